@@ -1,0 +1,231 @@
+#include <stdio.h>
+
+#include "options.h"
+
+#include <getopt.h>
+#include <openexr.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "exr_io.h"
+#include "version.h"
+
+enum {
+    OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
+    OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
+    OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION
+};
+
+static const struct option long_opts[] = {
+    { "output", required_argument, NULL, 'o' },
+    { "depth", required_argument, NULL, OPT_DEPTH },
+    { "layer", required_argument, NULL, OPT_LAYER },
+    { "depth-channel", required_argument, NULL, OPT_DEPTH_CHANNEL },
+    { "depth-mode", required_argument, NULL, OPT_DEPTH_MODE },
+    { "sky", required_argument, NULL, OPT_SKY },
+    { "fog", required_argument, NULL, OPT_FOG },
+    { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
+    { "world-to-camera", required_argument, NULL, OPT_W2C },
+    { "camera-to-world", required_argument, NULL, OPT_C2W },
+    { "fov", required_argument, NULL, OPT_FOV },
+    { "near", required_argument, NULL, OPT_NEAR },
+    { "far", required_argument, NULL, OPT_FAR },
+    { "compression", required_argument, NULL, OPT_COMPRESSION },
+    { "data-type", required_argument, NULL, 'd' },
+    { "threads", required_argument, NULL, OPT_THREADS },
+    { "preview", required_argument, NULL, OPT_PREVIEW },
+    { "explain", no_argument, NULL, OPT_EXPLAIN },
+    { "stats", no_argument, NULL, OPT_STATS },
+    { "verbose", no_argument, NULL, 'v' },
+    { "quiet", no_argument, NULL, 'q' },
+    { "help", no_argument, NULL, 'h' },
+    { "version", no_argument, NULL, OPT_VERSION },
+    { NULL, 0, NULL, 0 },
+};
+
+void ef_options_usage(FILE *out)
+{
+    fprintf(out,
+            "usage: exrfog [OPTIONS] INPUT -o OUTPUT\n"
+            "Puts physically correct fog into a rendered EXR, using its depth and camera.\n"
+            "\n"
+            "  -o, --output FILE        output EXR (may equal INPUT; written atomically)\n"
+            "      --fog SPEC           fog component, repeatable: MODEL[:KEY=VALUE]...\n"
+            "                           linear:start=S:end=E  exp:density=D  exp2:density=D\n"
+            "                           density may be R,G,B; distance=radial|planar\n"
+            "      --fog-color R,G,B    scene-linear fog colour (default %g,%g,%g)\n"
+            "      --sky fog|keep|distance=D  background pixels (default fog)\n"
+            "      --depth FILE         take depth from a second EXR\n"
+            "      --layer NAME         colour layer (e.g. ViewLayer.Combined)\n"
+            "      --depth-channel NAME depth channel (e.g. depth.Z)\n"
+            "      --depth-mode MODE    planar (default), radial, inverse, normalized, gl-ndc,\n"
+            "                           gl-window, zero-one, reversed, reversed-infinite\n"
+            "      --world-to-camera M  16 numbers, row-vector layout as in the file\n"
+            "      --camera-to-world M  its inverse\n"
+            "      --fov DEG            horizontal field of view\n"
+            "      --near N, --far F    clip planes for the buffer depth modes\n"
+            "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's)\n"
+            "  -d, --data-type T        half|float output for half/float channels\n"
+            "      --threads N          worker threads, 0 = all cores (default)\n"
+            "      --preview FILE       also write an sRGB preview (PNG, JPEG, ...)\n"
+            "      --explain            print the resolved camera and conventions, write nothing\n"
+            "      --stats              print per-stage timings and peak memory\n"
+            "  -v, --verbose  -q, --quiet  -h, --help  --version\n"
+            "\n"
+            "Exit status: 0 success, 1 runtime error, 2 usage error. See exrfog(1).\n",
+            EF_DEFAULT_FOG_COLOR_R, EF_DEFAULT_FOG_COLOR_G, EF_DEFAULT_FOG_COLOR_B);
+}
+
+/* 16 numbers separated by commas and/or spaces. */
+static int parse_matrix(const char *text, ef_opt_mat *m)
+{
+    char buf[1024];
+    size_t n = 0;
+    int sep = 1;
+    for (const char *s = text; *s && n + 1 < sizeof buf; ++s) {
+        if (*s == ',' || *s == ' ' || *s == '\t') {
+            if (!sep)
+                buf[n++] = ',';
+            sep = 1;
+        } else {
+            buf[n++] = *s;
+            sep = 0;
+        }
+    }
+    if (n && buf[n - 1] == ',')
+        --n;
+    buf[n] = '\0';
+    if (ef_parse_numbers(buf, m->v.m, 16))
+        return -1;
+    m->set = 1;
+    return 0;
+}
+
+static int parse_num(const char *text, ef_opt_num *n)
+{
+    if (ef_parse_numbers(text, &n->v, 1))
+        return -1;
+    n->set = 1;
+    return 0;
+}
+
+static void record(ef_options *o, const char *a)
+{
+    size_t len = strlen(o->params);
+    snprintf(o->params + len, sizeof o->params - len, "%s%s", len ? " " : "", a);
+}
+
+ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
+{
+    memset(o, 0, sizeof *o);
+    ef_scene_init(&o->scene);
+    o->depth_mode = EF_DEPTH_PLANAR;
+    o->compression = -1;
+    o->pixel_type = -1;
+    for (int i = 1; i < argc; ++i)
+        record(o, argv[i]);
+    optind = 1;
+    opterr = 0;
+    int c;
+    while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {
+        const char *a = optarg;
+        switch (c) {
+        case 'o': o->output = a; break;
+        case OPT_DEPTH: o->depth_file = a; break;
+        case OPT_LAYER: o->layer = a; break;
+        case OPT_DEPTH_CHANNEL: o->depth_channel = a; break;
+        case OPT_PREVIEW: o->preview = a; break;
+        case OPT_DEPTH_MODE:
+            if (ef_depth_mode_parse(a, &o->depth_mode))
+                return ef_fail(err, "--depth-mode '%s' is not one of planar, radial, inverse, "
+                                    "normalized, gl-ndc, gl-window, zero-one, reversed, "
+                                    "reversed-infinite", a), EF_PARSE_USAGE;
+            break;
+        case OPT_SKY:
+            if (ef_scene_parse_sky(&o->scene, a, err))
+                return EF_PARSE_USAGE;
+            break;
+        case OPT_FOG:
+            if (o->scene.ncomp >= EF_FOG_MAX_COMPONENTS)
+                return ef_fail(err, "too many --fog components (at most %d)", EF_FOG_MAX_COMPONENTS),
+                       EF_PARSE_USAGE;
+            if (ef_fog_parse(a, &o->scene.comp[o->scene.ncomp], err))
+                return EF_PARSE_USAGE;
+            o->scene.ncomp++;
+            break;
+        case OPT_FOG_COLOR:
+            if (ef_parse_rgb(a, o->scene.color))
+                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers)", a), EF_PARSE_USAGE;
+            break;
+        case OPT_W2C:
+            if (parse_matrix(a, &o->cam.w2c))
+                return ef_fail(err, "--world-to-camera '%s' is not 16 finite numbers", a), EF_PARSE_USAGE;
+            break;
+        case OPT_C2W:
+            if (parse_matrix(a, &o->cam.c2w))
+                return ef_fail(err, "--camera-to-world '%s' is not 16 finite numbers", a), EF_PARSE_USAGE;
+            break;
+        case OPT_FOV:
+            if (parse_num(a, &o->cam.fov) || !(o->cam.fov.v > 0 && o->cam.fov.v < 180))
+                return ef_fail(err, "--fov '%s' is not an angle between 0 and 180 degrees", a),
+                       EF_PARSE_USAGE;
+            break;
+        case OPT_NEAR:
+            if (parse_num(a, &o->cam.near_) || !(o->cam.near_.v > 0))
+                return ef_fail(err, "--near '%s' is not a positive number", a), EF_PARSE_USAGE;
+            break;
+        case OPT_FAR:
+            if (parse_num(a, &o->cam.far_) || !(o->cam.far_.v > 0))
+                return ef_fail(err, "--far '%s' is not a positive number", a), EF_PARSE_USAGE;
+            break;
+        case OPT_COMPRESSION:
+            if (ef_compression_parse(a, &o->compression, err))
+                return EF_PARSE_USAGE;
+            break;
+        case 'd':
+            if (!strcmp(a, "half"))
+                o->pixel_type = EXR_PIXEL_HALF;
+            else if (!strcmp(a, "float"))
+                o->pixel_type = EXR_PIXEL_FLOAT;
+            else
+                return ef_fail(err, "--data-type '%s' is not half or float", a), EF_PARSE_USAGE;
+            break;
+        case OPT_THREADS: {
+            char *end;
+            long n = strtol(a, &end, 10);
+            if (*a == '\0' || *end || n < 0 || n > 1024)
+                return ef_fail(err, "--threads '%s' is not a count from 0 to 1024", a), EF_PARSE_USAGE;
+            o->threads = (int) n;
+            break;
+        }
+        case OPT_EXPLAIN: o->explain = 1; break;
+        case OPT_STATS: o->stats = 1; break;
+        case 'v': o->verbose++; break;
+        case 'q': o->quiet = 1; break;
+        case 'h': ef_options_usage(stdout); return EF_PARSE_EXIT;
+        case OPT_VERSION:
+            printf("exrfog %s\n", EXRFOG_VERSION);
+            return EF_PARSE_EXIT;
+        case ':':
+            return ef_fail(err, "option '%s' needs a value", argv[optind - 1]), EF_PARSE_USAGE;
+        default:
+            return ef_fail(err, "unknown option '%s' (see exrfog --help)", argv[optind - 1]),
+                   EF_PARSE_USAGE;
+        }
+    }
+    if (optind < argc)
+        o->input = argv[optind++];
+    if (optind < argc)
+        return ef_fail(err, "unexpected argument '%s' (one INPUT, and the output with -o)", argv[optind]),
+               EF_PARSE_USAGE;
+    if (!o->input)
+        return ef_fail(err, "no INPUT given (usage: exrfog [OPTIONS] INPUT -o OUTPUT)"), EF_PARSE_USAGE;
+    if (!o->explain && !o->output)
+        return ef_fail(err, "no output given (add -o OUTPUT)"), EF_PARSE_USAGE;
+    if (!o->explain && o->scene.ncomp == 0)
+        return ef_fail(err, "no fog given (add --fog SPEC, e.g. --fog exp:density=0.02)"), EF_PARSE_USAGE;
+    if (o->cam.near_.set && o->cam.far_.set && !(o->cam.far_.v > o->cam.near_.v))
+        return ef_fail(err, "--far %g must be greater than --near %g", o->cam.far_.v, o->cam.near_.v),
+               EF_PARSE_USAGE;
+    return EF_PARSE_RUN;
+}

@@ -1,0 +1,31 @@
+/* Command-line options of exrfog: parsing and the usage text. */
+#ifndef EF_OPTIONS_H
+#define EF_OPTIONS_H
+
+#include "camera.h"
+#include "depth.h"
+#include "error.h"
+#include "scene.h"
+
+typedef struct ef_options {
+    const char *input, *output, *depth_file, *layer, *depth_channel, *preview;
+    ef_depth_mode depth_mode;
+    ef_fog_scene scene;
+    ef_cam_flags cam;
+    int compression;          /* -1: keep the input's */
+    int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
+    int threads;              /* 0: all cores */
+    int explain, stats, verbose, quiet;
+    char params[2048];        /* the options as given, for exrfog/parameters */
+} ef_options;
+
+typedef enum ef_parse_result { EF_PARSE_RUN = 0, EF_PARSE_EXIT = 1, EF_PARSE_USAGE = -1 } ef_parse_result;
+
+/* Parses argv. EF_PARSE_EXIT after --help/--version (already printed to
+ * stdout); EF_PARSE_USAGE with err set, quoting the offending text. */
+ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err);
+
+/* Prints the usage text. */
+void ef_options_usage(FILE *out);
+
+#endif

@@ -1,0 +1,279 @@
+/* Orchestration: every message the user sees is printed here. */
+#include "run.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include "exr_io.h"
+#include "options.h"
+#include "preview.h"
+#include "recon.h"
+#include "scene.h"
+
+/* The temporary output, removed if a signal ends the run. */
+static char tmp_path[PATH_MAX];
+
+static void on_signal(int sig)
+{
+    if (tmp_path[0])
+        unlink(tmp_path);
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+static int report(const char *file, const ef_err *err, int status)
+{
+    fprintf(stderr, "exrfog: %s: %s\n", file, err->msg);
+    return status;
+}
+
+/* Per-run state shared read-only by the worker threads. */
+typedef struct fog_job {
+    const ef_camera *cam;
+    const ef_depth_conv *conv;
+    const ef_fog_scene *scene;
+    /* preview: every step-th pixel of the data window */
+    unsigned char *preview;
+    int pv_w, pv_h, pv_step, dw_x0, dw_y0;
+} fog_job;
+
+static unsigned char srgb8(double v)
+{
+    if (!(v > 0))
+        return 0;
+    if (v >= 1)
+        return 255;
+    double s = v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1 / 2.4) - 0.055;
+    return (unsigned char) lrint(s * 255.0);
+}
+
+static void fog_chunk(void *user, const ef_chunk *ck)
+{
+    const fog_job *j = user;
+    const ef_fog_scene *s = j->scene;
+    const int fog_uncovered = s->sky != EF_SKY_KEEP;
+    for (int yy = 0; yy < ck->h; ++yy) {
+        const int y = ck->y0 + yy;
+        for (int xx = 0; xx < ck->w; ++xx) {
+            const int x = ck->x0 + xx;
+            const size_t i = (size_t) yy * (size_t) ck->w + (size_t) xx;
+            ef_ray r;
+            const int sky = ef_reconstruct(j->cam, j->conv, x, y, ck->depth[i], &r);
+            if (!(sky && s->sky == EF_SKY_KEEP)) {
+                double T[3], Tinf[3], rgb[3], a = ck->alpha ? ck->alpha[i] : 1.0;
+                if (sky && s->sky == EF_SKY_DISTANCE_MODE)
+                    ef_ray_at_distance(j->cam, x, y, s->sky_distance, &r);
+                ef_scene_transmittance(s, &r, T, Tinf);
+                for (int k = 0; k < 3; ++k)
+                    rgb[k] = ck->rgb[k][i];
+                ef_composite(T, Tinf, s->color, fog_uncovered, rgb, ck->alpha ? &a : NULL);
+                for (int k = 0; k < 3; ++k)
+                    ck->rgb[k][i] = (float) rgb[k];
+                if (ck->alpha)
+                    ck->alpha[i] = (float) a;
+            }
+            if (j->preview && (y - j->dw_y0) % j->pv_step == 0 && (x - j->dw_x0) % j->pv_step == 0) {
+                unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w +
+                                                     (size_t) ((x - j->dw_x0) / j->pv_step));
+                for (int k = 0; k < 3; ++k)
+                    p[k] = srgb8(ck->rgb[k][i]);
+            }
+        }
+    }
+}
+
+static void print_vec(const char *label, const double v[3], const char *src)
+{
+    printf("  %-11s (%.9g, %.9g, %.9g)%s%s\n", label, v[0], v[1], v[2], src ? "  from " : "",
+           src ? src : "");
+}
+
+static void explain(const ef_options *o, const ef_exr_file *in, const ef_channel_plan *plan,
+                    const ef_camera *cam, const ef_depth_conv *conv, int conv_ok)
+{
+    static const double fwd[3] = { 0, 0, 1 }, upc[3] = { 0, 1, 0 };
+    double f[3], u[3];
+    ef_camera_to_world_dir(cam, fwd, f);
+    ef_camera_to_world_dir(cam, upc, u);
+    printf("input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
+    printf("camera:\n");
+    print_vec("position", cam->pos, cam->src_pose);
+    print_vec("forward", f, NULL);
+    print_vec("up", u, NULL);
+    printf("  %-11s %.6g deg horizontal  from %s\n", "fov", cam->hfov_deg, cam->src_fov);
+    if (cam->proj != EF_PROJ_NONE)
+        printf("  %-11s %s\n", "projection", cam->src_proj);
+    if (cam->near_.set)
+        printf("  %-11s %.9g  from %s\n", "near", cam->near_.v, cam->src_near);
+    if (cam->far_.set)
+        printf("  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
+    printf("colour: %s, %s, %s%s%s (part %d)\n", plan->rgb[0].name, plan->rgb[1].name,
+           plan->rgb[2].name, plan->alpha.part >= 0 ? ", alpha " : ", no alpha (alpha = 1)",
+           plan->alpha.part >= 0 ? plan->alpha.name : "", plan->rgb[0].part);
+    printf("depth: %s (part %d%s%s), mode %s\n", plan->depth.name, plan->depth.part,
+           o->depth_file ? " of " : "", o->depth_file ? o->depth_file : "",
+           ef_depth_mode_name(o->depth_mode));
+    if (conv_ok && (conv->mode != EF_DEPTH_PLANAR && conv->mode != EF_DEPTH_RADIAL &&
+                    conv->mode != EF_DEPTH_INVERSE))
+        printf("  clip planes near %.9g far %.9g  from %s\n", conv->near_, conv->far_, conv->src_clip);
+    printf("sky rule: depth non-finite, <= 0 (planar/radial/inverse), >= %g once linearised, or at "
+           "the far plane (buffer modes)\n", EF_SKY_DISTANCE);
+    if (o->scene.sky == EF_SKY_FOG)
+        printf("  sky pixels: fogged to infinity (--sky fog)\n");
+    else if (o->scene.sky == EF_SKY_KEEP)
+        printf("  sky pixels: kept unchanged (--sky keep)\n");
+    else
+        printf("  sky pixels: a background at distance %g (--sky distance=%g)\n",
+               o->scene.sky_distance, o->scene.sky_distance);
+    for (int i = 0; i < o->scene.ncomp; ++i)
+        printf("fog: %s\n", o->scene.comp[i].spec);
+    printf("fog colour: %g, %g, %g (scene-linear)\n", o->scene.color[0], o->scene.color[1],
+           o->scene.color[2]);
+}
+
+/* A temporary name beside the output, so the final rename is atomic. */
+static int make_tmp_path(const char *out, char *buf, size_t len)
+{
+    const char *slash = strrchr(out, '/');
+    int n;
+    if (slash)
+        n = snprintf(buf, len, "%.*s/.%s.exrfog-%ld.tmp", (int) (slash - out), out, slash + 1,
+                     (long) getpid());
+    else
+        n = snprintf(buf, len, ".%s.exrfog-%ld.tmp", out, (long) getpid());
+    return n > 0 && (size_t) n < len ? 0 : -1;
+}
+
+static int cpu_count(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n < 1 ? 1 : n > 256 ? 256 : (int) n;
+}
+
+int ef_main(int argc, char **argv)
+{
+    static ef_options o;
+    ef_err err = { { 0 } };
+    ef_parse_result pr = ef_options_parse(argc, argv, &o, &err);
+    if (pr == EF_PARSE_EXIT)
+        return 0;
+    if (pr == EF_PARSE_USAGE) {
+        fprintf(stderr, "exrfog: %s\n", err.msg);
+        return 2;
+    }
+
+    ef_exr_file in = { 0 }, dep = { 0 };
+    const ef_exr_file *df = &in;
+    ef_channel_plan plan;
+    ef_cam_meta meta;
+    ef_camera cam;
+    ef_depth_conv conv;
+    int status = 1;
+    if (ef_exr_open(o.input, &in, &err))
+        return report(o.input, &err, 1);
+    if (o.depth_file) {
+        if (ef_exr_open(o.depth_file, &dep, &err)) {
+            report(o.depth_file, &err, 1);
+            goto done;
+        }
+        df = &dep;
+    }
+    if (ef_find_channels(&in, df, o.layer, o.depth_channel, &plan, &err)) {
+        report(o.input, &err, 1);
+        goto done;
+    }
+    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
+        ef_camera_resolve(&meta, &o.cam, &cam, &err)) {
+        report(o.input, &err, 1);
+        goto done;
+    }
+    int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
+    if (o.explain) {
+        explain(&o, &in, &plan, &cam, &conv, conv_ok);
+        if (!conv_ok)
+            printf("depth conversion: %s\n", err.msg);
+        status = 0;
+        goto done;
+    }
+    if (!conv_ok) {
+        report(o.input, &err, 1);
+        goto done;
+    }
+
+    fog_job job = { &cam, &conv, &o.scene, NULL, 0, 0, 1, 0, 0 };
+    exr_attr_box2i_t dw;
+    exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
+    if (o.preview) {
+        int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+        job.pv_step = (w > h ? w : h) / 2048 + 1;
+        job.pv_w = (w + job.pv_step - 1) / job.pv_step;
+        job.pv_h = (h + job.pv_step - 1) / job.pv_step;
+        job.dw_x0 = dw.min.x;
+        job.dw_y0 = dw.min.y;
+        job.preview = calloc((size_t) job.pv_w * (size_t) job.pv_h, 3);
+        if (!job.preview) {
+            ef_fail(&err, "out of memory for the preview");
+            report(o.preview, &err, 1);
+            goto done;
+        }
+    }
+    if (make_tmp_path(o.output, tmp_path, sizeof tmp_path)) {
+        ef_fail(&err, "the output path is too long");
+        report(o.output, &err, 1);
+        goto done;
+    }
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+    signal(SIGHUP, on_signal);
+
+    ef_stream_opts so = { o.threads ? o.threads : cpu_count(), o.compression, o.pixel_type, o.params };
+    ef_stream_stats st;
+    if (o.verbose)
+        fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
+                so.threads > 1 ? "s" : "");
+    if (ef_exr_stream(&in, df, &plan, tmp_path, &so, fog_chunk, &job, &st, &err)) {
+        unlink(tmp_path);
+        tmp_path[0] = '\0';
+        report(o.output, &err, 1);
+        free(job.preview);
+        goto done;
+    }
+    if (rename(tmp_path, o.output) != 0) {
+        ef_fail(&err, "cannot move the finished file into place: %s", strerror(errno));
+        unlink(tmp_path);
+        tmp_path[0] = '\0';
+        report(o.output, &err, 1);
+        free(job.preview);
+        goto done;
+    }
+    tmp_path[0] = '\0';
+    status = 0;
+    if (job.preview) {
+        char msg[512];
+        if (ef_preview_write(o.preview, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            status = report(o.preview, &err, 1);
+        }
+        free(job.preview);
+    }
+    if (o.stats) {
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
+        fprintf(stderr,
+                "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode %.3f s, "
+                "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
+                st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
+                (double) ru.ru_maxrss / 1024.0);
+    }
+done:
+    ef_exr_close(&dep);
+    ef_exr_close(&in);
+    return status;
+}

@@ -1,0 +1,403 @@
+#include "camera.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#define EF_PI 3.14159265358979323846
+
+/* Which header family supplied a part of the camera; clip planes are only
+ * taken from the family that supplied the pose (or, for a flag pose, the lens). */
+typedef enum fam { FAM_NONE = 0, FAM_EXR, FAM_VRAY, FAM_RS } fam;
+
+void ef_cam_meta_init(ef_cam_meta *meta, int xmin, int ymin, int xmax, int ymax)
+{
+    memset(meta, 0, sizeof *meta);
+    meta->disp[0] = xmin;
+    meta->disp[1] = ymin;
+    meta->disp[2] = xmax;
+    meta->disp[3] = ymax;
+    meta->pixel_aspect = 1.0;
+}
+
+/* Flag names start with "--"; only header attributes get the flag hint. */
+static int check_mat(const ef_mat4 *m, const char *name, ef_err *err)
+{
+    if (!ef_mat4_finite(m))
+        return ef_fail(err, "%s holds NaN/Inf%s", name, name[0] == '-' ? ""
+                       : "; fix the header or pass --world-to-camera M and --fov DEG");
+    return 0;
+}
+
+static int check_num(double v, const char *name, ef_err *err)
+{
+    if (!isfinite(v))
+        return ef_fail(err, "%s holds NaN/Inf", name);
+    return 0;
+}
+
+/* Pose matrices must be affine in the row-vector layout; a transposed
+ * (column-vector) matrix shows up as a non-zero last column. */
+static int check_affine(const ef_mat4 *m, const char *name, ef_err *err)
+{
+    const double *a = m->m;
+    double mx = 0.0;
+    for (int i = 0; i < 16; ++i)
+        mx = fmax(mx, fabs(a[i]));
+    const double tol = 1e-6 * mx;
+    if (fabs(a[3]) > tol || fabs(a[7]) > tol || fabs(a[11]) > tol
+        || fabs(a[15] - 1.0) > 1e-6)
+        return ef_fail(err, "%s is not an affine row-vector matrix (its last "
+                            "column should be 0 0 0 1; is it transposed?)", name);
+    return 0;
+}
+
+/* Inverse of a matrix the user or header named, with a message if singular. */
+static int invert_named(const ef_mat4 *m, ef_mat4 *out, const char *name, ef_err *err)
+{
+    if (ef_mat4_invert(m, out) != 0)
+        return ef_fail(err, "%s is singular (not invertible); fix it or pass "
+                            "--world-to-camera M and --fov DEG", name);
+    return 0;
+}
+
+/* Camera attributes the header carries, for the "no camera" message. */
+static void list_attrs(const ef_cam_meta *meta, char *buf, size_t n)
+{
+    const struct { int set; const char *name; } a[] = {
+        {meta->w2ndc.set, "worldToNDC"},      {meta->w2screen.set, "worldToScreen"},
+        {meta->arnold_fov.set, "CameraFov"},  {meta->arnold_near.set, "arnold/camera/near_clip"},
+        {meta->arnold_far.set, "arnold/camera/far_clip"}, {meta->vray_fov.set, "cameraFov"},
+        {meta->vray_near.set, "cameraNearClip"}, {meta->vray_far.set, "cameraFarClip"},
+        {meta->rs_fov.set, "rs/camera/fov"},  {meta->rs_near.set, "rs/camera/nearPlane"},
+        {meta->rs_far.set, "rs/camera/farPlane"},
+    };
+    size_t len = 0;
+    buf[0] = '\0';
+    for (size_t i = 0; i < sizeof a / sizeof a[0]; ++i)
+        if (a[i].set && len < n)
+            len += (size_t)snprintf(buf + len, n - len, "%s%s", len ? ", " : "", a[i].name);
+    if (!len)
+        snprintf(buf, n, "none");
+}
+
+/* The pose, in precedence order: flags, worldToCamera, V-Ray, Redshift. */
+static int resolve_pose(const ef_cam_meta *meta, const ef_cam_flags *flags,
+                        ef_mat4 *c2w, fam *f, ef_camera *cam, ef_err *err)
+{
+    const ef_mat4 *m;
+    const char *name;
+    int is_w2c = 0, minus_z = 0;
+    *f = FAM_NONE;
+    if (flags->w2c.set) {
+        m = &flags->w2c.v, name = "--world-to-camera", is_w2c = 1;
+        cam->src_pose = "flag --world-to-camera";
+    } else if (flags->c2w.set) {
+        m = &flags->c2w.v, name = "--camera-to-world";
+        cam->src_pose = "flag --camera-to-world";
+    } else if (meta->w2c.set) {
+        m = &meta->w2c.v, name = "worldToCamera", is_w2c = 1, *f = FAM_EXR;
+        cam->src_pose = "header worldToCamera";
+    } else if (meta->vray_c2w.set) {
+        m = &meta->vray_c2w.v, name = "cameraTransform", minus_z = 1, *f = FAM_VRAY;
+        cam->src_pose = "header cameraTransform (camera-to-world, -Z forward)";
+    } else if (meta->rs_c2w.set) {
+        m = &meta->rs_c2w.v, name = "rs/camera/transform", minus_z = 1, *f = FAM_RS;
+        cam->src_pose = "header rs/camera/transform (camera-to-world, -Z forward)";
+    } else {
+        char have[512];
+        list_attrs(meta, have, sizeof have);
+        return ef_fail(err, "no camera pose: the header has none of worldToCamera, "
+                            "cameraTransform, rs/camera/transform (camera attributes "
+                            "found: %s); pass --world-to-camera M or --camera-to-world M "
+                            "(16 numbers, row-vector, as in the file) and --fov DEG", have);
+    }
+    if (check_mat(m, name, err) || check_affine(m, name, err))
+        return -1;
+    if (is_w2c)
+        return invert_named(m, c2w, name, err);
+    *c2w = *m;
+    /* V-Ray and Redshift cameras look down their -Z (right-handed):
+     * S = diag(1,1,-1,1) on the left flips the camera's own Z axis. */
+    if (minus_z)
+        for (int j = 0; j < 4; ++j)
+            c2w->m[8 + j] = -c2w->m[8 + j];
+    ef_mat4 w2c;
+    return invert_named(c2w, &w2c, name, err);
+}
+
+/* Ray matrix of a centred pinhole with horizontal fov hfov_deg. */
+static void fov_ray(ef_camera *cam, const ef_cam_meta *meta, double hfov_deg)
+{
+    const double W = meta->disp[2] - meta->disp[0] + 1.0;
+    const double H = meta->disp[3] - meta->disp[1] + 1.0;
+    const double t = tan(hfov_deg * (EF_PI / 360.0));
+    const double k = t * H / (W * meta->pixel_aspect);
+    memset(cam->ray, 0, sizeof cam->ray);
+    cam->ray[0] = 2.0 * t / W;
+    cam->ray[6] = -t * (1.0 + 2.0 * meta->disp[0] / W);
+    cam->ray[4] = -2.0 * k / H;
+    cam->ray[7] = k * (1.0 + 2.0 * meta->disp[1] / H);
+    cam->ray[8] = 1.0;
+    cam->hfov_deg = hfov_deg;
+}
+
+/* Angle between the rays through the left and right frame edges at mid height. */
+static double ray_hfov(const ef_camera *cam, const ef_cam_meta *meta)
+{
+    const double ymid = 0.5 * (meta->disp[1] + meta->disp[3]);
+    double a[3], b[3];
+    ef_camera_ray(cam, meta->disp[0] - 0.5, ymid, a);
+    ef_camera_ray(cam, meta->disp[2] + 0.5, ymid, b);
+    const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                         a[0] * b[1] - a[1] * b[0]};
+    const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    return atan2(sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), dot) * (180.0 / EF_PI);
+}
+
+/* Rays from a projection matrix, classified by where it sends the optical
+ * axis (the attribute name is unreliable: Arnold writes screen space under
+ * worldToNDC). c2w_hdr is the inverse of the header's own worldToCamera. */
+static int projection_ray(ef_camera *cam, const ef_cam_meta *meta,
+                          const ef_mat4 *c2w_hdr, ef_err *err)
+{
+    const int scr = meta->w2screen.set;
+    const ef_mat4 *M = scr ? &meta->w2screen.v : &meta->w2ndc.v;
+    const char *name = scr ? "worldToScreen" : "worldToNDC";
+    if (check_mat(M, name, err))
+        return -1;
+    ef_mat4 Pc, Q, absc, absm, Pabs;
+    ef_mat4_mul(c2w_hdr, M, &Pc);
+    /* |C2W|.|M| bounds the rounding in each entry of Pc: float32 headers
+     * leave ~1e-7 of it where a perspective matrix has exact zeros. */
+    for (int i = 0; i < 16; ++i) {
+        absc.m[i] = fabs(c2w_hdr->m[i]);
+        absm.m[i] = fabs(M->m[i]);
+    }
+    ef_mat4_mul(&absc, &absm, &Pabs);
+    const double *p = Pc.m, *tol = Pabs.m;
+    const double wz = p[11];
+    const int w_const = fabs(wz) <= 1e-4 * tol[11];
+    if (w_const && fabs(p[15]) > 1e-4 * tol[15])
+        return ef_fail(err, "%s is an orthographic projection (its w column is 0 0 0 1); "
+                            "exrfog needs a perspective camera", name);
+    if (w_const || wz < 0.0 || fabs(p[3]) > 1e-4 * tol[3] || fabs(p[7]) > 1e-4 * tol[7]
+        || fabs(p[15]) > 1e-4 * tol[15])
+        return ef_fail(err, "%s is not a perspective projection looking down +Z of "
+                            "worldToCamera; pass --fov DEG to ignore it", name);
+    /* Where camera-space (0,0,1) lands. */
+    const double cx = (p[8] + p[12]) / (p[11] + p[15]);
+    const double cy = (p[9] + p[13]) / (p[11] + p[15]);
+    int ndc;
+    if (fabs(cx) < 0.25 && fabs(cy) < 0.25 && p[5] > 0.0)
+        ndc = 0;
+    else if (fabs(cx - 0.5) < 0.25 && fabs(cy - 0.5) < 0.25 && p[5] < 0.0)
+        ndc = 1;
+    else
+        return ef_fail(err, "%s is neither a screen-space (centre 0,0, y up) nor an NDC "
+                            "(centre 0.5,0.5, y down) projection (centre %g,%g); "
+                            "pass --fov DEG to ignore it", name, cx, cy);
+    if (ef_mat4_invert(&Pc, &Q) != 0)
+        return ef_fail(err, "%s is singular (not invertible); pass --fov DEG to ignore it",
+                       name);
+
+    /* A: (px, py, 1) -> (sx, sy, 1), the display window onto screen or NDC. */
+    const double W = meta->disp[2] - meta->disp[0] + 1.0;
+    const double H = meta->disp[3] - meta->disp[1] + 1.0;
+    double A[9] = {0};
+    if (ndc) {
+        A[0] = 1.0 / W;
+        A[6] = -meta->disp[0] / W;
+        A[4] = 1.0 / H;
+        A[7] = -meta->disp[1] / H;
+    } else {
+        A[0] = 2.0 / W;
+        A[6] = -1.0 - 2.0 * meta->disp[0] / W;
+        A[4] = -2.0 / H;
+        A[7] = 1.0 + 2.0 * meta->disp[1] / H;
+    }
+    A[8] = 1.0;
+    /* B: (sx, sy, 1) -> xyz of (sx, sy, z0, 1) . Q; any z0 gives a point on
+     * the same ray through the camera (z0 = alpha is the point at infinity). */
+    const double z0 = 0.5;
+    double B[9];
+    for (int j = 0; j < 3; ++j) {
+        B[j] = Q.m[j];
+        B[3 + j] = Q.m[4 + j];
+        B[6 + j] = z0 * Q.m[8 + j] + Q.m[12 + j];
+    }
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            cam->ray[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j]
+                                + A[3 * i + 2] * B[6 + j];
+
+    static const char *const srcs[2][2] = {
+        {"header worldToNDC (classified as screen space)", "header worldToNDC (classified as NDC)"},
+        {"header worldToScreen (classified as screen space)",
+         "header worldToScreen (classified as NDC)"}};
+    cam->src_fov = cam->src_proj = srcs[scr][ndc];
+    cam->proj = ndc ? EF_PROJ_NDC : EF_PROJ_SCREEN;
+    cam->proj_alpha = p[10] / wz;
+    cam->proj_beta = p[14] / wz;
+    cam->hfov_deg = ray_hfov(cam, meta);
+    if (!isfinite(cam->hfov_deg) || !(cam->hfov_deg > 0.0 && cam->hfov_deg < 180.0))
+        return ef_fail(err, "%s gives a field of view of %g degrees; pass --fov DEG",
+                       name, cam->hfov_deg);
+    return 0;
+}
+
+/* A field of view in degrees from a flag or attribute, checked. */
+static int use_fov(ef_camera *cam, const ef_cam_meta *meta, double deg,
+                   const char *name, const char *src, ef_err *err)
+{
+    if (check_num(deg, name, err))
+        return -1;
+    if (!(deg > 0.0 && deg < 180.0))
+        return ef_fail(err, "%s gives a field of view of %g degrees; it must be "
+                            "between 0 and 180: pass --fov DEG", name, deg);
+    fov_ray(cam, meta, deg);
+    cam->src_fov = src;
+    return 0;
+}
+
+/* The lens, in precedence order: --fov, then the header family of the pose
+ * (any family when the pose came from flags). Sets *lf to that family. */
+static int resolve_lens(const ef_cam_meta *meta, const ef_cam_flags *flags, fam pf,
+                        const ef_mat4 *c2w, fam *lf, ef_camera *cam, ef_err *err)
+{
+    *lf = FAM_NONE;
+    if (flags->fov.set)
+        return use_fov(cam, meta, flags->fov.v, "--fov", "flag --fov", err);
+    const int exr = pf == FAM_EXR || pf == FAM_NONE;
+    if (exr && meta->w2c.set && (meta->w2screen.set || meta->w2ndc.set)) {
+        ef_mat4 hdr_c2w = *c2w;
+        /* A flag pose replaces the header pose, but the lens is still the
+         * header projection taken relative to the header's own camera. */
+        if (pf == FAM_NONE && (check_mat(&meta->w2c.v, "worldToCamera", err)
+                               || invert_named(&meta->w2c.v, &hdr_c2w, "worldToCamera", err)))
+            return -1;
+        *lf = FAM_EXR;
+        return projection_ray(cam, meta, &hdr_c2w, err);
+    }
+    if (exr && meta->arnold_fov.set) {
+        *lf = FAM_EXR;
+        return use_fov(cam, meta, meta->arnold_fov.v, "CameraFov", "header CameraFov", err);
+    }
+    if ((pf == FAM_VRAY || pf == FAM_NONE) && meta->vray_fov.set) {
+        *lf = FAM_VRAY;
+        return use_fov(cam, meta, meta->vray_fov.v, "cameraFov", "header cameraFov", err);
+    }
+    if ((pf == FAM_RS || pf == FAM_NONE) && meta->rs_fov.set) {
+        *lf = FAM_RS;
+        double v = meta->rs_fov.v;
+        if (check_num(v, "rs/camera/fov", err))
+            return -1;
+        /* Maxon documents radians; a value above pi can only be degrees. */
+        const int deg = v > EF_PI;
+        return use_fov(cam, meta, deg ? v : v * (180.0 / EF_PI), "rs/camera/fov",
+                       deg ? "header rs/camera/fov (read as degrees)"
+                           : "header rs/camera/fov (radians)", err);
+    }
+    static const char *const looked[] = {
+        "worldToScreen, worldToNDC, CameraFov, cameraFov, rs/camera/fov",
+        "worldToScreen, worldToNDC, CameraFov", "cameraFov", "rs/camera/fov"};
+    return ef_fail(err, "no field of view for the camera from %s (looked for %s): "
+                        "pass --fov DEG", cam->src_pose, looked[pf]);
+}
+
+/* One clip plane from a header attribute; "clipping off" values stay unset. */
+static int meta_clip(ef_opt_num *out, const char **src, const ef_opt_num *a,
+                     const char *name, const char *srcname, int is_far, ef_err *err)
+{
+    if (!a->set)
+        return 0;
+    if (check_num(a->v, name, err))
+        return -1;
+    /* V-Ray writes near 0 / far 1e30 when clipping is off. */
+    if (a->v <= 0.0 || (is_far && a->v >= 1e29))
+        return 0;
+    out->set = 1;
+    out->v = a->v;
+    *src = srcname;
+    return 0;
+}
+
+/* Clip planes, each on its own: flag, then the family's header attribute,
+ * then the projection matrix. */
+static int resolve_clip(const ef_cam_meta *meta, const ef_cam_flags *flags, fam cf,
+                        ef_camera *cam, ef_err *err)
+{
+    if (flags->near_.set) {
+        if (check_num(flags->near_.v, "--near", err))
+            return -1;
+        cam->near_ = flags->near_;
+        cam->src_near = "flag --near";
+    }
+    if (flags->far_.set) {
+        if (check_num(flags->far_.v, "--far", err))
+            return -1;
+        cam->far_ = flags->far_;
+        cam->src_far = "flag --far";
+    }
+    const struct {
+        const ef_opt_num *n, *f;
+        const char *nn, *fn, *ns, *fs;
+    } fams[] = {
+        [FAM_NONE] = {0},
+        [FAM_EXR] = {&meta->arnold_near, &meta->arnold_far,
+                     "arnold/camera/near_clip", "arnold/camera/far_clip",
+                     "header arnold/camera/near_clip", "header arnold/camera/far_clip"},
+        [FAM_VRAY] = {&meta->vray_near, &meta->vray_far, "cameraNearClip", "cameraFarClip",
+                      "header cameraNearClip", "header cameraFarClip"},
+        [FAM_RS] = {&meta->rs_near, &meta->rs_far, "rs/camera/nearPlane", "rs/camera/farPlane",
+                    "header rs/camera/nearPlane", "header rs/camera/farPlane"},
+    };
+    if (cf != FAM_NONE
+        && ((!cam->near_.set && meta_clip(&cam->near_, &cam->src_near, fams[cf].n,
+                                          fams[cf].nn, fams[cf].ns, 0, err))
+            || (!cam->far_.set && meta_clip(&cam->far_, &cam->src_far, fams[cf].f,
+                                            fams[cf].fn, fams[cf].fs, 1, err))))
+        return -1;
+    if (cam->proj != EF_PROJ_NONE) {
+        /* z/w = alpha + beta/d read as a [0,1] depth range (D3D style, as
+         * Arnold writes); a GL [-1,1] matrix would give near twice too small. */
+        const double a = cam->proj_alpha, b = cam->proj_beta;
+        const double n = -b / a, f = b / (1.0 - a);
+        if (!cam->near_.set && isfinite(n) && n > 0.0) {
+            cam->near_.set = 1;
+            cam->near_.v = n;
+            cam->src_near = "projection matrix";
+        }
+        if (!cam->far_.set && a != 1.0 && isfinite(f) && f > 0.0 && f < 1e29) {
+            cam->far_.set = 1;
+            cam->far_.v = f;
+            cam->src_far = "projection matrix";
+        }
+    }
+    return 0;
+}
+
+int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
+                      ef_camera *cam, ef_err *err)
+{
+    memset(cam, 0, sizeof *cam);
+    cam->src_pose = cam->src_fov = cam->src_near = cam->src_far = cam->src_proj = "none";
+    if (meta->disp[2] < meta->disp[0] || meta->disp[3] < meta->disp[1])
+        return ef_fail(err, "empty displayWindow (%d,%d)-(%d,%d)", meta->disp[0],
+                       meta->disp[1], meta->disp[2], meta->disp[3]);
+    if (!isfinite(meta->pixel_aspect) || !(meta->pixel_aspect > 0.0))
+        return ef_fail(err, "pixelAspectRatio %g is not a positive number",
+                       meta->pixel_aspect);
+    ef_mat4 c2w;
+    fam pf = FAM_NONE, lf = FAM_NONE;
+    if (resolve_pose(meta, flags, &c2w, &pf, cam, err)
+        || resolve_lens(meta, flags, pf, &c2w, &lf, cam, err)
+        || resolve_clip(meta, flags, pf != FAM_NONE ? pf : lf, cam, err))
+        return -1;
+    for (int i = 0; i < 3; ++i) {
+        cam->pos[i] = c2w.m[12 + i];
+        for (int j = 0; j < 3; ++j)
+            cam->rot[3 * i + j] = c2w.m[4 * i + j];
+    }
+    return 0;
+}

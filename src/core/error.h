@@ -1,0 +1,21 @@
+/* Error reporting shared by every layer: a message buffer the caller owns.
+ * Messages say what is wrong and, when known, how to fix it; the CLI adds
+ * the "exrfog: FILE: " prefix. */
+#ifndef EF_ERROR_H
+#define EF_ERROR_H
+
+#include <stddef.h>
+
+typedef struct ef_err {
+    char msg[1024];
+} ef_err;
+
+/* Formats into err->msg (printf-style) and returns -1, so callers can
+ * `return ef_fail(err, ...)`. err may be NULL. */
+int ef_fail(ef_err *err, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
+#endif

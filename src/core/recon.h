@@ -1,0 +1,25 @@
+/* Reconstruction: pixel + stored depth -> the camera-to-surface segment,
+ * in double, relative to the camera (so a camera far from the origin loses
+ * nothing). */
+#ifndef EF_RECON_H
+#define EF_RECON_H
+
+#include "camera.h"
+#include "depth.h"
+
+/* One pixel's view segment. The world point is cam->pos + dir * dist. */
+typedef struct ef_ray {
+    double dir[3];    /* unit direction in world axes */
+    double dist;      /* distance along the ray; INFINITY for sky */
+    double planar;    /* distance along the view axis; INFINITY for sky */
+} ef_ray;
+
+/* Builds the ray of absolute pixel (x, y) from stored depth value v.
+ * Returns 1 for a sky pixel (dist = planar = INFINITY, dir still set), else 0. */
+int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
+                   int x, int y, double v, ef_ray *r);
+
+/* The ray of pixel (x, y) ending at radial distance dist (INFINITY allowed). */
+void ef_ray_at_distance(const ef_camera *cam, int x, int y, double dist, ef_ray *r);
+
+#endif

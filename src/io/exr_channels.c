@@ -1,0 +1,264 @@
+/* Finding the colour and depth channels among the names real tools write. */
+#include "exr_io.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct qchan {
+    int part, index;
+    char name[256];           /* qualified: layer.channel */
+    char view[64];            /* the part's view, "" when none */
+} qchan;
+
+typedef struct qlist {
+    qchan *c;
+    int n;
+} qlist;
+
+static int ends_with(const char *s, const char *suffix)
+{
+    size_t a = strlen(s), b = strlen(suffix);
+    return a >= b && !strcmp(s + a - b, suffix);
+}
+
+/* The layer a multi-part part stands for: its name without the ".view" or
+ * "_view" suffix Nuke and the Beachball frames add. */
+static void part_layer(const ef_exr_file *f, int p, char *layer, size_t len, char *view, size_t vlen)
+{
+    const char *name = NULL, *v = NULL;
+    int32_t vl = 0;
+    layer[0] = view[0] = '\0';
+    if (exr_attr_get_string(f->ctx, p, "view", &vl, &v) == EXR_ERR_SUCCESS && v)
+        snprintf(view, vlen, "%.*s", (int) vl, v);
+    if (f->nparts < 2 || exr_get_name(f->ctx, p, &name) != EXR_ERR_SUCCESS || !name)
+        return;
+    snprintf(layer, len, "%s", name);
+    if (view[0]) {
+        char sfx[80];
+        for (int k = 0; k < 2; ++k) {
+            snprintf(sfx, sizeof sfx, "%c%s", k ? '_' : '.', view);
+            if (ends_with(layer, sfx) && strlen(layer) > strlen(sfx)) {
+                layer[strlen(layer) - strlen(sfx)] = '\0';
+                break;
+            }
+        }
+    }
+}
+
+static int build_list(const ef_exr_file *f, qlist *q)
+{
+    int total = 0;
+    for (int p = 0; p < f->nparts; ++p) {
+        const exr_attr_chlist_t *cl;
+        if (exr_get_channels(f->ctx, p, &cl))
+            return -1;
+        total += cl->num_channels;
+    }
+    q->c = calloc((size_t) total + 1, sizeof *q->c);
+    q->n = 0;
+    if (!q->c)
+        return -1;
+    for (int p = 0; p < f->nparts; ++p) {
+        const exr_attr_chlist_t *cl;
+        char layer[200], view[64];
+        exr_get_channels(f->ctx, p, &cl);
+        part_layer(f, p, layer, sizeof layer, view, sizeof view);
+        for (int c = 0; c < cl->num_channels; ++c) {
+            qchan *e = &q->c[q->n++];
+            const char *cn = cl->entries[c].name.str;
+            e->part = p;
+            e->index = c;
+            snprintf(e->view, sizeof e->view, "%s", view);
+            if (layer[0] && !strchr(cn, '.'))
+                snprintf(e->name, sizeof e->name, "%s.%s", layer, cn);
+            else
+                snprintf(e->name, sizeof e->name, "%s", cn);
+        }
+    }
+    return 0;
+}
+
+/* The channel called name, preferring one in a part of the given view. */
+static const qchan *find(const qlist *q, const char *name, const char *view)
+{
+    const qchan *first = NULL;
+    for (int i = 0; i < q->n; ++i) {
+        if (strcmp(q->c[i].name, name))
+            continue;
+        if (!view || !strcmp(q->c[i].view, view))
+            return &q->c[i];
+        if (!first)
+            first = &q->c[i];
+    }
+    return first;
+}
+
+static void set_ref(ef_chan_ref *r, const qchan *c)
+{
+    if (!c) {
+        r->part = -1;
+        r->index = -1;
+        r->name[0] = '\0';
+        return;
+    }
+    r->part = c->part;
+    r->index = c->index;
+    snprintf(r->name, sizeof r->name, "%s", c->name);
+}
+
+static void join(const char *prefix, const char *ch, char *out, size_t len)
+{
+    if (prefix[0])
+        snprintf(out, len, "%s.%s", prefix, ch);
+    else
+        snprintf(out, len, "%s", ch);
+}
+
+/* R, G and B of one layer, all in one part. */
+static int try_colour(const qlist *q, const char *prefix, ef_channel_plan *plan)
+{
+    static const char *const rgb[3] = { "R", "G", "B" };
+    const qchan *c[3];
+    char name[300];
+    for (int k = 0; k < 3; ++k) {
+        join(prefix, rgb[k], name, sizeof name);
+        c[k] = find(q, name, NULL);
+        if (!c[k] || c[k]->part != c[0]->part)
+            return 0;
+    }
+    for (int k = 0; k < 3; ++k)
+        set_ref(&plan->rgb[k], c[k]);
+    join(prefix, "A", name, sizeof name);
+    const qchan *a = find(q, name, c[0]->view);
+    set_ref(&plan->alpha, a && a->part == c[0]->part ? a : NULL);
+    return 1;
+}
+
+/* Names a user might pass to --layer, for the error message. */
+static void list_layers(const qlist *q, char *out, size_t len)
+{
+    out[0] = '\0';
+    for (int i = 0; i < q->n; ++i) {
+        const char *n = q->c[i].name;
+        if (!ends_with(n, ".R"))
+            continue;
+        if (strlen(out) + strlen(n) + 4 >= len)
+            break;
+        size_t at = strlen(out);
+        snprintf(out + at, len - at, "%s%.*s", at ? ", " : "", (int) (strlen(n) - 2), n);
+    }
+    if (!out[0])
+        snprintf(out, len, "none");
+}
+
+static void list_all(const qlist *q, char *out, size_t len)
+{
+    out[0] = '\0';
+    for (int i = 0; i < q->n; ++i) {
+        if (strlen(out) + strlen(q->c[i].name) + 8 >= len) {
+            strncat(out, ", ...", len - strlen(out) - 1);
+            break;
+        }
+        strncat(out, i ? ", " : "", len - strlen(out) - 1);
+        strncat(out, q->c[i].name, len - strlen(out) - 1);
+    }
+}
+
+static int find_colour(const qlist *q, const char *layer, ef_channel_plan *plan, char *prefix,
+                       size_t plen, ef_err *err)
+{
+    if (layer) {
+        snprintf(prefix, plen, "%s", layer);
+        if (try_colour(q, layer, plan))
+            return 0;
+        char layers[600];
+        list_layers(q, layers, sizeof layers);
+        return ef_fail(err, "no colour channels %s.R, %s.G, %s.B in one part (layers with R: %s)",
+                       layer, layer, layer, layers);
+    }
+    static const char *const plain[] = { "", "rgba", "rgb", "RGBA" };
+    for (size_t i = 0; i < sizeof plain / sizeof plain[0]; ++i)
+        if (try_colour(q, plain[i], plan)) {
+            snprintf(prefix, plen, "%s", plain[i]);
+            return 0;
+        }
+    for (int i = 0; i < q->n; ++i)
+        if (ends_with(q->c[i].name, ".Combined.R")) {
+            snprintf(prefix, plen, "%.*s", (int) (strlen(q->c[i].name) - 2), q->c[i].name);
+            if (try_colour(q, prefix, plan))
+                return 0;
+        }
+    char layers[600];
+    list_layers(q, layers, sizeof layers);
+    return ef_fail(err, "no colour channels found (no R,G,B, rgba.*, or Blender *.Combined.*; layers "
+                        "with R: %s); choose one with --layer NAME", layers);
+}
+
+static const qchan *find_depth(const qlist *q, const char *prefix, const char *view)
+{
+    char name[320];
+    const qchan *c;
+    /* Same layer as the colour first: Arnold/RenderMan Z beside R,G,B. */
+    if (!prefix[0] || !strcmp(prefix, "rgba") || !strcmp(prefix, "rgb") || !strcmp(prefix, "RGBA")) {
+        if ((c = find(q, "Z", view)))
+            return c;
+    } else {
+        join(prefix, "Z", name, sizeof name);
+        if ((c = find(q, name, view)))
+            return c;
+    }
+    if ((c = find(q, "depth.Z", view)))
+        return c;
+    /* Blender: ViewLayer.Combined -> ViewLayer.Depth.Z. */
+    if (ends_with(prefix, ".Combined")) {
+        snprintf(name, sizeof name, "%.*s.Depth.Z", (int) (strlen(prefix) - 9), prefix);
+        if ((c = find(q, name, view)))
+            return c;
+    }
+    if ((c = find(q, "Depth.Z", view)))
+        return c;
+    return NULL;
+}
+
+int ef_find_channels(const ef_exr_file *f, const ef_exr_file *df, const char *layer,
+                     const char *depth_channel, ef_channel_plan *plan, ef_err *err)
+{
+    qlist q = { 0 }, dq = { 0 };
+    char prefix[256], all[800];
+    int rc = -1;
+    memset(plan, 0, sizeof *plan);
+    if (build_list(f, &q) || build_list(df, &dq)) {
+        ef_fail(err, "out of memory listing channels");
+        goto done;
+    }
+    if (find_colour(&q, layer, plan, prefix, sizeof prefix, err))
+        goto done;
+    const char *view = q.c[0].view;
+    for (int i = 0; i < q.n; ++i)
+        if (q.c[i].part == plan->rgb[0].part)
+            view = q.c[i].view;
+    const qchan *d;
+    if (depth_channel) {
+        d = find(&dq, depth_channel, view);
+        if (!d) {
+            list_all(&dq, all, sizeof all);
+            ef_fail(err, "no channel named '%s' for --depth-channel (channels: %s)", depth_channel, all);
+            goto done;
+        }
+    } else if (!(d = find_depth(&dq, prefix, view)) && df != f) {
+        d = find(&dq, "Z", NULL);   /* a separate depth file may hold only Z */
+    }
+    if (!d) {
+        list_all(&dq, all, sizeof all);
+        ef_fail(err, "no depth channel found (looked for Z, depth.Z, *.Depth.Z beside the colour; "
+                     "channels: %s); choose one with --depth-channel NAME or --depth FILE", all);
+        goto done;
+    }
+    set_ref(&plan->depth, d);
+    rc = 0;
+done:
+    free(q.c);
+    free(dq.c);
+    return rc;
+}

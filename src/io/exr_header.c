@@ -1,0 +1,186 @@
+/* Opening, validating and interpreting EXR headers. */
+#include "exr_io.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+
+/* Core reports details through a callback; keep the last one per thread so
+ * error messages can quote it instead of printing from inside the library. */
+static _Thread_local char last_core_msg[512];
+
+static void core_error_handler(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void) ctxt;
+    snprintf(last_core_msg, sizeof last_core_msg, "%s (%s)", msg ? msg : "",
+             exr_get_error_code_as_string(code));
+}
+
+const char *ef_exr_last_core_message(void)
+{
+    return last_core_msg;
+}
+
+void ef_exr_init_context(exr_context_initializer_t *init)
+{
+    exr_context_initializer_t def = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    *init = def;
+    init->error_handler_fn = core_error_handler;
+}
+
+static int check_part(const ef_exr_file *f, int p, ef_err *err)
+{
+    exr_storage_t st;
+    exr_attr_box2i_t dw, disp;
+    const exr_attr_chlist_t *cl;
+    if (exr_get_storage(f->ctx, p, &st) || exr_get_data_window(f->ctx, p, &dw) ||
+        exr_get_display_window(f->ctx, p, &disp) || exr_get_channels(f->ctx, p, &cl))
+        return ef_fail(err, "part %d has an incomplete header (%s)", p, last_core_msg);
+    if (st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED)
+        return ef_fail(err, "part %d holds deep data, which exrfog does not fog (flatten it first, "
+                            "e.g. oiiotool IN --flatten -o FLAT.exr)", p);
+    const exr_attr_box2i_t *win[2] = { &dw, &disp };
+    const char *wname[2] = { "data", "display" };
+    for (int i = 0; i < 2; ++i) {
+        int64_t w = (int64_t) win[i]->max.x - win[i]->min.x + 1;
+        int64_t h = (int64_t) win[i]->max.y - win[i]->min.y + 1;
+        if (w < 1 || h < 1)
+            return ef_fail(err, "part %d has an empty %s window (%d,%d)-(%d,%d)", p, wname[i],
+                           win[i]->min.x, win[i]->min.y, win[i]->max.x, win[i]->max.y);
+        if (w > EF_MAX_DIMENSION || h > EF_MAX_DIMENSION)
+            return ef_fail(err, "part %d has an absurd %s window of %lld x %lld pixels "
+                                "(exrfog caps each side at %d; the header is probably corrupt)",
+                           p, wname[i], (long long) w, (long long) h, EF_MAX_DIMENSION);
+    }
+    if (cl->num_channels < 1)
+        return ef_fail(err, "part %d has no channels", p);
+    for (int c = 0; c < cl->num_channels; ++c)
+        if (cl->entries[c].x_sampling != 1 || cl->entries[c].y_sampling != 1)
+            return ef_fail(err, "channel '%s' is subsampled (%dx%d), which exrfog does not support",
+                           cl->entries[c].name.str, cl->entries[c].x_sampling,
+                           cl->entries[c].y_sampling);
+    if (st == EXR_STORAGE_TILED) {
+        uint32_t tx, ty;
+        exr_tile_level_mode_t lm;
+        exr_tile_round_mode_t rm;
+        if (exr_get_tile_descriptor(f->ctx, p, &tx, &ty, &lm, &rm))
+            return ef_fail(err, "part %d is tiled but has no valid tile description", p);
+        if (tx < 1 || ty < 1 || tx > EF_MAX_DIMENSION || ty > EF_MAX_DIMENSION)
+            return ef_fail(err, "part %d has an absurd tile size %u x %u", p, tx, ty);
+    }
+    return 0;
+}
+
+int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
+{
+    struct stat sb;
+    memset(f, 0, sizeof *f);
+    f->path = path;
+    if (stat(path, &sb) != 0)
+        return ef_fail(err, "cannot open: %s", strerror(errno));
+    if (S_ISDIR(sb.st_mode))
+        return ef_fail(err, "is a directory, not an EXR file");
+    if (sb.st_size == 0)
+        return ef_fail(err, "the file is empty (0 bytes), not an EXR image");
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return ef_fail(err, "cannot open: %s", strerror(errno));
+    unsigned char magic[4] = { 0 };
+    size_t got = fread(magic, 1, 4, fp);
+    fclose(fp);
+    if (got < 4 || magic[0] != 0x76 || magic[1] != 0x2f || magic[2] != 0x31 || magic[3] != 0x01)
+        return ef_fail(err, "not an OpenEXR file (wrong magic number)");
+
+    exr_context_initializer_t init;
+    ef_exr_init_context(&init);
+    last_core_msg[0] = '\0';
+    exr_result_t rv = exr_start_read(&f->ctx, path, &init);
+    if (rv != EXR_ERR_SUCCESS) {
+        f->ctx = NULL;
+        return ef_fail(err, "cannot read the EXR header, the file is truncated or corrupt: %s",
+                       last_core_msg[0] ? last_core_msg : exr_get_error_code_as_string(rv));
+    }
+    if (exr_get_count(f->ctx, &f->nparts) || f->nparts < 1) {
+        ef_exr_close(f);
+        return ef_fail(err, "the EXR has no image parts");
+    }
+    for (int p = 0; p < f->nparts; ++p)
+        if (check_part(f, p, err)) {
+            ef_exr_close(f);
+            return -1;
+        }
+    return 0;
+}
+
+void ef_exr_close(ef_exr_file *f)
+{
+    if (f && f->ctx)
+        exr_finish(&f->ctx);
+    if (f)
+        f->ctx = NULL;
+}
+
+/* Reads an m44f or m44d attribute; absent attributes leave out unset. */
+static int get_mat(const ef_exr_file *f, int p, const char *name, ef_opt_mat *out, ef_err *err)
+{
+    const exr_attribute_t *a;
+    if (exr_get_attribute_by_name(f->ctx, p, name, &a) != EXR_ERR_SUCCESS)
+        return 0;
+    if (a->type == EXR_ATTR_M44F)
+        for (int i = 0; i < 16; ++i)
+            out->v.m[i] = a->m44f->m[i];
+    else if (a->type == EXR_ATTR_M44D)
+        for (int i = 0; i < 16; ++i)
+            out->v.m[i] = a->m44d->m[i];
+    else
+        return ef_fail(err, "attribute '%s' has type %s, expected m44f or m44d", name, a->type_name);
+    out->set = 1;
+    return 0;
+}
+
+/* Reads a float, double or int attribute as a number. */
+static int get_num(const ef_exr_file *f, int p, const char *name, ef_opt_num *out, ef_err *err)
+{
+    const exr_attribute_t *a;
+    if (exr_get_attribute_by_name(f->ctx, p, name, &a) != EXR_ERR_SUCCESS)
+        return 0;
+    if (a->type == EXR_ATTR_FLOAT)
+        out->v = a->f;
+    else if (a->type == EXR_ATTR_DOUBLE)
+        out->v = a->d;
+    else if (a->type == EXR_ATTR_INT)
+        out->v = a->i;
+    else
+        return ef_fail(err, "attribute '%s' has type %s, expected a number", name, a->type_name);
+    out->set = 1;
+    return 0;
+}
+
+int ef_exr_read_cam_meta(const ef_exr_file *f, int p, ef_cam_meta *m, ef_err *err)
+{
+    exr_attr_box2i_t disp;
+    float pa = 1.0f;
+    if (exr_get_display_window(f->ctx, p, &disp))
+        return ef_fail(err, "part %d has no display window", p);
+    ef_cam_meta_init(m, disp.min.x, disp.min.y, disp.max.x, disp.max.y);
+    if (exr_get_pixel_aspect_ratio(f->ctx, p, &pa) == EXR_ERR_SUCCESS && isfinite(pa) && pa > 0)
+        m->pixel_aspect = pa;
+    return get_mat(f, p, "worldToCamera", &m->w2c, err) ||
+           get_mat(f, p, "worldToNDC", &m->w2ndc, err) ||
+           get_mat(f, p, "worldToScreen", &m->w2screen, err) ||
+           get_num(f, p, "CameraFov", &m->arnold_fov, err) ||
+           get_num(f, p, "arnold/camera/near_clip", &m->arnold_near, err) ||
+           get_num(f, p, "arnold/camera/far_clip", &m->arnold_far, err) ||
+           get_mat(f, p, "cameraTransform", &m->vray_c2w, err) ||
+           get_num(f, p, "cameraFov", &m->vray_fov, err) ||
+           get_num(f, p, "cameraNearClip", &m->vray_near, err) ||
+           get_num(f, p, "cameraFarClip", &m->vray_far, err) ||
+           get_mat(f, p, "rs/camera/transform", &m->rs_c2w, err) ||
+           get_num(f, p, "rs/camera/fov", &m->rs_fov, err) ||
+           get_num(f, p, "rs/camera/nearPlane", &m->rs_near, err) ||
+           get_num(f, p, "rs/camera/farPlane", &m->rs_far, err)
+               ? -1
+               : 0;
+}

@@ -1,0 +1,96 @@
+/* OpenEXRCore adapter: opening and validating inputs, reading camera
+ * metadata, finding the colour and depth channels, and streaming a file
+ * chunk by chunk into a new one while a callback edits the colour. */
+#ifndef EF_EXR_IO_H
+#define EF_EXR_IO_H
+
+#include <openexr.h>
+#include <stdint.h>
+
+#include "camera.h"
+#include "error.h"
+
+/* Widths and heights above this are refused as absurd (corrupt headers). */
+#define EF_MAX_DIMENSION 262144
+
+typedef struct ef_exr_file {
+    const char *path;
+    exr_context_t ctx;
+    int nparts;
+} ef_exr_file;
+
+/* Opens and validates path: an EXR whose parts are flat (not deep), not
+ * subsampled, with sane windows. Returns 0, or -1 with a message. */
+int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err);
+/* Releases what ef_exr_open took; safe on a zeroed struct. */
+void ef_exr_close(ef_exr_file *f);
+
+/* Reads the camera attributes of a part into meta. Fails only on
+ * attributes of an unexpected type. */
+int ef_exr_read_cam_meta(const ef_exr_file *f, int part, ef_cam_meta *meta, ef_err *err);
+
+/* A channel located in a file: part, index in its channel list, and the
+ * qualified name (layer.channel, the layer coming from the part name for
+ * multi-part files). */
+typedef struct ef_chan_ref {
+    int part;                 /* -1: absent */
+    int index;
+    char name[256];
+} ef_chan_ref;
+
+typedef struct ef_channel_plan {
+    ef_chan_ref rgb[3];
+    ef_chan_ref alpha;        /* part == -1 when the colour has no alpha */
+    ef_chan_ref depth;        /* in depth_file */
+} ef_channel_plan;
+
+/* Finds colour in f (layer NULL: automatic) and depth in depth_file (which
+ * may be f; depth_channel NULL: automatic). Never picks look-alikes such as
+ * normals.Z, N.Z, P.Z, *.ZBack or another layer's Z. Fails with the list of
+ * what the file has and the flag that chooses explicitly. */
+int ef_find_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const char *layer,
+                     const char *depth_channel, ef_channel_plan *plan, ef_err *err);
+
+/* One work unit of the colour part, decoded to float: a rectangle of
+ * absolute pixels, rows of w floats. alpha is NULL without alpha. */
+typedef struct ef_chunk {
+    int x0, y0, w, h;
+    float *rgb[3];
+    float *alpha;
+    const float *depth;
+} ef_chunk;
+
+/* Edits the colour of one unit in place; called from worker threads, so it
+ * must only touch the unit and read-only shared state. */
+typedef void (*ef_chunk_fn)(void *user, const ef_chunk *chunk);
+
+typedef struct ef_stream_stats {
+    double decode_s, fog_s, encode_s, write_s;  /* summed over threads */
+    double wall_s;
+    long units;
+} ef_stream_stats;
+
+typedef struct ef_stream_opts {
+    int threads;              /* >= 1 */
+    int compression;          /* exr_compression_t, or -1 to keep each part's */
+    int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep */
+    const char *param_attr;   /* value of the exrfog/parameters string attribute */
+} ef_stream_opts;
+
+/* Writes every part of in to out_path (the exact path: the caller picks a
+ * temporary name and renames), calling fn on each unit of the colour part
+ * with its depth. Every channel is written back; header attributes are
+ * copied. Returns 0, or -1 with a message; a failed write leaves out_path
+ * removed. */
+int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,
+                  const ef_channel_plan *plan, const char *out_path,
+                  const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
+                  ef_stream_stats *stats, ef_err *err);
+
+/* Parses a --compression name; DWAA/DWAB are refused with a message.
+ * Returns 0 or -1. */
+int ef_compression_parse(const char *name, int *compression, ef_err *err);
+/* The name of a compression enum. */
+const char *ef_compression_name(int compression);
+
+#endif

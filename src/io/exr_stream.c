@@ -1,0 +1,609 @@
+/* Streaming transcoder: every part of the input is decoded unit by unit
+ * (a band of scanline chunks or one tile), the colour part's units go
+ * through the fog callback, and the result is compressed in parallel and
+ * written in chunk order. Memory is a few units per thread, whatever the
+ * image size. */
+#include "exr_io.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+const char *ef_exr_last_core_message(void);
+void ef_exr_init_context(exr_context_initializer_t *init);
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
+}
+
+/* Geometry of one part as the stream walks it. */
+typedef struct part_geom {
+    exr_attr_box2i_t dw;
+    int width, height;
+    int tiled, tw, th, ntx;
+    int in_rows;              /* scanlines per input chunk */
+    int unit_rows;            /* scanline: rows per unit (a multiple of both chunkings) */
+    int nunits;
+} part_geom;
+
+static int geom_init(exr_const_context_t ctx, int p, int out_rows, part_geom *g)
+{
+    exr_storage_t st;
+    memset(g, 0, sizeof *g);
+    if (exr_get_data_window(ctx, p, &g->dw) || exr_get_storage(ctx, p, &st))
+        return -1;
+    g->width = g->dw.max.x - g->dw.min.x + 1;
+    g->height = g->dw.max.y - g->dw.min.y + 1;
+    g->tiled = st == EXR_STORAGE_TILED;
+    if (g->tiled) {
+        uint32_t tx, ty;
+        if (exr_get_tile_descriptor(ctx, p, &tx, &ty, NULL, NULL))
+            return -1;
+        g->tw = (int) tx;
+        g->th = (int) ty;
+        g->ntx = (g->width + g->tw - 1) / g->tw;
+        g->nunits = g->ntx * ((g->height + g->th - 1) / g->th);
+        return 0;
+    }
+    if (exr_get_scanlines_per_chunk(ctx, p, &g->in_rows) || g->in_rows < 1)
+        return -1;
+    /* Chunk heights are 1, 16 or 32 (powers of two), so the larger is a
+     * multiple of the smaller; at least 16 rows keep per-unit overhead low. */
+    g->unit_rows = g->in_rows > out_rows ? g->in_rows : out_rows;
+    if (g->unit_rows < 16)
+        g->unit_rows = 16;
+    g->nunits = (g->height + g->unit_rows - 1) / g->unit_rows;
+    return 0;
+}
+
+/* The rectangle of unit u, in absolute pixels. */
+static void unit_rect(const part_geom *g, int u, int *x0, int *y0, int *w, int *h)
+{
+    if (g->tiled) {
+        int tx = u % g->ntx, ty = u / g->ntx;
+        *x0 = g->dw.min.x + tx * g->tw;
+        *y0 = g->dw.min.y + ty * g->th;
+        *w = g->dw.max.x + 1 - *x0 < g->tw ? g->dw.max.x + 1 - *x0 : g->tw;
+        *h = g->dw.max.y + 1 - *y0 < g->th ? g->dw.max.y + 1 - *y0 : g->th;
+    } else {
+        *x0 = g->dw.min.x;
+        *y0 = g->dw.min.y + u * g->unit_rows;
+        *w = g->width;
+        *h = g->dw.max.y + 1 - *y0 < g->unit_rows ? g->dw.max.y + 1 - *y0 : g->unit_rows;
+    }
+}
+
+/* Decodes one input chunk into planes (one 32-bit plane per channel,
+ * row stride `stride` pixels, origin at absolute (ox, oy)). Every channel
+ * gets a destination: Core 3.1.5 crashes on NULL ones. */
+static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *ci, int cx,
+                        int cy, exr_decode_pipeline_t *dec, int *ready, void **planes, int stride,
+                        int ox, int oy)
+{
+    exr_result_t rv = *ready ? exr_decoding_update(ctx, p, ci, dec)
+                             : exr_decoding_initialize(ctx, p, ci, dec);
+    if (rv)
+        return -1;
+    const exr_attr_chlist_t *cl;
+    exr_get_channels(ctx, p, &cl);
+    for (int c = 0; c < dec->channel_count; ++c) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        int k = 0;
+        while (k < cl->num_channels && strcmp(cl->entries[k].name.str, ch->channel_name))
+            ++k;
+        if (k == cl->num_channels)
+            return -1;
+        ch->decode_to_ptr = (uint8_t *) planes[k] +
+                            4 * ((size_t) (cy - oy) * (size_t) stride + (size_t) (cx - ox));
+        ch->user_data_type = ch->data_type == EXR_PIXEL_UINT ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = 4;
+        ch->user_pixel_stride = 4;
+        ch->user_line_stride = 4 * stride;
+    }
+    if (!*ready && exr_decoding_choose_default_routines(ctx, p, dec))
+        return -1;
+    *ready = 1;
+    return exr_decoding_run(ctx, p, dec) ? -1 : 0;
+}
+
+/* Chunk info for the chunk that holds absolute pixel (x, y), and the
+ * absolute pixel of its top-left corner (Core reports tile indices). */
+static int chunk_at(exr_const_context_t ctx, int p, const part_geom *g, int x, int y,
+                    exr_chunk_info_t *ci, int *cx, int *cy)
+{
+    if (g->tiled) {
+        int tx = (x - g->dw.min.x) / g->tw, ty = (y - g->dw.min.y) / g->th;
+        *cx = g->dw.min.x + tx * g->tw;
+        *cy = g->dw.min.y + ty * g->th;
+        return exr_read_tile_chunk_info(ctx, p, tx, ty, 0, 0, ci) ? -1 : 0;
+    }
+    if (exr_read_scanline_chunk_info(ctx, p, y, ci))
+        return -1;
+    *cx = g->dw.min.x;
+    *cy = ci->start_y;
+    return 0;
+}
+
+/* Reads depth for a rectangle from another part or file: decodes each
+ * source chunk that overlaps it (whole, every channel) and copies the
+ * overlap. The last chunk is cached because neighbouring units share it. */
+typedef struct depth_reader {
+    exr_const_context_t ctx;
+    int part, chan, nch;
+    part_geom g;
+    exr_decode_pipeline_t dec;
+    int ready;
+    void **planes;            /* nch planes of one source chunk */
+    size_t plane_cap;
+    int cached, cx, cy, cw, ch;
+} depth_reader;
+
+static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
+{
+    for (int y = y0; y < y0 + h;) {
+        int next_y = y0 + h;
+        for (int x = x0; x < x0 + w;) {
+            if (!(r->cached && x >= r->cx && x < r->cx + r->cw && y >= r->cy && y < r->cy + r->ch)) {
+                exr_chunk_info_t ci;
+                int cx, cy;
+                if (chunk_at(r->ctx, r->part, &r->g, x, y, &ci, &cx, &cy))
+                    return -1;
+                size_t need = (size_t) ci.width * (size_t) ci.height;
+                if (need > r->plane_cap) {
+                    for (int k = 0; k < r->nch; ++k) {
+                        free(r->planes[k]);
+                        r->planes[k] = malloc(need * 4);
+                        if (!r->planes[k])
+                            return -1;
+                    }
+                    r->plane_cap = need;
+                }
+                r->cached = 0;
+                if (decode_chunk(r->ctx, r->part, &ci, cx, cy, &r->dec, &r->ready, r->planes,
+                                 ci.width, cx, cy))
+                    return -1;
+                r->cached = 1;
+                r->cx = cx;
+                r->cy = cy;
+                r->cw = ci.width;
+                r->ch = ci.height;
+            }
+            int xe = r->cx + r->cw < x0 + w ? r->cx + r->cw : x0 + w;
+            int ye = r->cy + r->ch < y0 + h ? r->cy + r->ch : y0 + h;
+            const float *src = r->planes[r->chan];
+            for (int yy = y; yy < ye; ++yy)
+                memcpy(out + (size_t) (yy - y0) * w + (x - x0),
+                       src + (size_t) (yy - r->cy) * r->cw + (x - r->cx),
+                       sizeof(float) * (size_t) (xe - x));
+            next_y = ye;
+            x = xe;
+        }
+        y = next_y;
+    }
+    return 0;
+}
+
+static void depth_reader_free(depth_reader *r)
+{
+    if (r->ready)
+        exr_decoding_destroy(r->ctx, &r->dec);
+    for (int k = 0; r->planes && k < r->nch; ++k)
+        free(r->planes[k]);
+    free(r->planes);
+}
+
+/* Shared state of one part's parallel pass. */
+typedef struct part_job {
+    exr_const_context_t in;
+    exr_context_t out;
+    int part;
+    part_geom g;
+    int out_rows;             /* scanlines per output chunk */
+    int nch;
+    const exr_attr_chlist_t *cl;
+    int colour;               /* 1: this is the part the callback edits */
+    const ef_channel_plan *plan;
+    exr_const_context_t depth_ctx;
+    int depth_part;           /* part in depth_ctx, when separate */
+    int depth_local;          /* channel index of depth in this part, or -1 */
+    ef_chunk_fn fn;
+    void *user;
+    atomic_int next_unit;
+    pthread_mutex_t lock;
+    pthread_cond_t turn;
+    int written;              /* units written so far (guarded by lock) */
+    int failed;               /* guarded by lock */
+    ef_err err;
+    double t_decode, t_fog, t_encode, t_write;
+} part_job;
+
+static void job_fail(part_job *j, const char *fmt, int a, const char *detail)
+{
+    pthread_mutex_lock(&j->lock);
+    if (!j->failed) {
+        char what[200];
+        snprintf(what, sizeof what, fmt, a);
+        ef_fail(&j->err, "%s%s%s", what, detail && detail[0] ? ": " : "", detail ? detail : "");
+        j->failed = 1;
+    }
+    pthread_cond_broadcast(&j->turn);
+    pthread_mutex_unlock(&j->lock);
+}
+
+/* Compressed chunks of one unit, kept until it is this unit's turn. */
+typedef struct out_buf {
+    uint8_t *data;
+    size_t len, cap;
+    int n;
+    int y[64];                /* scanline start or tile index x */
+    int ty[64];
+    size_t off[64], size[64];
+} out_buf;
+
+static int out_append(out_buf *o, const void *p, size_t n, int y, int ty)
+{
+    if (o->len + n > o->cap) {
+        size_t cap = (o->len + n) * 2;
+        uint8_t *d = realloc(o->data, cap);
+        if (!d)
+            return -1;
+        o->data = d;
+        o->cap = cap;
+    }
+    memcpy(o->data + o->len, p, n);
+    o->y[o->n] = y;
+    o->ty[o->n] = ty;
+    o->off[o->n] = o->len;
+    o->size[o->n] = n;
+    o->n++;
+    o->len += n;
+    return 0;
+}
+
+/* Packs and compresses one output chunk, copying the bytes into o. */
+static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
+                        const exr_chunk_info_t *ci, int cy, void **planes, int stride, int oy,
+                        out_buf *o, int key_y, int key_ty)
+{
+    exr_result_t rv = *ready ? exr_encoding_update(j->out, j->part, ci, enc)
+                             : exr_encoding_initialize(j->out, j->part, ci, enc);
+    if (rv)
+        return -1;
+    for (int c = 0; c < enc->channel_count; ++c) {
+        exr_coding_channel_info_t *ch = &enc->channels[c];
+        int k = 0;
+        while (k < j->nch && strcmp(j->cl->entries[k].name.str, ch->channel_name))
+            ++k;
+        if (k == j->nch)
+            return -1;
+        ch->encode_from_ptr = (const uint8_t *) planes[k] + 4 * (size_t) (cy - oy) * (size_t) stride;
+        ch->user_data_type = ch->data_type == EXR_PIXEL_UINT ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = 4;
+        ch->user_pixel_stride = 4;
+        ch->user_line_stride = 4 * stride;
+    }
+    if (!*ready) {
+        if (exr_encoding_choose_default_routines(j->out, j->part, enc))
+            return -1;
+        /* Only pack and compress here; the ordered writer stores the bytes. */
+        enc->write_fn = NULL;
+        enc->yield_until_ready_fn = NULL;
+        *ready = 1;
+    }
+    if (exr_encoding_run(j->out, j->part, enc))
+        return -1;
+    exr_compression_t comp;
+    exr_get_compression(j->out, j->part, &comp);
+    if (comp == EXR_COMPRESSION_NONE || !enc->compressed_buffer ||
+        enc->compressed_bytes >= enc->packed_bytes)
+        return out_append(o, enc->packed_buffer, enc->packed_bytes, key_y, key_ty);
+    return out_append(o, enc->compressed_buffer, enc->compressed_bytes, key_y, key_ty);
+}
+
+static void *worker(void *arg)
+{
+    part_job *j = arg;
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    int dec_ready = 0, enc_ready = 0;
+    depth_reader dr = { 0 };
+    out_buf ob = { 0 };
+    float *depth = NULL;
+    size_t cap = j->g.tiled ? (size_t) j->g.tw * (size_t) j->g.th
+                            : (size_t) j->g.width * (size_t) j->g.unit_rows;
+    void **planes = calloc((size_t) j->nch, sizeof *planes);
+    int ok = planes != NULL;
+    for (int k = 0; ok && k < j->nch; ++k)
+        ok = (planes[k] = malloc(cap * 4)) != NULL;
+    if (ok && j->colour && j->depth_local < 0) {
+        const exr_attr_chlist_t *dcl;
+        dr.ctx = j->depth_ctx;
+        dr.part = j->depth_part;
+        dr.chan = j->plan->depth.index;
+        ok = !exr_get_channels(dr.ctx, dr.part, &dcl) && !geom_init(dr.ctx, dr.part, 1, &dr.g);
+        dr.nch = ok ? dcl->num_channels : 0;
+        ok = ok && (dr.planes = calloc((size_t) dr.nch, sizeof *dr.planes)) != NULL &&
+             (depth = malloc(cap * sizeof *depth)) != NULL;
+    }
+    if (!ok)
+        job_fail(j, "out of memory for part %d", j->part, NULL);
+
+    double td = 0, tf = 0, te = 0, tw = 0;
+    for (;;) {
+        int u = atomic_fetch_add(&j->next_unit, 1);
+        if (u >= j->g.nunits || !ok)
+            break;
+        pthread_mutex_lock(&j->lock);
+        int stop = j->failed;
+        pthread_mutex_unlock(&j->lock);
+        if (stop)
+            break;
+        int x0, y0, w, h;
+        unit_rect(&j->g, u, &x0, &y0, &w, &h);
+        double t0 = now();
+        /* decode */
+        for (int y = y0; y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
+            exr_chunk_info_t ci;
+            int cx, cy;
+            if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
+                decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0)) {
+                job_fail(j, "cannot decode the chunk at scanline %d, the file is truncated or "
+                            "corrupt", y, ef_exr_last_core_message());
+                goto out;
+            }
+        }
+        if (j->colour && j->depth_local < 0 && depth_read(&dr, x0, y0, w, h, depth)) {
+            job_fail(j, "cannot decode the depth chunk at scanline %d, the depth file is "
+                        "truncated or corrupt", y0, ef_exr_last_core_message());
+            goto out;
+        }
+        double t1 = now();
+        td += t1 - t0;
+        if (j->colour) {
+            ef_chunk ck = { x0, y0, w, h, { NULL, NULL, NULL }, NULL, NULL };
+            for (int k = 0; k < 3; ++k)
+                ck.rgb[k] = planes[j->plan->rgb[k].index];
+            ck.alpha = j->plan->alpha.part >= 0 ? planes[j->plan->alpha.index] : NULL;
+            ck.depth = j->depth_local >= 0 ? planes[j->depth_local] : depth;
+            j->fn(j->user, &ck);
+        }
+        double t2 = now();
+        tf += t2 - t1;
+        /* encode */
+        ob.n = 0;
+        ob.len = 0;
+        int step = j->g.tiled ? h : j->out_rows;
+        for (int y = y0; y < y0 + h; y += step) {
+            exr_chunk_info_t ci;
+            exr_result_t rv;
+            int tx = (x0 - j->g.dw.min.x) / (j->g.tiled ? j->g.tw : 1);
+            int ty = (y0 - j->g.dw.min.y) / (j->g.tiled ? j->g.th : 1);
+            if (j->g.tiled)
+                rv = exr_write_tile_chunk_info(j->out, j->part, tx, ty, 0, 0, &ci);
+            else
+                rv = exr_write_scanline_chunk_info(j->out, j->part, y, &ci);
+            if (rv || encode_chunk(j, &enc, &enc_ready, &ci, y, planes, w, y0, &ob,
+                                   j->g.tiled ? tx : y, ty)) {
+                job_fail(j, "cannot encode the output chunk at scanline %d", y,
+                         ef_exr_last_core_message());
+                goto out;
+            }
+        }
+        double t3 = now();
+        te += t3 - t2;
+        /* write, in unit order */
+        pthread_mutex_lock(&j->lock);
+        while (j->written != u && !j->failed)
+            pthread_cond_wait(&j->turn, &j->lock);
+        int failed = j->failed;
+        pthread_mutex_unlock(&j->lock);
+        if (failed)
+            goto out;
+        double t4 = now();
+        for (int i = 0; i < ob.n; ++i) {
+            exr_result_t rv =
+                j->g.tiled ? exr_write_tile_chunk(j->out, j->part, ob.y[i], ob.ty[i], 0, 0,
+                                                  ob.data + ob.off[i], ob.size[i])
+                           : exr_write_scanline_chunk(j->out, j->part, ob.y[i],
+                                                      ob.data + ob.off[i], ob.size[i]);
+            if (rv) {
+                job_fail(j, "cannot write the output chunk at scanline %d (disk full?)", y0,
+                         ef_exr_last_core_message());
+                goto out;
+            }
+        }
+        tw += now() - t4;
+        pthread_mutex_lock(&j->lock);
+        j->written++;
+        pthread_cond_broadcast(&j->turn);
+        pthread_mutex_unlock(&j->lock);
+    }
+out:
+    pthread_mutex_lock(&j->lock);
+    j->t_decode += td;
+    j->t_fog += tf;
+    j->t_encode += te;
+    j->t_write += tw;
+    pthread_mutex_unlock(&j->lock);
+    if (dec_ready)
+        exr_decoding_destroy(j->in, &dec);
+    if (enc_ready)
+        exr_encoding_destroy(j->out, &enc);
+    depth_reader_free(&dr);
+    free(depth);
+    free(ob.data);
+    for (int k = 0; planes && k < j->nch; ++k)
+        free(planes[k]);
+    free(planes);
+    return NULL;
+}
+
+/* Declares output part p like input part p: same name, storage, tile size
+ * (one level), channels (types per opts), then every other attribute. */
+static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef_stream_opts *o,
+                       ef_err *err)
+{
+    const char *name = NULL;
+    exr_storage_t st;
+    exr_compression_t comp;
+    const exr_attr_chlist_t *cl;
+    int op;
+    exr_get_name(in->ctx, p, &name);
+    exr_get_storage(in->ctx, p, &st);
+    exr_get_compression(in->ctx, p, &comp);
+    exr_get_channels(in->ctx, p, &cl);
+    if (o->compression >= 0)
+        comp = (exr_compression_t) o->compression;
+    else if (comp == EXR_COMPRESSION_DWAA || comp == EXR_COMPRESSION_DWAB)
+        return ef_fail(err, "part %d is DWA-compressed, which OpenEXRCore 3.1.5 cannot read", p);
+    if (exr_add_part(out, name, st, &op) || op != p)
+        return ef_fail(err, "cannot add output part %d: %s", p, ef_exr_last_core_message());
+    if (st == EXR_STORAGE_TILED) {
+        uint32_t tx, ty;
+        exr_get_tile_descriptor(in->ctx, p, &tx, &ty, NULL, NULL);
+        if (exr_set_tile_descriptor(out, p, tx, ty, EXR_TILE_ONE_LEVEL, EXR_TILE_ROUND_DOWN))
+            return ef_fail(err, "cannot set the tile size of part %d", p);
+    }
+    for (int c = 0; c < cl->num_channels; ++c) {
+        const exr_attr_chlist_entry_t *e = &cl->entries[c];
+        exr_pixel_type_t t = e->pixel_type;
+        if (o->pixel_type >= 0 && t != EXR_PIXEL_UINT)
+            t = (exr_pixel_type_t) o->pixel_type;
+        if (exr_add_channel(out, p, e->name.str, t, e->p_linear ? EXR_PERCEPTUALLY_LINEAR
+                                                                : EXR_PERCEPTUALLY_LOGARITHMIC,
+                            1, 1))
+            return ef_fail(err, "cannot add channel '%s'", e->name.str);
+    }
+    if (exr_set_compression(out, p, comp) || exr_set_lineorder(out, p, EXR_LINEORDER_INCREASING_Y))
+        return ef_fail(err, "cannot set compression of part %d", p);
+    if (o->param_attr && exr_attr_set_string(out, p, "exrfog/parameters", o->param_attr))
+        return ef_fail(err, "cannot record exrfog/parameters");
+    if (exr_copy_unset_attributes(out, p, in->ctx, p))
+        return ef_fail(err, "cannot copy the header of part %d: %s", p, ef_exr_last_core_message());
+    return 0;
+}
+
+static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t out, int p,
+                    const ef_channel_plan *plan, const ef_stream_opts *o, ef_chunk_fn fn,
+                    void *user, ef_stream_stats *stats, ef_err *err)
+{
+    part_job j;
+    memset(&j, 0, sizeof j);
+    j.in = in->ctx;
+    j.out = out;
+    j.part = p;
+    j.plan = plan;
+    j.fn = fn;
+    j.user = user;
+    j.colour = p == plan->rgb[0].part;
+    j.depth_local = -1;
+    if (exr_get_scanlines_per_chunk(out, p, &j.out_rows) || j.out_rows < 1)
+        j.out_rows = 1;
+    if (geom_init(in->ctx, p, j.out_rows, &j.g))
+        return ef_fail(err, "part %d: cannot read its chunk layout", p);
+    exr_get_channels(in->ctx, p, &j.cl);
+    j.nch = j.cl->num_channels;
+    if (j.colour) {
+        if (df == in && plan->depth.part == p) {
+            j.depth_local = plan->depth.index;
+        } else {
+            exr_attr_box2i_t ddw;
+            j.depth_ctx = df->ctx;
+            j.depth_part = plan->depth.part;
+            exr_get_data_window(df->ctx, plan->depth.part, &ddw);
+            if (memcmp(&ddw, &j.g.dw, sizeof ddw))
+                return ef_fail(err, "the depth data window (%d,%d)-(%d,%d) [%dx%d] differs from the "
+                                    "colour data window (%d,%d)-(%d,%d) [%dx%d]; the depth must "
+                                    "cover exactly the colour pixels",
+                               ddw.min.x, ddw.min.y, ddw.max.x, ddw.max.y,
+                               ddw.max.x - ddw.min.x + 1, ddw.max.y - ddw.min.y + 1,
+                               j.g.dw.min.x, j.g.dw.min.y, j.g.dw.max.x, j.g.dw.max.y, j.g.width,
+                               j.g.height);
+        }
+    }
+    atomic_init(&j.next_unit, 0);
+    pthread_mutex_init(&j.lock, NULL);
+    pthread_cond_init(&j.turn, NULL);
+    int nt = o->threads < 1 ? 1 : o->threads;
+    if (nt > j.g.nunits)
+        nt = j.g.nunits;
+    pthread_t *th = calloc((size_t) nt, sizeof *th);
+    int started = 0;
+    for (; th && started < nt; ++started)
+        if (pthread_create(&th[started], NULL, worker, &j))
+            break;
+    if (started == 0)
+        worker(&j);
+    for (int i = 0; i < started; ++i)
+        pthread_join(th[i], NULL);
+    free(th);
+    pthread_mutex_destroy(&j.lock);
+    pthread_cond_destroy(&j.turn);
+    stats->decode_s += j.t_decode;
+    stats->fog_s += j.t_fog;
+    stats->encode_s += j.t_encode;
+    stats->write_s += j.t_write;
+    stats->units += j.g.nunits;
+    if (j.failed) {
+        *err = j.err;
+        return -1;
+    }
+    return 0;
+}
+
+int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
+                  const char *out_path, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
+                  ef_stream_stats *stats, ef_err *err)
+{
+    exr_context_initializer_t init;
+    exr_context_t out = NULL;
+    double t0 = now();
+    memset(stats, 0, sizeof *stats);
+    ef_exr_init_context(&init);
+    if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init))
+        return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
+    int rc = 0;
+    for (int p = 0; p < in->nparts && !rc; ++p)
+        rc = define_part(in, out, p, o, err);
+    if (!rc && exr_write_header(out))
+        rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
+    for (int p = 0; p < in->nparts && !rc; ++p)
+        rc = run_part(in, df, out, p, plan, o, fn, user, stats, err);
+    if (exr_finish(&out) && !rc)
+        rc = ef_fail(err, "cannot finish the output: %s", ef_exr_last_core_message());
+    if (rc)
+        remove(out_path);
+    stats->wall_s = now() - t0;
+    return rc;
+}
+
+static const char *const comp_names[] = { "none", "rle", "zips", "zip", "piz",
+                                          "pxr24", "b44", "b44a", "dwaa", "dwab" };
+
+int ef_compression_parse(const char *name, int *compression, ef_err *err)
+{
+    for (int i = 0; i < (int) (sizeof comp_names / sizeof comp_names[0]); ++i)
+        if (!strcmp(name, comp_names[i])) {
+            if (i == EXR_COMPRESSION_DWAA || i == EXR_COMPRESSION_DWAB)
+                return ef_fail(err, "--compression %s: DWA compression is not available yet "
+                                    "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", name);
+            *compression = i;
+            return 0;
+        }
+    return ef_fail(err, "--compression '%s' is not one of none, rle, zips, zip, piz, pxr24, b44, b44a",
+                   name);
+}
+
+const char *ef_compression_name(int compression)
+{
+    if (compression < 0 || compression >= (int) (sizeof comp_names / sizeof comp_names[0]))
+        return "unknown";
+    return comp_names[compression];
+}

@@ -1,0 +1,20 @@
+/* Preview images through OpenImageIO (any format it writes, by extension). */
+#ifndef EF_PREVIEW_H
+#define EF_PREVIEW_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Writes an 8-bit RGB image (rows of w*3 bytes). Returns 0, or -1 with a
+ * message in err. */
+int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, char *err,
+                     size_t errlen);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,189 @@
+/* Fog models, the SPEC grammar and premultiplied compositing, against
+ * values worked out by hand from glFog (seed 001) and the compositing
+ * formula of the foundation issue. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "scene.h"
+
+static ef_ray ray(double dist, double planar)
+{
+    ef_ray r = { { 0, 0, 1 }, dist, planar };
+    return r;
+}
+
+static void scene_with(ef_fog_scene *s, const char *spec)
+{
+    ef_err err;
+    ef_scene_init(s);
+    assert_int_equal(ef_fog_parse(spec, &s->comp[s->ncomp], &err), 0);
+    s->ncomp++;
+}
+
+static void expect_T(const ef_fog_scene *s, ef_ray r, double t0, double t1, double t2)
+{
+    double T[3], Tinf[3];
+    ef_scene_transmittance(s, &r, T, Tinf);
+    assert_true(fabs(T[0] - t0) <= 1e-15);
+    assert_true(fabs(T[1] - t1) <= 1e-15);
+    assert_true(fabs(T[2] - t2) <= 1e-15);
+}
+
+static void test_exp(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "exp:density=0.1");
+    expect_T(&s, ray(10, 8), 0.36787944117144233, 0.36787944117144233, 0.36787944117144233);
+    expect_T(&s, ray(0, 0), 1, 1, 1);
+    scene_with(&s, "exp:density=0.1:distance=planar");
+    expect_T(&s, ray(10, 8), 0.44932896411722156, 0.44932896411722156, 0.44932896411722156);
+}
+
+static void test_exp2(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "exp2:density=0.1");
+    expect_T(&s, ray(10, 10), 0.36787944117144233, 0.36787944117144233, 0.36787944117144233);
+    expect_T(&s, ray(20, 20), 0.018315638888734179, 0.018315638888734179, 0.018315638888734179);
+}
+
+static void test_linear(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "linear:start=10:end=30");
+    expect_T(&s, ray(20, 20), 0.5, 0.5, 0.5);
+    expect_T(&s, ray(25, 25), 0.25, 0.25, 0.25);
+    expect_T(&s, ray(5, 5), 1, 1, 1);     /* clamped to 1 before start */
+    expect_T(&s, ray(40, 40), 0, 0, 0);   /* clamped to 0 beyond end */
+    expect_T(&s, ray(INFINITY, INFINITY), 0, 0, 0);
+}
+
+static void test_per_channel_and_sum(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "exp:density=0.1,0.2,0.3");
+    expect_T(&s, ray(10, 10), exp(-1.0), exp(-2.0), exp(-3.0));
+    /* Two components: optical depths add. */
+    ef_err err;
+    assert_int_equal(ef_fog_parse("exp:density=0.05", &s.comp[s.ncomp++], &err), 0);
+    expect_T(&s, ray(10, 10), exp(-1.5), exp(-2.5), exp(-3.5));
+}
+
+static void test_sky_limits(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    double T[3], Tinf[3];
+    ef_ray sky = ray(INFINITY, INFINITY);
+    scene_with(&s, "exp:density=0.1,0,0.2");
+    ef_scene_transmittance(&s, &sky, T, Tinf);
+    /* A zero density stays fog-free at infinity (no 0*inf NaN). */
+    assert_true(T[0] == 0.0 && T[1] == 1.0 && T[2] == 0.0);
+    assert_memory_equal(T, Tinf, sizeof T);
+    /* Background as a shell at 100: Tinf ends there. */
+    scene_with(&s, "exp:density=0.01");
+    ef_err err;
+    assert_int_equal(ef_scene_parse_sky(&s, "distance=100", &err), 0);
+    ef_ray near = ray(5, 5);
+    ef_scene_transmittance(&s, &near, T, Tinf);
+    assert_true(fabs(Tinf[0] - exp(-1.0)) < 1e-15);
+    assert_true(fabs(T[0] - exp(-0.05)) < 1e-15);
+}
+
+static void test_composite(void **state)
+{
+    (void) state;
+    const double F[3] = { 1, 0.5, 0.25 };
+    const double T[3] = { 0.5, 0.5, 0.5 }, Tinf[3] = { 0.1, 0.1, 0.1 };
+    /* alpha = 1: exactly glFog, C' = f C + (1 - f) F; alpha stays 1. */
+    double rgb[3] = { 0.2, 0.4, 0.8 }, a = 1.0;
+    ef_composite(T, Tinf, F, 1, rgb, &a);
+    assert_true(fabs(rgb[0] - 0.6) < 1e-15 && fabs(rgb[1] - 0.45) < 1e-15 &&
+                fabs(rgb[2] - 0.525) < 1e-15 && a == 1.0);
+    /* alpha = 0.5, premultiplied colour 0.2: 0.5*0.2 + 0.5*0.5*F + 0.5*0.9*F. */
+    double h[3] = { 0.2, 0.2, 0.2 };
+    a = 0.5;
+    ef_composite(T, Tinf, F, 1, h, &a);
+    assert_true(fabs(h[0] - 0.8) < 1e-15 && fabs(h[1] - 0.45) < 1e-15 &&
+                fabs(h[2] - 0.275) < 1e-15);
+    assert_true(fabs(a - 0.95) < 1e-15);
+    /* alpha = 0 (nothing rendered): only the fog in front of the background. */
+    double z[3] = { 0, 0, 0 };
+    a = 0.0;
+    ef_composite(Tinf, Tinf, F, 1, z, &a);
+    assert_true(fabs(z[0] - 0.9) < 1e-15 && fabs(z[1] - 0.45) < 1e-15 && fabs(a - 0.9) < 1e-15);
+    /* --sky keep drops the last term and leaves alpha alone. */
+    double k[3] = { 0.2, 0.2, 0.2 };
+    a = 0.5;
+    ef_composite(T, Tinf, F, 0, k, &a);
+    assert_true(fabs(k[0] - 0.35) < 1e-15 && a == 0.5);
+    /* No alpha channel: alpha = 1. */
+    double n[3] = { 0.2, 0.4, 0.8 };
+    ef_composite(T, Tinf, F, 1, n, NULL);
+    assert_true(fabs(n[0] - 0.6) < 1e-15);
+}
+
+static void expect_usage(const char *spec, const char *quote)
+{
+    ef_fog_component c;
+    ef_err err;
+    assert_int_equal(ef_fog_parse(spec, &c, &err), -1);
+    if (!strstr(err.msg, quote))
+        fail_msg("error for '%s' does not quote '%s': %s", spec, quote, err.msg);
+}
+
+static void test_spec_errors(void **state)
+{
+    (void) state;
+    expect_usage("fogg:density=1", "'fogg'");
+    expect_usage("exp:densty=1", "'densty'");
+    expect_usage("exp:density", "'density'");
+    expect_usage("exp:density=", "'density'");
+    expect_usage("exp", "missing density");
+    expect_usage("exp:density=-0.5", "'-0.5'");
+    expect_usage("exp:density=0.1,-1,0.1", "negative");
+    expect_usage("exp:density=abc", "'abc'");
+    expect_usage("exp:density=nan", "'nan'");
+    expect_usage("linear:start=30:end=10", "end (10) is less than start (30)");
+    expect_usage("linear:start=1", "missing end");
+    expect_usage("exp:density=1:density=2", "twice");
+    expect_usage("exp:density=1:distance=manhattan", "'manhattan'");
+    expect_usage("", "empty");
+}
+
+static void test_spec_ok(void **state)
+{
+    (void) state;
+    ef_fog_component c;
+    ef_err err;
+    assert_int_equal(ef_fog_parse("exp2:density=1e-3,2e-3,3e-3:distance=planar", &c, &err), 0);
+    assert_true(c.model == &ef_fog_exp2 && c.distance == EF_DIST_PLANAR);
+    assert_true(c.p[0] == 1e-3 && c.p[1] == 2e-3 && c.p[2] == 3e-3);
+    assert_int_equal(ef_fog_parse("linear:end=5", &c, &err), 0);
+    assert_true(c.p[0] == 0.0 && c.p[1] == 5.0);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_exp),
+        cmocka_unit_test(test_exp2),
+        cmocka_unit_test(test_linear),
+        cmocka_unit_test(test_per_channel_and_sum),
+        cmocka_unit_test(test_sky_limits),
+        cmocka_unit_test(test_composite),
+        cmocka_unit_test(test_spec_errors),
+        cmocka_unit_test(test_spec_ok),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -1,0 +1,254 @@
+#include "testutil.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+void tu_part_init(tu_part *p, int w, int h)
+{
+    memset(p, 0, sizeof *p);
+    p->dw[2] = p->disp[2] = w - 1;
+    p->dw[3] = p->disp[3] = h - 1;
+    p->comp = EXR_COMPRESSION_ZIP;
+}
+
+void tu_part_add(tu_part *p, const char *name, exr_pixel_type_t type, const float *plane)
+{
+    p->ch[p->nch] = name;
+    p->type[p->nch] = type;
+    p->plane[p->nch] = plane;
+    p->nch++;
+}
+
+static int write_part_pixels(exr_context_t f, int pi, const tu_part *p)
+{
+    int w = p->dw[2] - p->dw[0] + 1, h = p->dw[3] - p->dw[1] + 1;
+    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    int first = 1, rv = 0;
+    int32_t lpc = 1;
+    int tw = p->tile ? p->tile : w;
+    if (!p->tile)
+        exr_get_scanlines_per_chunk(f, pi, &lpc);
+    int th = p->tile ? p->tile : lpc;
+    for (int ty = 0; ty * th < h && !rv; ++ty)
+        for (int tx = 0; tx * tw < w && !rv; ++tx) {
+            exr_chunk_info_t ci;
+            rv = p->tile ? exr_write_tile_chunk_info(f, pi, tx, ty, 0, 0, &ci)
+                         : exr_write_scanline_chunk_info(f, pi, p->dw[1] + ty * th, &ci);
+            if (rv)
+                break;
+            rv = first ? exr_encoding_initialize(f, pi, &ci, &enc) : exr_encoding_update(f, pi, &ci, &enc);
+            if (rv)
+                break;
+            for (int c = 0; c < enc.channel_count; ++c) {
+                int k = 0;
+                while (k < p->nch && strcmp(p->ch[k], enc.channels[c].channel_name))
+                    ++k;
+                enc.channels[c].encode_from_ptr =
+                    (const uint8_t *) (p->plane[k] + (size_t) ty * th * w + (size_t) tx * tw);
+                enc.channels[c].user_data_type = EXR_PIXEL_FLOAT;
+                enc.channels[c].user_bytes_per_element = 4;
+                enc.channels[c].user_pixel_stride = 4;
+                enc.channels[c].user_line_stride = 4 * w;
+            }
+            if (first && (rv = exr_encoding_choose_default_routines(f, pi, &enc)))
+                break;
+            first = 0;
+            rv = exr_encoding_run(f, pi, &enc);
+        }
+    if (!first)
+        exr_encoding_destroy(f, &enc);
+    return rv;
+}
+
+int tu_write_exr(const char *path, const tu_part *parts, int nparts)
+{
+    exr_context_t f;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    int rv = exr_start_write(&f, path, EXR_WRITE_FILE_DIRECTLY, &init);
+    if (rv)
+        return rv;
+    for (int i = 0; i < nparts && !rv; ++i) {
+        const tu_part *p = &parts[i];
+        int pi;
+        exr_attr_box2i_t dw, disp;
+        exr_attr_v2f_t swc;
+        dw.min.x = p->dw[0]; dw.min.y = p->dw[1]; dw.max.x = p->dw[2]; dw.max.y = p->dw[3];
+        disp.min.x = p->disp[0]; disp.min.y = p->disp[1];
+        disp.max.x = p->disp[2]; disp.max.y = p->disp[3];
+        swc.x = swc.y = 0.0f;
+        rv = exr_add_part(f, p->name, p->tile ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE, &pi);
+        if (!rv)
+            rv = exr_initialize_required_attr(f, pi, &dw, &disp, 1.0f, &swc, 1.0f,
+                                              EXR_LINEORDER_INCREASING_Y, p->comp);
+        if (!rv && p->tile)
+            rv = exr_set_tile_descriptor(f, pi, (uint32_t) p->tile, (uint32_t) p->tile,
+                                         EXR_TILE_ONE_LEVEL, EXR_TILE_ROUND_DOWN);
+        for (int c = 0; c < p->nch && !rv; ++c)
+            rv = exr_add_channel(f, pi, p->ch[c], p->type[c], EXR_PERCEPTUALLY_LINEAR, 1, 1);
+        for (int a = 0; a < 4 && p->m44[a].name && !rv; ++a) {
+            exr_attr_m44f_t m;
+            memcpy(m.m, p->m44[a].m, sizeof m.m);
+            rv = exr_attr_set_m44f(f, pi, p->m44[a].name, &m);
+        }
+        for (int a = 0; a < 4 && p->f[a].name && !rv; ++a)
+            rv = exr_attr_set_float(f, pi, p->f[a].name, p->f[a].v);
+        if (!rv && p->str_name)
+            rv = exr_attr_set_string(f, pi, p->str_name, p->str_value);
+    }
+    if (!rv)
+        rv = exr_write_header(f);
+    for (int i = 0; i < nparts && !rv; ++i)
+        rv = write_part_pixels(f, i, &parts[i]);
+    int rv2 = exr_finish(&f);
+    return rv ? rv : rv2;
+}
+
+float *tu_read_channel(const char *path, int part, const char *name, int *pw, int *ph)
+{
+    exr_context_t f;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    if (exr_start_read(&f, path, &init))
+        return NULL;
+    exr_attr_box2i_t dw;
+    exr_storage_t st;
+    const exr_attr_chlist_t *cl;
+    exr_get_data_window(f, part, &dw);
+    exr_get_storage(f, part, &st);
+    exr_get_channels(f, part, &cl);
+    int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    int nch = cl->num_channels, want = -1;
+    for (int c = 0; c < nch; ++c)
+        if (!strcmp(cl->entries[c].name.str, name))
+            want = c;
+    if (want < 0 || nch < 1 || nch > 4096) {
+        exr_finish(&f);
+        return NULL;
+    }
+    float **planes = calloc((size_t) nch, sizeof *planes);
+    float *result = NULL;
+    int ok = planes != NULL;
+    for (int c = 0; c < nch && ok; ++c)
+        ok = (planes[c] = malloc(sizeof(float) * (size_t) w * (size_t) h)) != NULL;
+    int32_t cw = w, chh = 1;
+    if (ok && st == EXR_STORAGE_TILED) {
+        uint32_t tx, ty;
+        exr_get_tile_descriptor(f, part, &tx, &ty, NULL, NULL);
+        cw = (int32_t) tx;
+        chh = (int32_t) ty;
+    } else if (ok) {
+        exr_get_scanlines_per_chunk(f, part, &chh);
+    }
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    int first = 1;
+    for (int ty = 0; ok && ty * chh < h; ++ty)
+        for (int tx = 0; ok && tx * cw < w; ++tx) {
+            exr_chunk_info_t ci;
+            ok = !(st == EXR_STORAGE_TILED ? exr_read_tile_chunk_info(f, part, tx, ty, 0, 0, &ci)
+                                           : exr_read_scanline_chunk_info(f, part, dw.min.y + ty * chh, &ci));
+            ok = ok && !(first ? exr_decoding_initialize(f, part, &ci, &dec)
+                               : exr_decoding_update(f, part, &ci, &dec));
+            for (int c = 0; ok && c < dec.channel_count; ++c) {
+                int k = 0;
+                while (strcmp(cl->entries[k].name.str, dec.channels[c].channel_name))
+                    ++k;
+                dec.channels[c].decode_to_ptr =
+                    (uint8_t *) (planes[k] + (size_t) ty * chh * w + (size_t) tx * cw);
+                dec.channels[c].user_data_type = EXR_PIXEL_FLOAT;
+                dec.channels[c].user_bytes_per_element = 4;
+                dec.channels[c].user_pixel_stride = 4;
+                dec.channels[c].user_line_stride = 4 * w;
+            }
+            if (ok && first)
+                ok = !exr_decoding_choose_default_routines(f, part, &dec);
+            first = 0;
+            ok = ok && !exr_decoding_run(f, part, &dec);
+        }
+    if (!first)
+        exr_decoding_destroy(f, &dec);
+    if (ok) {
+        result = planes[want];
+        planes[want] = NULL;
+        *pw = w;
+        *ph = h;
+    }
+    for (int c = 0; planes && c < nch; ++c)
+        free(planes[c]);
+    free(planes);
+    exr_finish(&f);
+    return result;
+}
+
+char *tu_path(const char *file)
+{
+    const char *base = getenv("EXRFOG_TMP_DIR");
+    char dir[1024];
+    snprintf(dir, sizeof dir, "%s", base ? base : "/tmp/exrfog-tests");
+    mkdir(dir, 0777);
+    size_t n = strlen(dir) + strlen(file) + 2;
+    char *p = malloc(n);
+    snprintf(p, n, "%s/%s", dir, file);
+    return p;
+}
+
+static void slurp(const char *path, char *buf, size_t len)
+{
+    if (!buf || !len)
+        return;
+    buf[0] = '\0';
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return;
+    size_t n = fread(buf, 1, len - 1, fp);
+    buf[n] = '\0';
+    fclose(fp);
+    remove(path);
+}
+
+int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
+{
+    const char *bin = getenv("EXRFOG_BIN");
+    char *o = tu_path("run.stdout"), *e = tu_path("run.stderr");
+    size_t n = strlen(args) + strlen(o) + strlen(e) + 1024;
+    char *cmd = malloc(n);
+    snprintf(cmd, n, "%s %s >'%s' 2>'%s'", bin ? bin : "exrfog", args, o, e);
+    int st = system(cmd);
+    slurp(o, out, outlen);
+    slurp(e, err, errlen);
+    free(cmd);
+    free(o);
+    free(e);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+}
+
+int tu_exists(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0;
+}
+
+const char *tu_real_exr_dir(void)
+{
+    static char dir[1024];
+    const char *shared = getenv("EXRFOG_SHARED_DIR");
+    snprintf(dir, sizeof dir, "%s/real-exr", shared ? shared : "../shared");
+    return tu_exists(dir) ? dir : NULL;
+}
+
+int tu_copy(const char *from, const char *to)
+{
+    FILE *a = fopen(from, "rb"), *b = fopen(to, "wb");
+    char buf[65536];
+    size_t n;
+    int rc = a && b ? 0 : -1;
+    while (!rc && (n = fread(buf, 1, sizeof buf, a)) > 0)
+        if (fwrite(buf, 1, n, b) != n)
+            rc = -1;
+    if (a)
+        fclose(a);
+    if (b)
+        fclose(b);
+    return rc;
+}
