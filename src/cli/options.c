@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "exr_io.h"
+#include "ocio_shim.h"
 #include "version.h"
 
 enum {
@@ -204,7 +205,13 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
         case 'q': o->quiet = 1; break;
         case 'h': ef_options_usage(stdout); return EF_PARSE_EXIT;
         case OPT_VERSION:
-            printf("exrfog %s\n", EXRFOG_VERSION);
+        {
+            int maj, min, pat;
+            const char *extra;
+            exr_get_library_version(&maj, &min, &pat, &extra);
+            printf("exrfog %s (OpenEXRCore %d.%d.%d, OpenColorIO %s, OpenImageIO loaded for --preview)\n",
+                   EXRFOG_VERSION, maj, min, pat, ef_ocio_version());
+        }
             return EF_PARSE_EXIT;
         case ':':
             return ef_fail(err, "option '%s' needs a value", argv[optind - 1]), EF_PARSE_USAGE;

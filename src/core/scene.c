@@ -45,6 +45,14 @@ static void sum_tau(const ef_fog_scene *s, const ef_ray *r, double acc[3])
     }
 }
 
+/* exp(-tau) per channel; grey fog (equal taus) needs one exp, not three. */
+static void transmit(const double tau[3], double T[3])
+{
+    T[0] = exp(-tau[0]);
+    T[1] = tau[1] == tau[0] ? T[0] : exp(-tau[1]);
+    T[2] = tau[2] == tau[0] ? T[0] : tau[2] == tau[1] ? T[1] : exp(-tau[2]);
+}
+
 void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r, double T[3], double Tinf[3])
 {
     double tau[3];
@@ -58,15 +66,13 @@ void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r, double T[3],
         far.dist = far.planar = INFINITY;
     }
     sum_tau(s, &far, tau);
-    for (int k = 0; k < 3; ++k)
-        Tinf[k] = exp(-tau[k]);
+    transmit(tau, Tinf);
     if (far.dist == r->dist) {
         memcpy(T, Tinf, 3 * sizeof *T);
         return;
     }
     sum_tau(s, r, tau);
-    for (int k = 0; k < 3; ++k)
-        T[k] = exp(-tau[k]);
+    transmit(tau, T);
 }
 
 void ef_composite(const double T[3], const double Tinf[3], const double F[3], int fog_uncovered,

@@ -1,0 +1,59 @@
+/* Loads the OpenImageIO module on demand (see oiio/oiio_module.cpp). */
+#define _GNU_SOURCE 1
+#include "preview.h"
+
+#include <dlfcn.h>
+#include <limits.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#define MODULE_NAME "libexrfog_oiio.so"
+
+/* The module sits beside the executable (build tree) or in
+ * ../lib/exrfog (installed); $EXRFOG_MODULE_DIR overrides both. */
+static void *load_module(char *err, size_t errlen)
+{
+    char exe[PATH_MAX], path[PATH_MAX + 64];
+    const char *env = getenv("EXRFOG_MODULE_DIR");
+    void *h = NULL;
+    if (env) {
+        snprintf(path, sizeof path, "%s/%s", env, MODULE_NAME);
+        h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    }
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (!h && n > 0) {
+        exe[n] = '\0';
+        char *slash = strrchr(exe, '/');
+        if (slash)
+            *slash = '\0';
+        static const char *const rel[] = { "", "/../lib/exrfog" };
+        for (size_t i = 0; !h && i < sizeof rel / sizeof rel[0]; ++i) {
+            snprintf(path, sizeof path, "%s%s/%s", exe, rel[i], MODULE_NAME);
+            h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+        }
+    }
+    if (!h)
+        snprintf(err, errlen, "cannot load the OpenImageIO module %s (%s); reinstall exrfog or set "
+                              "EXRFOG_MODULE_DIR", MODULE_NAME, dlerror());
+    return h;
+}
+
+int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, char *err,
+                     size_t errlen)
+{
+    void *mod = load_module(err, errlen);
+    if (!mod)
+        return -1;
+    int (*fn)(const char *, int, int, const unsigned char *, char *, size_t);
+    *(void **) &fn = dlsym(mod, "ef_oiio_write_rgb8");
+    if (!fn) {
+        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_write_rgb8");
+        dlclose(mod);
+        return -1;
+    }
+    int rc = fn(path, w, h, rgb, err, errlen);
+    dlclose(mod);
+    return rc;
+}
