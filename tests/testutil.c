@@ -19,6 +19,16 @@ void tu_part_add(tu_part *p, const char *name, exr_pixel_type_t type, const floa
     p->ch[p->nch] = name;
     p->type[p->nch] = type;
     p->plane[p->nch] = plane;
+    p->uplane[p->nch] = NULL;
+    p->nch++;
+}
+
+void tu_part_add_uint(tu_part *p, const char *name, const uint32_t *plane)
+{
+    p->ch[p->nch] = name;
+    p->type[p->nch] = EXR_PIXEL_UINT;
+    p->plane[p->nch] = NULL;
+    p->uplane[p->nch] = plane;
     p->nch++;
 }
 
@@ -46,9 +56,14 @@ static int write_part_pixels(exr_context_t f, int pi, const tu_part *p)
                 int k = 0;
                 while (k < p->nch && strcmp(p->ch[k], enc.channels[c].channel_name))
                     ++k;
-                enc.channels[c].encode_from_ptr =
-                    (const uint8_t *) (p->plane[k] + (size_t) ty * th * w + (size_t) tx * tw);
-                enc.channels[c].user_data_type = EXR_PIXEL_FLOAT;
+                const size_t at = (size_t) ty * th * w + (size_t) tx * tw;
+                if (p->uplane[k]) {
+                    enc.channels[c].encode_from_ptr = (const uint8_t *) (p->uplane[k] + at);
+                    enc.channels[c].user_data_type = EXR_PIXEL_UINT;
+                } else {
+                    enc.channels[c].encode_from_ptr = (const uint8_t *) (p->plane[k] + at);
+                    enc.channels[c].user_data_type = EXR_PIXEL_FLOAT;
+                }
                 enc.channels[c].user_bytes_per_element = 4;
                 enc.channels[c].user_pixel_stride = 4;
                 enc.channels[c].user_line_stride = 4 * w;
@@ -181,6 +196,160 @@ float *tu_read_channel(const char *path, int part, const char *name, int *pw, in
     return result;
 }
 
+void tu_image_free(tu_image *img)
+{
+    for (int c = 0; c < img->nch; ++c) {
+        if (img->ch)
+            free(img->ch[c]);
+        if (img->plane)
+            free(img->plane[c]);
+    }
+    free(img->ch);
+    free(img->type);
+    free(img->plane);
+    memset(img, 0, sizeof *img);
+}
+
+int tu_read_image(const char *path, int part, tu_image *img)
+{
+    exr_context_t f;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    memset(img, 0, sizeof *img);
+    if (exr_start_read(&f, path, &init))
+        return -1;
+    exr_attr_box2i_t dw, disp;
+    exr_storage_t st;
+    const exr_attr_chlist_t *cl;
+    const char *pname = NULL;
+    int ok = !exr_get_data_window(f, part, &dw) && !exr_get_display_window(f, part, &disp) &&
+             !exr_get_storage(f, part, &st) && !exr_get_channels(f, part, &cl) &&
+             !exr_get_compression(f, part, &img->comp) && cl->num_channels > 0 &&
+             (st == EXR_STORAGE_SCANLINE || st == EXR_STORAGE_TILED);
+    if (!ok) {
+        exr_finish(&f);
+        return -1;
+    }
+    if (exr_get_name(f, part, &pname) == EXR_ERR_SUCCESS && pname)
+        snprintf(img->name, sizeof img->name, "%s", pname);
+    img->dw[0] = dw.min.x; img->dw[1] = dw.min.y; img->dw[2] = dw.max.x; img->dw[3] = dw.max.y;
+    img->disp[0] = disp.min.x; img->disp[1] = disp.min.y;
+    img->disp[2] = disp.max.x; img->disp[3] = disp.max.y;
+    const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    img->w = w;
+    img->h = h;
+    img->nch = cl->num_channels;
+    img->ch = calloc((size_t) img->nch, sizeof *img->ch);
+    img->type = calloc((size_t) img->nch, sizeof *img->type);
+    img->plane = calloc((size_t) img->nch, sizeof *img->plane);
+    ok = img->ch && img->type && img->plane;
+    for (int c = 0; ok && c < img->nch; ++c) {
+        img->ch[c] = strdup(cl->entries[c].name.str);
+        img->type[c] = cl->entries[c].pixel_type;
+        img->plane[c] = malloc(4 * (size_t) w * (size_t) h);
+        ok = img->ch[c] && img->plane[c];
+    }
+    int32_t cw = w, chh = 1;
+    img->tiled = st == EXR_STORAGE_TILED;
+    if (ok && img->tiled) {
+        uint32_t tx, ty;
+        ok = !exr_get_tile_descriptor(f, part, &tx, &ty, NULL, NULL);
+        img->tile_x = (int) tx;
+        img->tile_y = (int) ty;
+        cw = (int32_t) tx;
+        chh = (int32_t) ty;
+    } else if (ok) {
+        ok = !exr_get_scanlines_per_chunk(f, part, &chh);
+    }
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    int first = 1, chosen = 0;
+    for (int ty = 0; ok && ty * chh < h; ++ty)
+        for (int tx = 0; ok && tx * cw < w; ++tx) {
+            exr_chunk_info_t ci;
+            ok = !(img->tiled ? exr_read_tile_chunk_info(f, part, tx, ty, 0, 0, &ci)
+                              : exr_read_scanline_chunk_info(f, part, dw.min.y + ty * chh, &ci));
+            ok = ok && !(first ? exr_decoding_initialize(f, part, &ci, &dec)
+                               : exr_decoding_update(f, part, &ci, &dec));
+            if (ok)
+                first = 0;
+            for (int c = 0; ok && c < dec.channel_count; ++c) {
+                exr_coding_channel_info_t *e = &dec.channels[c];
+                int k = tu_image_find(img, e->channel_name);
+                if (k < 0) {
+                    ok = 0;
+                    break;
+                }
+                e->decode_to_ptr = (uint8_t *) img->plane[k] +
+                                   4 * ((size_t) ty * chh * w + (size_t) tx * cw);
+                e->user_data_type = e->data_type == EXR_PIXEL_UINT ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+                e->user_bytes_per_element = 4;
+                e->user_pixel_stride = 4;
+                e->user_line_stride = 4 * w;
+            }
+            if (ok && !chosen)
+                ok = !exr_decoding_choose_default_routines(f, part, &dec);
+            chosen = 1;
+            ok = ok && !exr_decoding_run(f, part, &dec);
+        }
+    if (!first)
+        exr_decoding_destroy(f, &dec);
+    exr_finish(&f);
+    if (!ok) {
+        tu_image_free(img);
+        return -1;
+    }
+    return 0;
+}
+
+int tu_image_find(const tu_image *img, const char *name)
+{
+    for (int c = 0; c < img->nch; ++c)
+        if (!strcmp(img->ch[c], name))
+            return c;
+    return -1;
+}
+
+const float *tu_image_f(const tu_image *img, const char *name)
+{
+    int k = tu_image_find(img, name);
+    return k >= 0 && img->type[k] != EXR_PIXEL_UINT ? img->plane[k] : NULL;
+}
+
+const uint32_t *tu_image_u(const tu_image *img, const char *name)
+{
+    int k = tu_image_find(img, name);
+    return k >= 0 && img->type[k] == EXR_PIXEL_UINT ? img->plane[k] : NULL;
+}
+
+uint32_t *tu_read_channel_uint(const char *path, int part, const char *name, int *w, int *h)
+{
+    tu_image img;
+    if (tu_read_image(path, part, &img))
+        return NULL;
+    uint32_t *out = NULL;
+    int k = tu_image_find(&img, name);
+    if (k >= 0 && img.type[k] == EXR_PIXEL_UINT) {
+        out = img.plane[k];
+        img.plane[k] = NULL;
+        *w = img.w;
+        *h = img.h;
+    }
+    tu_image_free(&img);
+    return out;
+}
+
+int tu_nparts(const char *path)
+{
+    exr_context_t f;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    int n = -1;
+    if (exr_start_read(&f, path, &init))
+        return -1;
+    if (exr_get_count(f, &n))
+        n = -1;
+    exr_finish(&f);
+    return n;
+}
+
 char *tu_path(const char *file)
 {
     const char *base = getenv("EXRFOG_TMP_DIR");
@@ -210,7 +379,12 @@ static void slurp(const char *path, char *buf, size_t len)
 int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
 {
     const char *bin = getenv("EXRFOG_BIN");
-    char *o = tu_path("run.stdout"), *e = tu_path("run.stderr");
+    /* Per-process names: test programs share the scratch directory and
+     * ctest may run them in parallel. */
+    char on[64], en[64];
+    snprintf(on, sizeof on, "run.%ld.stdout", (long) getpid());
+    snprintf(en, sizeof en, "run.%ld.stderr", (long) getpid());
+    char *o = tu_path(on), *e = tu_path(en);
     size_t n = strlen(args) + strlen(o) + strlen(e) + 1024;
     char *cmd = malloc(n);
     snprintf(cmd, n, "%s %s >'%s' 2>'%s'", bin ? bin : "exrfog", args, o, e);

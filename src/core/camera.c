@@ -109,8 +109,9 @@ static int resolve_pose(const ef_cam_meta *meta, const ef_cam_flags *flags,
         list_attrs(meta, have, sizeof have);
         return ef_fail(err, "no camera pose: the header has none of worldToCamera, "
                             "cameraTransform, rs/camera/transform (camera attributes "
-                            "found: %s); pass --world-to-camera M or --camera-to-world M "
-                            "(16 numbers, row-vector, as in the file) and --fov DEG", have);
+                            "found: %s; other attributes: %s); pass --world-to-camera M or "
+                            "--camera-to-world M (16 numbers, row-vector, as in the file) and "
+                            "--fov DEG", have, meta->other_attrs[0] ? meta->other_attrs : "none");
     }
     if (check_mat(m, name, err) || check_affine(m, name, err))
         return -1;

@@ -32,6 +32,7 @@ typedef struct ef_cam_meta {
     ef_opt_num rs_fov;        /* rs/camera/fov: radians (Maxon doc); > pi read as degrees */
     ef_opt_num rs_near;       /* rs/camera/nearPlane */
     ef_opt_num rs_far;        /* rs/camera/farPlane */
+    char other_attrs[400];    /* the header's other attribute names, for messages */
 } ef_cam_meta;
 
 /* What the command line forces; each set field overrides the header. */

@@ -56,6 +56,12 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
     }
     if (cl->num_channels < 1)
         return ef_fail(err, "part %d has no channels", p);
+    exr_compression_t comp;
+    if (exr_get_compression(f->ctx, p, &comp) == EXR_ERR_SUCCESS &&
+        (comp == EXR_COMPRESSION_DWAA || comp == EXR_COMPRESSION_DWAB))
+        return ef_fail(err, "part %d is %s-compressed, which OpenEXRCore 3.1.5 cannot decode "
+                            "(convert it first, e.g. oiiotool IN --compression zip -o OUT)",
+                       p, comp == EXR_COMPRESSION_DWAA ? "DWAA" : "DWAB");
     for (int c = 0; c < cl->num_channels; ++c)
         if (cl->entries[c].x_sampling != 1 || cl->entries[c].y_sampling != 1)
             return ef_fail(err, "channel '%s' is subsampled (%dx%d), which exrfog does not support",
@@ -158,6 +164,30 @@ static int get_num(const ef_exr_file *f, int p, const char *name, ef_opt_num *ou
     return 0;
 }
 
+/* Names of the attributes beyond the required ones, for "no camera" messages. */
+static void list_other_attrs(const ef_exr_file *f, int p, char *out, size_t len)
+{
+    static const char *const required[] = { "channels", "compression", "dataWindow", "displayWindow",
+                                            "lineOrder", "pixelAspectRatio", "screenWindowCenter",
+                                            "screenWindowWidth", "tiles", "type", "name", "version",
+                                            "chunkCount", NULL };
+    int32_t n = 0;
+    out[0] = '\0';
+    exr_get_attribute_count(f->ctx, p, &n);
+    for (int32_t i = 0; i < n; ++i) {
+        const exr_attribute_t *a;
+        int skip = 0;
+        if (exr_get_attribute_by_index(f->ctx, p, EXR_ATTR_LIST_SORTED_ORDER, i, &a))
+            continue;
+        for (int k = 0; required[k]; ++k)
+            skip |= !strcmp(a->name, required[k]);
+        size_t at = strlen(out);
+        if (skip || at + strlen(a->name) + 8 >= len)
+            continue;
+        snprintf(out + at, len - at, "%s%s", at ? ", " : "", a->name);
+    }
+}
+
 int ef_exr_read_cam_meta(const ef_exr_file *f, int p, ef_cam_meta *m, ef_err *err)
 {
     exr_attr_box2i_t disp;
@@ -167,6 +197,7 @@ int ef_exr_read_cam_meta(const ef_exr_file *f, int p, ef_cam_meta *m, ef_err *er
     ef_cam_meta_init(m, disp.min.x, disp.min.y, disp.max.x, disp.max.y);
     if (exr_get_pixel_aspect_ratio(f->ctx, p, &pa) == EXR_ERR_SUCCESS && isfinite(pa) && pa > 0)
         m->pixel_aspect = pa;
+    list_other_attrs(f, p, m->other_attrs, sizeof m->other_attrs);
     return get_mat(f, p, "worldToCamera", &m->w2c, err) ||
            get_mat(f, p, "worldToNDC", &m->w2ndc, err) ||
            get_mat(f, p, "worldToScreen", &m->w2screen, err) ||

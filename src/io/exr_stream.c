@@ -316,7 +316,9 @@ static void *worker(void *arg)
     depth_reader dr = { 0 };
     out_buf ob = { 0 };
     float *depth = NULL;
-    size_t cap = j->g.tiled ? (size_t) j->g.tw * (size_t) j->g.th
+    /* A unit never exceeds the data window, whatever the tile size claims. */
+    size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
+                                  (size_t) (j->g.th < j->g.height ? j->g.th : j->g.height)
                             : (size_t) j->g.width * (size_t) j->g.unit_rows;
     void **planes = calloc((size_t) j->nch, sizeof *planes);
     int ok = planes != NULL;
@@ -461,8 +463,6 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
     exr_get_channels(in->ctx, p, &cl);
     if (o->compression >= 0)
         comp = (exr_compression_t) o->compression;
-    else if (comp == EXR_COMPRESSION_DWAA || comp == EXR_COMPRESSION_DWAB)
-        return ef_fail(err, "part %d is DWA-compressed, which OpenEXRCore 3.1.5 cannot read", p);
     if (exr_add_part(out, name, st, &op) || op != p)
         return ef_fail(err, "cannot add output part %d: %s", p, ef_exr_last_core_message());
     if (st == EXR_STORAGE_TILED) {
