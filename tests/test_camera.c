@@ -147,7 +147,7 @@ static void test_arnold_screen(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     arnold_meta(&m);
     assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
     assert_vec(c.pos, 0, 0, 7.2625, 1e-12);
@@ -192,7 +192,7 @@ static void test_arnold_float32(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 0, 0, 149, 99);
     ef_mat4 M = mul(mk(w2c), screen_proj(50, 150, 100, 1, 0.01, 1e5));
     for (int i = 0; i < 16; ++i)
@@ -217,7 +217,7 @@ static void test_true_ndc(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 10, 20, 49, 39);
     m.pixel_aspect = 2.0;
     set_mat(&m.w2c, mk(w2c));
@@ -250,7 +250,7 @@ static void test_arnold_fov(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 0, 0, 99, 49);
     set_mat(&m.w2c, mk(arnold_w2c));
     set_num(&m.arnold_fov, 65.0);
@@ -276,7 +276,7 @@ static void test_vray(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 0, 0, 959, 539);
     set_mat(&m.vray_c2w, mk(c2w));
     set_num(&m.vray_fov, 54.43);
@@ -334,7 +334,7 @@ static void test_redshift(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 0, 0, 63, 47);
     set_mat(&m.rs_c2w, mk(c2w));
     set_num(&m.rs_fov, 0.8);
@@ -372,7 +372,7 @@ static void test_precedence(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     ef_cam_meta_init(&m, 0, 0, 9, 9);
     set_mat(&m.vray_c2w, mk(vray));
     set_num(&m.vray_fov, 30);
@@ -395,7 +395,7 @@ static void test_flags(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     arnold_meta(&m);
     set_num(&m.arnold_near, 0.02);
 
@@ -456,7 +456,7 @@ static void test_errors(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
 
     /* Nothing at all. */
     ef_cam_meta_init(&m, 0, 0, 9, 9);
@@ -580,7 +580,7 @@ static void test_pixel_centres(void **state)
     ef_cam_meta m;
     ef_cam_flags fl = {0};
     ef_camera c;
-    ef_err err = {{0}};
+    ef_err err = {0};
     const double id[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
     set_mat(&fl.w2c, mk(id));
     set_num(&fl.fov, 90.0);

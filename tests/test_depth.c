@@ -78,7 +78,7 @@ static void resolve(const scene *s, ef_camera *cam, int with_clip)
 {
     ef_cam_meta m;
     ef_cam_flags fl;
-    ef_err err = {{0}};
+    ef_err err = {0};
     memset(&fl, 0, sizeof fl);
     ef_cam_meta_init(&m, X0, Y0, X1, Y1);
     m.pixel_aspect = PA;
@@ -165,7 +165,7 @@ static void check_roundtrip(int projection)
     const double ratio = 0.9 * FAR_ / (1.5 * NEAR_);
     for (int mode = 0; mode < EF_DEPTH_MODE_COUNT; ++mode) {
         ef_depth_conv conv;
-        ef_err err = {{0}};
+        ef_err err = {0};
         assert_int_equal(ef_depth_conv_init(&conv, (ef_depth_mode)mode, &cam, &err), 0);
         int count = 0;
         for (int y = Y0; y <= Y1; y += 5)
@@ -220,7 +220,7 @@ static void conv_for(ef_depth_conv *conv, ef_depth_mode mode)
 {
     scene s;
     ef_camera cam;
-    ef_err err = {{0}};
+    ef_err err = {0};
     make_scene(&s, 0);
     resolve(&s, &cam, 1);
     assert_int_equal(ef_depth_conv_init(conv, mode, &cam, &err), 0);
@@ -345,7 +345,7 @@ static void test_conv_init_errors(void **state)
     scene s;
     ef_camera cam;
     ef_depth_conv conv;
-    ef_err err = {{0}};
+    ef_err err = {0};
     make_scene(&s, 0);
     resolve(&s, &cam, 0); /* fov camera: no clip planes anywhere */
     assert_false(cam.near_.set);

@@ -32,7 +32,7 @@ static void make_camera(ef_camera *cam)
     const double c2w[16] = {0, 0, 1, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1e7, -3e7, 2e7, 1};
     ef_cam_meta m;
     ef_cam_flags fl;
-    ef_err err = {{0}};
+    ef_err err = {0};
     memset(&fl, 0, sizeof fl);
     ef_cam_meta_init(&m, 0, 0, 1, 1);
     fl.c2w.set = 1;
@@ -44,7 +44,7 @@ static void make_camera(ef_camera *cam)
 
 static void make_conv(const ef_camera *cam, ef_depth_conv *conv, ef_depth_mode mode)
 {
-    ef_err err = {{0}};
+    ef_err err = {0};
     assert_int_equal(ef_depth_conv_init(conv, mode, cam, &err), 0);
 }
 

@@ -1,5 +1,6 @@
 #include "testutil.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,7 +42,7 @@ static int write_part_pixels(exr_context_t f, int pi, const tu_part *p)
     int tw = p->tile ? p->tile : w;
     if (!p->tile)
         exr_get_scanlines_per_chunk(f, pi, &lpc);
-    int th = p->tile ? p->tile : lpc;
+    int th = p->tile ? (p->tile_h ? p->tile_h : p->tile) : lpc;
     for (int ty = 0; ty * th < h && !rv; ++ty)
         for (int tx = 0; tx * tw < w && !rv; ++tx) {
             exr_chunk_info_t ci;
@@ -96,10 +97,12 @@ int tu_write_exr(const char *path, const tu_part *parts, int nparts)
         swc.x = swc.y = 0.0f;
         rv = exr_add_part(f, p->name, p->tile ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE, &pi);
         if (!rv)
-            rv = exr_initialize_required_attr(f, pi, &dw, &disp, 1.0f, &swc, 1.0f,
+            /* Core's order is displayWindow, then dataWindow. */
+            rv = exr_initialize_required_attr(f, pi, &disp, &dw, 1.0f, &swc, 1.0f,
                                               EXR_LINEORDER_INCREASING_Y, p->comp);
         if (!rv && p->tile)
-            rv = exr_set_tile_descriptor(f, pi, (uint32_t) p->tile, (uint32_t) p->tile,
+            rv = exr_set_tile_descriptor(f, pi, (uint32_t) p->tile,
+                                         (uint32_t) (p->tile_h ? p->tile_h : p->tile),
                                          EXR_TILE_ONE_LEVEL, EXR_TILE_ROUND_DOWN);
         for (int c = 0; c < p->nch && !rv; ++c)
             rv = exr_add_channel(f, pi, p->ch[c], p->type[c], EXR_PERCEPTUALLY_LINEAR, 1, 1);
@@ -425,4 +428,244 @@ int tu_copy(const char *from, const char *to)
     if (b)
         fclose(b);
     return rc;
+}
+
+/* ---- comparisons ---- */
+
+float tu_half_round(float f)
+{
+    if (!isfinite(f) || f == 0.0f)
+        return f;
+    const double a = fabs((double) f);
+    if (a >= 65520.0)
+        return f > 0 ? INFINITY : -INFINITY;
+    int e;
+    frexp(a, &e);
+    int lead = e - 1;          /* a in [2^lead, 2^(lead+1)) */
+    if (lead < -14)
+        lead = -14;            /* subnormal halves share the 2^-24 step */
+    const double q = ldexp(1.0, lead - 10);
+    return (float) copysign(rint(a / q) * q, (double) f);
+}
+
+static const char *tu_type_name(exr_pixel_type_t t)
+{
+    return t == EXR_PIXEL_UINT ? "uint" : t == EXR_PIXEL_HALF ? "half" : "float";
+}
+
+long tu_compare_layout(const tu_image *in, const tu_image *out, int pixel_type)
+{
+    long bad = 0;
+    if (in->nch != out->nch) {
+        fprintf(stderr, "  %d channels in, %d out\n", in->nch, out->nch);
+        return 1;
+    }
+    for (int c = 0; c < in->nch; ++c) {
+        if (strcmp(in->ch[c], out->ch[c])) {
+            fprintf(stderr, "  channel %d is %s, expected %s\n", c, out->ch[c], in->ch[c]);
+            ++bad;
+            continue;
+        }
+        exr_pixel_type_t want = in->type[c];
+        if (pixel_type >= 0 && want != EXR_PIXEL_UINT)
+            want = (exr_pixel_type_t) pixel_type;
+        if (out->type[c] != want) {
+            fprintf(stderr, "  channel %s is %s, expected %s\n", out->ch[c],
+                    tu_type_name(out->type[c]), tu_type_name(want));
+            ++bad;
+        }
+    }
+    if (memcmp(in->dw, out->dw, sizeof in->dw)) {
+        fprintf(stderr, "  data window (%d,%d)-(%d,%d), expected (%d,%d)-(%d,%d)\n", out->dw[0],
+                out->dw[1], out->dw[2], out->dw[3], in->dw[0], in->dw[1], in->dw[2], in->dw[3]);
+        ++bad;
+    }
+    if (memcmp(in->disp, out->disp, sizeof in->disp)) {
+        fprintf(stderr, "  display window differs\n");
+        ++bad;
+    }
+    return bad;
+}
+
+long tu_compare_channel(const tu_image *in, const tu_image *out, const char *name, double rel,
+                        int as_half)
+{
+    const int ki = tu_image_find(in, name), ko = tu_image_find(out, name);
+    if (ki < 0 || ko < 0 || in->w != out->w || in->h != out->h) {
+        fprintf(stderr, "  channel %s missing or resized (in %d, out %d)\n", name, ki, ko);
+        return 1;
+    }
+    const size_t n = (size_t) in->w * (size_t) in->h;
+    long bad = 0;
+    if (in->type[ki] == EXR_PIXEL_UINT || out->type[ko] == EXR_PIXEL_UINT) {
+        if (in->type[ki] != out->type[ko]) {
+            fprintf(stderr, "  channel %s: uint changed type\n", name);
+            return 1;
+        }
+        const uint32_t *a = in->plane[ki], *b = out->plane[ko];
+        for (size_t i = 0; i < n; ++i)
+            if (a[i] != b[i] && bad++ < 5)
+                fprintf(stderr, "  %s[%zu]: %u, expected %u\n", name, i, b[i], a[i]);
+    } else {
+        const float *a = in->plane[ki], *b = out->plane[ko];
+        for (size_t i = 0; i < n; ++i) {
+            const float want = as_half ? tu_half_round(a[i]) : a[i];
+            int ok;
+            if (rel == 0.0 || !isfinite(want))
+                ok = memcmp(&want, &b[i], sizeof want) == 0;
+            else
+                ok = fabs((double) b[i] - want) <= rel * (1.0 + fabs(want));
+            if (!ok && bad++ < 5)
+                fprintf(stderr, "  %s[%zu]: %.9g, expected %.9g\n", name, i, (double) b[i],
+                        (double) want);
+        }
+    }
+    if (bad)
+        fprintf(stderr, "  %ld pixels of %s differ\n", bad, name);
+    return bad;
+}
+
+long tu_compare_files(const char *in_path, const char *out_path, int skip_part,
+                      const char *const *skip)
+{
+    const int n = tu_nparts(in_path), m = tu_nparts(out_path);
+    if (n < 1 || n != m) {
+        fprintf(stderr, "  %d parts in %s, %d in %s\n", n, in_path, m, out_path);
+        return 1;
+    }
+    long bad = 0;
+    for (int p = 0; p < n; ++p) {
+        tu_image a, b;
+        if (tu_read_image(in_path, p, &a))
+            return fprintf(stderr, "  cannot read part %d of %s\n", p, in_path), bad + 1;
+        if (tu_read_image(out_path, p, &b)) {
+            tu_image_free(&a);
+            return fprintf(stderr, "  cannot read part %d of %s\n", p, out_path), bad + 1;
+        }
+        if (strcmp(a.name, b.name)) {
+            fprintf(stderr, "  part %d is named '%s', expected '%s'\n", p, b.name, a.name);
+            ++bad;
+        }
+        long lb = tu_compare_layout(&a, &b, -1);
+        if (lb)
+            fprintf(stderr, "  part %d ('%s'): channel layout differs\n", p, a.name);
+        bad += lb;
+        for (int c = 0; !lb && c < a.nch; ++c) {
+            int skipped = 0;
+            if (p == skip_part) {
+                skipped = skip == NULL;
+                for (int k = 0; skip && skip[k]; ++k)
+                    skipped |= !strcmp(skip[k], a.ch[c]);
+            }
+            if (!skipped)
+                bad += tu_compare_channel(&a, &b, a.ch[c], 0.0, 0);
+        }
+        tu_image_free(&a);
+        tu_image_free(&b);
+    }
+    return bad;
+}
+
+void tu_pinhole_fov(tu_pinhole *p, const int disp[4], double hfov_deg)
+{
+    const double W = disp[2] - disp[0] + 1.0, H = disp[3] - disp[1] + 1.0;
+    const double t = tan(hfov_deg * 3.14159265358979323846 / 360.0);
+    memcpy(p->disp, disp, sizeof p->disp);
+    p->a = 0.5 / t;
+    p->b = p->a * W / H;
+    p->cu = p->cv = 0.5;
+}
+
+void tu_pinhole_screen(tu_pinhole *p, const int disp[4], double px, double py)
+{
+    /* sx = 2u - 1 = px X/Z  <=>  u = (px / 2) X/Z + 1/2; sy = 1 - 2v likewise. */
+    memcpy(p->disp, disp, sizeof p->disp);
+    p->a = 0.5 * px;
+    p->b = 0.5 * py;
+    p->cu = p->cv = 0.5;
+}
+
+double tu_pinhole_ray_len(const tu_pinhole *p, int x, int y)
+{
+    const double W = p->disp[2] - p->disp[0] + 1.0, H = p->disp[3] - p->disp[1] + 1.0;
+    const double u = (x + 0.5 - p->disp[0]) / W, v = (y + 0.5 - p->disp[1]) / H;
+    const double dx = (u - p->cu) / p->a, dy = -(v - p->cv) / p->b;
+    return sqrt(dx * dx + dy * dy + 1.0);
+}
+
+long tu_check_fog(tu_fog_check *fc)
+{
+    tu_image in, out, dimg;
+    fc->sky = fc->fogged = 0;
+    if (tu_read_image(fc->in, fc->in_part, &in))
+        return fprintf(stderr, "  cannot read %s\n", fc->in), -1;
+    if (tu_read_image(fc->out, fc->out_part, &out)) {
+        tu_image_free(&in);
+        return fprintf(stderr, "  cannot read %s\n", fc->out), -1;
+    }
+    if (tu_read_image(fc->depth ? fc->depth : fc->in, fc->depth ? fc->depth_part : fc->in_part,
+                      &dimg)) {
+        tu_image_free(&in);
+        tu_image_free(&out);
+        return fprintf(stderr, "  cannot read the depth\n"), -1;
+    }
+    long bad = 0;
+    /* A UINT depth counts by its numeric value. */
+    const float *Z = tu_image_f(&dimg, fc->z);
+    float *zconv = NULL;
+    const uint32_t *zu = tu_image_u(&dimg, fc->z);
+    if (!Z && zu && (zconv = malloc(sizeof(float) * (size_t) dimg.w * (size_t) dimg.h))) {
+        for (size_t i = 0; i < (size_t) dimg.w * (size_t) dimg.h; ++i)
+            zconv[i] = (float) zu[i];
+        Z = zconv;
+    }
+    const float *cin[4] = { NULL }, *cout[4] = { NULL };
+    int half[4] = { 0 };
+    if (!Z || memcmp(in.dw, out.dw, sizeof in.dw) || memcmp(in.dw, dimg.dw, sizeof in.dw)) {
+        fprintf(stderr, "  no depth %s, or the windows differ\n", fc->z);
+        bad = -1;
+    }
+    for (int k = 0; bad == 0 && k < 4; ++k) {
+        if (!fc->rgba[k])
+            continue;
+        cin[k] = tu_image_f(&in, fc->rgba[k]);
+        cout[k] = tu_image_f(&out, fc->rgba[k]);
+        if (!cin[k] || !cout[k]) {
+            fprintf(stderr, "  no channel %s\n", fc->rgba[k]);
+            bad = -1;
+            break;
+        }
+        half[k] = out.type[tu_image_find(&out, fc->rgba[k])] == EXR_PIXEL_HALF;
+    }
+    for (int j = 0; bad >= 0 && j < in.h; ++j)
+        for (int i = 0; i < in.w; ++i) {
+            const size_t idx = (size_t) j * (size_t) in.w + (size_t) i;
+            const int x = in.dw[0] + i, y = in.dw[1] + j;
+            const double z = Z[idx];
+            const int sky = !isfinite(z) || z <= 0.0 || z >= 1e9;
+            const double T = sky ? 0.0 : exp(-fc->rho * z * tu_pinhole_ray_len(fc->cam, x, y));
+            const double a = cin[3] ? cin[3][idx] : 1.0;
+            fc->sky += sky;
+            fc->fogged += !sky && T < 0.999;
+            for (int k = 0; k < 4; ++k) {
+                if (!cin[k])
+                    continue;
+                const double want = k < 3 ? T * cin[k][idx] + (1.0 - T) * a * fc->F[k] +
+                                                (1.0 - a) * fc->F[k]
+                                          : a + (1.0 - a);
+                const double got = cout[k][idx];
+                const double tol = (half[k] ? 6e-4 : 1e-5) * (fabs(want) + 1e-3) +
+                                   fc->extra_rel * fabs(want) + fc->extra_abs;
+                if (!(fabs(got - want) <= tol) && bad++ < 8)
+                    fprintf(stderr, "  %s at (%d,%d) z %g: %.9g, expected %.9g (T %.6g, a %g)\n",
+                            fc->rgba[k], x, y, z, got, want, T, a);
+            }
+        }
+    if (bad > 0)
+        fprintf(stderr, "  %ld fogged values differ from the expectation\n", bad);
+    free(zconv);
+    tu_image_free(&in);
+    tu_image_free(&out);
+    tu_image_free(&dimg);
+    return bad;
 }

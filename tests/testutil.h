@@ -12,7 +12,8 @@
 typedef struct tu_attr_m44 { const char *name; float m[16]; } tu_attr_m44;
 typedef struct tu_attr_float { const char *name; float v; } tu_attr_float;
 
-/* One part to write. Planes are float, w*h of the data window, row-major. */
+/* One part to write. Planes are w*h of the data window, row-major: float
+ * (converted by Core to the channel type), or uint32 via tu_part_add_uint. */
 typedef struct tu_part {
     const char *name;                 /* NULL for an unnamed single part */
     int dw[4], disp[4];               /* xmin ymin xmax ymax */
@@ -23,6 +24,7 @@ typedef struct tu_part {
     const uint32_t *uplane[TU_MAX_CH]; /* set by tu_part_add_uint: written as uint, exactly */
     exr_compression_t comp;
     int tile;                         /* 0: scanline, else NxN tiles */
+    int tile_h;                       /* tiled: tile height when not tile (0: square) */
     tu_attr_m44 m44[4];               /* name NULL ends the list */
     tu_attr_float f[4];
     const char *str_name, *str_value; /* one optional string attribute */
@@ -37,7 +39,8 @@ void tu_part_add(tu_part *p, const char *name, exr_pixel_type_t type, const floa
  * so values above 2^24 survive). */
 void tu_part_add_uint(tu_part *p, const char *name, const uint32_t *plane);
 
-/* Writes parts to path. Returns 0 or a Core error code. */
+/* Writes parts to path (dw is the data window, disp the display window).
+ * Returns 0 or a Core error code. */
 int tu_write_exr(const char *path, const tu_part *parts, int nparts);
 
 /* Reads channel `name` of part `part` into a new float array (data window,
@@ -92,5 +95,67 @@ const char *tu_real_exr_dir(void);
 
 /* Copies a file; returns 0 on success. */
 int tu_copy(const char *from, const char *to);
+
+/* ---- Comparing outputs with inputs and with independent expectations.
+ * These print what differs (first few values) to stderr and return a
+ * count, so a test asserts the count is 0. */
+
+/* A float rounded to the nearest half (ties to even), widened back. */
+float tu_half_round(float f);
+
+/* Same channel names in the same order, same windows; same types, except
+ * that pixel_type >= 0 (EXR_PIXEL_HALF/FLOAT) replaces every non-UINT
+ * type. Returns the number of differences. */
+long tu_compare_layout(const tu_image *in, const tu_image *out, int pixel_type);
+
+/* Channel name of out against in: bit-exact when rel == 0 (after rounding
+ * to half when as_half), else within rel * (1 + |v|). UINT compares as
+ * uint32. Returns the number of differing pixels (1 when absent). */
+long tu_compare_channel(const tu_image *in, const tu_image *out, const char *name, double rel,
+                        int as_half);
+
+/* Every part of out_path against in_path: count, part names, layout, and
+ * every channel bit-exact except, in part skip_part, the channels named in
+ * the NULL-terminated list skip (NULL: the whole part). Returns the number
+ * of differences. */
+long tu_compare_files(const char *in_path, const char *out_path, int skip_part,
+                      const char *const *skip);
+
+/* A pinhole written the way the tests think of it: pixel (x, y) of the
+ * display window W x H has u = (x + 0.5 - disp.xmin) / W, v = (y + 0.5 -
+ * disp.ymin) / H, and the camera-space ray ((u - cu) / a, -(v - cv) / b, 1)
+ * (the NDC projection u = a X/Z + cu, v = -b Y/Z + cv). */
+typedef struct tu_pinhole {
+    int disp[4];
+    double a, b, cu, cv;
+} tu_pinhole;
+
+/* A centred pinhole of horizontal fov hfov_deg, square pixels. */
+void tu_pinhole_fov(tu_pinhole *p, const int disp[4], double hfov_deg);
+/* A screen-space projection sx = px X/Z, sy = py Y/Z over [-1,1] (Arnold). */
+void tu_pinhole_screen(tu_pinhole *p, const int disp[4], double px, double py);
+/* Length of the ray through absolute pixel (x, y) (its z is 1). */
+double tu_pinhole_ray_len(const tu_pinhole *p, int x, int y);
+
+/* Expected exp fog: for planar depth z (sky when non-finite, <= 0 or >=
+ * 1e9), T = exp(-rho z |ray|), Tinf = 0 and
+ *   rgb = T rgb + (1 - T) a F + (1 - a) F,  alpha = 1. */
+typedef struct tu_fog_check {
+    const char *in, *out, *depth;     /* depth NULL: in */
+    int in_part, out_part, depth_part;
+    const char *rgba[4];              /* channel names; rgba[3] NULL: no alpha */
+    const char *z;                    /* depth channel name in its part (UINT: its value) */
+    const tu_pinhole *cam;
+    double rho, F[3];
+    double extra_rel, extra_abs;      /* slack for lossy output compressions */
+    /* results */
+    long sky, fogged;                 /* sky pixels; surface pixels with T < 0.999 */
+} tu_fog_check;
+
+/* Compares every pixel of the output colour with the expectation, computed
+ * from the input file's colour and the depth file's depth as stored.
+ * Tolerance: 6e-4 relative for half outputs, 1e-5 for float, plus the
+ * slack. Returns the number of differing values, -1 if unreadable. */
+long tu_check_fog(tu_fog_check *fc);
 
 #endif

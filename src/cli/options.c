@@ -116,6 +116,23 @@ static void record(ef_options *o, const char *a)
     snprintf(o->params + len, sizeof o->params - len, "%s%s", len ? " " : "", a);
 }
 
+/* Records an option in canonical form, unless it cannot change the output
+ * file (threads, messages, preview): equal outputs get equal headers. */
+static void record_option(ef_options *o, int c, const char *arg)
+{
+    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_PREVIEW || c == 'v' || c == 'q' || c == 'o')
+        return;
+    for (const struct option *lo = long_opts; lo->name; ++lo)
+        if (lo->val == c) {
+            char buf[64];
+            snprintf(buf, sizeof buf, "--%s", lo->name);
+            record(o, buf);
+            if (arg)
+                record(o, arg);
+            return;
+        }
+}
+
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
 {
     memset(o, 0, sizeof *o);
@@ -123,13 +140,12 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
     o->depth_mode = EF_DEPTH_PLANAR;
     o->compression = -1;
     o->pixel_type = -1;
-    for (int i = 1; i < argc; ++i)
-        record(o, argv[i]);
     optind = 1;
     opterr = 0;
     int c;
     while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {
         const char *a = optarg;
+        record_option(o, c, a);
         switch (c) {
         case 'o': o->output = a; break;
         case OPT_DEPTH: o->depth_file = a; break;
@@ -155,8 +171,10 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
             o->scene.ncomp++;
             break;
         case OPT_FOG_COLOR:
-            if (ef_parse_rgb(a, o->scene.color))
-                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers)", a), EF_PARSE_USAGE;
+            if (ef_parse_rgb(a, o->scene.color) || o->scene.color[0] < 0 || o->scene.color[1] < 0 ||
+                o->scene.color[2] < 0)
+                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers >= 0)", a),
+                       EF_PARSE_USAGE;
             break;
         case OPT_W2C:
             if (parse_matrix(a, &o->cam.w2c))
@@ -225,6 +243,8 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
     if (optind < argc)
         return ef_fail(err, "unexpected argument '%s' (one INPUT, and the output with -o)", argv[optind]),
                EF_PARSE_USAGE;
+    if (o->input)
+        record(o, o->input);
     if (!o->input)
         return ef_fail(err, "no INPUT given (usage: exrfog [OPTIONS] INPUT -o OUTPUT)"), EF_PARSE_USAGE;
     if (!o->explain && !o->output)

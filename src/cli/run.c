@@ -28,9 +28,10 @@ static void on_signal(int sig)
     raise(sig);
 }
 
+/* Prints "exrfog: FILE: message"; the callee's idea of FILE wins. */
 static int report(const char *file, const ef_err *err, int status)
 {
-    fprintf(stderr, "exrfog: %s: %s\n", file, err->msg);
+    fprintf(stderr, "exrfog: %s: %s\n", err->file ? err->file : file, err->msg);
     return status;
 }
 
@@ -160,7 +161,7 @@ static int cpu_count(void)
 int ef_main(int argc, char **argv)
 {
     static ef_options o;
-    ef_err err = { { 0 } };
+    ef_err err = {0};
     ef_parse_result pr = ef_options_parse(argc, argv, &o, &err);
     if (pr == EF_PARSE_EXIT)
         return 0;

@@ -8,6 +8,7 @@
 
 typedef struct ef_err {
     char msg[1024];
+    const char *file;   /* the file the message is about, when the callee knows better */
 } ef_err;
 
 /* Formats into err->msg (printf-style) and returns -1, so callers can

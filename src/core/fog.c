@@ -115,6 +115,8 @@ int ef_fog_parse(const char *spec, ef_fog_component *c, ef_err *err)
     snprintf(c->spec, sizeof c->spec, "%s", spec);
     snprintf(buf, sizeof buf, "%s", spec);
 
+    if (strstr(spec, "::") || spec[0] == ':' || (spec[0] && spec[strlen(spec) - 1] == ':'))
+        return ef_fail(err, "fog spec '%s' has an empty KEY=VALUE (write MODEL:KEY=VALUE:...)", spec);
     char *save = NULL;
     char *name = strtok_r(buf, ":", &save);
     char models[256];

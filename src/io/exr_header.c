@@ -79,6 +79,41 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
     return 0;
 }
 
+static int32_t le32(const unsigned char *b)
+{
+    return (int32_t) ((uint32_t) b[0] | (uint32_t) b[1] << 8 | (uint32_t) b[2] << 16 |
+                      (uint32_t) b[3] << 24);
+}
+
+/* When Core refuses a header, look for window boxes it found absurd so the
+ * message can say so (Core rejects coordinates near INT32_MAX itself). */
+static int explain_bad_windows(const char *path, ef_err *err)
+{
+    static const char *const names[2] = { "dataWindow", "displayWindow" };
+    unsigned char buf[65536];
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return 0;
+    size_t n = fread(buf, 1, sizeof buf, fp);
+    fclose(fp);
+    for (int k = 0; k < 2; ++k) {
+        char key[32];
+        size_t klen = (size_t) snprintf(key, sizeof key, "%s%cbox2i", names[k], 0) + 1;
+        for (size_t i = 0; i + klen + 20 <= n; ++i) {
+            if (memcmp(buf + i, key, klen))
+                continue;
+            const unsigned char *b = buf + i + klen + 4;
+            int64_t w = (int64_t) le32(b + 8) - le32(b) + 1, h = (int64_t) le32(b + 12) - le32(b + 4) + 1;
+            if (w < 1 || h < 1 || w > EF_MAX_DIMENSION || h > EF_MAX_DIMENSION)
+                return ef_fail(err, "absurd %s (%d,%d)-(%d,%d), %lld x %lld pixels (exrfog caps "
+                                    "each side at %d; the header is probably corrupt)",
+                               names[k], le32(b), le32(b + 4), le32(b + 8), le32(b + 12),
+                               (long long) w, (long long) h, EF_MAX_DIMENSION);
+        }
+    }
+    return 0;
+}
+
 int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
 {
     struct stat sb;
@@ -105,6 +140,8 @@ int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
     exr_result_t rv = exr_start_read(&f->ctx, path, &init);
     if (rv != EXR_ERR_SUCCESS) {
         f->ctx = NULL;
+        if (explain_bad_windows(path, err))
+            return -1;
         return ef_fail(err, "cannot read the EXR header, the file is truncated or corrupt: %s",
                        last_core_msg[0] ? last_core_msg : exr_get_error_code_as_string(rv));
     }

@@ -80,12 +80,19 @@ static void unit_rect(const part_geom *g, int u, int *x0, int *y0, int *w, int *
     }
 }
 
+/* Planes hold uint channels as uint32, so ids pass through exactly, unless
+ * the fog reads or writes the channel (colour, alpha, depth): then float. */
+static exr_pixel_type_t plane_type(exr_pixel_type_t file_type, uint8_t as_float)
+{
+    return file_type == EXR_PIXEL_UINT && !as_float ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+}
+
 /* Decodes one input chunk into planes (one 32-bit plane per channel,
  * row stride `stride` pixels, origin at absolute (ox, oy)). Every channel
  * gets a destination: Core 3.1.5 crashes on NULL ones. */
 static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *ci, int cx,
                         int cy, exr_decode_pipeline_t *dec, int *ready, void **planes, int stride,
-                        int ox, int oy)
+                        int ox, int oy, const uint8_t *as_float)
 {
     exr_result_t rv = *ready ? exr_decoding_update(ctx, p, ci, dec)
                              : exr_decoding_initialize(ctx, p, ci, dec);
@@ -102,7 +109,7 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
             return -1;
         ch->decode_to_ptr = (uint8_t *) planes[k] +
                             4 * ((size_t) (cy - oy) * (size_t) stride + (size_t) (cx - ox));
-        ch->user_data_type = ch->data_type == EXR_PIXEL_UINT ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+        ch->user_data_type = plane_type(ch->data_type, as_float[k]);
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
@@ -141,6 +148,7 @@ typedef struct depth_reader {
     exr_decode_pipeline_t dec;
     int ready;
     void **planes;            /* nch planes of one source chunk */
+    uint8_t *as_float;        /* only the depth channel */
     size_t plane_cap;
     int cached, cx, cy, cw, ch;
 } depth_reader;
@@ -167,7 +175,7 @@ static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
                 }
                 r->cached = 0;
                 if (decode_chunk(r->ctx, r->part, &ci, cx, cy, &r->dec, &r->ready, r->planes,
-                                 ci.width, cx, cy))
+                                 ci.width, cx, cy, r->as_float))
                     return -1;
                 r->cached = 1;
                 r->cx = cx;
@@ -197,17 +205,20 @@ static void depth_reader_free(depth_reader *r)
     for (int k = 0; r->planes && k < r->nch; ++k)
         free(r->planes[k]);
     free(r->planes);
+    free(r->as_float);
 }
 
 /* Shared state of one part's parallel pass. */
 typedef struct part_job {
     exr_const_context_t in;
     exr_context_t out;
+    const char *in_path, *depth_path, *out_path;
     int part;
     part_geom g;
     int out_rows;             /* scanlines per output chunk */
     int nch;
     const exr_attr_chlist_t *cl;
+    uint8_t *as_float;        /* per channel: the callback sees it as float */
     int colour;               /* 1: this is the part the callback edits */
     const ef_channel_plan *plan;
     exr_const_context_t depth_ctx;
@@ -224,13 +235,15 @@ typedef struct part_job {
     double t_decode, t_fog, t_encode, t_write;
 } part_job;
 
-static void job_fail(part_job *j, const char *fmt, int a, const char *detail)
+/* Records the first failure; file is the file it is about. */
+static void job_fail(part_job *j, const char *file, const char *fmt, int a, const char *detail)
 {
     pthread_mutex_lock(&j->lock);
     if (!j->failed) {
         char what[200];
         snprintf(what, sizeof what, fmt, a);
         ef_fail(&j->err, "%s%s%s", what, detail && detail[0] ? ": " : "", detail ? detail : "");
+        j->err.file = file;
         j->failed = 1;
     }
     pthread_cond_broadcast(&j->turn);
@@ -284,7 +297,7 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         if (k == j->nch)
             return -1;
         ch->encode_from_ptr = (const uint8_t *) planes[k] + 4 * (size_t) (cy - oy) * (size_t) stride;
-        ch->user_data_type = ch->data_type == EXR_PIXEL_UINT ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
+        ch->user_data_type = plane_type(ch->data_type, j->as_float[k]);
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
@@ -332,10 +345,13 @@ static void *worker(void *arg)
         ok = !exr_get_channels(dr.ctx, dr.part, &dcl) && !geom_init(dr.ctx, dr.part, 1, &dr.g);
         dr.nch = ok ? dcl->num_channels : 0;
         ok = ok && (dr.planes = calloc((size_t) dr.nch, sizeof *dr.planes)) != NULL &&
+             (dr.as_float = calloc((size_t) dr.nch, 1)) != NULL &&
              (depth = malloc(cap * sizeof *depth)) != NULL;
+        if (ok)
+            dr.as_float[dr.chan] = 1;
     }
     if (!ok)
-        job_fail(j, "out of memory for part %d", j->part, NULL);
+        job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
 
     double td = 0, tf = 0, te = 0, tw = 0;
     for (;;) {
@@ -355,14 +371,15 @@ static void *worker(void *arg)
             exr_chunk_info_t ci;
             int cx, cy;
             if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
-                decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0)) {
-                job_fail(j, "cannot decode the chunk at scanline %d, the file is truncated or "
+                decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0,
+                             j->as_float)) {
+                job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is truncated or "
                             "corrupt", y, ef_exr_last_core_message());
                 goto out;
             }
         }
         if (j->colour && j->depth_local < 0 && depth_read(&dr, x0, y0, w, h, depth)) {
-            job_fail(j, "cannot decode the depth chunk at scanline %d, the depth file is "
+            job_fail(j, j->depth_path, "cannot decode the depth chunk at scanline %d, the depth file is "
                         "truncated or corrupt", y0, ef_exr_last_core_message());
             goto out;
         }
@@ -393,7 +410,7 @@ static void *worker(void *arg)
                 rv = exr_write_scanline_chunk_info(j->out, j->part, y, &ci);
             if (rv || encode_chunk(j, &enc, &enc_ready, &ci, y, planes, w, y0, &ob,
                                    j->g.tiled ? tx : y, ty)) {
-                job_fail(j, "cannot encode the output chunk at scanline %d", y,
+                job_fail(j, j->out_path, "cannot encode the output chunk at scanline %d", y,
                          ef_exr_last_core_message());
                 goto out;
             }
@@ -416,7 +433,7 @@ static void *worker(void *arg)
                            : exr_write_scanline_chunk(j->out, j->part, ob.y[i],
                                                       ob.data + ob.off[i], ob.size[i]);
             if (rv) {
-                job_fail(j, "cannot write the output chunk at scanline %d (disk full?)", y0,
+                job_fail(j, j->out_path, "cannot write the output chunk at scanline %d (disk full?)", y0,
                          ef_exr_last_core_message());
                 goto out;
             }
@@ -490,7 +507,28 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
     return 0;
 }
 
-static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t out, int p,
+/* The depth must cover exactly the colour pixels. */
+static int check_depth_window(const ef_exr_file *in, const ef_exr_file *df,
+                              const ef_channel_plan *plan, ef_err *err)
+{
+    exr_attr_box2i_t cw, dw;
+    if (exr_get_data_window(in->ctx, plan->rgb[0].part, &cw) ||
+        exr_get_data_window(df->ctx, plan->depth.part, &dw))
+        return ef_fail(err, "cannot read the data windows");
+    if (!memcmp(&cw, &dw, sizeof cw))
+        return 0;
+    ef_fail(err, "the depth data window (%d,%d)-(%d,%d) [%dx%d] differs from the colour data "
+                 "window (%d,%d)-(%d,%d) [%dx%d] of %s; the depth must cover exactly the colour "
+                 "pixels (re-render or crop the depth to match)",
+            dw.min.x, dw.min.y, dw.max.x, dw.max.y, dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1,
+            cw.min.x, cw.min.y, cw.max.x, cw.max.y, cw.max.x - cw.min.x + 1, cw.max.y - cw.min.y + 1,
+            in->path);
+    err->file = df->path;
+    return -1;
+}
+
+static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t out,
+                    const char *out_path, int p,
                     const ef_channel_plan *plan, const ef_stream_opts *o, ef_chunk_fn fn,
                     void *user, ef_stream_stats *stats, ef_err *err)
 {
@@ -498,6 +536,9 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     memset(&j, 0, sizeof j);
     j.in = in->ctx;
     j.out = out;
+    j.in_path = in->path;
+    j.depth_path = df->path;
+    j.out_path = out_path;
     j.part = p;
     j.plan = plan;
     j.fn = fn;
@@ -510,22 +551,20 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
         return ef_fail(err, "part %d: cannot read its chunk layout", p);
     exr_get_channels(in->ctx, p, &j.cl);
     j.nch = j.cl->num_channels;
+    j.as_float = calloc((size_t) j.nch, 1);
+    if (!j.as_float)
+        return ef_fail(err, "out of memory");
     if (j.colour) {
+        for (int k = 0; k < 3; ++k)
+            j.as_float[plan->rgb[k].index] = 1;
+        if (plan->alpha.part >= 0)
+            j.as_float[plan->alpha.index] = 1;
         if (df == in && plan->depth.part == p) {
             j.depth_local = plan->depth.index;
+            j.as_float[j.depth_local] = 1;
         } else {
-            exr_attr_box2i_t ddw;
             j.depth_ctx = df->ctx;
             j.depth_part = plan->depth.part;
-            exr_get_data_window(df->ctx, plan->depth.part, &ddw);
-            if (memcmp(&ddw, &j.g.dw, sizeof ddw))
-                return ef_fail(err, "the depth data window (%d,%d)-(%d,%d) [%dx%d] differs from the "
-                                    "colour data window (%d,%d)-(%d,%d) [%dx%d]; the depth must "
-                                    "cover exactly the colour pixels",
-                               ddw.min.x, ddw.min.y, ddw.max.x, ddw.max.y,
-                               ddw.max.x - ddw.min.x + 1, ddw.max.y - ddw.min.y + 1,
-                               j.g.dw.min.x, j.g.dw.min.y, j.g.dw.max.x, j.g.dw.max.y, j.g.width,
-                               j.g.height);
         }
     }
     atomic_init(&j.next_unit, 0);
@@ -546,6 +585,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     free(th);
     pthread_mutex_destroy(&j.lock);
     pthread_cond_destroy(&j.turn);
+    free(j.as_float);
     stats->decode_s += j.t_decode;
     stats->fog_s += j.t_fog;
     stats->encode_s += j.t_encode;
@@ -566,6 +606,8 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     exr_context_t out = NULL;
     double t0 = now();
     memset(stats, 0, sizeof *stats);
+    if (check_depth_window(in, df, plan, err))
+        return -1;
     ef_exr_init_context(&init);
     if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init))
         return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
@@ -575,7 +617,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     if (!rc && exr_write_header(out))
         rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
     for (int p = 0; p < in->nparts && !rc; ++p)
-        rc = run_part(in, df, out, p, plan, o, fn, user, stats, err);
+        rc = run_part(in, df, out, out_path, p, plan, o, fn, user, stats, err);
     if (exr_finish(&out) && !rc)
         rc = ef_fail(err, "cannot finish the output: %s", ef_exr_last_core_message());
     if (rc)
