@@ -230,6 +230,10 @@ int ef_main(int argc, char **argv)
         report(o.output, &err, 1);
         goto done;
     }
+    for (int p = 0; p < in.nparts && !o.quiet; ++p)
+        if (ef_exr_part_is_multilevel(&in, p))
+            fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
+                            "output part is single-level\n", o.input, p);
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGHUP, on_signal);
@@ -256,14 +260,6 @@ int ef_main(int argc, char **argv)
     }
     tmp_path[0] = '\0';
     status = 0;
-    if (job.preview) {
-        char msg[512];
-        if (ef_preview_write(o.preview, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
-            ef_fail(&err, "%s", msg);
-            status = report(o.preview, &err, 1);
-        }
-        free(job.preview);
-    }
     if (o.stats) {
         struct rusage ru;
         getrusage(RUSAGE_SELF, &ru);
@@ -272,6 +268,14 @@ int ef_main(int argc, char **argv)
                 "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
                 st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
                 (double) ru.ru_maxrss / 1024.0);
+    }
+    if (job.preview) {
+        char msg[512];
+        if (ef_preview_write(o.preview, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            status = report(o.preview, &err, 1);
+        }
+        free(job.preview);
     }
 done:
     ef_exr_close(&dep);

@@ -165,6 +165,16 @@ void ef_exr_close(ef_exr_file *f)
         f->ctx = NULL;
 }
 
+int ef_exr_part_is_multilevel(const ef_exr_file *f, int p)
+{
+    exr_storage_t st;
+    exr_tile_level_mode_t lm;
+    if (exr_get_storage(f->ctx, p, &st) || st != EXR_STORAGE_TILED)
+        return 0;
+    return exr_get_tile_descriptor(f->ctx, p, NULL, NULL, &lm, NULL) == EXR_ERR_SUCCESS &&
+           lm != EXR_TILE_ONE_LEVEL;
+}
+
 /* Reads an m44f or m44d attribute; absent attributes leave out unset. */
 static int get_mat(const ef_exr_file *f, int p, const char *name, ef_opt_mat *out, ef_err *err)
 {

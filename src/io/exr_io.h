@@ -25,6 +25,9 @@ int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err);
 /* Releases what ef_exr_open took; safe on a zeroed struct. */
 void ef_exr_close(ef_exr_file *f);
 
+/* 1 when part p is a tiled mip- or rip-map (exrfog writes level 0 only). */
+int ef_exr_part_is_multilevel(const ef_exr_file *f, int part);
+
 /* Reads the camera attributes of a part into meta. Fails only on
  * attributes of an unexpected type. */
 int ef_exr_read_cam_meta(const ef_exr_file *f, int part, ef_cam_meta *meta, ef_err *err);
