@@ -8,28 +8,13 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "tassert.h"
+
 #include "camera.h"
 
 #define PI 3.14159265358979323846
 
-#define assert_close(a, b, tol)                                                     \
-    do {                                                                            \
-        const double a_ = (a), b_ = (b);                                            \
-        if (!(fabs(a_ - b_) <= (tol))) {                                            \
-            print_error("%s = %.17g, expected %.17g (tol %g)\n", #a, a_, b_,        \
-                        (double)(tol));                                             \
-            fail();                                                                 \
-        }                                                                           \
-    } while (0)
 
-#define assert_contains(hay, needle)                                                \
-    do {                                                                            \
-        if (!(hay) || !strstr((hay), (needle))) {                                   \
-            print_error("\"%s\" does not contain \"%s\"\n", (hay) ? (hay) : "(null)", \
-                        (needle));                                                  \
-            fail();                                                                 \
-        }                                                                           \
-    } while (0)
 
 static ef_mat4 mk(const double v[16])
 {

@@ -21,6 +21,8 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "tassert.h"
+
 #include "exr_io.h"
 #include "testutil.h"
 
@@ -73,13 +75,6 @@ static int run(const char *fmt, ...)
         }                                                                                 \
     } while (0)
 
-#define assert_contains(hay, needle)                                                      \
-    do {                                                                                  \
-        if (!strstr((hay), (needle))) {                                                   \
-            print_error("'%s' not found in:\n%s\n", (needle), (hay));                    \
-            fail();                                                                       \
-        }                                                                                 \
-    } while (0)
 
 static void read_image(const char *path, int part, tu_image *img)
 {

@@ -15,29 +15,15 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "tassert.h"
+
 #include "camera.h"
 #include "depth.h"
 #include "exr_io.h"
 #include "recon.h"
 #include "testutil.h"
 
-#define assert_close(a, b, tol)                                                     \
-    do {                                                                            \
-        const double a_ = (a), b_ = (b);                                            \
-        if (!(fabs(a_ - b_) <= (tol))) {                                            \
-            print_error("%s = %.17g, expected %.17g (tol %g)\n", #a, a_, b_,        \
-                        (double) (tol));                                            \
-            fail();                                                                 \
-        }                                                                           \
-    } while (0)
 
-#define assert_contains(hay, needle)                                                \
-    do {                                                                            \
-        if (!strstr((hay), (needle))) {                                             \
-            print_error("'%s' not found in:\n%s\n", (needle), (hay));              \
-            fail();                                                                 \
-        }                                                                           \
-    } while (0)
 
 static const char *real_dir;
 static char g_out[1 << 16], g_err[1 << 16];

@@ -8,19 +8,12 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "tassert.h"
+
 #include "camera.h"
 #include "depth.h"
 #include "recon.h"
 
-#define assert_close(a, b, tol)                                                     \
-    do {                                                                            \
-        const double a_ = (a), b_ = (b);                                            \
-        if (!(fabs(a_ - b_) <= (tol))) {                                            \
-            print_error("%s = %.17g, expected %.17g (tol %g)\n", #a, a_, b_,        \
-                        (double)(tol));                                             \
-            fail();                                                                 \
-        }                                                                           \
-    } while (0)
 
 /* Camera axes in world: x -> (0,0,1), y -> (0,1,0), z (forward) -> (-1,0,0),
  * at (1e7, -3e7, 2e7); hfov 90 (tan 45 = 1) on a 2x2 display, so pixel
