@@ -51,29 +51,8 @@ static double rnd01(void)
     return (double) (rnd_u32() >> 8) * (1.0 / 16777216.0);
 }
 
-static char g_out[1 << 16], g_err[1 << 16];
 
-/* Runs exrfog with printf-style arguments; stdout/stderr land in g_out/g_err. */
-static int run(const char *fmt, ...)
-{
-    char args[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    int st = tu_run(args, g_out, sizeof g_out, g_err, sizeof g_err);
-    return st;
-}
 
-#define assert_run(expect, ...)                                                           \
-    do {                                                                                  \
-        int st_ = run(__VA_ARGS__);                                                       \
-        if (st_ != (expect)) {                                                            \
-            print_error("exrfog exited %d, expected %d\nstdout: %s\nstderr: %s\n", st_,    \
-                        (expect), g_out, g_err);                                          \
-            fail();                                                                       \
-        }                                                                                 \
-    } while (0)
 
 
 static void read_image(const char *path, int part, tu_image *img)
@@ -440,8 +419,8 @@ static void test_dwa_refused(void **state)
     static const char *const dwa[] = { "dwaa", "dwab" };
     for (int i = 0; i < 2; ++i) {
         assert_run(2, "'%s' -o '%s' " FOG " --compression %s", in, out, dwa[i]);
-        assert_contains(g_err, dwa[i]);
-        assert_contains(g_err, "DWA");
+        assert_contains(tu_err, dwa[i]);
+        assert_contains(tu_err, "DWA");
         assert_no_output(out);
     }
     free(in);
@@ -575,8 +554,8 @@ static void test_multipart_nuke(void **state)
     write_exr(in, parts, 3);
 
     assert_run(0, "--explain '%s'", in);
-    assert_contains(g_out, "depth: depth.Z (part 2)");
-    assert_contains(g_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 1)");
+    assert_contains(tu_out, "depth: depth.Z (part 2)");
+    assert_contains(tu_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 1)");
 
     assert_run(0, "'%s' -o '%s' " FOG " --threads 2", in, out);
     check_files(in, out, 1, RGBA);
@@ -855,11 +834,11 @@ static void test_depth_file(void **state)
     /* Without --depth there is no depth: exit 1. */
     remove(out);
     assert_run(1, "'%s' -o '%s' " FOG, in, out);
-    assert_contains(g_err, "--depth");
+    assert_contains(tu_err, "--depth");
     assert_no_output(out);
 
     assert_run(0, "--explain '%s' --depth '%s'", in, dep);
-    assert_contains(g_out, "depth: Z (part 0 of ");
+    assert_contains(tu_out, "depth: Z (part 0 of ");
     assert_run(0, "'%s' --depth '%s' -o '%s' " FOG " --threads 3", in, dep, out);
     check_files(in, out, 0, RGBA);
     fog_check fc;
@@ -878,8 +857,8 @@ static void test_depth_file(void **state)
     write_exr(dep2, &dp2, 1);
     remove(out);
     assert_run(1, "'%s' --depth '%s' -o '%s' " FOG, in, dep2, out);
-    assert_contains(g_err, "(2,1)-(65,48)");
-    assert_contains(g_err, "(0,0)-(63,47)");
+    assert_contains(tu_err, "(2,1)-(65,48)");
+    assert_contains(tu_err, "(0,0)-(63,47)");
     assert_no_output(out);
 
     /* A smaller one too. */
@@ -891,8 +870,8 @@ static void test_depth_file(void **state)
     tu_part_add(&dp3, "Z", EXR_PIXEL_FLOAT, s3.Z);
     write_exr(dep2, &dp3, 1);
     assert_run(1, "'%s' --depth '%s' -o '%s' " FOG, in, dep2, out);
-    assert_contains(g_err, "(0,0)-(62,47)");
-    assert_contains(g_err, "(0,0)-(63,47)");
+    assert_contains(tu_err, "(0,0)-(62,47)");
+    assert_contains(tu_err, "(0,0)-(63,47)");
     assert_no_output(out);
 
     free(in);
@@ -940,8 +919,8 @@ static void test_channels_blender(void **state)
     char cf[1024];
     cam_flags(&c, cf, sizeof cf);
     assert_run(0, "--explain '%s' %s", in, cf);
-    assert_contains(g_out, "depth: ViewLayer.Depth.Z (part 0)");
-    assert_contains(g_out, "colour: ViewLayer.Combined.R, ViewLayer.Combined.G, "
+    assert_contains(tu_out, "depth: ViewLayer.Depth.Z (part 0)");
+    assert_contains(tu_out, "colour: ViewLayer.Combined.R, ViewLayer.Combined.G, "
                            "ViewLayer.Combined.B, alpha ViewLayer.Combined.A");
     assert_run(0, "'%s' -o '%s' " FOG " %s", in, out, cf);
     static const char *const combined[] = { "ViewLayer.Combined.R", "ViewLayer.Combined.G",
@@ -967,16 +946,16 @@ static void test_channels_blender(void **state)
     tu_part_add(&p, "Back.Depth.Z", EXR_PIXEL_FLOAT, z2);
     write_exr(in, &p, 1);
     assert_run(0, "--explain '%s' %s", in, cf);
-    if (strstr(g_out, "colour: Back.Combined.R"))
-        assert_contains(g_out, "depth: Back.Depth.Z (part 0)");
+    if (strstr(tu_out, "colour: Back.Combined.R"))
+        assert_contains(tu_out, "depth: Back.Depth.Z (part 0)");
     else
-        assert_contains(g_out, "depth: ViewLayer.Depth.Z (part 0)");
+        assert_contains(tu_out, "depth: ViewLayer.Depth.Z (part 0)");
     assert_run(0, "--explain '%s' %s --layer ViewLayer.Combined", in, cf);
-    assert_contains(g_out, "colour: ViewLayer.Combined.R");
-    assert_contains(g_out, "depth: ViewLayer.Depth.Z (part 0)");
+    assert_contains(tu_out, "colour: ViewLayer.Combined.R");
+    assert_contains(tu_out, "depth: ViewLayer.Depth.Z (part 0)");
     assert_run(0, "--explain '%s' %s --layer Back.Combined", in, cf);
-    assert_contains(g_out, "colour: Back.Combined.R");
-    assert_contains(g_out, "depth: Back.Depth.Z (part 0)");
+    assert_contains(tu_out, "colour: Back.Combined.R");
+    assert_contains(tu_out, "depth: Back.Depth.Z (part 0)");
     assert_run(0, "'%s' -o '%s' " FOG " %s --layer Back.Combined", in, out, cf);
     static const char *const back[] = { "Back.Combined.R", "Back.Combined.G", "Back.Combined.B",
                                         "Back.Combined.A", NULL };
@@ -1022,8 +1001,8 @@ static void test_channels_nuke_single(void **state)
     char cf[1024];
     cam_flags(&c, cf, sizeof cf);
     assert_run(0, "--explain '%s' %s", in, cf);
-    assert_contains(g_out, "depth: depth.Z (part 0)");
-    assert_contains(g_out, "colour: R, G, B, alpha A");
+    assert_contains(tu_out, "depth: depth.Z (part 0)");
+    assert_contains(tu_out, "colour: R, G, B, alpha A");
     assert_run(0, "'%s' -o '%s' " FOG " %s", in, out, cf);
     check_files(in, out, 0, RGBA);
     fog_check fc;
@@ -1067,12 +1046,12 @@ static void test_channels_explicit(void **state)
 
     /* Automatic: R,G,B,A with Z. */
     assert_run(0, "--explain '%s'", in);
-    assert_contains(g_out, "depth: Z (part 0)");
-    assert_contains(g_out, "colour: R, G, B, alpha A");
+    assert_contains(tu_out, "depth: Z (part 0)");
+    assert_contains(tu_out, "colour: R, G, B, alpha A");
 
     /* --depth-channel alt.Z: the beauty fogged with alt.Z. */
     assert_run(0, "--explain '%s' --depth-channel alt.Z", in);
-    assert_contains(g_out, "depth: alt.Z (part 0)");
+    assert_contains(tu_out, "depth: alt.Z (part 0)");
     assert_run(0, "'%s' -o '%s' " FOG " --depth-channel alt.Z", in, out);
     check_files(in, out, 0, RGBA);
     fog_check fc;
@@ -1082,8 +1061,8 @@ static void test_channels_explicit(void **state)
 
     /* --layer diffuse --depth-channel Z: only diffuse.* fogged, alpha 1. */
     assert_run(0, "--explain '%s' --layer diffuse --depth-channel Z", in);
-    assert_contains(g_out, "colour: diffuse.R, diffuse.G, diffuse.B, no alpha");
-    assert_contains(g_out, "depth: Z (part 0)");
+    assert_contains(tu_out, "colour: diffuse.R, diffuse.G, diffuse.B, no alpha");
+    assert_contains(tu_out, "depth: Z (part 0)");
     assert_run(0, "'%s' -o '%s' " FOG " --layer diffuse --depth-channel Z", in, out);
     static const char *const diffuse[] = { "diffuse.R", "diffuse.G", "diffuse.B", NULL };
     check_files(in, out, 0, diffuse);
@@ -1125,10 +1104,10 @@ static void test_uint_depth_channel(void **state)
     char *in = tu_path("io_uintdepth.exr"), *out = tu_path("io_uintdepth.out.exr");
     write_exr(in, &p, 1);
     remove(out);
-    const int st = run("'%s' -o '%s' " FOG " --depth-channel zi", in, out);
+    const int st = tu_runf("'%s' -o '%s' " FOG " --depth-channel zi", in, out);
     if (st == 1) {
         /* A refusal is acceptable if it names the channel. */
-        assert_contains(g_err, "zi");
+        assert_contains(tu_err, "zi");
         assert_no_output(out);
     } else {
         /* BUG: src/io/exr_stream.c decode_chunk() decodes UINT channels as
@@ -1179,9 +1158,9 @@ static void test_uint_colour_layer(void **state)
     char *in = tu_path("io_uintcolour.exr"), *out = tu_path("io_uintcolour.out.exr");
     write_exr(in, &p, 1);
     remove(out);
-    const int st = run("'%s' -o '%s' " FOG " --layer count", in, out);
+    const int st = tu_runf("'%s' -o '%s' " FOG " --layer count", in, out);
     if (st == 1) {
-        assert_contains(g_err, "count.");
+        assert_contains(tu_err, "count.");
         assert_no_output(out);
     } else {
         /* BUG: src/io/exr_stream.c decode_chunk()/encode_chunk() keep UINT

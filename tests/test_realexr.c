@@ -26,31 +26,12 @@
 
 
 static const char *real_dir;
-static char g_out[1 << 16], g_err[1 << 16];
 
 /* Identity pose (camera at the origin looking down +Z) and a 40 degree
  * lens, for files without a camera. */
 #define NO_CAMERA_FLAGS "--camera-to-world 1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --fov 40"
 
-static int run(const char *fmt, ...)
-{
-    char args[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    return tu_run(args, g_out, sizeof g_out, g_err, sizeof g_err);
-}
 
-#define assert_run(expect, ...)                                                           \
-    do {                                                                                  \
-        int st_ = run(__VA_ARGS__);                                                       \
-        if (st_ != (expect)) {                                                            \
-            print_error("exrfog exited %d, expected %d\nstdout: %s\nstderr: %s\n", st_,    \
-                        (expect), g_out, g_err);                                          \
-            fail();                                                                       \
-        }                                                                                 \
-    } while (0)
 
 /* The path of a real file; skips the test when that one file is missing. */
 static char *real(const char *name)
@@ -149,9 +130,9 @@ static void expect_no_camera(const char *in, const char *out)
 {
     remove(out);
     assert_run(1, "'%s' -o '%s' --fog exp:density=0.1", in, out);
-    assert_contains(g_err, "--world-to-camera");
-    assert_contains(g_err, "--camera-to-world");
-    assert_contains(g_err, "--fov");
+    assert_contains(tu_err, "--world-to-camera");
+    assert_contains(tu_err, "--camera-to-world");
+    assert_contains(tu_err, "--fov");
     assert_false(tu_exists(out));
 }
 
@@ -160,12 +141,12 @@ static void expect_no_depth(const char *in, const char *out)
 {
     remove(out);
     assert_run(1, "'%s' -o '%s' --fog exp:density=0.1", in, out);
-    assert_contains(g_err, "no depth channel");
-    assert_contains(g_err, "--depth-channel");
-    assert_contains(g_err, "--depth ");
+    assert_contains(tu_err, "no depth channel");
+    assert_contains(tu_err, "--depth-channel");
+    assert_contains(tu_err, "--depth ");
     assert_false(tu_exists(out));
     assert_run(1, "--explain '%s'", in);
-    assert_contains(g_err, "no depth channel");
+    assert_contains(tu_err, "no depth channel");
 }
 
 /* ------------------------------------------------------------------ */
@@ -278,8 +259,8 @@ static void test_arnold_representative(void **state)
 
     char *out = tu_path("real_representative.exr");
     assert_run(0, "--explain '%s'", path);
-    assert_contains(g_out, "depth: Z (part 0)");
-    assert_contains(g_out, "colour: R, G, B, alpha A (part 0)");
+    assert_contains(tu_out, "depth: Z (part 0)");
+    assert_contains(tu_out, "colour: R, G, B, alpha A (part 0)");
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.1 --fog-color 0.25,0.5,0.75", path, out);
     check_files(path, out, 0, RGBA);
     const int disp[4] = { 0, 0, 149, 99 };
@@ -301,8 +282,8 @@ static void test_nuke_singlepart(void **state)
     char *out = tu_path("real_nuke_single.exr");
     expect_no_camera(path, out);
     assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
-    assert_contains(g_out, "depth: depth.Z (part 0)");
-    assert_contains(g_out, "colour: R, G, B, alpha A (part 0)");
+    assert_contains(tu_out, "depth: depth.Z (part 0)");
+    assert_contains(tu_out, "colour: R, G, B, alpha A (part 0)");
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.5 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
                path, out);
     check_files(path, out, 0, RGBA);
@@ -336,8 +317,8 @@ static void test_nuke_part_per_layer(void **state)
     assert_int_equal(tu_nparts(path), 4);
     expect_no_camera(path, out);
     assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
-    assert_contains(g_out, "depth: depth.Z (part 2)");
-    assert_contains(g_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 0)");
+    assert_contains(tu_out, "depth: depth.Z (part 2)");
+    assert_contains(tu_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 0)");
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.5 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
                path, out);
     check_files(path, out, 0, RGBA);
@@ -363,12 +344,12 @@ static void test_beachball_singlepart(void **state)
     char *out = tu_path("real_beachball_single.exr");
     expect_no_camera(path, out);
     assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
-    assert_contains(g_out, "depth: Z (part 0)");
-    assert_contains(g_out, "colour: R, G, B, alpha A (part 0)");
+    assert_contains(tu_out, "depth: Z (part 0)");
+    assert_contains(tu_out, "colour: R, G, B, alpha A (part 0)");
     /* The other view: its own depth, not the default view's Z. */
     assert_run(0, "--explain '%s' --layer left " NO_CAMERA_FLAGS, path);
-    assert_contains(g_out, "colour: left.R, left.G, left.B, alpha left.A (part 0)");
-    assert_contains(g_out, "depth: left.Z (part 0)");
+    assert_contains(tu_out, "colour: left.R, left.G, left.B, alpha left.A (part 0)");
+    assert_contains(tu_out, "depth: left.Z (part 0)");
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
                path, out);
     check_files(path, out, 0, RGBA);
@@ -393,8 +374,8 @@ static void test_beachball_multipart(void **state)
     assert_int_equal(tu_nparts(path), 10);
     expect_no_camera(path, out);
     assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
-    assert_contains(g_out, "depth: depth.Z (part 5)");
-    assert_contains(g_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 0)");
+    assert_contains(tu_out, "depth: depth.Z (part 5)");
+    assert_contains(tu_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 0)");
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
                path, out);
     check_files(path, out, 0, RGBA);
@@ -508,8 +489,8 @@ static void test_arnold7_multipart(void **state)
     char *dep = tu_path("real_arnold7_depth.exr");
     assert_int_equal(tu_write_exr(dep, &dp, 1), 0);
     assert_run(0, "--explain '%s' --depth '%s'", path, dep);
-    assert_contains(g_out, "depth: Z (part 0 of ");
-    assert_contains(g_out, "(part 0)");
+    assert_contains(tu_out, "depth: Z (part 0 of ");
+    assert_contains(tu_out, "(part 0)");
     assert_run(0, "'%s' --depth '%s' -o '%s' --fog exp:density=0.3 --fog-color 0.25,0.5,0.75",
                path, dep, out);
     check_files(path, out, 0, RGBA);

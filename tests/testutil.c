@@ -1,6 +1,7 @@
 #include "testutil.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -668,4 +669,16 @@ long tu_check_fog(tu_fog_check *fc)
     tu_image_free(&out);
     tu_image_free(&dimg);
     return bad;
+}
+
+char tu_out[1 << 16], tu_err[1 << 16];
+
+int tu_runf(const char *fmt, ...)
+{
+    char args[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    return tu_run(args, tu_out, sizeof tu_out, tu_err, sizeof tu_err);
 }

@@ -87,6 +87,28 @@ char *tu_path(const char *file);
  * given buffers (NULL to discard). Returns the exit status. */
 int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen);
 
+/* Captured output of the last tu_runf. */
+extern char tu_out[1 << 16], tu_err[1 << 16];
+
+/* tu_run with printf-style arguments; output lands in tu_out/tu_err. */
+int tu_runf(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
+
+/* Runs exrfog with printf-style arguments and fails the test unless it
+ * exits with `expect` (include after cmocka.h). */
+#define assert_run(expect, ...)                                                           \
+    do {                                                                                  \
+        int st_ = tu_runf(__VA_ARGS__);                                                   \
+        if (st_ != (expect)) {                                                            \
+            print_error("exrfog exited %d, expected %d\nstdout: %s\nstderr: %s\n", st_,    \
+                        (expect), tu_out, tu_err);                                        \
+            fail();                                                                       \
+        }                                                                                 \
+    } while (0)
+
 /* 1 if the file exists. */
 int tu_exists(const char *path);
 
