@@ -166,6 +166,34 @@ static void test_arnold_screen(void **state)
     assert_string_equal(c.src_far, "header arnold/camera/far_clip");
 }
 
+/* A screen matrix made for 16:9 on a square display window (a crop after
+ * rendering, as OIIO's cryptoasset.exr): still resolves, with a warning
+ * that names both aspects; a matching one gives no warning. */
+static void test_aspect_warning(void **state)
+{
+    (void)state;
+    ef_cam_meta m;
+    ef_cam_flags fl = {0};
+    ef_camera c;
+    ef_err err = {0};
+    arnold_meta(&m);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
+    assert_string_equal(c.warning, "");
+    ef_cam_meta_init(&m, 0, 0, 31, 31);
+    set_mat(&m.w2c, mk(arnold_w2c));
+    set_mat(&m.w2ndc, mul(mk(arnold_w2c), screen_proj(50, 1920, 1080, 1, 0.1, 1e4)));
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
+    assert_contains(c.warning, "1.778");
+    assert_contains(c.warning, "32x32");
+    /* Anamorphic pixels that match the matrix are fine. */
+    ef_cam_meta_init(&m, 0, 0, 99, 99);
+    m.pixel_aspect = 2.0;
+    set_mat(&m.w2c, mk(arnold_w2c));
+    set_mat(&m.w2ndc, mul(mk(arnold_w2c), screen_proj(50, 100, 100, 2.0, 0.1, 1e4)));
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
+    assert_string_equal(c.warning, "");
+}
+
 /* Float32 matrices (as Arnold writes M44f) and a camera far from the origin:
  * still recognised as a perspective screen matrix. */
 static void test_arnold_float32(void **state)
@@ -616,6 +644,7 @@ int main(void)
         cmocka_unit_test(test_flags),
         cmocka_unit_test(test_errors),
         cmocka_unit_test(test_pixel_centres),
+        cmocka_unit_test(test_aspect_warning),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

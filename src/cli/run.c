@@ -115,6 +115,8 @@ static void explain(const ef_options *o, const ef_exr_file *in, const ef_channel
         printf("  %-11s %.9g  from %s\n", "near", cam->near_.v, cam->src_near);
     if (cam->far_.set)
         printf("  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
+    if (cam->warning[0])
+        printf("  warning:    %s\n", cam->warning);
     printf("colour: %s, %s, %s%s%s (part %d)\n", plan->rgb[0].name, plan->rgb[1].name,
            plan->rgb[2].name, plan->alpha.part >= 0 ? ", alpha " : ", no alpha (alpha = 1)",
            plan->alpha.part >= 0 ? plan->alpha.name : "", plan->rgb[0].part);
@@ -195,6 +197,8 @@ int ef_main(int argc, char **argv)
         report(o.input, &err, 1);
         goto done;
     }
+    if (cam.warning[0] && !o.quiet && !o.explain)
+        fprintf(stderr, "exrfog: %s: warning: %s\n", o.input, cam.warning);
     int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
     if (o.explain) {
         explain(&o, &in, &plan, &cam, &conv, conv_ok);

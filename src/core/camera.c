@@ -156,6 +156,32 @@ static double ray_hfov(const ef_camera *cam, const ef_cam_meta *meta)
     return atan2(sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), dot) * (180.0 / EF_PI);
 }
 
+/* A projection made for another frame shape (the image was cropped or
+ * reformatted after rendering) still gives rays, but they no longer match
+ * the pixels: angle per pixel must be the same both ways, times the pixel
+ * aspect. Worth a warning, not a refusal. */
+static void check_aspect(ef_camera *cam, const ef_cam_meta *meta, const char *name)
+{
+    const double W = meta->disp[2] - meta->disp[0] + 1.0;
+    const double H = meta->disp[3] - meta->disp[1] + 1.0;
+    const double xm = 0.5 * (meta->disp[0] + meta->disp[2]);
+    const double ym = 0.5 * (meta->disp[1] + meta->disp[3]);
+    double l[3], r[3], t[3], b[3];
+    ef_camera_ray(cam, meta->disp[0] - 0.5, ym, l);
+    ef_camera_ray(cam, meta->disp[2] + 0.5, ym, r);
+    ef_camera_ray(cam, xm, meta->disp[1] - 0.5, t);
+    ef_camera_ray(cam, xm, meta->disp[3] + 0.5, b);
+    const double per_px_x = (r[0] - l[0]) / W, per_px_y = (t[1] - b[1]) / H;
+    const double ratio = per_px_x / (per_px_y * meta->pixel_aspect);
+    if (isfinite(ratio) && fabs(ratio - 1.0) > 0.01)
+        snprintf(cam->warning, sizeof cam->warning,
+                 "%s implies a frame aspect of %.4g but the display window %gx%g (pixel aspect "
+                 "%g) has %.4g; was the image cropped or reformatted after rendering? The rays "
+                 "follow the matrix; pass --fov DEG to use the display window instead",
+                 name, W / H * meta->pixel_aspect * ratio, W, H, meta->pixel_aspect,
+                 W / H * meta->pixel_aspect);
+}
+
 /* Rays from a projection matrix, classified by where it sends the optical
  * axis (the attribute name is unreliable: Arnold writes screen space under
  * worldToNDC). c2w_hdr is the inverse of the header's own worldToCamera. */
@@ -244,6 +270,7 @@ static int projection_ray(ef_camera *cam, const ef_cam_meta *meta,
     if (!isfinite(cam->hfov_deg) || !(cam->hfov_deg > 0.0 && cam->hfov_deg < 180.0))
         return ef_fail(err, "%s gives a field of view of %g degrees; pass --fov DEG",
                        name, cam->hfov_deg);
+    check_aspect(cam, meta, name);
     return 0;
 }
 

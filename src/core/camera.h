@@ -62,6 +62,9 @@ typedef struct ef_camera {
     ef_opt_num near_, far_;   /* clip planes when known (flags, metadata, or matrix) */
     ef_proj_kind proj;
     double proj_alpha, proj_beta; /* valid when proj != EF_PROJ_NONE */
+    /* Non-fatal doubts about the header, "" when none (e.g. a projection
+     * whose aspect no longer matches the display window after a crop). */
+    char warning[320];
     /* Where each part came from, for --explain (static strings). */
     const char *src_pose, *src_fov, *src_near, *src_far, *src_proj;
 } ef_camera;
