@@ -262,6 +262,8 @@ typedef struct out_buf {
 
 static int out_append(out_buf *o, const void *p, size_t n, int y, int ty)
 {
+    if (o->n >= (int) (sizeof o->y / sizeof o->y[0]))
+        return -1;
     if (o->len + n > o->cap) {
         size_t cap = (o->len + n) * 2;
         uint8_t *d = realloc(o->data, cap);
