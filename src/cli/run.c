@@ -90,54 +90,55 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     }
 }
 
-static void print_vec(const char *label, const double v[3], const char *src)
+static void print_vec(FILE *out, const char *label, const double v[3], const char *src)
 {
-    printf("  %-11s (%.9g, %.9g, %.9g)%s%s\n", label, v[0], v[1], v[2], src ? "  from " : "",
+    fprintf(out, "  %-11s (%.9g, %.9g, %.9g)%s%s\n", label, v[0], v[1], v[2], src ? "  from " : "",
            src ? src : "");
 }
 
-static void explain(const ef_options *o, const ef_exr_file *in, const ef_channel_plan *plan,
+/* The resolved camera, channels and conventions, as --explain and -v show them. */
+static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const ef_channel_plan *plan,
                     const ef_camera *cam, const ef_depth_conv *conv, int conv_ok)
 {
     static const double fwd[3] = { 0, 0, 1 }, upc[3] = { 0, 1, 0 };
     double f[3], u[3];
     ef_camera_to_world_dir(cam, fwd, f);
     ef_camera_to_world_dir(cam, upc, u);
-    printf("input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
-    printf("camera:\n");
-    print_vec("position", cam->pos, cam->src_pose);
-    print_vec("forward", f, NULL);
-    print_vec("up", u, NULL);
-    printf("  %-11s %.6g deg horizontal  from %s\n", "fov", cam->hfov_deg, cam->src_fov);
+    fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
+    fprintf(out, "camera:\n");
+    print_vec(out, "position", cam->pos, cam->src_pose);
+    print_vec(out, "forward", f, NULL);
+    print_vec(out, "up", u, NULL);
+    fprintf(out, "  %-11s %.6g deg horizontal  from %s\n", "fov", cam->hfov_deg, cam->src_fov);
     if (cam->proj != EF_PROJ_NONE)
-        printf("  %-11s %s\n", "projection", cam->src_proj);
+        fprintf(out, "  %-11s %s\n", "projection", cam->src_proj);
     if (cam->near_.set)
-        printf("  %-11s %.9g  from %s\n", "near", cam->near_.v, cam->src_near);
+        fprintf(out, "  %-11s %.9g  from %s\n", "near", cam->near_.v, cam->src_near);
     if (cam->far_.set)
-        printf("  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
+        fprintf(out, "  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
     if (cam->warning[0])
-        printf("  warning:    %s\n", cam->warning);
-    printf("colour: %s, %s, %s%s%s (part %d)\n", plan->rgb[0].name, plan->rgb[1].name,
+        fprintf(out, "  warning:    %s\n", cam->warning);
+    fprintf(out, "colour: %s, %s, %s%s%s (part %d)\n", plan->rgb[0].name, plan->rgb[1].name,
            plan->rgb[2].name, plan->alpha.part >= 0 ? ", alpha " : ", no alpha (alpha = 1)",
            plan->alpha.part >= 0 ? plan->alpha.name : "", plan->rgb[0].part);
-    printf("depth: %s (part %d%s%s), mode %s\n", plan->depth.name, plan->depth.part,
+    fprintf(out, "depth: %s (part %d%s%s), mode %s\n", plan->depth.name, plan->depth.part,
            o->depth_file ? " of " : "", o->depth_file ? o->depth_file : "",
            ef_depth_mode_name(o->depth_mode));
     if (conv_ok && (conv->mode != EF_DEPTH_PLANAR && conv->mode != EF_DEPTH_RADIAL &&
                     conv->mode != EF_DEPTH_INVERSE))
-        printf("  clip planes near %.9g far %.9g  from %s\n", conv->near_, conv->far_, conv->src_clip);
-    printf("sky rule: depth non-finite, <= 0 (planar/radial/inverse), >= %g once linearised, or at "
+        fprintf(out, "  clip planes near %.9g far %.9g  from %s\n", conv->near_, conv->far_, conv->src_clip);
+    fprintf(out, "sky rule: depth non-finite, <= 0 (planar/radial/inverse), >= %g once linearised, or at "
            "the far plane (buffer modes)\n", EF_SKY_DISTANCE);
     if (o->scene.sky == EF_SKY_FOG)
-        printf("  sky pixels: fogged to infinity (--sky fog)\n");
+        fprintf(out, "  sky pixels: fogged to infinity (--sky fog)\n");
     else if (o->scene.sky == EF_SKY_KEEP)
-        printf("  sky pixels: kept unchanged (--sky keep)\n");
+        fprintf(out, "  sky pixels: kept unchanged (--sky keep)\n");
     else
-        printf("  sky pixels: a background at distance %g (--sky distance=%g)\n",
+        fprintf(out, "  sky pixels: a background at distance %g (--sky distance=%g)\n",
                o->scene.sky_distance, o->scene.sky_distance);
     for (int i = 0; i < o->scene.ncomp; ++i)
-        printf("fog: %s\n", o->scene.comp[i].spec);
-    printf("fog colour: %g, %g, %g (scene-linear)\n", o->scene.color[0], o->scene.color[1],
+        fprintf(out, "fog: %s\n", o->scene.comp[i].spec);
+    fprintf(out, "fog colour: %g, %g, %g (scene-linear)\n", o->scene.color[0], o->scene.color[1],
            o->scene.color[2]);
 }
 
@@ -201,7 +202,7 @@ int ef_main(int argc, char **argv)
         fprintf(stderr, "exrfog: %s: warning: %s\n", o.input, cam.warning);
     int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
     if (o.explain) {
-        explain(&o, &in, &plan, &cam, &conv, conv_ok);
+        explain(stdout, &o, &in, &plan, &cam, &conv, conv_ok);
         if (!conv_ok)
             printf("depth conversion: %s\n", err.msg);
         status = 0;
@@ -244,9 +245,11 @@ int ef_main(int argc, char **argv)
 
     ef_stream_opts so = { o.threads ? o.threads : cpu_count(), o.compression, o.pixel_type, o.params };
     ef_stream_stats st;
-    if (o.verbose)
+    if (o.verbose) {
+        explain(stderr, &o, &in, &plan, &cam, &conv, conv_ok);
         fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
                 so.threads > 1 ? "s" : "");
+    }
     if (ef_exr_stream(&in, df, &plan, tmp_path, &so, fog_chunk, &job, &st, &err)) {
         unlink(tmp_path);
         tmp_path[0] = '\0';
