@@ -28,10 +28,25 @@ static void on_signal(int sig)
     raise(sig);
 }
 
+/* Writes s with control bytes as \xNN: names in messages come from the
+ * file, and a hostile one must not drive the terminal. */
+static void put_clean(const char *s)
+{
+    for (const unsigned char *c = (const unsigned char *) s; *c; ++c)
+        if (*c < 0x20 || *c == 0x7f)
+            fprintf(stderr, "\\x%02x", *c);
+        else
+            fputc(*c, stderr);
+}
+
 /* Prints "exrfog: FILE: message"; the callee's idea of FILE wins. */
 static int report(const char *file, const ef_err *err, int status)
 {
-    fprintf(stderr, "exrfog: %s: %s\n", err->file ? err->file : file, err->msg);
+    fputs("exrfog: ", stderr);
+    put_clean(err->file ? err->file : file);
+    fputs(": ", stderr);
+    put_clean(err->msg);
+    fputc('\n', stderr);
     return status;
 }
 

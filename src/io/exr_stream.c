@@ -504,6 +504,20 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
         return ef_fail(err, "cannot set compression of part %d", p);
     if (o->param_attr && exr_attr_set_string(out, p, "exrfog/parameters", o->param_attr))
         return ef_fail(err, "cannot record exrfog/parameters");
+    /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
+     * (EXR_ATTR_OPAQUE); declare those first so the copy skips them. */
+    int32_t na = 0;
+    exr_get_attribute_count(in->ctx, p, &na);
+    for (int32_t i = 0; i < na; ++i) {
+        const exr_attribute_t *a;
+        if (exr_get_attribute_by_index(in->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
+            a->type != EXR_ATTR_OPAQUE || !a->opaque)
+            continue;
+        if (exr_attr_set_user(out, p, a->name, a->type_name, a->opaque->size,
+                              a->opaque->packed_data))
+            return ef_fail(err, "cannot copy attribute '%s' of part %d: %s", a->name, p,
+                           ef_exr_last_core_message());
+    }
     if (exr_copy_unset_attributes(out, p, in->ctx, p))
         return ef_fail(err, "cannot copy the header of part %d: %s", p, ef_exr_last_core_message());
     return 0;
@@ -600,6 +614,27 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     return 0;
 }
 
+/* 1 when a part, attribute, type or channel name is longer than 31 bytes. */
+static int has_long_names(const ef_exr_file *in)
+{
+    for (int p = 0; p < in->nparts; ++p) {
+        int32_t na = 0;
+        const exr_attr_chlist_t *cl;
+        exr_get_attribute_count(in->ctx, p, &na);
+        for (int32_t i = 0; i < na; ++i) {
+            const exr_attribute_t *a;
+            if (exr_get_attribute_by_index(in->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a) == 0 &&
+                (a->name_length > 31 || a->type_name_length > 31))
+                return 1;
+        }
+        if (exr_get_channels(in->ctx, p, &cl) == 0)
+            for (int c = 0; c < cl->num_channels; ++c)
+                if (cl->entries[c].name.length > 31)
+                    return 1;
+    }
+    return 0;
+}
+
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
                   const char *out_path, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err)
@@ -613,6 +648,13 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     ef_exr_init_context(&init);
     if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init))
         return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
+    /* Names longer than 31 bytes (Blender view layers, renderer metadata)
+     * are legal with the long-names flag; the reader accepted them. */
+    if (has_long_names(in) && exr_set_longname_support(out, 1)) {
+        exr_finish(&out);
+        remove(out_path);
+        return ef_fail(err, "cannot enable long names: %s", ef_exr_last_core_message());
+    }
     int rc = 0;
     for (int p = 0; p < in->nparts && !rc; ++p)
         rc = define_part(in, out, p, o, err);
