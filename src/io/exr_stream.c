@@ -520,6 +520,14 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
     }
     if (exr_copy_unset_attributes(out, p, in->ctx, p))
         return ef_fail(err, "cannot copy the header of part %d: %s", p, ef_exr_last_core_message());
+    /* Core 3.1.5 can stop copying early yet report success; never drop
+     * metadata silently. */
+    for (int32_t i = 0; i < na; ++i) {
+        const exr_attribute_t *a, *b;
+        if (exr_get_attribute_by_index(in->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a) == 0 &&
+            exr_get_attribute_by_name(out, p, a->name, &b) != EXR_ERR_SUCCESS)
+            return ef_fail(err, "cannot copy attribute '%s' of part %d", a->name, p);
+    }
     return 0;
 }
 
