@@ -180,7 +180,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         (void) ef_exr_part_is_multilevel(&in, p);
 
     fuzz_job job = { &cam, &conv, 0.0 };
-    ef_stream_opts so = { 1, -1, -1, "fuzz" };
+    ef_stream_opts so = { .threads = 1, .compression = -1, .zip_level = -1, .pixel_type = -1,
+                          .param_attr = "fuzz" };
     ef_stream_stats st;
     struct stat sb;
     err.msg[0] = '\0';

@@ -1326,7 +1326,8 @@ static void test_stream_geometry(void **state)
 {
     (void) state;
     const int disp[4] = { 0, 0, 63, 47 };
-    ef_stream_opts so = { 3, -1, -1, "geometry test" };
+    ef_stream_opts so = { .threads = 3, .compression = -1, .zip_level = -1, .pixel_type = -1,
+                          .param_attr = "geometry test" };
 
     /* Scanline ZIP (16-line chunks), overscan window; output PIZ (32-line
      * chunks), then NONE (1 line). */

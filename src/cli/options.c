@@ -65,7 +65,8 @@ void ef_options_usage(FILE *out)
             "      --camera-to-world M  its inverse\n"
             "      --fov DEG            horizontal field of view\n"
             "      --near N, --far F    clip planes for the buffer depth modes\n"
-            "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's)\n"
+            "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's);\n"
+            "                           zip:LEVEL, zips:LEVEL with zlib level 1-9\n"
             "  -d, --data-type T        half|float output for half/float channels\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
             "      --preview FILE       also write an sRGB preview (PNG, JPEG, ...)\n"
@@ -139,6 +140,7 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
     ef_scene_init(&o->scene);
     o->depth_mode = EF_DEPTH_PLANAR;
     o->compression = -1;
+    o->zip_level = -1;
     o->pixel_type = -1;
     optind = 1;
     opterr = 0;
@@ -198,7 +200,7 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
                 return ef_fail(err, "--far '%s' is not a positive number", a), EF_PARSE_USAGE;
             break;
         case OPT_COMPRESSION:
-            if (ef_compression_parse(a, &o->compression, err))
+            if (ef_compression_parse(a, &o->compression, &o->zip_level, err))
                 return EF_PARSE_USAGE;
             break;
         case 'd':

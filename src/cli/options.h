@@ -13,6 +13,7 @@ typedef struct ef_options {
     ef_fog_scene scene;
     ef_cam_flags cam;
     int compression;          /* -1: keep the input's */
+    int zip_level;            /* -1: OpenEXRCore's default */
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
     int threads;              /* 0: all cores */
     int explain, stats, verbose, quiet;

@@ -258,7 +258,11 @@ int ef_main(int argc, char **argv)
     signal(SIGTERM, on_signal);
     signal(SIGHUP, on_signal);
 
-    ef_stream_opts so = { o.threads ? o.threads : cpu_count(), o.compression, o.pixel_type, o.params };
+    ef_stream_opts so = { .threads = o.threads ? o.threads : cpu_count(),
+                          .compression = o.compression,
+                          .zip_level = o.zip_level,
+                          .pixel_type = o.pixel_type,
+                          .param_attr = o.params };
     ef_stream_stats st;
     if (o.verbose) {
         explain(stderr, &o, &in, &plan, &cam, &conv, conv_ok);

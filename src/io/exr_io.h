@@ -76,6 +76,7 @@ typedef struct ef_stream_stats {
 typedef struct ef_stream_opts {
     int threads;              /* >= 1 */
     int compression;          /* exr_compression_t, or -1 to keep each part's */
+    int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */
     int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep */
     const char *param_attr;   /* value of the exrfog/parameters string attribute */
 } ef_stream_opts;
@@ -90,9 +91,10 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,
                   const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err);
 
-/* Parses a --compression name; DWAA/DWAB are refused with a message.
+/* Parses a --compression value, NAME or zip:LEVEL / zips:LEVEL (1..9);
+ * DWAA/DWAB are refused with a message. *level is -1 without a level.
  * Returns 0 or -1. */
-int ef_compression_parse(const char *name, int *compression, ef_err *err);
+int ef_compression_parse(const char *name, int *compression, int *level, ef_err *err);
 /* The name of a compression enum. */
 const char *ef_compression_name(int compression);
 

@@ -502,6 +502,8 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
     }
     if (exr_set_compression(out, p, comp) || exr_set_lineorder(out, p, EXR_LINEORDER_INCREASING_Y))
         return ef_fail(err, "cannot set compression of part %d", p);
+    if (o->zip_level > 0 && exr_set_zip_compression_level(out, p, o->zip_level))
+        return ef_fail(err, "cannot set the zip level of part %d", p);
     if (o->param_attr && exr_attr_set_string(out, p, "exrfog/parameters", o->param_attr))
         return ef_fail(err, "cannot record exrfog/parameters");
     /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
@@ -681,18 +683,36 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
 static const char *const comp_names[] = { "none", "rle", "zips", "zip", "piz",
                                           "pxr24", "b44", "b44a", "dwaa", "dwab" };
 
-int ef_compression_parse(const char *name, int *compression, ef_err *err)
+int ef_compression_parse(const char *text, int *compression, int *level, ef_err *err)
 {
-    for (int i = 0; i < (int) (sizeof comp_names / sizeof comp_names[0]); ++i)
-        if (!strcmp(name, comp_names[i])) {
-            if (i == EXR_COMPRESSION_DWAA || i == EXR_COMPRESSION_DWAB)
-                return ef_fail(err, "--compression %s: DWA compression is not available yet "
-                                    "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", name);
-            *compression = i;
-            return 0;
+    char name[16];
+    const char *colon = strchr(text, ':');
+    size_t len = colon ? (size_t) (colon - text) : strlen(text);
+    *level = -1;
+    if (len >= sizeof name)
+        len = sizeof name - 1;
+    memcpy(name, text, len);
+    name[len] = '\0';
+    for (int i = 0; i < (int) (sizeof comp_names / sizeof comp_names[0]); ++i) {
+        if (strcmp(name, comp_names[i]))
+            continue;
+        if (i == EXR_COMPRESSION_DWAA || i == EXR_COMPRESSION_DWAB)
+            return ef_fail(err, "--compression %s: DWA compression is not available yet "
+                                "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", text);
+        if (colon) {
+            char *end;
+            long l = strtol(colon + 1, &end, 10);
+            if ((i != EXR_COMPRESSION_ZIP && i != EXR_COMPRESSION_ZIPS) || colon[1] == '\0' ||
+                *end || l < 1 || l > 9)
+                return ef_fail(err, "--compression '%s': only zip and zips take a level, "
+                                    "from 1 (fastest) to 9 (smallest)", text);
+            *level = (int) l;
         }
-    return ef_fail(err, "--compression '%s' is not one of none, rle, zips, zip, piz, pxr24, b44, b44a",
-                   name);
+        *compression = i;
+        return 0;
+    }
+    return ef_fail(err, "--compression '%s' is not one of none, rle, zips, zip, piz, pxr24, b44, "
+                        "b44a (zip and zips take :LEVEL, 1-9)", text);
 }
 
 const char *ef_compression_name(int compression)

@@ -1,0 +1,78 @@
+/* Options that trade speed for size: --compression zip:LEVEL. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include <cmocka.h>
+
+#include "tassert.h"
+#include "testutil.h"
+
+static long file_size(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0 ? (long) sb.st_size : -1;
+}
+
+static char *sample(void)
+{
+    const char *src = getenv("EXRFOG_SOURCE_DIR");
+    size_t n = strlen(src ? src : ".") + 32;
+    char *p = malloc(n);
+    snprintf(p, n, "%s/samples/sample.exr", src ? src : ".");
+    return p;
+}
+
+/* zlib levels change the size, never the pixels: level 1 is larger than
+ * level 9 and both decode to the same values. */
+static void test_zip_levels(void **state)
+{
+    (void) state;
+    char *in = sample(), *fast = tu_path("opt_zip1.exr"), *small = tu_path("opt_zip9.exr");
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.02 --compression zip:1", in, fast);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.02 --compression zip:9", in, small);
+    assert_true(file_size(fast) > file_size(small));
+    static const char *const ch[] = { "R", "G", "B", "A", "Z" };
+    for (int k = 0; k < 5; ++k) {
+        int w1, h1, w9, h9;
+        float *a = tu_read_channel(fast, 0, ch[k], &w1, &h1);
+        float *b = tu_read_channel(small, 0, ch[k], &w9, &h9);
+        assert_non_null(a);
+        assert_non_null(b);
+        assert_true(w1 == w9 && h1 == h9);
+        assert_memory_equal(a, b, sizeof(float) * (size_t) w1 * (size_t) h1);
+        free(a);
+        free(b);
+    }
+    free(in);
+    free(fast);
+    free(small);
+}
+
+static void test_zip_level_errors(void **state)
+{
+    (void) state;
+    char *in = sample(), *out = tu_path("opt_bad.exr");
+    static const char *const bad[] = { "zip:0", "zip:10", "zip:", "zip:x", "piz:3", "none:1" };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+        assert_run(2, "'%s' -o '%s' --fog exp:density=0.02 --compression %s", in, out, bad[i]);
+        assert_contains(tu_err, bad[i]);
+        assert_false(tu_exists(out));
+    }
+    free(in);
+    free(out);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_zip_levels),
+        cmocka_unit_test(test_zip_level_errors),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
