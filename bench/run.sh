@@ -82,6 +82,8 @@ threads=()
 [[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
 if [[ -x "$exrfog" ]]; then
     add_tool "exrfog exp:density=0.02" '"$exrfog" "${threads[@]}" --fog exp:density=0.02 "$IN" -o "$OUT"'
+    add_tool "exrfog exp:density=0.02 zip:1" \
+        '"$exrfog" "${threads[@]}" --fog exp:density=0.02 --compression zip:1 "$IN" -o "$OUT"'
     add_tool "exrfog exp2 R,G,B + linear" \
         '"$exrfog" "${threads[@]}" --fog exp2:density=0.01,0.012,0.015 --fog linear:start=5:end=400 "$IN" -o "$OUT"'
     # The numpy peer's own model (halfspace) arrives with the analytic-fog issue;
