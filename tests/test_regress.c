@@ -95,6 +95,20 @@ static void test_escape_in_message(void **state)
     free(out);
 }
 
+/* A required attribute repeated with the wrong type: Core reads the header
+ * but complains; exrfog refuses it rather than copying a broken header. */
+static void test_corrupt_required_attribute(void **state)
+{
+    (void) state;
+    char *in = regression("wrong_type_required_attr.exr"), *out = tu_path("regress.type.exr");
+    assert_run(1, "'%s' -o '%s' " CAMERA_FLAGS " --fog exp:density=0.1", in, out);
+    assert_contains(tu_err, "header is corrupt");
+    assert_contains(tu_err, "screenWindowWidth");
+    assert_false(tu_exists(out));
+    free(in);
+    free(out);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -102,6 +116,7 @@ int main(void)
         cmocka_unit_test(test_long_attribute_name),
         cmocka_unit_test(test_opaque_attribute),
         cmocka_unit_test(test_escape_in_message),
+        cmocka_unit_test(test_corrupt_required_attribute),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

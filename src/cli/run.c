@@ -11,6 +11,7 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include "apply.h"
 #include "exr_io.h"
 #include "options.h"
 #include "preview.h"
@@ -52,9 +53,7 @@ static int report(const char *file, const ef_err *err, int status)
 
 /* Per-run state shared read-only by the worker threads. */
 typedef struct fog_job {
-    const ef_camera *cam;
-    const ef_depth_conv *conv;
-    const ef_fog_scene *scene;
+    ef_fog_pass pass;
     /* preview: every step-th pixel of the data window */
     unsigned char *preview;
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
@@ -73,34 +72,20 @@ static unsigned char srgb8(double v)
 static void fog_chunk(void *user, const ef_chunk *ck)
 {
     const fog_job *j = user;
-    const ef_fog_scene *s = j->scene;
-    const int fog_uncovered = s->sky != EF_SKY_KEEP;
-    for (int yy = 0; yy < ck->h; ++yy) {
-        const int y = ck->y0 + yy;
-        for (int xx = 0; xx < ck->w; ++xx) {
-            const int x = ck->x0 + xx;
-            const size_t i = (size_t) yy * (size_t) ck->w + (size_t) xx;
-            ef_ray r;
-            const int sky = ef_reconstruct(j->cam, j->conv, x, y, ck->depth[i], &r);
-            if (!(sky && s->sky == EF_SKY_KEEP)) {
-                double T[3], Tinf[3], rgb[3], a = ck->alpha ? ck->alpha[i] : 1.0;
-                if (sky && s->sky == EF_SKY_DISTANCE_MODE)
-                    ef_ray_at_distance(j->cam, x, y, s->sky_distance, &r);
-                ef_scene_transmittance(s, &r, T, Tinf);
-                for (int k = 0; k < 3; ++k)
-                    rgb[k] = ck->rgb[k][i];
-                ef_composite(T, Tinf, s->color, fog_uncovered, rgb, ck->alpha ? &a : NULL);
-                for (int k = 0; k < 3; ++k)
-                    ck->rgb[k][i] = (float) rgb[k];
-                if (ck->alpha)
-                    ck->alpha[i] = (float) a;
-            }
-            if (j->preview && (y - j->dw_y0) % j->pv_step == 0 && (x - j->dw_x0) % j->pv_step == 0) {
-                unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w +
-                                                     (size_t) ((x - j->dw_x0) / j->pv_step));
-                for (int k = 0; k < 3; ++k)
-                    p[k] = srgb8(ck->rgb[k][i]);
-            }
+    ef_fog_block(&j->pass, ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth);
+    if (!j->preview)
+        return;
+    for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
+        if ((y - j->dw_y0) % j->pv_step)
+            continue;
+        for (int x = ck->x0; x < ck->x0 + ck->w; ++x) {
+            if ((x - j->dw_x0) % j->pv_step)
+                continue;
+            const size_t i = (size_t) (y - ck->y0) * (size_t) ck->w + (size_t) (x - ck->x0);
+            unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w +
+                                                 (size_t) ((x - j->dw_x0) / j->pv_step));
+            for (int k = 0; k < 3; ++k)
+                p[k] = srgb8(ck->rgb[k][i]);
         }
     }
 }
@@ -228,7 +213,7 @@ int ef_main(int argc, char **argv)
         goto done;
     }
 
-    fog_job job = { &cam, &conv, &o.scene, NULL, 0, 0, 1, 0, 0 };
+    fog_job job = { { &cam, &conv, &o.scene }, NULL, 0, 0, 1, 0, 0 };
     exr_attr_box2i_t dw;
     exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
     if (o.preview) {

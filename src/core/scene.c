@@ -81,7 +81,8 @@ void ef_composite(const double T[3], const double Tinf[3], const double F[3], in
     const double a = alpha ? *alpha : 1.0;
     double cover = 0.0;
     for (int k = 0; k < 3; ++k) {
-        rgb[k] = T[k] * rgb[k] + (1.0 - T[k]) * a * F[k];
+        /* T = 0 hides the surface entirely, even an infinite or NaN one. */
+        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * F[k];
         if (fog_uncovered)
             rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * F[k];
     }

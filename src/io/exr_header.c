@@ -30,6 +30,14 @@ void ef_exr_init_context(exr_context_initializer_t *init)
     init->error_handler_fn = core_error_handler;
 }
 
+static int has_control_byte(const char *s)
+{
+    for (const unsigned char *c = (const unsigned char *) s; c && *c; ++c)
+        if (*c < 0x20 || *c == 0x7f)
+            return 1;
+    return 0;
+}
+
 static int check_part(const ef_exr_file *f, int p, ef_err *err)
 {
     exr_storage_t st;
@@ -56,6 +64,22 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
     }
     if (cl->num_channels < 1)
         return ef_fail(err, "part %d has no channels", p);
+    int32_t na = 0;
+    exr_get_attribute_count(f->ctx, p, &na);
+    for (int32_t i = 0; i < na; ++i) {
+        const exr_attribute_t *a;
+        if (exr_get_attribute_by_index(f->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a))
+            continue;
+        /* No writer puts control bytes in names; Core 3.1.5 also leaks when
+         * asked to copy an empty user-typed attribute. Both mean damage. */
+        if (has_control_byte(a->name) || has_control_byte(a->type_name))
+            return ef_fail(err, "part %d has an attribute '%s' of type '%s' with control "
+                                "characters in its name, so the header is corrupt",
+                           p, a->name, a->type_name);
+        if (a->type == EXR_ATTR_OPAQUE && (!a->opaque || a->opaque->size <= 0))
+            return ef_fail(err, "part %d has an empty attribute '%s' of unknown type '%s', so "
+                                "the header is corrupt", p, a->name, a->type_name);
+    }
     exr_compression_t comp;
     if (exr_get_compression(f->ctx, p, &comp) == EXR_ERR_SUCCESS &&
         (comp == EXR_COMPRESSION_DWAA || comp == EXR_COMPRESSION_DWAB))
@@ -144,6 +168,12 @@ int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
             return -1;
         return ef_fail(err, "cannot read the EXR header, the file is truncated or corrupt: %s",
                        last_core_msg[0] ? last_core_msg : exr_get_error_code_as_string(rv));
+    }
+    if (last_core_msg[0]) {
+        /* Core read the header but complained (e.g. a required attribute of
+         * the wrong type): trusting such a header leads to silent damage. */
+        ef_exr_close(f);
+        return ef_fail(err, "the EXR header is corrupt: %s", last_core_msg);
     }
     if (exr_get_count(f->ctx, &f->nparts) || f->nparts < 1) {
         ef_exr_close(f);

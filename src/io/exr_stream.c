@@ -94,8 +94,11 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
                         int cy, exr_decode_pipeline_t *dec, int *ready, void **planes, int stride,
                         int ox, int oy, const uint8_t *as_float)
 {
-    exr_result_t rv = *ready ? exr_decoding_update(ctx, p, ci, dec)
-                             : exr_decoding_initialize(ctx, p, ci, dec);
+    const int first = !*ready;
+    exr_result_t rv = first ? exr_decoding_initialize(ctx, p, ci, dec)
+                            : exr_decoding_update(ctx, p, ci, dec);
+    /* Even a failed initialisation may hold allocations: destroy it later. */
+    *ready = 1;
     if (rv)
         return -1;
     const exr_attr_chlist_t *cl;
@@ -114,9 +117,8 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
     }
-    if (!*ready && exr_decoding_choose_default_routines(ctx, p, dec))
+    if (first && exr_decoding_choose_default_routines(ctx, p, dec))
         return -1;
-    *ready = 1;
     return exr_decoding_run(ctx, p, dec) ? -1 : 0;
 }
 
