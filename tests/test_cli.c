@@ -1157,10 +1157,8 @@ static void test_absurd_dimensions(void **state)
     unlink(in.s);
 }
 
-/* BUG: a dataWindow of (0,0)-(2000000000,10) is refused by OpenEXRCore inside
- * exr_start_read ("Invalid data window") before exrfog's own check runs, so
- * the message never mentions exrfog's cap (262144 per side) although the
- * contract asks for it. See the report. */
+/* A dataWindow of (0,0)-(2000000000,10) is refused by OpenEXRCore itself
+ * inside exr_start_read; the message must still state exrfog's cap. */
 static void test_absurd_dimensions_huge(void **state)
 {
     (void) state;
@@ -1437,11 +1435,9 @@ static void test_output_dir_missing(void **state)
     assert_int_equal(dir_count(sub.s), 0);
 }
 
-/* BUG: errors found while streaming (a corrupt or truncated chunk of INPUT,
- * a --depth file whose data window differs) are reported as
- * "exrfog: OUTPUT: ...", naming the output file that was never written,
- * instead of the file that is wrong. src/cli/run.c reports every
- * ef_exr_stream failure with report(o.output, ...). See the report. */
+/* Errors found while streaming (a corrupt or truncated chunk of INPUT, a
+ * --depth file whose data window differs) name the file that is wrong,
+ * never the OUTPUT that was not written. */
 static void test_stream_errors_name_the_bad_file(void **state)
 {
     (void) state;
@@ -1835,9 +1831,8 @@ static void test_threads_deterministic(void **state)
     free(d0);
 }
 
-/* BUG: the man page says "The output is bit-identical for any N", but the
- * exrfog/parameters attribute records "--threads N", so the files differ in
- * that header byte. src/cli/options.c record() stores every argument. */
+/* The man page promises a bit-identical output for any N: the header too,
+ * so exrfog/parameters must not record --threads. */
 static void test_threads_bit_identical_files(void **state)
 {
     (void) state;

@@ -105,24 +105,6 @@ static void check_fog(tu_fog_check *fc, int want_sky)
     print_message("  %ld fogged surface pixels, %ld sky pixels checked\n", fc->fogged, fc->sky);
 }
 
-static void fog_init(tu_fog_check *fc, const char *in, const char *out, const tu_pinhole *cam,
-                     double rho)
-{
-    memset(fc, 0, sizeof *fc);
-    fc->in = in;
-    fc->out = out;
-    fc->rgba[0] = "R";
-    fc->rgba[1] = "G";
-    fc->rgba[2] = "B";
-    fc->rgba[3] = "A";
-    fc->z = "Z";
-    fc->cam = cam;
-    fc->rho = rho;
-    fc->F[0] = 0.25;
-    fc->F[1] = 0.5;
-    fc->F[2] = 0.75;
-}
-
 static const char *const RGBA[] = { "R", "G", "B", "A", NULL };
 
 /* Exit 1 with a message naming the camera flags. */
@@ -267,7 +249,7 @@ static void test_arnold_representative(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, 50.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.1);
+    tu_fog_check_init(&fc, path, out, &pin, 0.1);
     check_fog(&fc, 1);
     free(out);
     free(path);
@@ -300,7 +282,7 @@ static void test_nuke_singlepart(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, 40.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.5);
+    tu_fog_check_init(&fc, path, out, &pin, 0.5);
     fc.z = "depth.Z";
     check_fog(&fc, 0);
     free(out);
@@ -326,7 +308,7 @@ static void test_nuke_part_per_layer(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, 40.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.5);
+    tu_fog_check_init(&fc, path, out, &pin, 0.5);
     fc.depth = path;
     fc.depth_part = 2;
     check_fog(&fc, 0);
@@ -357,7 +339,7 @@ static void test_beachball_singlepart(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, 40.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.1);
+    tu_fog_check_init(&fc, path, out, &pin, 0.1);
     check_fog(&fc, 1);
     free(out);
     free(path);
@@ -383,7 +365,7 @@ static void test_beachball_multipart(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, 40.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.1);
+    tu_fog_check_init(&fc, path, out, &pin, 0.1);
     fc.depth = path;
     fc.depth_part = 5;
     check_fog(&fc, 1);
@@ -443,7 +425,7 @@ static void test_vray_cornellbox(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, disp, header_float(path, 0, "cameraFov"));
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.05);
+    tu_fog_check_init(&fc, path, out, &pin, 0.05);
     fc.depth = dep;
     check_fog(&fc, 1);
     free(dep);
@@ -504,7 +486,7 @@ static void test_arnold7_multipart(void **state)
     tu_pinhole pin;
     tu_pinhole_fov(&pin, dw, 50.0);
     tu_fog_check fc;
-    fog_init(&fc, path, out, &pin, 0.3);
+    tu_fog_check_init(&fc, path, out, &pin, 0.3);
     fc.depth = dep;
     check_fog(&fc, 1);
     free(dep);

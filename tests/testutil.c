@@ -682,3 +682,20 @@ int tu_runf(const char *fmt, ...)
     va_end(ap);
     return tu_run(args, tu_out, sizeof tu_out, tu_err, sizeof tu_err);
 }
+
+void tu_fog_check_init(tu_fog_check *fc, const char *in, const char *out, const tu_pinhole *cam,
+                       double rho)
+{
+    static const char *const rgba[4] = { "R", "G", "B", "A" };
+    memset(fc, 0, sizeof *fc);
+    fc->in = in;
+    fc->out = out;
+    for (int k = 0; k < 4; ++k)
+        fc->rgba[k] = rgba[k];
+    fc->z = "Z";
+    fc->cam = cam;
+    fc->rho = rho;
+    fc->F[0] = 0.25;
+    fc->F[1] = 0.5;
+    fc->F[2] = 0.75;
+}

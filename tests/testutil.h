@@ -174,6 +174,11 @@ typedef struct tu_fog_check {
     long sky, fogged;                 /* sky pixels; surface pixels with T < 0.999 */
 } tu_fog_check;
 
+/* Sets up a check of in -> out with channels R,G,B,A,Z, density rho and the
+ * fog colour the tests pass (--fog-color 0.25,0.5,0.75). */
+void tu_fog_check_init(tu_fog_check *fc, const char *in, const char *out, const tu_pinhole *cam,
+                       double rho);
+
 /* Compares every pixel of the output colour with the expectation, computed
  * from the input file's colour and the depth file's depth as stored.
  * Tolerance: 6e-4 relative for half outputs, 1e-5 for float, plus the
