@@ -179,6 +179,7 @@ int ef_main(int argc, char **argv)
     ef_cam_meta meta;
     ef_camera cam;
     ef_depth_conv conv;
+    fog_job job = { { NULL, NULL, NULL }, NULL, 0, 0, 1, 0, 0 };
     int status = 1;
     if (ef_exr_open(o.input, &in, &err))
         return report(o.input, &err, 1);
@@ -213,7 +214,7 @@ int ef_main(int argc, char **argv)
         goto done;
     }
 
-    fog_job job = { { &cam, &conv, &o.scene }, NULL, 0, 0, 1, 0, 0 };
+    job.pass = (ef_fog_pass){ &cam, &conv, &o.scene };
     exr_attr_box2i_t dw;
     exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
     if (o.preview) {
@@ -254,19 +255,13 @@ int ef_main(int argc, char **argv)
         fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
                 so.threads > 1 ? "s" : "");
     }
-    if (ef_exr_stream(&in, df, &plan, tmp_path, &so, fog_chunk, &job, &st, &err)) {
+    int rc = ef_exr_stream(&in, df, &plan, tmp_path, &so, fog_chunk, &job, &st, &err);
+    if (!rc && rename(tmp_path, o.output) != 0)
+        rc = ef_fail(&err, "cannot move the finished file into place: %s", strerror(errno));
+    if (rc) {
         unlink(tmp_path);
         tmp_path[0] = '\0';
         report(o.output, &err, 1);
-        free(job.preview);
-        goto done;
-    }
-    if (rename(tmp_path, o.output) != 0) {
-        ef_fail(&err, "cannot move the finished file into place: %s", strerror(errno));
-        unlink(tmp_path);
-        tmp_path[0] = '\0';
-        report(o.output, &err, 1);
-        free(job.preview);
         goto done;
     }
     tmp_path[0] = '\0';
@@ -286,9 +281,9 @@ int ef_main(int argc, char **argv)
             ef_fail(&err, "%s", msg);
             status = report(o.preview, &err, 1);
         }
-        free(job.preview);
     }
 done:
+    free(job.preview);
     ef_exr_close(&dep);
     ef_exr_close(&in);
     return status;

@@ -56,6 +56,11 @@ static void transmit(const double tau[3], double T[3])
 void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r, double T[3], double Tinf[3])
 {
     double tau[3];
+    if (!Tinf) {
+        sum_tau(s, r, tau);
+        transmit(tau, T);
+        return;
+    }
     ef_ray far = *r;
     if (s->sky == EF_SKY_DISTANCE_MODE && isfinite(r->dist) && r->dist > 0) {
         /* The background is a shell at sky_distance: "infinity" ends there. */

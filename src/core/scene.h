@@ -28,7 +28,8 @@ int ef_scene_parse_sky(ef_fog_scene *s, const char *text, ef_err *err);
 
 /* Transmittance per channel to the surface (T) and to infinity along the same
  * ray (Tinf), T = exp(-sum of the components' optical depths). For a sky
- * ray (r->dist infinite) T == Tinf. */
+ * ray (r->dist infinite) T == Tinf. Tinf may be NULL when the caller has no
+ * use for it (an opaque pixel), which saves evaluating every component. */
 void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r,
                             double T[3], double Tinf[3]);
 
