@@ -95,7 +95,9 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,
  * DWAA/DWAB are refused with a message. *level is -1 without a level.
  * Returns 0 or -1. */
 int ef_compression_parse(const char *name, int *compression, int *level, ef_err *err);
-/* The name of a compression enum. */
-const char *ef_compression_name(int compression);
+/* Shared inside the adapter: a context initializer whose error handler
+ * keeps Core's last message (per thread) instead of printing it. */
+void ef_exr_init_context(exr_context_initializer_t *init);
+const char *ef_exr_last_core_message(void);
 
 #endif

@@ -13,8 +13,6 @@
 #include <string.h>
 #include <time.h>
 
-const char *ef_exr_last_core_message(void);
-void ef_exr_init_context(exr_context_initializer_t *init);
 
 static double now(void)
 {
@@ -715,11 +713,4 @@ int ef_compression_parse(const char *text, int *compression, int *level, ef_err 
     }
     return ef_fail(err, "--compression '%s' is not one of none, rle, zips, zip, piz, pxr24, b44, "
                         "b44a (zip and zips take :LEVEL, 1-9)", text);
-}
-
-const char *ef_compression_name(int compression)
-{
-    if (compression < 0 || compression >= (int) (sizeof comp_names / sizeof comp_names[0]))
-        return "unknown";
-    return comp_names[compression];
 }
