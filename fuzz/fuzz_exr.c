@@ -156,9 +156,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     ef_fog_scene scene;
     ef_scene_init(&scene);
-    if (ef_fog_parse("exp:density=0.01,0.02,0.03", &scene.comp[0], &err))
+    if (ef_scene_add(&scene, "exp:density=0.01,0.02,0.03", &err))
         abort();
-    scene.ncomp = 1;
     ef_fog_pass pass = { &cam, &conv, &scene };
     ef_stream_opts so = { .threads = 1, .compression = -1, .zip_level = -1, .pixel_type = -1,
                           .param_attr = "fuzz" };

@@ -14,7 +14,7 @@
 
 static ef_ray ray(double dist, double planar)
 {
-    ef_ray r = { { 0, 0, 1 }, dist, planar };
+    ef_ray r = { { 0, 0, 1 }, dist, planar, { 0, 0, 0 } };
     return r;
 }
 
@@ -22,14 +22,14 @@ static void scene_with(ef_fog_scene *s, const char *spec)
 {
     ef_err err;
     ef_scene_init(s);
-    assert_int_equal(ef_fog_parse(spec, &s->comp[s->ncomp], &err), 0);
-    s->ncomp++;
+    assert_int_equal(ef_scene_add(s, spec, &err), 0);
 }
 
 static void expect_T(const ef_fog_scene *s, ef_ray r, double t0, double t1, double t2)
 {
-    double T[3], Tinf[3];
-    ef_scene_transmittance(s, &r, T, Tinf);
+    ef_fog_sample surf, inf;
+    ef_scene_eval(s, &r, &surf, &inf);
+    const double *T = surf.T;
     assert_true(fabs(T[0] - t0) <= 1e-15);
     assert_true(fabs(T[1] - t1) <= 1e-15);
     assert_true(fabs(T[2] - t2) <= 1e-15);
@@ -75,7 +75,7 @@ static void test_per_channel_and_sum(void **state)
     expect_T(&s, ray(10, 10), exp(-1.0), exp(-2.0), exp(-3.0));
     /* Two components: optical depths add. */
     ef_err err;
-    assert_int_equal(ef_fog_parse("exp:density=0.05", &s.comp[s.ncomp++], &err), 0);
+    assert_int_equal(ef_scene_add(&s, "exp:density=0.05", &err), 0);
     expect_T(&s, ray(10, 10), exp(-1.5), exp(-2.5), exp(-3.5));
 }
 
@@ -83,10 +83,11 @@ static void test_sky_limits(void **state)
 {
     (void) state;
     ef_fog_scene s;
-    double T[3], Tinf[3];
+    ef_fog_sample surf, inf;
+    const double *T = surf.T, *Tinf = inf.T;
     ef_ray sky = ray(INFINITY, INFINITY);
     scene_with(&s, "exp:density=0.1,0,0.2");
-    ef_scene_transmittance(&s, &sky, T, Tinf);
+    ef_scene_eval(&s, &sky, &surf, &inf);
     /* A zero density stays fog-free at infinity (no 0*inf NaN). */
     assert_true(T[0] == 0.0 && T[1] == 1.0 && T[2] == 0.0);
     assert_memory_equal(T, Tinf, sizeof T);
@@ -95,7 +96,7 @@ static void test_sky_limits(void **state)
     ef_err err;
     assert_int_equal(ef_scene_parse_sky(&s, "distance=100", &err), 0);
     ef_ray near = ray(5, 5);
-    ef_scene_transmittance(&s, &near, T, Tinf);
+    ef_scene_eval(&s, &near, &surf, &inf);
     assert_true(fabs(Tinf[0] - exp(-1.0)) < 1e-15);
     assert_true(fabs(T[0] - exp(-0.05)) < 1e-15);
 }
@@ -103,33 +104,33 @@ static void test_sky_limits(void **state)
 static void test_composite(void **state)
 {
     (void) state;
-    const double F[3] = { 1, 0.5, 0.25 };
-    const double T[3] = { 0.5, 0.5, 0.5 }, Tinf[3] = { 0.1, 0.1, 0.1 };
+    const ef_fog_sample T = { { 0.5, 0.5, 0.5 }, { 1, 0.5, 0.25 } };
+    const ef_fog_sample Tinf = { { 0.1, 0.1, 0.1 }, { 1, 0.5, 0.25 } };
     /* alpha = 1: exactly glFog, C' = f C + (1 - f) F; alpha stays 1. */
     double rgb[3] = { 0.2, 0.4, 0.8 }, a = 1.0;
-    ef_composite(T, Tinf, F, 1, rgb, &a);
+    ef_composite(&T, &Tinf, 1, rgb, &a);
     assert_true(fabs(rgb[0] - 0.6) < 1e-15 && fabs(rgb[1] - 0.45) < 1e-15 &&
                 fabs(rgb[2] - 0.525) < 1e-15 && a == 1.0);
     /* alpha = 0.5, premultiplied colour 0.2: 0.5*0.2 + 0.5*0.5*F + 0.5*0.9*F. */
     double h[3] = { 0.2, 0.2, 0.2 };
     a = 0.5;
-    ef_composite(T, Tinf, F, 1, h, &a);
+    ef_composite(&T, &Tinf, 1, h, &a);
     assert_true(fabs(h[0] - 0.8) < 1e-15 && fabs(h[1] - 0.45) < 1e-15 &&
                 fabs(h[2] - 0.275) < 1e-15);
     assert_true(fabs(a - 0.95) < 1e-15);
     /* alpha = 0 (nothing rendered): only the fog in front of the background. */
     double z[3] = { 0, 0, 0 };
     a = 0.0;
-    ef_composite(Tinf, Tinf, F, 1, z, &a);
+    ef_composite(&Tinf, &Tinf, 1, z, &a);
     assert_true(fabs(z[0] - 0.9) < 1e-15 && fabs(z[1] - 0.45) < 1e-15 && fabs(a - 0.9) < 1e-15);
     /* --sky keep drops the last term and leaves alpha alone. */
     double k[3] = { 0.2, 0.2, 0.2 };
     a = 0.5;
-    ef_composite(T, Tinf, F, 0, k, &a);
+    ef_composite(&T, &Tinf, 0, k, &a);
     assert_true(fabs(k[0] - 0.35) < 1e-15 && a == 0.5);
     /* No alpha channel: alpha = 1. */
     double n[3] = { 0.2, 0.4, 0.8 };
-    ef_composite(T, Tinf, F, 1, n, NULL);
+    ef_composite(&T, &Tinf, 1, n, NULL);
     assert_true(fabs(n[0] - 0.6) < 1e-15);
 }
 
@@ -137,7 +138,7 @@ static void expect_usage(const char *spec, const char *quote)
 {
     ef_fog_component c;
     ef_err err;
-    assert_int_equal(ef_fog_parse(spec, &c, &err), -1);
+    assert_int_equal(ef_fog_parse(spec, NULL, &c, &err), -1);
     if (!strstr(err.msg, quote))
         fail_msg("error for '%s' does not quote '%s': %s", spec, quote, err.msg);
 }
@@ -166,10 +167,10 @@ static void test_spec_ok(void **state)
     (void) state;
     ef_fog_component c;
     ef_err err;
-    assert_int_equal(ef_fog_parse("exp2:density=1e-3,2e-3,3e-3:distance=planar", &c, &err), 0);
+    assert_int_equal(ef_fog_parse("exp2:density=1e-3,2e-3,3e-3:distance=planar", NULL, &c, &err), 0);
     assert_true(c.model == &ef_fog_exp2 && c.distance == EF_DIST_PLANAR);
     assert_true(c.p[0] == 1e-3 && c.p[1] == 2e-3 && c.p[2] == 3e-3);
-    assert_int_equal(ef_fog_parse("linear:end=5", &c, &err), 0);
+    assert_int_equal(ef_fog_parse("linear:end=5", NULL, &c, &err), 0);
     assert_true(c.p[0] == 0.0 && c.p[1] == 5.0);
 }
 

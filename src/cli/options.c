@@ -9,12 +9,14 @@
 
 #include "exr_io.h"
 #include "ocio_shim.h"
+#include "scene_file.h"
 #include "version.h"
 
 enum {
     OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
-    OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION
+    OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
+    OPT_UNITS
 };
 
 static const struct option long_opts[] = {
@@ -26,6 +28,9 @@ static const struct option long_opts[] = {
     { "sky", required_argument, NULL, OPT_SKY },
     { "fog", required_argument, NULL, OPT_FOG },
     { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
+    { "scene", required_argument, NULL, OPT_SCENE },
+    { "up-axis", required_argument, NULL, OPT_UP_AXIS },
+    { "units-per-meter", required_argument, NULL, OPT_UNITS },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
     { "camera-to-world", required_argument, NULL, OPT_C2W },
     { "fov", required_argument, NULL, OPT_FOV },
@@ -134,8 +139,76 @@ static void record_option(ef_options *o, int c, const char *arg)
         }
 }
 
+void ef_options_free(ef_options *o)
+{
+    ef_scene_free(&o->scene);
+}
+
+/* What the command line said about the scene, applied once every option is
+ * read: a scene file first, then the flags over it, then the --fog specs. */
+typedef struct scene_flags {
+    const char *specs[EF_FOG_MAX_COMPONENTS];
+    int nspec;
+    int has_color, has_sky, has_up, has_units;
+    double color[3], up[3], units;
+    const char *sky;
+} scene_flags;
+
+static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *err)
+{
+    ef_fog_scene *s = &o->scene;
+    ef_scene_file sf;
+    memset(&sf, 0, sizeof sf);
+    if (o->scene_file) {
+        if (ef_scene_file_read(o->scene_file, &sf, err)) {
+            err->file = o->scene_file;
+            return EF_PARSE_FAIL;
+        }
+        if (sf.has_color)
+            memcpy(s->color, sf.color, sizeof s->color);
+        if (sf.has_up)
+            memcpy(s->ctx.up, sf.up, sizeof s->ctx.up);
+        if (sf.has_units)
+            s->ctx.units_per_meter = sf.units;
+        if (sf.has_sky && ef_scene_parse_sky(s, sf.sky, err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            ef_fail(err, "sky: %s", msg);
+            err->file = o->scene_file;
+            ef_scene_file_free(&sf);
+            return EF_PARSE_FAIL;
+        }
+    }
+    if (f->has_color)
+        memcpy(s->color, f->color, sizeof s->color);
+    if (f->has_up)
+        memcpy(s->ctx.up, f->up, sizeof s->ctx.up);
+    if (f->has_units)
+        s->ctx.units_per_meter = f->units;
+    if (f->has_sky && ef_scene_parse_sky(s, f->sky, err))
+        return ef_scene_file_free(&sf), EF_PARSE_USAGE;
+    s->ctx.read_file = ef_read_text_file;
+    for (int i = 0; i < sf.nspec; ++i)
+        if (ef_scene_add(s, sf.specs[i], err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            ef_fail(err, "%s: %s", sf.where[i], msg);
+            err->file = o->scene_file;
+            ef_scene_file_free(&sf);
+            return EF_PARSE_FAIL;
+        }
+    ef_scene_file_free(&sf);
+    for (int i = 0; i < f->nspec; ++i)
+        if (ef_scene_add(s, f->specs[i], err))
+            /* A profile file that is missing or wrong is a runtime error. */
+            return err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
+    return EF_PARSE_RUN;
+}
+
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
 {
+    scene_flags f;
+    memset(&f, 0, sizeof f);
     memset(o, 0, sizeof *o);
     ef_scene_init(&o->scene);
     o->depth_mode = EF_DEPTH_PLANAR;
@@ -161,22 +234,33 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
                                     "reversed-infinite", a), EF_PARSE_USAGE;
             break;
         case OPT_SKY:
-            if (ef_scene_parse_sky(&o->scene, a, err))
-                return EF_PARSE_USAGE;
+            f.has_sky = 1;
+            f.sky = a;
             break;
         case OPT_FOG:
-            if (o->scene.ncomp >= EF_FOG_MAX_COMPONENTS)
+            if (f.nspec >= EF_FOG_MAX_COMPONENTS)
                 return ef_fail(err, "too many --fog components (at most %d)", EF_FOG_MAX_COMPONENTS),
                        EF_PARSE_USAGE;
-            if (ef_fog_parse(a, &o->scene.comp[o->scene.ncomp], err))
-                return EF_PARSE_USAGE;
-            o->scene.ncomp++;
+            f.specs[f.nspec++] = a;
             break;
         case OPT_FOG_COLOR:
-            if (ef_parse_rgb(a, o->scene.color) || o->scene.color[0] < 0 || o->scene.color[1] < 0 ||
-                o->scene.color[2] < 0)
+            if (ef_parse_rgb(a, f.color) || f.color[0] < 0 || f.color[1] < 0 || f.color[2] < 0)
                 return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers >= 0)", a),
                        EF_PARSE_USAGE;
+            f.has_color = 1;
+            break;
+        case OPT_SCENE: o->scene_file = a; break;
+        case OPT_UP_AXIS:
+            if (ef_parse_up(a, f.up))
+                return ef_fail(err, "--up-axis '%s' is not y, z, -y, -z or X,Y,Z (non-zero)", a),
+                       EF_PARSE_USAGE;
+            f.has_up = 1;
+            break;
+        case OPT_UNITS:
+            if (ef_parse_numbers(a, &f.units, 1) || !(f.units > 0))
+                return ef_fail(err, "--units-per-meter '%s' is not a positive number (100 for a "
+                                    "scene in centimetres)", a), EF_PARSE_USAGE;
+            f.has_units = 1;
             break;
         case OPT_W2C:
             if (parse_matrix(a, &o->cam.w2c))
@@ -251,8 +335,12 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
         return ef_fail(err, "no INPUT given (usage: exrfog [OPTIONS] INPUT -o OUTPUT)"), EF_PARSE_USAGE;
     if (!o->explain && !o->output)
         return ef_fail(err, "no output given (add -o OUTPUT)"), EF_PARSE_USAGE;
+    const ef_parse_result br = build_scene(o, &f, err);
+    if (br != EF_PARSE_RUN)
+        return br;
     if (!o->explain && o->scene.ncomp == 0)
-        return ef_fail(err, "no fog given (add --fog SPEC, e.g. --fog exp:density=0.02)"), EF_PARSE_USAGE;
+        return ef_fail(err, "no fog given (add --fog SPEC or --scene FILE, e.g. --fog exp:density=0.02)"),
+               EF_PARSE_USAGE;
     if (o->cam.near_.set && o->cam.far_.set && !(o->cam.far_.v > o->cam.near_.v))
         return ef_fail(err, "--far %g must be greater than --near %g", o->cam.far_.v, o->cam.near_.v),
                EF_PARSE_USAGE;

@@ -8,7 +8,7 @@
 #include "scene.h"
 
 typedef struct ef_options {
-    const char *input, *output, *depth_file, *layer, *depth_channel, *preview;
+    const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;
     ef_depth_mode depth_mode;
     ef_fog_scene scene;
     ef_cam_flags cam;
@@ -20,11 +20,19 @@ typedef struct ef_options {
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
 
-typedef enum ef_parse_result { EF_PARSE_RUN = 0, EF_PARSE_EXIT = 1, EF_PARSE_USAGE = -1 } ef_parse_result;
+typedef enum ef_parse_result {
+    EF_PARSE_RUN = 0, EF_PARSE_EXIT = 1, EF_PARSE_USAGE = -1, EF_PARSE_FAIL = -2
+} ef_parse_result;
 
 /* Parses argv. EF_PARSE_EXIT after --help/--version (already printed to
- * stdout); EF_PARSE_USAGE with err set, quoting the offending text. */
+ * stdout); EF_PARSE_USAGE with err set, quoting the offending text;
+ * EF_PARSE_FAIL when a file named by an option (--scene, a fog profile) is
+ * unreadable or wrong, with err->file naming it. Release o with
+ * ef_options_free whatever the result. */
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err);
+
+/* Releases what parsing allocated (the fog components' data). */
+void ef_options_free(ef_options *o);
 
 /* Prints the usage text. */
 void ef_options_usage(FILE *out);

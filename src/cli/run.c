@@ -166,9 +166,12 @@ int ef_main(int argc, char **argv)
     static ef_options o;
     ef_err err = {0};
     ef_parse_result pr = ef_options_parse(argc, argv, &o, &err);
-    if (pr == EF_PARSE_EXIT)
-        return 0;
-    if (pr == EF_PARSE_USAGE) {
+    if (pr != EF_PARSE_RUN) {
+        ef_options_free(&o);
+        if (pr == EF_PARSE_EXIT)
+            return 0;
+        if (pr == EF_PARSE_FAIL)
+            return report(err.file, &err, 1);
         fprintf(stderr, "exrfog: %s\n", err.msg);
         return 2;
     }
@@ -181,8 +184,10 @@ int ef_main(int argc, char **argv)
     ef_depth_conv conv;
     fog_job job = { { NULL, NULL, NULL }, NULL, 0, 0, 1, 0, 0 };
     int status = 1;
-    if (ef_exr_open(o.input, &in, &err))
-        return report(o.input, &err, 1);
+    if (ef_exr_open(o.input, &in, &err)) {
+        report(o.input, &err, 1);
+        goto done;
+    }
     if (o.depth_file) {
         if (ef_exr_open(o.depth_file, &dep, &err)) {
             report(o.depth_file, &err, 1);
@@ -286,5 +291,6 @@ done:
     free(job.preview);
     ef_exr_close(&dep);
     ef_exr_close(&in);
+    ef_options_free(&o);
     return status;
 }

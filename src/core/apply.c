@@ -29,16 +29,16 @@ void ef_fog_block(const ef_fog_pass *pass, int x0, int y0, int w, int h, float *
                 continue;
             if (sky && s->sky == EF_SKY_DISTANCE_MODE)
                 ef_ray_at_distance(pass->cam, x, y, s->sky_distance, &r);
-            double T[3], Tinf[3], c[3], a = alpha ? alpha[i] : 1.0;
-            /* Tinf only reaches the uncovered part (1 - a) of a pixel. */
+            ef_fog_sample surf, inf;
+            double c[3], a = alpha ? alpha[i] : 1.0;
+            /* The fog behind only reaches the uncovered part (1 - a) of a pixel. */
             const int need_inf = fog_uncovered && !(a == 1.0 && isfinite(r.dist));
-            ef_scene_transmittance(s, &r, T, need_inf ? Tinf : NULL);
+            ef_scene_eval(s, &r, &surf, need_inf ? &inf : NULL);
             if (!need_inf)
-                for (int k = 0; k < 3; ++k)
-                    Tinf[k] = T[k];
+                inf = surf;
             for (int k = 0; k < 3; ++k)
                 c[k] = rgb[k][i];
-            ef_composite(T, Tinf, s->color, fog_uncovered, c, alpha ? &a : NULL);
+            ef_composite(&surf, &inf, fog_uncovered, c, alpha ? &a : NULL);
             for (int k = 0; k < 3; ++k)
                 rgb[k][i] = to_float(c[k]);
             if (alpha)

@@ -11,7 +11,33 @@ static const ef_fog_model *const registry[] = {
     &ef_fog_linear,
     &ef_fog_exp,
     &ef_fog_exp2,
+    &ef_fog_halfspace,
+    &ef_fog_halfspace_linear,
+    &ef_fog_halfspace_smooth,
+    &ef_fog_height,
+    &ef_fog_layered,
+    &ef_fog_box,
+    &ef_fog_convex,
 };
+
+void ef_fog_context_init(ef_fog_context *ctx)
+{
+    ctx->up[0] = 0.0;
+    ctx->up[1] = 1.0;
+    ctx->up[2] = 0.0;
+    ctx->units_per_meter = 1.0;
+    ctx->read_file = NULL;
+}
+
+double ef_fog_per_unit(const ef_fog_context *ctx, double per_meter)
+{
+    return per_meter / ctx->units_per_meter;
+}
+
+double ef_fog_per_unit2(const ef_fog_context *ctx, double per_meter2)
+{
+    return per_meter2 / ctx->units_per_meter / ctx->units_per_meter;
+}
 
 const ef_fog_model *ef_fog_model_find(const char *name)
 {
@@ -43,6 +69,83 @@ int ef_parse_numbers(const char *text, double *out, int n)
     return *s == '\0' ? 0 : -1;
 }
 
+int ef_parse_list(const char *text, double *out, int cap)
+{
+    int n = 1;
+    for (const char *q = text; *q; ++q)
+        n += *q == ',';
+    if (n > cap || ef_parse_numbers(text, out, n))
+        return -1;
+    return n;
+}
+
+int ef_parse_up(const char *text, double up[3])
+{
+    static const struct {
+        const char *name;
+        double v[3];
+    } axes[] = { { "x", { 1, 0, 0 } },  { "y", { 0, 1, 0 } },  { "z", { 0, 0, 1 } },
+                 { "-x", { -1, 0, 0 } }, { "-y", { 0, -1, 0 } }, { "-z", { 0, 0, -1 } },
+                 { "+x", { 1, 0, 0 } },  { "+y", { 0, 1, 0 } },  { "+z", { 0, 0, 1 } } };
+    for (size_t i = 0; i < sizeof axes / sizeof axes[0]; ++i)
+        if (!strcmp(text, axes[i].name)) {
+            memcpy(up, axes[i].v, sizeof axes[i].v);
+            return 0;
+        }
+    double v[3];
+    if (ef_parse_numbers(text, v, 3))
+        return -1;
+    const double len = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(len > 0) || !isfinite(len))
+        return -1;
+    for (int i = 0; i < 3; ++i)
+        up[i] = v[i] / len;
+    return 0;
+}
+
+int ef_fog_set_density(ef_fog_component *c, const char *key, const char *val, double out[3],
+                       ef_err *err)
+{
+    if (ef_parse_rgb(val, out))
+        return ef_fail(err, "fog spec '%s': %s='%s' is not a number or R,G,B", c->spec, key, val);
+    for (int i = 0; i < 3; ++i)
+        if (out[i] < 0)
+            return ef_fail(err, "fog spec '%s': %s='%s' is negative (it must be >= 0)", c->spec,
+                           key, val);
+    return 0;
+}
+
+int ef_fog_set_visibility(ef_fog_component *c, const char *key, const char *val, double out[3],
+                          ef_err *err)
+{
+    double v[3];
+    if (ef_parse_rgb(val, v))
+        return ef_fail(err, "fog spec '%s': %s='%s' is not a distance or R,G,B", c->spec, key, val);
+    for (int i = 0; i < 3; ++i) {
+        if (!(v[i] > 0))
+            return ef_fail(err, "fog spec '%s': %s='%s' must be > 0 (the distance at which "
+                           "contrast falls to 2%%)", c->spec, key, val);
+        out[i] = EF_VISIBILITY_K / v[i];
+    }
+    return 0;
+}
+
+int ef_fog_set_plane(ef_fog_component *c, const char *key, const char *val, double out[4],
+                     ef_err *err)
+{
+    double v[4];
+    if (ef_parse_numbers(val, v, 4))
+        return ef_fail(err, "fog spec '%s': %s='%s' is not A,B,C,D (four numbers)", c->spec, key,
+                       val);
+    const double len = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(len > 0) || !isfinite(len))
+        return ef_fail(err, "fog spec '%s': %s='%s' has a zero normal (A,B,C must not all be 0)",
+                       c->spec, key, val);
+    for (int i = 0; i < 4; ++i)
+        out[i] = v[i] / len;
+    return 0;
+}
+
 int ef_parse_rgb(const char *text, double out[3])
 {
     if (strchr(text, ',') == NULL) {
@@ -66,11 +169,16 @@ static void list_models(char *buf, size_t len)
 
 static void list_keys(const ef_fog_model *m, char *buf, size_t len)
 {
-    snprintf(buf, len, "distance");
+    buf[0] = '\0';
     for (int i = 0; m->keys[i]; ++i) {
-        strncat(buf, ", ", len - strlen(buf) - 1);
         strncat(buf, m->keys[i], len - strlen(buf) - 1);
+        strncat(buf, ", ", len - strlen(buf) - 1);
     }
+    if (m->uses_distance)
+        strncat(buf, "distance, ", len - strlen(buf) - 1);
+    if (m->uses_up)
+        strncat(buf, "up, ", len - strlen(buf) - 1);
+    strncat(buf, "color", len - strlen(buf) - 1);
 }
 
 /* Applies one KEY=VALUE token (tok is modified in place). */
@@ -85,7 +193,24 @@ static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err 
     const char *key = tok, *val = eq + 1;
     if (*val == '\0')
         return ef_fail(err, "fog spec '%s': key '%s' has no value (write %s=VALUE)", spec, key, key);
-    if (!strcmp(key, "distance")) {
+    if (!strcmp(key, "color")) {
+        if (c->has_color)
+            return ef_fail(err, "fog spec '%s': key 'color' is given twice", spec);
+        if (ef_parse_rgb(val, c->color) || c->color[0] < 0 || c->color[1] < 0 || c->color[2] < 0)
+            return ef_fail(err, "fog spec '%s': color='%s' is not R,G,B (numbers >= 0)", spec, val);
+        c->has_color = 1;
+        return 0;
+    }
+    if (!strcmp(key, "up") && c->model->uses_up) {
+        if (c->has_up)
+            return ef_fail(err, "fog spec '%s': key 'up' is given twice", spec);
+        if (ef_parse_up(val, c->up))
+            return ef_fail(err, "fog spec '%s': up='%s' is not y, z, -y, -z or X,Y,Z (non-zero)",
+                           spec, val);
+        c->has_up = 1;
+        return 0;
+    }
+    if (!strcmp(key, "distance") && c->model->uses_distance) {
         if (!strcmp(val, "radial"))
             c->distance = EF_DIST_RADIAL;
         else if (!strcmp(val, "planar"))
@@ -106,9 +231,36 @@ static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err 
                    c->model->name, keys);
 }
 
-int ef_fog_parse(const char *spec, ef_fog_component *c, ef_err *err)
+int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src)
+{
+    *dst = *src;
+    dst->arr = NULL;
+    if (src->narr > 0) {
+        dst->arr = malloc((size_t) src->narr * sizeof *dst->arr);
+        if (!dst->arr) {
+            dst->narr = 0;
+            return -1;
+        }
+        memcpy(dst->arr, src->arr, (size_t) src->narr * sizeof *dst->arr);
+    }
+    return 0;
+}
+
+void ef_fog_free(ef_fog_component *c)
+{
+    free(c->arr);
+    c->arr = NULL;
+    c->narr = 0;
+}
+
+int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err)
 {
     char buf[sizeof c->spec];
+    ef_fog_context dflt;
+    if (!ctx) {
+        ef_fog_context_init(&dflt);
+        ctx = &dflt;
+    }
     memset(c, 0, sizeof *c);
     if (strlen(spec) >= sizeof buf)
         return ef_fail(err, "fog spec '%.40s...' is too long", spec);
@@ -127,7 +279,15 @@ int ef_fog_parse(const char *spec, ef_fog_component *c, ef_err *err)
     if (!c->model)
         return ef_fail(err, "fog spec '%s': unknown model '%s' (models: %s)", spec, name, models);
     for (char *tok = strtok_r(NULL, ":", &save); tok; tok = strtok_r(NULL, ":", &save))
-        if (parse_token(c, tok, c->spec, err))
+        if (parse_token(c, tok, c->spec, err)) {
+            ef_fog_free(c);
             return -1;
-    return c->model->finish(c, err);
+        }
+    if (!c->has_up)
+        memcpy(c->up, ctx->up, sizeof c->up);
+    if (c->model->finish(c, ctx, err)) {
+        ef_fog_free(c);
+        return -1;
+    }
+    return 0;
 }

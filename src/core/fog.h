@@ -1,18 +1,30 @@
 /* Fog components, their registry and the SPEC grammar
  * (MODEL[:KEY=VALUE]...). Each model is one small unit in fog_*.c that knows
- * how to read its keys and the optical depth of a segment; adding a model
- * means one file plus one line in the registry (fog.c). */
+ * how to read its keys, its density, and the closed-form optical depth of a
+ * segment; adding a model means one file plus one line in the registry
+ * (fog.c). */
 #ifndef EF_FOG_H
 #define EF_FOG_H
 
 #include "error.h"
 #include "recon.h"
 
-#define EF_FOG_MAX_PARAMS 24
+#define EF_FOG_MAX_PARAMS 32
 #define EF_FOG_MAX_COMPONENTS 32
 
 /* Which distance a model measures: the true one, or OpenGL's eye depth. */
 typedef enum ef_distance_kind { EF_DIST_RADIAL = 0, EF_DIST_PLANAR } ef_distance_kind;
+
+/* Scene-wide settings a component is finished against: the up axis of the
+ * height models and the scene's units per metre (densities are read per
+ * metre and converted to per scene unit). */
+typedef struct ef_fog_context {
+    double up[3];                    /* unit length */
+    double units_per_meter;          /* > 0 */
+    /* Reads a whole text file (file= keys) into a malloc'd, NUL-terminated
+     * buffer; NULL means files cannot be read here. The core does no I/O. */
+    int (*read_file)(const char *path, char **text, ef_err *err);
+} ef_fog_context;
 
 struct ef_fog_model;
 
@@ -20,25 +32,71 @@ typedef struct ef_fog_component {
     const struct ef_fog_model *model;
     ef_distance_kind distance;
     double p[EF_FOG_MAX_PARAMS];     /* model parameters; layout is the model's */
+    double *arr;                     /* variable-size data (planes, profiles), owned */
+    int narr;                        /* number of doubles in arr */
     unsigned seen;                   /* bit i: key i of the model was given */
+    int has_color, has_up;
+    double color[3];                 /* color=R,G,B: this component's in-scattered colour */
+    double up[3];                    /* unit up (height models): up= key, else the context's */
     char spec[256];                  /* the SPEC as written, for messages */
 } ef_fog_component;
+
+/* A linear functional of world position, value(x) = n.x + d. Models that
+ * have a density describe it through such functionals (planes, heights). */
+typedef struct ef_fog_functional {
+    double n[3], d;
+} ef_fog_functional;
+
+/* Where a density changes: functional f crosses value, and the density
+ * varies over about scale (in the functional's units) around it; scale 0
+ * marks a jump or kink only. The reference integrator splits there. */
+typedef struct ef_fog_feature {
+    int f;
+    double value, scale;
+} ef_fog_feature;
 
 typedef struct ef_fog_model {
     const char *name;
     const char *const *keys;         /* NULL-terminated list of accepted keys */
     /* Parses value val of key index k into c. Returns 0 or -1 (usage error). */
     int (*set)(ef_fog_component *c, int k, const char *val, ef_err *err);
-    /* Checks required keys and consistency once all keys are read. */
-    int (*finish)(ef_fog_component *c, ef_err *err);
-    /* Optical depth per channel along r (r->dist may be INFINITY; the
-     * result is then the exact limit, possibly INFINITY). */
+    /* Checks required keys and consistency once all keys are read, and
+     * converts to scene units with ctx. */
+    int (*finish)(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err);
+    /* Closed-form optical depth per channel along r, from r->org over
+     * [0, r->dist] along r->dir (r->dist may be INFINITY; the result is then
+     * the exact limit, possibly INFINITY). */
     void (*tau)(const ef_fog_component *c, const ef_ray *r, double tau[3]);
+    /* For the reference integrator (NULL for models with no density of
+     * position, such as OpenGL's linear and exp2). functionals() fills up to
+     * cap entries and returns how many there are; features() likewise. */
+    int (*functionals)(const ef_fog_component *c, ef_fog_functional *out, int cap);
+    int (*features)(const ef_fog_component *c, ef_fog_feature *out, int cap);
+    /* Density per channel at a point given by its functional values v
+     * (any may be +-INFINITY: the density's limit there). */
+    void (*density)(const ef_fog_component *c, const long double *v, long double out[3]);
+    int uses_distance;               /* accepts distance=radial|planar */
+    int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */
 } ef_fog_model;
 
-/* Parses one SPEC into c. On error, returns -1 with a message quoting the
- * offending text (unknown model or key, missing value, bad number...). */
-int ef_fog_parse(const char *spec, ef_fog_component *c, ef_err *err);
+/* The default context: up = +y, 1 unit per metre. */
+void ef_fog_context_init(ef_fog_context *ctx);
+
+/* Length-dimensioned conversions with ctx: a per-metre coefficient to per
+ * scene unit (x / U), and a per-metre-squared one (x / U^2). */
+double ef_fog_per_unit(const ef_fog_context *ctx, double per_meter);
+double ef_fog_per_unit2(const ef_fog_context *ctx, double per_meter2);
+
+/* Parses and finishes one SPEC into c (ctx may be NULL: the default). On
+ * error, returns -1 with a message quoting the offending text (unknown model
+ * or key, missing value, bad number...). Release c with ef_fog_free. */
+int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err);
+
+/* Copies src into dst, duplicating owned data. Returns 0 or -1 (memory). */
+int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src);
+
+/* Releases what c owns; c may then be reused. */
+void ef_fog_free(ef_fog_component *c);
 
 /* The registered model with this name, or NULL. */
 const ef_fog_model *ef_fog_model_find(const char *name);
@@ -48,6 +106,24 @@ const ef_fog_model *ef_fog_model_find(const char *name);
 int ef_parse_rgb(const char *text, double out[3]);
 /* Parses exactly n comma-separated finite numbers. Returns 0 or -1. */
 int ef_parse_numbers(const char *text, double *out, int n);
+/* Parses 1..cap comma-separated finite numbers; returns the count or -1. */
+int ef_parse_list(const char *text, double *out, int cap);
+/* Parses an up axis: y, z, -y, -z (also x, -x) or X,Y,Z (non-zero, made
+ * unit). Returns 0 or -1. */
+int ef_parse_up(const char *text, double up[3]);
+
+/* Shared key parsers for models; each fails with a message naming the spec
+ * and key. density: R,G,B >= 0. visibility: R,G,B > 0, stored as the
+ * density 3.912/V. plane: A,B,C,D with (A,B,C) != 0, stored normalised. */
+int ef_fog_set_density(ef_fog_component *c, const char *key, const char *val, double out[3],
+                       ef_err *err);
+int ef_fog_set_visibility(ef_fog_component *c, const char *key, const char *val, double out[3],
+                          ef_err *err);
+int ef_fog_set_plane(ef_fog_component *c, const char *key, const char *val, double out[4],
+                     ef_err *err);
+
+/* The contrast threshold of visibility=V: density = EF_VISIBILITY_K / V. */
+#define EF_VISIBILITY_K 3.912
 
 /* The distance a component measures on r (radial or planar). */
 static inline double ef_fog_distance(const ef_fog_component *c, const ef_ray *r)
@@ -57,5 +133,7 @@ static inline double ef_fog_distance(const ef_fog_component *c, const ef_ray *r)
 
 /* Models, registered in fog.c. */
 extern const ef_fog_model ef_fog_linear, ef_fog_exp, ef_fog_exp2;
+extern const ef_fog_model ef_fog_halfspace, ef_fog_halfspace_linear, ef_fog_halfspace_smooth;
+extern const ef_fog_model ef_fog_height, ef_fog_layered, ef_fog_box, ef_fog_convex;
 
 #endif

@@ -1,31 +1,38 @@
 /* OpenGL's three fog modes (glFog, seed 001), expressed as optical depth so
- * they combine with other components: f = exp(-tau), f clamped to [0,1]. */
+ * they combine with other components: f = exp(-tau), f clamped to [0,1].
+ * They depend on the distance from the camera, not on position, so they have
+ * no density for the reference integrator; their tests use glFog's formulas. */
 #include "fog.h"
 
 #include <math.h>
 #include <string.h>
 
-static const char *const density_keys[] = { "density", NULL };
+static const char *const density_keys[] = { "density", "visibility", NULL };
 static const char *const linear_keys[] = { "start", "end", NULL };
 
-/* Shared by exp and exp2: p[0..2] = per-channel density >= 0. */
+/* Shared by exp and exp2: p[0..2] = per-channel density >= 0, per metre
+ * until finish converts it. visibility=V is stored as its exp density. */
 static int set_density(ef_fog_component *c, int k, const char *val, ef_err *err)
 {
-    (void) k;
-    if (ef_parse_rgb(val, c->p))
-        return ef_fail(err, "fog spec '%s': density='%s' is not a number or R,G,B", c->spec, val);
-    for (int i = 0; i < 3; ++i)
-        if (c->p[i] < 0)
-            return ef_fail(err, "fog spec '%s': density='%s' is negative (densities must be >= 0)",
-                           c->spec, val);
-    return 0;
+    if (k == 0)
+        return ef_fog_set_density(c, "density", val, c->p, err);
+    return ef_fog_set_visibility(c, "visibility", val, c->p, err);
 }
 
-static int finish_density(ef_fog_component *c, ef_err *err)
+static int finish_density(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
 {
-    if (!(c->seen & 1u))
-        return ef_fail(err, "fog spec '%s': missing density (write %s:density=D)", c->spec,
-                       c->model->name);
+    const unsigned given = c->seen & 3u;
+    if (!given)
+        return ef_fail(err, "fog spec '%s': missing density (write %s:density=D or visibility=V)",
+                       c->spec, c->model->name);
+    if (given == 3u)
+        return ef_fail(err, "fog spec '%s': give density or visibility, not both", c->spec);
+    for (int i = 0; i < 3; ++i) {
+        /* exp2 falls to 2% contrast where (rho V)^2 = 3.912, not rho V. */
+        if (given == 2u && c->model == &ef_fog_exp2)
+            c->p[i] *= sqrt(EF_VISIBILITY_K) / EF_VISIBILITY_K;
+        c->p[i] = ef_fog_per_unit(ctx, c->p[i]);
+    }
     return 0;
 }
 
@@ -51,7 +58,7 @@ static void tau_exp2(const ef_fog_component *c, const ef_ray *r, double tau[3])
     }
 }
 
-/* p[0] = start, p[1] = end. */
+/* p[0] = start, p[1] = end, in scene units (they are distances in the scene). */
 static int set_linear(ef_fog_component *c, int k, const char *val, ef_err *err)
 {
     if (ef_parse_numbers(val, &c->p[k], 1))
@@ -60,8 +67,9 @@ static int set_linear(ef_fog_component *c, int k, const char *val, ef_err *err)
     return 0;
 }
 
-static int finish_linear(ef_fog_component *c, ef_err *err)
+static int finish_linear(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
 {
+    (void) ctx;
     if (!(c->seen & 2u))
         return ef_fail(err, "fog spec '%s': missing end (write linear:start=S:end=E)", c->spec);
     if (c->p[1] < c->p[0])
@@ -85,6 +93,11 @@ static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3]
     tau[0] = tau[1] = tau[2] = t;
 }
 
-const ef_fog_model ef_fog_linear = { "linear", linear_keys, set_linear, finish_linear, tau_linear };
-const ef_fog_model ef_fog_exp = { "exp", density_keys, set_density, finish_density, tau_exp };
-const ef_fog_model ef_fog_exp2 = { "exp2", density_keys, set_density, finish_density, tau_exp2 };
+const ef_fog_model ef_fog_linear = { .name = "linear", .keys = linear_keys, .set = set_linear,
+                                     .finish = finish_linear, .tau = tau_linear,
+                                     .uses_distance = 1 };
+const ef_fog_model ef_fog_exp = { .name = "exp", .keys = density_keys, .set = set_density,
+                                  .finish = finish_density, .tau = tau_exp, .uses_distance = 1 };
+const ef_fog_model ef_fog_exp2 = { .name = "exp2", .keys = density_keys, .set = set_density,
+                                   .finish = finish_density, .tau = tau_exp2,
+                                   .uses_distance = 1 };

@@ -14,6 +14,9 @@ static void ray_from_cam(const ef_camera *cam, const double dc[3], double t, ef_
     r->dir[2] = w[2] / len;
     r->planar = t;
     r->dist = t * len;
+    r->org[0] = cam->pos[0];
+    r->org[1] = cam->pos[1];
+    r->org[2] = cam->pos[2];
 }
 
 int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,

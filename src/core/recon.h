@@ -12,6 +12,7 @@ typedef struct ef_ray {
     double dir[3];    /* unit direction in world axes */
     double dist;      /* distance along the ray; INFINITY for sky */
     double planar;    /* distance along the view axis; INFINITY for sky */
+    double org[3];    /* world position of the segment's start (the camera) */
 } ef_ray;
 
 /* Builds the ray of absolute pixel (x, y) from stored depth value v.

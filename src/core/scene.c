@@ -11,6 +11,7 @@ void ef_scene_init(ef_fog_scene *s)
     s->color[2] = EF_DEFAULT_FOG_COLOR_B;
     s->sky = EF_SKY_FOG;
     s->sky_distance = INFINITY;
+    ef_fog_context_init(&s->ctx);
 }
 
 int ef_scene_parse_sky(ef_fog_scene *s, const char *text, ef_err *err)
@@ -34,31 +35,74 @@ int ef_scene_parse_sky(ef_fog_scene *s, const char *text, ef_err *err)
     return ef_fail(err, "--sky '%s' is not fog, keep or distance=D", text);
 }
 
-static void sum_tau(const ef_fog_scene *s, const ef_ray *r, double acc[3])
+int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err)
 {
+    if (s->ncomp >= EF_FOG_MAX_COMPONENTS)
+        return ef_fail(err, "too many fog components (at most %d)", EF_FOG_MAX_COMPONENTS);
+    ef_fog_component *c = &s->comp[s->ncomp];
+    if (ef_fog_parse(spec, &s->ctx, c, err))
+        return -1;
+    s->any_color |= c->has_color;
+    s->ncomp++;
+    return 0;
+}
+
+void ef_scene_free(ef_fog_scene *s)
+{
+    for (int i = 0; i < s->ncomp; ++i)
+        ef_fog_free(&s->comp[i]);
+    s->ncomp = 0;
+    s->any_color = 0;
+}
+
+/* Sums the components' optical depths and, with per-component colours, the
+ * tau-weighted colour; out->T holds tau until transmit() turns it into T. */
+static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out)
+{
+    double *acc = out->T, wc[3] = { 0, 0, 0 }, inf_c[3] = { 0, 0, 0 };
+    int ninf[3] = { 0, 0, 0 };
     acc[0] = acc[1] = acc[2] = 0.0;
     for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
         double t[3];
-        s->comp[i].model->tau(&s->comp[i], r, t);
-        for (int k = 0; k < 3; ++k)
+        c->model->tau(c, r, t);
+        for (int k = 0; k < 3; ++k) {
             acc[k] += t[k];
+            if (!s->any_color)
+                continue;
+            const double col = c->has_color ? c->color[k] : s->color[k];
+            if (isinf(t[k])) {
+                inf_c[k] += col;
+                ninf[k]++;
+            } else if (t[k] > 0) {
+                wc[k] += t[k] * col;
+            }
+        }
+    }
+    for (int k = 0; k < 3; ++k) {
+        if (!s->any_color || acc[k] == 0.0)
+            out->F[k] = s->color[k];
+        else if (ninf[k])
+            out->F[k] = inf_c[k] / ninf[k];   /* the infinite ones outweigh any finite one */
+        else
+            out->F[k] = wc[k] / acc[k];
     }
 }
 
-/* exp(-tau) per channel; grey fog (equal taus) needs one exp, not three. */
-static void transmit(const double tau[3], double T[3])
+/* exp(-tau) per channel in place; grey fog (equal taus) needs one exp, not three. */
+static void transmit(double T[3])
 {
-    T[0] = exp(-tau[0]);
-    T[1] = tau[1] == tau[0] ? T[0] : exp(-tau[1]);
-    T[2] = tau[2] == tau[0] ? T[0] : tau[2] == tau[1] ? T[1] : exp(-tau[2]);
+    const double t0 = T[0], t1 = T[1], t2 = T[2];
+    T[0] = exp(-t0);
+    T[1] = t1 == t0 ? T[0] : exp(-t1);
+    T[2] = t2 == t0 ? T[0] : t2 == t1 ? T[1] : exp(-t2);
 }
 
-void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r, double T[3], double Tinf[3])
+void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf, ef_fog_sample *inf)
 {
-    double tau[3];
-    if (!Tinf) {
-        sum_tau(s, r, tau);
-        transmit(tau, T);
+    if (!inf) {
+        sum_tau(s, r, surf);
+        transmit(surf->T);
         return;
     }
     ef_ray far = *r;
@@ -70,30 +114,30 @@ void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r, double T[3],
     } else {
         far.dist = far.planar = INFINITY;
     }
-    sum_tau(s, &far, tau);
-    transmit(tau, Tinf);
+    sum_tau(s, &far, inf);
+    transmit(inf->T);
     if (far.dist == r->dist) {
-        memcpy(T, Tinf, 3 * sizeof *T);
+        *surf = *inf;
         return;
     }
-    sum_tau(s, r, tau);
-    transmit(tau, T);
+    sum_tau(s, r, surf);
+    transmit(surf->T);
 }
 
-void ef_composite(const double T[3], const double Tinf[3], const double F[3], int fog_uncovered,
+void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
                   double rgb[3], double *alpha)
 {
     const double a = alpha ? *alpha : 1.0;
-    double cover = 0.0;
+    const double *T = surf->T, *Tinf = inf->T;
     for (int k = 0; k < 3; ++k) {
         /* T = 0 hides the surface entirely, even an infinite or NaN one. */
-        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * F[k];
+        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * surf->F[k];
         if (fog_uncovered)
-            rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * F[k];
+            rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * inf->F[k];
     }
     if (alpha && fog_uncovered) {
         /* One alpha for three channels: the mean coverage of the fog behind. */
-        cover = (3.0 - Tinf[0] - Tinf[1] - Tinf[2]) / 3.0;
+        const double cover = (3.0 - Tinf[0] - Tinf[1] - Tinf[2]) / 3.0;
         *alpha = a + (1.0 - a) * cover;
     }
 }

@@ -10,7 +10,9 @@ typedef enum ef_sky_mode { EF_SKY_FOG = 0, EF_SKY_KEEP, EF_SKY_DISTANCE_MODE } e
 typedef struct ef_fog_scene {
     ef_fog_component comp[EF_FOG_MAX_COMPONENTS];
     int ncomp;
+    int any_color;                   /* some component carries its own color= */
     double color[3];                 /* scene-linear fog colour F */
+    ef_fog_context ctx;              /* up axis and units the components were finished with */
     ef_sky_mode sky;
     double sky_distance;             /* EF_SKY_DISTANCE_MODE: background at this distance */
 } ef_fog_scene;
@@ -20,25 +22,39 @@ typedef struct ef_fog_scene {
 #define EF_DEFAULT_FOG_COLOR_G 0.75
 #define EF_DEFAULT_FOG_COLOR_B 0.8
 
-/* An empty scene with the default colour and --sky fog. */
+/* An empty scene with the default colour, --sky fog, up +y, 1 unit/metre. */
 void ef_scene_init(ef_fog_scene *s);
+
+/* Parses SPEC with the scene's context and appends it. Returns 0 or -1. */
+int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err);
+
+/* Releases the components' data; the scene is empty afterwards. */
+void ef_scene_free(ef_fog_scene *s);
+
+/* What the fog does to one segment: transmittance per channel and the
+ * colour it scatters in. F is the scene colour, or, when components carry
+ * their own, the optical-depth-weighted mean of their colours (exact when
+ * the components' densities are proportional along the segment). */
+typedef struct ef_fog_sample {
+    double T[3], F[3];
+} ef_fog_sample;
 
 /* Parses a --sky value (fog | keep | distance=D). Returns 0 or -1. */
 int ef_scene_parse_sky(ef_fog_scene *s, const char *text, ef_err *err);
 
-/* Transmittance per channel to the surface (T) and to infinity along the same
- * ray (Tinf), T = exp(-sum of the components' optical depths). For a sky
- * ray (r->dist infinite) T == Tinf. Tinf may be NULL when the caller has no
+/* The fog to the surface (surf) and to infinity along the same ray (inf),
+ * T = exp(-sum of the components' optical depths). For a sky ray
+ * (r->dist infinite) both are equal. inf may be NULL when the caller has no
  * use for it (an opaque pixel), which saves evaluating every component. */
-void ef_scene_transmittance(const ef_fog_scene *s, const ef_ray *r,
-                            double T[3], double Tinf[3]);
+void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
+                   ef_fog_sample *inf);
 
 /* Premultiplied compositing of one pixel in place:
- *   rgb   = T rgb + (1 - T) a F + (1 - a)(1 - Tinf) F
+ *   rgb   = T rgb + (1 - T) a F + (1 - a)(1 - Tinf) Finf
  *   alpha = a + (1 - a)(1 - Tinf)
  * fog_uncovered == 0 drops the last term and leaves alpha alone (--sky keep).
  * alpha may be NULL (a = 1). */
-void ef_composite(const double T[3], const double Tinf[3], const double F[3],
-                  int fog_uncovered, double rgb[3], double *alpha);
+void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
+                  double rgb[3], double *alpha);
 
 #endif

@@ -1,0 +1,93 @@
+/* Error-free transformations (fma-based) for the few sums that cancel:
+ * a plane's value at a camera far from the origin, and a ray's slope
+ * against a plane it nearly parallels. With them, a functional's value at
+ * both ends of a segment is correct to the last bit of a double. */
+#ifndef EF_EXACT_H
+#define EF_EXACT_H
+
+#include <math.h>
+
+#include "fog.h"
+
+/* An unevaluated sum hi + lo, |lo| <= ulp(hi)/2. */
+typedef struct ef_dd {
+    double hi, lo;
+} ef_dd;
+
+static inline ef_dd ef_two_sum(double a, double b)
+{
+    const double s = a + b, bb = s - a;
+    return (ef_dd) { s, (a - (s - bb)) + (b - bb) };
+}
+
+static inline ef_dd ef_two_prod(double a, double b)
+{
+    const double p = a * b;
+    return (ef_dd) { p, fma(a, b, -p) };
+}
+
+static inline ef_dd ef_dd_add(ef_dd a, ef_dd b)
+{
+    ef_dd s = ef_two_sum(a.hi, b.hi);
+    s.lo += a.lo + b.lo;
+    return ef_two_sum(s.hi, s.lo);
+}
+
+/* a.b + d, accurate to about 2^-104 relative to the largest term. */
+static inline ef_dd ef_dd_dot3(const double a[3], const double b[3], double d)
+{
+    ef_dd s = ef_dd_add(ef_two_prod(a[0], b[0]), ef_two_prod(a[1], b[1]));
+    s = ef_dd_add(s, ef_two_prod(a[2], b[2]));
+    return ef_dd_add(s, (ef_dd) { d, 0.0 });
+}
+
+/* h + s * t for a double-double h and s. */
+static inline ef_dd ef_dd_affine(ef_dd h, ef_dd s, double t)
+{
+    ef_dd p = ef_two_prod(s.hi, t);
+    p.lo += s.lo * t;
+    return ef_dd_add(h, p);
+}
+
+/* A functional along a segment org + t dir, t in [0, len]: its value at the
+ * start (h0), its rate (s, per unit t) and its value at the end (h1; for
+ * len = INFINITY, +-INFINITY by the sign of s, or h0 when s == 0). Each is
+ * the correctly rounded value of the exact one, to within an ulp. */
+typedef struct ef_line {
+    double h0, s, h1;
+} ef_line;
+
+static inline void ef_line_of(const ef_fog_functional *f, const double org[3],
+                              const double dir[3], double len, ef_line *l)
+{
+    const ef_dd h0 = ef_dd_dot3(f->n, org, f->d), s = ef_dd_dot3(f->n, dir, 0.0);
+    l->h0 = h0.hi + h0.lo;
+    l->s = s.hi + s.lo;
+    if (isinf(len))
+        l->h1 = l->s == 0.0 ? l->h0 : copysign(INFINITY, l->s);
+    else {
+        const ef_dd h1 = ef_dd_affine(h0, s, len);
+        l->h1 = h1.hi + h1.lo;
+    }
+}
+
+/* The same in long double, for the reference integrator. */
+typedef struct ef_line_ld {
+    long double h0, s, h1;
+} ef_line_ld;
+
+static inline void ef_line_of_ld(const ef_fog_functional *f, const double org[3],
+                                 const double dir[3], double len, ef_line_ld *l)
+{
+    const ef_dd h0 = ef_dd_dot3(f->n, org, f->d), s = ef_dd_dot3(f->n, dir, 0.0);
+    l->h0 = (long double) h0.hi + h0.lo;
+    l->s = (long double) s.hi + s.lo;
+    if (isinf(len))
+        l->h1 = l->s == 0.0L ? l->h0 : copysignl(INFINITY, l->s);
+    else {
+        const ef_dd h1 = ef_dd_affine(h0, s, len);
+        l->h1 = (long double) h1.hi + h1.lo;
+    }
+}
+
+#endif
