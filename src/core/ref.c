@@ -1,0 +1,492 @@
+#include "ref.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "exact.h"
+
+#define MAXF 64          /* functionals per density */
+#define MAX_DEPTH 48     /* bisection levels per piece */
+#define REL_TOL 1e-14L   /* per-interval |K - G| / |K| */
+
+/* Gauss-Kronrod 7/15 abscissae and weights (QUADPACK's qk15), in long double. */
+static const long double xgk[8] = {
+    0.991455371120812639206854697526329L, 0.949107912342758524526189684047851L,
+    0.864864423359769072789712788640926L, 0.741531185599394439863864773280788L,
+    0.586087235467691130294144845693013L, 0.405845151377397166906606412076961L,
+    0.207784955007898467600689403773245L, 0.000000000000000000000000000000000L,
+};
+static const long double wgk[8] = {
+    0.022935322010529224963732008058970L, 0.063092092629978553290700663189204L,
+    0.104790010322250183839876322541518L, 0.140653259715525918745189590510238L,
+    0.169004726639267902826583426598550L, 0.190350578064785409913256402421014L,
+    0.204432940075298892414161999234649L, 0.209482141084727828012999174891714L,
+};
+static const long double wg[4] = {
+    0.129484966168869693270611432679082L, 0.279705391489276667901467771423780L,
+    0.381830050505118944950369775488975L, 0.417959183673469387755102040816327L,
+};
+
+typedef struct run {
+    const ef_ref_density *d;
+    int nf;
+    long double s[MAXF];
+    long double lambda;  /* the infinite tail's length scale, t = lambda u / (1 - u) */
+    ef_ref_stats *st;
+} run;
+
+static void eval(run *R, const long double *v, long double out[3])
+{
+    R->d->density(R->d->ctx, v, out);
+    R->st->evals++;
+}
+
+/* The functionals at offset u of an interval of width w, carried from the
+ * nearer end so values next to a crossing keep their relative precision. */
+static void values_at(const run *R, const long double *vL, const long double *vR, long double w,
+                      long double u, long double *v)
+{
+    if (u <= w / 2)
+        for (int i = 0; i < R->nf; ++i)
+            v[i] = vL[i] + R->s[i] * u;
+    else
+        for (int i = 0; i < R->nf; ++i)
+            v[i] = vR[i] - R->s[i] * (w - u);
+}
+
+/* Tail points: t = lambda u / (1 - u) past the tail's start vL. Returns dt/du. */
+static long double tail_at(const run *R, const long double *vL, long double u, long double *v)
+{
+    const long double t = R->lambda * u / (1 - u);
+    for (int i = 0; i < R->nf; ++i)
+        v[i] = R->s[i] == 0 ? vL[i] : vL[i] + R->s[i] * t;
+    return R->lambda / ((1 - u) * (1 - u));
+}
+
+/* One Gauss-Kronrod interval: [0, w] of a piece, or [u0, u0 + w] of the tail
+ * (tail != 0). */
+static void gk15(run *R, const long double *vL, const long double *vR, long double u0,
+                 long double w, int tail, long double K[3], long double G[3])
+{
+    const long double h = w / 2;
+    long double v[MAXF], f[3];
+    long double jac = 1;
+    for (int k = 0; k < 3; ++k)
+        K[k] = G[k] = 0;
+    /* j = 0..7 walks the left half up to the centre, 8..14 mirrors it. */
+    for (int j = 0; j < 15; ++j) {
+        const int idx = j < 8 ? j : 14 - j;
+        const long double x = j < 8 ? -xgk[idx] : xgk[idx];
+        const long double u = h + h * x;
+        if (tail)
+            jac = tail_at(R, vL, u0 + u, v);
+        else
+            values_at(R, vL, vR, w, u, v);
+        eval(R, v, f);
+        for (int k = 0; k < 3; ++k) {
+            const long double g = f[k] * jac;
+            K[k] += wgk[idx] * g;
+            if (idx & 1)   /* the Gauss nodes: 1, 3, 5 and the centre 7 */
+                G[k] += wg[idx / 2] * g;
+        }
+    }
+    for (int k = 0; k < 3; ++k) {
+        K[k] *= h;
+        G[k] *= h;
+    }
+}
+
+/* Global adaptive quadrature (QUADPACK's qag strategy): every interval keeps
+ * its Kronrod sum and error estimate |K - G|; the worst one is bisected until
+ * the summed error is below REL_TOL of the total. A local test would never
+ * settle next to a zero of the density (x^n near 0 looks the same at every
+ * scale); the global one does. */
+typedef struct ival {
+    long double u0, w, K[3], G[3], err;
+    size_t iL, iR;       /* the end values in the value store */
+    int tail;
+} ival;
+
+typedef struct quad {
+    run *R;
+    ival *heap;          /* max-heap by err */
+    size_t n, cap;
+    long double *vals;   /* nf values per stored point */
+    size_t nvals, capvals;
+    long double scale[3];
+} quad;
+
+static long double *vals_at(quad *q, size_t i)
+{
+    return q->vals + i * (size_t) q->R->nf;
+}
+
+static long ival_store(quad *q, const long double *v)
+{
+    if (q->nvals == q->capvals) {
+        const size_t cap = q->capvals ? 2 * q->capvals : 64;
+        long double *nv = realloc(q->vals, cap * (size_t) (q->R->nf ? q->R->nf : 1) * sizeof *nv);
+        if (!nv)
+            return -1;
+        q->vals = nv;
+        q->capvals = cap;
+    }
+    if (q->R->nf)
+        memcpy(vals_at(q, q->nvals), v, (size_t) q->R->nf * sizeof *v);
+    return (long) q->nvals++;
+}
+
+static long double ival_err(const quad *q, const ival *iv)
+{
+    long double e = 0;
+    for (int k = 0; k < 3; ++k)
+        if (isfinite(iv->K[k]) && q->scale[k] > 0) {
+            const long double d = fabsl(iv->K[k] - iv->G[k]) / q->scale[k];
+            if (!(d <= e))
+                e = d;
+        }
+    return isnan(e) ? INFINITY : e;
+}
+
+static void sift_up(ival *h, size_t i)
+{
+    while (i > 0) {
+        const size_t p = (i - 1) / 2;
+        if (!(h[p].err < h[i].err))
+            break;
+        const ival t = h[p];
+        h[p] = h[i];
+        h[i] = t;
+        i = p;
+    }
+}
+
+static void sift_down(ival *h, size_t n, size_t i)
+{
+    for (;;) {
+        size_t m = i;
+        const size_t l = 2 * i + 1, r = l + 1;
+        if (l < n && h[l].err > h[m].err)
+            m = l;
+        if (r < n && h[r].err > h[m].err)
+            m = r;
+        if (m == i)
+            return;
+        const ival t = h[m];
+        h[m] = h[i];
+        h[i] = t;
+        i = m;
+    }
+}
+
+static int ival_push(quad *q, ival iv)
+{
+    if (q->n == q->cap) {
+        const size_t cap = q->cap ? 2 * q->cap : 64;
+        ival *nh = realloc(q->heap, cap * sizeof *nh);
+        if (!nh)
+            return -1;
+        q->heap = nh;
+        q->cap = cap;
+    }
+    q->heap[q->n] = iv;
+    sift_up(q->heap, q->n++);
+    return 0;
+}
+
+/* Evaluates an interval (its err is set later, once the scale is known). */
+static void ival_eval(quad *q, ival *iv)
+{
+    gk15(q->R, vals_at(q, iv->iL), vals_at(q, iv->iR), iv->u0, iv->w, iv->tail, iv->K, iv->G);
+    q->R->st->intervals++;
+}
+
+#define MAX_INTERVALS 200000
+
+/* Adds the pieces' intervals (already evaluated into q->heap as a plain
+ * array), then refines. Returns 0 or -1 (memory). */
+static int refine(quad *q, long double tau[3])
+{
+    for (int k = 0; k < 3; ++k) {
+        q->scale[k] = 0;
+        for (size_t i = 0; i < q->n; ++i)
+            q->scale[k] += fabsl(q->heap[i].K[k]);
+    }
+    long double total_err = 0;
+    for (size_t i = 0; i < q->n; ++i) {
+        q->heap[i].err = ival_err(q, &q->heap[i]);
+        total_err += q->heap[i].err;
+    }
+    for (size_t i = q->n / 2 + 1; i-- > 0;)
+        sift_down(q->heap, q->n, i);
+    while (q->n && total_err > REL_TOL && q->n < MAX_INTERVALS) {
+        ival top = q->heap[0];
+        q->heap[0] = q->heap[--q->n];
+        sift_down(q->heap, q->n, 0);
+        const long double h = top.w / 2;
+        ival a = top, b = top;
+        a.w = h;
+        b.u0 = top.u0 + h;
+        b.w = top.w - h;
+        if (!(h > 0) || b.u0 == top.u0 || (top.tail && !(b.u0 < 1))) {
+            /* Cannot split further: keep it as it is. */
+            q->R->st->unconverged++;
+            top.err = 0;
+            if (ival_push(q, top))
+                return -1;
+            continue;
+        }
+        if (!top.tail) {
+            long double vM[MAXF];
+            const long double *vL = vals_at(q, top.iL), *vR = vals_at(q, top.iR);
+            for (int i = 0; i < q->R->nf; ++i)
+                vM[i] = fabsl(vL[i]) <= fabsl(vR[i]) ? vL[i] + q->R->s[i] * h
+                                                     : vR[i] - q->R->s[i] * (top.w - h);
+            const long m = ival_store(q, vM);
+            if (m < 0)
+                return -1;
+            a.iR = b.iL = (size_t) m;
+            a.u0 = b.u0 = 0;
+        }
+        ival_eval(q, &a);
+        ival_eval(q, &b);
+        a.err = ival_err(q, &a);
+        b.err = ival_err(q, &b);
+        total_err += a.err + b.err - top.err;
+        if (ival_push(q, a) || ival_push(q, b))
+            return -1;
+        if (!(total_err >= 0) || total_err < 1e-3L * REL_TOL) {
+            /* Running sums drift; recompute now and then. */
+            total_err = 0;
+            for (size_t i = 0; i < q->n; ++i)
+                total_err += q->heap[i].err;
+        }
+    }
+    if (total_err > REL_TOL)
+        q->R->st->unconverged++;
+    for (size_t i = 0; i < q->n; ++i)
+        for (int k = 0; k < 3; ++k)
+            tau[k] += q->heap[i].K[k];
+    return 0;
+}
+
+/* Queues piece [0, w] between stored points iL and iR (or the tail). */
+static int add_piece(quad *q, size_t iL, size_t iR, long double w, int tail)
+{
+    ival iv = { .u0 = 0, .w = w, .iL = iL, .iR = iR, .tail = tail };
+    ival_eval(q, &iv);
+    q->R->st->pieces++;
+    if (q->n == q->cap) {
+        const size_t cap = q->cap ? 2 * q->cap : 64;
+        ival *nh = realloc(q->heap, cap * sizeof *nh);
+        if (!nh)
+            return -1;
+        q->heap = nh;
+        q->cap = cap;
+    }
+    q->heap[q->n++] = iv;
+    return 0;
+}
+
+/* A split point: offsets from the start (a) and from the end (b), and the
+ * functional f that has the exact value val there (f < 0: none). */
+typedef struct split {
+    long double a, b, val;
+    int f;
+} split;
+
+static int by_offset(const void *x, const void *y)
+{
+    const long double a = ((const split *) x)->a, b = ((const split *) y)->a;
+    return a < b ? -1 : a > b;
+}
+
+typedef struct splits {
+    split *v;
+    size_t n, cap;
+} splits;
+
+static int push(splits *S, split p)
+{
+    if (S->n == S->cap) {
+        const size_t cap = S->cap ? 2 * S->cap : 64;
+        split *nv = realloc(S->v, cap * sizeof *nv);
+        if (!nv)
+            return -1;
+        S->v = nv;
+        S->cap = cap;
+    }
+    S->v[S->n++] = p;
+    return 0;
+}
+
+/* Adds the crossing of functional f with value val if it lies inside the segment. */
+static int add_crossing(splits *S, const ef_line_ld *l, int f, long double val, long double len)
+{
+    if (l->s == 0)
+        return 0;
+    const long double a = (val - l->h0) / l->s;
+    if (!(a > 0 && a < len))
+        return 0;
+    const long double b = isinf(len) ? INFINITY : (l->h1 - val) / l->s;
+    return push(S, (split) { a, b, val, f });
+}
+
+/* True when val lies strictly between the functional's values at the ends. */
+static int within(const ef_line_ld *l, long double val)
+{
+    return l->s > 0 ? val > l->h0 && val < l->h1 : val < l->h0 && val > l->h1;
+}
+
+static void point_values(const run *R, const ef_line_ld *L, const split *p, long double *v)
+{
+    for (int i = 0; i < R->nf; ++i)
+        v[i] = i == p->f ? p->val : p->a <= p->b ? L[i].h0 + L[i].s * p->a : L[i].h1 - L[i].s * p->b;
+}
+
+int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double dir[3],
+                     double len, long double tau[3], ef_ref_stats *st)
+{
+    ef_ref_stats dummy;
+    run R = { .d = d, .nf = d->nf, .st = st ? st : &dummy };
+    memset(R.st, 0, sizeof *R.st);
+    tau[0] = tau[1] = tau[2] = 0;
+    if (d->nf > MAXF || d->nf < 0)
+        return -1;
+    if (!(len > 0))
+        return 0;
+    if (!d->density)
+        return -1;
+    ef_line_ld L[MAXF];
+    for (int i = 0; i < d->nf; ++i) {
+        ef_line_of_ld(&d->f[i], org, dir, len, &L[i]);
+        R.s[i] = L[i].s;
+    }
+
+    splits S = { NULL, 0, 0 };
+    quad q = { .R = &R };
+    R.lambda = 0;
+    for (int j = 0; j < d->nfeat; ++j) {
+        const ef_fog_feature *ft = &d->feat[j];
+        const ef_line_ld *l = &L[ft->f];
+        if (ft->f < 0 || ft->f >= d->nf)
+            continue;
+        if (add_crossing(&S, l, ft->f, ft->value, len))
+            goto oom;
+        if (!(ft->scale > 0) || l->s == 0)
+            continue;
+        const long double tail_scale = ft->scale / fabsl(l->s);
+        if (R.lambda == 0 || tail_scale < R.lambda)
+            R.lambda = tail_scale;
+        /* Geometric steps away from the feature on both sides: every piece is
+         * then no wider than its distance to the feature, whatever the ratio
+         * of the feature's scale to the segment's length. */
+        for (int side = -1; side <= 1; side += 2)
+            for (int e = 0; e < 4000; ++e) {
+                const long double val = ft->value + side * ldexpl(ft->scale, e);
+                if (!isfinite(val))
+                    break;
+                if (within(l, val)) {
+                    if (add_crossing(&S, l, ft->f, val, len))
+                        goto oom;
+                } else if (side > 0 ? val > fmaxl(l->h0, l->h1) : val < fminl(l->h0, l->h1)) {
+                    break;
+                }
+            }
+    }
+    if (R.lambda == 0)
+        R.lambda = 1;
+    if (S.n)
+        qsort(S.v, S.n, sizeof *S.v, by_offset);
+
+    long double vL[MAXF], vR[MAXF];
+    split prev = { 0, len, 0, -1 };
+    for (int i = 0; i < R.nf; ++i)
+        vL[i] = L[i].h0;
+    long iL = ival_store(&q, vL);
+    if (iL < 0)
+        goto oom;
+    for (size_t k = 0; k <= S.n; ++k) {
+        split next;
+        if (k < S.n) {
+            next = S.v[k];
+            if (next.a <= prev.a)
+                continue;
+            point_values(&R, L, &next, vR);
+        } else if (isinf(len)) {
+            break;
+        } else {
+            next = (split) { len, 0, 0, -1 };
+            for (int i = 0; i < R.nf; ++i)
+                vR[i] = L[i].h1;
+        }
+        /* Between two steps of one feature, the width is the difference of
+         * two exactly known values; elsewhere, of the offsets nearer an end. */
+        const long double w = next.f >= 0 && next.f == prev.f
+                                  ? (next.val - prev.val) / R.s[next.f]
+                                  : next.a <= prev.b ? next.a - prev.a : prev.b - next.b;
+        const long iR = ival_store(&q, vR);
+        if (iR < 0 || (w > 0 && add_piece(&q, (size_t) iL, (size_t) iR, w, 0)))
+            goto oom;
+        prev = next;
+        iL = iR;
+    }
+    long double dinf[3] = { 0, 0, 0 };
+    if (isinf(len)) {
+        /* Past the last split the density is smooth; if it stays positive
+         * at infinity the optical depth diverges. */
+        long double vinf[MAXF];
+        const long double *last = vals_at(&q, (size_t) iL);
+        for (int i = 0; i < R.nf; ++i)
+            vinf[i] = R.s[i] > 0 ? INFINITY : R.s[i] < 0 ? -INFINITY : last[i];
+        eval(&R, vinf, dinf);
+        if (add_piece(&q, (size_t) iL, (size_t) iL, 1, 1))
+            goto oom;
+    }
+    if (refine(&q, tau))
+        goto oom;
+    for (int k = 0; k < 3; ++k)
+        if (dinf[k] > 0)
+            tau[k] = INFINITY;
+    free(q.heap);
+    free(q.vals);
+    free(S.v);
+    return 0;
+oom:
+    free(q.heap);
+    free(q.vals);
+    free(S.v);
+    return -1;
+}
+
+typedef struct comp_ctx {
+    const ef_fog_component *c;
+} comp_ctx;
+
+static void comp_density(const void *ctx, const long double *v, long double out[3])
+{
+    const ef_fog_component *c = ((const comp_ctx *) ctx)->c;
+    c->model->density(c, v, out);
+}
+
+int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], ef_ref_stats *st)
+{
+    const ef_fog_model *m = c->model;
+    if (!m->density || !m->functionals || !m->features)
+        return -1;
+    ef_fog_functional f[MAXF];
+    const int nf = m->functionals(c, f, MAXF);
+    const int nfeat = m->features(c, NULL, 0);
+    if (nf > MAXF || nf < 0 || nfeat < 0)
+        return -1;
+    ef_fog_feature *feat = malloc(((size_t) nfeat + 1) * sizeof *feat);
+    if (!feat)
+        return -1;
+    m->features(c, feat, nfeat);
+    comp_ctx cc = { c };
+    ef_ref_density d = { nf, f, nfeat, feat, comp_density, &cc };
+    const int rc = ef_ref_integrate(&d, r->org, r->dir, r->dist, tau, st);
+    free(feat);
+    return rc;
+}
