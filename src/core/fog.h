@@ -38,7 +38,7 @@ typedef struct ef_fog_component {
     int has_color, has_up;
     double color[3];                 /* color=R,G,B: this component's in-scattered colour */
     double up[3];                    /* unit up (height models): up= key, else the context's */
-    char spec[256];                  /* the SPEC as written, for messages */
+    char spec[8192];                 /* the SPEC as written, for messages */
 } ef_fog_component;
 
 /* A linear functional of world position, value(x) = n.x + d. Models that

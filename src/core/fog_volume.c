@@ -1,8 +1,545 @@
-/* PLACEHOLDER: being written; replaced wholesale. */
+/* Constant-density convex fog volumes: box and convex (seed 002, the stencil
+ * fog-volume note). The note finds, per pixel, the front face the view ray
+ * enters through by rendering each face into the stencil buffer; here the
+ * same question is answered analytically by clipping the segment against
+ * the volume's planes, so tau = rho * (length of the segment inside).
+ *
+ * Both models store their planes (A,B,C,D, unit normal, fog where
+ * A*x+B*y+C*z+D < 0) in c->arr and share one clipping routine; a box is its
+ * six planes x - max < 0 and -x + min < 0 per axis.
+ *
+ * Exactness: plane values and rates are the fma double-double dot products
+ * of exact.h (as ef_line_of, keeping the low parts), and the crossing
+ * parameters t = -h0/s are double-doubles, so picking the entry/exit plane
+ * and subtracting the two crossings does not cancel even for a sliver of a
+ * volume 1e7 from the camera. A length that ends at the segment's end is
+ * taken from the end's own plane value (len - t = h1/s), so a pixel on or
+ * near a face is exact. A plain-double pass with proven error bounds decides
+ * the signs and the binding planes first, so only those one or two planes
+ * pay for double-doubles on nearly every pixel. */
+#include "exact.h"
 #include "fog.h"
-static const char *const no_keys[] = { NULL };
-static int no_set(ef_fog_component *c, int k, const char *v, ef_err *e) { (void) c; (void) k; (void) v; return ef_fail(e, "not yet"); }
-static int no_finish(ef_fog_component *c, const ef_fog_context *x, ef_err *e) { (void) c; (void) x; return ef_fail(e, "not yet"); }
-static void no_tau(const ef_fog_component *c, const ef_ray *r, double t[3]) { (void) c; (void) r; t[0] = t[1] = t[2] = 0; }
-const ef_fog_model ef_fog_box = { .name = "box", .keys = no_keys, .set = no_set, .finish = no_finish, .tau = no_tau };
-const ef_fog_model ef_fog_convex = { .name = "convex", .keys = no_keys, .set = no_set, .finish = no_finish, .tau = no_tau };
+
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MAX_PLANES 64
+
+/* p[] layout: p[0..2] = density per channel (per metre until finish, then per
+ * scene unit); box only: p[3..5] = min, p[6..8] = max (scene units). */
+enum { P_RHO = 0, P_MIN = 3, P_MAX = 6 };
+
+static const char *const box_keys[] = { "min", "max", "density", "visibility", NULL };
+enum { BOX_MIN, BOX_MAX, BOX_DENSITY, BOX_VISIBILITY };
+static const char *const convex_keys[] = { "planes", "density", "visibility", NULL };
+enum { CVX_PLANES, CVX_DENSITY, CVX_VISIBILITY };
+
+/* ---- parsing ---- */
+
+/* The shortest of %.15g..%.17g that reads back as v, for messages. */
+static void fmt_num(char *buf, size_t len, double v)
+{
+    for (int prec = 15; prec <= 17; ++prec) {
+        snprintf(buf, len, "%.*g", prec, v);
+        if (strtod(buf, NULL) == v)
+            return;
+    }
+}
+
+static int set_box(ef_fog_component *c, int k, const char *val, ef_err *err)
+{
+    switch (k) {
+    case BOX_MIN:
+    case BOX_MAX:
+        if (ef_parse_numbers(val, &c->p[k == BOX_MIN ? P_MIN : P_MAX], 3))
+            return ef_fail(err, "fog spec '%s': %s='%s' is not X,Y,Z (three numbers)", c->spec,
+                           box_keys[k], val);
+        return 0;
+    case BOX_DENSITY:
+        return ef_fog_set_density(c, "density", val, &c->p[P_RHO], err);
+    default:
+        return ef_fog_set_visibility(c, "visibility", val, &c->p[P_RHO], err);
+    }
+}
+
+/* Normalises plane pl (A,B,C,D) in place as ef_fog_set_plane does, scaling
+ * by the largest |A|,|B|,|C| first when A^2+B^2+C^2 would overflow or lose
+ * bits to underflow. Returns 0, -1 for a zero normal, or -2 when D over the
+ * normal's length overflows. */
+static int normalise_plane(double pl[4])
+{
+    const double ss = pl[0] * pl[0] + pl[1] * pl[1] + pl[2] * pl[2];
+    if (ss >= DBL_MIN && ss <= DBL_MAX) {
+        const double len = sqrt(ss);
+        for (int i = 0; i < 4; ++i)
+            pl[i] /= len;
+    } else {
+        const double m = fmax(fabs(pl[0]), fmax(fabs(pl[1]), fabs(pl[2])));
+        if (m == 0.0)
+            return -1;
+        for (int i = 0; i < 4; ++i)
+            pl[i] /= m;
+        const double len = sqrt(pl[0] * pl[0] + pl[1] * pl[1] + pl[2] * pl[2]);
+        for (int i = 0; i < 4; ++i)
+            pl[i] /= len;
+    }
+    return isfinite(pl[3]) ? 0 : -2;
+}
+
+/* planes=A,B,C,D,...: 1..64 planes, each stored normalised in c->arr. */
+static int set_planes(ef_fog_component *c, const char *val, ef_err *err)
+{
+    int n = 1;
+    for (const char *q = val; *q; ++q)
+        n += *q == ',';
+    if (n > 4 * MAX_PLANES)
+        return ef_fail(err, "fog spec '%s': planes='%.40s...' has %d numbers, more than %d "
+                       "planes of A,B,C,D (use at most %d planes, or split the volume into "
+                       "several components)", c->spec, val, n, MAX_PLANES, MAX_PLANES);
+    double *pl = malloc((size_t) n * sizeof *pl);
+    if (!pl)
+        return ef_fail(err, "fog spec '%s': out of memory", c->spec);
+    const char *s = val;
+    for (int i = 0; i < n; ++i) {
+        const char *e = strchr(s, ',');
+        if (!e)
+            e = s + strlen(s);
+        char *end;
+        errno = 0;
+        const double v = strtod(s, &end);
+        while (end < e && *end == ' ')
+            ++end;
+        if (end == s || end != e || errno == ERANGE || !isfinite(v)) {
+            free(pl);
+            return ef_fail(err, "fog spec '%s': planes= number %d ('%.*s') is not a finite "
+                           "number (write planes=A,B,C,D,A,B,C,D,...)", c->spec, i + 1,
+                           (int) (e - s), s);
+        }
+        pl[i] = v;
+        s = *e ? e + 1 : e;
+    }
+    if (n % 4) {
+        free(pl);
+        return ef_fail(err, "fog spec '%s': planes='%s' has %d numbers, not a multiple of 4 "
+                       "(give A,B,C,D for each plane)", c->spec, val, n);
+    }
+    /* Walk the text again to quote the offending plane. */
+    s = val;
+    for (int p = 0; p < n / 4; ++p) {
+        const char *start = s;
+        for (int j = 0; j < 4; ++j) {
+            const char *e = strchr(s, ',');
+            s = e ? e + 1 : s + strlen(s);
+        }
+        const int rc = normalise_plane(pl + 4 * p);
+        if (rc) {
+            int w = (int) (s - start);
+            if (w > 0 && start[w - 1] == ',')
+                --w;
+            free(pl);
+            return ef_fail(err, rc == -1 ? "fog spec '%s': planes= plane %d (%.*s) has a zero "
+                                           "normal (A,B,C must not all be 0)"
+                                         : "fog spec '%s': planes= plane %d (%.*s) is out of "
+                                           "range (D is too large for its normal A,B,C)",
+                           c->spec, p + 1, w, start);
+        }
+    }
+    free(c->arr);
+    c->arr = pl;
+    c->narr = n;
+    return 0;
+}
+
+static int set_convex(ef_fog_component *c, int k, const char *val, ef_err *err)
+{
+    switch (k) {
+    case CVX_PLANES:
+        return set_planes(c, val, err);
+    case CVX_DENSITY:
+        return ef_fog_set_density(c, "density", val, &c->p[P_RHO], err);
+    default:
+        return ef_fog_set_visibility(c, "visibility", val, &c->p[P_RHO], err);
+    }
+}
+
+/* Exactly one of density/visibility (bits dbit, dbit+1 of c->seen), then
+ * converted to per scene unit. */
+static int finish_density(ef_fog_component *c, const ef_fog_context *ctx, int dbit,
+                          const char *example, ef_err *err)
+{
+    const unsigned given = (c->seen >> dbit) & 3u;
+    if (!given)
+        return ef_fail(err, "fog spec '%s': missing density (write %s:density=D or "
+                       "visibility=V)", c->spec, example);
+    if (given == 3u)
+        return ef_fail(err, "fog spec '%s': give density or visibility, not both", c->spec);
+    for (int i = 0; i < 3; ++i)
+        c->p[P_RHO + i] = ef_fog_per_unit(ctx, c->p[P_RHO + i]);
+    return 0;
+}
+
+static int finish_box(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
+{
+    static const char axis[3] = { 'x', 'y', 'z' };
+    for (int k = BOX_MIN; k <= BOX_MAX; ++k)
+        if (!(c->seen & (1u << k)))
+            return ef_fail(err, "fog spec '%s': missing %s (write box:min=X,Y,Z:max=X,Y,Z:"
+                           "density=D)", c->spec, box_keys[k]);
+    for (int a = 0; a < 3; ++a)
+        if (!(c->p[P_MIN + a] < c->p[P_MAX + a])) {
+            char lo[32], hi[32];
+            fmt_num(lo, sizeof lo, c->p[P_MIN + a]);
+            fmt_num(hi, sizeof hi, c->p[P_MAX + a]);
+            return ef_fail(err, "fog spec '%s': min %c = %s is not less than max %c = %s (each "
+                           "min coordinate must be below the max one; swap them or widen the "
+                           "box)", c->spec, axis[a], lo, axis[a], hi);
+        }
+    if (finish_density(c, ctx, BOX_DENSITY, "box:min=X,Y,Z:max=X,Y,Z", err))
+        return -1;
+    double *pl = malloc(24 * sizeof *pl);
+    if (!pl)
+        return ef_fail(err, "fog spec '%s': out of memory", c->spec);
+    /* Per axis: x - max < 0, then -x + min < 0. Unit normals, no rounding. */
+    for (int a = 0; a < 3; ++a) {
+        double *hi = pl + 8 * a, *lo = hi + 4;
+        for (int i = 0; i < 3; ++i)
+            hi[i] = lo[i] = 0.0;
+        hi[a] = 1.0;
+        hi[3] = -c->p[P_MAX + a];
+        lo[a] = -1.0;
+        lo[3] = c->p[P_MIN + a];
+    }
+    free(c->arr);
+    c->arr = pl;
+    c->narr = 24;
+    return 0;
+}
+
+static int finish_convex(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
+{
+    if (!(c->seen & (1u << CVX_PLANES)) || c->narr < 4)
+        return ef_fail(err, "fog spec '%s': missing planes (write convex:planes=A,B,C,D,...:"
+                       "density=D; fog is where every A*x+B*y+C*z+D < 0)", c->spec);
+    return finish_density(c, ctx, CVX_DENSITY, "convex:planes=A,B,C,D,...", err);
+}
+
+/* ---- clipping ----
+ *
+ * Along the ray, plane i has value h0 + s t (h1 at t = len) and the fog is
+ * where every value is < 0. A plane with s > 0 is left at t = -h0/s, one with
+ * s < 0 entered there; the segment inside is [max entries, min exits] within
+ * [0, len]. A plane whose value is >= 0 at both ends rejects the segment.
+ *
+ * Two passes: a plain-double pass with rigorous error bounds settles every
+ * sign and picks the binding entry/exit planes when the bounds separate them
+ * (nearly every pixel), and the exact double-double pass decides the rest
+ * (camera or pixel on a face's plane, grazing rays, ties at edges). Either
+ * way the final length comes from double-doubles of the binding planes. */
+
+/* One plane along the ray, in double-double (hi = the rounded value). */
+typedef struct crossing {
+    ef_dd h0, s, h1;
+} crossing;
+
+static inline ef_dd dd_neg(ef_dd a)
+{
+    return (ef_dd) { -a.hi, -a.lo };
+}
+
+/* a < b for normalised double-doubles (hi = fl(hi + lo)). */
+static inline int dd_less(ef_dd a, ef_dd b)
+{
+    return a.hi < b.hi || (a.hi == b.hi && a.lo < b.lo);
+}
+
+/* a / b to about 2^-100 relative, normalised; b.hi != 0. The remainder of
+ * the rounded quotient, a.hi - q*b.hi, is exact with fma. */
+static inline ef_dd dd_div(ef_dd a, ef_dd b)
+{
+    const double q = a.hi / b.hi;
+    if (!isfinite(q) || q == 0.0)
+        return (ef_dd) { q, 0.0 };
+    const double r = fma(-q, b.hi, a.hi) + (a.lo - q * b.lo);
+    return ef_two_sum(q, r / b.hi);
+}
+
+/* As ef_line_of, keeping the double-double parts; h1 only when asked for
+ * (len finite). An axis-aligned unit normal (every box plane) needs one
+ * two_sum: +-org[a] and +-dir[a] are exact. */
+static inline void crossing_of(const double *p, const double org[3], const double dir[3],
+                               double len, int want_h1, crossing *x)
+{
+    int a = -1;
+    if (p[1] == 0.0 && p[2] == 0.0)
+        a = 0;
+    else if (p[0] == 0.0 && p[2] == 0.0)
+        a = 1;
+    else if (p[0] == 0.0 && p[1] == 0.0)
+        a = 2;
+    if (a >= 0 && fabs(p[a]) == 1.0) {
+        x->h0 = ef_two_sum(p[a] * org[a], p[3]);
+        x->s = (ef_dd) { p[a] * dir[a], 0.0 };
+    } else {
+        x->h0 = ef_dd_dot3(p, org, p[3]);
+        x->s = ef_dd_dot3(p, dir, 0.0);
+    }
+    x->h1 = (ef_dd) { 0.0, 0.0 };
+    if (want_h1) {
+        x->h1 = ef_dd_affine(x->h0, x->s, len);
+        if (!isfinite(x->h1.hi))              /* s * len overflowed: no NaN from the dd parts */
+            x->h1 = (ef_dd) { x->h0.hi + x->s.hi * len, 0.0 };
+    }
+}
+
+/* The inside length once the binding entering plane in (or -1: entry at 0)
+ * and leaving plane out (or -1: exit at len) are known, with their
+ * crossings xi, xo (xi->h1 needed when out < 0 and len is finite). */
+static double bound_length(const double *pl, int in, const crossing *xi, int out,
+                           const crossing *xo, double len)
+{
+    if (out < 0) {
+        if (in < 0 || isinf(len))
+            return len;                       /* inside to the end (INFINITY for the sky) */
+        /* len - t_in = h1/s of the entering plane: the end's own value, no
+         * cancellation when the pixel is near that face. */
+        return dd_div(xi->h1, xi->s).hi;
+    }
+    const ef_dd t_out = dd_div(dd_neg(xo->h0), xo->s);
+    if (in < 0 || isinf(t_out.hi))
+        return t_out.hi;
+    const double *pi = pl + 4 * in, *po = pl + 4 * out;
+    ef_dd d;
+    if (pi[0] == -po[0] && pi[1] == -po[1] && pi[2] == -po[2])
+        /* Opposite faces of a slab: h_in + h_out = D_in + D_out everywhere, so
+         * the length is the width over the rate, however far away it lies. */
+        d = dd_div(dd_neg(ef_two_sum(pi[3], po[3])), xo->s);
+    else
+        d = ef_dd_add(t_out, dd_neg(dd_div(dd_neg(xi->h0), xi->s)));
+    return d.hi > 0.0 ? d.hi : 0.0;
+}
+
+/* The exact pass: every plane in double-double. */
+static double inside_length_exact(const double *pl, int np, const double org[3],
+                                  const double dir[3], double len)
+{
+    const int sky = isinf(len);
+    int in = -1, out = -1;                    /* binding entering / leaving plane */
+    ef_dd t_in = { 0, 0 }, t_out = { 0, 0 };
+    crossing xi = { { 0, 0 }, { 0, 0 }, { 0, 0 } }, xo = xi;
+    for (int k = 0; k < np; ++k) {
+        crossing x;
+        crossing_of(pl + 4 * k, org, dir, len, !sky, &x);
+        if (x.s.hi == 0.0) {
+            if (x.h0.hi >= 0.0)
+                return 0.0;                   /* parallel, on or outside the plane */
+            continue;
+        }
+        if (x.s.hi > 0.0) {
+            if (x.h0.hi >= 0.0)
+                return 0.0;                   /* starts outside and goes further out */
+            if (!sky && x.h1.hi <= 0.0)
+                continue;                     /* ends inside (or on) it: no exit before len */
+            const ef_dd t = dd_div(dd_neg(x.h0), x.s);
+            if (out < 0 || dd_less(t, t_out)) {
+                out = k;
+                t_out = t;
+                xo = x;
+            }
+        } else {
+            if (!sky && x.h1.hi >= 0.0)
+                return 0.0;                   /* ends outside (or on) it, came from further out */
+            if (x.h0.hi <= 0.0)
+                continue;                     /* starts inside (or on) it: no entry after 0 */
+            const ef_dd t = dd_div(dd_neg(x.h0), x.s);
+            if (in < 0 || dd_less(t_in, t)) {
+                in = k;
+                t_in = t;
+                xi = x;
+            }
+        }
+    }
+    if (in >= 0 && out >= 0 && !dd_less(t_in, t_out))
+        return 0.0;
+    return bound_length(pl, in, &xi, out, &xo, len);
+}
+
+/* Error bounds of the plain-double pass: a 3-product dot plus a constant
+ * has at most 4 roundings on any path (fma contraction only removes some),
+ * so |error| <= gamma_4 * sum |terms| < 2^-50 * sum; plus a few subnormal
+ * roundings. Derived bounds get a 2^-20 relative margin for their own
+ * rounding. */
+#define EPS_DOT 0x1p-50
+#define EPS_TINY 0x1p-1069
+#define MARGIN (1.0 + 0x1p-20)
+
+enum { CLIP_EMPTY, CLIP_BOUND, CLIP_UNSURE };
+
+/* The plain-double pass. CLIP_EMPTY: the segment certainly misses the
+ * volume. CLIP_BOUND: *in, *out are certainly the binding planes (-1: none)
+ * and entry < exit. CLIP_UNSURE: a sign or a choice is within rounding. */
+static int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
+                     double len, int *in_, int *out_)
+{
+    const int sky = isinf(len);
+    int in = -1, out = -1;
+    /* The best entry (largest t) and exit (smallest t) with their error
+     * bounds, and the most competitive bound among the other planes. */
+    double t_in = 0, e_in = 0, other_in = -INFINITY;
+    double t_out = 0, e_out = 0, other_out = INFINITY;
+    for (int k = 0; k < np; ++k) {
+        const double *p = pl + 4 * k;
+        const double a0 = p[0] * org[0], a1 = p[1] * org[1], a2 = p[2] * org[2];
+        const double b0 = p[0] * dir[0], b1 = p[1] * dir[1], b2 = p[2] * dir[2];
+        const double h0 = a0 + a1 + a2 + p[3];
+        const double eh = (fabs(a0) + fabs(a1) + fabs(a2) + fabs(p[3])) * EPS_DOT + EPS_TINY;
+        if (!(fabs(h0) > eh))
+            return CLIP_UNSURE;
+        if (b0 == 0.0 && b1 == 0.0 && b2 == 0.0) {
+            /* Exactly parallel (as the double-double pass sees it too). */
+            if (h0 > 0.0)
+                return CLIP_EMPTY;
+            continue;
+        }
+        const double s = b0 + b1 + b2;
+        const double es = (fabs(b0) + fabs(b1) + fabs(b2)) * EPS_DOT + EPS_TINY;
+        if (!(fabs(s) > es))
+            return CLIP_UNSURE;
+        if (s > 0.0 && h0 > 0.0)
+            return CLIP_EMPTY;                /* starts outside and goes further out */
+        if (!sky) {
+            const double h1 = h0 + s * len;
+            const double eh1 = (eh + es * len + (fabs(h0) + fabs(s) * len) * 0x1p-51) * MARGIN;
+            if (!(fabs(h1) > eh1))
+                return CLIP_UNSURE;
+            if (s < 0.0 && h1 > 0.0)
+                return CLIP_EMPTY;            /* ends outside, came from further out */
+            if (s > 0.0 && h1 < 0.0)
+                continue;                     /* ends inside: no exit before len */
+        }
+        if (s < 0.0 && h0 < 0.0)
+            continue;                         /* starts inside: no entry after 0 */
+        /* The exact t = -h0x/sx, where |h0x - h0| <= eh and |sx - s| <= es: it
+         * differs from -h0/s by at most (eh + |t| es)/(|s| - es), which is below
+         * (eh + |t| es)/|s| * (1 + 2^-19) when es/|s| <= 2^-20 (else too
+         * grazing to decide here); t itself has two roundings. */
+        const double inv = 1.0 / s, t = -h0 * inv;
+        if (!(es * fabs(inv) <= 0x1p-20))
+            return CLIP_UNSURE;
+        const double et = ((eh + fabs(t) * es) * fabs(inv) * (1.0 + 0x1p-19) +
+                           fabs(t) * 0x1p-51) * MARGIN;
+        if (!isfinite(t) || !isfinite(et))
+            return CLIP_UNSURE;
+        if (s > 0.0) {
+            if (out < 0 || t < t_out) {
+                if (out >= 0)
+                    other_out = fmin(other_out, t_out - e_out);
+                out = k;
+                t_out = t;
+                e_out = et;
+            } else
+                other_out = fmin(other_out, t - et);
+        } else {
+            if (in < 0 || t > t_in) {
+                if (in >= 0)
+                    other_in = fmax(other_in, t_in + e_in);
+                in = k;
+                t_in = t;
+                e_in = et;
+            } else
+                other_in = fmax(other_in, t + et);
+        }
+    }
+    if (in >= 0 && !(other_in < t_in - e_in))
+        return CLIP_UNSURE;                   /* two entries tie within rounding */
+    if (out >= 0 && !(other_out > t_out + e_out))
+        return CLIP_UNSURE;
+    if (in >= 0 && out >= 0) {
+        if (t_in - e_in > t_out + e_out)
+            return CLIP_EMPTY;
+        if (!(t_in + e_in < t_out - e_out))
+            return CLIP_UNSURE;
+    }
+    *in_ = in;
+    *out_ = out;
+    return CLIP_BOUND;
+}
+
+/* The length of the part of [0, len] (len may be INFINITY) of the ray
+ * org + t dir where every plane's value is < 0: 0 when none, INFINITY when
+ * the ray stays inside forever. */
+static double inside_length(const double *pl, int np, const double org[3], const double dir[3],
+                            double len)
+{
+    int in, out;
+    switch (clip_fast(pl, np, org, dir, len, &in, &out)) {
+    case CLIP_EMPTY:
+        return 0.0;
+    case CLIP_UNSURE:
+        return inside_length_exact(pl, np, org, dir, len);
+    default:
+        break;
+    }
+    crossing xi = { { 0, 0 }, { 0, 0 }, { 0, 0 } }, xo = xi;
+    if (in >= 0)
+        crossing_of(pl + 4 * in, org, dir, len, out < 0 && !isinf(len), &xi);
+    if (out >= 0)
+        crossing_of(pl + 4 * out, org, dir, len, 0, &xo);
+    return bound_length(pl, in, &xi, out, &xo, len);
+}
+
+static void tau_volume(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    const double *rho = &c->p[P_RHO];
+    tau[0] = tau[1] = tau[2] = 0.0;
+    if (rho[0] == 0.0 && rho[1] == 0.0 && rho[2] == 0.0)
+        return;
+    const double l = inside_length(c->arr, c->narr / 4, r->org, r->dir, r->dist);
+    if (l == 0.0)
+        return;
+    for (int i = 0; i < 3; ++i)
+        tau[i] = rho[i] == 0.0 ? 0.0 : rho[i] * l;  /* 0 * inf stays 0 */
+}
+
+/* ---- for the reference integrator ---- */
+
+static int functionals_volume(const ef_fog_component *c, ef_fog_functional *out, int cap)
+{
+    const int n = c->narr / 4;
+    for (int i = 0; i < n && i < cap; ++i) {
+        const double *p = c->arr + 4 * i;
+        out[i] = (ef_fog_functional) { { p[0], p[1], p[2] }, p[3] };
+    }
+    return n;
+}
+
+/* The density jumps on every plane. */
+static int features_volume(const ef_fog_component *c, ef_fog_feature *out, int cap)
+{
+    const int n = c->narr / 4;
+    for (int i = 0; i < n && i < cap; ++i)
+        out[i] = (ef_fog_feature) { i, 0.0, 0.0 };
+    return n;
+}
+
+/* rho strictly inside every plane, 0 on or outside any of them. */
+static void density_volume(const ef_fog_component *c, const long double *v, long double out[3])
+{
+    int inside = 1;
+    for (int i = 0; i < c->narr / 4; ++i)
+        inside &= v[i] < 0.0L;
+    for (int k = 0; k < 3; ++k)
+        out[k] = inside ? (long double) c->p[P_RHO + k] : 0.0L;
+}
+
+const ef_fog_model ef_fog_box = { .name = "box", .keys = box_keys, .set = set_box,
+                                  .finish = finish_box, .tau = tau_volume,
+                                  .functionals = functionals_volume,
+                                  .features = features_volume, .density = density_volume };
+const ef_fog_model ef_fog_convex = { .name = "convex", .keys = convex_keys, .set = set_convex,
+                                     .finish = finish_convex, .tau = tau_volume,
+                                     .functionals = functionals_volume,
+                                     .features = features_volume, .density = density_volume };

@@ -115,6 +115,7 @@ typedef struct quad {
     long double *vals;   /* nf values per stored point */
     size_t nvals, capvals;
     long double scale[3];
+    long double dinf[3]; /* density at infinity; > 0: that channel diverges */
 } quad;
 
 static long double *vals_at(quad *q, size_t i)
@@ -202,16 +203,21 @@ static void ival_eval(quad *q, ival *iv)
     q->R->st->intervals++;
 }
 
-#define MAX_INTERVALS 200000
+#define MAX_INTERVALS 20000
 
 /* Adds the pieces' intervals (already evaluated into q->heap as a plain
  * array), then refines. Returns 0 or -1 (memory). */
-static int refine(quad *q, long double tau[3])
+/* Sets the error scale to the current total of each channel and rebuilds
+ * the heap; returns the summed relative error. The first estimate of a
+ * total can be off by many orders (a steep exponential seen by 15 nodes), so
+ * the scale follows the total as it changes. */
+static long double rescale(quad *q, long double Ksum[3])
 {
     for (int k = 0; k < 3; ++k) {
-        q->scale[k] = 0;
+        Ksum[k] = 0;
         for (size_t i = 0; i < q->n; ++i)
-            q->scale[k] += fabsl(q->heap[i].K[k]);
+            Ksum[k] += q->heap[i].K[k];
+        q->scale[k] = q->dinf[k] > 0 || !isfinite(Ksum[k]) ? 0 : fabsl(Ksum[k]);
     }
     long double total_err = 0;
     for (size_t i = 0; i < q->n; ++i) {
@@ -220,6 +226,22 @@ static int refine(quad *q, long double tau[3])
     }
     for (size_t i = q->n / 2 + 1; i-- > 0;)
         sift_down(q->heap, q->n, i);
+    return total_err;
+}
+
+static int drifted(const quad *q, const long double Ksum[3])
+{
+    for (int k = 0; k < 3; ++k)
+        if (q->scale[k] > 0 && !(Ksum[k] <= 2 * q->scale[k] && Ksum[k] >= q->scale[k] / 2))
+            return 1;
+    return 0;
+}
+
+static int refine(quad *q, long double tau[3])
+{
+    long double Ksum[3];
+    long double total_err = rescale(q, Ksum);
+    long iter = 0;
     while (q->n && total_err > REL_TOL && q->n < MAX_INTERVALS) {
         ival top = q->heap[0];
         q->heap[0] = q->heap[--q->n];
@@ -232,6 +254,7 @@ static int refine(quad *q, long double tau[3])
         if (!(h > 0) || b.u0 == top.u0 || (top.tail && !(b.u0 < 1))) {
             /* Cannot split further: keep it as it is. */
             q->R->st->unconverged++;
+            total_err -= top.err;
             top.err = 0;
             if (ival_push(q, top))
                 return -1;
@@ -254,14 +277,13 @@ static int refine(quad *q, long double tau[3])
         a.err = ival_err(q, &a);
         b.err = ival_err(q, &b);
         total_err += a.err + b.err - top.err;
+        for (int k = 0; k < 3; ++k)
+            Ksum[k] += a.K[k] + b.K[k] - top.K[k];
         if (ival_push(q, a) || ival_push(q, b))
             return -1;
-        if (!(total_err >= 0) || total_err < 1e-3L * REL_TOL) {
-            /* Running sums drift; recompute now and then. */
-            total_err = 0;
-            for (size_t i = 0; i < q->n; ++i)
-                total_err += q->heap[i].err;
-        }
+        /* Running sums drift, and the totals move: recompute now and then. */
+        if (drifted(q, Ksum) || ++iter % 256 == 0 || !(total_err >= 0))
+            total_err = rescale(q, Ksum);
     }
     if (total_err > REL_TOL)
         q->R->st->unconverged++;
@@ -289,17 +311,49 @@ static int add_piece(quad *q, size_t iL, size_t iR, long double w, int tail)
     return 0;
 }
 
-/* A split point: offsets from the start (a) and from the end (b), and the
- * functional f that has the exact value val there (f < 0: none). */
+/* Double-double helpers for the split geometry: offsets of crossings far
+ * along a segment (1e7 away, a sliver 1e-6 wide) must keep their relative
+ * difference, which long double alone cannot. */
+static ef_dd dd_neg(ef_dd a)
+{
+    return (ef_dd) { -a.hi, -a.lo };
+}
+
+static ef_dd dd_mul(ef_dd a, ef_dd b)
+{
+    ef_dd p = ef_two_prod(a.hi, b.hi);
+    p.lo += a.hi * b.lo + a.lo * b.hi;
+    return ef_two_sum(p.hi, p.lo);
+}
+
+static ef_dd dd_div(ef_dd a, ef_dd b)
+{
+    const double q1 = a.hi / b.hi;
+    ef_dd r = ef_dd_add(a, dd_neg(dd_mul(b, (ef_dd) { q1, 0 })));
+    const double q2 = r.hi / b.hi;
+    r = ef_dd_add(r, dd_neg(dd_mul(b, (ef_dd) { q2, 0 })));
+    const double q3 = r.hi / b.hi;
+    return ef_dd_add(ef_two_sum(q1, q2), (ef_dd) { q3, 0 });
+}
+
+static long double ld(ef_dd a)
+{
+    return (long double) a.hi + a.lo;
+}
+
+/* A split point: its offset a from the start, and the functional f that has
+ * the exact value val there (f < 0: none). */
 typedef struct split {
-    long double a, b, val;
+    ef_dd a, val;
     int f;
 } split;
 
 static int by_offset(const void *x, const void *y)
 {
-    const long double a = ((const split *) x)->a, b = ((const split *) y)->a;
-    return a < b ? -1 : a > b;
+    const ef_dd a = ((const split *) x)->a, b = ((const split *) y)->a;
+    if (a.hi != b.hi)
+        return a.hi < b.hi ? -1 : 1;
+    return a.lo < b.lo ? -1 : a.lo > b.lo;
 }
 
 typedef struct splits {
@@ -321,16 +375,21 @@ static int push(splits *S, split p)
     return 0;
 }
 
+/* A functional along the segment in double-double: value at the start, rate. */
+typedef struct dline {
+    ef_dd h0, s;
+} dline;
+
 /* Adds the crossing of functional f with value val if it lies inside the segment. */
-static int add_crossing(splits *S, const ef_line_ld *l, int f, long double val, long double len)
+static int add_crossing(splits *S, const dline *l, int f, ef_dd val, double len)
 {
-    if (l->s == 0)
+    if (l->s.hi == 0)
         return 0;
-    const long double a = (val - l->h0) / l->s;
-    if (!(a > 0 && a < len))
+    const ef_dd a = dd_div(ef_dd_add(val, dd_neg(l->h0)), l->s);
+    const long double al = ld(a);
+    if (!(al > 0 && al < len))
         return 0;
-    const long double b = isinf(len) ? INFINITY : (l->h1 - val) / l->s;
-    return push(S, (split) { a, b, val, f });
+    return push(S, (split) { a, val, f });
 }
 
 /* True when val lies strictly between the functional's values at the ends. */
@@ -339,10 +398,10 @@ static int within(const ef_line_ld *l, long double val)
     return l->s > 0 ? val > l->h0 && val < l->h1 : val < l->h0 && val > l->h1;
 }
 
-static void point_values(const run *R, const ef_line_ld *L, const split *p, long double *v)
+static void point_values(const run *R, const dline *D, const split *p, long double *v)
 {
     for (int i = 0; i < R->nf; ++i)
-        v[i] = i == p->f ? p->val : p->a <= p->b ? L[i].h0 + L[i].s * p->a : L[i].h1 - L[i].s * p->b;
+        v[i] = i == p->f ? ld(p->val) : ld(ef_dd_add(D[i].h0, dd_mul(D[i].s, p->a)));
 }
 
 int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double dir[3],
@@ -359,20 +418,35 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
     if (!d->density)
         return -1;
     ef_line_ld L[MAXF];
+    dline D[MAXF];
     for (int i = 0; i < d->nf; ++i) {
         ef_line_of_ld(&d->f[i], org, dir, len, &L[i]);
+        D[i].h0 = ef_dd_dot3(d->f[i].n, org, d->f[i].d);
+        D[i].s = ef_dd_dot3(d->f[i].n, dir, 0.0);
         R.s[i] = L[i].s;
     }
 
     splits S = { NULL, 0, 0 };
     quad q = { .R = &R };
     R.lambda = 0;
+    if (isinf(len)) {
+        /* Channels whose density stays positive at infinity diverge; when all
+         * do, nothing is left to integrate. */
+        long double vinf[MAXF];
+        for (int i = 0; i < R.nf; ++i)
+            vinf[i] = R.s[i] > 0 ? INFINITY : R.s[i] < 0 ? -INFINITY : L[i].h0;
+        eval(&R, vinf, q.dinf);
+        if (q.dinf[0] > 0 && q.dinf[1] > 0 && q.dinf[2] > 0) {
+            tau[0] = tau[1] = tau[2] = INFINITY;
+            return 0;
+        }
+    }
     for (int j = 0; j < d->nfeat; ++j) {
         const ef_fog_feature *ft = &d->feat[j];
-        const ef_line_ld *l = &L[ft->f];
         if (ft->f < 0 || ft->f >= d->nf)
             continue;
-        if (add_crossing(&S, l, ft->f, ft->value, len))
+        const ef_line_ld *l = &L[ft->f];
+        if (add_crossing(&S, &D[ft->f], ft->f, (ef_dd) { ft->value, 0 }, len))
             goto oom;
         if (!(ft->scale > 0) || l->s == 0)
             continue;
@@ -382,15 +456,21 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         /* Geometric steps away from the feature on both sides: every piece is
          * then no wider than its distance to the feature, whatever the ratio
          * of the feature's scale to the segment's length. */
+        /* On an infinite segment the steps stop a few hundred scales past the
+         * start; the tail's own substitution (scale lambda) takes over. */
+        const long double reach = isinf(len) ? 256 * fmaxl(fabsl(l->h0 - ft->value), ft->scale)
+                                             : INFINITY;
         for (int side = -1; side <= 1; side += 2)
             for (int e = 0; e < 4000; ++e) {
-                const long double val = ft->value + side * ldexpl(ft->scale, e);
-                if (!isfinite(val))
+                const double step = side * ldexp(ft->scale, e);
+                if (!isfinite(step) || fabs(step) > reach)
                     break;
-                if (within(l, val)) {
-                    if (add_crossing(&S, l, ft->f, val, len))
+                const ef_dd val = ef_two_sum(ft->value, step);
+                if (within(l, ld(val))) {
+                    if (add_crossing(&S, &D[ft->f], ft->f, val, len))
                         goto oom;
-                } else if (side > 0 ? val > fmaxl(l->h0, l->h1) : val < fminl(l->h0, l->h1)) {
+                } else if (side > 0 ? ld(val) > fmaxl(l->h0, l->h1)
+                                    : ld(val) < fminl(l->h0, l->h1)) {
                     break;
                 }
             }
@@ -401,7 +481,7 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         qsort(S.v, S.n, sizeof *S.v, by_offset);
 
     long double vL[MAXF], vR[MAXF];
-    split prev = { 0, len, 0, -1 };
+    split prev = { { 0, 0 }, { 0, 0 }, -1 };
     for (int i = 0; i < R.nf; ++i)
         vL[i] = L[i].h0;
     long iL = ival_store(&q, vL);
@@ -411,43 +491,33 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         split next;
         if (k < S.n) {
             next = S.v[k];
-            if (next.a <= prev.a)
-                continue;
-            point_values(&R, L, &next, vR);
+            point_values(&R, D, &next, vR);
         } else if (isinf(len)) {
             break;
         } else {
-            next = (split) { len, 0, 0, -1 };
+            next = (split) { { len, 0 }, { 0, 0 }, -1 };
             for (int i = 0; i < R.nf; ++i)
                 vR[i] = L[i].h1;
         }
-        /* Between two steps of one feature, the width is the difference of
-         * two exactly known values; elsewhere, of the offsets nearer an end. */
-        const long double w = next.f >= 0 && next.f == prev.f
-                                  ? (next.val - prev.val) / R.s[next.f]
-                                  : next.a <= prev.b ? next.a - prev.a : prev.b - next.b;
+        const long double w = ld(ef_dd_add(next.a, dd_neg(prev.a)));
+        if (!(w > 0))
+            continue;
         const long iR = ival_store(&q, vR);
-        if (iR < 0 || (w > 0 && add_piece(&q, (size_t) iL, (size_t) iR, w, 0)))
+        if (iR < 0 || add_piece(&q, (size_t) iL, (size_t) iR, w, 0))
             goto oom;
         prev = next;
         iL = iR;
     }
-    long double dinf[3] = { 0, 0, 0 };
     if (isinf(len)) {
-        /* Past the last split the density is smooth; if it stays positive
-         * at infinity the optical depth diverges. */
-        long double vinf[MAXF];
-        const long double *last = vals_at(&q, (size_t) iL);
-        for (int i = 0; i < R.nf; ++i)
-            vinf[i] = R.s[i] > 0 ? INFINITY : R.s[i] < 0 ? -INFINITY : last[i];
-        eval(&R, vinf, dinf);
+        /* Past the last split the density is smooth; a channel that diverges
+         * (q.dinf) is left out of the error control. */
         if (add_piece(&q, (size_t) iL, (size_t) iL, 1, 1))
             goto oom;
     }
     if (refine(&q, tau))
         goto oom;
     for (int k = 0; k < 3; ++k)
-        if (dinf[k] > 0)
+        if (q.dinf[k] > 0)
             tau[k] = INFINITY;
     free(q.heap);
     free(q.vals);
