@@ -11,6 +11,7 @@
 #include <cmocka.h>
 
 #include "scene.h"
+#include "tassert.h"
 
 static ef_ray ray(double dist, double planar)
 {
@@ -174,6 +175,36 @@ static void test_spec_ok(void **state)
     assert_true(c.p[0] == 0.0 && c.p[1] == 5.0);
 }
 
+static void test_colour_mix_at_infinity(void **state)
+{
+    (void) state;
+    /* Two uniform fogs with their own colours: along any stretch of the ray
+     * their optical depths are in the ratio of their densities, so the
+     * in-scattered colour is (r1 c1 + r2 c2) / (r1 + r2), at a finite
+     * distance and for the sky alike (where both taus are infinite). */
+    ef_fog_scene s;
+    ef_err err;
+    scene_with(&s, "exp:density=0.02:color=1,0.5,0");
+    assert_int_equal(ef_scene_add(&s, "exp:density=0.05:color=0,0.5,1", &err), 0);
+    const double want[3] = { 0.02 / 0.07, 0.5, 0.05 / 0.07 };
+    ef_fog_sample surf, inf;
+    ef_ray near = ray(10, 10), sky = ray(INFINITY, INFINITY);
+    ef_scene_eval(&s, &near, &surf, &inf);
+    for (int k = 0; k < 3; ++k) {
+        assert_close(surf.F[k], want[k], 1e-15);
+        assert_close(inf.F[k], want[k], 1e-15);
+    }
+    ef_scene_eval(&s, &sky, &surf, NULL);
+    for (int k = 0; k < 3; ++k)
+        assert_close(surf.F[k], want[k], 1e-15);
+    /* A glFog wall (linear end) in front of the sky takes the colour. */
+    scene_with(&s, "linear:start=0:end=5:color=0.1,0.2,0.3");
+    assert_int_equal(ef_scene_add(&s, "exp:density=0.001:color=1,1,1", &err), 0);
+    ef_scene_eval(&s, &sky, &surf, NULL);
+    assert_close(surf.F[0], 0.1, 1e-15);
+    assert_close(surf.F[2], 0.3, 1e-15);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -185,6 +216,7 @@ int main(void)
         cmocka_unit_test(test_composite),
         cmocka_unit_test(test_spec_errors),
         cmocka_unit_test(test_spec_ok),
+        cmocka_unit_test(test_colour_mix_at_infinity),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -200,9 +200,13 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
     s->ctx.read_file = ef_read_text_file;
     for (int i = 0; i < sf.nspec; ++i)
         if (ef_scene_add(s, sf.specs[i], err)) {
+            /* A profile the component names keeps its own name in the message. */
             char msg[sizeof err->msg];
             snprintf(msg, sizeof msg, "%s", err->msg);
-            ef_fail(err, "%s: %s", sf.where[i], msg);
+            if (err->file)
+                ef_fail(err, "%s: %s: %s", sf.where[i], err->file, msg);
+            else
+                ef_fail(err, "%s: %s", sf.where[i], msg);
             err->file = o->scene_file;
             ef_scene_file_free(&sf);
             return EF_PARSE_FAIL;

@@ -55,11 +55,59 @@ void ef_scene_free(ef_fog_scene *s)
     s->any_color = 0;
 }
 
+/* With an infinite optical depth, the light that reaches the camera comes
+ * from the stretch of the ray before the fog turns opaque, so the colour is
+ * the tau-weighted mean over [0, D] where the total tau first reaches 40
+ * (T = 4e-18): found by growing D fourfold from one scene unit. For each
+ * channel with ninf[k] set, wc[k] becomes that normalised mean. */
+static void mix_where_opaque(const ef_fog_scene *s, const ef_ray *r, const int ninf[3],
+                             double wc[3])
+{
+    ef_ray near = *r;
+    double sum[3] = { 0, 0, 0 }, w[3] = { 0, 0, 0 };
+    for (double D = 1.0; D < 1e300; D *= 4.0) {
+        near.dist = D;
+        near.planar = isfinite(r->planar) && r->dist > 0 ? r->planar * (D / r->dist) : D;
+        sum[0] = sum[1] = sum[2] = w[0] = w[1] = w[2] = 0;
+        for (int i = 0; i < s->ncomp; ++i) {
+            const ef_fog_component *c = &s->comp[i];
+            double t[3];
+            c->model->tau(c, &near, t);
+            for (int k = 0; k < 3; ++k)
+                if (t[k] > 0) {
+                    sum[k] += t[k];
+                    w[k] += (isinf(t[k]) ? 1.0 : t[k]) * (c->has_color ? c->color[k] : s->color[k]);
+                }
+        }
+        int done = 1;
+        for (int k = 0; k < 3; ++k)
+            done &= !ninf[k] || sum[k] >= 40.0;
+        if (done)
+            break;
+    }
+    for (int k = 0; k < 3; ++k)
+        if (ninf[k]) {
+            /* A component opaque within D (a wall) takes the colour alone. */
+            int walls = 0;
+            double wall = 0;
+            for (int i = 0; i < s->ncomp; ++i) {
+                const ef_fog_component *c = &s->comp[i];
+                double t[3];
+                c->model->tau(c, &near, t);
+                if (isinf(t[k])) {
+                    walls++;
+                    wall += c->has_color ? c->color[k] : s->color[k];
+                }
+            }
+            wc[k] = walls ? wall / walls : sum[k] > 0 ? w[k] / sum[k] : s->color[k];
+        }
+}
+
 /* Sums the components' optical depths and, with per-component colours, the
  * tau-weighted colour; out->T holds tau until transmit() turns it into T. */
 static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out)
 {
-    double *acc = out->T, wc[3] = { 0, 0, 0 }, inf_c[3] = { 0, 0, 0 };
+    double *acc = out->T, wc[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
     acc[0] = acc[1] = acc[2] = 0.0;
     for (int i = 0; i < s->ncomp; ++i) {
@@ -71,21 +119,19 @@ static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out)
             if (!s->any_color)
                 continue;
             const double col = c->has_color ? c->color[k] : s->color[k];
-            if (isinf(t[k])) {
-                inf_c[k] += col;
+            if (isinf(t[k]))
                 ninf[k]++;
-            } else if (t[k] > 0) {
+            else if (t[k] > 0)
                 wc[k] += t[k] * col;
-            }
         }
     }
+    if (s->any_color && (ninf[0] || ninf[1] || ninf[2]))
+        mix_where_opaque(s, r, ninf, wc);
     for (int k = 0; k < 3; ++k) {
         if (!s->any_color || acc[k] == 0.0)
             out->F[k] = s->color[k];
-        else if (ninf[k])
-            out->F[k] = inf_c[k] / ninf[k];   /* the infinite ones outweigh any finite one */
         else
-            out->F[k] = wc[k] / acc[k];
+            out->F[k] = wc[k] / (ninf[k] ? 1.0 : acc[k]);
     }
 }
 
