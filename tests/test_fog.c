@@ -205,6 +205,20 @@ static void test_colour_mix_at_infinity(void **state)
     assert_close(surf.F[2], 0.3, 1e-15);
 }
 
+static void test_huge_plane_coefficients(void **state)
+{
+    (void) state;
+    /* 3e200 y - 6e200 < 0 is y < 2: the normal's length must not overflow. */
+    ef_fog_component c;
+    ef_err err;
+    assert_int_equal(ef_fog_parse("halfspace:plane=0,3e200,0,-6e200:density=1", NULL, &c, &err), 0);
+    ef_ray r = { { 0, -1, 0 }, 2, 2, { 0, 3, 0 } };
+    double t[3];
+    c.model->tau(&c, &r, t);
+    assert_close(t[0], 1.0, 1e-15);
+    ef_fog_free(&c);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -217,6 +231,7 @@ int main(void)
         cmocka_unit_test(test_spec_errors),
         cmocka_unit_test(test_spec_ok),
         cmocka_unit_test(test_colour_mix_at_infinity),
+        cmocka_unit_test(test_huge_plane_coefficients),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -137,7 +137,8 @@ int ef_fog_set_plane(ef_fog_component *c, const char *key, const char *val, doub
     if (ef_parse_numbers(val, v, 4))
         return ef_fail(err, "fog spec '%s': %s='%s' is not A,B,C,D (four numbers)", c->spec, key,
                        val);
-    const double len = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    /* hypot's scaling: coefficients near 1e200 must not overflow to a "zero" normal. */
+    const double len = hypot(hypot(v[0], v[1]), v[2]);
     if (!(len > 0) || !isfinite(len))
         return ef_fail(err, "fog spec '%s': %s='%s' has a zero normal (A,B,C must not all be 0)",
                        c->spec, key, val);
