@@ -1972,6 +1972,12 @@ static void test_explain(void **state)
     assert_int_equal(dir_count(dir.s), 0);
     assert_true(same_bytes(sample(), inb, len));
     free(inb);
+    /* The scene-wide settings the height models are read with. */
+    st = run("--explain --up-axis -z --units-per-meter 100 '%s' --fog height:density=1:falloff=1",
+             sample());
+    assert_status(st, 0);
+    assert_non_null(strstr(g_out, "up axis: -0, -0, -1; 100 scene units per metre") ?
+                    g_out : strstr(g_out, "up axis: 0, 0, -1; 100 scene units per metre"));
 }
 
 static void test_preview(void **state)

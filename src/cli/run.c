@@ -140,6 +140,9 @@ static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const
         fprintf(out, "fog: %s\n", o->scene.comp[i].spec);
     fprintf(out, "fog colour: %g, %g, %g (scene-linear)\n", o->scene.color[0], o->scene.color[1],
            o->scene.color[2]);
+    fprintf(out, "up axis: %g, %g, %g; %g scene units per metre%s%s\n", o->scene.ctx.up[0],
+            o->scene.ctx.up[1], o->scene.ctx.up[2], o->scene.ctx.units_per_meter,
+            o->scene_file ? "; scene file " : "", o->scene_file ? o->scene_file : "");
 }
 
 /* A temporary name beside the output, so the final rename is atomic. */
