@@ -9,6 +9,7 @@
 #   (a) oiiotool IN -o OUT                                   the I/O floor
 #   (b) exrfog --fog exp:density=0.02 IN -o OUT              the brief's workload
 #   (c) exrfog with per-channel exp2 plus linear fog (two components, three taus)
+#   (c') exrfog with the numpy peer's own half-space fog
 #   (d) python3 numpy_halfspace_fog.py IN OUT                the numpy/OIIO peer
 # and prints a Markdown table of medians (wall seconds, peak RSS) with ratios to
 # oiiotool; the same table goes to bench/results.md.  Nothing here asserts on time.
@@ -86,8 +87,10 @@ if [[ -x "$exrfog" ]]; then
         '"$exrfog" "${threads[@]}" --fog exp:density=0.02 --compression zip:1 "$IN" -o "$OUT"'
     add_tool "exrfog exp2 R,G,B + linear" \
         '"$exrfog" "${threads[@]}" --fog exp2:density=0.01,0.012,0.015 --fog linear:start=5:end=400 "$IN" -o "$OUT"'
-    # The numpy peer's own model (halfspace) arrives with the analytic-fog issue;
-    # until then its row is the peer alone.
+    # The numpy peer's own fog, like for like: half-space y < 1, density 0.15,
+    # colour 0.6,0.65,0.7, sky at the peer's 1e7 stand-in distance.
+    add_tool "exrfog halfspace (the peer's fog)" \
+        '"$exrfog" "${threads[@]}" --fog halfspace:plane=0,1,0,-1:density=0.15 --fog-color 0.6,0.65,0.7 --sky distance=1e7 "$IN" -o "$OUT"'
 else
     echo "exrfog not built ($exrfog)"
     note "exrfog not built ($exrfog): no exrfog rows"

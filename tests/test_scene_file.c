@@ -764,7 +764,9 @@ static void pinhole(tu_pinhole *pin)
 static path_t run_ok(int sky, const char *dir, const char *name, const char *args)
 {
     path_t out;
-    snprintf(out.s, sizeof out.s, "%s/%s", dir, name);
+    /* The path is checked, not truncated: a short test directory is assumed. */
+    if (snprintf(out.s, sizeof out.s, "%s/%s", dir, name) >= (int) sizeof out.s)
+        fail_msg("path too long: %s/%s", dir, name);
     assert_run(0, "'%s' -o '%s' %s", frame(sky), out.s, args);
     return out;
 }
