@@ -148,8 +148,9 @@ static void test_volumes(void **state)
     (void) state;
     CHECK("box.exr", "box:min=-3,0,-12:max=3,2.5,-4:density=0.4");
     CHECK("convex.exr",
-          "convex:planes=1,1,1,-17,-1,1,1,-27,1,-1,1,-23,-1,-1,1,-33,1,1,-1,-77,-1,1,-1,-87,"
-          "1,-1,-1,-83,-1,-1,-1,-93:density=0.1");
+          /* The octahedron |x-5|+|y-3|+|z+30| < 8 in front of the camera. */
+          "convex:planes=1,1,1,14,-1,1,1,24,1,-1,1,20,-1,-1,1,30,1,1,-1,-46,-1,1,-1,-36,"
+          "1,-1,-1,-40,-1,-1,-1,-30:density=0.1");
 }
 
 static void test_combined(void **state)
