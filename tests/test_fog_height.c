@@ -14,6 +14,7 @@
 
 #include "fog.h"
 #include "tassert.h"
+#include "tfog.h"
 
 #define LN2_TEXT "0.6931471805599453"
 #define LN2 0.69314718055994530942
@@ -29,24 +30,6 @@ static void parse(const char *spec, const ef_fog_context *ctx, ef_fog_component 
     ef_err err;
     if (ef_fog_parse(spec, ctx, c, &err))
         fail_msg("'%s' did not parse: %s", spec, err.msg);
-}
-
-/* Optical depth of c from org along dir (made unit here) for length L. */
-static void tau_of(const ef_fog_component *c, double ox, double oy, double oz, double dx,
-                   double dy, double dz, double L, double tau[3])
-{
-    const double n = sqrt(dx * dx + dy * dy + dz * dz);
-    ef_ray r = { { dx / n, dy / n, dz / n }, L, L, { ox, oy, oz } };
-    c->model->tau(c, &r, tau);
-}
-
-static double tau1(const ef_fog_component *c, double ox, double oy, double oz, double dx,
-                   double dy, double dz, double L)
-{
-    double t[3];
-    tau_of(c, ox, oy, oz, dx, dy, dz, L, t);
-    assert_true(t[0] == t[1] && t[1] == t[2]);
-    return t[0];
 }
 
 static void test_falloff_zero_is_exp(void **state)

@@ -18,6 +18,7 @@
 
 #include "fog.h"
 #include "tassert.h"
+#include "tfog.h"
 #include "testutil.h"
 
 #define RAMP "layered:heights=0,10:densities=0,1"
@@ -31,23 +32,6 @@ static void parse(const char *spec, const ef_fog_context *ctx, ef_fog_component 
     ef_fog_free(c);
     if (ef_fog_parse(spec, ctx, c, &err))
         fail_msg("'%s' did not parse: %s", spec, err.msg);
-}
-
-static void tau_of(const ef_fog_component *c, double ox, double oy, double oz, double dx,
-                   double dy, double dz, double L, double tau[3])
-{
-    const double n = sqrt(dx * dx + dy * dy + dz * dz);
-    ef_ray r = { { dx / n, dy / n, dz / n }, L, L, { ox, oy, oz } };
-    c->model->tau(c, &r, tau);
-}
-
-static double tau1(const ef_fog_component *c, double ox, double oy, double oz, double dx,
-                   double dy, double dz, double L)
-{
-    double t[3];
-    tau_of(c, ox, oy, oz, dx, dy, dz, L, t);
-    assert_true(t[0] == t[1] && t[1] == t[2]);
-    return t[0];
 }
 
 static void test_ramp(void **state)

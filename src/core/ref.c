@@ -97,6 +97,19 @@ static void gk15(run *R, const long double *vL, const long double *vR, long doub
     }
 }
 
+/* arr with room for element n of a growing array (doubling *cap), or NULL
+ * when memory runs out (arr is then still valid). */
+static void *grow(void *arr, size_t *cap, size_t n, size_t elem)
+{
+    if (n < *cap)
+        return arr;
+    const size_t ncap = *cap ? 2 * *cap : 64;
+    void *na = realloc(arr, ncap * elem);
+    if (na)
+        *cap = ncap;
+    return na;
+}
+
 /* Global adaptive quadrature (QUADPACK's qag strategy): every interval keeps
  * its Kronrod sum and error estimate |K - G|; the worst one is bisected until
  * the summed error is below REL_TOL of the total. A local test would never
@@ -125,14 +138,11 @@ static long double *vals_at(quad *q, size_t i)
 
 static long ival_store(quad *q, const long double *v)
 {
-    if (q->nvals == q->capvals) {
-        const size_t cap = q->capvals ? 2 * q->capvals : 64;
-        long double *nv = realloc(q->vals, cap * (size_t) (q->R->nf ? q->R->nf : 1) * sizeof *nv);
-        if (!nv)
-            return -1;
-        q->vals = nv;
-        q->capvals = cap;
-    }
+    const size_t per = (size_t) (q->R->nf ? q->R->nf : 1) * sizeof *q->vals;
+    long double *nv = grow(q->vals, &q->capvals, q->nvals, per);
+    if (!nv)
+        return -1;
+    q->vals = nv;
     if (q->R->nf)
         memcpy(vals_at(q, q->nvals), v, (size_t) q->R->nf * sizeof *v);
     return (long) q->nvals++;
@@ -183,14 +193,10 @@ static void sift_down(ival *h, size_t n, size_t i)
 
 static int ival_push(quad *q, ival iv)
 {
-    if (q->n == q->cap) {
-        const size_t cap = q->cap ? 2 * q->cap : 64;
-        ival *nh = realloc(q->heap, cap * sizeof *nh);
-        if (!nh)
-            return -1;
-        q->heap = nh;
-        q->cap = cap;
-    }
+    ival *h = grow(q->heap, &q->cap, q->n, sizeof *h);
+    if (!h)
+        return -1;
+    q->heap = h;
     q->heap[q->n] = iv;
     sift_up(q->heap, q->n++);
     return 0;
@@ -299,16 +305,7 @@ static int add_piece(quad *q, size_t iL, size_t iR, long double w, int tail)
     ival iv = { .u0 = 0, .w = w, .iL = iL, .iR = iR, .tail = tail };
     ival_eval(q, &iv);
     q->R->st->pieces++;
-    if (q->n == q->cap) {
-        const size_t cap = q->cap ? 2 * q->cap : 64;
-        ival *nh = realloc(q->heap, cap * sizeof *nh);
-        if (!nh)
-            return -1;
-        q->heap = nh;
-        q->cap = cap;
-    }
-    q->heap[q->n++] = iv;
-    return 0;
+    return ival_push(q, iv);  /* err 0 until refine() sets the scale and rebuilds the heap */
 }
 
 /* Double-double helpers for the split geometry: offsets of crossings far
@@ -363,14 +360,10 @@ typedef struct splits {
 
 static int push(splits *S, split p)
 {
-    if (S->n == S->cap) {
-        const size_t cap = S->cap ? 2 * S->cap : 64;
-        split *nv = realloc(S->v, cap * sizeof *nv);
-        if (!nv)
-            return -1;
-        S->v = nv;
-        S->cap = cap;
-    }
+    split *v = grow(S->v, &S->cap, S->n, sizeof *v);
+    if (!v)
+        return -1;
+    S->v = v;
     S->v[S->n++] = p;
     return 0;
 }
