@@ -375,6 +375,7 @@ int main(int argc, char **argv)
                 fprintf(stderr, PROG ": %s\n", err.msg);
                 bad = 1;
             }
+        ef_scene_bind(&s, f.cam.pos);   /* as the CLI does, once per frame */
         double best = 0, med = 0;
         accuracy acc;
         if (!bad && time_pass(&f, &s, runs, &best, &med)) {

@@ -643,10 +643,50 @@ static void test_reductions_to_exp(void **state)
     ef_fog_free(&cv);
 }
 
+static void test_bound_camera(void **state)
+{
+    (void) state;
+    /* Binding a component to the camera only moves a per-frame constant out
+     * of the per-pixel path: rays from the camera give the same bits, and
+     * rays from anywhere else are unaffected. */
+    long n = 0;
+    for (size_t m = 0; m < sizeof gens / sizeof gens[0]; ++m) {
+        rng g = { 0xb1d00ull + m };
+        for (int i = 0; i < 200; ++i) {
+            double P[3] = { 0, 0, 0 }, nrm[6], cam[3];
+            if (chance(&g, 0.3))
+                P[0] = P[1] = P[2] = 1e7;
+            char spec[4096];
+            gens[m].gen(&g, P, spec, sizeof spec, nrm);
+            ef_fog_component c, b;
+            parse(spec, &c);
+            assert_int_equal(ef_fog_copy(&b, &c), 0);
+            for (int k = 0; k < 3; ++k)
+                cam[k] = P[k] + uni(&g, -20, 20);
+            ef_fog_bind(&b, cam);
+            for (int j = 0; j < 50; ++j) {
+                double org[3], dir[3], len, t1[3], t2[3];
+                random_segment(&g, P, nrm, gens[m].volume ? nrm + 3 : NULL, org, dir, &len);
+                if (j % 2)
+                    memcpy(org, cam, sizeof org);
+                ef_ray r = { { dir[0], dir[1], dir[2] }, len, len, { org[0], org[1], org[2] } };
+                c.model->tau(&c, &r, t1);
+                b.model->tau(&b, &r, t2);
+                assert_memory_equal(t1, t2, sizeof t1);
+                n++;
+            }
+            ef_fog_free(&c);
+            ef_fog_free(&b);
+        }
+    }
+    printf("  bound camera: %ld segments bit-identical\n", n);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_reductions_to_exp),
+        cmocka_unit_test(test_bound_camera),
         cmocka_unit_test(test_properties),
         cmocka_unit_test(test_extremes_planes),
         cmocka_unit_test(test_extremes_height),

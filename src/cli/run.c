@@ -222,6 +222,7 @@ int ef_main(int argc, char **argv)
         goto done;
     }
 
+    ef_scene_bind(&o.scene, cam.pos);
     job.pass = (ef_fog_pass){ &cam, &conv, &o.scene };
     exr_attr_box2i_t dw;
     exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);

@@ -57,10 +57,22 @@ typedef struct ef_line {
     double h0, s, h1;
 } ef_line;
 
-static inline void ef_line_of(const ef_fog_functional *f, const double org[3],
-                              const double dir[3], double len, ef_line *l)
+/* n.org + d where n is the normal of c's first functional: from the
+ * camera bound by ef_fog_bind when org is that camera (bit-identical). */
+static inline ef_dd ef_fog_dot_org(const ef_fog_component *c, const double n[3],
+                                   const double org[3], double d)
 {
-    const ef_dd h0 = ef_dd_dot3(f->n, org, f->d), s = ef_dd_dot3(f->n, dir, 0.0);
+    if (c->bound && org[0] == c->bound_org[0] && org[1] == c->bound_org[1] &&
+        org[2] == c->bound_org[2])
+        return ef_dd_add((ef_dd) { c->bound_dot[0], c->bound_dot[1] }, (ef_dd) { d, 0.0 });
+    return ef_dd_dot3(n, org, d);
+}
+
+/* ef_line_of with the start value h0 = f.org + d already known. */
+static inline void ef_line_from(const ef_fog_functional *f, ef_dd h0, const double dir[3],
+                                double len, ef_line *l)
+{
+    const ef_dd s = ef_dd_dot3(f->n, dir, 0.0);
     l->h0 = h0.hi + h0.lo;
     l->s = s.hi + s.lo;
     if (isinf(len))
@@ -69,6 +81,12 @@ static inline void ef_line_of(const ef_fog_functional *f, const double org[3],
         const ef_dd h1 = ef_dd_affine(h0, s, len);
         l->h1 = h1.hi + h1.lo;
     }
+}
+
+static inline void ef_line_of(const ef_fog_functional *f, const double org[3],
+                              const double dir[3], double len, ef_line *l)
+{
+    ef_line_from(f, ef_dd_dot3(f->n, org, f->d), dir, len, l);
 }
 
 /* The same in long double, for the reference integrator. */

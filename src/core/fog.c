@@ -1,5 +1,7 @@
 #include "fog.h"
 
+#include "exact.h"
+
 #include <errno.h>
 #include <stdio.h>
 #include <math.h>
@@ -245,6 +247,21 @@ int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src)
         memcpy(dst->arr, src->arr, (size_t) src->narr * sizeof *dst->arr);
     }
     return 0;
+}
+
+void ef_fog_bind(ef_fog_component *c, const double org[3])
+{
+    ef_fog_functional f;
+    c->bound = 0;
+    if (!c->model->functionals || c->model->functionals(c, &f, 1) < 1)
+        return;
+    /* ef_dd_dot3 adds d last, so n.org + d later is the same bits as in one go. */
+    const ef_dd d = ef_dd_add(ef_dd_add(ef_two_prod(f.n[0], org[0]), ef_two_prod(f.n[1], org[1])),
+                              ef_two_prod(f.n[2], org[2]));
+    memcpy(c->bound_org, org, sizeof c->bound_org);
+    c->bound_dot[0] = d.hi;
+    c->bound_dot[1] = d.lo;
+    c->bound = 1;
 }
 
 void ef_fog_free(ef_fog_component *c)

@@ -38,6 +38,10 @@ typedef struct ef_fog_component {
     int has_color, has_up;
     double color[3];                 /* color=R,G,B: this component's in-scattered colour */
     double up[3];                    /* unit up (height models): up= key, else the context's */
+    /* The camera bound by ef_fog_bind: n.org of the first functional, as a
+     * double-double, so per-pixel work skips a per-frame constant. */
+    int bound;
+    double bound_org[3], bound_dot[2];
     char spec[8192];                 /* the SPEC as written, for messages */
 } ef_fog_component;
 
@@ -91,6 +95,11 @@ double ef_fog_per_unit2(const ef_fog_context *ctx, double per_meter2);
  * error, returns -1 with a message quoting the offending text (unknown model
  * or key, missing value, bad number...). Release c with ef_fog_free. */
 int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err);
+
+/* Precomputes the camera-dependent part of c's first functional for rays
+ * starting at org (the camera). Rays from elsewhere are still exact. Call
+ * before any thread evaluates c. */
+void ef_fog_bind(ef_fog_component *c, const double org[3]);
 
 /* Copies src into dst, duplicating owned data. Returns 0 or -1 (memory). */
 int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src);

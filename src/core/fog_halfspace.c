@@ -128,7 +128,7 @@ static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
         return IN_NONE;
     const ef_fog_functional f = { { c->p[0], c->p[1], c->p[2] }, c->p[3] };
     ef_line ln;
-    ef_line_of(&f, r->org, r->dir, L, &ln);
+    ef_line_from(&f, ef_fog_dot_org(c, f.n, r->org, f.d), r->dir, L, &ln);
     const double h0 = ln.h0, h1 = ln.h1, s = ln.s;
     /* Outside, or lying in the plane (h0 = h1 = 0): the density is 0 there. */
     if (h0 >= 0 && h1 >= 0)

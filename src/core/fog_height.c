@@ -96,7 +96,7 @@ static void tau_height(const ef_fog_component *c, const ef_ray *r, double tau[3]
 {
     const ef_fog_functional f = height_functional(c);
     const double k = c->p[3], L = r->dist;
-    const ef_dd u0 = ef_dd_dot3(f.n, r->org, f.d), sd = ef_dd_dot3(f.n, r->dir, 0.0);
+    const ef_dd u0 = ef_fog_dot_org(c, f.n, r->org, f.d), sd = ef_dd_dot3(f.n, r->dir, 0.0);
     const double s = sd.hi + sd.lo;
     double x = 0.0;
     if (isinf(L)) {

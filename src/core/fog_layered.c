@@ -518,7 +518,7 @@ static void tau_layered(const ef_fog_component *c, const ef_ray *r, double tau[3
     }
     /* Heights kept as double-doubles so the pieces' spans next to a knot
      * do not cancel, far from the origin included. */
-    const ef_dd u0 = ef_dd_dot3(c->up, r->org, 0.0), sd = ef_dd_dot3(c->up, r->dir, 0.0);
+    const ef_dd u0 = ef_fog_dot_org(c, c->up, r->org, 0.0), sd = ef_dd_dot3(c->up, r->dir, 0.0);
     const double s = sd.hi + sd.lo;
     if (s == 0) {
         const where at = locate(&p, first_above(p.h, p.n, u0), u0);

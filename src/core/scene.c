@@ -47,6 +47,12 @@ int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err)
     return 0;
 }
 
+void ef_scene_bind(ef_fog_scene *s, const double org[3])
+{
+    for (int i = 0; i < s->ncomp; ++i)
+        ef_fog_bind(&s->comp[i], org);
+}
+
 void ef_scene_free(ef_fog_scene *s)
 {
     for (int i = 0; i < s->ncomp; ++i)

@@ -28,6 +28,10 @@ void ef_scene_init(ef_fog_scene *s);
 /* Parses SPEC with the scene's context and appends it. Returns 0 or -1. */
 int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err);
 
+/* Binds every component to the camera at org (ef_fog_bind): once per
+ * frame, before the threads start. */
+void ef_scene_bind(ef_fog_scene *s, const double org[3]);
+
 /* Releases the components' data; the scene is empty afterwards. */
 void ef_scene_free(ef_fog_scene *s);
 
