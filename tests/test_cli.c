@@ -128,11 +128,7 @@ static unsigned char *slurp(const char *path, size_t *len)
 
 static void spit(const char *path, const void *data, size_t len)
 {
-    FILE *f = fopen(path, "wb");
-    assert_non_null(f);
-    if (len)
-        assert_int_equal(fwrite(data, 1, len, f), len);
-    assert_int_equal(fclose(f), 0);
+    assert_int_equal(tu_write_bytes(path, data, len), 0);
 }
 
 static int same_bytes(const char *path, const unsigned char *data, size_t len)

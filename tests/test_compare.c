@@ -376,6 +376,23 @@ static void test_random_grid(void **state)
 
 /* ---- the explicit extreme set ---- */
 
+/* The 26 unit directions to the faces, edges and corners of a cube. */
+static int cube_dirs(double out[26][3])
+{
+    int n = 0;
+    for (int x = -1; x <= 1; ++x)
+        for (int y = -1; y <= 1; ++y)
+            for (int z = -1; z <= 1; ++z)
+                if (x || y || z) {
+                    double *d = out[n++];
+                    d[0] = x;
+                    d[1] = y;
+                    d[2] = z;
+                    unit(d);
+                }
+    return n;
+}
+
 /* Segments around the plane y = c (normal +y) at offset P: camera on it,
  * pixel on it, both, parallel (s = 0, +-1e-12), grazing, zero length, and
  * the sky in 26 directions plus exactly horizontal ones. */
@@ -405,18 +422,12 @@ static void plane_cases(const ef_fog_component *c, const double P[3], double cy,
         }
     }
     /* Sky in the 26 directions of a cube, from above, on and below the plane. */
-    for (int x = -1; x <= 1; ++x)
-        for (int y = -1; y <= 1; ++y)
-            for (int z = -1; z <= 1; ++z) {
-                if (!x && !y && !z)
-                    continue;
-                double dir[3] = { x, y, z };
-                unit(dir);
-                for (size_t h = 0; h < sizeof heights / sizeof heights[0]; ++h) {
-                    const double org[3] = { P[0], cy + heights[h], P[2] };
-                    compare(c, org, dir, INFINITY, t);
-                }
-            }
+    double cube[26][3];
+    for (int d = cube_dirs(cube); d-- > 0;)
+        for (size_t h = 0; h < sizeof heights / sizeof heights[0]; ++h) {
+            const double org[3] = { P[0], cy + heights[h], P[2] };
+            compare(c, org, cube[d], INFINITY, t);
+        }
 }
 
 static void test_extremes_planes(void **state)
@@ -525,19 +536,14 @@ static void test_extremes_volumes(void **state)
                     { B - S, cyy, cz }, { B + 5 * S, B + 5 * S, B - 3 * S }, { cx, B + 2 * S, cz },
                 };
                 const double lens[] = { 0, S / 3, S, 3 * S, 1e4 * S, INFINITY };
+                double cube[26][3];
+                const int nd = cube_dirs(cube);
                 for (size_t k = 0; k < sizeof cams / sizeof cams[0]; ++k)
-                    for (int x = -1; x <= 1; ++x)
-                        for (int y = -1; y <= 1; ++y)
-                            for (int w = -1; w <= 1; ++w) {
-                                if (!x && !y && !w)
-                                    continue;
-                                double dir[3] = { x, y, w };
-                                unit(dir);
-                                for (size_t l = 0; l < sizeof lens / sizeof lens[0]; ++l) {
-                                    compare(&box, cams[k], dir, lens[l], &tb);
-                                    compare(&cvx, cams[k], dir, lens[l], &tc);
-                                }
-                            }
+                    for (int d = 0; d < nd; ++d)
+                        for (size_t l = 0; l < sizeof lens / sizeof lens[0]; ++l) {
+                            compare(&box, cams[k], cube[d], lens[l], &tb);
+                            compare(&cvx, cams[k], cube[d], lens[l], &tc);
+                        }
                 ef_fog_free(&box);
                 ef_fog_free(&cvx);
             }

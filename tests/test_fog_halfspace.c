@@ -28,7 +28,7 @@ static int parse_at(const char *spec, double units_per_meter, ef_fog_component *
 
 static void parse_ok(int line, const char *spec, double upm, ef_fog_component *c)
 {
-    ef_err err = { { 0 }, NULL };
+    ef_err err = { .file = NULL };
     if (parse_at(spec, upm, c, &err)) {
         print_error("line %d: '%s' failed: %s\n", line, spec, err.msg);
         fail();
@@ -506,7 +506,7 @@ static void test_interface(void **state)
 static void expect_error(int line, const char *spec, const char *n1, const char *n2)
 {
     ef_fog_component c;
-    ef_err err = { { 0 }, NULL };
+    ef_err err = { .file = NULL };
     if (parse_at(spec, 1.0, &c, &err) == 0) {
         print_error("line %d: '%s' was accepted\n", line, spec);
         fail();

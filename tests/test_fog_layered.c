@@ -382,7 +382,7 @@ static int read_text(const char *path, char **text, ef_err *err)
     *text = NULL;
     FILE *f = fopen(path, "rb");
     if (!f) {
-        err->file = path;
+        ef_err_set_file(err, path);
         return ef_fail(err, "cannot open (%s)", strerror(errno));
     }
     size_t cap = 256, len = 0;

@@ -22,7 +22,7 @@ static const double REL = 1e-14;
 
 static void parse_ctx(const char *spec, const ef_fog_context *ctx, ef_fog_component *c)
 {
-    ef_err err = { { 0 }, NULL };
+    ef_err err = { .file = NULL };
     if (ef_fog_parse(spec, ctx, c, &err))
         fail_msg("'%s' failed: %s", spec, err.msg);
 }
@@ -419,7 +419,7 @@ static void test_density_functionals_features(void **state)
 static void expect_error(const char *spec, const char *quote)
 {
     ef_fog_component c;
-    ef_err err = { { 0 }, NULL };
+    ef_err err = { .file = NULL };
     if (ef_fog_parse(spec, NULL, &c, &err) == 0) {
         ef_fog_free(&c);
         fail_msg("'%s' was accepted", spec);

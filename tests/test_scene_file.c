@@ -70,11 +70,7 @@ static path_t pth(const char *fmt, ...)
 
 static void spit(const char *path, const char *data, size_t len)
 {
-    FILE *f = fopen(path, "wb");
-    assert_non_null(f);
-    if (len)
-        assert_int_equal(fwrite(data, 1, len, f), len);
-    assert_int_equal(fclose(f), 0);
+    assert_int_equal(tu_write_bytes(path, data, len), 0);
 }
 
 /* Writes text to scratch file name and returns its path. */

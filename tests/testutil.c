@@ -401,6 +401,15 @@ int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
     return WIFEXITED(st) ? WEXITSTATUS(st) : 128;
 }
 
+int tu_write_bytes(const char *path, const void *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f)
+        return -1;
+    const int ok = (len == 0 || fwrite(data, 1, len, f) == len);
+    return fclose(f) == 0 && ok ? 0 : -1;
+}
+
 int tu_exists(const char *path)
 {
     struct stat sb;

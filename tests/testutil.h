@@ -109,6 +109,10 @@ int tu_runf(const char *fmt, ...)
         }                                                                                 \
     } while (0)
 
+/* Writes len bytes of data to path (replacing it). Returns 0, or -1 on any
+ * failure. */
+int tu_write_bytes(const char *path, const void *data, size_t len);
+
 /* 1 if the file exists. */
 int tu_exists(const char *path);
 

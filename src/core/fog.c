@@ -238,6 +238,9 @@ int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src)
 {
     *dst = *src;
     dst->arr = NULL;
+    dst->path = NULL;
+    if (src->path && !(dst->path = strdup(src->path)))
+        return -1;
     if (src->narr > 0) {
         dst->arr = malloc((size_t) src->narr * sizeof *dst->arr);
         if (!dst->arr) {
@@ -267,7 +270,9 @@ void ef_fog_bind(ef_fog_component *c, const double org[3])
 void ef_fog_free(ef_fog_component *c)
 {
     free(c->arr);
+    free(c->path);
     c->arr = NULL;
+    c->path = NULL;
     c->narr = 0;
 }
 

@@ -34,6 +34,7 @@ typedef struct ef_fog_component {
     double p[EF_FOG_MAX_PARAMS];     /* model parameters; layout is the model's */
     double *arr;                     /* variable-size data (planes, profiles), owned */
     int narr;                        /* number of doubles in arr */
+    char *path;                      /* a file= key's path, owned */
     unsigned seen;                   /* bit i: key i of the model was given */
     int has_color, has_up;
     double color[3];                 /* color=R,G,B: this component's in-scattered colour */

@@ -11,9 +11,7 @@
  *     ghi[n], glo[n]           G(h_i) = integral of sigma from h_0 to h_i, as a
  *                              double-double so differences stay accurate
  * Before finish, heights= and densities= are kept in arr as [heights | R,G,B
- * triples] with p[0], p[1] their counts. file= keeps its path as the bytes of
- * p when it fits, else just past the NUL that ends c->spec: either way it
- * lives as long as c, so err->file may point at it after finish() fails. */
+ * triples] with p[0], p[1] their counts; file= keeps its path in c->path. */
 #include "exact.h"
 #include "fog.h"
 
@@ -29,12 +27,6 @@
 enum { K_HEIGHTS, K_DENSITIES, K_FILE };
 
 static const char *const layered_keys[] = { "heights", "densities", "file", NULL };
-
-static const char *layered_path(const ef_fog_component *c)
-{
-    const char *p = (const char *) c->p;
-    return *p ? p : c->spec + strlen(c->spec) + 1;
-}
 
 #define CLIP 160
 
@@ -186,13 +178,8 @@ static int set_layered(ef_fog_component *c, int k, const char *val, ef_err *err)
         return set_heights(c, val, err);
     if (k == K_DENSITIES)
         return set_densities(c, val, err);
-    const size_t len = strlen(val), at = strlen(c->spec) + 1;
-    if (len < sizeof c->p)
-        memcpy(c->p, val, len + 1);
-    else if (at + len < sizeof c->spec)
-        memcpy(c->spec + at, val, len + 1);
-    else
-        return lfail(c, err, "file= path is too long");
+    if (!(c->path = strdup(val)))
+        return lfail(c, err, "out of memory");
     return 0;
 }
 
@@ -238,8 +225,8 @@ static int build_profile(ef_fog_component *c, const ef_fog_context *ctx, const d
     return 0;
 }
 
-/* Formats "fog spec 'S': profile 'P' line N: ..." and points err->file at
- * the path kept in c->p (it lives as long as c). */
+/* Formats "fog spec 'S': profile 'P' line N: ..." and names the profile in
+ * err->file (a copy: c->path goes when the failed component is freed). */
 #if defined(__GNUC__)
 __attribute__((format(printf, 4, 5)))
 #endif
@@ -250,9 +237,8 @@ static int profile_fail(const ef_fog_component *c, ef_err *err, int line, const 
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
-    const char *path = clip(layered_path(c), pb);
-    if (err)
-        err->file = layered_path(c);
+    const char *path = clip(c->path, pb);
+    ef_err_set_file(err, c->path);
     if (line > 0)
         return lfail(c, err, "profile '%s' line %d: %s", path, line, msg);
     return lfail(c, err, "profile '%s' %s", path, msg);
@@ -350,8 +336,8 @@ static int finish_file(ef_fog_component *c, const ef_fog_context *ctx, ef_err *e
         return lfail(c, err, "file= cannot be read here (give the profile as heights=H0,...:"
                      "densities=D0,... instead)");
     char *text = NULL;
-    /* read_file sets err (and err->file, to our lasting copy of the path). */
-    if (ctx->read_file(layered_path(c), &text, err)) {
+    /* read_file sets err, err->file included. */
+    if (ctx->read_file(c->path, &text, err)) {
         free(text);
         return -1;
     }
@@ -365,8 +351,8 @@ static int finish_file(ef_fog_component *c, const ef_fog_context *ctx, ef_err *e
     int rc = -1;
     if (n > 0) {
         rc = build_profile(c, ctx, buf, buf + LAYERED_MAX, n, err);
-        if (rc && err)
-            err->file = layered_path(c);
+        if (rc)
+            ef_err_set_file(err, c->path);
     }
     free(buf);
     return rc;

@@ -70,43 +70,39 @@ static void mix_where_opaque(const ef_fog_scene *s, const ef_ray *r, const int n
                              double wc[3])
 {
     ef_ray near = *r;
-    double sum[3] = { 0, 0, 0 }, w[3] = { 0, 0, 0 };
-    for (double D = 1.0; D < 1e300; D *= 4.0) {
+    double sum[3], w[3], wall[3];
+    int walls[3];
+    for (double D = 1.0;; D *= 4.0) {
         near.dist = D;
         near.planar = isfinite(r->planar) && r->dist > 0 ? r->planar * (D / r->dist) : D;
-        sum[0] = sum[1] = sum[2] = w[0] = w[1] = w[2] = 0;
+        for (int k = 0; k < 3; ++k) {
+            sum[k] = w[k] = wall[k] = 0;
+            walls[k] = 0;
+        }
         for (int i = 0; i < s->ncomp; ++i) {
             const ef_fog_component *c = &s->comp[i];
             double t[3];
             c->model->tau(c, &near, t);
-            for (int k = 0; k < 3; ++k)
-                if (t[k] > 0) {
+            for (int k = 0; k < 3; ++k) {
+                const double col = c->has_color ? c->color[k] : s->color[k];
+                if (isinf(t[k])) {   /* opaque within D (a wall): its colour alone */
+                    walls[k]++;
+                    wall[k] += col;
+                } else if (t[k] > 0) {
                     sum[k] += t[k];
-                    w[k] += (isinf(t[k]) ? 1.0 : t[k]) * (c->has_color ? c->color[k] : s->color[k]);
+                    w[k] += t[k] * col;
                 }
+            }
         }
         int done = 1;
         for (int k = 0; k < 3; ++k)
-            done &= !ninf[k] || sum[k] >= 40.0;
-        if (done)
+            done &= !ninf[k] || walls[k] || sum[k] >= 40.0;
+        if (done || D > 1e300)
             break;
     }
     for (int k = 0; k < 3; ++k)
-        if (ninf[k]) {
-            /* A component opaque within D (a wall) takes the colour alone. */
-            int walls = 0;
-            double wall = 0;
-            for (int i = 0; i < s->ncomp; ++i) {
-                const ef_fog_component *c = &s->comp[i];
-                double t[3];
-                c->model->tau(c, &near, t);
-                if (isinf(t[k])) {
-                    walls++;
-                    wall += c->has_color ? c->color[k] : s->color[k];
-                }
-            }
-            wc[k] = walls ? wall / walls : sum[k] > 0 ? w[k] / sum[k] : s->color[k];
-        }
+        if (ninf[k])
+            wc[k] = walls[k] ? wall[k] / walls[k] : sum[k] > 0 ? w[k] / sum[k] : s->color[k];
 }
 
 /* Sums the components' optical depths and, with per-component colours, the

@@ -26,8 +26,7 @@ static const char top_keys[] = "units, up, color, sky, fog";
 int ef_read_text_file(const char *path, char **text, ef_err *err)
 {
     *text = NULL;
-    if (err)
-        err->file = path;
+    ef_err_set_file(err, path);   /* path may belong to a fog component freed on failure */
     FILE *fp = fopen(path, "rb");
     if (!fp)
         return ef_fail(err, "cannot open: %s", strerror(errno));
