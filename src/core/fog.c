@@ -20,6 +20,8 @@ static const ef_fog_model *const registry[] = {
     &ef_fog_layered,
     &ef_fog_box,
     &ef_fog_convex,
+    &ef_fog_noise,
+    &ef_fog_noise_separable,
 };
 
 void ef_fog_context_init(ef_fog_context *ctx)
@@ -29,6 +31,20 @@ void ef_fog_context_init(ef_fog_context *ctx)
     ctx->up[2] = 0.0;
     ctx->units_per_meter = 1.0;
     ctx->read_file = NULL;
+    ctx->time = 0.0;
+}
+
+void ef_fog_tau(const ef_fog_component *c, const ef_ray *r, double tau[3], ef_tau_info *info)
+{
+    if (info && c->model->tau_info) {
+        c->model->tau_info(c, r, tau, info);
+        return;
+    }
+    c->model->tau(c, r, tau);
+    if (info) {
+        info->err[0] = info->err[1] = info->err[2] = 0.0;
+        info->evals = info->cells = info->dropped = 0.0;
+    }
 }
 
 double ef_fog_per_unit(const ef_fog_context *ctx, double per_meter)

@@ -21,6 +21,7 @@ typedef enum ef_distance_kind { EF_DIST_RADIAL = 0, EF_DIST_PLANAR } ef_distance
 typedef struct ef_fog_context {
     double up[3];                    /* unit length */
     double units_per_meter;          /* > 0 */
+    double time;                     /* --time T: the time every velocity= key is read at */
     /* Reads a whole text file (file= keys) into a malloc'd, NUL-terminated
      * buffer; NULL means files cannot be read here. The core does no I/O. */
     int (*read_file)(const char *path, char **text, ef_err *err);
@@ -60,6 +61,23 @@ typedef struct ef_fog_feature {
     double value, scale;
 } ef_fog_feature;
 
+/* Where a density repeats a non-smooth seam: functional f crosses
+ * phase + k * period for every integer k (a noise lattice's planes). The
+ * reference integrator splits at every such crossing on a segment. */
+typedef struct ef_fog_lattice {
+    int f;
+    double phase, period;
+} ef_fog_lattice;
+
+/* What one optical-depth evaluation cost and how far it may be off. Closed
+ * forms leave it zero. */
+typedef struct ef_tau_info {
+    double err[3];      /* bound (or stated estimate) of |tau - exact tau| per channel */
+    double evals;       /* noise evaluations (one octave at one point each) */
+    double cells;       /* lattice cells walked, over all octaves */
+    double dropped;     /* octaves left out by the tolerance rule */
+} ef_tau_info;
+
 typedef struct ef_fog_model {
     const char *name;
     const char *const *keys;         /* NULL-terminated list of accepted keys */
@@ -80,6 +98,13 @@ typedef struct ef_fog_model {
     /* Density per channel at a point given by its functional values v
      * (any may be +-INFINITY: the density's limit there). */
     void (*density)(const ef_fog_component *c, const long double *v, long double out[3]);
+    /* Models whose tau is not a closed form (noise) also report its error
+     * and cost; NULL for the exact ones. tau must give the same values. */
+    void (*tau_info)(const ef_fog_component *c, const ef_ray *r, double tau[3],
+                     ef_tau_info *info);
+    /* Periodic seams for the reference integrator (NULL: none), like
+     * functionals(): fills up to cap, returns how many there are. */
+    int (*lattices)(const ef_fog_component *c, ef_fog_lattice *out, int cap);
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */
 } ef_fog_model;
@@ -107,6 +132,10 @@ int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src);
 
 /* Releases what c owns; c may then be reused. */
 void ef_fog_free(ef_fog_component *c);
+
+/* c's optical depth along r, and into info (which may be NULL) its error
+ * and cost: zero for the closed forms. */
+void ef_fog_tau(const ef_fog_component *c, const ef_ray *r, double tau[3], ef_tau_info *info);
 
 /* The registered model with this name, or NULL. */
 const ef_fog_model *ef_fog_model_find(const char *name);
@@ -145,5 +174,6 @@ static inline double ef_fog_distance(const ef_fog_component *c, const ef_ray *r)
 extern const ef_fog_model ef_fog_linear, ef_fog_exp, ef_fog_exp2;
 extern const ef_fog_model ef_fog_halfspace, ef_fog_halfspace_linear, ef_fog_halfspace_smooth;
 extern const ef_fog_model ef_fog_height, ef_fog_layered, ef_fog_box, ef_fog_convex;
+extern const ef_fog_model ef_fog_noise, ef_fog_noise_separable;
 
 #endif

@@ -1,0 +1,1243 @@
+/* Heterogeneous fog from Perlin noise (seed 004 section 3.2.3, made
+ * three-dimensional), with a speed/accuracy trade the user picks and sees.
+ *
+ *   noise:            sigma = rho env(p) max(0, 1 + c fbm(q))
+ *   noise-separable:  sigma = rho env(p) prod_{a in axes} max(0, 1 + c fbm(e_a(q_a)))
+ *
+ * q = (p - offset - velocity time) / scale + seed S, env = e^(-k (up.p - base)),
+ * sigma = 0 outside the box [min, max] when one is given (noise.h has fbm).
+ *
+ * Methods (method= key):
+ *   exact     inside one lattice cell the noise along a line is a polynomial
+ *             of degree 16, so Gauss-Legendre with 9 nodes per cell segment is
+ *             exact; each octave's cells are walked on their own (a 3D DDA)
+ *             and summed with compensated summation. Where that is not
+ *             enough (the envelope is not constant, or the clamp can bind),
+ *             every cell segment is integrated by a pair of Gauss rules
+ *             (9 and 13 nodes) and bisected until they agree to 1e-13.
+ *   adaptive  tau to an absolute error tol (the default): per octave the
+ *             fewest Gauss nodes per cell whose calibrated error fits, fine
+ *             octaves dropped when their contribution cannot reach tol, and
+ *             every pixel's error estimate reported.
+ *   steps     the uniform midpoint ray-march of game engines (steps=N).
+ *   preintegrated  (noise-separable) the seed's evaluation: per-axis prefix
+ *             integrals and the product of the factors' means over K pieces.
+ * The mean part rho * integral(env) is always the closed form.
+ *
+ * Lattice coordinates are formed in long double from the ray's origin and
+ * reduced modulo the noise period 256, so a fraction inside a cell keeps
+ * its absolute precision wherever the camera and the offset are. */
+#include "exact.h"
+#include "fog.h"
+#include "noise.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum {
+    K_DENSITY, K_VISIBILITY, K_SCALE, K_OCTAVES, K_LACUNARITY, K_GAIN, K_CONTRAST, K_OFFSET,
+    K_VELOCITY, K_SEED, K_FALLOFF, K_BASE, K_MIN, K_MAX, K_METHOD, K_TOL, K_STEPS, K_AXES,
+    K_PIECES
+};
+
+static const char *const noise_keys[] = {
+    "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
+    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "steps", NULL
+};
+static const char *const separable_keys[] = {
+    "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
+    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "steps", "axes",
+    "pieces", NULL
+};
+
+/* p[] while parsing (finish() moves everything into the state in arr). */
+enum {
+    P_RHO = 0, P_SCALE = 3, P_OCTAVES, P_LACUNARITY, P_GAIN, P_CONTRAST, P_OFFSET = 8,
+    P_VELOCITY = 11, P_SEED = 14, P_FALLOFF, P_BASE, P_MIN = 17, P_MAX = 20, P_METHOD = 23,
+    P_TOL, P_STEPS, P_AXES, P_PIECES
+};
+
+enum { M_ADAPTIVE = 0, M_EXACT, M_STEPS, M_PREINT };
+
+/* The default tolerance: 2^-12 in tau keeps |dT| = T |dtau| below half an
+ * ulp of a half float for every T, so half output cannot tell. */
+#define DEFAULT_TOL 0x1p-12
+#define DEFAULT_STEPS 64
+#define GL_MAX 16
+#define TAB 257          /* prefix entries per octave over one period of 256 cells */
+
+/* Everything a component needs per evaluation, stored in c->arr (plain
+ * numbers only, so ef_fog_copy's memcpy duplicates it); the preintegrated
+ * tables follow it. */
+typedef struct nstate {
+    int separable, method, steps, pieces, naxes, axis[3], has_box, clamp;
+    double rho[3], rho_max;          /* per scene unit */
+    double scale, contrast, seed, k, base, tol, time;
+    double offset[3], velocity[3], bmin[3], bmax[3], up[3];
+    double fixed[3][EF_FBM_MAX_OCTAVES][2];   /* separable: the two constant noise coordinates */
+    ef_fbm fbm;
+    double glx[GL_MAX + 1][GL_MAX], glw[GL_MAX + 1][GL_MAX];   /* Gauss-Legendre on [-1, 1] */
+    int tab_off;                     /* separable: index in arr of the prefix tables, or 0 */
+} nstate;
+
+static const nstate *state(const ef_fog_component *c)
+{
+    return (const nstate *) (const void *) c->arr;
+}
+
+/* ---- parsing ---- */
+
+static int set_vec3(ef_fog_component *c, const char *key, const char *val, double *out,
+                    ef_err *err)
+{
+    if (ef_parse_numbers(val, out, 3))
+        return ef_fail(err, "fog spec '%s': %s='%s' is not X,Y,Z (three numbers)", c->spec, key, val);
+    return 0;
+}
+
+static int set_real(ef_fog_component *c, const char *key, const char *val, double *out,
+                    const char *what, int (*ok)(double), ef_err *err)
+{
+    if (ef_parse_numbers(val, out, 1) || (ok && !ok(*out)))
+        return ef_fail(err, "fog spec '%s': %s='%s' %s", c->spec, key, val, what);
+    return 0;
+}
+
+static int positive(double v) { return v > 0; }
+static int nonneg(double v) { return v >= 0; }
+static int above_one(double v) { return v > 1; }
+
+static int set_noise(ef_fog_component *c, int k, const char *val, ef_err *err)
+{
+    double *p = c->p;
+    switch (k) {
+    case K_DENSITY:
+        return ef_fog_set_density(c, "density", val, p + P_RHO, err);
+    case K_VISIBILITY:
+        return ef_fog_set_visibility(c, "visibility", val, p + P_RHO, err);
+    case K_SCALE:
+        return set_real(c, "scale", val, p + P_SCALE, "must be a length > 0 (scene units: the "
+                        "size of the coarsest noise cell)", positive, err);
+    case K_OCTAVES: {
+        char *end;
+        long n = strtol(val, &end, 10);
+        if (*end || end == val || n < 1 || n > EF_FBM_MAX_OCTAVES)
+            return ef_fail(err, "fog spec '%s': octaves='%s' must be a whole number from 1 to %d",
+                           c->spec, val, EF_FBM_MAX_OCTAVES);
+        p[P_OCTAVES] = (double) n;
+        return 0;
+    }
+    case K_LACUNARITY:
+        return set_real(c, "lacunarity", val, p + P_LACUNARITY, "must be a number > 1 (each "
+                        "octave's frequency over the previous one; 2 is usual)", above_one, err);
+    case K_GAIN:
+        return set_real(c, "gain", val, p + P_GAIN, "must be a number > 0 (each octave's "
+                        "amplitude over the previous one; 0.5 is usual)", positive, err);
+    case K_CONTRAST:
+        return set_real(c, "contrast", val, p + P_CONTRAST, "is not a number", NULL, err);
+    case K_OFFSET:
+        return set_vec3(c, "offset", val, p + P_OFFSET, err);
+    case K_VELOCITY:
+        return set_vec3(c, "velocity", val, p + P_VELOCITY, err);
+    case K_SEED:
+        return set_real(c, "seed", val, p + P_SEED, "is not a number", NULL, err);
+    case K_FALLOFF:
+        return set_real(c, "falloff", val, p + P_FALLOFF, "must be a number >= 0 (per metre; 0: "
+                        "no height envelope)", nonneg, err);
+    case K_BASE:
+        return set_real(c, "base", val, p + P_BASE, "is not a number (the height, in scene "
+                        "units, where the envelope is 1)", NULL, err);
+    case K_MIN:
+        return set_vec3(c, "min", val, p + P_MIN, err);
+    case K_MAX:
+        return set_vec3(c, "max", val, p + P_MAX, err);
+    case K_METHOD: {
+        static const char *const names[] = { "adaptive", "exact", "steps", "preintegrated" };
+        for (int m = 0; m < 4; ++m)
+            if (!strcmp(val, names[m]) && (m != M_PREINT || c->model == &ef_fog_noise_separable)) {
+                p[P_METHOD] = m;
+                return 0;
+            }
+        return ef_fail(err, "fog spec '%s': method='%s' is not adaptive, exact, steps%s", c->spec,
+                       val, c->model == &ef_fog_noise_separable ? " or preintegrated" : "");
+    }
+    case K_TOL:
+        return set_real(c, "tol", val, p + P_TOL, "must be a number > 0 (the absolute error "
+                        "allowed in tau, which is the relative error of T)", positive, err);
+    case K_STEPS:
+    case K_PIECES: {
+        char *end;
+        long n = strtol(val, &end, 10);
+        if (*end || end == val || n < 1 || n > 1000000)
+            return ef_fail(err, "fog spec '%s': %s='%s' must be a whole number from 1 to 1000000",
+                           c->spec, k == K_STEPS ? "steps" : "pieces", val);
+        p[k == K_STEPS ? P_STEPS : P_PIECES] = (double) n;
+        return 0;
+    }
+    default: { /* K_AXES */
+        int mask = 0;
+        for (const char *s = val; *s; ++s) {
+            const int bit = *s == 'x' ? 1 : *s == 'y' ? 2 : *s == 'z' ? 4 : 0;
+            if (!bit || (mask & bit))
+                return ef_fail(err, "fog spec '%s': axes='%s' must be a subset of xyz, each axis "
+                               "once (e.g. xz)", c->spec, val);
+            mask |= bit;
+        }
+        p[P_AXES] = mask;
+        return 0;
+    }
+    }
+}
+
+/* Gauss-Legendre nodes and weights on [-1, 1] for n points (Newton on the
+ * Legendre recurrence in long double). */
+static void gauss_legendre(int n, double *x, double *w)
+{
+    const long double pi = 3.141592653589793238462643383279502884L;
+    for (int i = 0; i < n; ++i) {
+        long double z = cosl(pi * (i + 0.75L) / (n + 0.5L)), dp = 1;
+        for (int it = 0; it < 100; ++it) {
+            long double p0 = 1, p1 = z;
+            for (int j = 2; j <= n; ++j) {
+                const long double p2 = ((2 * j - 1) * z * p1 - (j - 1) * p0) / j;
+                p0 = p1;
+                p1 = p2;
+            }
+            if (n == 1)
+                p0 = 1, p1 = z;
+            dp = n * (z * p1 - p0) / (z * z - 1);
+            const long double dz = p1 / dp;
+            z -= dz;
+            if (fabsl(dz) < 1e-19L)
+                break;
+        }
+        x[i] = (double) -z;
+        w[i] = (double) (2 / ((1 - z * z) * dp * dp));
+    }
+}
+
+static void build_tables(nstate *s, double *tab);
+
+static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
+{
+    const int sep = c->model == &ef_fog_noise_separable;
+    const unsigned given = c->seen & ((1u << K_DENSITY) | (1u << K_VISIBILITY));
+    const char *name = c->model->name;
+    if (!given)
+        return ef_fail(err, "fog spec '%s': missing density (write %s:density=D:scale=L, or "
+                       "visibility=V instead of density)", c->spec, name);
+    if (given == ((1u << K_DENSITY) | (1u << K_VISIBILITY)))
+        return ef_fail(err, "fog spec '%s': give density or visibility, not both", c->spec);
+    if (!(c->seen & (1u << K_SCALE)))
+        return ef_fail(err, "fog spec '%s': missing scale (write %s:density=D:scale=L, L the "
+                       "coarsest noise cell in scene units)", c->spec, name);
+    const int has_min = !!(c->seen & (1u << K_MIN)), has_max = !!(c->seen & (1u << K_MAX));
+    if (has_min != has_max)
+        return ef_fail(err, "fog spec '%s': give both min=X,Y,Z and max=X,Y,Z for the box, or "
+                       "neither", c->spec);
+    for (int a = 0; has_min && a < 3; ++a)
+        if (!(c->p[P_MIN + a] <= c->p[P_MAX + a]))
+            return ef_fail(err, "fog spec '%s': the box's min %g is above its max %g on axis %c",
+                           c->spec, c->p[P_MIN + a], c->p[P_MAX + a], "xyz"[a]);
+    const int method = (c->seen & (1u << K_METHOD)) ? (int) c->p[P_METHOD] : M_ADAPTIVE;
+    if ((c->seen & (1u << K_STEPS)) && method != M_STEPS)
+        return ef_fail(err, "fog spec '%s': steps= only applies to method=steps", c->spec);
+    if ((c->seen & (1u << K_TOL)) && method != M_ADAPTIVE)
+        return ef_fail(err, "fog spec '%s': tol= only applies to method=adaptive", c->spec);
+    if (sep && (c->seen & (1u << K_PIECES)) && method != M_PREINT)
+        return ef_fail(err, "fog spec '%s': pieces= only applies to method=preintegrated", c->spec);
+
+    nstate s;
+    memset(&s, 0, sizeof s);
+    s.separable = sep;
+    s.method = method;
+    s.steps = (c->seen & (1u << K_STEPS)) ? (int) c->p[P_STEPS] : DEFAULT_STEPS;
+    s.pieces = (c->seen & (1u << K_PIECES)) ? (int) c->p[P_PIECES] : 1;
+    s.tol = (c->seen & (1u << K_TOL)) ? c->p[P_TOL] : DEFAULT_TOL;
+    const int axes = sep ? ((c->seen & (1u << K_AXES)) ? (int) c->p[P_AXES] : 5) : 7;
+    for (int a = 0; a < 3; ++a)
+        if (axes & (1 << a))
+            s.axis[s.naxes++] = a;
+    const int octaves = (c->seen & (1u << K_OCTAVES)) ? (int) c->p[P_OCTAVES] : 4;
+    const double lac = (c->seen & (1u << K_LACUNARITY)) ? c->p[P_LACUNARITY] : 2.0;
+    const double gain = (c->seen & (1u << K_GAIN)) ? c->p[P_GAIN] : 0.5;
+    ef_fbm_init(&s.fbm, octaves, lac, gain);
+    if (!isfinite(s.fbm.norm) || !isfinite(s.fbm.freq[octaves - 1]) || !(s.fbm.weight[octaves - 1] > 0))
+        return ef_fail(err, "fog spec '%s': lacunarity %g and gain %g over %d octaves leave the "
+                       "range of doubles; use fewer octaves or values nearer 2 and 0.5", c->spec,
+                       lac, gain, octaves);
+    s.contrast = (c->seen & (1u << K_CONTRAST)) ? c->p[P_CONTRAST] : 0.9;
+    s.clamp = fabs(s.contrast) * EF_NOISE_BOUND > 1;
+    s.scale = c->p[P_SCALE];
+    s.seed = c->p[P_SEED];
+    s.k = ef_fog_per_unit(ctx, c->p[P_FALLOFF]);
+    s.base = c->p[P_BASE];
+    s.time = ctx->time;
+    s.has_box = has_min;
+    s.rho_max = 0;
+    for (int a = 0; a < 3; ++a) {
+        s.rho[a] = ef_fog_per_unit(ctx, c->p[P_RHO + a]);
+        if (s.rho[a] > s.rho_max)
+            s.rho_max = s.rho[a];
+        s.offset[a] = c->p[P_OFFSET + a];
+        s.velocity[a] = c->p[P_VELOCITY + a];
+        s.bmin[a] = c->p[P_MIN + a];
+        s.bmax[a] = c->p[P_MAX + a];
+        s.up[a] = c->up[a];
+    }
+    if (!isfinite(s.k) || !isfinite(s.rho_max))
+        return ef_fail(err, "fog spec '%s': a density or falloff leaves the range of doubles",
+                       c->spec);
+    for (int a = 0; a < 3; ++a)
+        if (!isfinite(s.velocity[a] * s.time))
+            return ef_fail(err, "fog spec '%s': velocity times --time leaves the range of doubles",
+                           c->spec);
+    if (sep && method == M_PREINT && s.clamp)
+        return ef_fail(err, "fog spec '%s': method=preintegrated needs |contrast| <= %.6g, where "
+                       "the clamp max(0, 1 + c fbm) never binds (the factors' prefix integrals "
+                       "are then exact); use method=adaptive or exact for this contrast", c->spec,
+                       1 / EF_NOISE_BOUND);
+    /* The separable factors' constant coordinates, as the contract forms them. */
+    for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < octaves; ++i) {
+            static const double e_other[3][2] = { { 0.37, 0.71 }, { 0.37, 0.71 }, { 0.37, 0.71 } };
+            int j = 0;
+            for (int b = 0; b < 3; ++b)
+                if (b != a)
+                    s.fixed[a][i][j] = s.fbm.freq[i] * e_other[a][j] + (double) i * ef_fbm_offset[b],
+                    ++j;
+        }
+    for (int n = 1; n <= GL_MAX; ++n)
+        gauss_legendre(n, s.glx[n], s.glw[n]);
+
+    const size_t head = (sizeof s + sizeof(double) - 1) / sizeof(double);
+    const size_t ntab = sep ? (size_t) 3 * (size_t) octaves * TAB : 0;
+    double *arr = calloc(head + ntab, sizeof *arr);
+    if (!arr)
+        return ef_fail(err, "fog spec '%s': out of memory", c->spec);
+    s.tab_off = ntab ? (int) head : 0;
+    if (ntab)
+        build_tables(&s, arr + head);
+    memcpy(arr, &s, sizeof s);
+    free(c->arr);
+    c->arr = arr;
+    c->narr = (int) (head + ntab);
+    return 0;
+}
+
+/* ---- lattice coordinates along a ray ---- */
+
+/* A noise coordinate along the ray: u(t) = b + t d, b reduced modulo 256. */
+typedef struct lin {
+    long double b, d;
+} lin;
+
+static long double mod256(long double u)
+{
+    return u - 256 * floorl(u / 256);
+}
+
+/* q_a at the ray's origin and its rate per unit t, in long double. */
+static void q_line(const nstate *s, const double org[3], const double dir[3], int a,
+                   long double *q0, long double *dq)
+{
+    const long double sh = (long double) s->seed * ef_noise_seed_dir[a];
+    *q0 = (((long double) org[a] - s->offset[a]) - (long double) s->velocity[a] * s->time) /
+              s->scale + sh;
+    *dq = (long double) dir[a] / s->scale;
+}
+
+/* Octave i's coordinate on axis a along the ray. */
+static lin octave_line(const nstate *s, int i, long double q0, long double dq, int a)
+{
+    const long double f = s->fbm.freq[i];
+    return (lin) { mod256(f * q0 + (long double) i * ef_fbm_offset[a]), f * dq };
+}
+
+/* Splits a long double coordinate into a cell index and its fraction. */
+static void split_ld(long double u, int64_t *cell, double *frac)
+{
+    const long double f = floorl(u);
+    *cell = (int64_t) mod256(f);
+    double fr = (double) (u - f);
+    *frac = fr < 0 ? 0 : fr > 1 ? 1 : fr;
+}
+
+/* ---- the cell walk: several coordinates crossing integers along t ---- */
+
+#define MAXLIN (3 * EF_FBM_MAX_OCTAVES)
+
+typedef struct walk {
+    int m;
+    const lin *u;
+    long double cell[MAXLIN], next[MAXLIN];
+    long double t, t1;
+} walk;
+
+static long double next_crossing(const lin *u, long double cell)
+{
+    if (u->d > 0)
+        return (cell + 1 - u->b) / u->d;
+    if (u->d < 0)
+        return (cell - u->b) / u->d;
+    return INFINITY;
+}
+
+static void walk_init(walk *w, const lin *u, int m, long double t0, long double t1)
+{
+    w->m = m;
+    w->u = u;
+    w->t = t0;
+    w->t1 = t1;
+    for (int j = 0; j < m; ++j) {
+        const long double v = u[j].b + t0 * u[j].d;
+        long double c = floorl(v);
+        if (u[j].d < 0 && c == v)
+            c -= 1;   /* on a face, moving down: the cell below */
+        w->cell[j] = c;
+        w->next[j] = next_crossing(&u[j], c);
+    }
+}
+
+/* The next piece [*ta, *tb] with every coordinate inside one cell; 0 at the end. */
+static int walk_next(walk *w, long double *ta, long double *tb)
+{
+    if (!(w->t < w->t1))
+        return 0;
+    long double tn = w->t1;
+    for (int j = 0; j < w->m; ++j)
+        if (w->next[j] < tn)
+            tn = w->next[j];
+    if (!(tn > w->t))
+        tn = w->t;
+    *ta = w->t;
+    *tb = tn;
+    return 1;
+}
+
+/* Moves past the piece that ended at tb. */
+static void walk_advance(walk *w, long double tb)
+{
+    for (int j = 0; j < w->m; ++j)
+        while (w->next[j] <= tb) {
+            w->cell[j] += w->u[j].d > 0 ? 1 : -1;
+            w->next[j] = next_crossing(&w->u[j], w->cell[j]);
+        }
+    w->t = tb;
+    if (tb >= w->t1)
+        w->t = w->t1;
+}
+
+/* The fraction of coordinate j inside its current cell at t. */
+static double walk_frac(const walk *w, int j, long double t)
+{
+    const double f = (double) ((w->u[j].b - w->cell[j]) + t * w->u[j].d);
+    return f < 0 ? 0 : f > 1 ? 1 : f;
+}
+
+static void walk_hash(const walk *w, int j0, ef_noise_cell *nc)
+{
+    ef_noise_cell_at((int64_t) mod256(w->cell[j0]), (int64_t) mod256(w->cell[j0 + 1]),
+                     (int64_t) mod256(w->cell[j0 + 2]), nc);
+}
+
+/* ---- compensated summation (Neumaier) ---- */
+
+typedef struct ksum {
+    double s, c;
+} ksum;
+
+static void kadd(ksum *k, double v)
+{
+    const double t = k->s + v;
+    if (fabs(k->s) >= fabs(v))
+        k->c += (k->s - t) + v;
+    else
+        k->c += (v - t) + k->s;
+    k->s = t;
+}
+
+static double kval(const ksum *k)
+{
+    return k->s + k->c;
+}
+
+/* ---- one ray's setup ---- */
+
+typedef struct rayc {
+    const nstate *s;
+    long double t0, t1;              /* the stretch in fog (box-clipped; t1 may be finite for sky) */
+    long double h0, hs;              /* envelope height at t = 0 and its rate */
+    lin u[MAXLIN];                   /* noise: octave i axis a at 3 i + a; separable: a * N + i */
+    double evals, cells;
+} rayc;
+
+static long double env_at(const rayc *R, long double t)
+{
+    return R->s->k == 0 ? 1 : expl(-R->s->k * (R->h0 + R->hs * t));
+}
+
+/* Clips [0, len] to the box; returns 0 when the ray misses it. */
+static int clip_box(const nstate *s, const ef_ray *r, long double *t0, long double *t1)
+{
+    *t0 = 0;
+    *t1 = r->dist;
+    if (!s->has_box)
+        return 1;
+    for (int a = 0; a < 3; ++a) {
+        const long double o = r->org[a], d = r->dir[a];
+        if (d == 0) {
+            if (o < s->bmin[a] || o > s->bmax[a])
+                return 0;
+            continue;
+        }
+        long double ta = (s->bmin[a] - o) / d, tb = (s->bmax[a] - o) / d;
+        if (ta > tb) {
+            const long double x = ta;
+            ta = tb;
+            tb = x;
+        }
+        if (ta > *t0)
+            *t0 = ta;
+        if (tb < *t1)
+            *t1 = tb;
+    }
+    return *t0 < *t1;
+}
+
+static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
+{
+    R->s = s;
+    R->evals = R->cells = 0;
+    const ef_fog_functional up = { { s->up[0], s->up[1], s->up[2] }, -s->base };
+    const ef_dd h0 = ef_dd_dot3(up.n, r->org, up.d), hs = ef_dd_dot3(up.n, r->dir, 0.0);
+    R->h0 = (long double) h0.hi + h0.lo;
+    R->hs = (long double) hs.hi + hs.lo;
+    const int N = s->fbm.octaves;
+    for (int a = 0; a < 3; ++a) {
+        long double q0, dq;
+        q_line(s, r->org, r->dir, a, &q0, &dq);
+        for (int i = 0; i < N; ++i) {
+            const lin l = octave_line(s, i, q0, dq, a);
+            if (s->separable)
+                R->u[a * N + i] = l;
+            else
+                R->u[3 * i + a] = l;
+        }
+    }
+}
+
+/* ---- densities at a point of the ray ---- */
+
+/* Octave i's noise at t (noise model). */
+static double octave_at(rayc *R, int i, long double t)
+{
+    int64_t X[3];
+    double f[3];
+    for (int a = 0; a < 3; ++a)
+        split_ld(R->u[3 * i + a].b + t * R->u[3 * i + a].d, &X[a], &f[a]);
+    ef_noise_cell nc;
+    ef_noise_cell_at(X[0], X[1], X[2], &nc);
+    R->evals += 1;
+    return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
+}
+
+/* Octave i of the factor along axis a at its coordinate u (reduced). */
+static double factor_octave(const nstate *s, int a, int i, long double u)
+{
+    int64_t X[3];
+    double f[3];
+    int j = 0;
+    for (int b = 0; b < 3; ++b) {
+        if (b == a)
+            split_ld(u, &X[b], &f[b]);
+        else
+            ef_noise_split(s->fixed[a][i][j++], &X[b], &f[b]);
+    }
+    ef_noise_cell nc;
+    ef_noise_cell_at(X[0], X[1], X[2], &nc);
+    return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
+}
+
+/* max(0, 1 + c fbm) of the noise model, or the product of the separable
+ * factors, at t (without rho and the envelope). */
+static double shape_at(rayc *R, long double t)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    if (!s->separable) {
+        double f = 0;
+        for (int i = 0; i < N; ++i)
+            f += s->fbm.weight[i] * octave_at(R, i, t);
+        const double v = 1 + s->contrast * f;
+        return v > 0 ? v : 0;
+    }
+    double prod = 1;
+    for (int k = 0; k < s->naxes; ++k) {
+        const int a = s->axis[k];
+        double f = 0;
+        for (int i = 0; i < N; ++i)
+            f += s->fbm.weight[i] * factor_octave(s, a, i, R->u[a * N + i].b + t * R->u[a * N + i].d);
+        R->evals += N;
+        const double v = 1 + s->contrast * f;
+        prod *= v > 0 ? v : 0;
+    }
+    return prod;
+}
+
+/* ---- the closed-form mean part: integral of env over [t0, t1] ---- */
+
+/* integral_{t0}^{t1} e^(-k (h0 + hs t)) dt; t1 may be infinite (the caller
+ * only asks when the envelope decays along the ray). */
+static long double env_integral(const nstate *s, long double h0, long double hs, long double t0,
+                                long double t1)
+{
+    if (s->k == 0 || hs == 0)
+        return (t1 - t0) * (s->k == 0 ? 1 : expl(-s->k * h0));
+    const long double a = s->k * hs;
+    if (isinf(t1))
+        return expl(-s->k * (h0 + hs * t0)) / a;
+    /* From the lower end of the envelope: e^(-k h_low) (1 - e^-b)/(k |hs|). */
+    const long double L = t1 - t0, b = fabsl(a) * L;
+    const long double hl = hs > 0 ? h0 + hs * t0 : h0 + hs * t1;
+    const long double m = b < 1e-4L ? L * (1 - b / 2 + b * b / 6) : -expm1l(-b) / fabsl(a);
+    return expl(-s->k * hl) * m;
+}
+
+/* ---- adaptive bisection of one piece with a pair of Gauss rules ---- */
+
+typedef double (*piece_fn)(rayc *R, const void *ctx, long double t);
+
+/* n-point Gauss-Legendre of f over [ta, tb]. */
+static double gauss(rayc *R, piece_fn f, const void *ctx, int n, long double ta, long double tb)
+{
+    const nstate *s = R->s;
+    const long double mid = (ta + tb) / 2, half = (tb - ta) / 2;
+    double sum = 0;
+    for (int j = 0; j < n; ++j)
+        sum += s->glw[n][j] * f(R, ctx, mid + half * s->glx[n][j]);
+    return (double) half * sum;
+}
+
+/* Integrates f over [ta, tb] with rules lo and hi, bisecting until they
+ * agree within tol (absolute) or depth runs out; adds the hi values to acc
+ * and |hi - lo| of accepted pieces to *err. */
+static void bisect(rayc *R, piece_fn f, const void *ctx, int lo, int hi, long double ta,
+                   long double tb, double tol, int depth, ksum *acc, double *err)
+{
+    const double a = gauss(R, f, ctx, lo, ta, tb), b = gauss(R, f, ctx, hi, ta, tb);
+    const double e = fabs(b - a);
+    const long double mid = (ta + tb) / 2;
+    if (e <= tol || depth <= 0 || !(mid > ta && mid < tb)) {
+        kadd(acc, b);
+        *err += e;
+        return;
+    }
+    bisect(R, f, ctx, lo, hi, ta, mid, tol / 2, depth - 1, acc, err);
+    bisect(R, f, ctx, lo, hi, mid, tb, tol / 2, depth - 1, acc, err);
+}
+
+/* ---- one octave of the noise model, cell by cell ---- */
+
+typedef struct cell_ctx {
+    const walk *w;
+    int j0;
+    ef_noise_cell nc;
+} cell_ctx;
+
+/* env * noise inside the current cell of octave j0 / 3. */
+static double cell_env_noise(rayc *R, const void *ctx, long double t)
+{
+    const cell_ctx *cc = ctx;
+    R->evals += 1;
+    const double n = ef_noise_cell_eval(&cc->nc, walk_frac(cc->w, cc->j0, t),
+                                        walk_frac(cc->w, cc->j0 + 1, t),
+                                        walk_frac(cc->w, cc->j0 + 2, t));
+    return R->s->k == 0 ? n : (double) env_at(R, t) * n;
+}
+
+/* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
+ * n == 0 the certified pair (9 and 13 nodes, bisected to tol relative to
+ * the cell's envelope bound). *err collects the certified pair's residue. */
+static double octave_integral(rayc *R, int i, int n, long double t0, long double t1,
+                              double *err)
+{
+    const nstate *s = R->s;
+    walk w;
+    walk_init(&w, &R->u[3 * i], 3, t0, t1);
+    ksum acc = { 0, 0 };
+    long double ta, tb;
+    cell_ctx cc = { &w, 0, { { 0 } } };
+    while (walk_next(&w, &ta, &tb)) {
+        if (tb > ta) {
+            walk_hash(&w, 0, &cc.nc);
+            R->cells += 1;
+            if (n > 0 && s->k == 0) {
+                const long double mid = (ta + tb) / 2, half = (tb - ta) / 2;
+                double sum = 0;
+                for (int j = 0; j < n; ++j) {
+                    const long double t = mid + half * s->glx[n][j];
+                    sum += s->glw[n][j] * ef_noise_cell_eval(&cc.nc, walk_frac(&w, 0, t),
+                                                             walk_frac(&w, 1, t), walk_frac(&w, 2, t));
+                }
+                R->evals += n;
+                kadd(&acc, (double) half * sum);
+            } else if (n > 0) {
+                kadd(&acc, gauss(R, cell_env_noise, &cc, n, ta, tb));
+            } else {
+                const double bound = EF_NOISE_BOUND * (double) (tb - ta) *
+                                     (double) fmaxl(env_at(R, ta), env_at(R, tb));
+                bisect(R, cell_env_noise, &cc, 9, 13, ta, tb, 1e-14 * bound, 30, &acc, err);
+            }
+        }
+        walk_advance(&w, tb);
+    }
+    return kval(&acc);
+}
+
+/* ---- the full density, piece by piece over every octave's cells ---- */
+
+static double full_density(rayc *R, const void *ctx, long double t)
+{
+    (void) ctx;
+    const double v = shape_at(R, t);
+    return R->s->k == 0 || v == 0 ? v : (double) env_at(R, t) * v;
+}
+
+/* The lattice coordinates the full density's pieces follow. */
+static int full_lins(const rayc *R, const lin **u)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    if (!s->separable) {
+        *u = R->u;
+        return 3 * N;
+    }
+    /* The separable factors only cross their own axes' cells. */
+    return -1;
+}
+
+/* The bound of shape (max(0, 1 + c fbm), or a product of naxes of them). */
+static double shape_bound(const nstate *s)
+{
+    const double b = 1 + fabs(s->contrast) * EF_NOISE_BOUND;
+    return s->separable ? pow(b, s->naxes) : b;
+}
+
+/* integral of env * shape over [t0, t1] with the rule pair (lo, hi) on
+ * every piece where all coordinates stay in one cell, bisected until the
+ * pair agrees to tol_per_len * length (absolute) or, with tol_per_len = 0,
+ * to 1e-14 of the piece's own bound (certified). */
+static double full_integral(rayc *R, int lo, int hi, long double t0, long double t1,
+                            double tol_per_len, double *err)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    lin sel[MAXLIN];
+    const lin *u;
+    int m = full_lins(R, &u);
+    if (m < 0) {
+        m = 0;
+        for (int k = 0; k < s->naxes; ++k)
+            for (int i = 0; i < N; ++i)
+                sel[m++] = R->u[s->axis[k] * N + i];
+        u = sel;
+    }
+    walk w;
+    walk_init(&w, u, m, t0, t1);
+    ksum acc = { 0, 0 };
+    long double ta, tb;
+    while (walk_next(&w, &ta, &tb)) {
+        if (tb > ta) {
+            R->cells += 1;
+            const double tol = tol_per_len > 0
+                                   ? tol_per_len * (double) (tb - ta)
+                                   : 1e-14 * shape_bound(s) * (double) (tb - ta) *
+                                         (double) fmaxl(env_at(R, ta), env_at(R, tb));
+            bisect(R, full_density, NULL, lo, hi, ta, tb, tol, 30, &acc, err);
+        }
+        walk_advance(&w, tb);
+    }
+    return kval(&acc);
+}
+
+/* ---- adaptive: nodes per octave and octaves kept, from the tolerance ---- */
+
+/* Per-cell Gauss-Legendre error of integral(noise) per unit of chord length
+ * with q nodes, q = 1..8 (9 is exact): the maximum and the root mean square
+ * over cells, measured on 2e6 random chords through random cells
+ * (bench/noise_calibrate.c prints them; these are its values times 1.5). */
+static const double e_max[9] = { 0, 0.16, 0.032, 4.8e-3, 3.3e-4, 2.0e-5, 1.2e-6, 6e-8, 3e-9 };
+static const double e_rms[9] = { 0, 0.045, 6.5e-3, 6.5e-4, 3.5e-5, 1.8e-6, 9e-8, 4e-9, 1.5e-10 };
+
+/* RMS of integral(noise) over a stretch of l lattice units, per sqrt(l):
+ * noise-anchors.md section 1.5 (0.23), measured again by the calibration. */
+#define LINE_RMS 0.25
+
+/* The error estimate of octave i's quadrature with q nodes per cell: the
+ * smaller of the worst case (every cell at its maximum error, same sign)
+ * and three standard deviations of a sum of independent cell errors. */
+static double quad_estimate(double A, double L, double hbar, int q)
+{
+    if (q >= 9)
+        return 0;
+    return A * fmin(e_max[q] * L, 3 * e_rms[q] * sqrt(L * hbar));
+}
+
+typedef struct plan {
+    int q[EF_FBM_MAX_OCTAVES];       /* 0: dropped */
+    double est;                      /* the error estimate, in tau of the densest channel */
+    int dropped;
+} plan;
+
+/* Chooses nodes per octave for tau within tol over a stretch of length L
+ * whose envelope is at most envmax. Octaves are dropped from the finest
+ * while three standard deviations of their line integrals (or their hard
+ * bound, if smaller) sum to at most tol/4; then nodes are added where they
+ * buy the most error per evaluation until the estimates sum to tol/2. */
+static void plan_octaves(const rayc *R, double L, double envmax, plan *P)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    const double A = s->rho_max * fabs(s->contrast) * envmax, tol = s->tol;
+    double drop = 0, quad = 0, ncell[EF_FBM_MAX_OCTAVES];
+    int kept = N;
+    P->dropped = 0;
+    for (int i = N - 1; i >= 1; --i) {
+        const double lambda = s->scale / s->fbm.freq[i];
+        const double D = A * s->fbm.weight[i] *
+                         fmin(EF_NOISE_BOUND * L, 3 * LINE_RMS * sqrt(L * lambda));
+        if (drop + D > tol / 4)
+            break;
+        drop += D;
+        kept = i;
+        P->dropped++;
+    }
+    for (int i = 0; i < N; ++i) {
+        P->q[i] = i < kept ? 1 : 0;
+        if (i >= kept)
+            continue;
+        const lin *u = &R->u[3 * i];
+        ncell[i] = (double) ((fabsl(u[0].d) + fabsl(u[1].d) + fabsl(u[2].d)) * L) + 1;
+        quad += quad_estimate(A * s->fbm.weight[i], L, L / ncell[i], 1);
+    }
+    while (quad > tol / 2) {
+        int best = -1;
+        double gain = 0;
+        for (int i = 0; i < kept; ++i) {
+            if (P->q[i] >= 9)
+                continue;
+            const double Ai = A * s->fbm.weight[i], h = L / ncell[i];
+            const double g = (quad_estimate(Ai, L, h, P->q[i]) -
+                              quad_estimate(Ai, L, h, P->q[i] + 1)) / ncell[i];
+            if (best < 0 || g > gain) {
+                best = i;
+                gain = g;
+            }
+        }
+        if (best < 0)
+            break;
+        const double Ai = A * s->fbm.weight[best], h = L / ncell[best];
+        quad -= quad_estimate(Ai, L, h, P->q[best]);
+        P->q[best]++;
+        quad += quad_estimate(Ai, L, h, P->q[best]);
+    }
+    P->est = drop + (quad > 0 ? quad : 0);
+}
+
+/* ---- the seed's preintegrated evaluation (noise-separable) ---- */
+
+static const double *table(const ef_fog_component *c, int a, int i)
+{
+    const nstate *s = state(c);
+    return c->arr + s->tab_off + ((size_t) a * (size_t) s->fbm.octaves + (size_t) i) * TAB;
+}
+
+/* integral of factor octave (a, i) over [x0, x1] inside cell m (5 nodes:
+ * exact for its degree-6 polynomial). */
+static double cell_part(const nstate *s, int a, int i, long double x0, long double x1)
+{
+    const long double mid = (x0 + x1) / 2, half = (x1 - x0) / 2;
+    double sum = 0;
+    for (int j = 0; j < 5; ++j)
+        sum += s->glw[5][j] * factor_octave(s, a, i, mid + half * s->glx[5][j]);
+    return (double) half * sum;
+}
+
+/* The prefix tables: entry m of octave (a, i) is the integral of the
+ * factor's octave over [0, m] of its own coordinate, m = 0..256; the
+ * noise's period 256 gives every other prefix. */
+static void build_tables(nstate *s, double *tab)
+{
+    const int N = s->fbm.octaves;
+    for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < N; ++i) {
+            double *t = tab + ((size_t) a * (size_t) N + (size_t) i) * TAB;
+            ksum acc = { 0, 0 };
+            t[0] = 0;
+            for (int m = 0; m < 256; ++m) {
+                kadd(&acc, cell_part(s, a, i, m, m + 1));
+                t[m + 1] = kval(&acc);
+            }
+        }
+}
+
+/* integral of octave (a, i) of the factor over [u0, u1] of its coordinate:
+ * in one cell directly, else from the table (whole periods, whole cells and
+ * the two partial cells). */
+static double octave_span(const ef_fog_component *c, int a, int i, long double u0, long double u1)
+{
+    const nstate *s = state(c);
+    const long double c0 = floorl(u0), c1 = floorl(u1);
+    if (c0 == c1)
+        return cell_part(s, a, i, u0, u1);
+    const double *t = table(c, a, i);
+    const long double k0 = floorl(c0 / 256), k1 = floorl(c1 / 256);
+    const int m0 = (int) (c0 - 256 * k0), m1 = (int) (c1 - 256 * k1);
+    const double whole = (double) (k1 - k0) * t[256] + (t[m1] - t[m0]);
+    return whole + cell_part(s, a, i, c1, u1) - cell_part(s, a, i, c0, u0);
+}
+
+/* The mean of factor a over [ta, tb] of the ray. */
+static double factor_mean(const ef_fog_component *c, const rayc *R, int a, long double ta,
+                          long double tb, double *evals)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    double f = 0;
+    for (int i = 0; i < N; ++i) {
+        const lin *u = &R->u[a * N + i];
+        const long double u0 = u->b + ta * u->d, u1 = u->b + tb * u->d;
+        if (u1 == u0) {
+            f += s->fbm.weight[i] * factor_octave(s, a, i, u0);
+            *evals += 1;
+        } else {
+            const long double lo = u0 < u1 ? u0 : u1, hi = u0 < u1 ? u1 : u0;
+            f += s->fbm.weight[i] * octave_span(c, a, i, lo, hi) / (double) (hi - lo);
+            *evals += 10;
+        }
+    }
+    return 1 + s->contrast * f;
+}
+
+/* tau / rho of K equal pieces of [t0, t1]: per piece the mean envelope
+ * times the product of the factors' means. */
+static double preintegrated(const ef_fog_component *c, rayc *R, long double t0, long double t1,
+                            int K)
+{
+    const nstate *s = R->s;
+    ksum acc = { 0, 0 };
+    const long double h = (t1 - t0) / K;
+    for (int p = 0; p < K; ++p) {
+        const long double ta = t0 + p * h, tb = p + 1 == K ? t1 : t0 + (p + 1) * h;
+        double v = (double) env_integral(s, R->h0, R->hs, ta, tb);
+        for (int k = 0; k < s->naxes; ++k)
+            v *= factor_mean(c, R, s->axis[k], ta, tb, &R->evals);
+        kadd(&acc, v);
+    }
+    R->cells += (double) K * s->naxes * s->fbm.octaves;
+    return kval(&acc);
+}
+
+/* ---- the midpoint ray-march ---- */
+
+static double march(rayc *R, long double t0, long double t1, int n)
+{
+    const long double h = (t1 - t0) / n;
+    ksum acc = { 0, 0 };
+    for (int j = 0; j < n; ++j)
+        kadd(&acc, full_density(R, NULL, t0 + (j + 0.5L) * h));
+    R->cells += n;
+    return (double) h * kval(&acc);
+}
+
+/* A bound of |d2 (env shape) / dt2| along the ray (for the midpoint
+ * rule's error h^2 L / 24 max|f''|), from the noise's Lipschitz and
+ * curvature bounds per lattice unit. */
+static double curvature_bound(const rayc *R, double envmax)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    const double ac = fabs(s->contrast), B1 = 1 + ac * EF_NOISE_BOUND;
+    double d1[3] = { 0, 0, 0 }, d2[3] = { 0, 0, 0 }, D1 = 0, D2 = 0;
+    for (int i = 0; i < N; ++i)
+        for (int a = 0; a < 3; ++a) {
+            const double rate = fabs((double) R->u[s->separable ? a * N + i : 3 * i + a].d);
+            d1[a] += ac * s->fbm.weight[i] * EF_NOISE_LIPSCHITZ * rate;
+            d2[a] += ac * s->fbm.weight[i] * EF_NOISE_CURVATURE * rate * rate;
+        }
+    if (!s->separable) {
+        /* |grad| over the three rates: the Lipschitz bound covers the sum. */
+        D1 = d1[0] + d1[1] + d1[2];
+        D2 = d2[0] + d2[1] + d2[2];
+    } else {
+        const int m = s->naxes;
+        for (int x = 0; x < m; ++x) {
+            D1 += d1[s->axis[x]] * pow(B1, m - 1);
+            D2 += d2[s->axis[x]] * pow(B1, m - 1);
+            for (int y = x + 1; y < m; ++y)
+                D2 += 2 * d1[s->axis[x]] * d1[s->axis[y]] * pow(B1, m - 2);
+        }
+    }
+    const double B = shape_bound(s), ks = s->k * fabs((double) R->hs);
+    return envmax * (D2 + 2 * ks * D1 + ks * ks * B);
+}
+
+/* ---- the component's tau ---- */
+
+/* Where to stop on a ray whose envelope decays (k hs > 0): past T the
+ * density's integral is at most B e^(-k h(T)) / (k hs) <= rel of the mean
+ * part's from t0 (or, with abs > 0, at most abs in tau). */
+static long double tail_end(const rayc *R, long double t0, double rel, double abs)
+{
+    const nstate *s = R->s;
+    const long double a = s->k * R->hs, B = shape_bound(s);
+    const long double e0 = env_at(R, t0);
+    long double need;
+    if (abs > 0)
+        need = logl(s->rho_max * B * e0 / a / abs);
+    else
+        need = logl(B / rel);
+    return t0 + (need > 0 ? need : 0) / a;
+}
+
+static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double tau[3],
+                           ef_tau_info *info)
+{
+    const nstate *s = state(c);
+    ef_tau_info dummy;
+    if (!info)
+        info = &dummy;
+    memset(info, 0, sizeof *info);
+    tau[0] = tau[1] = tau[2] = 0;
+    long double t0, t1;
+    if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1))
+        return;
+    rayc R;
+    ray_setup(s, r, &R);
+    const int sky = isinf(t1);
+    if (sky && !(s->k > 0 && R.hs > 0)) {
+        /* Nothing lets the ray out of the fog: every channel with density
+         * is opaque (the clamp's zeros cannot cover a whole infinite ray). */
+        for (int k = 0; k < 3; ++k)
+            tau[k] = s->rho[k] > 0 ? INFINITY : 0;
+        return;
+    }
+    const int linear = !s->separable && !s->clamp;
+    double unit = 0, err = 0, tail = 0;  /* tau / rho, its error, the dropped tail's bound */
+    long double tend = t1;
+    if (sky) {
+        if (s->method == M_ADAPTIVE)
+            tend = tail_end(&R, t0, 0, s->tol / 8);
+        else if (s->method == M_EXACT)
+            tend = tail_end(&R, t0, 1e-16, 0);
+        else
+            tend = tail_end(&R, t0, 1e-6, 0);
+        const long double a = s->k * R.hs;
+        tail = (double) (shape_bound(s) * env_at(&R, tend) / a);
+        if (linear)
+            tail -= (double) (env_at(&R, tend) / a);   /* the mean part is exact to infinity */
+    }
+    const double L = (double) (tend - t0);
+    const double envmax = (double) fmaxl(env_at(&R, t0), env_at(&R, tend));
+    double mean = 0;
+    if (linear || s->method == M_PREINT)
+        mean = (double) env_integral(s, R.h0, R.hs, t0, linear ? t1 : tend);
+    switch (s->method) {
+    case M_EXACT:
+        if (linear) {
+            ksum acc = { 0, 0 };
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                kadd(&acc, s->fbm.weight[i] * octave_integral(&R, i, s->k == 0 ? 9 : 0, t0, tend,
+                                                              &err));
+            unit = mean + s->contrast * kval(&acc);
+            err *= fabs(s->contrast);
+        } else {
+            unit = full_integral(&R, s->separable ? 10 : 9, s->separable ? 14 : 13, t0, tend, 0,
+                                 &err);
+        }
+        err += 4 * DBL_EPSILON * fabs(unit) + tail;
+        break;
+    case M_ADAPTIVE:
+        if (linear) {
+            plan P;
+            plan_octaves(&R, L, envmax, &P);
+            ksum acc = { 0, 0 };
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                if (P.q[i])
+                    kadd(&acc, s->fbm.weight[i] * octave_integral(&R, i, P.q[i], t0, tend, &err));
+            unit = mean + s->contrast * kval(&acc);
+            err = P.est / s->rho_max + tail;
+            info->dropped = P.dropped;
+        } else {
+            double e = 0;
+            unit = full_integral(&R, 3, 6, t0, tend, s->tol / 2 / L / s->rho_max, &e);
+            err = e + tail;
+        }
+        break;
+    case M_STEPS: {
+        unit = march(&R, t0, tend, s->steps);
+        const double h = L / s->steps;
+        err = fmin(h * h * L / 24 * curvature_bound(&R, envmax),
+                   fmax(unit, shape_bound(s) * envmax * L)) + tail;
+        break;
+    }
+    default: { /* M_PREINT */
+        unit = preintegrated(c, &R, t0, tend, s->pieces);
+        /* The estimate: the difference to twice as many pieces. */
+        if (info != &dummy) {
+            rayc R2 = R;
+            err = fabs(preintegrated(c, &R2, t0, tend, 2 * s->pieces) - unit) + tail;
+        }
+        break;
+    }
+    }
+    if (unit < 0)
+        unit = 0;   /* rounding below an exactly zero density */
+    for (int k = 0; k < 3; ++k) {
+        tau[k] = s->rho[k] * unit;
+        info->err[k] = s->rho[k] * err;
+    }
+    info->evals = R.evals;
+    info->cells = R.cells;
+}
+
+static void tau_noise(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_noise_info(c, r, tau, NULL);
+}
+
+/* ---- what the reference integrator sees: the density alone ---- */
+
+/* Functionals: world x, y, z, and the height above base. */
+static int functionals_noise(const ef_fog_component *c, ef_fog_functional *out, int cap)
+{
+    const nstate *s = state(c);
+    const ef_fog_functional f[4] = { { { 1, 0, 0 }, 0 }, { { 0, 1, 0 }, 0 }, { { 0, 0, 1 }, 0 },
+                                     { { s->up[0], s->up[1], s->up[2] }, -s->base } };
+    for (int i = 0; i < 4 && i < cap; ++i)
+        out[i] = f[i];
+    return 4;
+}
+
+/* The box's faces (jumps) and the envelope's scale 1/k around the base. */
+static int features_noise(const ef_fog_component *c, ef_fog_feature *out, int cap)
+{
+    const nstate *s = state(c);
+    ef_fog_feature f[7];
+    int n = 0;
+    for (int a = 0; s->has_box && a < 3; ++a) {
+        f[n++] = (ef_fog_feature) { a, s->bmin[a], 0 };
+        f[n++] = (ef_fog_feature) { a, s->bmax[a], 0 };
+    }
+    if (s->k > 0)
+        f[n++] = (ef_fog_feature) { 3, 0, 1 / s->k };
+    for (int i = 0; i < n && i < cap; ++i)
+        out[i] = f[i];
+    return n;
+}
+
+/* Octave i's cell faces on axis a: l^i q_a + i O_a integer, i.e. world
+ * p_a = phase + k scale / l^i. */
+static int lattices_noise(const ef_fog_component *c, ef_fog_lattice *out, int cap)
+{
+    const nstate *s = state(c);
+    int n = 0;
+    for (int a = 0; a < 3; ++a) {
+        if (s->separable) {
+            int used = 0;
+            for (int k = 0; k < s->naxes; ++k)
+                used |= s->axis[k] == a;
+            if (!used)
+                continue;
+        }
+        for (int i = 0; i < s->fbm.octaves; ++i) {
+            const double f = s->fbm.freq[i];
+            if (n < cap)
+                out[n] = (ef_fog_lattice) {
+                    a,
+                    (-(double) i * ef_fbm_offset[a] / f - s->seed * ef_noise_seed_dir[a]) *
+                            s->scale + s->offset[a] + s->velocity[a] * s->time,
+                    s->scale / f
+                };
+            n++;
+        }
+    }
+    return n;
+}
+
+/* sigma from the definition, with q formed in long double from the world
+ * point (so the reference and the integrators see the same field). At
+ * infinity (the reference's divergence test): 0 where the box or the
+ * envelope ends the fog, else the mean density. */
+static void density_noise(const ef_fog_component *c, const long double *v, long double out[3])
+{
+    const nstate *s = state(c);
+    out[0] = out[1] = out[2] = 0;
+    if (s->has_box)
+        for (int a = 0; a < 3; ++a)
+            if (!(v[a] >= s->bmin[a] && v[a] <= s->bmax[a]))
+                return;
+    long double env = 1;
+    if (s->k > 0) {
+        if (isinf(v[3]))
+            env = v[3] > 0 ? 0 : INFINITY;
+        else
+            env = expl(-s->k * v[3]);
+    }
+    if (env == 0)
+        return;
+    long double shape = 1;
+    if (isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2])) {
+        const int N = s->fbm.octaves;
+        long double q[3];
+        for (int a = 0; a < 3; ++a)
+            q[a] = ((v[a] - s->offset[a]) - (long double) s->velocity[a] * s->time) / s->scale +
+                   (long double) s->seed * ef_noise_seed_dir[a];
+        if (!s->separable) {
+            double f = 0;
+            for (int i = 0; i < N; ++i) {
+                int64_t X[3];
+                double fr[3];
+                for (int a = 0; a < 3; ++a)
+                    split_ld(mod256(s->fbm.freq[i] * q[a] + (long double) i * ef_fbm_offset[a]),
+                             &X[a], &fr[a]);
+                ef_noise_cell nc;
+                ef_noise_cell_at(X[0], X[1], X[2], &nc);
+                f += s->fbm.weight[i] * ef_noise_cell_eval(&nc, fr[0], fr[1], fr[2]);
+            }
+            const long double x = 1 + (long double) s->contrast * f;
+            shape = x > 0 ? x : 0;
+        } else {
+            for (int k = 0; k < s->naxes; ++k) {
+                const int a = s->axis[k];
+                double f = 0;
+                for (int i = 0; i < N; ++i)
+                    f += s->fbm.weight[i] *
+                         factor_octave(s, a, i, mod256(s->fbm.freq[i] * q[a] +
+                                                       (long double) i * ef_fbm_offset[a]));
+                const long double x = 1 + (long double) s->contrast * f;
+                shape *= x > 0 ? x : 0;
+            }
+        }
+    }
+    for (int k = 0; k < 3; ++k)
+        out[k] = s->rho[k] == 0 ? 0 : s->rho[k] * env * shape;
+}
+
+const ef_fog_model ef_fog_noise = {
+    .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
+    .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
+    .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
+    .uses_up = 1
+};
+
+const ef_fog_model ef_fog_noise_separable = {
+    .name = "noise-separable", .keys = separable_keys, .set = set_noise, .finish = finish_noise,
+    .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
+    .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
+    .uses_up = 1
+};
