@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "aov.h"
 #include "exr_io.h"
 #include "ocio_shim.h"
 #include "scene_file.h"
@@ -16,7 +17,7 @@ enum {
     OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
-    OPT_UNITS
+    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN
 };
 
 static const struct option long_opts[] = {
@@ -31,6 +32,9 @@ static const struct option long_opts[] = {
     { "scene", required_argument, NULL, OPT_SCENE },
     { "up-axis", required_argument, NULL, OPT_UP_AXIS },
     { "units-per-meter", required_argument, NULL, OPT_UNITS },
+    { "time", required_argument, NULL, OPT_TIME },
+    { "aov", required_argument, NULL, OPT_AOV },
+    { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
     { "camera-to-world", required_argument, NULL, OPT_C2W },
     { "fov", required_argument, NULL, OPT_FOV },
@@ -65,12 +69,18 @@ void ef_options_usage(FILE *out)
             "                           distance=radial|planar (linear, exp, exp2)\n"
             "      --fog-color R,G,B    scene-linear fog colour (default %g,%g,%g)\n"
             "      --sky fog|keep|distance=D  background pixels (default fog)\n"
-            "      --scene FILE         JSON scene: fog, color, sky, up, units; the flags\n"
-            "                           given here override it\n"
+            "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
+            "                           the flags given here override it\n"
             "      --up-axis y|z|-y|-z|X,Y,Z  up for the height models (default y;\n"
             "                           Blender and V-Ray scenes are z-up)\n"
             "      --units-per-meter U  scene units per metre (default 1, 100 for cm);\n"
             "                           densities are per metre\n"
+            "      --time T             time in seconds for velocity= keys (default 0)\n"
+            "      --aov LIST           extra output channels, repeatable: a comma list of\n"
+            "                           fog (fog.R,G,B,A), T (fog_T.R,G,B), error\n"
+            "                           (fog_error.R,G,B), P (fog_P.X,Y,Z), distance\n"
+            "                           (fog_distance.Z)\n"
+            "      --aov-origin X,Y,Z   subtracted from fog_P (default 0,0,0)\n"
             "      --depth FILE         take depth from a second EXR\n"
             "      --layer NAME         colour layer (e.g. ViewLayer.Combined)\n"
             "      --depth-channel NAME depth channel (e.g. depth.Z)\n"
@@ -86,7 +96,8 @@ void ef_options_usage(FILE *out)
             "      --threads N          worker threads, 0 = all cores (default)\n"
             "      --preview FILE       also write an sRGB preview (PNG, JPEG, ...)\n"
             "      --explain            print the resolved camera and conventions, write nothing\n"
-            "      --stats              print per-stage timings and peak memory\n"
+            "      --stats              print per-stage timings and peak memory, and the cost\n"
+            "                           and error of each noise component\n"
             "  -v, --verbose  -q, --quiet  -h, --help  --version\n"
             "\n"
             "Exit status: 0 success, 1 runtime error, 2 usage error. See exrfog(1).\n",
@@ -159,8 +170,8 @@ void ef_options_free(ef_options *o)
 typedef struct scene_flags {
     const char *specs[EF_FOG_MAX_COMPONENTS];
     int nspec;
-    int has_color, has_sky, has_up, has_units;
-    double color[3], up[3], units;
+    int has_color, has_sky, has_up, has_units, has_time;
+    double color[3], up[3], units, time;
     const char *sky;
 } scene_flags;
 
@@ -180,6 +191,9 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
             memcpy(s->ctx.up, sf.up, sizeof s->ctx.up);
         if (sf.has_units)
             s->ctx.units_per_meter = sf.units;
+        if (sf.has_time)
+            s->ctx.time = sf.time;
+        o->aov |= sf.aov;
         if (sf.has_sky && ef_scene_parse_sky(s, sf.sky, err)) {
             char msg[sizeof err->msg];
             snprintf(msg, sizeof msg, "%s", err->msg);
@@ -195,6 +209,8 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
         memcpy(s->ctx.up, f->up, sizeof s->ctx.up);
     if (f->has_units)
         s->ctx.units_per_meter = f->units;
+    if (f->has_time)
+        s->ctx.time = f->time;
     if (f->has_sky && ef_scene_parse_sky(s, f->sky, err))
         return ef_scene_file_free(&sf), EF_PARSE_USAGE;
     s->ctx.read_file = ef_read_text_file;
@@ -275,6 +291,22 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
                 return ef_fail(err, "--units-per-meter '%s' is not a positive number (100 for a "
                                     "scene in centimetres)", a), EF_PARSE_USAGE;
             f.has_units = 1;
+            break;
+        case OPT_TIME:
+            if (ef_parse_numbers(a, &f.time, 1))
+                return ef_fail(err, "--time '%s' is not a finite number (seconds)", a),
+                       EF_PARSE_USAGE;
+            f.has_time = 1;
+            break;
+        case OPT_AOV:
+            if (ef_aov_parse(a, &o->aov, "--aov", err))
+                return EF_PARSE_USAGE;
+            break;
+        case OPT_AOV_ORIGIN:
+            if (ef_parse_numbers(a, o->aov_origin, 3))
+                return ef_fail(err, "--aov-origin '%s' is not X,Y,Z (three finite numbers)", a),
+                       EF_PARSE_USAGE;
+            o->has_aov_origin = 1;
             break;
         case OPT_W2C:
             if (parse_matrix(a, &o->cam.w2c))

@@ -17,6 +17,9 @@ typedef struct ef_options {
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
     int threads;              /* 0: all cores */
     int explain, stats, verbose, quiet;
+    unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */
+    int has_aov_origin;       /* --aov-origin given */
+    double aov_origin[3];     /* subtracted from fog_P */
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
 

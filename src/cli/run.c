@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -51,9 +52,14 @@ static int report(const char *file, const ef_err *err, int status)
     return status;
 }
 
-/* Per-run state shared read-only by the worker threads. */
+/* Per-run state shared read-only by the worker threads, except the
+ * statistics, which each unit adds under the lock. */
 typedef struct fog_job {
     ef_fog_pass pass;
+    unsigned aov;             /* EF_AOV_* bits, in the stream's extra channels */
+    double aov_origin[3];
+    ef_tau_stats *stats;      /* per component, or NULL without --stats */
+    pthread_mutex_t lock;
     /* preview: every step-th pixel of the data window */
     unsigned char *preview;
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
@@ -71,8 +77,23 @@ static unsigned char srgb8(double v)
 
 static void fog_chunk(void *user, const ef_chunk *ck)
 {
-    const fog_job *j = user;
-    ef_fog_block(&j->pass, ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth);
+    fog_job *j = user;
+    ef_aov_out aov;
+    ef_aov_bind(&aov, j->aov, ck->extra);
+    memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
+    /* Statistics per unit, merged once: no lock per pixel. */
+    ef_tau_stats st[EF_FOG_MAX_COMPONENTS];
+    const int ncomp = j->pass.scene->ncomp;
+    if (j->stats)
+        memset(st, 0, sizeof st);
+    ef_fog_block_aov(&j->pass, ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth, &aov,
+                     j->stats ? st : NULL);
+    if (j->stats) {
+        pthread_mutex_lock(&j->lock);
+        for (int i = 0; i < ncomp; ++i)
+            ef_tau_stats_merge(&j->stats[i], &st[i]);
+        pthread_mutex_unlock(&j->lock);
+    }
     if (!j->preview)
         return;
     for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
@@ -143,6 +164,39 @@ static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const
     fprintf(out, "up axis: %g, %g, %g; %g scene units per metre%s%s\n", o->scene.ctx.up[0],
             o->scene.ctx.up[1], o->scene.ctx.up[2], o->scene.ctx.units_per_meter,
             o->scene_file ? "; scene file " : "", o->scene_file ? o->scene_file : "");
+    fprintf(out, "time: %.9g s\n", o->scene.ctx.time);
+    if (o->aov) {
+        const char *names[EF_AOV_MAX_CHANNELS];
+        const int n = ef_aov_channels(o->aov, names);
+        fprintf(out, "aov channels (part %d):", plan->rgb[0].part);
+        for (int i = 0; i < n; ++i)
+            fprintf(out, " %s", names[i]);
+        if (o->aov & EF_AOV_P)
+            fprintf(out, "; fog_P relative to %.9g, %.9g, %.9g", o->aov_origin[0],
+                    o->aov_origin[1], o->aov_origin[2]);
+        fputc('\n', out);
+    }
+}
+
+/* --stats: one line per component whose optical depth is numerical. Only
+ * the surface segment's evaluation of each fogged pixel is counted (not
+ * the segment to infinity behind a partly transparent pixel). */
+static void print_tau_stats(const ef_fog_scene *s, const ef_tau_stats *st)
+{
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->tau_info)
+            continue;
+        const ef_tau_stats *t = &st[i];
+        const double n = t->pixels > 0 ? t->pixels : 1.0;
+        fprintf(stderr,
+                "exrfog: stats: fog[%d] %.60s%s: %.0f pixels; per pixel: noise evaluations mean "
+                "%.1f max %.0f, cells walked mean %.1f, octaves dropped mean %.2f; error "
+                "estimate (tau) max %.3g mean %.3g\n",
+                i, c->spec, strlen(c->spec) > 60 ? "..." : "", t->pixels, t->evals / n,
+                t->evals_max, t->cells / n, t->dropped / n, t->err_max,
+                (t->err_sum + t->err_sum_lo) / n);
+    }
 }
 
 /* A temporary name beside the output, so the final rename is atomic. */
@@ -185,7 +239,12 @@ int ef_main(int argc, char **argv)
     ef_cam_meta meta;
     ef_camera cam;
     ef_depth_conv conv;
-    fog_job job = { { NULL, NULL, NULL }, NULL, 0, 0, 1, 0, 0 };
+    static fog_job job;
+    memset(&job, 0, sizeof job);
+    job.pv_step = 1;
+    pthread_mutex_init(&job.lock, NULL);
+    const char *aov_names[EF_AOV_MAX_CHANNELS];
+    const int naov = ef_aov_channels(o.aov, aov_names);
     int status = 1;
     if (ef_exr_open(o.input, &in, &err)) {
         report(o.input, &err, 1);
@@ -200,6 +259,15 @@ int ef_main(int argc, char **argv)
     }
     if (ef_find_channels(&in, df, o.layer, o.depth_channel, &plan, &err)) {
         report(o.input, &err, 1);
+        goto done;
+    }
+    const char *clash = ef_exr_part_has_any(&in, plan.rgb[0].part, aov_names, naov);
+    if (clash) {
+        char list[64];
+        ef_aov_list(o.aov, list, sizeof list);
+        ef_fail(&err, "--aov %s: the colour part already has a channel '%s'; the AOV would "
+                      "overwrite it (leave that AOV out, or rename the channel)", list, clash);
+        status = report(o.input, &err, 2);
         goto done;
     }
     if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
@@ -224,6 +292,16 @@ int ef_main(int argc, char **argv)
 
     ef_scene_bind(&o.scene, cam.pos);
     job.pass = (ef_fog_pass){ &cam, &conv, &o.scene };
+    job.aov = o.aov;
+    memcpy(job.aov_origin, o.aov_origin, sizeof job.aov_origin);
+    if (o.stats) {
+        job.stats = calloc((size_t) o.scene.ncomp + 1, sizeof *job.stats);
+        if (!job.stats) {
+            ef_fail(&err, "out of memory for the statistics");
+            report(o.output, &err, 1);
+            goto done;
+        }
+    }
     exr_attr_box2i_t dw;
     exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
     if (o.preview) {
@@ -257,7 +335,11 @@ int ef_main(int argc, char **argv)
                           .compression = o.compression,
                           .zip_level = o.zip_level,
                           .pixel_type = o.pixel_type,
-                          .param_attr = o.params };
+                          .param_attr = o.params,
+                          .extra = aov_names,
+                          .nextra = naov,
+                          .has_origin_attr = o.has_aov_origin,
+                          .origin_attr = { o.aov_origin[0], o.aov_origin[1], o.aov_origin[2] } };
     ef_stream_stats st;
     if (o.verbose) {
         explain(stderr, &o, &in, &plan, &cam, &conv, conv_ok);
@@ -283,6 +365,7 @@ int ef_main(int argc, char **argv)
                 "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
                 st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
                 (double) ru.ru_maxrss / 1024.0);
+        print_tau_stats(&o.scene, job.stats);
     }
     if (job.preview) {
         char msg[512];
@@ -293,6 +376,8 @@ int ef_main(int argc, char **argv)
     }
 done:
     free(job.preview);
+    free(job.stats);
+    pthread_mutex_destroy(&job.lock);
     ef_exr_close(&dep);
     ef_exr_close(&in);
     ef_options_free(&o);

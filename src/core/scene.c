@@ -107,7 +107,8 @@ static void mix_where_opaque(const ef_fog_scene *s, const ef_ray *r, const int n
 
 /* Sums the components' optical depths and, with per-component colours, the
  * tau-weighted colour; out->T holds tau until transmit() turns it into T. */
-static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out)
+static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out,
+                    ef_tau_info *info)
 {
     double *acc = out->T, wc[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
@@ -115,7 +116,10 @@ static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out)
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         double t[3];
-        c->model->tau(c, r, t);
+        if (info)
+            ef_fog_tau(c, r, t, &info[i]);
+        else
+            c->model->tau(c, r, t);
         for (int k = 0; k < 3; ++k) {
             acc[k] += t[k];
             if (!s->any_color)
@@ -148,8 +152,14 @@ static void transmit(double T[3])
 
 void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf, ef_fog_sample *inf)
 {
+    ef_scene_eval_info(s, r, surf, inf, NULL);
+}
+
+void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
+                        ef_fog_sample *inf, ef_tau_info *info)
+{
     if (!inf) {
-        sum_tau(s, r, surf);
+        sum_tau(s, r, surf, info);
         transmit(surf->T);
         return;
     }
@@ -162,13 +172,15 @@ void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf, 
     } else {
         far.dist = far.planar = INFINITY;
     }
-    sum_tau(s, &far, inf);
+    /* The surface segment's info: the far one when they are the same. */
+    const int same = far.dist == r->dist;
+    sum_tau(s, &far, inf, same ? info : NULL);
     transmit(inf->T);
-    if (far.dist == r->dist) {
+    if (same) {
         *surf = *inf;
         return;
     }
-    sum_tau(s, r, surf);
+    sum_tau(s, r, surf, info);
     transmit(surf->T);
 }
 

@@ -53,6 +53,13 @@ int ef_scene_parse_sky(ef_fog_scene *s, const char *text, ef_err *err);
 void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
                    ef_fog_sample *inf);
 
+/* ef_scene_eval that also reports, in info[i] for each component i (info
+ * may be NULL), the error and cost of its optical depth on the surface
+ * segment (ef_fog_tau; zero for the closed forms). The far segment's
+ * evaluation is not reported unless it is the surface segment (sky). */
+void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
+                        ef_fog_sample *inf, ef_tau_info *info);
+
 /* Premultiplied compositing of one pixel in place:
  *   rgb   = T rgb + (1 - T) a F + (1 - a)(1 - Tinf) Finf
  *   alpha = a + (1 - a)(1 - Tinf)

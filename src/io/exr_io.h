@@ -54,13 +54,20 @@ typedef struct ef_channel_plan {
 int ef_find_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const char *layer,
                      const char *depth_channel, ef_channel_plan *plan, ef_err *err);
 
+/* Channels the stream can add to the colour part (ef_stream_opts.extra). */
+#define EF_MAX_EXTRA_CHANNELS 16
+
 /* One work unit of the colour part, decoded to float: a rectangle of
- * absolute pixels, rows of w floats. alpha is NULL without alpha. */
+ * absolute pixels, rows of w floats. alpha is NULL without alpha. extra[i]
+ * is the plane of opts->extra[i] (zeroed before the callback), which the
+ * callback fills. */
 typedef struct ef_chunk {
     int x0, y0, w, h;
     float *rgb[3];
     float *alpha;
     const float *depth;
+    float *extra[EF_MAX_EXTRA_CHANNELS];
+    int nextra;
 } ef_chunk;
 
 /* Edits the colour of one unit in place; called from worker threads, so it
@@ -79,6 +86,14 @@ typedef struct ef_stream_opts {
     int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */
     int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep */
     const char *param_attr;   /* value of the exrfog/parameters string attribute */
+    /* New channels of the colour part, FLOAT (HALF when pixel_type is
+     * HALF), filled by the callback; names must not be in the part yet. */
+    const char *const *extra;
+    int nextra;               /* 0..EF_MAX_EXTRA_CHANNELS */
+    /* A v3d attribute of the colour part (exrfog/aovOrigin), when
+     * has_origin_attr. */
+    int has_origin_attr;
+    double origin_attr[3];
 } ef_stream_opts;
 
 /* Writes every part of in to out_path (the exact path: the caller picks a
@@ -90,6 +105,10 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,
                   const ef_channel_plan *plan, const char *out_path,
                   const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err);
+
+/* The name of the first of the n channel names that part p of f already
+ * has, or NULL when it has none of them. */
+const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *const *names, int n);
 
 /* Parses a --compression value, NAME or zip:LEVEL / zips:LEVEL (1..9);
  * DWAA/DWAB are refused with a message. *level is -1 without a level.

@@ -218,6 +218,8 @@ typedef struct part_job {
     int out_rows;             /* scanlines per output chunk */
     int nch;
     const exr_attr_chlist_t *cl;
+    int nextra;               /* colour part: channels added after the nch read */
+    const char *const *extra; /* their names */
     uint8_t *as_float;        /* per channel: the callback sees it as float */
     int colour;               /* 1: this is the part the callback edits */
     const ef_channel_plan *plan;
@@ -293,13 +295,17 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         return -1;
     for (int c = 0; c < enc->channel_count; ++c) {
         exr_coding_channel_info_t *ch = &enc->channels[c];
+        /* By name: the output list is sorted, the added channels among the
+         * others. planes[nch + i] holds extra channel i, as float. */
         int k = 0;
         while (k < j->nch && strcmp(j->cl->entries[k].name.str, ch->channel_name))
             ++k;
-        if (k == j->nch)
+        while (k >= j->nch && k < j->nch + j->nextra && strcmp(j->extra[k - j->nch], ch->channel_name))
+            ++k;
+        if (k == j->nch + j->nextra)
             return -1;
         ch->encode_from_ptr = (const uint8_t *) planes[k] + 4 * (size_t) (cy - oy) * (size_t) stride;
-        ch->user_data_type = plane_type(ch->data_type, j->as_float[k]);
+        ch->user_data_type = k < j->nch ? plane_type(ch->data_type, j->as_float[k]) : EXR_PIXEL_FLOAT;
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
@@ -335,9 +341,10 @@ static void *worker(void *arg)
     size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
                                   (size_t) (j->g.th < j->g.height ? j->g.th : j->g.height)
                             : (size_t) j->g.width * (size_t) j->g.unit_rows;
-    void **planes = calloc((size_t) j->nch, sizeof *planes);
+    const int nplanes = j->nch + j->nextra;
+    void **planes = calloc((size_t) nplanes, sizeof *planes);
     int ok = planes != NULL;
-    for (int k = 0; ok && k < j->nch; ++k)
+    for (int k = 0; ok && k < nplanes; ++k)
         ok = (planes[k] = malloc(cap * 4)) != NULL;
     if (ok && j->colour && j->depth_local < 0) {
         const exr_attr_chlist_t *dcl;
@@ -388,9 +395,19 @@ static void *worker(void *arg)
         double t1 = now();
         td += t1 - t0;
         if (j->colour) {
-            ef_chunk ck = { x0, y0, w, h, { NULL, NULL, NULL }, NULL, NULL };
+            ef_chunk ck;
+            memset(&ck, 0, sizeof ck);
+            ck.x0 = x0;
+            ck.y0 = y0;
+            ck.w = w;
+            ck.h = h;
             for (int k = 0; k < 3; ++k)
                 ck.rgb[k] = planes[j->plan->rgb[k].index];
+            ck.nextra = j->nextra;
+            for (int k = 0; k < j->nextra; ++k) {
+                ck.extra[k] = planes[j->nch + k];
+                memset(ck.extra[k], 0, (size_t) w * (size_t) h * sizeof(float));
+            }
             ck.alpha = j->plan->alpha.part >= 0 ? planes[j->plan->alpha.index] : NULL;
             ck.depth = j->depth_local >= 0 ? planes[j->depth_local] : depth;
             j->fn(j->user, &ck);
@@ -460,16 +477,17 @@ out:
     depth_reader_free(&dr);
     free(depth);
     free(ob.data);
-    for (int k = 0; planes && k < j->nch; ++k)
+    for (int k = 0; planes && k < nplanes; ++k)
         free(planes[k]);
     free(planes);
     return NULL;
 }
 
 /* Declares output part p like input part p: same name, storage, tile size
- * (one level), channels (types per opts), then every other attribute. */
-static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef_stream_opts *o,
-                       ef_err *err)
+ * (one level), channels (types per opts), then every other attribute. The
+ * colour part also gets opts' extra channels and origin attribute. */
+static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colour,
+                       const ef_stream_opts *o, ef_err *err)
 {
     const char *name = NULL;
     exr_storage_t st;
@@ -499,6 +517,16 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, const ef
                                                                 : EXR_PERCEPTUALLY_LOGARITHMIC,
                             1, 1))
             return ef_fail(err, "cannot add channel '%s'", e->name.str);
+    }
+    for (int c = 0; colour && c < o->nextra; ++c) {
+        const exr_pixel_type_t t = o->pixel_type == EXR_PIXEL_HALF ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT;
+        if (exr_add_channel(out, p, o->extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
+            return ef_fail(err, "cannot add channel '%s': %s", o->extra[c], ef_exr_last_core_message());
+    }
+    if (colour && o->has_origin_attr) {
+        const exr_attr_v3d_t v = { .x = o->origin_attr[0], .y = o->origin_attr[1], .z = o->origin_attr[2] };
+        if (exr_attr_set_v3d(out, p, "exrfog/aovOrigin", &v))
+            return ef_fail(err, "cannot record exrfog/aovOrigin: %s", ef_exr_last_core_message());
     }
     if (exr_set_compression(out, p, comp) || exr_set_lineorder(out, p, EXR_LINEORDER_INCREASING_Y))
         return ef_fail(err, "cannot set compression of part %d", p);
@@ -571,6 +599,10 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.user = user;
     j.colour = p == plan->rgb[0].part;
     j.depth_local = -1;
+    if (j.colour) {
+        j.nextra = o->nextra;
+        j.extra = o->extra;
+    }
     if (exr_get_scanlines_per_chunk(out, p, &j.out_rows) || j.out_rows < 1)
         j.out_rows = 1;
     if (geom_init(in->ctx, p, j.out_rows, &j.g))
@@ -655,6 +687,12 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     memset(stats, 0, sizeof *stats);
     if (check_depth_window(in, df, plan, err))
         return -1;
+    if (o->nextra < 0 || o->nextra > EF_MAX_EXTRA_CHANNELS)
+        return ef_fail(err, "internal error: %d extra channels (at most %d)", o->nextra,
+                       EF_MAX_EXTRA_CHANNELS);
+    const char *clash = ef_exr_part_has_any(in, plan->rgb[0].part, o->extra, o->nextra);
+    if (clash)
+        return ef_fail(err, "part %d already has a channel '%s'", plan->rgb[0].part, clash);
     ef_exr_init_context(&init);
     if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init))
         return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
@@ -667,7 +705,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     }
     int rc = 0;
     for (int p = 0; p < in->nparts && !rc; ++p)
-        rc = define_part(in, out, p, o, err);
+        rc = define_part(in, out, p, p == plan->rgb[0].part, o, err);
     if (!rc && exr_write_header(out))
         rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
     for (int p = 0; p < in->nparts && !rc; ++p)
@@ -678,6 +716,18 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
         remove(out_path);
     stats->wall_s = now() - t0;
     return rc;
+}
+
+const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *const *names, int n)
+{
+    const exr_attr_chlist_t *cl;
+    if (exr_get_channels(f->ctx, part, &cl))
+        return NULL;
+    for (int i = 0; i < n; ++i)
+        for (int c = 0; c < cl->num_channels; ++c)
+            if (!strcmp(cl->entries[c].name.str, names[i]))
+                return names[i];
+    return NULL;
 }
 
 static const char *const comp_names[] = { "none", "rle", "zips", "zip", "piz",

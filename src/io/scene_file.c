@@ -4,6 +4,8 @@
  * meaning is left to the models, which parse the SPEC as they parse --fog. */
 #include "scene_file.h"
 
+#include "aov.h"
+
 #include <errno.h>
 #include <jansson.h>
 #include <stdarg.h>
@@ -19,7 +21,7 @@
 /* The longest SPEC a component can hold (ef_fog_component.spec). */
 #define EF_SPEC_MAX (sizeof(((ef_fog_component *) 0)->spec) - 1)
 
-static const char top_keys[] = "units, up, color, sky, fog";
+static const char top_keys[] = "units, up, color, sky, time, aov, fog";
 
 /* ------------------------------------------------------------ text files */
 
@@ -485,6 +487,36 @@ static int read_sky(const json_t *v, ef_scene_file *out, ef_err *err)
     return 0;
 }
 
+static int read_time(const json_t *v, ef_scene_file *out, ef_err *err)
+{
+    if (!json_is_number(v))
+        return expected(err, "time", "a number (seconds)", v);
+    out->time = json_number_value(v);
+    out->has_time = 1;
+    return 0;
+}
+
+/* "fog,T" or ["fog", "T"]. */
+static int read_aov(const json_t *v, ef_scene_file *out, ef_err *err)
+{
+    static const char what[] = "a comma list or an array of AOV names (" EF_AOV_NAMES ")";
+    if (json_is_string(v))
+        return ef_aov_parse(json_string_value(v), &out->aov, "aov:", err);
+    if (!json_is_array(v) || json_array_size(v) == 0)
+        return expected(err, "aov", what, v);
+    for (size_t i = 0; i < json_array_size(v); ++i) {
+        const json_t *e = json_array_get(v, i);
+        char where[32];
+        snprintf(where, sizeof where, "aov[%zu]:", i);
+        if (!json_is_string(e))
+            return ef_fail(err, "aov[%zu]: expected an AOV name (a string), got %s", i,
+                           type_name(e));
+        if (ef_aov_parse(json_string_value(e), &out->aov, where, err))
+            return -1;
+    }
+    return 0;
+}
+
 static int read_fog(const json_t *v, const char *path, ef_scene_file *out, ef_err *err)
 {
     if (!json_is_array(v))
@@ -530,6 +562,10 @@ static int read_root(const json_t *root, const char *path, ef_scene_file *out, e
             rc = read_sky(v, out, err);
         else if (!strcmp(key, "fog"))
             rc = read_fog(v, path, out, err);
+        else if (!strcmp(key, "time"))
+            rc = read_time(v, out, err);
+        else if (!strcmp(key, "aov"))
+            rc = read_aov(v, out, err);
         else
             rc = ef_fail(err, "unknown key '%s' (keys: %s)", key, top_keys);
         if (rc)

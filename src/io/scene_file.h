@@ -1,6 +1,7 @@
-/* Scene files (--scene FILE, JSON): the fog components, colour, sky, up axis
- * and units of a scene, with the SPEC grammar's names. The reader turns each
- * component into a SPEC string; the core parses it as it parses --fog. */
+/* Scene files (--scene FILE, JSON): the fog components, colour, sky, up
+ * axis, units, time and AOVs of a scene, with the SPEC grammar's names. The
+ * reader turns each component into a SPEC string; the core parses it as it
+ * parses --fog. */
 #ifndef EF_SCENE_FILE_H
 #define EF_SCENE_FILE_H
 
@@ -11,8 +12,9 @@ typedef struct ef_scene_file {
     char *specs[EF_FOG_MAX_COMPONENTS];      /* malloc'd SPEC strings */
     char where[EF_FOG_MAX_COMPONENTS][64];   /* each one's path in the file, e.g. "fog[2]" */
     int nspec;
-    int has_color, has_up, has_units, has_sky;
-    double color[3], up[3], units;
+    int has_color, has_up, has_units, has_sky, has_time;
+    double color[3], up[3], units, time;
+    unsigned aov;                            /* EF_AOV_* bits of "aov" (0: none) */
     char sky[64];                            /* as --sky takes it: fog, keep, distance=D */
 } ef_scene_file;
 

@@ -1,0 +1,136 @@
+#include "aov.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+static const struct {
+    const char *name;
+    unsigned bit;
+    int n;
+    const char *ch[4];
+} aovs[] = {
+    { "fog", EF_AOV_FOG, 4, { "fog.R", "fog.G", "fog.B", "fog.A" } },
+    { "T", EF_AOV_T, 3, { "fog_T.R", "fog_T.G", "fog_T.B" } },
+    { "error", EF_AOV_ERROR, 3, { "fog_error.R", "fog_error.G", "fog_error.B" } },
+    { "P", EF_AOV_P, 3, { "fog_P.X", "fog_P.Y", "fog_P.Z" } },
+    { "distance", EF_AOV_DISTANCE, 1, { "fog_distance.Z" } },
+};
+#define NAOV ((int) (sizeof aovs / sizeof aovs[0]))
+
+unsigned ef_aov_find(const char *name)
+{
+    for (int i = 0; i < NAOV; ++i)
+        if (!strcmp(aovs[i].name, name))
+            return aovs[i].bit;
+    return 0;
+}
+
+int ef_aov_parse(const char *list, unsigned *mask, const char *what, ef_err *err)
+{
+    const char *s = list;
+    for (;;) {
+        const char *comma = strchr(s, ',');
+        const size_t len = comma ? (size_t) (comma - s) : strlen(s);
+        char name[32];
+        if (len == 0)
+            return ef_fail(err, "%s '%s' has an empty name (a comma list of %s)", what, list,
+                           EF_AOV_NAMES);
+        if (len >= sizeof name)
+            return ef_fail(err, "%s '%s': '%.*s' is not an AOV (valid: %s)", what, list,
+                           (int) (len > 40 ? 40 : len), s, EF_AOV_NAMES);
+        memcpy(name, s, len);
+        name[len] = '\0';
+        const unsigned bit = ef_aov_find(name);
+        if (!bit)
+            return ef_fail(err, "%s '%s': '%s' is not an AOV (valid: %s)", what, list, name,
+                           EF_AOV_NAMES);
+        *mask |= bit;
+        if (!comma)
+            return 0;
+        s = comma + 1;
+    }
+}
+
+int ef_aov_channels(unsigned mask, const char **names)
+{
+    int n = 0;
+    for (int i = 0; i < NAOV; ++i)
+        if (mask & aovs[i].bit)
+            for (int k = 0; k < aovs[i].n; ++k, ++n)
+                if (names)
+                    names[n] = aovs[i].ch[k];
+    return n;
+}
+
+void ef_aov_list(unsigned mask, char *buf, size_t len)
+{
+    size_t at = 0;
+    if (len)
+        buf[0] = '\0';
+    for (int i = 0; i < NAOV; ++i)
+        if (mask & aovs[i].bit) {
+            int n = snprintf(buf + at, len - at, "%s%s", at ? "," : "", aovs[i].name);
+            if (n < 0 || (size_t) n >= len - at)
+                return;
+            at += (size_t) n;
+        }
+}
+
+void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes)
+{
+    float **slot[NAOV][4] = {
+        { &out->fog[0], &out->fog[1], &out->fog[2], &out->fog[3] },
+        { &out->T[0], &out->T[1], &out->T[2], NULL },
+        { &out->err[0], &out->err[1], &out->err[2], NULL },
+        { &out->P[0], &out->P[1], &out->P[2], NULL },
+        { &out->dist, NULL, NULL, NULL },
+    };
+    int n = 0;
+    out->mask = mask;
+    for (int i = 0; i < NAOV; ++i)
+        for (int k = 0; k < aovs[i].n; ++k)
+            *slot[i][k] = mask & aovs[i].bit ? planes[n++] : NULL;
+}
+
+/* s += v, keeping the rounding error in *lo (Neumaier), so the total does
+ * not depend on the order partial sums are merged in, to double rounding. */
+static void add_comp(double *s, double *lo, double v)
+{
+    const double t = *s + v;
+    if (!isfinite(t)) {
+        *s = t;
+        return;
+    }
+    if (fabs(*s) >= fabs(v))
+        *lo += (*s - t) + v;
+    else
+        *lo += (v - t) + *s;
+    *s = t;
+}
+
+void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info)
+{
+    const double e = fmax(info->err[0], fmax(info->err[1], info->err[2]));
+    s->pixels += 1.0;
+    s->evals += info->evals;
+    s->cells += info->cells;
+    s->dropped += info->dropped;
+    if (info->evals > s->evals_max)
+        s->evals_max = info->evals;
+    if (e > s->err_max)
+        s->err_max = e;
+    add_comp(&s->err_sum, &s->err_sum_lo, e);
+}
+
+void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
+{
+    a->pixels += b->pixels;
+    a->evals += b->evals;
+    a->cells += b->cells;
+    a->dropped += b->dropped;
+    a->evals_max = fmax(a->evals_max, b->evals_max);
+    a->err_max = fmax(a->err_max, b->err_max);
+    add_comp(&a->err_sum, &a->err_sum_lo, b->err_sum);
+    add_comp(&a->err_sum, &a->err_sum_lo, b->err_sum_lo);
+}

@@ -1,0 +1,71 @@
+/* Per-pixel outputs of the fog pass (AOVs), written as extra channels of
+ * the colour part. Their names are a public interface:
+ *   fog       fog.R, fog.G, fog.B, fog.A   the premultiplied fog alone:
+ *                                          out.rgb - T in.rgb, out.a - in.a
+ *   T         fog_T.R, fog_T.G, fog_T.B    transmittance to the surface
+ *   error     fog_error.R, .G, .B          bound (or estimate) of |dT|
+ *   P         fog_P.X, fog_P.Y, fog_P.Z    world position minus an origin
+ *   distance  fog_distance.Z               true camera distance
+ * Pure C, no I/O. */
+#ifndef EF_AOV_H
+#define EF_AOV_H
+
+#include "error.h"
+#include "fog.h"
+
+enum {
+    EF_AOV_FOG = 1u << 0,
+    EF_AOV_T = 1u << 1,
+    EF_AOV_ERROR = 1u << 2,
+    EF_AOV_P = 1u << 3,
+    EF_AOV_DISTANCE = 1u << 4,
+};
+
+/* Channels of every AOV together. */
+#define EF_AOV_MAX_CHANNELS 14
+
+/* The AOV names as users write them, in table order, comma-separated. */
+#define EF_AOV_NAMES "fog, T, error, P, distance"
+
+/* Adds the AOVs of a comma list ("fog,T") to *mask; duplicates merge, and
+ * empty items are refused. On an unknown name returns -1 with a message
+ * that lists the valid ones (what names where the value came from). */
+int ef_aov_parse(const char *list, unsigned *mask, const char *what, ef_err *err);
+
+/* The AOV bit of one name, or 0 when there is none. */
+unsigned ef_aov_find(const char *name);
+
+/* The channel names of mask, in table order; returns how many (at most
+ * EF_AOV_MAX_CHANNELS). names may be NULL to count. */
+int ef_aov_channels(unsigned mask, const char **names);
+
+/* The AOV names of mask as a comma list ("fog,T"), into buf. */
+void ef_aov_list(unsigned mask, char *buf, size_t len);
+
+/* Where the pass writes the AOVs of one block: planes of w x h floats, one
+ * per channel; only those of the AOVs in mask are used. */
+typedef struct ef_aov_out {
+    unsigned mask;
+    double origin[3];         /* subtracted from fog_P (in double) */
+    float *fog[4], *T[3], *err[3], *P[3], *dist;
+} ef_aov_out;
+
+/* Points out's planes at planes[i], i in the order ef_aov_channels gives. */
+void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes);
+
+/* Cost and error of the numerical components over many pixels (the
+ * surface segment of each fogged pixel), for --stats. */
+typedef struct ef_tau_stats {
+    double pixels;            /* pixels whose fog was evaluated */
+    double evals, cells, dropped;   /* sums over those pixels */
+    double evals_max;
+    double err_max;           /* max over pixels and channels of info.err (tau) */
+    double err_sum, err_sum_lo;     /* sum of the per-pixel max over channels, compensated */
+} ef_tau_stats;
+
+/* Adds one pixel's info to s. */
+void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info);
+/* Adds the totals of b to a. */
+void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b);
+
+#endif
