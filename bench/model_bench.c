@@ -233,7 +233,7 @@ static int ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3
 {
     if (!c->model->density && strcmp(c->model->name, "exp") == 0 &&
         c->distance == EF_DIST_RADIAL) {
-        const ef_ref_density d = { 0, NULL, 0, NULL, const_density, c->p };
+        const ef_ref_density d = { .density = const_density, .ctx = c->p };
         return ef_ref_integrate(&d, r->org, r->dir, r->dist, tau, NULL);
     }
     return ef_ref_tau(c, r, tau, NULL);

@@ -125,6 +125,7 @@ typedef struct quad {
     run *R;
     ival *heap;          /* max-heap by err */
     size_t n, cap;
+    size_t max_n;        /* refinement stops at this many intervals */
     long double *vals;   /* nf values per stored point */
     size_t nvals, capvals;
     long double scale[3];
@@ -209,10 +210,9 @@ static void ival_eval(quad *q, ival *iv)
     q->R->st->intervals++;
 }
 
+/* Intervals refinement may add beyond 4 per piece. */
 #define MAX_INTERVALS 20000
 
-/* Adds the pieces' intervals (already evaluated into q->heap as a plain
- * array), then refines. Returns 0 or -1 (memory). */
 /* Sets the error scale to the current total of each channel and rebuilds
  * the heap; returns the summed relative error. The first estimate of a
  * total can be off by many orders (a steep exponential seen by 15 nodes), so
@@ -247,8 +247,10 @@ static int refine(quad *q, long double tau[3])
 {
     long double Ksum[3];
     long double total_err = rescale(q, Ksum);
-    long iter = 0;
-    while (q->n && total_err > REL_TOL && q->n < MAX_INTERVALS) {
+    /* A full rescale costs O(n): space them so that millions of lattice
+     * pieces stay linear. */
+    long iter = 0, next_rescale = 256;
+    while (q->n && total_err > REL_TOL && q->n < q->max_n) {
         ival top = q->heap[0];
         q->heap[0] = q->heap[--q->n];
         sift_down(q->heap, q->n, 0);
@@ -288,8 +290,10 @@ static int refine(quad *q, long double tau[3])
         if (ival_push(q, a) || ival_push(q, b))
             return -1;
         /* Running sums drift, and the totals move: recompute now and then. */
-        if (drifted(q, Ksum) || ++iter % 256 == 0 || !(total_err >= 0))
+        if (drifted(q, Ksum) || ++iter >= next_rescale || !(total_err >= 0)) {
             total_err = rescale(q, Ksum);
+            next_rescale = iter + (long) (q->n / 8 > 256 ? q->n / 8 : 256);
+        }
     }
     if (total_err > REL_TOL)
         q->R->st->unconverged++;
@@ -373,8 +377,9 @@ typedef struct dline {
     ef_dd h0, s;
 } dline;
 
-/* Adds the crossing of functional f with value val if it lies inside the segment. */
-static int add_crossing(splits *S, const dline *l, int f, ef_dd val, double len)
+/* Adds the crossing of functional f with value val if it lies strictly
+ * inside [0, len]. */
+static int add_crossing(splits *S, const dline *l, int f, ef_dd val, long double len)
 {
     if (l->s.hi == 0)
         return 0;
@@ -389,6 +394,46 @@ static int add_crossing(splits *S, const dline *l, int f, ef_dd val, double len)
 static int within(const ef_line_ld *l, long double val)
 {
     return l->s > 0 ? val > l->h0 && val < l->h1 : val < l->h0 && val > l->h1;
+}
+
+/* Adds the crossings of lattice lt strictly inside [0, amax] of the
+ * segment (to_end: amax is the segment's end); *budget counts down the
+ * splits still allowed. Returns 0, or -1 (memory, budget exhausted, or a
+ * lattice whose crossings cannot be placed). */
+static int add_lattice(splits *S, const dline *D, const ef_line_ld *L, const ef_fog_lattice *lt,
+                       long double amax, int to_end, long *budget)
+{
+    if (!(isfinite(lt->period) && lt->period > 0 && isfinite(lt->phase)))
+        return -1;
+    const dline *l = &D[lt->f];
+    if (l->s.hi == 0)
+        return 0;
+    /* The functional's range over [0, amax]: its exact end values on a
+     * finite segment, else its value at amax (the margin below absorbs the
+     * rounding; add_crossing places each crossing exactly). */
+    const long double h0 = L[lt->f].h0;
+    const long double h1 =
+        to_end ? L[lt->f].h1
+               : ld(ef_dd_add(l->h0, dd_mul(l->s, (ef_dd) { (double) amax,
+                                                           (double) (amax - (double) amax) })));
+    const long double lo = fminl(h0, h1), hi = fmaxl(h0, h1);
+    const long double klo = floorl((lo - lt->phase) / lt->period);
+    const long double khi = ceill((hi - lt->phase) / lt->period);
+    if (!(fabsl(klo) < 0x1p53L && fabsl(khi) < 0x1p53L))
+        return -1;
+    /* Integers strictly between klo and khi: the crossings inside. */
+    const long double count = khi - klo - 1;
+    if (count > (long double) *budget)
+        return -1;
+    *budget -= count > 0 ? (long) count : 0;
+    for (long double k = klo; k <= khi; k += 1) {
+        /* phase + k period in double-double: k (< 2^53) and the product
+         * are exact. */
+        const ef_dd val = ef_dd_add((ef_dd) { lt->phase, 0 }, ef_two_prod((double) k, lt->period));
+        if (add_crossing(S, l, lt->f, val, amax))
+            return -1;
+    }
+    return 0;
 }
 
 static void point_values(const run *R, const dline *D, const split *p, long double *v)
@@ -470,6 +515,23 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
     }
     if (R.lambda == 0)
         R.lambda = 1;
+    if (d->nlat > 0 && d->lat) {
+        /* Lattice seams over the whole of a finite segment; on an infinite
+         * one, up to where the tail starts (the farthest split so far). */
+        long double amax = len;
+        if (isinf(len)) {
+            amax = 0;
+            for (size_t k = 0; k < S.n; ++k)
+                if (ld(S.v[k].a) > amax)
+                    amax = ld(S.v[k].a);
+        }
+        long budget = EF_REF_MAX_LATTICE_SPLITS;
+        if (amax > 0)
+            for (int j = 0; j < d->nlat; ++j)
+                if (d->lat[j].f >= 0 && d->lat[j].f < d->nf &&
+                    add_lattice(&S, D, L, &d->lat[j], amax, !isinf(len), &budget))
+                    goto oom;
+    }
     if (S.n)
         qsort(S.v, S.n, sizeof *S.v, by_offset);
 
@@ -507,6 +569,7 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         if (add_piece(&q, (size_t) iL, (size_t) iL, 1, 1))
             goto oom;
     }
+    q.max_n = MAX_INTERVALS + 4 * (size_t) R.st->pieces;
     if (refine(&q, tau))
         goto oom;
     for (int k = 0; k < 3; ++k)
@@ -548,8 +611,22 @@ int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], e
         return -1;
     m->features(c, feat, nfeat);
     comp_ctx cc = { c };
-    ef_ref_density d = { nf, f, nfeat, feat, comp_density, &cc };
+    int nlat = m->lattices ? m->lattices(c, NULL, 0) : 0;
+    if (nlat < 0) {
+        free(feat);
+        return -1;
+    }
+    ef_fog_lattice *lat = malloc(((size_t) nlat + 1) * sizeof *lat);
+    if (!lat) {
+        free(feat);
+        return -1;
+    }
+    if (nlat)
+        m->lattices(c, lat, nlat);
+    ef_ref_density d = { .nf = nf, .f = f, .nfeat = nfeat, .feat = feat,
+                         .density = comp_density, .ctx = &cc, .nlat = nlat, .lat = lat };
     const int rc = ef_ref_integrate(&d, r->org, r->dir, r->dist, tau, st);
+    free(lat);
     free(feat);
     return rc;
 }

@@ -26,17 +26,31 @@ typedef struct ef_ref_density {
     const ef_fog_feature *feat;
     void (*density)(const void *ctx, const long double *v, long double out[3]);
     const void *ctx;
+    /* Periodic seams (a noise lattice's planes): the segment is split where
+     * lattice j's functional crosses lat[j].phase + k lat[j].period, for
+     * every integer k, so no quadrature interval straddles a seam. */
+    int nlat;
+    const ef_fog_lattice *lat;
 } ef_ref_density;
 
 /* tau per channel along org + t dir, t in [0, len] (len may be INFINITY:
  * channels whose density stays positive at infinity get INFINITY). The
- * relative accuracy aimed at is 1e-15. Returns 0, or -1 when memory runs
- * out. st may be NULL. */
+ * relative accuracy aimed at is 1e-15. On an infinite segment, lattice
+ * seams are split at only up to where the infinite tail starts (the
+ * farthest of the features' geometric steps; with no such step, nowhere):
+ * the tail's substitution takes the rest. Returns 0, or -1 when memory runs
+ * out, when the lattice seams inside the segment number more than
+ * EF_REF_MAX_LATTICE_SPLITS in all, or when a lattice's period is not
+ * finite and positive, its phase not finite, or its crossing index
+ * (value - phase) / period reaches 2^53 in magnitude (its crossings could
+ * not be placed). st may be NULL. */
+#define EF_REF_MAX_LATTICE_SPLITS (1L << 22)
+
 int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double dir[3],
                      double len, long double tau[3], ef_ref_stats *st);
 
 /* The same for a fog component along r, from its model's functionals,
- * features and density. Returns -1 for models without a density of position
+ * features, lattices (when it has them) and density. Returns -1 for models without a density of position
  * (linear, exp2) or when memory runs out. */
 int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], ef_ref_stats *st);
 
