@@ -333,6 +333,7 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
 /* A noise coordinate along the ray: u(t) = b + t d, b reduced modulo 256. */
 typedef struct lin {
     long double b, d;
+    double bd, dd;                   /* the same rounded, for per-node work */
 } lin;
 
 static long double mod256(long double u)
@@ -354,7 +355,8 @@ static void q_line(const nstate *s, const double org[3], const double dir[3], in
 static lin octave_line(const nstate *s, int i, long double q0, long double dq, int a)
 {
     const long double f = s->fbm.freq[i];
-    return (lin) { mod256(f * q0 + (long double) i * ef_fbm_offset[a]), f * dq };
+    const long double b = mod256(f * q0 + (long double) i * ef_fbm_offset[a]), d = f * dq;
+    return (lin) { b, d, (double) b, (double) d };
 }
 
 /* Splits a long double coordinate into a cell index and its fraction. */
@@ -373,7 +375,8 @@ static void split_ld(long double u, int64_t *cell, double *frac)
 typedef struct walk {
     int m;
     const lin *u;
-    long double cell[MAXLIN], next[MAXLIN];
+    long double cell[MAXLIN], next[MAXLIN], step[MAXLIN];  /* step: t per cell */
+    int ic[MAXLIN];                  /* cell & 255 */
     long double t, t1;
 } walk;
 
@@ -398,7 +401,9 @@ static void walk_init(walk *w, const lin *u, int m, long double t0, long double 
         if (u[j].d < 0 && c == v)
             c -= 1;   /* on a face, moving down: the cell below */
         w->cell[j] = c;
+        w->ic[j] = (int) mod256(c);
         w->next[j] = next_crossing(&u[j], c);
+        w->step[j] = u[j].d == 0 ? 0 : fabsl(1 / u[j].d);
     }
 }
 
@@ -424,11 +429,17 @@ static void walk_advance(walk *w, long double tb)
     for (int j = 0; j < w->m; ++j)
         while (w->next[j] <= tb) {
             w->cell[j] += w->u[j].d > 0 ? 1 : -1;
-            w->next[j] = next_crossing(&w->u[j], w->cell[j]);
+            w->ic[j] = (w->ic[j] + (w->u[j].d > 0 ? 1 : 255)) & 255;
+            w->next[j] += w->step[j];
         }
     w->t = tb;
     if (tb >= w->t1)
         w->t = w->t1;
+}
+
+static double clamp01(double f)
+{
+    return f < 0 ? 0 : f > 1 ? 1 : f;
 }
 
 /* The fraction of coordinate j inside its current cell at t. */
@@ -440,8 +451,45 @@ static double walk_frac(const walk *w, int j, long double t)
 
 static void walk_hash(const walk *w, int j0, ef_noise_cell *nc)
 {
-    ef_noise_cell_at((int64_t) mod256(w->cell[j0]), (int64_t) mod256(w->cell[j0 + 1]),
-                     (int64_t) mod256(w->cell[j0 + 2]), nc);
+    ef_noise_cell_at(w->ic[j0], w->ic[j0 + 1], w->ic[j0 + 2], nc);
+}
+
+/* A cell's eight corner gradients as numbers, so a node's noise needs no
+ * branches: g.(x, y, z) adds the same two non-zero terms as Perlin's grad. */
+typedef struct gcell {
+    double g[8][3];
+} gcell;
+
+/* grad(h, x, y, z) = u +- v with u = h < 8 ? x : y, v = h < 4 ? y : h == 12
+ * or 14 ? x : z, as coefficient vectors. */
+static const double grad_vec[16][3] = {
+    { 1, 1, 0 },  { -1, 1, 0 },  { 1, -1, 0 },  { -1, -1, 0 },
+    { 1, 0, 1 },  { -1, 0, 1 },  { 1, 0, -1 },  { -1, 0, -1 },
+    { 0, 1, 1 },  { 0, -1, 1 },  { 0, 1, -1 },  { 0, -1, -1 },
+    { 1, 1, 0 },  { 0, -1, 1 },  { -1, 1, 0 },  { 0, -1, -1 },
+};
+
+static void gcell_of(const ef_noise_cell *nc, gcell *gc)
+{
+    for (int k = 0; k < 8; ++k)
+        memcpy(gc->g[k], grad_vec[nc->h[k] & 15], sizeof gc->g[k]);
+}
+
+static inline double gdot(const double g[3], double x, double y, double z)
+{
+    return g[0] * x + g[1] * y + g[2] * z;
+}
+
+/* Perlin's blend of the corner gradients (his nesting) at fractions x, y, z. */
+static inline double gcell_eval(const gcell *c, double x, double y, double z)
+{
+    const double u = ef_noise_fade_(x), v = ef_noise_fade_(y), w = ef_noise_fade_(z);
+    const double x1 = x - 1, y1 = y - 1, z1 = z - 1;
+    const double a = ef_noise_lerp_(u, gdot(c->g[0], x, y, z), gdot(c->g[1], x1, y, z));
+    const double b = ef_noise_lerp_(u, gdot(c->g[2], x, y1, z), gdot(c->g[3], x1, y1, z));
+    const double d = ef_noise_lerp_(u, gdot(c->g[4], x, y, z1), gdot(c->g[5], x1, y, z1));
+    const double e = ef_noise_lerp_(u, gdot(c->g[6], x, y1, z1), gdot(c->g[7], x1, y1, z1));
+    return ef_noise_lerp_(w, ef_noise_lerp_(v, a, b), ef_noise_lerp_(v, d, e));
 }
 
 /* ---- compensated summation (Neumaier) ---- */
@@ -537,23 +585,24 @@ static double octave_at(rayc *R, int i, long double t)
 {
     int64_t X[3];
     double f[3];
+    const double td = (double) t;
     for (int a = 0; a < 3; ++a)
-        split_ld(R->u[3 * i + a].b + t * R->u[3 * i + a].d, &X[a], &f[a]);
+        ef_noise_split(R->u[3 * i + a].bd + td * R->u[3 * i + a].dd, &X[a], &f[a]);
     ef_noise_cell nc;
     ef_noise_cell_at(X[0], X[1], X[2], &nc);
     R->evals += 1;
     return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
 }
 
-/* Octave i of the factor along axis a at its coordinate u (reduced). */
-static double factor_octave(const nstate *s, int a, int i, long double u)
+/* Octave i of the factor along axis a at its coordinate u. */
+static double factor_octave(const nstate *s, int a, int i, double u)
 {
     int64_t X[3];
     double f[3];
     int j = 0;
     for (int b = 0; b < 3; ++b) {
         if (b == a)
-            split_ld(u, &X[b], &f[b]);
+            ef_noise_split(u, &X[b], &f[b]);
         else
             ef_noise_split(s->fixed[a][i][j++], &X[b], &f[b]);
     }
@@ -580,7 +629,8 @@ static double shape_at(rayc *R, long double t)
         const int a = s->axis[k];
         double f = 0;
         for (int i = 0; i < N; ++i)
-            f += s->fbm.weight[i] * factor_octave(s, a, i, R->u[a * N + i].b + t * R->u[a * N + i].d);
+            f += s->fbm.weight[i] *
+                 factor_octave(s, a, i, R->u[a * N + i].bd + (double) t * R->u[a * N + i].dd);
         R->evals += N;
         const double v = 1 + s->contrast * f;
         prod *= v > 0 ? v : 0;
@@ -676,12 +726,22 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
             walk_hash(&w, 0, &cc.nc);
             R->cells += 1;
             if (n > 0 && s->k == 0) {
-                const long double mid = (ta + tb) / 2, half = (tb - ta) / 2;
+                /* Per node in double: the fractions at the cell's entry and their rates. */
+                const long double half = (tb - ta) / 2;
+                const double hh = (double) half;
+                gcell gc;
+                gcell_of(&cc.nc, &gc);
+                double f0[3], d0[3];
+                for (int a = 0; a < 3; ++a) {
+                    f0[a] = (double) ((w.u[a].b - w.cell[a]) + ta * w.u[a].d);
+                    d0[a] = w.u[a].dd;
+                }
                 double sum = 0;
                 for (int j = 0; j < n; ++j) {
-                    const long double t = mid + half * s->glx[n][j];
-                    sum += s->glw[n][j] * ef_noise_cell_eval(&cc.nc, walk_frac(&w, 0, t),
-                                                             walk_frac(&w, 1, t), walk_frac(&w, 2, t));
+                    const double o = hh * (1 + s->glx[n][j]);
+                    sum += s->glw[n][j] * gcell_eval(&gc, clamp01(f0[0] + o * d0[0]),
+                                                     clamp01(f0[1] + o * d0[1]),
+                                                     clamp01(f0[2] + o * d0[2]));
                 }
                 R->evals += n;
                 kadd(&acc, (double) half * sum);
@@ -768,23 +828,27 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
 
 /* Per-cell Gauss-Legendre error of integral(noise) per unit of chord length
  * with q nodes, q = 1..8 (9 is exact): the maximum and the root mean square
- * over cells, measured on 2e6 random chords through random cells
- * (bench/noise_calibrate.c prints them; these are its values times 1.5). */
-static const double e_max[9] = { 0, 0.16, 0.032, 4.8e-3, 3.3e-4, 2.0e-5, 1.2e-6, 6e-8, 3e-9 };
-static const double e_rms[9] = { 0, 0.045, 6.5e-3, 6.5e-4, 3.5e-5, 1.8e-6, 9e-8, 4e-9, 1.5e-10 };
+ * over cells, measured by bench/noise_calibrate on 10^6 random chords
+ * through random cells (length-weighted, which errs on the safe side),
+ * times 1.5. */
+static const double e_max[9] = { 0, 0.66, 0.30, 0.087, 0.0173, 2.4e-3, 2.45e-4, 1.56e-5, 5.7e-7 };
+static const double e_rms[9] = { 0, 0.149, 0.034, 6.0e-3, 7.2e-4, 6.8e-5, 5.0e-6, 2.3e-7, 6.4e-9 };
 
-/* RMS of integral(noise) over a stretch of l lattice units, per sqrt(l):
- * noise-anchors.md section 1.5 (0.23), measured again by the calibration. */
+/* RMS of integral(noise) over a straight stretch of l lattice units, per
+ * sqrt(l): 0.235-0.245 measured by the same program (noise-anchors.md has
+ * 0.23). */
 #define LINE_RMS 0.25
 
-/* The error estimate of octave i's quadrature with q nodes per cell: the
- * smaller of the worst case (every cell at its maximum error, same sign)
- * and three standard deviations of a sum of independent cell errors. */
+/* The error estimate of octave i's quadrature with q nodes per cell on a
+ * stretch of length L crossing cells of mean chord hbar: the smaller of the
+ * worst case (every cell at its maximum error, one sign) and three standard
+ * deviations of a sum of independent cell errors (sum of chord^2 taken as
+ * 2 L hbar: chords vary). */
 static double quad_estimate(double A, double L, double hbar, int q)
 {
     if (q >= 9)
         return 0;
-    return A * fmin(e_max[q] * L, 3 * e_rms[q] * sqrt(L * hbar));
+    return A * fmin(e_max[q] * L, 3 * e_rms[q] * sqrt(2 * L * hbar));
 }
 
 typedef struct plan {
@@ -863,7 +927,7 @@ static double cell_part(const nstate *s, int a, int i, long double x0, long doub
     const long double mid = (x0 + x1) / 2, half = (x1 - x0) / 2;
     double sum = 0;
     for (int j = 0; j < 5; ++j)
-        sum += s->glw[5][j] * factor_octave(s, a, i, mid + half * s->glx[5][j]);
+        sum += s->glw[5][j] * factor_octave(s, a, i, (double) (mid + half * s->glx[5][j]));
     return (double) half * sum;
 }
 
@@ -912,7 +976,7 @@ static double factor_mean(const ef_fog_component *c, const rayc *R, int a, long 
         const lin *u = &R->u[a * N + i];
         const long double u0 = u->b + ta * u->d, u1 = u->b + tb * u->d;
         if (u1 == u0) {
-            f += s->fbm.weight[i] * factor_octave(s, a, i, u0);
+            f += s->fbm.weight[i] * factor_octave(s, a, i, (double) u0);
             *evals += 1;
         } else {
             const long double lo = u0 < u1 ? u0 : u1, hi = u0 < u1 ? u1 : u0;
@@ -1217,8 +1281,8 @@ static void density_noise(const ef_fog_component *c, const long double *v, long 
                 double f = 0;
                 for (int i = 0; i < N; ++i)
                     f += s->fbm.weight[i] *
-                         factor_octave(s, a, i, mod256(s->fbm.freq[i] * q[a] +
-                                                       (long double) i * ef_fbm_offset[a]));
+                         factor_octave(s, a, i, (double) mod256(s->fbm.freq[i] * q[a] +
+                                                                (long double) i * ef_fbm_offset[a]));
                 const long double x = 1 + (long double) s->contrast * f;
                 shape *= x > 0 ? x : 0;
             }

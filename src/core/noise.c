@@ -39,24 +39,6 @@ static const unsigned char perm[512] = {
 const double ef_fbm_offset[3] = { 31.416, 27.183, 14.142 };
 const double ef_noise_seed_dir[3] = { 12.9898, 78.233, 37.719 };
 
-static double fade(double t)
-{
-    return t * t * t * (t * (t * 6 - 15) + 10);
-}
-
-static double lerp(double t, double a, double b)
-{
-    return a + t * (b - a);
-}
-
-static double grad(int hash, double x, double y, double z)
-{
-    const int h = hash & 15;
-    const double u = h < 8 ? x : y;
-    const double v = h < 4 ? y : (h == 12 || h == 14 ? x : z);
-    return ((h & 1) == 0 ? u : -u) + ((h & 2) == 0 ? v : -v);
-}
-
 void ef_noise_split(double v, int64_t *cell, double *frac)
 {
     const double f = floor(v);
@@ -82,17 +64,6 @@ void ef_noise_cell_at(int64_t X, int64_t Y, int64_t Z, ef_noise_cell *c)
     c->h[5] = perm[BA + 1];
     c->h[6] = perm[AB + 1];
     c->h[7] = perm[BB + 1];
-}
-
-double ef_noise_cell_eval(const ef_noise_cell *c, double x, double y, double z)
-{
-    const double u = fade(x), v = fade(y), w = fade(z);
-    const unsigned char *h = c->h;
-    return lerp(w,
-                lerp(v, lerp(u, grad(h[0], x, y, z), grad(h[1], x - 1, y, z)),
-                     lerp(u, grad(h[2], x, y - 1, z), grad(h[3], x - 1, y - 1, z))),
-                lerp(v, lerp(u, grad(h[4], x, y, z - 1), grad(h[5], x - 1, y, z - 1)),
-                     lerp(u, grad(h[6], x, y - 1, z - 1), grad(h[7], x - 1, y - 1, z - 1))));
 }
 
 double ef_noise3(double x, double y, double z)

@@ -24,9 +24,44 @@ typedef struct ef_noise_cell {
 void ef_noise_cell_at(int64_t X, int64_t Y, int64_t Z, ef_noise_cell *c);
 
 /* Noise inside cell c at fractions (x, y, z) in [0, 1]: the same operations
- * as ef_noise3 after its floor, so ef_noise3 equals it bit for bit. Inside a
- * cell the noise is a polynomial (degree 16 along any line). */
-double ef_noise_cell_eval(const ef_noise_cell *c, double x, double y, double z);
+ * as ef_noise3 after its floor, so ef_noise3 equals it bit for bit (in files
+ * built with -ffp-contract=off). Inside a cell the noise is a polynomial
+ * (degree 16 along any line). Inline: the integrators call it per node. */
+static inline double ef_noise_fade_(double t)
+{
+    return t * t * t * (t * (t * 6 - 15) + 10);
+}
+
+static inline double ef_noise_lerp_(double t, double a, double b)
+{
+    return a + t * (b - a);
+}
+
+static inline double ef_noise_grad_(int hash, double x, double y, double z)
+{
+    const int h = hash & 15;
+    const double u = h < 8 ? x : y;
+    const double v = h < 4 ? y : (h == 12 || h == 14 ? x : z);
+    return ((h & 1) == 0 ? u : -u) + ((h & 2) == 0 ? v : -v);
+}
+
+static inline double ef_noise_cell_eval(const ef_noise_cell *c, double x, double y, double z)
+{
+    const double u = ef_noise_fade_(x), v = ef_noise_fade_(y), w = ef_noise_fade_(z);
+    const unsigned char *h = c->h;
+    return ef_noise_lerp_(
+        w,
+        ef_noise_lerp_(v,
+                       ef_noise_lerp_(u, ef_noise_grad_(h[0], x, y, z),
+                                      ef_noise_grad_(h[1], x - 1, y, z)),
+                       ef_noise_lerp_(u, ef_noise_grad_(h[2], x, y - 1, z),
+                                      ef_noise_grad_(h[3], x - 1, y - 1, z))),
+        ef_noise_lerp_(v,
+                       ef_noise_lerp_(u, ef_noise_grad_(h[4], x, y, z - 1),
+                                      ef_noise_grad_(h[5], x - 1, y, z - 1)),
+                       ef_noise_lerp_(u, ef_noise_grad_(h[6], x, y - 1, z - 1),
+                                      ef_noise_grad_(h[7], x - 1, y - 1, z - 1))));
+}
 
 /* The cell index (floor(v) & 255) and fraction v - floor(v), as ef_noise3
  * takes them. */
