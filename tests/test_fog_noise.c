@@ -127,9 +127,16 @@ static ef_ray random_segment(rng *g, double scale, const double *bmin, const dou
         d[1] = uni(g, -1e-6, 1e-6);
         unit(d);
     }
-    len = chance(g, 0.02) ? 0 : uni(g, 0, 1) < 0.3 ? uni(g, 0, 0.5) * scale : uni(g, 0.5, 6) * scale;
-    if (chance(g, 0.08))
+    len = chance(g, 0.02) ? 0 : uni(g, 0, 1) < 0.3 ? uni(g, 0, 0.5) * scale : uni(g, 0.5, 4) * scale;
+    if (chance(g, 0.08)) {
+        /* Sky rays climb or fall at least 1 in 20 here: a grazing one
+         * crosses millions of cells before its fog thins (test_opaque). */
         len = INFINITY;
+        if (fabs(d[1]) < 0.05) {
+            d[1] = d[1] < 0 ? -0.05 : 0.05;
+            unit(d);
+        }
+    }
     return ray(o, d, len);
 }
 
@@ -138,14 +145,48 @@ typedef struct tally {
     double max_rel, max_abs;
 } tally;
 
-/* exact against the reference on one segment. */
-static void check_exact(const ef_fog_component *c, const ef_ray *r, tally *t)
+/* Where a ray leaves the box [bmin, bmax] for good (0 if it never is in it):
+ * past it the density is zero by definition, so the reference integrates a
+ * sky ray through a box only that far. */
+static double box_exit(const double *bmin, const double *bmax, const ef_ray *r)
+{
+    double t0 = 0, t1 = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+        if (r->dir[a] == 0) {
+            if (r->org[a] < bmin[a] || r->org[a] > bmax[a])
+                return 0;
+            continue;
+        }
+        double ta = (bmin[a] - r->org[a]) / r->dir[a], tb = (bmax[a] - r->org[a]) / r->dir[a];
+        if (ta > tb) {
+            const double x = ta;
+            ta = tb;
+            tb = x;
+        }
+        t0 = fmax(t0, ta);
+        t1 = fmin(t1, tb);
+    }
+    return t0 < t1 ? nextafter(t1, INFINITY) * (1 + 1e-12) : 0;
+}
+
+/* exact against the reference on one segment; a box bounds sky rays. */
+static void check_exact_box(const ef_fog_component *c, const ef_ray *r, const double *bmin,
+                            const double *bmax, tally *t)
 {
     double tau[3];
     long double ref[3];
     ef_tau_info info;
     ef_fog_tau(c, r, tau, &info);
-    assert_int_equal(ef_ref_tau(c, r, ref, NULL), 0);
+    ef_ray rr = *r;
+    if (bmin && isinf(r->dist)) {
+        rr.dist = rr.planar = box_exit(bmin, bmax, r);
+        r = &rr;
+    }
+    if (ef_ref_tau(c, r, ref, NULL)) {
+        print_error("%s: the reference failed (len %g org %.17g,%.17g,%.17g dir %.17g,%.17g,%.17g)\n",
+                    c->spec, r->dist, r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1], r->dir[2]);
+        fail();
+    }
     t->n++;
     for (int k = 0; k < 3; ++k) {
         if (isinf(ref[k]) || isinf(tau[k])) {
@@ -172,6 +213,11 @@ static void check_exact(const ef_fog_component *c, const ef_ray *r, tally *t)
                    c->spec, tau[k], ref[k], rel, r->dist, r->org[0], r->org[1], r->org[2],
                    r->dir[0], r->dir[1], r->dir[2]);
     }
+}
+
+static void check_exact(const ef_fog_component *c, const ef_ray *r, tally *t)
+{
+    check_exact_box(c, r, NULL, NULL, t);
 }
 
 typedef struct spec_case {
@@ -215,7 +261,8 @@ static void test_exact_against_reference(void **state)
         for (long k = 0; k < per; ++k) {
             const ef_ray r = random_segment(&g, sc->scale, sc->has_box ? sc->bmin : NULL,
                                             sc->has_box ? sc->bmax : NULL, sc->offset_mag);
-            check_exact(&c, &r, &t);
+            check_exact_box(&c, &r, sc->has_box ? sc->bmin : NULL, sc->has_box ? sc->bmax : NULL,
+                            &t);
         }
         printf("  %-60.60s %ld segs, %ld rel-checked, %ld inf, max rel %.2g\n", sc->spec, t.n,
                t.checked, t.inf_ok, t.max_rel);
@@ -235,14 +282,15 @@ static void test_sky(void **state)
     parse("noise:density=0.05:scale=4:falloff=0.25:base=0:method=exact", &up);
     parse("noise:density=0.05,0,0.02:scale=4:method=exact", &flat);
     parse("noise:density=0.05:scale=4:min=-4,-4,-4:max=4,4,4:method=exact", &boxed);
+    const double bmin[3] = { -4, -4, -4 }, bmax[3] = { 4, 4, 4 };
     const double o[3] = { 0.3, 1.7, -0.2 };
     tally t = { 0 };
     for (int k = 0; k < 40; ++k) {
-        double d[3] = { cos(k * 0.7), 0.05 + 0.02 * k, sin(k * 0.7) };
+        double d[3] = { cos(k * 0.7), 0.1 + 0.05 * k, sin(k * 0.7) };
         unit(d);
         ef_ray r = ray(o, d, INFINITY);
         check_exact(&up, &r, &t);
-        check_exact(&boxed, &r, &t);
+        check_exact_box(&boxed, &r, bmin, bmax, &t);
         double tau[3];
         ef_fog_tau(&flat, &r, tau, NULL);
         assert_true(isinf(tau[0]) && tau[1] == 0 && isinf(tau[2]));
@@ -250,12 +298,45 @@ static void test_sky(void **state)
         r = ray(o, d, INFINITY);
         ef_fog_tau(&up, &r, tau, NULL);
         assert_true(isinf(tau[0]));
-        check_exact(&boxed, &r, &t);
+        check_exact_box(&boxed, &r, bmin, bmax, &t);
     }
     assert_int_equal(t.bad, 0);
     ef_fog_free(&up);
     ef_fog_free(&flat);
     ef_fog_free(&boxed);
+}
+
+/* A grazing sky ray in height fog, or a very long segment, is cut where
+ * the fog is opaque (tau >= 60 at the least): T <= e^-60, and the error
+ * output (ln 2: the true T lies in [0, T]) says so. */
+static void test_opaque(void **state)
+{
+    (void) state;
+    static const char *const specs[] = {
+        "noise:density=0.05:scale=4:falloff=0.2:base=1:method=exact",
+        "noise:density=0.05:scale=4:falloff=0.2:base=1",
+        "noise:density=0.05,0,0.1:scale=4:method=steps",
+        "noise-separable:density=0.05:scale=4:falloff=0.2:method=preintegrated",
+    };
+    for (int i = 0; i < 4; ++i) {
+        ef_fog_component c;
+        parse(specs[i], &c);
+        const double o[3] = { 0, 1.7, 0 }, d[3] = { 0.6, 1e-7, 0.8 };
+        const ef_ray r = ray(o, d, i == 2 ? 1e7 : INFINITY);
+        double tau[3];
+        ef_tau_info info;
+        ef_fog_tau(&c, &r, tau, &info);
+        if (!(tau[0] >= 60 && isfinite(tau[0]))) {
+            print_error("%s: tau %g\n", specs[i], tau[0]);
+            fail();
+        }
+        assert_true(info.err[0] == log(2.0));
+        assert_true(info.evals < 1e7);
+        if (i == 2) {
+            assert_true(tau[1] == 0 && info.err[1] == 0 && tau[2] >= 120);
+        }
+        ef_fog_free(&c);
+    }
 }
 
 /* ---- adaptive: the tolerance holds and the error output covers ---- */
@@ -270,42 +351,49 @@ static void test_adaptive(void **state)
         "noise-separable:density=0.05:scale=4:axes=xyz",
     };
     static const double tols[] = { 1e-2, 1e-3, 1e-4, 1e-6 };
+    enum { NT = 4 };
     rng g = { 77 };
-    for (int b = 0; b < 4; ++b)
-        for (int ti = 0; ti < 4; ++ti) {
+    for (int b = 0; b < 4; ++b) {
+        ef_fog_component c[NT];
+        long n = 0, within[NT] = { 0 }, within2[NT] = { 0 }, covered[NT] = { 0 };
+        double worst[NT] = { 0 }, evals[NT] = { 0 };
+        for (int ti = 0; ti < NT; ++ti) {
             char spec[256];
             snprintf(spec, sizeof spec, "%s:tol=%g", base[b], tols[ti]);
-            ef_fog_component c;
-            parse(spec, &c);
-            const double tol = tols[ti];
-            long n = 0, within = 0, within2 = 0, covered = 0;
-            double worst = 0, evals = 0;
-            const long per = scaled(b == 3 ? 250 : 600);
-            for (long k = 0; k < per; ++k) {
-                ef_ray r = random_segment(&g, 4, NULL, NULL, 0);
-                r.dist = isinf(r.dist) ? 20 * uni(&g, 0, 1) : 4 * r.dist;  /* up to ~100 m */
-                double tau[3];
-                long double ref[3];
-                ef_tau_info info;
-                ef_fog_tau(&c, &r, tau, &info);
-                assert_int_equal(ef_ref_tau(&c, &r, ref, NULL), 0);
-                const double e = fabs(tau[0] - (double) ref[0]);
-                n++;
-                within += e <= tol;
-                within2 += e <= 2 * tol;
-                covered += e <= info.err[0];
-                evals += info.evals;
-                if (e > worst)
-                    worst = e;
-            }
-            printf("  %-48s %ld segs: within tol %.2f%%, within 2 tol %.2f%%, error output covers "
-                   "%.2f%%, worst %.2g, %.0f evals/seg\n", spec, n, 100.0 * within / n,
-                   100.0 * within2 / n, 100.0 * covered / n, worst, evals / n);
-            assert_true(within >= 0.999 * n);
-            assert_int_equal(within2, n);
-            assert_true(covered >= 0.999 * n);
-            ef_fog_free(&c);
+            parse(spec, &c[ti]);
         }
+        /* The reference once per segment, every tolerance on it. */
+        const long per = scaled(b < 2 ? 1500 : 300);
+        for (long k = 0; k < per; ++k) {
+            ef_ray r = random_segment(&g, 4, NULL, NULL, 0);
+            r.dist = r.planar = isinf(r.dist) ? 20 * uni(&g, 0, 1) : 3 * r.dist;  /* to ~70 m */
+            long double ref[3];
+            assert_int_equal(ef_ref_tau(&c[0], &r, ref, NULL), 0);
+            n++;
+            for (int ti = 0; ti < NT; ++ti) {
+                double tau[3];
+                ef_tau_info info;
+                ef_fog_tau(&c[ti], &r, tau, &info);
+                const double e = fabs(tau[0] - (double) ref[0]);
+                within[ti] += e <= tols[ti];
+                within2[ti] += e <= 2 * tols[ti];
+                covered[ti] += e <= info.err[0];
+                evals[ti] += info.evals;
+                if (e > worst[ti])
+                    worst[ti] = e;
+            }
+        }
+        for (int ti = 0; ti < NT; ++ti) {
+            printf("  %-52s %ld segs: within tol %.2f%%, within 2 tol %.2f%%, error output "
+                   "covers %.2f%%, worst %.2g, %.0f evals/seg\n", c[ti].spec, n,
+                   100.0 * within[ti] / n, 100.0 * within2[ti] / n, 100.0 * covered[ti] / n,
+                   worst[ti], evals[ti] / n);
+            assert_true(within[ti] >= 0.999 * n);
+            assert_int_equal(within2[ti], n);
+            assert_true(covered[ti] >= 0.999 * n);
+            ef_fog_free(&c[ti]);
+        }
+    }
 }
 
 /* Coarser tolerances must cost fewer evaluations (the trade is real). */
@@ -667,6 +755,7 @@ int main(void)
         cmocka_unit_test(test_translations),
         cmocka_unit_test(test_copy),
         cmocka_unit_test(test_sky),
+        cmocka_unit_test(test_opaque),
         cmocka_unit_test(test_steps),
         cmocka_unit_test(test_continuity),
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),
@@ -674,5 +763,7 @@ int main(void)
         cmocka_unit_test(test_adaptive),
         cmocka_unit_test(test_exact_against_reference),
     };
+    if (getenv("EXRFOG_TEST_FILTER"))
+        cmocka_set_test_filter(getenv("EXRFOG_TEST_FILTER"));
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

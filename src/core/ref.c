@@ -494,9 +494,10 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         /* Geometric steps away from the feature on both sides: every piece is
          * then no wider than its distance to the feature, whatever the ratio
          * of the feature's scale to the segment's length. */
-        /* On an infinite segment the steps stop a few hundred scales past the
-         * start; the tail's own substitution (scale lambda) takes over. */
-        const long double reach = isinf(len) ? 256 * fmaxl(fabsl(l->h0 - ft->value), ft->scale)
+        /* On an infinite segment the steps stop 64 scales past the start
+         * (an exponential feature is down to e^-64 there; lattice splits stop
+         * with them); the tail's own substitution (scale lambda) takes over. */
+        const long double reach = isinf(len) ? 64 * fmaxl(fabsl(l->h0 - ft->value), ft->scale)
                                              : INFINITY;
         for (int side = -1; side <= 1; side += 2)
             for (int e = 0; e < 4000; ++e) {
