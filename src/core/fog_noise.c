@@ -81,7 +81,17 @@ typedef struct nstate {
     ef_fbm fbm;
     double glx[GL_MAX + 1][GL_MAX], glw[GL_MAX + 1][GL_MAX];   /* Gauss-Legendre on [-1, 1] */
     int tab_off;                     /* separable: index in arr of the prefix tables, or 0 */
+    /* preintegrated with an integer lacunarity: per axis one table of the
+     * whole fbm factor over its period 256, piece by piece (merged.c below) */
+    int merged, mp;                  /* pieces per period */
+    int m_off[3];                    /* index in arr of axis a's table */
+    double mtotal[3];                /* the fbm part's integral over one period */
 } nstate;
+
+/* A merged table's layout from m_off: mp starts, mp + 1 prefixes, 7 mp
+ * coefficients, 2 mp bin hints (as doubles). */
+#define MERGED_SIZE(P) ((size_t) (P) * 11 + 1)
+#define MERGED_MAX 65536
 
 static const nstate *state(const ef_fog_component *c)
 {
@@ -220,6 +230,7 @@ static void gauss_legendre(int n, double *x, double *w)
 }
 
 static void build_tables(nstate *s, double *tab);
+static int build_merged(const nstate *s, int a, double *tab, int cap, double *total);
 
 static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
 {
@@ -315,16 +326,40 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
 
     const size_t head = (sizeof s + sizeof(double) - 1) / sizeof(double);
     const size_t ntab = sep ? (size_t) 3 * (size_t) octaves * TAB : 0;
-    double *arr = calloc(head + ntab, sizeof *arr);
+    /* One merged table per axis when every octave repeats within 256. */
+    long mp = 0;
+    if (sep && method == M_PREINT && lac == floor(lac)) {
+        mp = 1;
+        for (int i = 0; i < octaves && mp <= MERGED_MAX; ++i)
+            mp += 256 * (long) s.fbm.freq[i];
+        if (mp > MERGED_MAX)
+            mp = 0;
+    }
+    const size_t nmerged = mp ? (size_t) s.naxes * MERGED_SIZE(mp) : 0;
+    double *arr = calloc(head + ntab + nmerged, sizeof *arr);
     if (!arr)
         return ef_fail(err, "fog spec '%s': out of memory", c->spec);
     s.tab_off = ntab ? (int) head : 0;
     if (ntab)
         build_tables(&s, arr + head);
+    if (mp) {
+        size_t at = head + ntab;
+        s.merged = 1;
+        for (int k = 0; k < s.naxes; ++k) {
+            const int a = s.axis[k];
+            s.m_off[a] = (int) at;
+            s.mp = build_merged(&s, a, arr + at, (int) mp, &s.mtotal[a]);
+            if (!s.mp) {
+                free(arr);
+                return ef_fail(err, "fog spec '%s': out of memory", c->spec);
+            }
+            at += MERGED_SIZE(mp);
+        }
+    }
     memcpy(arr, &s, sizeof s);
     free(c->arr);
     c->arr = arr;
-    c->narr = (int) (head + ntab);
+    c->narr = (int) (head + ntab + nmerged);
     return 0;
 }
 
@@ -571,6 +606,8 @@ static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     const ef_dd h0 = ef_dd_dot3(up.n, r->org, up.d), hs = ef_dd_dot3(up.n, r->dir, 0.0);
     R->h0 = (long double) h0.hi + h0.lo;
     R->hs = (long double) hs.hi + hs.lo;
+    if (s->merged)
+        return;   /* the merged tables need no lattice lines */
     const int N = s->fbm.octaves;
     for (int a = 0; a < 3; ++a) {
         long double q0, dq;
@@ -1012,6 +1049,246 @@ static double factor_mean(const ef_fog_component *c, const rayc *R, int a, long 
     return 1 + s->contrast * f;
 }
 
+/* ---- merged tables: the whole factor's fbm part over its period ---- */
+
+/* Perlin's blend with the three fades given: linear in each fade. */
+static double blend_fades(const gcell *c, double x, double y, double z, double u, double v,
+                          double w)
+{
+    const double x1 = x - 1, y1 = y - 1, z1 = z - 1;
+    const double a = ef_noise_lerp_(u, gdot(c->g[0], x, y, z), gdot(c->g[1], x1, y, z));
+    const double b = ef_noise_lerp_(u, gdot(c->g[2], x, y1, z), gdot(c->g[3], x1, y1, z));
+    const double d = ef_noise_lerp_(u, gdot(c->g[4], x, y, z1), gdot(c->g[5], x1, y, z1));
+    const double e = ef_noise_lerp_(u, gdot(c->g[6], x, y1, z1), gdot(c->g[7], x1, y1, z1));
+    return ef_noise_lerp_(w, ef_noise_lerp_(v, a, b), ef_noise_lerp_(v, d, e));
+}
+
+/* Octave i of factor a inside cell m of its own coordinate, as the
+ * polynomial sum_j p[j] x^j (x the fraction, degree 6): the noise there is
+ * E(x, fade(x)) with E bilinear in the coordinate and its fade. */
+static void cell_poly(const nstate *s, int a, int i, long m, long double p[7])
+{
+    int64_t X[3];
+    double f[3];
+    int j = 0;
+    for (int b = 0; b < 3; ++b) {
+        if (b == a) {
+            X[b] = (int64_t) (((m % 256) + 256) % 256);
+            f[b] = 0;
+        } else {
+            ef_noise_split(s->fixed[a][i][j++], &X[b], &f[b]);
+        }
+    }
+    ef_noise_cell nc;
+    gcell gc;
+    ef_noise_cell_at(X[0], X[1], X[2], &nc);
+    gcell_of(&nc, &gc);
+    double E[2][2];
+    for (int xa = 0; xa < 2; ++xa)
+        for (int fa = 0; fa < 2; ++fa) {
+            double c3[3] = { f[0], f[1], f[2] }, fd[3];
+            c3[a] = xa;
+            for (int b = 0; b < 3; ++b)
+                fd[b] = b == a ? fa : ef_noise_fade_(f[b]);
+            E[xa][fa] = blend_fades(&gc, c3[0], c3[1], c3[2], fd[0], fd[1], fd[2]);
+        }
+    const long double al = E[0][0], be = E[1][0] - E[0][0], ga = E[0][1] - E[0][0];
+    const long double de = E[1][1] - E[1][0] - E[0][1] + E[0][0];
+    /* al + be x + (10 x^3 - 15 x^4 + 6 x^5)(ga + de x) */
+    p[0] = al;
+    p[1] = be;
+    p[2] = 0;
+    p[3] = 10 * ga;
+    p[4] = 10 * de - 15 * ga;
+    p[5] = 6 * ga - 15 * de;
+    p[6] = 6 * de;
+}
+
+static int by_value(const void *x, const void *y)
+{
+    const long double a = *(const long double *) x, b = *(const long double *) y;
+    return a < b ? -1 : a > b;
+}
+
+/* Builds factor a's merged table over s in [0, 256): pieces between every
+ * octave's cell faces, each with the polynomial (in s - start) of
+ * sum_i w_i noise_i and the prefix integral at its start. Returns the
+ * number of pieces. */
+static int build_merged(const nstate *s, int a, double *tab, int cap, double *total)
+{
+    const int N = s->fbm.octaves;
+    long double *br = malloc(((size_t) cap + 2) * sizeof *br);
+    int n = 0;
+    if (!br)
+        return 0;
+    br[n++] = 0;
+    for (int i = 0; i < N; ++i) {
+        const long double f = s->fbm.freq[i], o = (long double) i * ef_fbm_offset[a];
+        for (long m = (long) ceill(o); n < cap; ++m) {
+            const long double b = (m - o) / f;
+            if (b >= 256)
+                break;
+            if (b > 0)
+                br[n++] = b;
+        }
+    }
+    qsort(br, (size_t) n, sizeof *br, by_value);
+    int P = 0;
+    for (int k = 0; k < n; ++k)
+        if (P == 0 || br[k] - br[P - 1] > 1e-12L)
+            br[P++] = br[k];
+    br[P] = 256;
+    double *start = tab, *prefix = tab + P, *coef = tab + 2 * P + 1, *hint = tab + 9 * P + 1;
+    long double acc = 0;
+    for (int p = 0; p < P; ++p) {
+        const long double s0 = br[p], L = br[p + 1] - br[p], mid = s0 + L / 2;
+        long double c[7] = { 0, 0, 0, 0, 0, 0, 0 };
+        for (int i = 0; i < N; ++i) {
+            const long double f = s->fbm.freq[i], o = (long double) i * ef_fbm_offset[a];
+            const long m = (long) floorl(f * mid + o);
+            const long double xp = f * s0 + o - m;
+            long double q[7];
+            cell_poly(s, a, i, m, q);
+            /* q(xp + f y) = sum_k y^k f^k sum_{j >= k} C(j, k) q_j xp^(j - k) */
+            long double fk = 1;
+            for (int k = 0; k < 7; ++k) {
+                long double sum = 0, binom = 1, xpow = 1;
+                for (int j = k; j < 7; ++j) {
+                    sum += binom * q[j] * xpow;
+                    binom = binom * (j + 1) / (j + 1 - k);
+                    xpow *= xp;
+                }
+                c[k] += s->fbm.weight[i] * sum * fk;
+                fk *= f;
+            }
+        }
+        start[p] = (double) s0;
+        prefix[p] = (double) acc;
+        long double integral = 0, Lp = L;
+        for (int k = 0; k < 7; ++k) {
+            coef[7 * p + k] = (double) c[k];
+            integral += c[k] * Lp / (k + 1);
+            Lp *= L;
+        }
+        acc += integral;
+    }
+    prefix[P] = (double) acc;
+    *total = (double) acc;
+    /* Bin hints: the piece holding each bin's start (2 P bins). */
+    for (int b = 0, p = 0; b < 2 * P; ++b) {
+        const double at = 256.0 * b / (2 * P);
+        while (p + 1 < P && start[p + 1] <= at)
+            ++p;
+        hint[b] = p;
+    }
+    free(br);
+    return P;
+}
+
+/* The antiderivative of a merged piece from its start to y. */
+static double piece_int(const double *c, double y)
+{
+    double v = c[6] / 7;
+    for (int k = 5; k >= 0; --k)
+        v = v * y + c[k] / (k + 1);
+    return v * y;
+}
+
+static double piece_val(const double *c, double y)
+{
+    double v = c[6];
+    for (int k = 5; k >= 0; --k)
+        v = v * y + c[k];
+    return v;
+}
+
+/* The piece holding r in [0, 256), and r's offset into it. */
+static int piece_of(const nstate *s, const double *tab, double r, double *y)
+{
+    const int P = s->mp;
+    const double *start = tab, *hint = tab + 9 * P + 1;
+    int b = (int) (r * (2 * P) / 256.0);
+    b = b < 0 ? 0 : b >= 2 * P ? 2 * P - 1 : b;
+    int p = (int) hint[b];
+    while (p + 1 < P && start[p + 1] <= r)
+        ++p;
+    while (p > 0 && start[p] > r)
+        --p;
+    *y = r - start[p];
+    return p;
+}
+
+/* floor(v / 256) and v modulo 256. */
+static double period_split(double v, double *r)
+{
+    const double k = floor(v * (1.0 / 256));
+    *r = v - 256 * k;
+    if (*r >= 256) {      /* rounding */
+        *r -= 256;
+        return k + 1;
+    }
+    return k;
+}
+
+/* The mean of factor a's fbm part over q_a in [s0, s0 + ds]. */
+static double merged_mean(const ef_fog_component *c, int a, double s0, double ds)
+{
+    const nstate *s = state(c);
+    const double *tab = c->arr + s->m_off[a];
+    const int P = s->mp;
+    const double *prefix = tab + P, *coef = tab + 2 * P + 1;
+    if (ds < 0) {
+        s0 += ds;
+        ds = -ds;
+    }
+    double r0, y0, y1, r1;
+    const double k0 = period_split(s0, &r0);
+    const int p0 = piece_of(s, tab, r0, &y0);
+    if (ds < 1e-6)    /* no extent: the value at the middle */
+        return piece_val(coef + 7 * p0, y0 + ds / 2);
+    const double *start = tab;
+    const double pend = p0 + 1 < P ? start[p0 + 1] - start[p0] : 256 - start[p0];
+    if (y0 + ds <= pend)   /* one piece: the antiderivative's difference */
+        return (piece_int(coef + 7 * p0, y0 + ds) - piece_int(coef + 7 * p0, y0)) / ds;
+    const double k1 = period_split(s0 + ds, &r1);
+    const int p1 = piece_of(s, tab, r1, &y1);
+    const double G = (k1 - k0) * s->mtotal[a] + (prefix[p1] - prefix[p0]) +
+                     (piece_int(coef + 7 * p1, y1) - piece_int(coef + 7 * p0, y0));
+    return G / ds;
+}
+
+/* tau / rho of K equal pieces of [t0, t1] from the merged tables. */
+static double preintegrated_merged(const ef_fog_component *c, const nstate *s, const ef_ray *r,
+                                   double h0, double hs, double t0, double t1, int K)
+{
+    double q0[3], dq[3];
+    for (int k = 0; k < s->naxes; ++k) {
+        const int a = s->axis[k];
+        q0[a] = ((r->org[a] - s->offset[a]) - s->velocity[a] * s->time) / s->scale +
+                s->seed * ef_noise_seed_dir[a];
+        dq[a] = r->dir[a] / s->scale;
+    }
+    const double h = (t1 - t0) / K;
+    ksum acc = { 0, 0 };
+    for (int p = 0; p < K; ++p) {
+        const double ta = t0 + p * h, tb = p + 1 == K ? t1 : t0 + (p + 1) * h, L = tb - ta;
+        double v = L;
+        if (s->k > 0 && hs != 0) {
+            /* mean envelope: e^(-k h_low) (1 - e^-b) / b, b = k |hs| L */
+            const double b = s->k * fabs(hs) * L, hl = h0 + hs * (hs > 0 ? ta : tb);
+            v *= exp(-s->k * hl) * (b > 1e-12 ? -expm1(-b) / b : 1 - b / 2);
+        } else if (s->k > 0) {
+            v *= exp(-s->k * h0);
+        }
+        for (int k = 0; k < s->naxes; ++k) {
+            const int a = s->axis[k];
+            v *= 1 + s->contrast * merged_mean(c, a, q0[a] + ta * dq[a], L * dq[a]);
+        }
+        kadd(&acc, v);
+    }
+    return kval(&acc);
+}
+
 /* tau / rho of K equal pieces of [t0, t1]: per piece the mean envelope
  * times the product of the factors' means. */
 static double preintegrated(const ef_fog_component *c, rayc *R, long double t0, long double t1,
@@ -1175,8 +1452,8 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     const double L = (double) (tend - t0);
     const double envmax = (double) fmaxl(env_at(&R, t0), env_at(&R, tend));
     double mean = 0;
-    if (linear || s->method == M_PREINT)
-        mean = (double) env_integral(s, R.h0, R.hs, t0, linear && !opaque ? t1 : tend);
+    if (linear)
+        mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
     switch (s->method) {
     case M_EXACT:
         if (linear) {
@@ -1217,11 +1494,22 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         break;
     }
     default: { /* M_PREINT */
-        unit = preintegrated(c, &R, t0, tend, s->pieces);
+        if (s->merged) {
+            unit = preintegrated_merged(c, s, r, (double) R.h0, (double) R.hs, (double) t0,
+                                        (double) tend, s->pieces);
+            R.evals += 2.0 * s->pieces * s->naxes;
+            R.cells += (double) s->pieces * s->naxes;
+        } else {
+            unit = preintegrated(c, &R, t0, tend, s->pieces);
+        }
         /* The estimate: the difference to twice as many pieces. */
         if (info != &dummy) {
             rayc R2 = R;
-            err = fabs(preintegrated(c, &R2, t0, tend, 2 * s->pieces) - unit) + tail;
+            const double u2 = s->merged ? preintegrated_merged(c, s, r, (double) R.h0,
+                                                               (double) R.hs, (double) t0,
+                                                               (double) tend, 2 * s->pieces)
+                                        : preintegrated(c, &R2, t0, tend, 2 * s->pieces);
+            err = fabs(u2 - unit) + tail;
         }
         break;
     }
