@@ -355,7 +355,7 @@ static void test_adaptive(void **state)
     rng g = { 77 };
     for (int b = 0; b < 4; ++b) {
         ef_fog_component c[NT];
-        long n = 0, within[NT] = { 0 }, within2[NT] = { 0 }, covered[NT] = { 0 };
+        long n = 0, within[NT] = { 0 }, within2[NT] = { 0 }, covered[NT] = { 0 }, cut[NT] = { 0 };
         double worst[NT] = { 0 }, evals[NT] = { 0 };
         for (int ti = 0; ti < NT; ++ti) {
             char spec[256];
@@ -374,6 +374,16 @@ static void test_adaptive(void **state)
                 double tau[3];
                 ef_tau_info info;
                 ef_fog_tau(&c[ti], &r, tau, &info);
+                if (info.err[0] == log(2.0)) {
+                    /* Cut where the fog turned opaque (tau >= 60, T <= 1e-26):
+                     * a lower bound of tau, which no output can tell apart. */
+                    assert_true(tau[0] >= 60 && tau[0] <= (double) ref[0] + tols[ti]);
+                    cut[ti]++;
+                    within[ti]++;
+                    within2[ti]++;
+                    covered[ti]++;
+                    continue;
+                }
                 const double e = fabs(tau[0] - (double) ref[0]);
                 within[ti] += e <= tols[ti];
                 within2[ti] += e <= 2 * tols[ti];
@@ -385,9 +395,9 @@ static void test_adaptive(void **state)
         }
         for (int ti = 0; ti < NT; ++ti) {
             printf("  %-52s %ld segs: within tol %.2f%%, within 2 tol %.2f%%, error output "
-                   "covers %.2f%%, worst %.2g, %.0f evals/seg\n", c[ti].spec, n,
+                   "covers %.2f%%, worst %.2g, %.0f evals/seg, %ld cut opaque\n", c[ti].spec, n,
                    100.0 * within[ti] / n, 100.0 * within2[ti] / n, 100.0 * covered[ti] / n,
-                   worst[ti], evals[ti] / n);
+                   worst[ti], evals[ti] / n, cut[ti]);
             assert_true(within[ti] >= 0.999 * n);
             assert_int_equal(within2[ti], n);
             assert_true(covered[ti] >= 0.999 * n);
