@@ -479,11 +479,6 @@ static void walk_advance(walk *w, long double tb)
         w->t = w->t1;
 }
 
-static double clamp01(double f)
-{
-    return f < 0 ? 0 : f > 1 ? 1 : f;
-}
-
 /* The fraction of coordinate j inside its current cell at t. */
 static double walk_frac(const walk *w, int j, long double t)
 {
@@ -791,19 +786,33 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
                 /* Per node in double: the fractions at the cell's entry and their rates. */
                 const long double half = (tb - ta) / 2;
                 const double hh = (double) half;
-                gcell gc;
-                gcell_of(&cc.nc, &gc);
-                double f0[3], d0[3];
+                /* Each corner's gradient term is linear along the chord:
+                 * its value at the entry and its rate, once per cell. */
+                double f0[3], d0[3], A[8], B[8];
                 for (int a = 0; a < 3; ++a) {
                     f0[a] = (double) ((w.u[a].b - w.cell[a]) + ta * w.u[a].d);
                     d0[a] = w.u[a].dd;
                 }
+                for (int k = 0; k < 8; ++k) {
+                    const double *g = grad_vec[cc.nc.h[k] & 15];
+                    A[k] = g[0] * (f0[0] - (k & 1)) + g[1] * (f0[1] - ((k >> 1) & 1)) +
+                           g[2] * (f0[2] - (k >> 2));
+                    B[k] = g[0] * d0[0] + g[1] * d0[1] + g[2] * d0[2];
+                }
                 double sum = 0;
                 for (int j = 0; j < n; ++j) {
                     const double o = hh * (1 + s->glx[n][j]);
-                    sum += s->glw[n][j] * gcell_eval(&gc, clamp01(f0[0] + o * d0[0]),
-                                                     clamp01(f0[1] + o * d0[1]),
-                                                     clamp01(f0[2] + o * d0[2]));
+                    const double u = ef_noise_fade_(f0[0] + o * d0[0]);
+                    const double v = ef_noise_fade_(f0[1] + o * d0[1]);
+                    const double ww = ef_noise_fade_(f0[2] + o * d0[2]);
+                    double g[8];
+                    for (int k = 0; k < 8; ++k)
+                        g[k] = A[k] + o * B[k];
+                    const double x0 = ef_noise_lerp_(v, ef_noise_lerp_(u, g[0], g[1]),
+                                                     ef_noise_lerp_(u, g[2], g[3]));
+                    const double x1 = ef_noise_lerp_(v, ef_noise_lerp_(u, g[4], g[5]),
+                                                     ef_noise_lerp_(u, g[6], g[7]));
+                    sum += s->glw[n][j] * ef_noise_lerp_(ww, x0, x1);
                 }
                 R->evals += n;
                 kadd(&acc, (double) half * sum);
