@@ -856,6 +856,32 @@ static int full_lins(const rayc *R, const lin **u)
     return -1;
 }
 
+/* Whether the clamp of the noise model binds on [ta, tb] (inside one cell
+ * of every octave): from fbm at the middle and the noise's Lipschitz
+ * bound, -1 when 1 + c fbm <= 0 throughout (no fog: skipped), 1 when it
+ * stays > 0 (a polynomial), 0 when it may cross zero (or for the
+ * separable model). Costs one fbm evaluation. */
+static int clamp_state(rayc *R, long double ta, long double tb)
+{
+    const nstate *s = R->s;
+    if (s->separable)
+        return 0;
+    const long double mid = (ta + tb) / 2;
+    const double half = (double) (tb - ta) / 2;
+    double f = 0, dev = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i) {
+        f += s->fbm.weight[i] * octave_at(R, i, mid);
+        const double rate = s->fbm.freq[i] / s->scale;   /* lattice units per unit t */
+        dev += s->fbm.weight[i] * fmin(2 * EF_NOISE_BOUND, EF_NOISE_LIPSCHITZ * rate * half);
+    }
+    const double c = s->contrast, centre = 1 + c * f, spread = fabs(c) * dev;
+    if (centre + spread <= 0)
+        return -1;
+    if (centre - spread > 0)
+        return 1;
+    return 0;
+}
+
 /* The bound of shape (max(0, 1 + c fbm), or a product of naxes of them). */
 static double shape_bound(const nstate *s)
 {
@@ -889,11 +915,17 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
     while (walk_next(&w, &ta, &tb)) {
         if (tb > ta) {
             R->cells += 1;
+            const int clamp = clamp_state(R, ta, tb);
             const double tol = tol_per_len > 0
                                    ? tol_per_len * (double) (tb - ta)
                                    : 1e-14 * shape_bound(s) * (double) (tb - ta) *
                                          (double) fmaxl(env_at(R, ta), env_at(R, tb));
-            bisect(R, full_density, NULL, lo, hi, ta, tb, tol, 30, &acc, err);
+            if (clamp < 0)
+                ;   /* the clamp holds the density at zero over the whole piece */
+            else if (clamp > 0 && s->k == 0 && tol_per_len == 0)
+                kadd(&acc, gauss(R, full_density, NULL, 9, ta, tb));  /* a polynomial: exact */
+            else
+                bisect(R, full_density, NULL, lo, hi, ta, tb, tol, 30, &acc, err);
         }
         walk_advance(&w, tb);
     }
