@@ -882,38 +882,13 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
             R->cells += 1;
             if (n > 0 && s->k == 0) {
                 /* Per node in double: the fractions at the cell's entry and their rates. */
-                const long double half = (tb - ta) / 2;
-                const double hh = (double) half;
-                /* Each corner's gradient term is linear along the chord:
-                 * its value at the entry and its rate, once per cell. */
-                double f0[3], d0[3], A[8], B[8];
+                double f0[3], d0[3];
                 for (int a = 0; a < 3; ++a) {
                     f0[a] = (double) ((w.u[a].b - w.cell[a]) + ta * w.u[a].d);
                     d0[a] = w.u[a].dd;
                 }
-                for (int k = 0; k < 8; ++k) {
-                    const double *g = grad_vec[cc.nc.h[k] & 15];
-                    A[k] = g[0] * (f0[0] - (k & 1)) + g[1] * (f0[1] - ((k >> 1) & 1)) +
-                           g[2] * (f0[2] - (k >> 2));
-                    B[k] = g[0] * d0[0] + g[1] * d0[1] + g[2] * d0[2];
-                }
-                double sum = 0;
-                for (int j = 0; j < n; ++j) {
-                    const double o = hh * (1 + s->glx[n][j]);
-                    const double u = ef_noise_fade_(f0[0] + o * d0[0]);
-                    const double v = ef_noise_fade_(f0[1] + o * d0[1]);
-                    const double ww = ef_noise_fade_(f0[2] + o * d0[2]);
-                    double g[8];
-                    for (int k = 0; k < 8; ++k)
-                        g[k] = A[k] + o * B[k];
-                    const double x0 = ef_noise_lerp_(v, ef_noise_lerp_(u, g[0], g[1]),
-                                                     ef_noise_lerp_(u, g[2], g[3]));
-                    const double x1 = ef_noise_lerp_(v, ef_noise_lerp_(u, g[4], g[5]),
-                                                     ef_noise_lerp_(u, g[6], g[7]));
-                    sum += s->glw[n][j] * ef_noise_lerp_(ww, x0, x1);
-                }
                 R->evals += n;
-                kadd(&acc, (double) half * sum);
+                kadd(&acc, cell_gauss(s, &cc.nc, f0, d0, (double) (tb - ta), n));
             } else if (n > 0) {
                 kadd(&acc, gauss(R, cell_env_noise, &cc, n, ta, tb));
             } else if (s->k * fabsl(R->hs) * (tb - ta) <= 0.05L) {
