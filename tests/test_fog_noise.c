@@ -786,5 +786,7 @@ int main(void)
     };
     if (getenv("EXRFOG_TEST_FILTER"))
         cmocka_set_test_filter(getenv("EXRFOG_TEST_FILTER"));
+    if (getenv("EXRFOG_TEST_SKIP"))
+        cmocka_set_skip_filter(getenv("EXRFOG_TEST_SKIP"));
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -937,8 +937,8 @@ static int full_lins(const rayc *R, const lin **u)
 static int clamp_state(rayc *R, long double ta, long double tb)
 {
     const nstate *s = R->s;
-    if (s->separable)
-        return 0;
+    if (s->separable)   /* factors of degree 6 each: a polynomial unless the clamp binds */
+        return s->clamp ? 0 : 1;
     const long double mid = (ta + tb) / 2;
     const double half = (double) (tb - ta) / 2;
     double f = 0, dev = 0;
@@ -995,7 +995,7 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
             if (clamp < 0)
                 ;   /* the clamp holds the density at zero over the whole piece */
             else if (clamp > 0 && s->k == 0 && tol_per_len == 0)
-                kadd(&acc, gauss(R, full_density, NULL, 9, ta, tb));  /* a polynomial: exact */
+                kadd(&acc, gauss(R, full_density, NULL, lo, ta, tb));  /* a polynomial: exact */
             else
                 bisect(R, full_density, NULL, lo, hi, ta, tb, tol, 30, &acc, err);
         }
