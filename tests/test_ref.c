@@ -571,7 +571,8 @@ static void test_lattice_infinite(void **state)
 {
     (void) state;
     /* Height fog e^(-y) times (1 + kinks in x) up an oblique sky ray: the
-     * lattice splits stop where the envelope's geometric steps do (y = 512),
+     * lattice splits stop where the envelope's geometric steps do (y = 128,
+     * 64 times the larger of the start's height and the scale),
      * the tail takes the rest. In t, cell j of x is [t_j, t_j+1] and u is
      * linear in t there, so each cell is e^(-ct) times a quadratic. */
     const lat_density L = { LAT_KINK, 1.0L,
@@ -610,8 +611,8 @@ static void test_lattice_infinite(void **state)
     got = t3[0];
     assert_int_equal(st.unconverged, 0);
     assert_rel(got, want, 1e-13L);
-    /* x crossings up to y = 512, where the tail starts. */
-    const double tmax = (512 - 2.0) / 0.6;
+    /* x crossings up to y = 128, where the tail starts. */
+    const double tmax = (128 - 2.0) / 0.6;
     const long lat_splits = lat_crossings(A, org[0], 0.8, tmax);
     print_message("infinite: %ld lattice splits, %ld pieces, rel err %.2Lg\n", lat_splits, st.pieces,
                   fabsl(got - want) / want);
