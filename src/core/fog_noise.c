@@ -1322,7 +1322,7 @@ static double piece_val(const double *c, double y)
 }
 
 /* The piece holding r in [0, 256), and r's offset into it. */
-static int piece_of(const nstate *s, const double *tab, double r, double *y)
+static inline int piece_of(const nstate *s, const double *tab, double r, double *y)
 {
     const int P = s->mp;
     const double *start = tab, *hint = tab + 9 * P + 1;
@@ -1337,10 +1337,20 @@ static int piece_of(const nstate *s, const double *tab, double r, double *y)
     return p;
 }
 
+/* floor(x) by a truncating conversion (|x| < 2^62 here: coordinates of
+ * the preintegrated tables, in periods of 256). */
+static inline double fast_floor(double x)
+{
+    if (!(fabs(x) < 0x1p62))
+        return floor(x);
+    const double t = (double) (long long) x;
+    return t > x ? t - 1 : t;
+}
+
 /* floor(v / 256) and v modulo 256. */
 static double period_split(double v, double *r)
 {
-    const double k = floor(v * (1.0 / 256));
+    const double k = fast_floor(v * (1.0 / 256));
     *r = v - 256 * k;
     if (*r >= 256) {      /* rounding */
         *r -= 256;
