@@ -1,0 +1,414 @@
+#!/usr/bin/env bash
+# shellcheck disable=SC2016,SC2034  # tool command lines are stored single-quoted and eval'd
+# bench/noise.sh - the speed/accuracy trade of exrfog's noise fog on a 1920x1080 frame.
+#
+# usage: bench/noise.sh [BUILD_DIR]      (default: <repo>/build; a Release build:
+#        cmake -S . -B build-bench -DCMAKE_BUILD_TYPE=Release -DEXRFOG_TESTS=OFF
+#        cmake --build build-bench -j2 && bench/noise.sh build-bench)
+#
+# Renders the 1920x1080 RGBA half + Z float ZIP frame of bench/run.sh (make_sample),
+# then
+#   1. runs BUILD_DIR/noise_bench on it (the entries live in bench/noise_bench.c;
+#      `noise_bench --list` prints them): per method and tolerance the fog pass
+#      alone on one thread (Mpixel/s, seconds per frame, noise evaluations per
+#      pixel) and, on every 8th pixel each way, max and 99.9th-percentile |dT|
+#      against the reference integrator (noise-separable preintegrated: against
+#      its own method=exact tau) and the share of pixels whose error output covers
+#      the actual error;
+#   2. times end to end `exrfog --fog SPEC IN -o OUT` (default threads) for every
+#      timed entry and `oiiotool IN -o OUT`, interleaved, the order rotated each
+#      round, medians. Slow entries run fewer rounds (at most E2E_BUDGET seconds
+#      each, at least one run) and entries predicted above E2E_MAX seconds are not
+#      run: their row shows the prediction (exp's end-to-end time plus the fog
+#      pass over the threads), marked as such;
+#   3. checks the targets of issue 7 against the measured values, plots max |dT|
+#      against fog-pass time with gnuplot (bench/noise_trade.png) and writes the
+#      tables to bench/noise.md.
+# Nothing asserts on time; the targets are printed PASS or FAIL as measured.
+#
+# Environment:
+#   BENCH_RUNS=5            end-to-end rounds (oiiotool and exp run in every round)
+#   E2E_BUDGET=30           seconds of end-to-end runs per noise entry (>= 1 run)
+#   E2E_MAX=60              entries predicted slower than this are not run end to end
+#   NOISE_BENCH_RUNS=5      fog-pass runs per entry (fewer when over the budget)
+#   NOISE_BENCH_BUDGET=10   seconds of fog-pass runs per entry
+#   NOISE_BENCH_SAMPLE=16   1 in K pixels timed when the whole frame is over the budget
+#   NOISE_BENCH_STEP=8      accuracy on every S-th pixel each way
+#   EXRFOG_THREADS=N        pass --threads N to exrfog (default: one per core)
+#   MAKE_SAMPLE=path        make_sample binary (else BUILD_DIR/make_sample)
+set -uo pipefail
+
+die() { echo "noise: $*" >&2; exit 1; }
+
+here="$(cd "$(dirname "$0")" && pwd)"
+repo="$(cd "$here/.." && pwd)"
+build="${1:-$repo/build}"
+[[ -d "$build" ]] || die "no build directory $build"
+build="$(cd "$build" && pwd)"
+runs="${BENCH_RUNS:-5}"
+e2e_budget="${E2E_BUDGET:-30}"
+e2e_max="${E2E_MAX:-60}"
+nb_runs="${NOISE_BENCH_RUNS:-5}"
+nb_budget="${NOISE_BENCH_BUDGET:-10}"
+nb_sample="${NOISE_BENCH_SAMPLE:-16}"
+nb_step="${NOISE_BENCH_STEP:-8}"
+size=1920x1080
+for v in runs e2e_budget e2e_max nb_runs nb_budget nb_sample nb_step; do
+    [[ "${!v}" =~ ^[1-9][0-9]*$ ]] || die "$v must be a positive integer (got '${!v}')"
+done
+
+exrfog="$build/exrfog"
+noise_bench="$build/noise_bench"
+make_sample="${MAKE_SAMPLE:-$build/make_sample}"
+for b in "$exrfog" "$noise_bench" "$make_sample"; do
+    [[ -x "$b" ]] || die "$b not built (cmake --build $build)"
+done
+command -v oiiotool >/dev/null 2>&1 || die "oiiotool not found (apt-get install -y openimageio-tools)"
+gnuplot=""
+command -v gnuplot >/dev/null 2>&1 && gnuplot="$(command -v gnuplot)"
+[[ -n "$gnuplot" ]] || echo "noise: gnuplot not found (apt-get install -y gnuplot-nox): no plot" >&2
+build_type="$(sed -n 's/^CMAKE_BUILD_TYPE:[A-Z]*=//p' "$build/CMakeCache.txt" 2>/dev/null)"
+src_dir="$(sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$build/CMakeCache.txt" 2>/dev/null)"
+rev=""
+if [[ -n "$src_dir" ]] && git -C "$src_dir" rev-parse --short HEAD >/dev/null 2>&1; then
+    rev="$(git -C "$src_dir" rev-parse --short HEAD)"
+    git -C "$src_dir" diff --quiet HEAD -- src 2>/dev/null || rev+=" with uncommitted changes in src/"
+fi
+
+tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-noise.XXXXXX")" || die "mktemp failed"
+trap 'rm -rf "$tmp"' EXIT
+t_start=$EPOCHREALTIME
+load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
+
+# --- the input frame (as bench/run.sh) -----------------------------------------
+in="$tmp/frame.exr"
+echo "noise: rendering $size frame with $make_sample ..." >&2
+"$make_sample" "$in" --size "$size" --compression zip >&2 || die "make_sample failed"
+in_bytes=$(stat -c %s "$in")
+
+# --- 1. fog pass and accuracy ----------------------------------------------------
+echo "noise: noise_bench (fog pass on 1 thread; accuracy on every ${nb_step}th pixel) ..." >&2
+"$noise_bench" "$in" --tsv --runs "$nb_runs" --budget "$nb_budget" --sample "$nb_sample" \
+    --step "$nb_step" >"$tmp/nb.tsv" || die "noise_bench failed"
+t_nb=$EPOCHREALTIME
+
+# Columns: family name spec timed sample runs mpix_best mpix_median frame_s evals_px
+#          max_dT p999_dT covered surface_px sky_px
+declare -A F_fam F_spec F_timed F_sample F_runs F_mpix F_frame F_evals F_max F_p999 F_cov F_npx
+order=()
+while IFS=$'\t' read -r fam name spec timed sample nruns _best mpix frame evals mx p999 cov npx _sky; do
+    order+=("$name")
+    F_fam[$name]=$fam; F_spec[$name]=$spec; F_timed[$name]=$timed; F_sample[$name]=$sample
+    F_runs[$name]=$nruns; F_mpix[$name]=$mpix; F_frame[$name]=$frame; F_evals[$name]=$evals
+    F_max[$name]=$mx; F_p999[$name]=$p999; F_cov[$name]=$cov; F_npx[$name]=$npx
+done <"$tmp/nb.tsv"
+(( ${#order[@]} )) || die "noise_bench printed nothing"
+
+# --- 2. end to end -----------------------------------------------------------------
+threads=()
+nthreads=$(nproc)
+if [[ -n "${EXRFOG_THREADS:-}" ]]; then threads=(--threads "$EXRFOG_THREADS"); nthreads=$EXRFOG_THREADS; fi
+names=("oiiotool (copy)") cmds=('oiiotool "$IN" -o "$OUT"')
+for name in "${order[@]}"; do
+    (( F_timed[$name] )) || continue
+    names+=("$name")
+    cmds+=('"$exrfog" "${threads[@]}" --fog '"'${F_spec[$name]}'"' "$IN" -o "$OUT"')
+done
+ntools=${#names[@]}
+exp_i=-1
+for (( i = 0; i < ntools; ++i )); do [[ "${F_fam[${names[i]}]:-}" == baseline ]] && exp_i=$i; done
+(( exp_i > 0 )) || die "no exp baseline entry in noise_bench --list"
+
+declare -A walls failed
+last=""
+run_one() {   # $1 tool index, $2 1 = record; sets last (seconds) on success
+    local i=$1 IN="$in" OUT="$tmp/out_$1.exr" log="$tmp/log_$1" a b rc
+    rm -f "$OUT"
+    last=""
+    a=$EPOCHREALTIME
+    eval "${cmds[$i]}" >"$log" 2>&1; rc=$?
+    b=$EPOCHREALTIME
+    if (( rc != 0 )) || [[ ! -s "$OUT" ]]; then
+        if [[ -z "${failed[$i]:-}" ]]; then
+            echo "noise: '${names[$i]}' failed (exit $rc); last output:" >&2
+            tail -n 5 "$log" | sed 's/^/    /' >&2
+        fi
+        failed[$i]=1
+        return
+    fi
+    last="$(awk -v a="$a" -v b="$b" 'BEGIN { printf "%.4f", b - a }')"
+    (( $2 )) && walls[$i]+="$last "
+    return 0
+}
+
+# Warm-up (page cache, lazy loading): oiiotool and exp once, untimed. exp's
+# time is the I/O part of the predictions.
+echo "noise: end to end: warm-up" >&2
+run_one 0 0
+run_one "$exp_i" 0
+io_s="${last:-0.5}"
+nrun=() pred=()
+for (( i = 0; i < ntools; ++i )); do
+    name="${names[i]}"
+    if (( i == 0 || i == exp_i )); then nrun[i]=$runs; pred[i]=""; continue; fi
+    pred[i]="$(awk -v io="$io_s" -v f="${F_frame[$name]}" -v t="$nthreads" 'BEGIN { printf "%.3f", io + f / t }')"
+    nrun[i]="$(awk -v p="${pred[i]}" -v b="$e2e_budget" -v m="$e2e_max" -v r="$runs" 'BEGIN {
+        if (p > m) { print 0; exit } n = int(b / p); if (n < 1) n = 1; if (n > r) n = r; print n }')"
+done
+for (( r = 0; r < runs; ++r )); do
+    echo "noise: end to end: round $((r + 1))/$runs" >&2
+    for (( k = 0; k < ntools; ++k )); do
+        i=$(( (k + r) % ntools ))
+        (( nrun[i] > r )) && run_one "$i" 1
+    done
+done
+t_e2e=$EPOCHREALTIME
+load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
+
+median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{ v[NR] = $1 } END {
+    if (NR == 0) exit; if (NR % 2) print v[(NR + 1) / 2]; else print (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
+declare -A E_med E_n E_pred
+for (( i = 0; i < ntools; ++i )); do
+    E_med[${names[i]}]="$(median <<<"${walls[$i]:-}")"
+    E_n[${names[i]}]=$(wc -w <<<"${walls[$i]:-}")
+    E_pred[${names[i]}]="${pred[i]}"
+done
+oiio="${E_med[oiiotool (copy)]}"
+expn="${names[exp_i]}"
+exp_med="${E_med[$expn]}"
+[[ -n "$oiio" && -n "$exp_med" ]] || die "oiiotool or exp failed end to end"
+
+# --- formatting helpers ----------------------------------------------------------------
+fnum() { awk -v v="$1" -v f="$2" 'BEGIN { if (v == "" || v == "-") print "–"; else printf f, v }'; }
+e2e_cell() {   # name -> "s | / oiiotool | / exp"
+    local n="$1" m="${E_med[$1]:-}" p="${E_pred[$1]:-}"
+    if [[ -n "$m" ]]; then
+        awk -v m="$m" -v o="$oiio" -v e="$exp_med" -v k="${E_n[$n]}" \
+            'BEGIN { printf "%.2f (%d) | %.2f× | %.2f×", m, k, m / o, m / e }'
+    elif [[ -n "$p" ]]; then
+        awk -v m="$p" -v o="$oiio" -v e="$exp_med" \
+            'BEGIN { printf "≈ %.0f (predicted, not run) | ≈ %.0f× | ≈ %.0f×", m, m / o, m / e }'
+    else
+        echo "failed | | "
+    fi
+}
+sci() { awk -v v="$1" 'BEGIN { if (v == "" || v == "-") print "–"; else if (v == 0) print "0"; else printf "%.1e", v }'; }
+pct() { awk -v v="$1" 'BEGIN { if (v == "" || v == "-") print "–"; else printf "%.1f %%", 100 * v }'; }
+timed_on() {   # "N runs, whole frame" or "N runs, 1 in K px"
+    local n="${F_runs[$1]}" k="${F_sample[$1]}"
+    printf '%s run%s, %s' "$n" "$( (( n == 1 )) || echo s)" "$( (( k == 1 )) && echo "whole frame" || echo "1 in $k px")"
+}
+label() {   # the short method label of an entry
+    local s="${F_spec[$1]}"
+    case "${F_fam[$1]}" in
+        baseline) echo "exp (baseline)";;
+        exact|separable-exact) echo "exact";;
+        adaptive) if [[ "$s" == *tol=* ]]; then echo "adaptive tol=${s##*tol=}"; else echo "adaptive (default, tol=2^-12)"; fi;;
+        steps) echo "steps=${s##*steps=}";;
+        preintegrated) echo "preintegrated pieces=${s##*pieces=}";;
+        *) echo "$1";;
+    esac
+}
+
+# --- 3a. the trade: adaptive against steps at equal max |dT| ------------------------------
+# Points: time = fog pass seconds per frame (1 thread), error = max |dT|.
+: >"$tmp/adaptive.dat"; : >"$tmp/steps.dat"; : >"$tmp/exact.dat"; : >"$tmp/preint.dat"
+for name in "${order[@]}"; do
+    (( F_timed[$name] )) || continue
+    case "${F_fam[$name]}" in
+        adaptive) f=adaptive; l="${F_spec[$name]}"; [[ "$l" == *tol=* ]] && l="${l##*tol=}" || l="2^{-12}";;
+        steps) f=steps; l="${F_spec[$name]##*steps=}";;
+        exact) f=exact; l="exact";;
+        preintegrated) f=preint; l="${F_spec[$name]##*pieces=}";;
+        *) continue;;
+    esac
+    printf '%s\t%s\t%s\n' "${F_frame[$name]}" "${F_max[$name]}" "$l" >>"$tmp/$f.dat"
+done
+sort -g -k2,2 "$tmp/adaptive.dat" >"$tmp/adaptive.byerr"
+sort -g -k2,2 "$tmp/steps.dat" >"$tmp/steps.byerr"
+
+# interp FILE E: log-log interpolation of time at error E along the points of FILE
+# (sorted by error); prints "time how", how = "between A and B", "extrapolated" or "".
+interp_awk='
+    { t[NR] = $1; e[NR] = $2; l[NR] = $3 }
+    END {
+        n = NR; if (n == 0) exit
+        for (i = 1; i < n; ++i)
+            if (E >= e[i] && E <= e[i + 1]) {
+                f = (log(E) - log(e[i])) / (log(e[i + 1]) - log(e[i]))
+                printf "%.6g\tbetween %s and %s\n", exp(log(t[i]) + f * (log(t[i + 1]) - log(t[i]))), l[i], l[i + 1]
+                exit
+            }
+        if (ext && n >= 2) {   # beyond either end: the slope of the two nearest points
+            i = E < e[1] ? 1 : n - 1
+            f = (log(E) - log(e[i])) / (log(e[i + 1]) - log(e[i]))
+            printf "%.6g\textrapolated from %s and %s\n", exp(log(t[i]) + f * (log(t[i + 1]) - log(t[i]))), l[i], l[i + 1]
+        }
+    }'
+plain() { local x="${1//\{/}"; echo "${x//\}/}"; }   # 2^{-12} -> 2^-12 (gnuplot's markup out)
+interp() { awk -F'\t' -v E="$2" -v ext="${3:-0}" "$interp_awk" "$1"; }
+
+trade_rows=() min_speedup="" n_cmp=0
+while IFS=$'\t' read -r ts es ls; do
+    res="$(interp "$tmp/adaptive.byerr" "$es")"
+    if [[ -n "$res" ]]; then
+        ta="${res%%$'\t'*}"; how="${res#*$'\t'}"
+        sp="$(awk -v a="$ts" -v b="$ta" 'BEGIN { printf "%.1f", a / b }')"
+        trade_rows+=("| steps=$ls | $(sci "$es") | $(fnum "$ts" %.1f) | $(fnum "$ta" %.2f) (adaptive tol $(plain "$how")) | **${sp}×** |")
+        n_cmp=$((n_cmp + 1))
+        min_speedup="$(awk -v a="$sp" -v m="$min_speedup" 'BEGIN { print (m == "" || a < m) ? a : m }')"
+    else
+        amin="$(head -n1 "$tmp/adaptive.byerr" | cut -f2)"
+        if awk -v e="$es" -v a="$amin" 'BEGIN { exit !(e < a) }'; then
+            trade_rows+=("| steps=$ls | $(sci "$es") | $(fnum "$ts" %.1f) | more accurate than every adaptive point | not compared |")
+        else
+            # Steps is less accurate than the loosest adaptive tolerance measured.
+            loose="$(tail -n1 "$tmp/adaptive.byerr")"
+            tl="$(cut -f1 <<<"$loose")"; ll="$(cut -f3 <<<"$loose")"
+            sp="$(awk -v a="$ts" -v b="$tl" 'BEGIN { printf "%.1f", a / b }')"
+            trade_rows+=("| steps=$ls | $(sci "$es") | $(fnum "$ts" %.1f) | $(fnum "$tl" %.2f) (tol=$(plain "$ll"), already more accurate) | ${sp}× (adaptive also more accurate) |")
+        fi
+    fi
+done <"$tmp/steps.byerr"
+# The other direction: steps' time at each adaptive point's error.
+rev_rows=()
+while IFS=$'\t' read -r ta ea la; do
+    res="$(interp "$tmp/steps.byerr" "$ea" 1)"
+    [[ -n "$res" ]] || continue
+    tsi="${res%%$'\t'*}"; how="${res#*$'\t'}"
+    sp="$(awk -v a="$tsi" -v b="$ta" 'BEGIN { printf "%.1f", a / b }')"
+    rev_rows+=("| adaptive tol=$(plain "$la") | $(sci "$ea") | $(fnum "$ta" %.2f) | $(fnum "$tsi" %.1f) (steps $how) | ${sp}× |")
+done <"$tmp/adaptive.byerr"
+
+# --- 3b. targets ----------------------------------------------------------------------------
+def_name="" p1_name=""
+for name in "${order[@]}"; do
+    [[ "${F_fam[$name]}" == adaptive && "${F_spec[$name]}" != *method=* ]] && def_name="$name"
+    [[ "${F_fam[$name]}" == preintegrated && "${F_spec[$name]}" == *pieces=1 ]] && p1_name="$name"
+done
+verdict() { awk -v v="$1" -v lim="$2" -v op="$3" 'BEGIN {
+    if (v == "") { print "NOT MEASURED"; exit }
+    ok = op == "le" ? v <= lim : v >= lim; print ok ? "PASS" : "FAIL" }'; }
+t1_val="" t3_val=""
+[[ -n "$def_name" && -n "${E_med[$def_name]:-}" ]] && t1_val="$(awk -v a="${E_med[$def_name]}" -v b="$oiio" 'BEGIN { printf "%.2f", a / b }')"
+[[ -n "$p1_name" && -n "${E_med[$p1_name]:-}" ]] && t3_val="$(awk -v a="${E_med[$p1_name]}" -v b="$exp_med" 'BEGIN { printf "%.2f", a / b }')"
+t1="$(verdict "$t1_val" 10 le)"
+t2="$(verdict "$min_speedup" 5 ge)"
+t3="$(verdict "$t3_val" 1.3 le)"
+
+# --- 3c. the plot ---------------------------------------------------------------------------------
+plot_note=""
+if [[ -n "$gnuplot" ]]; then
+    cpu_short="$(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: *//' | cut -c1-40)"
+    term="pngcairo size 1000,720 font 'DejaVu Sans,11'"
+    "$gnuplot" -e 'set terminal' 2>/dev/null | grep -q pngcairo || term="png size 1000,720"
+    cat >"$tmp/plot.gp" <<EOF
+set terminal $term
+set output '$tmp/noise_trade.png'
+set title "exrfog noise fog on the 1920x1080 sample (4 octaves at scale 10):\nmax |ΔT| against fog-pass time (1 thread, ${cpu_short:-unknown CPU}, $(date -u '+%Y-%m-%d'))"
+set logscale xy
+set format y "10^{%L}"
+set xlabel "fog pass, seconds per frame on 1 thread (log)"
+set ylabel "max |ΔT| over the surface pixels checked (log)"
+set grid xtics ytics mxtics mytics lc rgb '#dddddd'
+set key bottom right box opaque spacing 1.2
+set arrow from graph 0, first 2**-11 to graph 1, first 2**-11 nohead dt 2 lc rgb '#888888'
+set label "half-float step just below T = 1 (2^{-11})" at graph 0.98, first 2**-11 right offset 0,0.7 tc rgb '#666666' font ',9'
+plot '$tmp/adaptive.dat' using 1:2 with linespoints pt 7 ps 1.3 lw 2 lc rgb '#1f77b4' title 'noise adaptive (tol)', \\
+     '' using 1:2:3 with labels offset 1.2,0.8 font ',9' tc rgb '#1f77b4' notitle, \\
+     '$tmp/steps.dat' using 1:2 with linespoints pt 5 ps 1.2 lw 2 lc rgb '#d62728' title 'noise steps (N)', \\
+     '' using 1:2:3 with labels offset 1.2,-0.8 font ',9' tc rgb '#d62728' notitle, \\
+     '$tmp/exact.dat' using 1:2 with points pt 9 ps 2 lc rgb '#2ca02c' title 'noise exact', \\
+     '$tmp/preint.dat' using 1:2 with linespoints pt 13 ps 1.3 lw 2 lc rgb '#9467bd' title 'noise-separable preintegrated (pieces; vs its exact τ)', \\
+     '' using 1:2:3 with labels offset 0,1.1 font ',9' tc rgb '#9467bd' notitle
+EOF
+    if "$gnuplot" "$tmp/plot.gp" 2>"$tmp/gnuplot.log" && [[ -s "$tmp/noise_trade.png" ]]; then
+        cp "$tmp/noise_trade.png" "$here/noise_trade.png" || die "could not write $here/noise_trade.png"
+    else
+        plot_note="gnuplot failed: $(head -c 300 "$tmp/gnuplot.log")"
+        echo "noise: $plot_note" >&2
+    fi
+else
+    plot_note="gnuplot not found: plot not made"
+fi
+
+# --- 3d. the report ---------------------------------------------------------------------------------
+t_end=$EPOCHREALTIME
+cpu="$(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: *//')"
+tdesc="its default of one thread per core ($(nproc))"
+[[ -n "${EXRFOG_THREADS:-}" ]] && tdesc="--threads $EXRFOG_THREADS"
+mins() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f min", (b - a) / 60 }'; }
+{
+    echo "## exrfog noise fog: the speed/accuracy trade"
+    echo
+    echo "- date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
+    echo "- machine: $(nproc) CPUs, ${cpu:-unknown CPU}, $(uname -sr); load average $load_before before, $load_after after"
+    echo "- build: ${build_type:-unknown} ($build)${rev:+, source $rev}"
+    echo "- input: ${size} RGBA half + Z float, ZIP, made by make_sample ($(awk -v b="$in_bytes" 'BEGIN { printf "%.1f MB", b / 1e6 }')); y-up, camera at y = 1.7 looking down -z, objects from z = -5 to -180, ground plane to the horizon"
+    echo "- fog pass: \`ef_fog_block\` on 1 thread (bench/noise_bench.c), median of up to ${nb_runs} runs within ${nb_budget} s per entry; the whole frame when that fits, else 1 in ${nb_sample} pixels spread over every row and column, each its own 1×1 block (the runs and the sample are in the last column of the tables); s/frame = that rate over the 2,073,600 pixels"
+    echo "- evals/px: noise evaluations (one octave at one point) per pixel, mean over the accuracy grid, sky included (as \`--stats\` counts them)"
+    echo "- end to end: \`exrfog --fog SPEC IN -o OUT\` with $tdesc and \`oiiotool IN -o OUT\` in the same run, interleaved, order rotated each round, ${runs} rounds after a warm-up of oiiotool and exp; noise entries run at most ${e2e_budget} s each (at least once; the count is in brackets) and entries predicted above ${e2e_max} s (exp's time plus the fog pass over the threads) are not run; medians of wall time"
+    echo "- accuracy: every ${nb_step}th pixel each way, surface pixels only (${F_npx[${order[1]}]:-?} of them; sky pixels are tau = inf for every noise method and the reference, since the noise model here has no falloff); |ΔT| = |e^-τ − e^-τref| in long double, max over channels; τref from the reference integrator (\`ef_ref_tau\`, Gauss–Kronrod split at every octave's lattice crossings); \"covers\" = share of those pixels where T·expm1(info.err) (the \`--aov error\` value) ≥ the actual |ΔT|"
+    echo "- oiiotool $(oiiotool --version 2>/dev/null); run time $(mins "$t_start" "$t_end") (noise_bench $(mins "$t_start" "$t_nb"), end to end $(mins "$t_nb" "$t_e2e"))"
+    echo
+    echo "### noise (\`noise:density=0.02:scale=10:octaves=4\`, contrast 0.9, no falloff)"
+    echo
+    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
+    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    echo "| oiiotool (copy) | | | | $(awk -v m="$oiio" -v k="${E_n[oiiotool (copy)]}" -v e="$exp_med" 'BEGIN { printf "%.2f (%d) | 1.00× | %.2f×", m, k, m / e }') | | | | |"
+    for name in "${order[@]}"; do
+        case "${F_fam[$name]}" in baseline|exact|adaptive|steps) ;; *) continue;; esac
+        if [[ "${F_fam[$name]}" == baseline ]]; then
+            echo "| $(label "$name") \`${F_spec[$name]}\` | $(fnum "${F_mpix[$name]}" %.2f) | $(fnum "${F_frame[$name]}" %.3f) | 0 | $(e2e_cell "$name") | – | – | – | $(timed_on "$name") |"
+            continue
+        fi
+        echo "| $(label "$name") | $(fnum "${F_mpix[$name]}" %.3f) | $(fnum "${F_frame[$name]}" %.1f) | $(fnum "${F_evals[$name]}" %.0f) | $(e2e_cell "$name") | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | $(timed_on "$name") |"
+    done
+    echo
+    echo "### noise-separable (\`noise-separable:density=0.02:scale=10:octaves=4:axes=xz:falloff=0.05:contrast=0.9\`)"
+    echo
+    echo "Preintegrated against the same SPEC's \`method=exact\` τ (the seed's approximation error); exact against the reference integrator. Sky pixels are left out: on a sky ray the envelope lets the fog end, and just above the horizon \`method=exact\` walks 10^5–10^7 m of cells (seconds to minutes per pixel), so exact is a yardstick here and not timed."
+    echo
+    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
+    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    for name in "${order[@]}"; do
+        case "${F_fam[$name]}" in
+            separable-exact)
+                echo "| exact (vs the reference) | not timed | | | | | | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | |";;
+            preintegrated)
+                echo "| $(label "$name") | $(fnum "${F_mpix[$name]}" %.3f) | $(fnum "${F_frame[$name]}" %.1f) | $(fnum "${F_evals[$name]}" %.0f) | $(e2e_cell "$name") | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | $(timed_on "$name") |";;
+        esac
+    done
+    echo
+    echo "### Adaptive against steps at equal max |ΔT|"
+    echo
+    echo "Time is the fog pass in seconds per frame on one thread. For each steps point, the adaptive time at the same max |ΔT| is interpolated log-log between the two adaptive tolerances whose measured max |ΔT| bracket it (the adaptive points sorted by error); the speed-up is the ratio."
+    echo
+    echo "| steps | max \\|ΔT\\| | steps s/frame | adaptive s/frame at that error | adaptive speed-up |"
+    echo "|---|---:|---:|---:|---:|"
+    for row in "${trade_rows[@]}"; do echo "$row"; done
+    echo
+    echo "And the other way: steps' time at each adaptive point's max |ΔT| (interpolated log-log between the bracketing steps counts; below steps=1024's error, extrapolated along the last two steps points)."
+    echo
+    echo "| adaptive | max \\|ΔT\\| | adaptive s/frame | steps s/frame at that error | adaptive speed-up |"
+    echo "|---|---:|---:|---:|---:|"
+    for row in "${rev_rows[@]}"; do echo "$row"; done
+    echo
+    echo "### Targets (issue 7)"
+    echo
+    echo "| target | measured | status |"
+    echo "|---|---|---|"
+    echo "| default adaptive ≤ 10× the oiiotool copy end to end | ${t1_val:-–}× ($(fnum "${E_med[$def_name]:-}" %.2f) s / $(fnum "$oiio" %.2f) s) | **$t1** |"
+    echo "| at equal measured max error, adaptive ≥ 5× faster than steps (fog pass) | smallest interpolated speed-up ${min_speedup:-–}× over $n_cmp steps point(s) inside the adaptive error range | **$t2** |"
+    echo "| preintegrated pieces=1 ≤ 1.3× the exp model end to end | ${t3_val:-–}× ($(fnum "${E_med[$p1_name]:-}" %.2f) s / $(fnum "$exp_med" %.2f) s) | **$t3** |"
+    echo
+    if [[ -z "$plot_note" ]]; then
+        echo "![max |ΔT| against fog-pass time](noise_trade.png)"
+    else
+        echo "- note: $plot_note"
+    fi
+} >"$tmp/noise.md"
+
+cat "$tmp/noise.md"
+cp "$tmp/noise.md" "$here/noise.md" || die "could not write $here/noise.md"
+echo "noise: tables written to $here/noise.md${plot_note:+ (no plot)}; plot: $here/noise_trade.png" >&2

@@ -1,0 +1,622 @@
+/* noise_bench.c - the speed/accuracy trade of exrfog's noise fog methods.
+ *
+ *   noise_bench FRAME.exr [--tsv] [--runs N] [--budget S] [--sample K] [--step S]
+ *                         [--threads T] [--only NAME]
+ *   noise_bench --list
+ *
+ * For each entry in the list below (the noise model's methods and
+ * tolerances, noise-separable's preintegrated pieces, exp as the baseline)
+ * it
+ *   - times the fog pass, ef_fog_block (src/core/apply.h), on one thread:
+ *     the median and best of up to N runs (default 5) on fresh copies of the
+ *     decoded planes. When N runs of the whole frame fit the budget (default
+ *     10 s per entry, estimated from a probe on 1 in 64 pixels) the whole
+ *     frame is one block; else 1 in K pixels (--sample K; default: the
+ *     smallest power of two that fits), pixel (i, j) when (i + 7 j) mod K
+ *     is 0, each its own 1x1 block, so every row and column is represented
+ *     (the cost varies a lot with the row: near the horizon the ground is
+ *     kilometres away), and fewer runs when even that does not fit (at
+ *     least one). Mpixel/s is pixels fogged over seconds; the per-frame
+ *     time is the same rate over the whole frame;
+ *   - on every S-th pixel each way (default 8), surface pixels only,
+ *     evaluates the component's tau with ef_fog_tau and its info, and
+ *     compares T = exp(-tau) with its yardstick's: for the noise model and
+ *     for noise-separable method=exact the reference integrator
+ *     (ef_ref_tau, src/core/ref.h) on the same density, for
+ *     noise-separable preintegrated its method=exact tau. |dT| is
+ *     |e^-tau - e^-tau_yard| in long double (the error tau causes, not the
+ *     output's rounding), max over channels; reported: its max, its 99.9th
+ *     percentile, and the share of pixels where the error output
+ *     T expm1(info.err) (what --aov error writes) covers it. The mean noise
+ *     evaluations per pixel (info.evals) are over every grid pixel, sky
+ *     included (the fog pass does those too), as --stats counts them.
+ *     The yardsticks are computed once, on --threads threads (default 2).
+ * Sky pixels are left out of the comparison: for the noise model (no
+ * falloff) every method and the reference give tau = inf there; for
+ * noise-separable (falloff) the exact method walks a sky ray cell by cell
+ * up to where the envelope's tail bound is negligible, which just above the
+ * horizon is 10^5..10^7 scene units: seconds to minutes per pixel, and the
+ * reference needs gigabytes. For that reason noise-separable exact is a
+ * yardstick here, not a timed entry.
+ *
+ * FRAME is read the way the CLI reads it (ef_exr_open, ef_find_channels,
+ * ef_exr_read_cam_meta, ef_camera_resolve, planar depth) and decoded once
+ * through ef_exr_stream (to a scratch copy that is removed).
+ *
+ * Output: a Markdown table, or with --tsv one tab-separated line per entry:
+ *   family name spec timed sample runs mpix_best mpix_median frame_s evals_px
+ *   max_dT p999_dT covered surface_px sky_px
+ * ("-" where a field does not apply). --list prints
+ * "family<TAB>name<TAB>spec<TAB>timed" per entry (bench/noise.sh reads it, so
+ * the list lives here only).
+ * Nothing asserts on time. */
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "apply.h"
+#include "exr_io.h"
+#include "ref.h"
+#include "scene.h"
+
+#define PROG "noise_bench"
+
+/* The sample scene is y-up, ground y = 0, camera at y = 1.7 looking down -z,
+ * objects from z = -5 to -180 (and the ground to the horizon). */
+#define NOISE "noise:density=0.02:scale=10:octaves=4"
+#define SEP "noise-separable:density=0.02:scale=10:octaves=4:axes=xz:falloff=0.05:contrast=0.9"
+
+enum { Y_NONE, Y_REF, Y_SEP_REF, Y_SEP_EXACT, NYARD };
+
+typedef struct entry {
+    const char *family; /* exact, adaptive, steps, preintegrated, separable-exact, baseline */
+    const char *name;
+    const char *spec;
+    int yard;           /* what its tau is compared with */
+    int timed;          /* 0: a yardstick only, its fog pass not timed */
+} entry;
+
+static const entry entries[] = {
+    { "baseline", "exp (OpenGL baseline)", "exp:density=0.02", Y_NONE, 1 },
+    { "exact", "noise exact", NOISE ":method=exact", Y_REF, 1 },
+    { "adaptive", "noise adaptive tol=1e-2", NOISE ":method=adaptive:tol=1e-2", Y_REF, 1 },
+    { "adaptive", "noise adaptive tol=1e-3", NOISE ":method=adaptive:tol=1e-3", Y_REF, 1 },
+    { "adaptive", "noise adaptive (default tol=2^-12)", NOISE, Y_REF, 1 },
+    { "adaptive", "noise adaptive tol=1e-4", NOISE ":method=adaptive:tol=1e-4", Y_REF, 1 },
+    { "adaptive", "noise adaptive tol=1e-6", NOISE ":method=adaptive:tol=1e-6", Y_REF, 1 },
+    { "steps", "noise steps=16", NOISE ":method=steps:steps=16", Y_REF, 1 },
+    { "steps", "noise steps=64", NOISE ":method=steps:steps=64", Y_REF, 1 },
+    { "steps", "noise steps=256", NOISE ":method=steps:steps=256", Y_REF, 1 },
+    { "steps", "noise steps=1024", NOISE ":method=steps:steps=1024", Y_REF, 1 },
+    { "separable-exact", "noise-separable exact", SEP ":method=exact", Y_SEP_REF, 0 },
+    { "preintegrated", "noise-separable pieces=1", SEP ":method=preintegrated:pieces=1", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=2", SEP ":method=preintegrated:pieces=2", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=4", SEP ":method=preintegrated:pieces=4", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=8", SEP ":method=preintegrated:pieces=8", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=16", SEP ":method=preintegrated:pieces=16", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=32", SEP ":method=preintegrated:pieces=32", Y_SEP_EXACT, 1 },
+    { "preintegrated", "noise-separable pieces=64", SEP ":method=preintegrated:pieces=64", Y_SEP_EXACT, 1 },
+};
+#define NENTRIES ((int) (sizeof entries / sizeof entries[0]))
+
+/* ------------------------------------------------------------ the frame */
+
+typedef struct frame {
+    int x0, y0, w, h;
+    float *rgb[3], *alpha, *depth;
+    ef_camera cam;
+    ef_depth_conv conv;
+} frame;
+
+static void copy_chunk(void *user, const ef_chunk *ch)
+{
+    frame *f = user;
+    for (int yy = 0; yy < ch->h; ++yy) {
+        const size_t dst = (size_t) (ch->y0 - f->y0 + yy) * (size_t) f->w +
+                           (size_t) (ch->x0 - f->x0);
+        const size_t src = (size_t) yy * (size_t) ch->w;
+        const size_t n = (size_t) ch->w * sizeof(float);
+        for (int k = 0; k < 3; ++k)
+            memcpy(f->rgb[k] + dst, ch->rgb[k] + src, n);
+        if (ch->alpha)
+            memcpy(f->alpha + dst, ch->alpha + src, n);
+        memcpy(f->depth + dst, ch->depth + src, n);
+    }
+}
+
+static int load_frame(const char *path, frame *f)
+{
+    ef_exr_file in = { 0 };
+    ef_err err;
+    ef_channel_plan plan;
+    ef_cam_meta meta;
+    ef_cam_flags flags;
+    memset(&flags, 0, sizeof flags);
+    memset(f, 0, sizeof *f);
+    if (ef_exr_open(path, &in, &err) || ef_find_channels(&in, &in, NULL, NULL, &plan, &err) ||
+        ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
+        ef_camera_resolve(&meta, &flags, &f->cam, &err) ||
+        ef_depth_conv_init(&f->conv, EF_DEPTH_PLANAR, &f->cam, &err)) {
+        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
+        ef_exr_close(&in);
+        return -1;
+    }
+    exr_attr_box2i_t dw;
+    if (exr_get_data_window(in.ctx, plan.rgb[0].part, &dw) != EXR_ERR_SUCCESS) {
+        fprintf(stderr, PROG ": %s: cannot read the data window\n", path);
+        ef_exr_close(&in);
+        return -1;
+    }
+    f->x0 = dw.min.x;
+    f->y0 = dw.min.y;
+    f->w = dw.max.x - dw.min.x + 1;
+    f->h = dw.max.y - dw.min.y + 1;
+    const size_t n = (size_t) f->w * (size_t) f->h;
+    for (int k = 0; k < 3; ++k)
+        f->rgb[k] = calloc(n, sizeof(float));
+    f->alpha = plan.alpha.part >= 0 ? calloc(n, sizeof(float)) : NULL;
+    f->depth = calloc(n, sizeof(float));
+    if (!f->rgb[0] || !f->rgb[1] || !f->rgb[2] || !f->depth ||
+        (plan.alpha.part >= 0 && !f->alpha)) {
+        fprintf(stderr, PROG ": out of memory\n");
+        ef_exr_close(&in);
+        return -1;
+    }
+
+    /* Decode through the library's stream; its output is a scratch copy. */
+    const char *tmpdir = getenv("TMPDIR");
+    char dir[4096], out[4200];
+    snprintf(dir, sizeof dir, "%s/noise_bench.XXXXXX", tmpdir && *tmpdir ? tmpdir : "/tmp");
+    if (!mkdtemp(dir)) {
+        fprintf(stderr, PROG ": mkdtemp %s: %s\n", dir, strerror(errno));
+        ef_exr_close(&in);
+        return -1;
+    }
+    snprintf(out, sizeof out, "%s/copy.exr", dir);
+    ef_stream_opts so = { .threads = 1, .compression = EXR_COMPRESSION_NONE, .zip_level = -1,
+                          .pixel_type = -1, .param_attr = "noise_bench" };
+    ef_stream_stats st;
+    const int rc = ef_exr_stream(&in, &in, &plan, out, &so, copy_chunk, f, &st, &err);
+    remove(out);
+    rmdir(dir);
+    ef_exr_close(&in);
+    if (rc) {
+        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
+        return -1;
+    }
+    return 0;
+}
+
+static void free_frame(frame *f)
+{
+    for (int k = 0; k < 3; ++k)
+        free(f->rgb[k]);
+    free(f->alpha);
+    free(f->depth);
+}
+
+/* ------------------------------------------------------------ timing */
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    const double x = *(const double *) a, y = *(const double *) b;
+    return (x > y) - (x < y);
+}
+
+typedef struct planes {
+    float *rgb[3], *alpha;
+} planes;
+
+/* Seconds of ef_fog_block over 1 in k pixels of the frame, fresh input
+ * each call: with k = 1 the whole frame as one block, else pixel (i, j)
+ * when (i + 7 j) mod k == 0, one 1x1 block each (every row and column is
+ * represented: the cost varies a lot with the row, near the horizon the
+ * ground is kilometres away). *npx: pixels fogged. */
+static double pass_pixels(const frame *f, const ef_fog_pass *pass, planes *p, int k, long *npx)
+{
+    const size_t n = (size_t) f->w * (size_t) f->h;
+    for (int c = 0; c < 3; ++c)
+        memcpy(p->rgb[c], f->rgb[c], n * sizeof(float));
+    if (p->alpha)
+        memcpy(p->alpha, f->alpha, n * sizeof(float));
+    long px = 0;
+    const double a = now();
+    if (k == 1) {
+        ef_fog_block(pass, f->x0, f->y0, f->w, f->h, p->rgb, p->alpha, f->depth);
+        px = (long) n;
+    } else {
+        for (int j = 0; j < f->h; ++j)
+            for (int i = (int) ((k - (7L * j) % k) % k); i < f->w; i += k, ++px) {
+                const size_t o = (size_t) j * (size_t) f->w + (size_t) i;
+                float *rgb[3] = { p->rgb[0] + o, p->rgb[1] + o, p->rgb[2] + o };
+                ef_fog_block(pass, f->x0 + i, f->y0 + j, 1, 1, rgb,
+                             p->alpha ? p->alpha + o : NULL, f->depth + o);
+            }
+    }
+    const double t = now() - a;
+    *npx = px;
+    return t;
+}
+
+typedef struct timing {
+    int k, runs;
+    long px;               /* pixels fogged per run */
+    double best, median;   /* seconds per run */
+} timing;
+
+/* Times the pass within about budget seconds (see the header). */
+static int time_pass(const frame *f, const ef_fog_scene *s, int max_runs, double budget,
+                     int force_k, timing *tm)
+{
+    const size_t n = (size_t) f->w * (size_t) f->h;
+    planes p = { { malloc(n * sizeof(float)), malloc(n * sizeof(float)),
+                   malloc(n * sizeof(float)) }, f->alpha ? malloc(n * sizeof(float)) : NULL };
+    double *t = malloc((size_t) max_runs * sizeof *t);
+    int rc = -1;
+    if (!p.rgb[0] || !p.rgb[1] || !p.rgb[2] || (f->alpha && !p.alpha) || !t)
+        goto out;
+    const ef_fog_pass pass = { &f->cam, &f->conv, s };
+    /* A probe on 1 in 64 pixels estimates the whole frame's time. */
+    long px;
+    const double probe = pass_pixels(f, &pass, &p, 64, &px);
+    const double frame_est = probe * (double) n / (double) px;
+    int k = 1;
+    if (frame_est * max_runs > budget) {
+        if (force_k > 0)
+            k = force_k;
+        else
+            while (k < 64 && frame_est / k * max_runs > budget)
+                k *= 2;
+    }
+    int runs = max_runs;
+    while (runs > 1 && frame_est / k * runs > budget)
+        --runs;
+    for (int r = 0; r < runs; ++r)
+        t[r] = pass_pixels(f, &pass, &p, k, &px);
+    qsort(t, (size_t) runs, sizeof *t, cmp_double);
+    tm->k = k;
+    tm->runs = runs;
+    tm->px = px;
+    tm->best = t[0];
+    tm->median = runs % 2 ? t[runs / 2] : 0.5 * (t[runs / 2 - 1] + t[runs / 2]);
+    rc = 0;
+out:
+    for (int c = 0; c < 3; ++c)
+        free(p.rgb[c]);
+    free(p.alpha);
+    free(t);
+    return rc;
+}
+
+/* ------------------------------------------------------------ the pixel grid */
+
+typedef struct grid {
+    int n;                 /* grid pixels */
+    ef_ray *ray;           /* the surface segment (sky: to infinity) */
+    unsigned char *sky;
+    /* Per yardstick: the reference tau of noise and of noise-separable,
+     * and noise-separable's method=exact tau. */
+    long double (*yard[NYARD])[3];
+} grid;
+
+static const char *const yard_spec[NYARD] = { NULL, NOISE, SEP, SEP ":method=exact" };
+
+static int make_grid(const frame *f, int step, grid *g)
+{
+    memset(g, 0, sizeof *g);
+    const int nx = (f->w + step - 1) / step, ny = (f->h + step - 1) / step;
+    g->n = nx * ny;
+    g->ray = malloc((size_t) g->n * sizeof *g->ray);
+    g->sky = malloc((size_t) g->n);
+    if (!g->ray || !g->sky)
+        return -1;
+    int m = 0;
+    for (int j = 0; j < f->h; j += step)
+        for (int i = 0; i < f->w; i += step, ++m) {
+            const size_t idx = (size_t) j * (size_t) f->w + (size_t) i;
+            g->sky[m] = (unsigned char) ef_reconstruct(&f->cam, &f->conv, f->x0 + i, f->y0 + j,
+                                                       f->depth[idx], &g->ray[m]);
+        }
+    return 0;
+}
+
+static void free_grid(grid *g)
+{
+    free(g->ray);
+    free(g->sky);
+    for (int y = 0; y < NYARD; ++y)
+        free(g->yard[y]);
+}
+
+/* The yardsticks over the grid, split among threads by interleaved pixels. */
+typedef struct yard_job {
+    grid *g;
+    const ef_fog_component *c;
+    int which, t, nt, failed;
+} yard_job;
+
+static void *yard_run(void *arg)
+{
+    yard_job *J = arg;
+    grid *g = J->g;
+    long double (*out)[3] = g->yard[J->which];
+    for (int m = J->t; m < g->n; m += J->nt) {
+        if (J->which != Y_REF && g->sky[m]) {
+            /* noise-separable's sky rays (an infinite segment under the
+             * falloff envelope) end where the envelope's tail bound allows:
+             * just above the horizon that is 10^5..10^7 scene units, which
+             * its exact method walks cell by cell (seconds to minutes per
+             * pixel) and the reference splits at every seam (gigabytes).
+             * Surface segments only, as for the noise model. */
+            out[m][0] = out[m][1] = out[m][2] = NAN;
+        } else if (J->which != Y_SEP_EXACT) {
+            if (ef_ref_tau(J->c, &g->ray[m], out[m], NULL))
+                J->failed++;
+        } else {
+            double t[3];
+            ef_fog_tau(J->c, &g->ray[m], t, NULL);
+            for (int k = 0; k < 3; ++k)
+                out[m][k] = t[k];
+        }
+    }
+    return NULL;
+}
+
+static int compute_yard(const frame *f, grid *g, int which, int threads)
+{
+    ef_fog_scene s;
+    ef_err err;
+    ef_scene_init(&s);
+    g->yard[which] = malloc((size_t) g->n * sizeof *g->yard[which]);
+    if (!g->yard[which]) {
+        fprintf(stderr, PROG ": out of memory\n");
+        return -1;
+    }
+    if (ef_scene_add(&s, yard_spec[which], &err)) {
+        fprintf(stderr, PROG ": %s\n", err.msg);
+        return -1;
+    }
+    ef_scene_bind(&s, f->cam.pos);
+    const double a = now();
+    yard_job job[16];
+    pthread_t th[16];
+    if (threads < 1)
+        threads = 1;
+    if (threads > 16)
+        threads = 16;
+    int failed = 0;
+    for (int t = 0; t < threads; ++t) {
+        job[t] = (yard_job) { g, &s.comp[0], which, t, threads, 0 };
+        if (pthread_create(&th[t], NULL, yard_run, &job[t])) {
+            yard_run(&job[t]);
+            th[t] = 0;
+        }
+    }
+    for (int t = 0; t < threads; ++t) {
+        if (th[t])
+            pthread_join(th[t], NULL);
+        failed += job[t].failed;
+    }
+    ef_scene_free(&s);
+    fprintf(stderr, PROG ": yardstick %s%s over %d grid pixels on %d threads in %.1f s\n",
+            which == Y_SEP_EXACT ? "" : "ef_ref_tau of ", yard_spec[which], g->n, threads,
+            now() - a);
+    if (failed) {
+        fprintf(stderr, PROG ": the reference integrator failed on %d pixels\n", failed);
+        return -1;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------ accuracy */
+
+typedef struct accuracy {
+    double evals_per_px, max_dT, p999_dT, covered;
+    long surface, sky;
+} accuracy;
+
+/* Compares c's tau on the grid's surface pixels with yardstick which; the
+ * mean evaluations are over every grid pixel (with sky_too; else over the
+ * surface pixels). */
+static int check_accuracy(const grid *g, const ef_fog_component *c, int which, int sky_too,
+                          accuracy *acc)
+{
+    memset(acc, 0, sizeof *acc);
+    double *dts = malloc((size_t) g->n * sizeof *dts);
+    if (!dts)
+        return -1;
+    double evals = 0;
+    long covered = 0, counted = 0;
+    for (int m = 0; m < g->n; ++m) {
+        if (g->sky[m] && !sky_too) {
+            acc->sky++;
+            continue;
+        }
+        double tau[3];
+        ef_tau_info info;
+        ef_fog_tau(c, &g->ray[m], tau, &info);
+        evals += info.evals;
+        counted++;
+        if (g->sky[m]) {
+            acc->sky++;
+            continue;
+        }
+        double dT = 0;
+        int cov = 1;
+        for (int k = 0; k < 3; ++k) {
+            const long double yard = g->yard[which][m][k];
+            /* The error tau causes, in long double (e^-inf = 0 on both
+             * sides: an opaque pair differs by 0). */
+            const long double d = fabsl(expl(-(long double) tau[k]) - expl(-yard));
+            const double T = exp(-tau[k]);
+            const double bound = T > 0 ? T * expm1(info.err[k]) : 0;   /* as the error AOV */
+            cov &= !((double) d > bound);
+            if ((double) d > dT)
+                dT = (double) d;
+        }
+        dts[acc->surface++] = dT;
+        covered += cov;
+    }
+    acc->evals_per_px = counted ? evals / counted : 0;
+    if (acc->surface > 0) {
+        qsort(dts, (size_t) acc->surface, sizeof *dts, cmp_double);
+        acc->max_dT = dts[acc->surface - 1];
+        long q = (long) ceil(0.999 * (double) acc->surface) - 1;
+        if (q < 0)
+            q = 0;
+        acc->p999_dT = dts[q];
+        acc->covered = (double) covered / (double) acc->surface;
+    }
+    free(dts);
+    return 0;
+}
+
+/* ------------------------------------------------------------ main */
+
+static int usage(void)
+{
+    fprintf(stderr, "usage: " PROG " FRAME.exr [--tsv] [--runs N] [--budget SECONDS] "
+                    "[--sample K] [--step S] [--threads T] [--only NAME]\n"
+                    "       " PROG " --list\n");
+    return 2;
+}
+
+int main(int argc, char **argv)
+{
+    const char *path = NULL, *only = NULL;
+    int tsv = 0, runs = 5, step = 8, threads = 2, force_k = 0;
+    double budget = 10;
+    for (int i = 1; i < argc; ++i) {
+        if (strcmp(argv[i], "--list") == 0) {
+            for (int e = 0; e < NENTRIES; ++e)
+                printf("%s\t%s\t%s\t%d\n", entries[e].family, entries[e].name, entries[e].spec,
+                       entries[e].timed);
+            return 0;
+        } else if (strcmp(argv[i], "--tsv") == 0) {
+            tsv = 1;
+        } else if (strcmp(argv[i], "--runs") == 0 && i + 1 < argc) {
+            runs = atoi(argv[++i]);
+        } else if (strcmp(argv[i], "--budget") == 0 && i + 1 < argc) {
+            budget = atof(argv[++i]);
+        } else if (strcmp(argv[i], "--sample") == 0 && i + 1 < argc) {
+            force_k = atoi(argv[++i]);
+        } else if (strcmp(argv[i], "--step") == 0 && i + 1 < argc) {
+            step = atoi(argv[++i]);
+        } else if (strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
+            threads = atoi(argv[++i]);
+        } else if (strcmp(argv[i], "--only") == 0 && i + 1 < argc) {
+            only = argv[++i];
+        } else if (argv[i][0] == '-' || path) {
+            return usage();
+        } else {
+            path = argv[i];
+        }
+    }
+    if (!path || runs < 1 || step < 1 || !(budget > 0))
+        return usage();
+
+    frame f;
+    if (load_frame(path, &f))
+        return 1;
+    fprintf(stderr, PROG ": %s: %dx%d; fog pass up to %d runs within %.0f s per entry; "
+                    "accuracy on every %d-th pixel each way\n",
+            path, f.w, f.h, runs, budget, step);
+    grid g;
+    if (make_grid(&f, step, &g)) {
+        fprintf(stderr, PROG ": out of memory\n");
+        return 1;
+    }
+    /* The yardsticks the selected entries need. */
+    int need[NYARD] = { 0 };
+    for (int e = 0; e < NENTRIES; ++e)
+        if (!only || strstr(entries[e].name, only))
+            need[entries[e].yard] = 1;
+    for (int y = 1; y < NYARD; ++y)
+        if (need[y] && compute_yard(&f, &g, y, threads))
+            return 1;
+
+    if (!tsv) {
+        printf("| family | SPEC | fog pass Mpixel/s (1 thread, best / median) | s per frame "
+               "| rows timed (runs) | evals/px | max \\|dT\\| | 99.9th \\|dT\\| "
+               "| error output covers |\n");
+        printf("|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    }
+    int status = 0;
+    for (int e = 0; e < NENTRIES; ++e) {
+        const entry *E = &entries[e];
+        if (only && !strstr(E->name, only))
+            continue;
+        ef_fog_scene s;
+        ef_err err;
+        ef_scene_init(&s);
+        if (ef_scene_add(&s, E->spec, &err)) {
+            fprintf(stderr, PROG ": %s\n", err.msg);
+            status = 1;
+            continue;
+        }
+        ef_scene_bind(&s, f.cam.pos);   /* as the CLI does, once per frame */
+        timing tm = { 0, 0, 0, 0, 0 };
+        const double a = now();
+        if (E->timed && time_pass(&f, &s, runs, budget, force_k, &tm)) {
+            fprintf(stderr, PROG ": out of memory\n");
+            return 1;
+        }
+        const double b = now();
+        accuracy acc = { 0 };
+        const int have = E->yard != Y_NONE;
+        if (have && check_accuracy(&g, &s.comp[0], E->yard, E->timed, &acc)) {
+            fprintf(stderr, PROG ": out of memory\n");
+            return 1;
+        }
+        ef_scene_free(&s);
+        const double px = (double) tm.px / 1e6;
+        char pass[64] = "-", best[32] = "-", med[32] = "-", frame_s[32] = "-", evals[32] = "-";
+        if (E->timed) {
+            snprintf(best, sizeof best, "%.4g", px / tm.best);
+            snprintf(med, sizeof med, "%.4g", px / tm.median);
+            snprintf(frame_s, sizeof frame_s, "%.4g", tm.median * f.w * f.h / (double) tm.px);
+            snprintf(pass, sizeof pass, "%d run%s, 1 in %d px", tm.runs,
+                     tm.runs == 1 ? "" : "s", tm.k);
+        }
+        if (have && E->timed)
+            snprintf(evals, sizeof evals, "%.4g", acc.evals_per_px);
+        fprintf(stderr, PROG ": %-34s %s Mpixel/s median (%s; %.1f s), %s evals/px",
+                E->name, med, pass, b - a, evals);
+        if (have)
+            fprintf(stderr, ", max |dT| %.3g, 99.9th %.3g, covered %.4f on %ld pixels (%.1f s)",
+                    acc.max_dT, acc.p999_dT, acc.covered, acc.surface, now() - b);
+        fprintf(stderr, "\n");
+        if (tsv) {
+            printf("%s\t%s\t%s\t%d\t%d\t%d\t%s\t%s\t%s\t%s", E->family, E->name, E->spec,
+                   E->timed, tm.k, tm.runs, best, med, frame_s, evals);
+            if (have)
+                printf("\t%.3e\t%.3e\t%.6f\t%ld\t%ld\n", acc.max_dT, acc.p999_dT,
+                       acc.covered, acc.surface, acc.sky);
+            else
+                printf("\t-\t-\t-\t-\t-\n");
+        } else {
+            printf("| %s | `%s` | %s / %s | %s | %s | %s | ", E->family, E->spec, best, med,
+                   frame_s, pass, evals);
+            if (have)
+                printf("%.2e | %.2e | %.2f %% |\n", acc.max_dT, acc.p999_dT, 100 * acc.covered);
+            else
+                printf("| | |\n");
+        }
+        fflush(stdout);
+    }
+    free_grid(&g);
+    free_frame(&f);
+    return status;
+}
