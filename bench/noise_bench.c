@@ -1,7 +1,7 @@
 /* noise_bench.c - the speed/accuracy trade of exrfog's noise fog methods.
  *
  *   noise_bench FRAME.exr [--tsv] [--runs N] [--budget S] [--sample K] [--step S]
- *                         [--threads T] [--only NAME]
+ *                         [--threads T] [--only NAME (exact, else a substring)]
  *   noise_bench --list
  *
  * For each entry in the list below (the noise model's methods and
@@ -12,11 +12,11 @@
  *     decoded planes. When N runs of the whole frame fit the budget (default
  *     10 s per entry, estimated from a probe on 1 in 64 pixels) the whole
  *     frame is one block; else 1 in K pixels (--sample K; default: the
- *     smallest power of two that fits), pixel (i, j) when (i + 7 j) mod K
- *     is 0, each its own 1x1 block, so every row and column is represented
- *     (the cost varies a lot with the row: near the horizon the ground is
- *     kilometres away), and fewer runs when even that does not fit (at
- *     least one). Mpixel/s is pixels fogged over seconds; the per-frame
+ *     smallest power of two that fits): in every row one span of w/K
+ *     pixels, span (7 j) mod K of row j, each its own block, so every row
+ *     and every stretch of columns is represented (the cost varies a lot
+ *     with the row: near the horizon the ground is kilometres away); and
+ *     fewer runs when even that does not fit (at least one). Mpixel/s is pixels fogged over seconds; the per-frame
  *     time is the same rate over the whole frame;
  *   - on every S-th pixel each way (default 8), surface pixels only,
  *     evaluates the component's tau with ef_fog_tau and its info, and
@@ -34,9 +34,10 @@
  * Sky pixels are left out of the comparison: for the noise model (no
  * falloff) every method and the reference give tau = inf there; for
  * noise-separable (falloff) the exact method walks a sky ray cell by cell
- * up to where the envelope's tail bound is negligible, which just above the
- * horizon is 10^5..10^7 scene units: seconds to minutes per pixel, and the
- * reference needs gigabytes. For that reason noise-separable exact is a
+ * up to where the envelope's tail bound is negligible (or tau reaches its
+ * opaque cut), which a few degrees above the horizon is kilometres: 2.5 s
+ * for one pixel 0.05 rad up, over a minute 0.01 rad up, and the reference
+ * needs gigabytes there. For that reason noise-separable exact is a
  * yardstick here, not a timed entry.
  *
  * FRAME is read the way the CLI reads it (ef_exr_open, ef_find_channels,
@@ -220,10 +221,12 @@ typedef struct planes {
 } planes;
 
 /* Seconds of ef_fog_block over 1 in k pixels of the frame, fresh input
- * each call: with k = 1 the whole frame as one block, else pixel (i, j)
- * when (i + 7 j) mod k == 0, one 1x1 block each (every row and column is
- * represented: the cost varies a lot with the row, near the horizon the
- * ground is kilometres away). *npx: pixels fogged. */
+ * each call: with k = 1 the whole frame as one block, else one span of
+ * w / k pixels per row, span (7 j) mod k of row j, one block each: every
+ * row and every stretch of columns is represented (the cost varies a lot
+ * with the row: near the horizon the ground is kilometres away), and the
+ * spans are long enough that memory is read as a stream, not pixel by
+ * pixel (which would add tens of ns per pixel). *npx: pixels fogged. */
 static double pass_pixels(const frame *f, const ef_fog_pass *pass, planes *p, int k, long *npx)
 {
     const size_t n = (size_t) f->w * (size_t) f->h;
@@ -237,13 +240,18 @@ static double pass_pixels(const frame *f, const ef_fog_pass *pass, planes *p, in
         ef_fog_block(pass, f->x0, f->y0, f->w, f->h, p->rgb, p->alpha, f->depth);
         px = (long) n;
     } else {
-        for (int j = 0; j < f->h; ++j)
-            for (int i = (int) ((k - (7L * j) % k) % k); i < f->w; i += k, ++px) {
-                const size_t o = (size_t) j * (size_t) f->w + (size_t) i;
-                float *rgb[3] = { p->rgb[0] + o, p->rgb[1] + o, p->rgb[2] + o };
-                ef_fog_block(pass, f->x0 + i, f->y0 + j, 1, 1, rgb,
-                             p->alpha ? p->alpha + o : NULL, f->depth + o);
-            }
+        const int span = (f->w + k - 1) / k;
+        for (int j = 0; j < f->h; ++j) {
+            const int i = (int) ((7L * j) % k) * span;
+            const int w = f->w - i < span ? f->w - i : span;
+            if (w <= 0)
+                continue;
+            const size_t o = (size_t) j * (size_t) f->w + (size_t) i;
+            float *rgb[3] = { p->rgb[0] + o, p->rgb[1] + o, p->rgb[2] + o };
+            ef_fog_block(pass, f->x0 + i, f->y0 + j, w, 1, rgb, p->alpha ? p->alpha + o : NULL,
+                         f->depth + o);
+            px += w;
+        }
     }
     const double t = now() - a;
     *npx = px;
@@ -354,12 +362,8 @@ static void *yard_run(void *arg)
     long double (*out)[3] = g->yard[J->which];
     for (int m = J->t; m < g->n; m += J->nt) {
         if (J->which != Y_REF && g->sky[m]) {
-            /* noise-separable's sky rays (an infinite segment under the
-             * falloff envelope) end where the envelope's tail bound allows:
-             * just above the horizon that is 10^5..10^7 scene units, which
-             * its exact method walks cell by cell (seconds to minutes per
-             * pixel) and the reference splits at every seam (gigabytes).
-             * Surface segments only, as for the noise model. */
+            /* noise-separable's sky rays (see the header): surface
+             * segments only, as for the noise model. */
             out[m][0] = out[m][1] = out[m][2] = NAN;
         } else if (J->which != Y_SEP_EXACT) {
             if (ef_ref_tau(J->c, &g->ray[m], out[m], NULL))
@@ -538,10 +542,15 @@ int main(int argc, char **argv)
         fprintf(stderr, PROG ": out of memory\n");
         return 1;
     }
+    /* --only NAME: that entry when a name is exactly NAME, else every
+     * entry whose name contains it. */
+    int exact = 0;
+    for (int e = 0; only && e < NENTRIES; ++e)
+        exact |= strcmp(entries[e].name, only) == 0;
     /* The yardsticks the selected entries need. */
     int need[NYARD] = { 0 };
     for (int e = 0; e < NENTRIES; ++e)
-        if (!only || strstr(entries[e].name, only))
+        if (!only || (exact ? !strcmp(entries[e].name, only) : strstr(entries[e].name, only) != NULL))
             need[entries[e].yard] = 1;
     for (int y = 1; y < NYARD; ++y)
         if (need[y] && compute_yard(&f, &g, y, threads))
@@ -556,7 +565,7 @@ int main(int argc, char **argv)
     int status = 0;
     for (int e = 0; e < NENTRIES; ++e) {
         const entry *E = &entries[e];
-        if (only && !strstr(E->name, only))
+        if (only && (exact ? strcmp(E->name, only) != 0 : !strstr(E->name, only)))
             continue;
         ef_fog_scene s;
         ef_err err;

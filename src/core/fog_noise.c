@@ -92,10 +92,12 @@ typedef struct nstate {
     int merged, mp;                  /* pieces per period */
     int m_off[3];                    /* index in arr of axis a's table */
     double mtotal[3];                /* the fbm part's integral over one period */
+    double inv_scale, shift[3], seedq[3];   /* merged: q = (p - shift) inv_scale + seedq */
 } nstate;
 
 /* A merged table's layout from m_off: mp starts, mp + 1 prefixes, 7 mp
- * coefficients, 2 mp bin hints (as doubles). */
+ * coefficients (of each piece's antiderivative), 2 mp bin hints (as
+ * doubles). */
 #define MERGED_SIZE(P) ((size_t) (P) * 11 + 1)
 #define MERGED_MAX 65536
 
@@ -313,6 +315,11 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
         if (!isfinite(s.velocity[a] * s.time))
             return ef_fail(err, "fog spec '%s': velocity times --time leaves the range of doubles",
                            c->spec);
+    s.inv_scale = 1 / s.scale;
+    for (int a = 0; a < 3; ++a) {
+        s.shift[a] = s.offset[a] + s.velocity[a] * s.time;
+        s.seedq[a] = s.seed * ef_noise_seed_dir[a];
+    }
     if (sep && method == M_PREINT && s.clamp)
         return ef_fail(err, "fog spec '%s': method=preintegrated needs |contrast| <= %.6g, where "
                        "the clamp max(0, 1 + c fbm) never binds (the factors' prefix integrals "
@@ -1285,7 +1292,7 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
         prefix[p] = (double) acc;
         long double integral = 0, Lp = L;
         for (int k = 0; k < 7; ++k) {
-            coef[7 * p + k] = (double) c[k];
+            coef[7 * p + k] = (double) (c[k] / (k + 1));
             integral += c[k] * Lp / (k + 1);
             Lp *= L;
         }
@@ -1304,20 +1311,22 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     return P;
 }
 
-/* The antiderivative of a merged piece from its start to y. */
-static double piece_int(const double *c, double y)
+/* The antiderivative of a merged piece from its start to y: the table
+ * holds its coefficients (of y^1..y^7), so no division per lookup. */
+static double piece_int(const double *ic, double y)
 {
-    double v = c[6] / 7;
+    double v = ic[6];
     for (int k = 5; k >= 0; --k)
-        v = v * y + c[k] / (k + 1);
+        v = v * y + ic[k];
     return v * y;
 }
 
-static double piece_val(const double *c, double y)
+/* The piece's value at y, the antiderivative's derivative. */
+static double piece_val(const double *ic, double y)
 {
-    double v = c[6];
+    double v = 7 * ic[6];
     for (int k = 5; k >= 0; --k)
-        v = v * y + c[k];
+        v = v * y + (k + 1) * ic[k];
     return v;
 }
 
@@ -1359,31 +1368,36 @@ static double period_split(double v, double *r)
     return k;
 }
 
-/* The mean of factor a's fbm part over q_a in [s0, s0 + ds]. */
-static double merged_mean(const ef_fog_component *c, int a, double s0, double ds)
+/* Factor a's fbm part over q_a from s0 to s0 + *ds: its integral over
+ * |*ds| (and *ds made |*ds|); or, when the extent is too small for that,
+ * its value at the middle with *ds set to 0. */
+static double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
 {
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mp;
     const double *prefix = tab + P, *coef = tab + 2 * P + 1;
+    double ds = *pds;
     if (ds < 0) {
         s0 += ds;
         ds = -ds;
     }
+    *pds = ds;
     double r0, y0, y1, r1;
     const double k0 = period_split(s0, &r0);
     const int p0 = piece_of(s, tab, r0, &y0);
-    if (ds < 1e-6)    /* no extent: the value at the middle */
+    if (ds < 1e-6) {  /* no extent: the value at the middle */
+        *pds = 0;
         return piece_val(coef + 7 * p0, y0 + ds / 2);
+    }
     const double *start = tab;
     const double pend = p0 + 1 < P ? start[p0 + 1] - start[p0] : 256 - start[p0];
     if (y0 + ds <= pend)   /* one piece: the antiderivative's difference */
-        return (piece_int(coef + 7 * p0, y0 + ds) - piece_int(coef + 7 * p0, y0)) / ds;
+        return piece_int(coef + 7 * p0, y0 + ds) - piece_int(coef + 7 * p0, y0);
     const double k1 = period_split(s0 + ds, &r1);
     const int p1 = piece_of(s, tab, r1, &y1);
-    const double G = (k1 - k0) * s->mtotal[a] + (prefix[p1] - prefix[p0]) +
-                     (piece_int(coef + 7 * p1, y1) - piece_int(coef + 7 * p0, y0));
-    return G / ds;
+    return (k1 - k0) * s->mtotal[a] + (prefix[p1] - prefix[p0]) +
+           (piece_int(coef + 7 * p1, y1) - piece_int(coef + 7 * p0, y0));
 }
 
 /* tau / rho of K equal pieces of [t0, t1] from the merged tables. */
@@ -1393,27 +1407,41 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
     double q0[3], dq[3];
     for (int k = 0; k < s->naxes; ++k) {
         const int a = s->axis[k];
-        q0[a] = ((r->org[a] - s->offset[a]) - s->velocity[a] * s->time) / s->scale +
-                s->seed * ef_noise_seed_dir[a];
-        dq[a] = r->dir[a] / s->scale;
+        q0[a] = (r->org[a] - s->shift[a]) * s->inv_scale + s->seedq[a];
+        dq[a] = r->dir[a] * s->inv_scale;
     }
     const double h = (t1 - t0) / K;
     ksum acc = { 0, 0 };
     for (int p = 0; p < K; ++p) {
         const double ta = t0 + p * h, tb = p + 1 == K ? t1 : t0 + (p + 1) * h, L = tb - ta;
-        double v = L;
+        /* L env prod(1 + c G_a / ds_a) as L env prod(ds_a + c G_a) / prod ds_a:
+         * one division per piece, not one per factor */
+        double num = L, den = 1;
         if (s->k > 0 && hs != 0) {
             /* mean envelope: e^(-k h_low) (1 - e^-b) / b, b = k |hs| L */
             const double b = s->k * fabs(hs) * L, hl = h0 + hs * (hs > 0 ? ta : tb);
-            v *= exp(-s->k * hl) * (b > 1e-12 ? -expm1(-b) / b : 1 - b / 2);
+            num *= exp(-s->k * hl);
+            if (b > 1e-12) {
+                num *= -expm1(-b);
+                den = b;
+            } else {
+                num *= 1 - b / 2;
+            }
         } else if (s->k > 0) {
-            v *= exp(-s->k * h0);
+            num *= exp(-s->k * h0);
         }
         for (int k = 0; k < s->naxes; ++k) {
             const int a = s->axis[k];
-            v *= 1 + s->contrast * merged_mean(c, a, q0[a] + ta * dq[a], L * dq[a]);
+            double ds = L * dq[a];
+            const double G = merged_int(c, a, q0[a] + ta * dq[a], &ds);
+            if (ds > 0) {
+                num *= ds + s->contrast * G;
+                den *= ds;
+            } else {
+                num *= 1 + s->contrast * G;
+            }
         }
-        kadd(&acc, v);
+        kadd(&acc, num / den);
     }
     return kval(&acc);
 }
