@@ -21,6 +21,7 @@
 #endif
 
 #include <dirent.h>
+#include <fcntl.h>
 #include <errno.h>
 #include <math.h>
 #include <setjmp.h>
@@ -31,8 +32,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/types.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -1422,10 +1426,11 @@ static void test_output_dir_missing(void **state)
     check_failure(1, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.1", sample(), out.s);
     assert_error_line(out.s);
     assert_false(tu_exists(out.s));
-    /* An OUTPUT that is a directory: refused, the directory is untouched. */
+    /* An OUTPUT that is a directory: refused as a usage error, the
+     * directory is untouched. */
     path_t sub = pth("nodir/sub");
     assert_int_equal(mkdir(sub.s, 0777), 0);
-    check_failure(1, sample(), dir.s, "--threads 2 '%s' -o '%s' --fog exp:density=0.1", sample(),
+    check_failure(2, sample(), dir.s, "--threads 2 '%s' -o '%s' --fog exp:density=0.1", sample(),
                   sub.s);
     assert_error_line(sub.s);
     assert_int_equal(dir_count(sub.s), 0);
@@ -1679,6 +1684,32 @@ static void sleep_ms(long ms)
     nanosleep(&ts, NULL);
 }
 
+/* Finds exrfog's temporary file for OUTPUT name in dir, written by pid:
+ * .NAME.exrfog-PID-TAG.tmp with TAG 10 letters or digits (documented, so
+ * that a stale one is recognisable). Returns 1 and its path. */
+static int find_tmp(const char *dir, const char *name, long pid, char *buf, size_t cap)
+{
+    char head[600];
+    snprintf(head, sizeof head, ".%s.exrfog-%ld-", name, pid);
+    DIR *d = opendir(dir);
+    struct dirent *e;
+    int found = 0;
+    while (d && !found && (e = readdir(d)) != NULL) {
+        const size_t hn = strlen(head), n = strlen(e->d_name);
+        if (n != hn + 14 || strncmp(e->d_name, head, hn) || strcmp(e->d_name + hn + 10, ".tmp"))
+            continue;
+        found = 1;
+        for (size_t k = hn; k < hn + 10; ++k)
+            found &= (e->d_name[k] >= 'a' && e->d_name[k] <= 'z') ||
+                     (e->d_name[k] >= '0' && e->d_name[k] <= '9');
+        if (found)
+            snprintf(buf, cap, "%s/%s", dir, e->d_name);
+    }
+    if (d)
+        closedir(d);
+    return found;
+}
+
 /* Starts exrfog on the big frame, waits for its temporary file to appear,
  * then sends sig. Checks OUTPUT is absent (or unchanged when preexisting),
  * and for catchable signals that no temporary file is left. */
@@ -1702,11 +1733,10 @@ static void kill_case(int sig, int preexisting)
               "exp:density=0.02", (char *) NULL);
         _exit(127);
     }
-    char tmp[2200];
-    snprintf(tmp, sizeof tmp, "%s/.out.exr.exrfog-%ld.tmp", dir.s, (long) pid);
+    char tmp[2200] = "";
     int seen = 0, status = 0;
     for (int i = 0; i < 20000 && !seen; ++i) {
-        if (tu_exists(tmp))
+        if (find_tmp(dir.s, "out.exr", pid, tmp, sizeof tmp))
             seen = 1;
         else
             sleep_ms(1);
@@ -1716,7 +1746,7 @@ static void kill_case(int sig, int preexisting)
     if (!seen) {
         kill(pid, SIGKILL);
         waitpid(pid, &status, 0);
-        fail_msg("the temporary file %s never appeared", tmp);
+        fail_msg("the temporary file .out.exr.exrfog-%ld-*.tmp never appeared in %s", (long) pid, dir.s);
     }
     sleep_ms(20);
     if (waitpid(pid, &status, WNOHANG) == pid)
@@ -2001,6 +2031,219 @@ static void test_preview(void **state)
     assert_int_equal(dir_count(dir.s), 2);
 }
 
+/* ------------------------------------------------------------ output safety (issue 8) */
+
+/* OUTPUT that is not a regular file is refused (exit 2) and left as it was. */
+static void test_output_not_regular(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("notreg");
+    path_t fifo = pth("notreg/fifo"), sub = pth("notreg/sub"), sock = pth("notreg/sock");
+    assert_int_equal(mkfifo(fifo.s, 0644), 0);
+    assert_int_equal(mkdir(sub.s, 0755), 0);
+    const int fd = socket(AF_UNIX, SOCK_STREAM, 0);
+    struct sockaddr_un sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sun_family = AF_UNIX;
+    const int sock_ok = strlen(sock.s) < sizeof sa.sun_path;
+    if (sock_ok) {
+        snprintf(sa.sun_path, sizeof sa.sun_path, "%s", sock.s);
+        assert_int_equal(bind(fd, (struct sockaddr *) &sa, sizeof sa), 0);
+    }
+    static const struct {
+        const char *name, *kind;
+    } cases[] = { { "fifo", "FIFO" }, { "sub", "directory" }, { "sock", "socket" } };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        if (!sock_ok && !strcmp(cases[i].name, "sock"))
+            continue;
+        path_t t = pth("notreg/%s", cases[i].name);
+        check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.02", sample(), t.s);
+        assert_error_line(t.s);
+        assert_err_has(cases[i].kind);
+    }
+    close(fd);
+    /* A device: refused before anything is opened, and still a device. */
+    struct stat before, after;
+    assert_int_equal(stat("/dev/null", &before), 0);
+    assert_status(run("'%s' -o /dev/null --fog exp:density=0.02", sample()), 2);
+    assert_error_line("/dev/null");
+    assert_err_has("character device");
+    assert_int_equal(stat("/dev/null", &after), 0);
+    assert_true(S_ISCHR(after.st_mode));
+    assert_true(after.st_rdev == before.st_rdev);
+    /* Empty names are usage errors. */
+    check_failure(2, sample(), dir.s, "'%s' -o '' --fog exp:density=0.02", sample());
+    assert_err_has("empty");
+    path_t out = pth("notreg/o.exr");
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --preview '' --fog exp:density=0.02", sample(),
+                  out.s);
+    /* A missing directory: nothing read, nothing written. */
+    path_t nodir = pth("notreg/none/o.exr");
+    check_failure(1, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.02", sample(), nodir.s);
+    assert_error_line(nodir.s);
+    assert_err_has("does not exist");
+}
+
+/* A symlink OUTPUT is written through to its target (the link stays); a
+ * dangling one is refused, as cp does. */
+static void test_output_symlink(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("symlink");
+    path_t target = pth("symlink/target.exr"), link = pth("symlink/link.exr");
+    static const char old[] = "old target\n";
+    spit(target.s, old, sizeof old - 1);
+    assert_int_equal(symlink("target.exr", link.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02", sample(), link.s), 0);
+    struct stat st;
+    assert_int_equal(lstat(link.s, &st), 0);
+    assert_true(S_ISLNK(st.st_mode));
+    assert_int_equal(tu_nparts(target.s), 1);   /* the target is now the fogged EXR */
+    assert_int_equal(dir_count(dir.s), 2);
+    path_t dang = pth("symlink/dangling.exr");
+    assert_int_equal(symlink("missing.exr", dang.s), 0);
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.02", sample(), dang.s);
+    assert_error_line(dang.s);
+    assert_err_has("missing file");
+}
+
+/* A replaced OUTPUT keeps its permission bits and (as root) its owner. */
+static void test_output_keeps_mode(void **state)
+{
+    (void) state;
+    fresh_dir("mode");
+    path_t out = pth("mode/out.exr");
+    spit(out.s, "x", 1);
+    assert_int_equal(chmod(out.s, 0640), 0);
+    const int root_user = geteuid() == 0;
+    if (root_user)
+        assert_int_equal(chown(out.s, 65534, 65534), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02", sample(), out.s), 0);
+    struct stat st;
+    assert_int_equal(stat(out.s, &st), 0);
+    assert_int_equal(st.st_mode & 07777, 0640);
+    if (root_user) {
+        assert_int_equal(st.st_uid, 65534);
+        assert_int_equal(st.st_gid, 65534);
+    }
+    assert_int_equal(tu_nparts(out.s), 1);
+    /* A new file gets 0666 minus the umask, like any program's. */
+    path_t fresh = pth("mode/new.exr");
+    const mode_t um = umask(022);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02", sample(), fresh.s), 0);
+    umask(um);
+    assert_int_equal(stat(fresh.s, &st), 0);
+    assert_int_equal(st.st_mode & 07777, 0644);
+}
+
+/* A 240-byte name (legal up to NAME_MAX) works: the temporary name is shortened. */
+static void test_output_long_name(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("longname");
+    char name[256];
+    memset(name, 'n', 236);
+    memcpy(name + 236, ".exr", 5);
+    path_t out = pth("longname/%s", name);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02", sample(), out.s), 0);
+    assert_int_equal(tu_nparts(out.s), 1);
+    assert_int_equal(dir_count(dir.s), 1);
+}
+
+/* The temporary file is created exclusively: a symlink planted under the
+ * old predictable name (or any name) is never followed. */
+static void test_output_planted_symlink(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("planted");
+    path_t victim = pth("planted/victim.txt"), out = pth("planted/out.exr");
+    static const char keep[] = "not yours\n";
+    spit(victim.s, keep, sizeof keep - 1);
+    /* The names older versions used, for the next few process ids. */
+    const long me = (long) getpid();
+    for (long p = me; p < me + 16; ++p) {
+        path_t plant = pth("planted/.out.exr.exrfog-%ld.tmp", p);
+        assert_int_equal(symlink(victim.s, plant.s), 0);
+    }
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02", sample(), out.s), 0);
+    assert_true(same_bytes(victim.s, (const unsigned char *) keep, sizeof keep - 1));
+    assert_int_equal(tu_nparts(out.s), 1);
+    assert_int_equal(dir_count(dir.s), 16 + 2);
+}
+
+/* -o equal to INPUT with a preview that cannot be written: the input is
+ * left as it was (everything is checked before a pixel is read). */
+static void test_output_preview_checked_first(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("pvfirst");
+    path_t in = pth("pvfirst/in.exr"), bad = pth("pvfirst/none/p.png"), fmt = pth("pvfirst/p.nosuchformat");
+    assert_int_equal(tu_copy(sample(), in.s), 0);
+    check_failure(1, in.s, dir.s, "'%s' -o '%s' --preview '%s' --fog exp:density=0.02", in.s, in.s,
+                  bad.s);
+    assert_error_line(bad.s);
+    check_failure(2, in.s, dir.s, "'%s' -o '%s' --preview '%s' --fog exp:density=0.02", in.s, in.s,
+                  fmt.s);
+    assert_error_line(fmt.s);
+    check_failure(2, in.s, dir.s, "'%s' -o '%s' --preview '%s' --fog exp:density=0.02", in.s, in.s,
+                  in.s);
+    assert_error_line(in.s);
+}
+
+/* Runs exrfog on the sample under a file size limit (with SIGXFSZ caught,
+ * or ignored so the write fails with EFBIG); returns the wait status. */
+static int run_fsize_limited(const char *out, int ignore_xfsz)
+{
+    path_t e = pth("fsize.stderr");
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        struct rlimit rl = { 20000, 20000 }, core = { 0, 0 };
+        setrlimit(RLIMIT_FSIZE, &rl);
+        setrlimit(RLIMIT_CORE, &core);   /* SIGXFSZ dumps core by default */
+        if (ignore_xfsz)
+            signal(SIGXFSZ, SIG_IGN);
+        const int fd = open(e.s, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(fd, 2);
+        execl(bin(), bin(), sample(), "-o", out, "--fog", "exp:density=0.02", (char *) NULL);
+        _exit(127);
+    }
+    int status = 0;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    slurp_text(e.s, g_err, sizeof g_err);
+    return status;
+}
+
+/* ulimit -f: SIGXFSZ removes the temporary file and says so; ignored, the
+ * write error names OUTPUT (not an empty name) and exits 1. */
+static void test_output_file_size_limit(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("fsize");
+    path_t out = pth("fsize/out.exr");
+    int st = run_fsize_limited(out.s, 0);
+    assert_true(WIFSIGNALED(st));
+    assert_int_equal(WTERMSIG(st), SIGXFSZ);
+    assert_error_line(out.s);
+    assert_err_has("SIGXFSZ");
+    assert_int_equal(dir_count(dir.s), 0);
+    st = run_fsize_limited(out.s, 1);
+    assert_true(WIFEXITED(st));
+    assert_int_equal(WEXITSTATUS(st), 1);
+    assert_error_line(out.s);
+    assert_err_has("File too large");
+    assert_int_equal(dir_count(dir.s), 0);
+}
+
+static void test_killed_run_other_signals(void **state)
+{
+    (void) state;
+    kill_case(SIGHUP, 1);
+    kill_case(SIGPIPE, 0);
+    kill_case(SIGALRM, 0);
+    kill_case(SIGUSR1, 1);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2047,6 +2290,14 @@ int main(void)
         cmocka_unit_test(test_e2e_sky_distance),
         cmocka_unit_test(test_explain),
         cmocka_unit_test(test_preview),
+        cmocka_unit_test(test_output_not_regular),
+        cmocka_unit_test(test_output_symlink),
+        cmocka_unit_test(test_output_keeps_mode),
+        cmocka_unit_test(test_output_long_name),
+        cmocka_unit_test(test_output_planted_symlink),
+        cmocka_unit_test(test_output_preview_checked_first),
+        cmocka_unit_test(test_output_file_size_limit),
+        cmocka_unit_test(test_killed_run_other_signals),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

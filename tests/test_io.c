@@ -1231,7 +1231,7 @@ static void geo_case(const char *in, const char *dep, const char *out, int colou
     assert_non_null(g.visits);
     atomic_init(&g.bad, 0);
     ef_stream_stats st;
-    if (ef_exr_stream(&fi, dep ? &fd : &fi, &plan, out, so, geo_fn, &g, &st, &err)) {
+    if (ef_exr_stream_file(&fi, dep ? &fd : &fi, &plan, out, so, geo_fn, &g, &st, &err)) {
         print_error("ef_exr_stream: %s\n", err.msg);
         fail();
     }

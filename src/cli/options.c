@@ -382,6 +382,11 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
         return ef_fail(err, "no INPUT given (usage: exrfog [OPTIONS] INPUT -o OUTPUT)"), EF_PARSE_USAGE;
     if (!o->explain && !o->output)
         return ef_fail(err, "no output given (add -o OUTPUT)"), EF_PARSE_USAGE;
+    if (o->output && !o->output[0])
+        return ef_fail(err, "-o: the output name is empty (give a file name)"), EF_PARSE_USAGE;
+    if (o->preview && !o->preview[0])
+        return ef_fail(err, "--preview: the file name is empty (give a name such as preview.png)"),
+               EF_PARSE_USAGE;
     const ef_parse_result br = build_scene(o, &f, err);
     if (br != EF_PARSE_RUN)
         return br;

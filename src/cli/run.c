@@ -15,20 +15,10 @@
 #include "apply.h"
 #include "exr_io.h"
 #include "options.h"
+#include "output.h"
 #include "preview.h"
 #include "recon.h"
 #include "scene.h"
-
-/* The temporary output, removed if a signal ends the run. */
-static char tmp_path[PATH_MAX];
-
-static void on_signal(int sig)
-{
-    if (tmp_path[0])
-        unlink(tmp_path);
-    signal(sig, SIG_DFL);
-    raise(sig);
-}
 
 /* Writes s with control bytes as \xNN: names in messages come from the
  * file, and a hostile one must not drive the terminal. */
@@ -199,19 +189,6 @@ static void print_tau_stats(const ef_fog_scene *s, const ef_tau_stats *st)
     }
 }
 
-/* A temporary name beside the output, so the final rename is atomic. */
-static int make_tmp_path(const char *out, char *buf, size_t len)
-{
-    const char *slash = strrchr(out, '/');
-    int n;
-    if (slash)
-        n = snprintf(buf, len, "%.*s/.%s.exrfog-%ld.tmp", (int) (slash - out), out, slash + 1,
-                     (long) getpid());
-    else
-        n = snprintf(buf, len, ".%s.exrfog-%ld.tmp", out, (long) getpid());
-    return n > 0 && (size_t) n < len ? 0 : -1;
-}
-
 static int cpu_count(void)
 {
     long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -246,6 +223,42 @@ int ef_main(int argc, char **argv)
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     const int naov = ef_aov_channels(o.aov, aov_names);
     int status = 1;
+    ef_output out, pv;
+    out.fd = pv.fd = -1;
+    out.tmp[0] = pv.tmp[0] = '\0';
+    if (!o.explain) {
+        /* Everything about the destinations is checked, and their temporary
+         * files made, before a pixel is read. */
+        ef_output_signals();
+        if (o.preview) {
+            char msg[512];
+            if (!strcmp(o.preview, o.output) || ef_output_same_file(o.preview, o.output) ||
+                ef_output_same_file(o.preview, o.input) ||
+                (o.depth_file && ef_output_same_file(o.preview, o.depth_file))) {
+                ef_fail(&err, "--preview names the same file as INPUT, --depth or -o; give the "
+                              "preview its own name");
+                status = report(o.preview, &err, 2);
+                goto done;
+            }
+            if (ef_preview_check(o.preview, msg, sizeof msg)) {
+                ef_fail(&err, "--preview: %s", msg);
+                status = report(o.preview, &err, 2);
+                goto done;
+            }
+            const char *dot = strrchr(o.preview, '.'), *slash = strrchr(o.preview, '/');
+            const int rc = ef_output_open(&pv, o.preview, dot && (!slash || dot > slash) ? dot : NULL,
+                                          &err);
+            if (rc) {
+                status = report(o.preview, &err, rc);
+                goto done;
+            }
+        }
+        const int rc = ef_output_open(&out, o.output, NULL, &err);
+        if (rc) {
+            status = report(o.output, &err, rc);
+            goto done;
+        }
+    }
     if (ef_exr_open(o.input, &in, &err)) {
         report(o.input, &err, 1);
         goto done;
@@ -318,18 +331,10 @@ int ef_main(int argc, char **argv)
             goto done;
         }
     }
-    if (make_tmp_path(o.output, tmp_path, sizeof tmp_path)) {
-        ef_fail(&err, "the output path is too long");
-        report(o.output, &err, 1);
-        goto done;
-    }
     for (int p = 0; p < in.nparts && !o.quiet; ++p)
         if (ef_exr_part_is_multilevel(&in, p))
             fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
                             "output part is single-level\n", o.input, p);
-    signal(SIGINT, on_signal);
-    signal(SIGTERM, on_signal);
-    signal(SIGHUP, on_signal);
 
     ef_stream_opts so = { .threads = o.threads ? o.threads : cpu_count(),
                           .compression = o.compression,
@@ -346,16 +351,30 @@ int ef_main(int argc, char **argv)
         fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
                 so.threads > 1 ? "s" : "");
     }
-    int rc = ef_exr_stream(&in, df, &plan, tmp_path, &so, fog_chunk, &job, &st, &err);
-    if (!rc && rename(tmp_path, o.output) != 0)
-        rc = ef_fail(&err, "cannot move the finished file into place: %s", strerror(errno));
-    if (rc) {
-        unlink(tmp_path);
-        tmp_path[0] = '\0';
+    if (ef_exr_stream(&in, df, &plan, o.output, out.fd, &so, fog_chunk, &job, &st, &err)) {
         report(o.output, &err, 1);
         goto done;
     }
-    tmp_path[0] = '\0';
+    if (job.preview) {
+        /* The preview goes in place first: when it fails, OUTPUT (which
+         * may be the input) is left as it was and the run fails. */
+        char msg[512];
+        close(pv.fd);
+        pv.fd = -1;
+        if (ef_preview_write(pv.tmp, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
+            ef_fail(&err, "%s; nothing was written", msg);
+            report(o.preview, &err, 1);
+            goto done;
+        }
+        if (ef_output_commit(&pv, &err)) {
+            report(o.preview, &err, 1);
+            goto done;
+        }
+    }
+    if (ef_output_commit(&out, &err)) {
+        report(o.output, &err, 1);
+        goto done;
+    }
     status = 0;
     if (o.stats) {
         struct rusage ru;
@@ -367,14 +386,9 @@ int ef_main(int argc, char **argv)
                 (double) ru.ru_maxrss / 1024.0);
         print_tau_stats(&o.scene, job.stats);
     }
-    if (job.preview) {
-        char msg[512];
-        if (ef_preview_write(o.preview, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
-            ef_fail(&err, "%s", msg);
-            status = report(o.preview, &err, 1);
-        }
-    }
 done:
+    ef_output_abort(&pv);
+    ef_output_abort(&out);
     free(job.preview);
     free(job.stats);
     pthread_mutex_destroy(&job.lock);

@@ -96,15 +96,22 @@ typedef struct ef_stream_opts {
     double origin_attr[3];
 } ef_stream_opts;
 
-/* Writes every part of in to out_path (the exact path: the caller picks a
- * temporary name and renames), calling fn on each unit of the colour part
- * with its depth. Every channel is written back; header attributes are
- * copied. Returns 0, or -1 with a message; a failed write leaves out_path
- * removed. */
+/* Writes every part of in to out_fd (a new, empty file the caller opened
+ * for writing; it picks the temporary name, renames or removes it), calling
+ * fn on each unit of the colour part with its depth. out_path names the
+ * output in messages. Every channel is written back; header attributes are
+ * copied. Returns 0, or -1 with a message about out_path or an input. */
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,
-                  const ef_channel_plan *plan, const char *out_path,
+                  const ef_channel_plan *plan, const char *out_path, int out_fd,
                   const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err);
+
+/* ef_exr_stream to a path created (or truncated) here and removed on
+ * failure: for tools and tests; the CLI creates its temporary file itself. */
+int ef_exr_stream_file(const ef_exr_file *in, const ef_exr_file *depth_file,
+                       const ef_channel_plan *plan, const char *path,
+                       const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
+                       ef_stream_stats *stats, ef_err *err);
 
 /* The name of the first of the n channel names that part p of f already
  * has, or NULL when it has none of them. */

@@ -5,6 +5,8 @@
  * image size. */
 #include "exr_io.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -12,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 
 static double now(void)
@@ -452,7 +455,7 @@ static void *worker(void *arg)
                            : exr_write_scanline_chunk(j->out, j->part, ob.y[i],
                                                       ob.data + ob.off[i], ob.size[i]);
             if (rv) {
-                job_fail(j, j->out_path, "cannot write the output chunk at scanline %d (disk full?)", y0,
+                job_fail(j, j->out_path, "cannot write the output chunk at scanline %d", y0,
                          ef_exr_last_core_message());
                 goto out;
             }
@@ -677,8 +680,39 @@ static int has_long_names(const ef_exr_file *in)
     return 0;
 }
 
+/* The output stream: Core writes through the caller's descriptor, so the
+ * file is the one the caller created (exclusively, beside OUTPUT) and no
+ * name is opened again. The first failure's errno is kept for the message. */
+typedef struct out_sink {
+    int fd;
+    int errnum;
+} out_sink;
+
+static int64_t sink_write(exr_const_context_t ctx, void *user, const void *buf, uint64_t sz,
+                          uint64_t off, exr_stream_error_func_ptr_t error_cb)
+{
+    out_sink *s = user;
+    const unsigned char *p = buf;
+    uint64_t done = 0;
+    while (done < sz) {
+        const ssize_t n = pwrite(s->fd, p + done, (size_t) (sz - done), (off_t) (off + done));
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n <= 0) {
+            const int e = n < 0 ? errno : ENOSPC;
+            if (!s->errnum)
+                s->errnum = e;
+            if (error_cb)
+                error_cb(ctx, EXR_ERR_WRITE_IO, "%s", strerror(e));
+            return -1;
+        }
+        done += (uint64_t) n;
+    }
+    return (int64_t) sz;
+}
+
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
-                  const char *out_path, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
+                  const char *out_path, int out_fd, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err)
 {
     exr_context_initializer_t init;
@@ -694,14 +728,21 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     if (clash)
         return ef_fail(err, "part %d already has a channel '%s'", plan->rgb[0].part, clash);
     ef_exr_init_context(&init);
-    if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init))
-        return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
+    out_sink sink = { out_fd, 0 };
+    init.user_data = &sink;
+    init.write_fn = sink_write;
+    if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init)) {
+        ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
+        err->file = out_path;
+        return -1;
+    }
     /* Names longer than 31 bytes (Blender view layers, renderer metadata)
      * are legal with the long-names flag; the reader accepted them. */
     if (has_long_names(in) && exr_set_longname_support(out, 1)) {
         exr_finish(&out);
-        remove(out_path);
-        return ef_fail(err, "cannot enable long names: %s", ef_exr_last_core_message());
+        ef_fail(err, "cannot enable long names: %s", ef_exr_last_core_message());
+        err->file = out_path;
+        return -1;
     }
     int rc = 0;
     for (int p = 0; p < in->nparts && !rc; ++p)
@@ -712,9 +753,37 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
         rc = run_part(in, df, out, out_path, p, plan, o, fn, user, stats, err);
     if (exr_finish(&out) && !rc)
         rc = ef_fail(err, "cannot finish the output: %s", ef_exr_last_core_message());
-    if (rc)
-        remove(out_path);
+    if (rc && sink.errnum) {
+        /* The system's reason beats Core's generic one. */
+        ef_fail(err, "cannot write the output: %s%s", strerror(sink.errnum),
+                sink.errnum == ENOSPC   ? " (free some space, or write elsewhere)"
+                : sink.errnum == EFBIG  ? " (a file size limit: see ulimit -f)"
+                : sink.errnum == EDQUOT ? " (over the disk quota)"
+                                        : "");
+    }
+    if (rc && (sink.errnum || !err->file))
+        err->file = out_path;
     stats->wall_s = now() - t0;
+    return rc;
+}
+
+int ef_exr_stream_file(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
+                       const char *path, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
+                       ef_stream_stats *stats, ef_err *err)
+{
+    const int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd < 0) {
+        ef_fail(err, "cannot create the output: %s", strerror(errno));
+        err->file = path;
+        return -1;
+    }
+    int rc = ef_exr_stream(in, df, plan, path, fd, o, fn, user, stats, err);
+    if (close(fd) && !rc) {
+        rc = ef_fail(err, "cannot write the output: %s", strerror(errno));
+        err->file = path;
+    }
+    if (rc)
+        unlink(path);
     return rc;
 }
 

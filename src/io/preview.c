@@ -57,3 +57,20 @@ int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, c
     dlclose(mod);
     return rc;
 }
+
+int ef_preview_check(const char *path, char *err, size_t errlen)
+{
+    void *mod = load_module(err, errlen);
+    if (!mod)
+        return -1;
+    int (*fn)(const char *, char *, size_t);
+    *(void **) &fn = dlsym(mod, "ef_oiio_can_write");
+    if (!fn) {
+        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_can_write");
+        dlclose(mod);
+        return -1;
+    }
+    int rc = fn(path, err, errlen);
+    dlclose(mod);
+    return rc;
+}

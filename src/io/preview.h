@@ -13,6 +13,10 @@ extern "C" {
 int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, char *err,
                      size_t errlen);
 
+/* Whether a preview can be written in path's format (by its extension),
+ * writing nothing. Returns 0, or -1 with a message in err. */
+int ef_preview_check(const char *path, char *err, size_t errlen);
+
 #ifdef __cplusplus
 }
 #endif

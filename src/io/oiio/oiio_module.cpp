@@ -31,6 +31,24 @@ ef_oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb, cha
     }
 }
 
+// Whether OIIO has a writer for this name's extension (nothing is written).
+extern "C" __attribute__((visibility("default"))) int
+ef_oiio_can_write(const char *path, char *err, size_t errlen)
+{
+    try {
+        auto out = OIIO::ImageOutput::create(path);
+        if (!out) {
+            std::snprintf(err, errlen, "OpenImageIO cannot write this format (%s); use a name "
+                          "ending in .png, .jpg or .tif", OIIO::geterror().c_str());
+            return -1;
+        }
+        return 0;
+    } catch (const std::exception &e) {
+        std::snprintf(err, errlen, "OpenImageIO cannot write this format: %s", e.what());
+        return -1;
+    }
+}
+
 extern "C" __attribute__((visibility("default"))) const char *ef_oiio_version(void)
 {
     return OIIO_VERSION_STRING;

@@ -1,0 +1,359 @@
+/* Putting a result in place safely (see output.h). */
+#define _GNU_SOURCE 1
+#include "output.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/random.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+/* The temporary files a signal must remove, and the message it prints.
+ * Written before a slot is marked live, read only by the handler. */
+#define SLOTS 2
+static char slot_path[SLOTS][PATH_MAX];
+static volatile sig_atomic_t slot_live[SLOTS];
+static char sig_prefix[PATH_MAX + 64];
+static volatile sig_atomic_t sig_prefix_len;
+
+static const struct {
+    int sig;
+    const char *what;
+} fatal[] = {
+    { SIGINT, "SIGINT (interrupted)" },
+    { SIGTERM, "SIGTERM (terminated)" },
+    { SIGHUP, "SIGHUP (the terminal went away)" },
+    { SIGQUIT, "SIGQUIT (quit)" },
+    { SIGPIPE, "SIGPIPE (a pipe closed)" },
+    { SIGXFSZ, "SIGXFSZ (the file size limit, see ulimit -f)" },
+    { SIGXCPU, "SIGXCPU (the CPU time limit, see ulimit -t)" },
+    { SIGALRM, "SIGALRM (an alarm, e.g. timeout)" },
+    { SIGVTALRM, "SIGVTALRM (a timer)" },
+    { SIGPROF, "SIGPROF (a profiling timer)" },
+    { SIGUSR1, "SIGUSR1" },
+    { SIGUSR2, "SIGUSR2" },
+#if !defined(__SANITIZE_ADDRESS__)
+    /* Faults: under ASan its own report matters more. */
+    { SIGSEGV, "SIGSEGV (a crash: please report it)" },
+    { SIGBUS, "SIGBUS (a bus error: the input may have changed while read)" },
+    { SIGFPE, "SIGFPE (a crash: please report it)" },
+    { SIGILL, "SIGILL (a crash: please report it)" },
+    { SIGABRT, "SIGABRT (aborted)" },
+#endif
+};
+
+static void put(const char *s)
+{
+    ssize_t r = write(2, s, strlen(s));
+    (void) r;
+}
+
+/* Async-signal-safe: unlink, write, then die by the same signal. */
+static void on_fatal(int sig)
+{
+    int removed = 0;
+    for (int i = 0; i < SLOTS; ++i)
+        if (slot_live[i]) {
+            slot_live[i] = 0;
+            removed |= unlink(slot_path[i]) == 0;
+        }
+    if (sig_prefix_len) {
+        ssize_t r = write(2, sig_prefix, (size_t) sig_prefix_len);
+        (void) r;
+        const char *what = "a signal";
+        for (size_t k = 0; k < sizeof fatal / sizeof fatal[0]; ++k)
+            if (fatal[k].sig == sig)
+                what = fatal[k].what;
+        put("stopped by ");
+        put(what);
+        put(removed ? "; the output was not written (temporary file removed)\n"
+                    : "; the output was not written\n");
+    }
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+void ef_output_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_fatal;
+    sigemptyset(&sa.sa_mask);
+    for (size_t k = 0; k < sizeof fatal / sizeof fatal[0]; ++k)
+        sigaddset(&sa.sa_mask, fatal[k].sig);
+    for (size_t k = 0; k < sizeof fatal / sizeof fatal[0]; ++k) {
+        struct sigaction old;
+        /* A signal the caller ignores (nohup, SIG_IGN for SIGPIPE) stays ignored. */
+        if (sigaction(fatal[k].sig, NULL, &old) == 0 && old.sa_handler == SIG_IGN)
+            continue;
+        sigaction(fatal[k].sig, &sa, NULL);
+    }
+}
+
+/* "exrfog: NAME: " with control and non-ASCII bytes escaped, for the handler. */
+static void set_prefix(const char *name)
+{
+    size_t n = 0;
+    const size_t cap = sizeof sig_prefix - 8;
+    n += (size_t) snprintf(sig_prefix, cap, "exrfog: ");
+    for (const unsigned char *c = (const unsigned char *) name; *c && n + 5 < cap; ++c) {
+        if (*c < 0x20 || *c >= 0x7f)
+            n += (size_t) snprintf(sig_prefix + n, cap - n, "\\x%02x", *c);
+        else
+            sig_prefix[n++] = (char) *c;
+    }
+    sig_prefix[n++] = ':';
+    sig_prefix[n++] = ' ';
+    sig_prefix[n] = '\0';
+    sig_prefix_len = (sig_atomic_t) n;
+}
+
+static int slot_of(const char *tmp)
+{
+    for (int i = 0; i < SLOTS; ++i)
+        if (slot_live[i] && strcmp(slot_path[i], tmp) == 0)
+            return i;
+    return -1;
+}
+
+static void slot_add(const char *tmp)
+{
+    for (int i = 0; i < SLOTS; ++i)
+        if (!slot_live[i]) {
+            snprintf(slot_path[i], sizeof slot_path[i], "%s", tmp);
+            slot_live[i] = 1;
+            return;
+        }
+}
+
+static void slot_drop(const char *tmp)
+{
+    const int i = slot_of(tmp);
+    if (i >= 0)
+        slot_live[i] = 0;
+}
+
+static const char *kind_of(mode_t m)
+{
+    return S_ISDIR(m)    ? "a directory"
+           : S_ISFIFO(m) ? "a FIFO (named pipe)"
+           : S_ISCHR(m)  ? "a character device"
+           : S_ISBLK(m)  ? "a block device"
+           : S_ISSOCK(m) ? "a socket"
+                         : "not a regular file";
+}
+
+/* Unpredictable letters for the temporary name. */
+static void random_tag(char *buf, size_t n)
+{
+    static const char abc[] = "abcdefghijklmnopqrstuvwxyz0123456789";
+    unsigned char r[32];
+    if (n > sizeof r)
+        n = sizeof r;
+    size_t got = 0;
+    while (got < n) {
+        const ssize_t k = getrandom(r + got, n - got, 0);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0)
+            break;
+        got += (size_t) k;
+    }
+    if (got < n) {
+        /* No entropy source (very old kernels): time and address bits;
+         * O_EXCL still makes the creation safe, only less unpredictable. */
+        unsigned long long x = (unsigned long long) time(NULL) ^ (unsigned long long) (size_t) buf;
+        for (size_t i = got; i < n; ++i) {
+            x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+            r[i] = (unsigned char) (x >> 56);
+        }
+    }
+    for (size_t i = 0; i < n; ++i)
+        buf[i] = abc[r[i] % 36];
+    buf[n] = '\0';
+}
+
+/* Splits path into directory ("." when none) and base name. */
+static int split(const char *path, char *dir, size_t dlen, const char **base)
+{
+    const char *slash = strrchr(path, '/');
+    if (!slash) {
+        snprintf(dir, dlen, ".");
+        *base = path;
+        return 0;
+    }
+    const size_t n = slash == path ? 1 : (size_t) (slash - path);
+    if (n >= dlen)
+        return -1;
+    memcpy(dir, path, n);
+    dir[n] = '\0';
+    *base = slash + 1;
+    return 0;
+}
+
+int ef_output_open(ef_output *o, const char *name, const char *suffix, ef_err *err)
+{
+    memset(o, 0, sizeof *o);
+    o->fd = -1;
+    o->name = name;
+    err->file = name;
+    if (!name[0])
+        return ef_fail(err, "the file name is empty"), 2;
+    if (strlen(name) >= sizeof o->path)
+        return ef_fail(err, "the path is longer than the system allows (%d bytes)", PATH_MAX), 2;
+    snprintf(o->path, sizeof o->path, "%s", name);
+    struct stat st;
+    if (lstat(name, &st) == 0 && S_ISLNK(st.st_mode)) {
+        /* Written through to the target, as cp and oiiotool do: the link stays. */
+        if (stat(name, &st) != 0)
+            return ef_fail(err, "is a symbolic link to a missing file; exrfog writes through links "
+                                "only to existing files (remove the link, or create its target)"),
+                   2;
+        char *real = realpath(name, NULL);
+        if (!real)
+            return ef_fail(err, "cannot resolve the symbolic link: %s", strerror(errno)), 1;
+        const int too_long = strlen(real) >= sizeof o->path;
+        if (!too_long)
+            snprintf(o->path, sizeof o->path, "%s", real);
+        free(real);
+        if (too_long)
+            return ef_fail(err, "the link's target path is too long"), 1;
+    }
+    if (lstat(o->path, &st) == 0) {
+        if (!S_ISREG(st.st_mode))
+            return ef_fail(err, "is %s; exrfog replaces only regular files (give a file name)",
+                           kind_of(st.st_mode)),
+                   2;
+        o->existed = 1;
+        o->dev = st.st_dev;
+        o->ino = st.st_ino;
+    } else if (errno != ENOENT) {
+        return ef_fail(err, "cannot use this path: %s", strerror(errno)), errno == ENOTDIR ? 2 : 1;
+    }
+    char dir[PATH_MAX];
+    const char *base;
+    if (split(o->path, dir, sizeof dir, &base))
+        return ef_fail(err, "the path is too long"), 2;
+    if (!base[0])
+        return ef_fail(err, "names a directory; give a file name"), 2;
+    struct stat ds;
+    if (stat(dir, &ds) != 0)
+        return ef_fail(err, "its directory %s %s", dir,
+                       errno == ENOENT ? "does not exist (create it first)" : strerror(errno)),
+               1;
+    if (!S_ISDIR(ds.st_mode))
+        return ef_fail(err, "%s is not a directory", dir), 2;
+    /* .NAME.exrfog-PID-RANDOM.tmp[suffix], shortened so it fits NAME_MAX. */
+    long name_max = pathconf(dir, _PC_NAME_MAX);
+    if (name_max <= 0 || name_max > 4096)
+        name_max = 255;
+    char tag[16];
+    for (int attempt = 0; attempt < 16; ++attempt) {
+        random_tag(tag, 10);
+        char tail[96];
+        snprintf(tail, sizeof tail, ".exrfog-%ld-%s.tmp%s", (long) getpid(), tag,
+                 suffix ? suffix : "");
+        long keep = name_max - 1 - (long) strlen(tail);
+        if (keep < 1)
+            return ef_fail(err, "the file system's names are too short for a temporary file"), 1;
+        size_t nb = strlen(base);
+        if ((long) nb > keep) {
+            nb = (size_t) keep;
+            while (nb > 0 && ((unsigned char) base[nb] & 0xc0) == 0x80)
+                --nb;  /* not inside a UTF-8 sequence */
+        }
+        const int n = !strchr(o->path, '/')
+                          ? snprintf(o->tmp, sizeof o->tmp, ".%.*s%s", (int) nb, base, tail)
+                          : snprintf(o->tmp, sizeof o->tmp, "%s%s.%.*s%s", dir,
+                                     strcmp(dir, "/") ? "/" : "", (int) nb, base, tail);
+        if (n < 0 || (size_t) n >= sizeof o->tmp)
+            return ef_fail(err, "the path is too long for a temporary file beside it"), 1;
+        o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC,
+                     o->existed ? 0600 : 0666);
+        if (o->fd >= 0)
+            break;
+        if (errno != EEXIST) {
+            const int e = errno;
+            o->tmp[0] = '\0';
+            return ef_fail(err, "cannot create a file in %s: %s%s", dir, strerror(e),
+                           e == EACCES || e == EPERM ? " (write elsewhere, or fix the permissions)"
+                           : e == ENOSPC             ? " (free some space)"
+                           : e == EROFS              ? " (write elsewhere)"
+                                                     : ""),
+                   1;
+        }
+    }
+    if (o->fd < 0) {
+        o->tmp[0] = '\0';
+        return ef_fail(err, "cannot find a free temporary name in %s", dir), 1;
+    }
+    if (!sig_prefix_len)
+        set_prefix(name);
+    slot_add(o->tmp);
+    if (o->existed) {
+        /* The owner first: chown clears set-id bits, fchmod restores them. */
+        if (fchown(o->fd, st.st_uid, st.st_gid) != 0) {
+            int r = fchown(o->fd, (uid_t) -1, st.st_gid);
+            (void) r;
+        }
+        if (fchmod(o->fd, st.st_mode & 07777) != 0) {
+            const int e = errno;
+            ef_output_abort(o);
+            return ef_fail(err, "cannot give the new file the old one's permissions: %s",
+                           strerror(e)),
+                   1;
+        }
+    }
+    err->file = NULL;
+    return 0;
+}
+
+int ef_output_commit(ef_output *o, ef_err *err)
+{
+    if (o->fd >= 0) {
+        const int rc = close(o->fd);
+        o->fd = -1;
+        if (rc != 0) {
+            const int e = errno;
+            ef_output_abort(o);
+            ef_fail(err, "cannot write the output: %s", strerror(e));
+            err->file = o->name;
+            return 1;
+        }
+    }
+    if (rename(o->tmp, o->path) != 0) {
+        const int e = errno;
+        ef_output_abort(o);
+        ef_fail(err, "cannot move the finished file into place: %s", strerror(e));
+        err->file = o->name;
+        return 1;
+    }
+    slot_drop(o->tmp);
+    o->tmp[0] = '\0';
+    return 0;
+}
+
+void ef_output_abort(ef_output *o)
+{
+    if (o->fd >= 0) {
+        close(o->fd);
+        o->fd = -1;
+    }
+    if (o->tmp[0]) {
+        slot_drop(o->tmp);
+        unlink(o->tmp);
+        o->tmp[0] = '\0';
+    }
+}
+
+int ef_output_same_file(const char *a, const char *b)
+{
+    struct stat sa, sb;
+    return stat(a, &sa) == 0 && stat(b, &sb) == 0 && sa.st_dev == sb.st_dev &&
+           sa.st_ino == sb.st_ino;
+}
