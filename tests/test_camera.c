@@ -11,6 +11,8 @@
 #include "tassert.h"
 
 #include "camera.h"
+#include "depth.h"
+#include "recon.h"
 
 #define PI 3.14159265358979323846
 
@@ -631,6 +633,81 @@ static void test_pixel_centres(void **state)
     assert_vec(d, -0.5, 0.25, 1.0, 1e-15);
 }
 
+/* A pose with a uniform scale s (worldToCamera = s * rigid in its 3x3 and
+ * translation) is the rigid camera with camera units of 1/s world units:
+ * same position and ray directions, world distance = depth / s. Checked
+ * against the rigid camera's reconstruction, for s near both ends of the
+ * accepted range; 1e300 is refused with a message; a shear warns. */
+static void test_scaled_pose(void **state)
+{
+    (void)state;
+    static const double scales[] = { 1e-25, 3.7e-9, 0.5, 1e7 };   /* depth 10 s stays below EF_SKY_DISTANCE */
+    ef_cam_meta m;
+    ef_cam_flags fl = {0};
+    ef_camera rigid, c;
+    ef_err err = {0};
+    ef_depth_conv conv;
+    arnold_meta(&m);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &rigid, &err), 0);
+    assert_true(rigid.unit == 1.0);
+    assert_int_equal(ef_depth_conv_init(&conv, EF_DEPTH_PLANAR, &rigid, &err), 0);
+    for (size_t k = 0; k < sizeof scales / sizeof scales[0]; ++k) {
+        const double s = scales[k];
+        double w[16];
+        memcpy(w, arnold_w2c, sizeof w);
+        for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 3; ++j)
+                w[4 * i + j] *= s;
+        ef_cam_meta ms;
+        ef_cam_meta_init(&ms, 0, 0, 149, 99);
+        set_mat(&ms.w2c, mk(w));
+        ef_cam_flags ff = {0};
+        ff.fov.set = 1;
+        ff.fov.v = 50;
+        ef_cam_flags fr = ff;
+        assert_int_equal(ef_camera_resolve(&ms, &ff, &c, &err), 0);
+        ef_cam_meta mr;
+        ef_cam_meta_init(&mr, 0, 0, 149, 99);
+        set_mat(&mr.w2c, mk(arnold_w2c));
+        assert_int_equal(ef_camera_resolve(&mr, &fr, &rigid, &err), 0);
+        assert_true(fabs(c.unit * s - 1) < 1e-12);
+        assert_vec(c.pos, rigid.pos[0], rigid.pos[1], rigid.pos[2], 1e-12);
+        assert_true(c.warning[0] == '\0');
+        for (int px = 0; px < 150; px += 37) {
+            const double depth = 10.0 * s;   /* camera units of the scaled pose */
+            ef_ray a, b;
+            ef_reconstruct(&c, &conv, px, 60, depth, &a);
+            ef_reconstruct(&rigid, &conv, px, 60, 10.0, &b);
+            for (int i = 0; i < 3; ++i)
+                assert_true(fabs(a.dir[i] - b.dir[i]) < 1e-14);
+            if (!(fabs(a.dist - b.dist) < 1e-12 * b.dist))
+                fail_msg("s %g px %d: dist %.17g, rigid %.17g", s, px, a.dist, b.dist);
+            assert_true(isfinite(a.dist));
+        }
+    }
+    /* Beyond 1e30 either way: refused, saying why. */
+    double w[16];
+    memcpy(w, arnold_w2c, sizeof w);
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 3; ++j)
+            w[4 * i + j] *= 1e300;
+    ef_cam_meta mh;
+    ef_cam_meta_init(&mh, 0, 0, 149, 99);
+    set_mat(&mh.w2c, mk(w));
+    ef_cam_flags ff = {0};
+    ff.fov.set = 1;
+    ff.fov.v = 50;
+    assert_int_equal(ef_camera_resolve(&mh, &ff, &c, &err), -1);
+    assert_non_null(strstr(err.msg, "between 1e-30 and 1e30"));
+    assert_int_equal(c.flag_error, 0);
+    /* A shear: accepted with a warning. */
+    memcpy(w, arnold_w2c, sizeof w);
+    w[4] = 0.5;
+    set_mat(&mh.w2c, mk(w));
+    assert_int_equal(ef_camera_resolve(&mh, &ff, &c, &err), 0);
+    assert_non_null(strstr(c.warning, "not rigid"));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -645,6 +722,7 @@ int main(void)
         cmocka_unit_test(test_errors),
         cmocka_unit_test(test_pixel_centres),
         cmocka_unit_test(test_aspect_warning),
+        cmocka_unit_test(test_scaled_pose),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

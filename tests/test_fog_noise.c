@@ -744,10 +744,64 @@ static void test_bad_values(void **state)
     expect_usage("noise:density=1:scale=1:axes=xz", "axes");
     expect_usage("noise:density=1:scale=1:steps=8", "steps");
     expect_usage("noise-separable:density=1:scale=1:contrast=2:method=preintegrated", "contrast");
+    expect_usage("noise:density=1:scale=1:contrast=100.5", "from -100 to 100");
+    expect_usage("noise:density=1:scale=1e-400", "out of range");
+    expect_usage("noise:density=5e-324:scale=1", "out of range");
+    expect_usage("noise:density=1:scale=1:offset=1e999,0,0", "out of range");
     ef_fog_component c;
     ef_err err;
     assert_int_equal(ef_fog_parse("noise-separable:visibility=200:scale=10:axes=xyz:pieces=4:"
                                   "method=preintegrated:color=0.5,0.6,0.7:up=z", NULL, &c, &err), 0);
+    ef_fog_free(&c);
+}
+
+/* Hostile scales and envelopes (issue 8): the work per ray is bounded
+ * and tau stays defined. A scale far below the ray's length leaves every
+ * octave past CELL_BUDGET cells unwalked, so tau is its mean part, rho L
+ * (the noise averages to 0), with a positive error estimate; an envelope
+ * that overflows makes the fog opaque. */
+static void test_hostile_scales(void **state)
+{
+    (void) state;
+    static const char *const specs[] = {
+        "noise:density=0.02:scale=1e-9:method=exact",
+        "noise:density=0.02:scale=1e-300",
+        "noise:density=0.02:scale=1e-300:contrast=2",
+        "noise-separable:density=0.02:scale=1e-300:method=exact",
+    };
+    const double o[3] = { 0.3, 1.7, -0.2 }, d[3] = { 0.6, 0, -0.8 };
+    for (size_t k = 0; k < sizeof specs / sizeof specs[0]; ++k) {
+        ef_fog_component c;
+        parse(specs[k], &c);
+        const ef_ray r = ray(o, d, 100);
+        double tau[3];
+        ef_tau_info info;
+        ef_fog_tau(&c, &r, tau, &info);
+        if (!isfinite(tau[0]) || !(tau[0] >= 0) || !(info.err[0] > 0)) {
+            print_error("%s: tau %g, error estimate %g\n", specs[k], tau[0], info.err[0]);
+            fail();
+        }
+        if (k < 2) {
+            /* linear: the mean part exactly (no falloff: rho L) */
+            assert_true(fabs(tau[0] - 0.02 * 100) <= 1e-12 * 2);
+            assert_true(info.dropped == 4);
+            assert_true(info.evals == 0);
+        } else {
+            /* clamped or separable: the density lies in [0, rho B] */
+            assert_true(tau[0] <= 0.02 * 100 * 4.3);
+        }
+        ef_fog_free(&c);
+    }
+    ef_fog_component c;
+    parse("noise:density=0.02:scale=10:falloff=0.1:base=1e15", &c);
+    const ef_ray r = ray(o, d, 100);
+    double tau[3];
+    ef_fog_tau(&c, &r, tau, NULL);
+    assert_true(isinf(tau[0]) && tau[0] > 0);
+    ef_fog_free(&c);
+    parse("noise-separable:density=0.02:scale=10:falloff=0.1:base=1e15:method=preintegrated", &c);
+    ef_fog_tau(&c, &r, tau, NULL);
+    assert_true(isinf(tau[0]) && tau[0] > 0);
     ef_fog_free(&c);
 }
 
@@ -782,6 +836,7 @@ int main(void)
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),
         cmocka_unit_test(test_preintegrated),
         cmocka_unit_test(test_adaptive),
+        cmocka_unit_test(test_hostile_scales),
         cmocka_unit_test(test_exact_against_reference),
     };
     if (getenv("EXRFOG_TEST_FILTER"))

@@ -2,6 +2,7 @@
 
 #include "options.h"
 
+#include <float.h>
 #include <getopt.h>
 #include <openexr.h>
 #include <stdlib.h>
@@ -124,7 +125,7 @@ static int parse_matrix(const char *text, ef_opt_mat *m)
     if (n && buf[n - 1] == ',')
         --n;
     buf[n] = '\0';
-    if (ef_parse_numbers(buf, m->v.m, 16))
+    if (ef_parse_numbers_ex(buf, m->v.m, 16, 1))
         return -1;
     m->set = 1;
     return 0;
@@ -236,7 +237,44 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
     return EF_PARSE_RUN;
 }
 
+static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_err *err,
+                                     int *cur_opt, const char **cur_arg);
+
+/* The numeric options, for the "out of range" message (wide: matrices). */
+static const struct {
+    int opt, wide;
+} numeric_opts[] = { { OPT_FOG_COLOR, 0 }, { OPT_UP_AXIS, 0 }, { OPT_UNITS, 0 }, { OPT_TIME, 0 },
+                     { OPT_AOV_ORIGIN, 0 }, { OPT_FOV, 0 }, { OPT_NEAR, 0 }, { OPT_FAR, 0 },
+                     { OPT_W2C, 1 }, { OPT_C2W, 1 } };
+
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
+{
+    int opt = 0;
+    const char *arg = NULL;
+    const ef_parse_result r = parse_options(argc, argv, o, err, &opt, &arg);
+    if (r != EF_PARSE_USAGE || !arg)
+        return r;
+    /* A number that underflows or overflows is out of range, not "not a number". */
+    for (size_t i = 0; i < sizeof numeric_opts / sizeof numeric_opts[0]; ++i) {
+        if (numeric_opts[i].opt != opt || !ef_out_of_range(arg, numeric_opts[i].wide))
+            continue;
+        const char *name = "?";
+        for (const struct option *lo = long_opts; lo->name; ++lo)
+            if (lo->val == opt)
+                name = lo->name;
+        if (numeric_opts[i].wide)
+            ef_fail(err, "--%s '%s' is out of range (a number overflows, or underflows below "
+                         "2.2e-308)", name, arg);
+        else
+            ef_fail(err, "--%s '%s' is out of range (numbers are 0 or between 2.2e-308 and "
+                         "1.8e308 in magnitude%s)", name, arg,
+                    opt == OPT_FOG_COLOR ? "; colours at most 65504" : "");
+    }
+    return r;
+}
+
+static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_err *err,
+                                     int *cur_opt, const char **cur_arg)
 {
     scene_flags f;
     memset(&f, 0, sizeof f);
@@ -251,6 +289,8 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
     int c;
     while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {
         const char *a = optarg;
+        *cur_opt = c;
+        *cur_arg = a;
         record_option(o, c, a);
         switch (c) {
         case 'o': o->output = a; break;
@@ -275,8 +315,9 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
             f.specs[f.nspec++] = a;
             break;
         case OPT_FOG_COLOR:
-            if (ef_parse_rgb(a, f.color) || f.color[0] < 0 || f.color[1] < 0 || f.color[2] < 0)
-                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers >= 0)", a),
+            if (ef_parse_color(a, f.color))
+                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers from 0 to %g)", a,
+                               EF_COLOR_MAX),
                        EF_PARSE_USAGE;
             f.has_color = 1;
             break;
@@ -371,6 +412,7 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
                    EF_PARSE_USAGE;
         }
     }
+    *cur_arg = NULL;   /* later errors are not about one option's number */
     if (optind < argc)
         o->input = argv[optind++];
     if (optind < argc)

@@ -283,9 +283,13 @@ int ef_main(int argc, char **argv)
         status = report(o.input, &err, 2);
         goto done;
     }
-    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
-        ef_camera_resolve(&meta, &o.cam, &cam, &err)) {
+    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err)) {
         report(o.input, &err, 1);
+        goto done;
+    }
+    if (ef_camera_resolve(&meta, &o.cam, &cam, &err)) {
+        /* A bad --world-to-camera is a usage error; a bad header is not. */
+        status = report(o.input, &err, cam.flag_error ? 2 : 1);
         goto done;
     }
     if (cam.warning[0] && !o.quiet && !o.explain)

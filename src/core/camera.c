@@ -52,10 +52,35 @@ static int check_affine(const ef_mat4 *m, const char *name, ef_err *err)
     return 0;
 }
 
+/* The inverse of an affine row-vector pose whose entries may lie near
+ * either end of the double range (a pose scaled by 1e300 or 1e-300): the
+ * 3x3 and the translation are divided by the largest 3x3 entry k first, so
+ * no cofactor overflows or underflows; [A/k; t/k]^-1 = [k A^-1; -t A^-1],
+ * and dividing its 3x3 by k gives the true inverse. */
+static int invert_pose(const ef_mat4 *m, ef_mat4 *out)
+{
+    double k = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            k = fmax(k, fabs(m->m[4 * i + j]));
+    if (!(k > 0) || !isfinite(k))
+        return -1;
+    ef_mat4 a = *m;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 3; ++j)
+            a.m[4 * i + j] /= k;
+    if (ef_mat4_invert(&a, out) != 0)
+        return -1;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            out->m[4 * i + j] /= k;
+    return ef_mat4_finite(out) ? 0 : -1;
+}
+
 /* Inverse of a matrix the user or header named, with a message if singular. */
 static int invert_named(const ef_mat4 *m, ef_mat4 *out, const char *name, ef_err *err)
 {
-    if (ef_mat4_invert(m, out) != 0)
+    if (invert_pose(m, out) != 0)
         return ef_fail(err, "%s is singular (not invertible); fix it or pass "
                             "--world-to-camera M and --fov DEG", name);
     return 0;
@@ -405,10 +430,61 @@ static int resolve_clip(const ef_cam_meta *meta, const ef_cam_flags *flags, fam 
     return 0;
 }
 
+/* The length of row i of rot, without overflow or underflow. */
+static double row_len(const double *r)
+{
+    return hypot(hypot(r[0], r[1]), r[2]);
+}
+
+/* Splits a uniform scale off the pose (cam->unit), so rot is orthonormal;
+ * a pose with a shear or a non-uniform scale is kept as it is, with a
+ * warning. Scales beyond 1e-30..1e30 are refused: distances would leave
+ * the range of doubles. */
+static int rigid_part(ef_camera *cam, ef_err *err)
+{
+    double n[3], lo = INFINITY, hi = 0;
+    for (int i = 0; i < 3; ++i) {
+        n[i] = row_len(cam->rot + 3 * i);
+        lo = fmin(lo, n[i]);
+        hi = fmax(hi, n[i]);
+    }
+    cam->unit = 1;
+    if (!(lo >= 1e-30 && hi <= 1e30)) {
+        cam->flag_error = !strncmp(cam->src_pose, "flag", 4);
+        return ef_fail(err, "the camera pose (%s) scales camera space by %.3g to %.3g; exrfog "
+                       "accepts a scale between 1e-30 and 1e30 (a rigid camera has 1): fix the "
+                       "matrix or pass --world-to-camera M", cam->src_pose, lo, hi);
+    }
+    double cosmax = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = i + 1; j < 3; ++j) {
+            const double *a = cam->rot + 3 * i, *b = cam->rot + 3 * j;
+            const double d = (a[0] / n[i]) * (b[0] / n[j]) + (a[1] / n[i]) * (b[1] / n[j]) +
+                             (a[2] / n[i]) * (b[2] / n[j]);
+            cosmax = fmax(cosmax, fabs(d));
+        }
+    if (hi / lo - 1 <= 1e-6 && cosmax <= 1e-6) {
+        const double u = (n[0] + n[1] + n[2]) / 3;
+        if (fabs(u - 1) > 1e-6) {
+            for (int k = 0; k < 9; ++k)
+                cam->rot[k] /= u;
+            cam->unit = u;
+        }
+        return 0;
+    }
+    const size_t at = strlen(cam->warning);
+    snprintf(cam->warning + at, sizeof cam->warning - at,
+             "%sthe camera pose (%s) is not rigid (axis lengths %.6g %.6g %.6g, largest cosine "
+             "between axes %.2g): a shear or non-uniform scale; rays follow the matrix as given",
+             at ? "; " : "", cam->src_pose, n[0], n[1], n[2], cosmax);
+    return 0;
+}
+
 int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
                       ef_camera *cam, ef_err *err)
 {
     memset(cam, 0, sizeof *cam);
+    cam->unit = 1;
     cam->src_pose = cam->src_fov = cam->src_near = cam->src_far = cam->src_proj = "none";
     if (meta->disp[2] < meta->disp[0] || meta->disp[3] < meta->disp[1])
         return ef_fail(err, "empty displayWindow (%d,%d)-(%d,%d)", meta->disp[0],
@@ -418,8 +494,11 @@ int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
                        meta->pixel_aspect);
     ef_mat4 c2w;
     fam pf = FAM_NONE, lf = FAM_NONE;
-    if (resolve_pose(meta, flags, &c2w, &pf, cam, err)
-        || resolve_lens(meta, flags, pf, &c2w, &lf, cam, err)
+    if (resolve_pose(meta, flags, &c2w, &pf, cam, err)) {
+        cam->flag_error = flags->w2c.set || flags->c2w.set;
+        return -1;
+    }
+    if (resolve_lens(meta, flags, pf, &c2w, &lf, cam, err)
         || resolve_clip(meta, flags, pf != FAM_NONE ? pf : lf, cam, err))
         return -1;
     for (int i = 0; i < 3; ++i) {
@@ -427,5 +506,5 @@ int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
         for (int j = 0; j < 3; ++j)
             cam->rot[3 * i + j] = c2w.m[4 * i + j];
     }
-    return 0;
+    return rigid_part(cam, err);
 }

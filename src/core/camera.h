@@ -62,9 +62,16 @@ typedef struct ef_camera {
     ef_opt_num near_, far_;   /* clip planes when known (flags, metadata, or matrix) */
     ef_proj_kind proj;
     double proj_alpha, proj_beta; /* valid when proj != EF_PROJ_NONE */
+    /* World units per camera-space unit: 1 for a rigid pose; a pose with a
+     * uniform scale is stored rigid (rot orthonormal) with its scale here,
+     * so that no product of the scale overflows. Depth (camera units)
+     * times unit is world distance. */
+    double unit;
     /* Non-fatal doubts about the header, "" when none (e.g. a projection
      * whose aspect no longer matches the display window after a crop). */
     char warning[320];
+    /* Set with an error that comes from a flag (a usage error, exit 2). */
+    int flag_error;
     /* Where each part came from, for --explain (static strings). */
     const char *src_pose, *src_fov, *src_near, *src_far, *src_proj;
 } ef_camera;

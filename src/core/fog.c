@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <stdio.h>
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -65,15 +66,51 @@ const ef_fog_model *ef_fog_model_find(const char *name)
     return NULL;
 }
 
-int ef_parse_numbers(const char *text, double *out, int n)
+int ef_parse_real(const char *s, char **end, double *out, int wide)
+{
+    errno = 0;
+    const double v = strtod(s, end);
+    if (*end == s || isnan(v))
+        return -1;
+    /* ERANGE: overflow, or underflow to 0 or a subnormal (1e-400, 5e-324) */
+    if (errno == ERANGE || isinf(v) || (v != 0 && fabs(v) < DBL_MIN) ||
+        (!wide && fabs(v) > EF_NUM_MAX))
+        return -2;
+    *out = v;
+    return 0;
+}
+
+int ef_out_of_range(const char *text, int wide)
+{
+    const char *s = text;
+    while (*s) {
+        if (strchr(",/: =", *s)) {
+            ++s;
+            continue;
+        }
+        char *end;
+        double v;
+        const int rc = ef_parse_real(s, &end, &v, wide);
+        if (end == s) {
+            ++s;
+            continue;
+        }
+        if (rc == -2 && (*end == '\0' || strchr(",/: ", *end)))
+            return 1;
+        s = end;
+    }
+    return 0;
+}
+
+int ef_parse_numbers_ex(const char *text, double *out, int n, int wide)
 {
     const char *s = text;
     for (int i = 0; i < n; ++i) {
         char *end;
-        errno = 0;
-        double v = strtod(s, &end);
-        if (end == s || errno == ERANGE || !isfinite(v))
-            return -1;
+        double v;
+        const int rc = ef_parse_real(s, &end, &v, wide);
+        if (rc)
+            return rc;
         out[i] = v;
         s = end;
         while (*s == ' ')
@@ -85,6 +122,11 @@ int ef_parse_numbers(const char *text, double *out, int n)
         }
     }
     return *s == '\0' ? 0 : -1;
+}
+
+int ef_parse_numbers(const char *text, double *out, int n)
+{
+    return ef_parse_numbers_ex(text, out, n, 0);
 }
 
 int ef_parse_list(const char *text, double *out, int cap)
@@ -165,6 +207,16 @@ int ef_fog_set_plane(ef_fog_component *c, const char *key, const char *val, doub
     return 0;
 }
 
+int ef_parse_color(const char *text, double out[3])
+{
+    if (ef_parse_rgb(text, out))
+        return -1;
+    for (int i = 0; i < 3; ++i)
+        if (!(out[i] >= 0 && out[i] <= EF_COLOR_MAX))
+            return -1;
+    return 0;
+}
+
 int ef_parse_rgb(const char *text, double out[3])
 {
     if (strchr(text, ',') == NULL) {
@@ -200,8 +252,23 @@ static void list_keys(const ef_fog_model *m, char *buf, size_t len)
     strncat(buf, "color", len - strlen(buf) - 1);
 }
 
-/* Applies one KEY=VALUE token (tok is modified in place). */
+static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec, ef_err *err);
+
+/* Applies one KEY=VALUE token (tok is modified in place); a number that
+ * overflows or underflows is called out of range, whatever the key. */
 static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err *err)
+{
+    const char *eq = strchr(tok, '=');
+    if (parse_token_inner(c, tok, spec, err) == 0)
+        return 0;
+    if (eq && ef_out_of_range(eq + 1, 0) && !strstr(err->msg, "out of range") &&
+        !strstr(err->msg, "unknown key") && !strstr(err->msg, "twice"))
+        return ef_fail(err, "fog spec '%s': %s='%s' is out of range (numbers in a SPEC are 0 or "
+                       "between 2.2e-308 and 1.8e308 in magnitude)", spec, tok, eq + 1);
+    return -1;
+}
+
+static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec, ef_err *err)
 {
     char *eq = strchr(tok, '=');
     char keys[256];
@@ -215,8 +282,9 @@ static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err 
     if (!strcmp(key, "color")) {
         if (c->has_color)
             return ef_fail(err, "fog spec '%s': key 'color' is given twice", spec);
-        if (ef_parse_rgb(val, c->color) || c->color[0] < 0 || c->color[1] < 0 || c->color[2] < 0)
-            return ef_fail(err, "fog spec '%s': color='%s' is not R,G,B (numbers >= 0)", spec, val);
+        if (ef_parse_color(val, c->color))
+            return ef_fail(err, "fog spec '%s': color='%s' is not R,G,B (numbers from 0 to %g)",
+                           spec, val, EF_COLOR_MAX);
         c->has_color = 1;
         return 0;
     }

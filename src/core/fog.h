@@ -6,6 +6,8 @@
 #ifndef EF_FOG_H
 #define EF_FOG_H
 
+#include <float.h>
+
 #include "error.h"
 #include "recon.h"
 
@@ -143,8 +145,28 @@ const ef_fog_model *ef_fog_model_find(const char *name);
 /* Parses "a" or "a,b,c" into 1 or 3 finite numbers; a single value is
  * broadcast to all three. Returns 0 or -1. Shared by models for R,G,B keys. */
 int ef_parse_rgb(const char *text, double out[3]);
-/* Parses exactly n comma-separated finite numbers. Returns 0 or -1. */
+/* The largest magnitude a SPEC or option number may have: every finite
+ * double (the models are exact at the extremes; a key whose use would
+ * overflow has its own range). */
+#define EF_NUM_MAX DBL_MAX
+/* The largest colour component: the largest half, so that fogged pixels
+ * stay finite in half channels. */
+#define EF_COLOR_MAX 65504.0
+/* One number at s (strtod's syntax); *end past it. Returns 0, -1 when it
+ * is not a number (NaN included), -2 when out of range: overflow, infinity,
+ * underflow to 0 or a subnormal, or (unless wide) above EF_NUM_MAX. */
+int ef_parse_real(const char *s, char **end, double *out, int wide);
+/* Whether text (a value, or a list separated by , / : or spaces) holds a
+ * number that is out of range in ef_parse_real's sense: for messages that
+ * say "out of range" rather than "not a number". */
+int ef_out_of_range(const char *text, int wide);
+/* Parses exactly n comma-separated numbers in range. Returns 0, -1 or -2
+ * as ef_parse_real. */
+int ef_parse_numbers_ex(const char *text, double *out, int n, int wide);
+/* ef_parse_numbers_ex, not wide. */
 int ef_parse_numbers(const char *text, double *out, int n);
+/* ef_parse_rgb with every component from 0 to EF_COLOR_MAX. */
+int ef_parse_color(const char *text, double out[3]);
 /* Parses 1..cap comma-separated finite numbers; returns the count or -1. */
 int ef_parse_list(const char *text, double *out, int cap);
 /* Parses an up axis: y, z, -y, -z (also x, -x) or X,Y,Z (non-zero, made

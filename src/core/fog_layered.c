@@ -87,9 +87,8 @@ static int count_entries(const char *val)
 static int parse_number(const char *s, const char **end, double *out)
 {
     char *e;
-    errno = 0;
-    const double v = strtod(s, &e);
-    if (e == s || errno == ERANGE || !isfinite(v))
+    double v;
+    if (ef_parse_real(s, &e, &v, 0))
         return -1;
     while (*e == ' ')
         ++e;
@@ -282,9 +281,11 @@ static int parse_profile(const ef_fog_component *c, const char *text, double *h,
                 return profile_fail(c, err, line, "more than 4 values at '%s' (write 'height "
                                     "density' or 'height r g b')", tok);
             char *e;
-            errno = 0;
-            v[nv] = strtod(tok, &e);
-            if (tlen > 63 || *e || e == tok || errno == ERANGE || !isfinite(v[nv]))
+            const int rc = ef_parse_real(tok, &e, &v[nv], 0);
+            if (rc == -2 && !*e)
+                return profile_fail(c, err, line, "'%s' is out of range (0 or between 2.2e-308 "
+                                    "and 1.8e308 in magnitude)", tok);
+            if (tlen > 63 || rc || *e)
                 return profile_fail(c, err, line, "'%s' is not a number", tok);
             ++nv;
             while (q < end && is_space(*q))

@@ -109,12 +109,16 @@ static int set_planes(ef_fog_component *c, const char *val, ef_err *err)
         if (!e)
             e = s + strlen(s);
         char *end;
-        errno = 0;
-        const double v = strtod(s, &end);
+        double v = 0;
+        const int rc = ef_parse_real(s, &end, &v, 0);
         while (end < e && *end == ' ')
             ++end;
-        if (end == s || end != e || errno == ERANGE || !isfinite(v)) {
+        if (rc || end == s || end != e) {
             free(pl);
+            if (rc == -2 && end == e)
+                return ef_fail(err, "fog spec '%s': planes= number %d ('%.*s') is out of range "
+                               "(0 or between 2.2e-308 and 1.8e308 in magnitude)", c->spec,
+                               i + 1, (int) (e - s), s);
             return ef_fail(err, "fog spec '%s': planes= number %d ('%.*s') is not a finite "
                            "number (write planes=A,B,C,D,A,B,C,D,...)", c->spec, i + 1,
                            (int) (e - s), s);

@@ -12,8 +12,8 @@ static void ray_from_cam(const ef_camera *cam, const double dc[3], double t, ef_
     r->dir[0] = w[0] / len;
     r->dir[1] = w[1] / len;
     r->dir[2] = w[2] / len;
-    r->planar = t;
-    r->dist = t * len;
+    r->planar = t * cam->unit;
+    r->dist = t * (len * cam->unit);
     r->org[0] = cam->pos[0];
     r->org[1] = cam->pos[1];
     r->org[2] = cam->pos[2];
