@@ -2047,7 +2047,7 @@ static void test_output_not_regular(void **state)
     sa.sun_family = AF_UNIX;
     const int sock_ok = strlen(sock.s) < sizeof sa.sun_path;
     if (sock_ok) {
-        snprintf(sa.sun_path, sizeof sa.sun_path, "%s", sock.s);
+        memcpy(sa.sun_path, sock.s, strlen(sock.s) + 1);
         assert_int_equal(bind(fd, (struct sockaddr *) &sa, sizeof sa), 0);
     }
     static const struct {
@@ -2244,6 +2244,104 @@ static void test_killed_run_other_signals(void **state)
     kill_case(SIGUSR1, 1);
 }
 
+/* A tile that would need more than the per-worker limit (1 GiB) is refused
+ * as a corrupt header before anything is allocated: a 64x64 tiled frame
+ * whose header claims one 262144x262144 tile. */
+static void test_huge_tile_refused(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("hugetile");
+    path_t in = pth("hugetile/in.exr"), out = pth("hugetile/out.exr");
+    frame_t f;
+    frame_alloc(&f, 64, 64);
+    tu_part p;
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_HALF);
+    p.tile = 16;
+    write_part(in.s, &p);
+    frame_free(&f);
+    size_t n;
+    unsigned char *d = slurp(in.s, &n);
+    const size_t t = find_attr(d, n, "tiles", "tiledesc", NULL);
+    const size_t w = find_attr(d, n, "dataWindow", "box2i", NULL);
+    assert_true(t > 0 && w > 0);
+    wr32(d + t, 262144);
+    wr32(d + t + 4, 262144);
+    wr32(d + w + 8, 262143);
+    wr32(d + w + 12, 262143);
+    spit(in.s, d, n);
+    free(d);
+    check_failure(1, in.s, dir.s, "'%s' -o '%s' --fog exp:density=0.1 --fov 40", in.s, out.s);
+    assert_error_line(in.s);
+    assert_err_has("per worker");
+}
+
+/* Messages (issue 8): a long value is shortened so the reason still fits;
+ * luminance-only and colourless images say so (not --layer); a subsampled
+ * channel says what to do; a FIFO input says what it is; bytes that are
+ * not UTF-8 are escaped. */
+static void test_messages(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("msgs");
+    path_t out = pth("msgs/out.exr");
+    char longv[2101];
+    memset(longv, 'z', 2100);
+    longv[2100] = '\0';
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.1 --compression %s",
+                  sample(), out.s, longv);
+    assert_err_has("(2100 bytes)");
+    assert_err_has("is not one of");
+    /* Y + Z and foo.A + Z images (written here with OpenEXRCore). */
+    frame_t f;
+    frame_alloc(&f, 16, 8);
+    tu_part p;
+    tu_part_init(&p, 16, 8);
+    tu_part_add(&p, "Y", EXR_PIXEL_HALF, f.c[0]);
+    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, f.c[4]);
+    add_camera(&p, 40);
+    path_t lum = pth("msgs/lum.exr"), noc = pth("msgs/noc.exr");
+    write_part(lum.s, &p);
+    tu_part_init(&p, 16, 8);
+    tu_part_add(&p, "foo.A", EXR_PIXEL_HALF, f.c[0]);
+    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, f.c[4]);
+    add_camera(&p, 40);
+    write_part(noc.s, &p);
+    frame_free(&f);
+    check_failure(1, lum.s, dir.s, "'%s' -o '%s' --fog exp:density=0.1", lum.s, out.s);
+    assert_err_has("luminance-only");
+    if (strstr(g_err, "--layer"))
+        fail_msg("the luminance message points at --layer:\n%s", g_err);
+    check_failure(1, noc.s, dir.s, "'%s' -o '%s' --fog exp:density=0.1", noc.s, out.s);
+    assert_err_has("no R,G,B colour");
+    assert_err_has("foo.A");
+    /* A 2x2-subsampled channel, patched into the sample's channel list. */
+    size_t n;
+    unsigned char *d = slurp(sample(), &n);
+    uint32_t sz;
+    const size_t at = find_attr(d, n, "channels", "chlist", &sz);
+    assert_true(at > 0);
+    const size_t pt = at + strlen((const char *) d + at) + 1;   /* after the first name */
+    wr32(d + pt + 8, 2);
+    wr32(d + pt + 12, 2);
+    path_t sub = pth("msgs/sub.exr");
+    spit(sub.s, d, n);
+    free(d);
+    check_failure(1, sub.s, dir.s, "'%s' -o '%s' --fog exp:density=0.1", sub.s, out.s);
+    assert_err_has("subsampled");
+    assert_err_has("render without subsampling");
+    /* A FIFO as INPUT: said to be one (not an empty file), nothing read. */
+    path_t fifo = pth("msgs/fifo.exr");
+    assert_int_equal(mkfifo(fifo.s, 0644), 0);
+    check_failure(1, NULL, dir.s, "'%s' -o '%s' --fog exp:density=0.1", fifo.s, out.s);
+    assert_err_has("FIFO");
+    unlink(fifo.s);
+    /* Invalid UTF-8 is escaped; valid UTF-8 passes. */
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog 'exp:density=0.1:k\xff\xc3\xa9=1'",
+                  sample(), out.s);
+    assert_err_has("k\\xff\xc3\xa9");
+    assert_null(strchr(g_err, '\xff'));
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2298,6 +2396,8 @@ int main(void)
         cmocka_unit_test(test_output_preview_checked_first),
         cmocka_unit_test(test_output_file_size_limit),
         cmocka_unit_test(test_killed_run_other_signals),
+        cmocka_unit_test(test_huge_tile_refused),
+        cmocka_unit_test(test_messages),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

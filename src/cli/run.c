@@ -20,15 +20,52 @@
 #include "recon.h"
 #include "scene.h"
 
-/* Writes s with control bytes as \xNN: names in messages come from the
- * file, and a hostile one must not drive the terminal. */
+/* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
+ * bytes there are not one (overlong, surrogate, beyond U+10FFFF, cut). */
+static int utf8_len(const unsigned char *s)
+{
+    const unsigned c = s[0];
+    int n;
+    unsigned min;
+    if (c >= 0xc2 && c <= 0xdf)
+        n = 2, min = 0x80;
+    else if (c >= 0xe0 && c <= 0xef)
+        n = 3, min = 0x800;
+    else if (c >= 0xf0 && c <= 0xf4)
+        n = 4, min = 0x10000;
+    else
+        return 0;
+    unsigned v = c & (0x3fu >> (n - 1));
+    for (int k = 1; k < n; ++k) {
+        if ((s[k] & 0xc0) != 0x80)
+            return 0;
+        v = v << 6 | (s[k] & 0x3fu);
+    }
+    if (v < min || v > 0x10ffff || (v >= 0xd800 && v <= 0xdfff))
+        return 0;
+    return n;
+}
+
+/* Writes s with control bytes and bytes that are not valid UTF-8 as
+ * \xNN: names in messages come from the file, and a hostile one must not
+ * drive the terminal or garble its encoding. */
 static void put_clean(const char *s)
 {
-    for (const unsigned char *c = (const unsigned char *) s; *c; ++c)
-        if (*c < 0x20 || *c == 0x7f)
-            fprintf(stderr, "\\x%02x", *c);
-        else
-            fputc(*c, stderr);
+    for (const unsigned char *c = (const unsigned char *) s; *c;) {
+        if (*c < 0x20 || *c == 0x7f) {
+            fprintf(stderr, "\\x%02x", *c++);
+        } else if (*c < 0x80) {
+            fputc(*c++, stderr);
+        } else {
+            const int n = utf8_len(c);
+            if (!n) {
+                fprintf(stderr, "\\x%02x", *c++);
+                continue;
+            }
+            fwrite(c, 1, (size_t) n, stderr);
+            c += n;
+        }
+    }
 }
 
 /* Prints "exrfog: FILE: message"; the callee's idea of FILE wins. */
@@ -206,7 +243,9 @@ int ef_main(int argc, char **argv)
             return 0;
         if (pr == EF_PARSE_FAIL)
             return report(err.file, &err, 1);
-        fprintf(stderr, "exrfog: %s\n", err.msg);
+        fputs("exrfog: ", stderr);
+        put_clean(err.msg);
+        fputc('\n', stderr);
         return 2;
     }
 
@@ -292,8 +331,13 @@ int ef_main(int argc, char **argv)
         status = report(o.input, &err, cam.flag_error ? 2 : 1);
         goto done;
     }
-    if (cam.warning[0] && !o.quiet && !o.explain)
-        fprintf(stderr, "exrfog: %s: warning: %s\n", o.input, cam.warning);
+    if (cam.warning[0] && !o.quiet && !o.explain) {
+        fputs("exrfog: ", stderr);
+        put_clean(o.input);
+        fputs(": warning: ", stderr);
+        put_clean(cam.warning);
+        fputc('\n', stderr);
+    }
     int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
     if (o.explain) {
         explain(stdout, &o, &in, &plan, &cam, &conv, conv_ok);
@@ -340,7 +384,11 @@ int ef_main(int argc, char **argv)
             fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
                             "output part is single-level\n", o.input, p);
 
-    ef_stream_opts so = { .threads = o.threads ? o.threads : cpu_count(),
+    /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
+    const int cpus = cpu_count();
+    if (o.threads > cpus && o.verbose)
+        fprintf(stderr, "exrfog: note: --threads %d capped at the %d CPUs\n", o.threads, cpus);
+    ef_stream_opts so = { .threads = o.threads && o.threads < cpus ? o.threads : cpus,
                           .compression = o.compression,
                           .zip_level = o.zip_level,
                           .pixel_type = o.pixel_type,

@@ -191,8 +191,22 @@ static int find_colour(const qlist *q, const char *layer, ef_channel_plan *plan,
         }
     char layers[600];
     list_layers(q, layers, sizeof layers);
-    return ef_fail(err, "no colour channels found (no R,G,B, rgba.*, or Blender *.Combined.*; layers "
-                        "with R: %s); choose one with --layer NAME", layers);
+    if (strcmp(layers, "none")) /* a layer has R: --layer can help */
+        return ef_fail(err, "no colour channels found (no R,G,B, rgba.*, or Blender *.Combined.*; "
+                            "layers with R: %s); choose one with --layer NAME", layers);
+    char all[600];
+    list_all(q, all, sizeof all);
+    int lum = 0;
+    for (int i = 0; i < q->n; ++i) {
+        const char *n = q->c[i].name, *dot = strrchr(n, '.');
+        lum |= !strcmp(dot ? dot + 1 : n, "Y");
+    }
+    if (lum)
+        return ef_fail(err, "the image is luminance-only (no R,G,B colour; its channels: %s): "
+                            "exrfog fogs colour; convert it first, e.g. oiiotool IN --ch "
+                            "R=Y,G=Y,B=Y,A,Z -o RGB.exr", all);
+    return ef_fail(err, "the image has no R,G,B colour channels (its channels: %s), so there is "
+                        "nothing to fog; give exrfog the beauty pass", all);
 }
 
 static const qchan *find_depth(const qlist *q, const char *prefix, const char *view)

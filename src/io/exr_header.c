@@ -88,7 +88,10 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
                        p, comp == EXR_COMPRESSION_DWAA ? "DWAA" : "DWAB");
     for (int c = 0; c < cl->num_channels; ++c)
         if (cl->entries[c].x_sampling != 1 || cl->entries[c].y_sampling != 1)
-            return ef_fail(err, "channel '%s' is subsampled (%dx%d), which exrfog does not support",
+            return ef_fail(err, "channel '%s' is subsampled (%dx%d), which exrfog does not "
+                                "support (OpenImageIO cannot read it either): convert the image "
+                                "to full-resolution RGB with a reader of luminance/chroma EXRs "
+                                "(OpenEXR's RgbaInputFile, Nuke), or render without subsampling",
                            cl->entries[c].name.str, cl->entries[c].x_sampling,
                            cl->entries[c].y_sampling);
     if (st == EXR_STORAGE_TILED) {
@@ -100,6 +103,32 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
         if (tx < 1 || ty < 1 || tx > EF_MAX_DIMENSION || ty > EF_MAX_DIMENSION)
             return ef_fail(err, "part %d has an absurd tile size %u x %u", p, tx, ty);
     }
+    /* One unit's buffers (every channel as 32 bits, decoded and packed,
+     * plus room for depth and AOVs) must fit the per-worker limit before
+     * anything is allocated. */
+    const uint64_t W = (uint64_t) ((int64_t) dw.max.x - dw.min.x + 1),
+                   H = (uint64_t) ((int64_t) dw.max.y - dw.min.y + 1);
+    uint64_t uw = W, uh = 16;
+    int32_t lines = 1;
+    if (st == EXR_STORAGE_TILED) {
+        uint32_t tx = 1, ty = 1;
+        exr_get_tile_descriptor(f->ctx, p, &tx, &ty, NULL, NULL);
+        uw = tx < W ? tx : W;
+        uh = ty < H ? ty : H;
+    } else if (exr_get_scanlines_per_chunk(f->ctx, p, &lines) == EXR_ERR_SUCCESS && lines > 16) {
+        uh = (uint64_t) lines;
+    }
+    if (uh > H)
+        uh = H;
+    const uint64_t bytes = uw * uh * ((uint64_t) cl->num_channels + EF_MAX_EXTRA_CHANNELS + 1) * 4 * 2;
+    if (bytes > EF_WORKER_BYTES)
+        return ef_fail(err, "part %d would need %.1f GiB per worker for one %s of %llu x %llu "
+                            "pixels and %d channels, over exrfog's limit of %.0f GiB per worker "
+                            "buffer: the header is probably corrupt (or re-chunk the file, e.g. "
+                            "oiiotool IN --tile 64 64 -o OUT)",
+                       p, (double) bytes / (1u << 30), st == EXR_STORAGE_TILED ? "tile" : "chunk",
+                       (unsigned long long) uw, (unsigned long long) uh, cl->num_channels,
+                       (double) EF_WORKER_BYTES / (1u << 30));
     return 0;
 }
 
@@ -147,6 +176,14 @@ int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
         return ef_fail(err, "cannot open: %s", strerror(errno));
     if (S_ISDIR(sb.st_mode))
         return ef_fail(err, "is a directory, not an EXR file");
+    if (!S_ISREG(sb.st_mode))
+        return ef_fail(err, "is %s, not a regular file: exrfog reads EXR files that it can seek "
+                            "in (copy the stream to a file first)",
+                       S_ISFIFO(sb.st_mode)  ? "a FIFO (named pipe)"
+                       : S_ISCHR(sb.st_mode) ? "a character device"
+                       : S_ISBLK(sb.st_mode) ? "a block device"
+                       : S_ISSOCK(sb.st_mode) ? "a socket"
+                                              : "not a regular file");
     if (sb.st_size == 0)
         return ef_fail(err, "the file is empty (0 bytes), not an EXR image");
     FILE *fp = fopen(path, "rb");

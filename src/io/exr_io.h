@@ -12,6 +12,12 @@
 
 /* Widths and heights above this are refused as absurd (corrupt headers). */
 #define EF_MAX_DIMENSION 262144
+/* The most one worker's unit buffers may take: a part whose tile or chunk
+ * needs more is refused as corrupt before anything is allocated. */
+#define EF_WORKER_BYTES (1ull << 30)
+/* The most all workers' unit buffers may take together: fewer threads run
+ * when the chunks are large (documented with --threads). */
+#define EF_STREAM_BYTES (2ull << 30)
 
 typedef struct ef_exr_file {
     const char *path;

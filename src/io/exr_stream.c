@@ -391,8 +391,12 @@ static void *worker(void *arg)
             }
         }
         if (j->colour && j->depth_local < 0 && depth_read(&dr, x0, y0, w, h, depth)) {
-            job_fail(j, j->depth_path, "cannot decode the depth chunk at scanline %d, the depth file is "
-                        "truncated or corrupt", y0, ef_exr_last_core_message());
+            job_fail(j, j->depth_path, j->depth_path == j->in_path
+                                           ? "cannot decode the depth part's chunk at scanline %d, "
+                                             "the file is truncated or corrupt"
+                                           : "cannot decode the depth chunk at scanline %d, the "
+                                             "depth file is truncated or corrupt",
+                     y0, ef_exr_last_core_message());
             goto out;
         }
         double t1 = now();
@@ -634,6 +638,16 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     int nt = o->threads < 1 ? 1 : o->threads;
     if (nt > j.g.nunits)
         nt = j.g.nunits;
+    {
+        /* Memory per worker: a unit of every plane, decoded and packed. */
+        const uint64_t px = j.g.tiled ? (uint64_t) (j.g.tw < j.g.width ? j.g.tw : j.g.width) *
+                                            (uint64_t) (j.g.th < j.g.height ? j.g.th : j.g.height)
+                                      : (uint64_t) j.g.width * (uint64_t) j.g.unit_rows;
+        const uint64_t per = px * ((uint64_t) j.nch + (uint64_t) j.nextra + 1) * 4 * 2;
+        const uint64_t fit = per ? EF_STREAM_BYTES / per : (uint64_t) nt;
+        if ((uint64_t) nt > fit)
+            nt = fit < 1 ? 1 : (int) fit;
+    }
     pthread_t *th = calloc((size_t) nt, sizeof *th);
     int started = 0;
     for (; th && started < nt; ++started)
