@@ -380,6 +380,54 @@ static void slurp(const char *path, char *buf, size_t len)
     remove(path);
 }
 
+/* The OUTPUT of an exrfog command line: the argument after "-o", quoted
+ * with '...' or bare. Returns 0 and the path, or -1. */
+static int output_of(const char *args, char *path, size_t cap)
+{
+    for (const char *a = strstr(args, "-o "); a; a = strstr(a + 1, "-o ")) {
+        if (a != args && a[-1] != ' ')
+            continue;
+        const char *p = a + 3;
+        while (*p == ' ')
+            ++p;
+        const char *e;
+        if (*p == '\'') {
+            e = strchr(++p, '\'');
+            if (!e)
+                return -1;
+        } else {
+            e = p + strcspn(p, " ");
+        }
+        if (e == p || (size_t) (e - p) >= cap)
+            return -1;
+        memcpy(path, p, (size_t) (e - p));
+        path[e - p] = '\0';
+        return 0;
+    }
+    return -1;
+}
+
+int tu_check_readback(const char *args, char *why, size_t cap)
+{
+    static int have = -1;
+    if (have < 0)
+        have = system("command -v oiiotool >/dev/null 2>&1") == 0;
+    char path[4096];
+    if (!have || output_of(args, path, sizeof path) || !tu_exists(path))
+        return 0;
+    /* The C++ OpenEXR library, through OpenImageIO: every part, every pixel. */
+    size_t n = strlen(path) + 128;
+    char *cmd = malloc(n);
+    snprintf(cmd, n, "oiiotool -a --stats '%s' >/dev/null 2>&1", path);
+    const int st = system(cmd);
+    free(cmd);
+    if (st == 0)
+        return 0;
+    snprintf(why, cap, "OpenImageIO (the OpenEXR C++ library) cannot read the output %s back",
+             path);
+    return -1;
+}
+
 int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
 {
     const char *bin = getenv("EXRFOG_BIN");
@@ -398,7 +446,15 @@ int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
     free(cmd);
     free(o);
     free(e);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+    const int rc = WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+    char why[4200];
+    if (rc == 0 && tu_check_readback(args, why, sizeof why)) {
+        /* A run that wrote what other readers refuse has not succeeded. */
+        if (err && errlen)
+            snprintf(err, errlen, "%s", why);
+        return 98;
+    }
+    return rc;
 }
 
 int tu_write_bytes(const char *path, const void *data, size_t len)

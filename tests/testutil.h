@@ -87,6 +87,14 @@ char *tu_path(const char *file);
  * given buffers (NULL to discard). Returns the exit status. */
 int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen);
 
+/* When args (an exrfog command line) wrote an OUTPUT that exists, reads it
+ * back whole with OpenImageIO (the OpenEXR C++ library): returns 0 when it
+ * reads or oiiotool is absent, -1 with a message otherwise. tu_run and
+ * test_cli's runs call it after every successful run (exit 98 when it
+ * fails), so every output the suite writes is read back by a second
+ * implementation. */
+int tu_check_readback(const char *args, char *why, size_t cap);
+
 /* Captured output of the last tu_runf. */
 extern char tu_out[1 << 16], tu_err[1 << 16];
 

@@ -167,6 +167,37 @@ static int explain_bad_windows(const char *path, ef_err *err)
     return 0;
 }
 
+/* The attributes every part of a multi-part file must share (OpenEXR's
+ * "non-conforming shared attributes"): the C++ library refuses files where
+ * they differ, so exrfog must neither read them as valid nor write them. */
+static int check_shared(const ef_exr_file *f, ef_err *err)
+{
+    exr_attr_box2i_t d0, d;
+    float a0 = 1, a = 1;
+    if (f->nparts < 2 || exr_get_display_window(f->ctx, 0, &d0))
+        return 0;
+    exr_get_pixel_aspect_ratio(f->ctx, 0, &a0);
+    for (int p = 1; p < f->nparts; ++p) {
+        if (exr_get_display_window(f->ctx, p, &d) == EXR_ERR_SUCCESS &&
+            (d.min.x != d0.min.x || d.min.y != d0.min.y || d.max.x != d0.max.x ||
+             d.max.y != d0.max.y))
+            return ef_fail(err, "parts 0 and %d have different display windows ((%d,%d)-(%d,%d) "
+                                "and (%d,%d)-(%d,%d)); every part of a multi-part file must share "
+                                "it (OpenEXR refuses such files: non-conforming shared "
+                                "attributes); fix the file, e.g. split its parts with exrmultipart "
+                                "-separate",
+                           p, d0.min.x, d0.min.y, d0.max.x, d0.max.y, d.min.x, d.min.y, d.max.x,
+                           d.max.y);
+        if (exr_get_pixel_aspect_ratio(f->ctx, p, &a) == EXR_ERR_SUCCESS && a != a0)
+            return ef_fail(err, "parts 0 and %d have different pixelAspectRatio (%g and %g); every "
+                                "part of a multi-part file must share it (OpenEXR refuses such "
+                                "files: non-conforming shared attributes); fix the file, e.g. split "
+                                "its parts with exrmultipart -separate",
+                           p, (double) a0, (double) a);
+    }
+    return 0;
+}
+
 int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
 {
     struct stat sb;
@@ -221,6 +252,10 @@ int ef_exr_open(const char *path, ef_exr_file *f, ef_err *err)
             ef_exr_close(f);
             return -1;
         }
+    if (check_shared(f, err)) {
+        ef_exr_close(f);
+        return -1;
+    }
     return 0;
 }
 
