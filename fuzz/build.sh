@@ -1,7 +1,7 @@
 #!/bin/sh
 # Builds the libFuzzer target fuzz_exr (ASan + UBSan + LeakSanitizer) from the
 # project's core and OpenEXRCore I/O sources.
-#   fuzz/build.sh [BUILD_DIR]             -> BUILD_DIR/fuzz_exr
+#   fuzz/build.sh [BUILD_DIR]             -> BUILD_DIR/fuzz_exr, BUILD_DIR/fuzz_cli
 #   fuzz/build.sh --coverage [BUILD_DIR]  -> BUILD_DIR/fuzz_exr_cov (llvm-cov build)
 # BUILD_DIR defaults to build-fuzz/ at the top of the repository. Needs clang
 # with libFuzzer and libopenexr-dev (OpenEXRCore 3.1).
@@ -33,4 +33,20 @@ $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -o "$exe" \
     "$here/fuzz_exr.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c \
     -lOpenEXRCore-3_1 -lm -lpthread -ldl
+echo "built $exe"
+# fuzz_cli: the option parser, SPECs, scene files and profiles (no OIIO/OCIO).
+if [ $cov = 1 ]; then
+    exe="$out/fuzz_cli_cov"
+else
+    exe="$out/fuzz_cli"
+fi
+# shellcheck disable=SC2086
+$CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
+    -Wall -Wextra \
+    -I "$root/src/core" -I "$root/src/io" -I "$root/src/cli" -I "$out/generated" \
+    -I /usr/include/OpenEXR \
+    -o "$exe" \
+    "$here/fuzz_cli.c" "$root/src/cli/options.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c \
+    "$root/src/io/scene_file.c" \
+    -lOpenEXRCore-3_1 -ljansson -lm -lpthread -ldl
 echo "built $exe"

@@ -164,7 +164,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     ef_stream_stats st;
     struct stat sb;
     err.msg[0] = '\0';
-    if (!failed(ef_exr_stream(&in, &in, &plan, out_path, &so, fog_chunk, &pass, &st, &err), &err,
+    if (!failed(ef_exr_stream_file(&in, &in, &plan, out_path, &so, fog_chunk, &pass, &st, &err), &err,
                 "ef_exr_stream") &&
         (fstat(out_fd, &sb) != 0 || sb.st_size < 8)) {
         fprintf(stderr, "fuzz_exr: ef_exr_stream succeeded but wrote no output\n");

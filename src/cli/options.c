@@ -284,7 +284,10 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     o->compression = -1;
     o->zip_level = -1;
     o->pixel_type = -1;
-    optind = 1;
+    /* 0, not 1: glibc then also forgets where it was inside a cluster of
+     * short options, so a second parse in one process (a library host, the
+     * fuzzer) never reads the previous argv. */
+    optind = 0;
     opterr = 0;
     int c;
     while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {

@@ -535,18 +535,6 @@ static inline double gdot(const double g[3], double x, double y, double z)
     return g[0] * x + g[1] * y + g[2] * z;
 }
 
-/* Perlin's blend of the corner gradients (his nesting) at fractions x, y, z. */
-static inline double gcell_eval(const gcell *c, double x, double y, double z)
-{
-    const double u = ef_noise_fade_(x), v = ef_noise_fade_(y), w = ef_noise_fade_(z);
-    const double x1 = x - 1, y1 = y - 1, z1 = z - 1;
-    const double a = ef_noise_lerp_(u, gdot(c->g[0], x, y, z), gdot(c->g[1], x1, y, z));
-    const double b = ef_noise_lerp_(u, gdot(c->g[2], x, y1, z), gdot(c->g[3], x1, y1, z));
-    const double d = ef_noise_lerp_(u, gdot(c->g[4], x, y, z1), gdot(c->g[5], x1, y, z1));
-    const double e = ef_noise_lerp_(u, gdot(c->g[6], x, y1, z1), gdot(c->g[7], x1, y1, z1));
-    return ef_noise_lerp_(w, ef_noise_lerp_(v, a, b), ef_noise_lerp_(v, d, e));
-}
-
 /* ---- compensated summation (Neumaier) ---- */
 
 typedef struct ksum {
