@@ -2373,6 +2373,47 @@ static void test_nonconforming_multipart(void **state)
     assert_err_has("non-conforming shared attributes");
 }
 
+/* A NaN or infinite alpha (damaged data) is fogged as an opaque pixel and
+ * written back as it was: RGB equal the run where that alpha is 1, and no
+ * NaN or inf appears that the input did not have. */
+static void test_nonfinite_alpha(void **state)
+{
+    (void) state;
+    fresh_dir("badalpha");
+    path_t bad = pth("badalpha/bad.exr"), ok = pth("badalpha/ok.exr");
+    path_t bad_o = pth("badalpha/bad_o.exr"), ok_o = pth("badalpha/ok_o.exr");
+    frame_t f;
+    frame_alloc(&f, 16, 8);
+    tu_part p;
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_FLOAT);
+    add_camera(&p, 40);
+    write_part(ok.s, &p);
+    for (size_t i = 0; i < 16 * 8; i += 3)
+        f.c[3][i] = (i / 3) % 2 ? NAN : INFINITY;
+    write_part(bad.s, &p);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05", bad.s, bad_o.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05", ok.s, ok_o.s), 0);
+    tu_image a, b;
+    assert_int_equal(tu_read_image(bad_o.s, 0, &a), 0);
+    assert_int_equal(tu_read_image(ok_o.s, 0, &b), 0);
+    const char *rgb[3] = { "R", "G", "B" };
+    for (size_t i = 0; i < 16 * 8; ++i) {
+        for (int k = 0; k < 3; ++k) {
+            const float va = tu_image_f(&a, rgb[k])[i], vb = tu_image_f(&b, rgb[k])[i];
+            if (!isfinite(va) || memcmp(&va, &vb, sizeof va))
+                fail_msg("pixel %zu %s: %g with a bad alpha, %g opaque", i, rgb[k], va, vb);
+        }
+        const float al = tu_image_f(&a, "A")[i];
+        if (i % 3 == 0)
+            assert_true((i / 3) % 2 ? isnan(al) : (isinf(al) && al > 0));
+        else
+            assert_true(al == 1.0f);
+    }
+    tu_image_free(&a);
+    tu_image_free(&b);
+    frame_free(&f);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2430,6 +2471,7 @@ int main(void)
         cmocka_unit_test(test_huge_tile_refused),
         cmocka_unit_test(test_messages),
         cmocka_unit_test(test_nonconforming_multipart),
+        cmocka_unit_test(test_nonfinite_alpha),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -71,6 +71,12 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 ef_ray_at_distance(pass->cam, x, y, s->sky_distance, &r);
             ef_fog_sample surf, inf;
             double c[3], in[3], a = alpha ? alpha[i] : 1.0;
+            /* A NaN or infinite alpha is damaged data: the pixel is fogged
+             * as opaque and its alpha written back as it was, so no NaN or
+             * inf appears that the input did not have. */
+            const int bad_alpha = !isfinite(a);
+            if (bad_alpha)
+                a = 1.0;
             const double a_in = a;
             /* The fog behind only reaches the uncovered part (1 - a) of a pixel. */
             const int need_inf = fog_uncovered && !(a == 1.0 && isfinite(r.dist));
@@ -82,7 +88,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
             ef_composite(&surf, &inf, fog_uncovered, c, alpha ? &a : NULL);
             for (int k = 0; k < 3; ++k)
                 rgb[k][i] = to_float(c[k]);
-            if (alpha)
+            if (alpha && !bad_alpha)
                 alpha[i] = to_float(a);
             if (mask & EF_AOV_FOG) {
                 for (int k = 0; k < 3; ++k)
