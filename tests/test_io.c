@@ -1235,6 +1235,11 @@ static void geo_case(const char *in, const char *dep, const char *out, int colou
         print_error("ef_exr_stream: %s\n", err.msg);
         fail();
     }
+    char why[4200];
+    if (tu_check_readback_path(out, why, sizeof why)) {
+        print_error("%s\n", why);
+        fail();
+    }
     ef_exr_close(&fi);
     ef_exr_close(&fd);
     long unvisited = 0;

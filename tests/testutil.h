@@ -94,6 +94,8 @@ int tu_run(const char *args, char *out, size_t outlen, char *err, size_t errlen)
  * fails), so every output the suite writes is read back by a second
  * implementation. */
 int tu_check_readback(const char *args, char *why, size_t cap);
+/* The same for a file written without the CLI (ef_exr_stream_file). */
+int tu_check_readback_path(const char *path, char *why, size_t cap);
 
 /* Captured output of the last tu_runf. */
 extern char tu_out[1 << 16], tu_err[1 << 16];
