@@ -392,6 +392,8 @@ int ef_main(int argc, char **argv)
                           .compression = o.compression,
                           .zip_level = o.zip_level,
                           .pixel_type = o.pixel_type,
+                          .depth_name = df == &in ? plan.depth.name : NULL,
+                          .depth_part = plan.depth.part,
                           .param_attr = o.params,
                           .extra = aov_names,
                           .nextra = naov,

@@ -90,7 +90,10 @@ typedef struct ef_stream_opts {
     int threads;              /* >= 1 */
     int compression;          /* exr_compression_t, or -1 to keep each part's */
     int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */
-    int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep */
+    int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep;
+                                 HALF never demotes ef_data_channel()s nor the depth read */
+    const char *depth_name;   /* the depth channel exrfog reads in INPUT, or NULL */
+    int depth_part;           /* and its part */
     const char *param_attr;   /* value of the exrfog/parameters string attribute */
     /* New channels of the colour part, FLOAT (HALF when pixel_type is
      * HALF), filled by the callback; names must not be in the part yet. */
@@ -118,6 +121,11 @@ int ef_exr_stream_file(const ef_exr_file *in, const ef_exr_file *depth_file,
                        const ef_channel_plan *plan, const char *path,
                        const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
                        ef_stream_stats *stats, ef_err *err);
+
+/* Whether -d half must leave channel name in float: depth (Z, *.Z,
+ * *.ZBack, depth...), positions (P.*, position.*, fog_P.*), ids (id.*,
+ * *Id.*, Cryptomatte). */
+int ef_data_channel(const char *name);
 
 /* The name of the first of the n channel names that part p of f already
  * has, or NULL when it has none of them. */

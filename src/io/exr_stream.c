@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -493,6 +494,46 @@ out:
 /* Declares output part p like input part p: same name, storage, tile size
  * (one level), channels (types per opts), then every other attribute. The
  * colour part also gets opts' extra channels and origin attribute. */
+/* Whether a channel holds data that half precision would destroy (depth,
+ * positions, ids, Cryptomatte), which -d half leaves in float: a whole
+ * name Z, ZBack, depth, Depth, distance, id or ID; a last segment ZBack; or
+ * a layer segment P, Pw, Pworld, Pref, Pobj, position, Position,
+ * (W|w)orldPosition, fog_P, fog_distance, id, ID, depth, Depth, Z, *Id,
+ * *ID, *_id or crypto* (Cryptomatte). */
+int ef_data_channel(const char *name)
+{
+    /* a whole name, or the last segment after a layer (N.Z is a normal) */
+    static const char *const whole[] = { "Z", "ZBack", "depth", "Depth", "distance", "id", "ID" };
+    static const char *const last[] = { "ZBack" };
+    if (!strchr(name, '.'))
+        for (size_t i = 0; i < sizeof whole / sizeof whole[0]; ++i)
+            if (!strcmp(name, whole[i]))
+                return 1;
+    static const char *const layer[] = { "P",        "Pw",       "Pworld",   "Pref",
+                                         "Pobj",     "position", "Position", "worldPosition",
+                                         "WorldPosition", "fog_P", "fog_distance", "id",
+                                         "ID",       "depth",    "Depth",    "Z" };
+    const char *dot = strrchr(name, '.'), *tail = dot ? dot + 1 : name;
+    for (size_t i = 0; i < sizeof last / sizeof last[0]; ++i)
+        if (!strcmp(tail, last[i]))
+            return 1;
+    /* every segment before the last */
+    for (const char *seg = name; dot && seg <= dot;) {
+        const char *end = strchr(seg, '.');
+        const size_t n = (size_t) (end - seg);
+        for (size_t i = 0; i < sizeof layer / sizeof layer[0]; ++i)
+            if (strlen(layer[i]) == n && !strncmp(seg, layer[i], n))
+                return 1;
+        if (n >= 2 && (!strncmp(end - 2, "Id", 2) || !strncmp(end - 2, "ID", 2) ||
+                       (n >= 3 && !strncmp(end - 3, "_id", 3))))
+            return 1;
+        if (n >= 6 && !strncasecmp(seg, "crypto", 6))
+            return 1;
+        seg = end + 1;
+    }
+    return 0;
+}
+
 static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colour,
                        const ef_stream_opts *o, ef_err *err)
 {
@@ -518,7 +559,10 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
     for (int c = 0; c < cl->num_channels; ++c) {
         const exr_attr_chlist_entry_t *e = &cl->entries[c];
         exr_pixel_type_t t = e->pixel_type;
-        if (o->pixel_type >= 0 && t != EXR_PIXEL_UINT)
+        const int keep = o->pixel_type == EXR_PIXEL_HALF &&
+                         (ef_data_channel(e->name.str) ||
+                          (o->depth_name && p == o->depth_part && !strcmp(e->name.str, o->depth_name)));
+        if (o->pixel_type >= 0 && t != EXR_PIXEL_UINT && !keep)
             t = (exr_pixel_type_t) o->pixel_type;
         if (exr_add_channel(out, p, e->name.str, t, e->p_linear ? EXR_PERCEPTUALLY_LINEAR
                                                                 : EXR_PERCEPTUALLY_LOGARITHMIC,
@@ -526,7 +570,9 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
             return ef_fail(err, "cannot add channel '%s'", e->name.str);
     }
     for (int c = 0; colour && c < o->nextra; ++c) {
-        const exr_pixel_type_t t = o->pixel_type == EXR_PIXEL_HALF ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT;
+        const exr_pixel_type_t t = o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(o->extra[c])
+                                       ? EXR_PIXEL_HALF
+                                       : EXR_PIXEL_FLOAT;
         if (exr_add_channel(out, p, o->extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
             return ef_fail(err, "cannot add channel '%s': %s", o->extra[c], ef_exr_last_core_message());
     }
