@@ -44,6 +44,7 @@
 #include <cmocka.h>
 
 #include "testutil.h"
+#include "version.h"
 
 /* ------------------------------------------------------------ paths */
 
@@ -2414,6 +2415,52 @@ static void test_nonfinite_alpha(void **state)
     frame_free(&f);
 }
 
+/* Provenance (issue 9): exrfog/history holds, per pass, the version, the
+ * command line shell-quoted less what cannot change the output (threads,
+ * messages, preview, output name) and the scene file's contents; a second
+ * pass appends its line to the first's. */
+static void test_history(void **state)
+{
+    (void) state;
+    fresh_dir("history");
+    path_t scene = pth("history/scene.json"), o1 = pth("history/one.exr"),
+           o2 = pth("history/two.exr"), o3 = pth("history/three.exr");
+    static const char json[] = "{\"fog\": [\"exp:density=0.01\"],\n \"color\": [0.5, 0.6, 0.7]}\n";
+    spit(scene.s, json, sizeof json - 1);
+    assert_status(run("--threads 2 -v '%s' -o '%s' --scene '%s' --fog 'height:density=0.1:falloff=0.5' "
+                      "--fog-color \"0.5,0.5,0.5\"", sample(), o1.s, scene.s), 0);
+    assert_status(run("'%s' -o '%s' --fog 'exp:density=0.02:color=1,1,1' --aov T", o1.s, o2.s), 0);
+    exr_context_t c;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    assert_int_equal(exr_start_read(&c, o2.s, &init), 0);
+    int32_t n = 0;
+    const char *h = NULL;
+    assert_int_equal(exr_attr_get_string(c, 0, "exrfog/history", &n, &h), 0);
+    static char want[16384];
+    snprintf(want, sizeof want,
+             "exrfog " EXRFOG_VERSION ": exrfog %s --scene %s --fog height:density=0.1:falloff=0.5 "
+             "--fog-color 0.5,0.5,0.5\n"
+             "  scene %s:\n"
+             "    {\"fog\": [\"exp:density=0.01\"],\n"
+             "     \"color\": [0.5, 0.6, 0.7]}\n"
+             "exrfog " EXRFOG_VERSION ": exrfog %s --fog exp:density=0.02:color=1,1,1 --aov T",
+             sample(), scene.s, scene.s, o1.s);
+    if (strcmp(h, want))
+        fail_msg("exrfog/history is\n%s\nexpected\n%s", h, want);
+    exr_finish(&c);
+    /* Quoting: a path with a space and a quote, as a POSIX shell reads it back. */
+    path_t odd = pth("history/it's a scene.json");
+    spit(odd.s, json, sizeof json - 1);
+    assert_status(run("'%s' -o '%s' --scene \"%s\"", sample(), o3.s, odd.s), 0);
+    assert_int_equal(exr_start_read(&c, o3.s, &init), 0);
+    assert_int_equal(exr_attr_get_string(c, 0, "exrfog/history", &n, &h), 0);
+    static char q[4096];
+    snprintf(q, sizeof q, " --scene '%.*s'\\''s a scene.json'\n", (int) (strstr(odd.s, "it's") - odd.s + 2), odd.s);
+    if (!strstr(h, q))
+        fail_msg("exrfog/history lacks %s:\n%s", q, h);
+    exr_finish(&c);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2472,6 +2519,7 @@ int main(void)
         cmocka_unit_test(test_messages),
         cmocka_unit_test(test_nonconforming_multipart),
         cmocka_unit_test(test_nonfinite_alpha),
+        cmocka_unit_test(test_history),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

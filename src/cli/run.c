@@ -19,6 +19,8 @@
 #include "preview.h"
 #include "recon.h"
 #include "scene.h"
+#include "scene_file.h"
+#include "version.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
  * bytes there are not one (overlong, surrogate, beyond U+10FFFF, cut). */
@@ -226,6 +228,109 @@ static void print_tau_stats(const ef_fog_scene *s, const ef_tau_stats *st)
     }
 }
 
+/* Appends s to the buffer b (growing it); returns -1 when out of memory. */
+static int grow(char **b, size_t *len, size_t *cap, const char *s, size_t n)
+{
+    if (*len + n + 1 > *cap) {
+        size_t c = *cap ? *cap : 256;
+        while (*len + n + 1 > c)
+            c *= 2;
+        char *nb = realloc(*b, c);
+        if (!nb)
+            return -1;
+        *b = nb;
+        *cap = c;
+    }
+    memcpy(*b + *len, s, n);
+    *len += n;
+    (*b)[*len] = '\0';
+    return 0;
+}
+
+/* Appends a, quoted for a POSIX shell when it needs it. */
+static int grow_quoted(char **b, size_t *len, size_t *cap, const char *a)
+{
+    int plain = a[0] != '\0';
+    for (const char *c = a; *c; ++c)
+        plain &= (*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || (*c >= '0' && *c <= '9') ||
+                 strchr("_@%+=:,./-", *c) != NULL;
+    if (plain)
+        return grow(b, len, cap, a, strlen(a));
+    if (grow(b, len, cap, "'", 1))
+        return -1;
+    for (const char *c = a; *c; ++c)
+        if (*c == '\'' ? grow(b, len, cap, "'\\''", 4) : grow(b, len, cap, c, 1))
+            return -1;
+    return grow(b, len, cap, "'", 1);
+}
+
+/* Whether argv[i] is an option that cannot change the output file (and
+ * the number of arguments it takes with it): left out of the history so
+ * that equal outputs get equal headers whatever the threads, messages,
+ * preview or output name. */
+static int history_skip(char **argv, int argc, int i)
+{
+    const char *a = argv[i];
+    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o" };
+    static const char *const alone[] = { "--stats", "--verbose", "--quiet" };
+    for (size_t k = 0; k < sizeof with_arg / sizeof with_arg[0]; ++k) {
+        const size_t n = strlen(with_arg[k]);
+        if (!strcmp(a, with_arg[k]))
+            return i + 1 < argc ? 2 : 1;
+        if (!strncmp(a, with_arg[k], n) && (a[n] == '=' || (n == 2 && a[n])))
+            return 1;
+    }
+    for (size_t k = 0; k < sizeof alone / sizeof alone[0]; ++k)
+        if (!strcmp(a, alone[k]))
+            return 1;
+    if (a[0] == '-' && a[1] && a[1] != '-' && strspn(a + 1, "vq") == strlen(a + 1))
+        return 1;
+    return 0;
+}
+
+/* The line this run adds to exrfog/history: the version, the command line
+ * shell-quoted (less what cannot change the output) and the scene file's
+ * contents, indented. NULL when out of memory. */
+static char *history_line(int argc, char **argv, const char *scene_file, ef_err *err)
+{
+    char *b = NULL;
+    size_t len = 0, cap = 0;
+    if (grow(&b, &len, &cap, "exrfog " EXRFOG_VERSION ":", strlen("exrfog " EXRFOG_VERSION ":")))
+        return NULL;
+    for (int i = 0; i < argc;) {
+        const int skip = i ? history_skip(argv, argc, i) : 0;
+        if (skip) {
+            i += skip;
+            continue;
+        }
+        if (grow(&b, &len, &cap, " ", 1) || grow_quoted(&b, &len, &cap, i ? argv[i] : "exrfog")) {
+            free(b);
+            return NULL;
+        }
+        ++i;
+    }
+    if (scene_file) {
+        char *text = NULL;
+        if (ef_read_text_file(scene_file, &text, err) == 0) {
+            int fail = grow(&b, &len, &cap, "\n  scene ", 9) ||
+                       grow(&b, &len, &cap, scene_file, strlen(scene_file)) ||
+                       grow(&b, &len, &cap, ":", 1);
+            for (const char *l = text; !fail && *l;) {
+                const char *nl = strchr(l, '\n');
+                const size_t n = nl ? (size_t) (nl - l) : strlen(l);
+                fail = grow(&b, &len, &cap, "\n    ", 5) || grow(&b, &len, &cap, l, n);
+                l += n + (nl != NULL);
+            }
+            free(text);
+            if (fail) {
+                free(b);
+                return NULL;
+            }
+        }
+    }
+    return b;
+}
+
 static int cpu_count(void)
 {
     long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -236,8 +341,16 @@ int ef_main(int argc, char **argv)
 {
     static ef_options o;
     ef_err err = {0};
+    /* The command line as typed, for the history: getopt permutes argv. */
+    char **typed = malloc(((size_t) argc + 1) * sizeof *typed);
+    if (!typed) {
+        fputs("exrfog: out of memory\n", stderr);
+        return 1;
+    }
+    memcpy(typed, argv, ((size_t) argc + 1) * sizeof *typed);
     ef_parse_result pr = ef_options_parse(argc, argv, &o, &err);
     if (pr != EF_PARSE_RUN) {
+        free(typed);
         ef_options_free(&o);
         if (pr == EF_PARSE_EXIT)
             return 0;
@@ -263,6 +376,7 @@ int ef_main(int argc, char **argv)
     const int naov = ef_aov_channels(o.aov, aov_names);
     int status = 1;
     ef_output out, pv;
+    char *history = NULL;
     out.fd = pv.fd = -1;
     out.tmp[0] = pv.tmp[0] = '\0';
     if (!o.explain) {
@@ -384,6 +498,12 @@ int ef_main(int argc, char **argv)
             fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
                             "output part is single-level\n", o.input, p);
 
+    history = history_line(argc, typed, o.scene_file, &err);
+    if (!history) {
+        ef_fail(&err, "out of memory for the history attribute");
+        report(o.output, &err, 1);
+        goto done;
+    }
     /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
     const int cpus = cpu_count();
     if (o.threads > cpus && o.verbose)
@@ -395,6 +515,7 @@ int ef_main(int argc, char **argv)
                           .depth_name = df == &in ? plan.depth.name : NULL,
                           .depth_part = plan.depth.part,
                           .param_attr = o.params,
+                          .history = history,
                           .extra = aov_names,
                           .nextra = naov,
                           .has_origin_attr = o.has_aov_origin,
@@ -441,6 +562,8 @@ int ef_main(int argc, char **argv)
         print_tau_stats(&o.scene, job.stats);
     }
 done:
+    free(history);
+    free(typed);
     ef_output_abort(&pv);
     ef_output_abort(&out);
     free(job.preview);

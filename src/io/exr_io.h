@@ -95,6 +95,7 @@ typedef struct ef_stream_opts {
     const char *depth_name;   /* the depth channel exrfog reads in INPUT, or NULL */
     int depth_part;           /* and its part */
     const char *param_attr;   /* value of the exrfog/parameters string attribute */
+    const char *history;      /* this run's line of exrfog/history, appended to the input's */
     /* New channels of the colour part, FLOAT (HALF when pixel_type is
      * HALF), filled by the callback; names must not be in the part yet. */
     const char *const *extra;

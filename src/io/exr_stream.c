@@ -587,6 +587,23 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
         return ef_fail(err, "cannot set the zip level of part %d", p);
     if (o->param_attr && exr_attr_set_string(out, p, "exrfog/parameters", o->param_attr))
         return ef_fail(err, "cannot record exrfog/parameters");
+    if (o->history) {
+        /* Earlier passes' lines first, as oiiotool appends to ImageHistory. */
+        const exr_attribute_t *h = NULL;
+        const char *prev = NULL;
+        if (exr_get_attribute_by_name(in->ctx, p, "exrfog/history", &h) == EXR_ERR_SUCCESS &&
+            h->type == EXR_ATTR_STRING && h->string && h->string->str && h->string->length > 0)
+            prev = h->string->str;
+        const size_t n = (prev ? strlen(prev) + 1 : 0) + strlen(o->history) + 1;
+        char *v = malloc(n);
+        if (!v)
+            return ef_fail(err, "out of memory");
+        snprintf(v, n, "%s%s%s", prev ? prev : "", prev ? "\n" : "", o->history);
+        const int bad = exr_attr_set_string(out, p, "exrfog/history", v) != EXR_ERR_SUCCESS;
+        free(v);
+        if (bad)
+            return ef_fail(err, "cannot record exrfog/history: %s", ef_exr_last_core_message());
+    }
     /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
      * (EXR_ATTR_OPAQUE); declare those first so the copy skips them. */
     int32_t na = 0;
