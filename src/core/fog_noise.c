@@ -1021,6 +1021,8 @@ static const double e_rms[9] = { 0, 0.149, 0.034, 6.0e-3, 7.2e-4, 6.8e-5, 5.0e-6
  * (documented: a scale far below the ray's length is integrated
  * statistically beyond it, so the work per pixel stays bounded). */
 #define CELL_BUDGET 65536
+/* The same where the density is not linear in the noise (clamp, separable). */
+#define CELL_BUDGET_FULL 8192
 /* Steps of the midpoint march that replaces a walk past the budget where
  * the density is not linear in the noise (clamp, separable). */
 #define MARCH_FALLBACK 4096
@@ -1700,9 +1702,13 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         unsigned over = 0;
         double over_err = 0;
         const double cross = fabs(r->dir[0]) + fabs(r->dir[1]) + fabs(r->dir[2]);
+        /* The clamped and separable densities are integrated piece by
+         * piece between the faces of every octave (~300 evaluations per
+         * finest cell), so their budget is smaller. */
+        const double budget = linear ? CELL_BUDGET : CELL_BUDGET_FULL;
         for (int i = 0; i < s->fbm.octaves; ++i) {
             const double lambda = s->scale / s->fbm.freq[i];
-            if (!(L * cross / lambda <= CELL_BUDGET)) {
+            if (!(L * cross / lambda <= budget)) {
                 over |= 1u << i;
                 over_err += fabs(s->contrast) * envmax * s->fbm.weight[i] *
                             fmin(EF_NOISE_BOUND * L, 3 * LINE_RMS * sqrt(L * lambda));
