@@ -2461,6 +2461,45 @@ static void test_history(void **state)
     exr_finish(&c);
 }
 
+/* Silent traps warned (issue 9): a Nuke render's depth.Z read as planar,
+ * and a V-Ray (Z-up) camera with height fog on the default y axis. Each
+ * warning goes away with the flag it suggests, and with -q. */
+static void test_trap_warnings(void **state)
+{
+    (void) state;
+    fresh_dir("traps");
+    path_t nk = pth("traps/nuke.exr"), vr = pth("traps/vray.exr"), out = pth("traps/out.exr");
+    frame_t f;
+    frame_alloc(&f, 16, 8);
+    tu_part p;
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_HALF);
+    add_camera(&p, 40);
+    p.str_name = "nuke/version";
+    p.str_value = "13.1v2";
+    write_part(nk.s, &p);
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_HALF);
+    p.m44[0].name = "cameraTransform";
+    memcpy(p.m44[0].m, ID16, sizeof ID16);
+    p.f[0].name = "cameraFov";
+    p.f[0].v = 40;
+    write_part(vr.s, &p);
+    frame_free(&f);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.1", nk.s, out.s), 0);
+    assert_err_has("--depth-mode inverse");
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.1 --depth-mode planar", nk.s, out.s), 0);
+    assert_null(strstr(g_err, "warning"));
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.1 -q", nk.s, out.s), 0);
+    assert_null(strstr(g_err, "warning"));
+    assert_status(run("'%s' -o '%s' --fog height:density=0.1:falloff=0.2", vr.s, out.s), 0);
+    assert_err_has("--up-axis z");
+    assert_status(run("'%s' -o '%s' --fog height:density=0.1:falloff=0.2 --up-axis z", vr.s, out.s), 0);
+    assert_null(strstr(g_err, "warning"));
+    assert_status(run("'%s' -o '%s' --fog height:density=0.1:falloff=0.2:up=z", vr.s, out.s), 0);
+    assert_null(strstr(g_err, "warning"));
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.1", vr.s, out.s), 0);
+    assert_null(strstr(g_err, "warning"));
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2520,6 +2559,7 @@ int main(void)
         cmocka_unit_test(test_nonconforming_multipart),
         cmocka_unit_test(test_nonfinite_alpha),
         cmocka_unit_test(test_history),
+        cmocka_unit_test(test_trap_warnings),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

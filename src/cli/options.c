@@ -191,6 +191,7 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
             memcpy(s->color, sf.color, sizeof s->color);
         if (sf.has_up)
             memcpy(s->ctx.up, sf.up, sizeof s->ctx.up);
+        o->up_set |= sf.has_up;
         if (sf.has_units)
             s->ctx.units_per_meter = sf.units;
         if (sf.has_time)
@@ -209,6 +210,7 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
         memcpy(s->color, f->color, sizeof s->color);
     if (f->has_up)
         memcpy(s->ctx.up, f->up, sizeof s->ctx.up);
+    o->up_set |= f->has_up;
     if (f->has_units)
         s->ctx.units_per_meter = f->units;
     if (f->has_time)
@@ -302,6 +304,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         case OPT_DEPTH_CHANNEL: o->depth_channel = a; break;
         case OPT_PREVIEW: o->preview = a; break;
         case OPT_DEPTH_MODE:
+            o->depth_mode_set = 1;
             if (ef_depth_mode_parse(a, &o->depth_mode))
                 return ef_fail(err, "--depth-mode '%s' is not one of planar, radial, inverse, "
                                     "normalized, gl-ndc, gl-window, zero-one, reversed, "

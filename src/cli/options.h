@@ -10,6 +10,8 @@
 typedef struct ef_options {
     const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;
     ef_depth_mode depth_mode;
+    int depth_mode_set;       /* --depth-mode was given */
+    int up_set;               /* --up-axis or the scene file's "up" was given */
     ef_fog_scene scene;
     ef_cam_flags cam;
     int compression;          /* -1: keep the input's */

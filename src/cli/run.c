@@ -331,6 +331,32 @@ static char *history_line(int argc, char **argv, const char *scene_file, ef_err 
     return b;
 }
 
+static void warn(const char *file, const char *msg)
+{
+    fputs("exrfog: ", stderr);
+    put_clean(file);
+    fputs(": warning: ", stderr);
+    fputs(msg, stderr);
+    fputc('\n', stderr);
+}
+
+/* Silent traps of real renders, each with its fix: Nuke's depth.Z is 1/z;
+ * V-Ray's world is Z-up while the height models default to y. */
+static void warn_traps(const ef_options *o, const ef_exr_file *in, int part, const ef_camera *cam)
+{
+    if (!o->depth_mode_set && ef_exr_has_attr(in, part, "nuke/version"))
+        warn(o->input, "a Nuke render (nuke/version): Nuke's ScanlineRender writes depth.Z as "
+                       "1/z, read here as planar depth; pass --depth-mode inverse if the fog looks "
+                       "wrong (--depth-mode planar keeps this reading and silences the warning)");
+    int height = 0;
+    for (int i = 0; i < o->scene.ncomp; ++i)
+        height |= o->scene.comp[i].model->uses_up && !o->scene.comp[i].has_up;
+    if (height && !o->up_set && strstr(cam->src_pose, "cameraTransform"))
+        warn(o->input, "the camera is V-Ray's (cameraTransform), whose world is Z-up, and the "
+                       "height fog uses y as up; pass --up-axis z (or --up-axis y to keep y and "
+                       "silence this)");
+}
+
 static int cpu_count(void)
 {
     long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -452,6 +478,8 @@ int ef_main(int argc, char **argv)
         put_clean(cam.warning);
         fputc('\n', stderr);
     }
+    if (!o.quiet && !o.explain)
+        warn_traps(&o, &in, plan.rgb[0].part, &cam);
     int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
     if (o.explain) {
         explain(stdout, &o, &in, &plan, &cam, &conv, conv_ok);

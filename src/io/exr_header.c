@@ -364,3 +364,9 @@ int ef_exr_read_cam_meta(const ef_exr_file *f, int p, ef_cam_meta *m, ef_err *er
                ? -1
                : 0;
 }
+
+int ef_exr_has_attr(const ef_exr_file *f, int part, const char *name)
+{
+    const exr_attribute_t *a;
+    return exr_get_attribute_by_name(f->ctx, part, name, &a) == EXR_ERR_SUCCESS;
+}

@@ -123,6 +123,9 @@ int ef_exr_stream_file(const ef_exr_file *in, const ef_exr_file *depth_file,
                        const ef_stream_opts *opts, ef_chunk_fn fn, void *user,
                        ef_stream_stats *stats, ef_err *err);
 
+/* Whether part p of f has an attribute of this name. */
+int ef_exr_has_attr(const ef_exr_file *f, int part, const char *name);
+
 /* Whether -d half must leave channel name in float: depth (Z, *.Z,
  * *.ZBack, depth...), positions (P.*, position.*, fog_P.*), ids (id.*,
  * *Id.*, Cryptomatte). */
