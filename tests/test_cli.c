@@ -2500,6 +2500,38 @@ static void test_trap_warnings(void **state)
     assert_null(strstr(g_err, "warning"));
 }
 
+/* OUTPUT's extension chooses the format (issue 9): .tif/.png through
+ * OpenImageIO with the fogged colour and alpha (a TIFF's float values equal
+ * the EXR run's R,G,B,A, compared by oiiotool --diff); an extension no
+ * writer knows, or AOVs with a colour-only format, is a usage error before
+ * any work, and never an EXR under another name. */
+static void test_output_formats(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("formats");
+    path_t exr = pth("formats/out.exr"), tif = pth("formats/out.tif"), png = pth("formats/out.png"),
+           foo = pth("formats/out.foo");
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05", sample(), exr.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05", sample(), tif.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05", sample(), png.s), 0);
+    size_t n;
+    unsigned char *d = slurp(png.s, &n);
+    static const unsigned char sig[8] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n' };
+    assert_true(d && n > 8 && !memcmp(d, sig, 8));
+    free(d);
+    if (system("command -v oiiotool >/dev/null 2>&1") == 0) {
+        char cmd[5000];
+        snprintf(cmd, sizeof cmd, "oiiotool '%s' --ch R,G,B,A '%s' --diff --fail 0 >/dev/null 2>&1",
+                 exr.s, tif.s);
+        assert_int_equal(system(cmd), 0);
+    }
+    assert_int_equal(dir_count(dir.s), 3);
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.05", sample(), foo.s);
+    assert_err_has("no writer");
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.05 --aov T", sample(), png.s);
+    assert_err_has("--aov needs an EXR");
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2560,6 +2592,7 @@ int main(void)
         cmocka_unit_test(test_nonfinite_alpha),
         cmocka_unit_test(test_history),
         cmocka_unit_test(test_trap_warnings),
+        cmocka_unit_test(test_output_formats),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

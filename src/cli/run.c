@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -401,10 +402,16 @@ int ef_main(int argc, char **argv)
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     const int naov = ef_aov_channels(o.aov, aov_names);
     int status = 1;
-    ef_output out, pv;
+    ef_output out, pv, mid;
     char *history = NULL;
-    out.fd = pv.fd = -1;
-    out.tmp[0] = pv.tmp[0] = '\0';
+    out.fd = pv.fd = mid.fd = -1;
+    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = '\0';
+    /* OUTPUT's extension chooses the format: .exr (or none) is written here,
+     * anything else through OpenImageIO from an EXR beside it. */
+    const char *ext = o.output ? strrchr(o.output, '.') : NULL;
+    if (ext && strchr(ext, '/'))
+        ext = NULL;
+    const int foreign = ext && strcasecmp(ext, ".exr") != 0;
     if (!o.explain) {
         /* Everything about the destinations is checked, and their temporary
          * files made, before a pixel is read. */
@@ -432,9 +439,28 @@ int ef_main(int argc, char **argv)
                 goto done;
             }
         }
-        const int rc = ef_output_open(&out, o.output, NULL, &err);
+        if (foreign) {
+            char msg[512];
+            if (naov) {
+                ef_fail(&err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
+                              "colour and alpha only", ext);
+                status = report(o.output, &err, 2);
+                goto done;
+            }
+            if (ef_preview_check(o.output, msg, sizeof msg)) {
+                ef_fail(&err, "no writer for '%s' files (exrfog writes .exr itself, and through "
+                              "OpenImageIO .tif, .png, .jpg, .dpx and the rest): %s", ext, msg);
+                status = report(o.output, &err, 2);
+                goto done;
+            }
+        }
+        const int rc = ef_output_open(&out, o.output, foreign ? ext : NULL, &err);
         if (rc) {
             status = report(o.output, &err, rc);
+            goto done;
+        }
+        if (foreign && (status = ef_output_open(&mid, o.output, ".exr", &err)) != 0) {
+            status = report(o.output, &err, status);
             goto done;
         }
     }
@@ -554,9 +580,27 @@ int ef_main(int argc, char **argv)
         fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
                 so.threads > 1 ? "s" : "");
     }
-    if (ef_exr_stream(&in, df, &plan, o.output, out.fd, &so, fog_chunk, &job, &st, &err)) {
+    if (ef_exr_stream(&in, df, &plan, o.output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
+                      &st, &err)) {
         report(o.output, &err, 1);
         goto done;
+    }
+    if (foreign) {
+        /* Colour and alpha of the fogged part, in OUTPUT's format. */
+        const char *names[4] = { plan.rgb[0].name, plan.rgb[1].name, plan.rgb[2].name,
+                                 plan.alpha.part >= 0 ? plan.alpha.name : NULL };
+        char msg[512];
+        close(mid.fd);
+        mid.fd = -1;
+        close(out.fd);
+        out.fd = -1;
+        if (ef_oiio_convert_exr(mid.tmp, plan.rgb[0].part, names, names[3] ? 4 : 3, out.tmp, msg,
+                                sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            report(o.output, &err, 1);
+            goto done;
+        }
+        ef_output_abort(&mid);
     }
     if (job.preview) {
         /* The preview goes in place first: when it fails, OUTPUT (which
@@ -592,6 +636,7 @@ int ef_main(int argc, char **argv)
 done:
     free(history);
     free(typed);
+    ef_output_abort(&mid);
     ef_output_abort(&pv);
     ef_output_abort(&out);
     free(job.preview);

@@ -74,3 +74,21 @@ int ef_preview_check(const char *path, char *err, size_t errlen)
     dlclose(mod);
     return rc;
 }
+
+int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
+                        const char *dst, char *err, size_t errlen)
+{
+    void *mod = load_module(err, errlen);
+    if (!mod)
+        return -1;
+    int (*fn)(const char *, int, const char *const *, int, const char *, char *, size_t);
+    *(void **) &fn = dlsym(mod, "ef_oiio_convert");
+    if (!fn) {
+        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_convert");
+        dlclose(mod);
+        return -1;
+    }
+    int rc = fn(src, part, names, n, dst, err, errlen);
+    dlclose(mod);
+    return rc;
+}

@@ -17,6 +17,12 @@ int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, c
  * writing nothing. Returns 0, or -1 with a message in err. */
 int ef_preview_check(const char *path, char *err, size_t errlen);
 
+/* Writes channels names[0..n) (R, G, B and maybe A) of part `part` of the
+ * EXR src to dst in the format of dst's extension, through OpenImageIO.
+ * Returns 0, or -1 with a message in err. */
+int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
+                        const char *dst, char *err, size_t errlen);
+
 #ifdef __cplusplus
 }
 #endif

@@ -4,7 +4,9 @@
 #include <OpenImageIO/imageio.h>
 
 #include <cstdio>
+#include <cstring>
 #include <exception>
+#include <vector>
 
 extern "C" __attribute__((visibility("default"))) int
 ef_oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb, char *err,
@@ -52,4 +54,73 @@ ef_oiio_can_write(const char *path, char *err, size_t errlen)
 extern "C" __attribute__((visibility("default"))) const char *ef_oiio_version(void)
 {
     return OIIO_VERSION_STRING;
+}
+
+// Writes channels names[0..n) of subimage `part` of the EXR src to dst,
+// in the format dst's extension names (colour and alpha of a fogged frame:
+// --output with a non-EXR name). Values go as float; the writer converts
+// to what its format holds.
+extern "C" __attribute__((visibility("default"))) int
+ef_oiio_convert(const char *src, int part, const char *const *names, int n, const char *dst,
+                char *err, size_t errlen)
+{
+    try {
+        auto in = OIIO::ImageInput::open(src);
+        if (!in || !in->seek_subimage(part, 0)) {
+            std::snprintf(err, errlen, "cannot read the fogged frame back: %s",
+                          in ? in->geterror().c_str() : OIIO::geterror().c_str());
+            return -1;
+        }
+        const OIIO::ImageSpec is = in->spec();
+        std::vector<int> idx;
+        for (int k = 0; k < n; ++k) {
+            int at = -1;
+            for (int c = 0; c < is.nchannels; ++c)
+                if (is.channelnames[c] == names[k])
+                    at = c;
+            if (at < 0) {
+                std::snprintf(err, errlen, "the fogged frame has no channel %s", names[k]);
+                return -1;
+            }
+            idx.push_back(at);
+        }
+        const size_t npx = (size_t) is.width * (size_t) is.height;
+        std::vector<float> all(npx * (size_t) is.nchannels), sel(npx * (size_t) n);
+        if (!in->read_image(part, 0, 0, is.nchannels, OIIO::TypeDesc::FLOAT, all.data())) {
+            std::snprintf(err, errlen, "cannot read the fogged frame back: %s",
+                          in->geterror().c_str());
+            return -1;
+        }
+        for (size_t i = 0; i < npx; ++i)
+            for (int k = 0; k < n; ++k)
+                sel[i * (size_t) n + (size_t) k] = all[i * (size_t) is.nchannels + (size_t) idx[(size_t) k]];
+        auto out = OIIO::ImageOutput::create(dst);
+        if (!out) {
+            std::snprintf(err, errlen, "no writer for this format: %s", OIIO::geterror().c_str());
+            return -1;
+        }
+        OIIO::ImageSpec os(is.width, is.height, n, OIIO::TypeDesc::FLOAT);
+        static const char *const rgba[4] = { "R", "G", "B", "A" };
+        os.channelnames.clear();
+        for (int k = 0; k < n; ++k)
+            os.channelnames.push_back(rgba[k < 4 ? k : 3]);
+        os.alpha_channel = n == 4 ? 3 : -1;
+        if (out->supports("origin")) {
+            os.x = is.x;
+            os.y = is.y;
+            os.full_x = is.full_x;
+            os.full_y = is.full_y;
+            os.full_width = is.full_width;
+            os.full_height = is.full_height;
+        }
+        if (!out->open(dst, os) || !out->write_image(OIIO::TypeDesc::FLOAT, sel.data()) ||
+            !out->close()) {
+            std::snprintf(err, errlen, "cannot write it: %s", out->geterror().c_str());
+            return -1;
+        }
+        return 0;
+    } catch (const std::exception &e) {
+        std::snprintf(err, errlen, "cannot write it: %s", e.what());
+        return -1;
+    }
 }
