@@ -2532,6 +2532,35 @@ static void test_output_formats(void **state)
     assert_err_has("--aov needs an EXR");
 }
 
+/* -d CHANNEL=TYPE as oiiotool (issue 9): per-channel types over -d TYPE,
+ * the last one naming a channel winning; a name-less override is a usage
+ * error. */
+static void test_data_type_per_channel(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("dtype");
+    path_t out = pth("dtype/out.exr");
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 -d half -d Z=half -d A=half -d A=float",
+                      sample(), out.s), 0);
+    tu_image b;
+    assert_int_equal(tu_read_image(out.s, 0, &b), 0);
+    static const struct { const char *ch; exr_pixel_type_t t; } want[] = {
+        { "R", EXR_PIXEL_HALF }, { "G", EXR_PIXEL_HALF }, { "B", EXR_PIXEL_HALF },
+        { "A", EXR_PIXEL_FLOAT }, { "Z", EXR_PIXEL_HALF },
+    };
+    for (size_t k = 0; k < sizeof want / sizeof want[0]; ++k) {
+        const int at = tu_image_find(&b, want[k].ch);
+        if (at < 0 || b.type[at] != want[k].t)
+            fail_msg("channel %s: type %d, want %d", want[k].ch, at < 0 ? -1 : (int) b.type[at],
+                     (int) want[k].t);
+    }
+    tu_image_free(&b);
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.05 -d =half", sample(),
+                  out.s);
+    check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.05 -d Z=double", sample(),
+                  out.s);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2593,6 +2622,7 @@ int main(void)
         cmocka_unit_test(test_history),
         cmocka_unit_test(test_trap_warnings),
         cmocka_unit_test(test_output_formats),
+        cmocka_unit_test(test_data_type_per_channel),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -94,7 +94,8 @@ void ef_options_usage(FILE *out)
             "      --near N, --far F    clip planes for the buffer depth modes\n"
             "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's);\n"
             "                           zip:LEVEL, zips:LEVEL with zlib level 1-9\n"
-            "  -d, --data-type T        half|float output for half/float channels\n"
+            "  -d, --data-type T        half|float output for half/float channels (depth,\n"
+            "                           P and ids stay float), or CHANNEL=half|float\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
             "      --preview FILE       also write an sRGB preview (PNG, JPEG, ...)\n"
             "      --explain            print the resolved camera and conventions, write nothing\n"
@@ -381,14 +382,31 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
             if (ef_compression_parse(a, &o->compression, &o->zip_level, err))
                 return EF_PARSE_USAGE;
             break;
-        case 'd':
-            if (!strcmp(a, "half"))
-                o->pixel_type = EXR_PIXEL_HALF;
-            else if (!strcmp(a, "float"))
-                o->pixel_type = EXR_PIXEL_FLOAT;
+        case 'd': {
+            /* TYPE for every half/float channel, or CHANNEL=TYPE for one */
+            const char *eq = strrchr(a, '='), *ty = eq ? eq + 1 : a;
+            int t;
+            if (!strcmp(ty, "half"))
+                t = EXR_PIXEL_HALF;
+            else if (!strcmp(ty, "float"))
+                t = EXR_PIXEL_FLOAT;
             else
-                return ef_fail(err, "--data-type '%s' is not half or float", a), EF_PARSE_USAGE;
+                return ef_fail(err, "--data-type '%s' is not half, float or CHANNEL=half|float",
+                               a), EF_PARSE_USAGE;
+            if (!eq) {
+                o->pixel_type = t;
+            } else if (eq == a) {
+                return ef_fail(err, "--data-type '%s' names no channel (write CHANNEL=%s)", a, ty),
+                       EF_PARSE_USAGE;
+            } else {
+                if (o->nchan_type >= EF_MAX_CHAN_TYPES)
+                    return ef_fail(err, "too many --data-type CHANNEL=TYPE (at most %d)",
+                                   EF_MAX_CHAN_TYPES), EF_PARSE_USAGE;
+                o->chan_type_name[o->nchan_type] = a;   /* "NAME=TYPE": compared up to '=' */
+                o->chan_type[o->nchan_type++] = t;
+            }
             break;
+        }
         case OPT_THREADS: {
             char *end;
             long n = strtol(a, &end, 10);

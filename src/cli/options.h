@@ -7,6 +7,8 @@
 #include "error.h"
 #include "scene.h"
 
+#define EF_MAX_CHAN_TYPES 64
+
 typedef struct ef_options {
     const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;
     ef_depth_mode depth_mode;
@@ -17,6 +19,9 @@ typedef struct ef_options {
     int compression;          /* -1: keep the input's */
     int zip_level;            /* -1: OpenEXRCore's default */
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
+    /* -d CHANNEL=TYPE, as oiiotool: per-channel types over pixel_type */
+    const char *chan_type_name[EF_MAX_CHAN_TYPES];
+    int chan_type[EF_MAX_CHAN_TYPES], nchan_type;
     int threads;              /* 0: all cores */
     int explain, stats, verbose, quiet;
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */

@@ -93,6 +93,9 @@ typedef struct ef_stream_opts {
     int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep;
                                  HALF never demotes ef_data_channel()s nor the depth read */
     const char *depth_name;   /* the depth channel exrfog reads in INPUT, or NULL */
+    const char *const *chan_type_name;   /* "NAME=TYPE" overrides (-d NAME=TYPE), */
+    const int *chan_type;                /* their types, */
+    int nchan_type;                      /* and how many */
     int depth_part;           /* and its part */
     const char *param_attr;   /* value of the exrfog/parameters string attribute */
     const char *history;      /* this run's line of exrfog/history, appended to the input's */

@@ -534,6 +534,20 @@ int ef_data_channel(const char *name)
     return 0;
 }
 
+/* -d NAME=TYPE: the last override naming this channel wins; uint stays. */
+static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, exr_pixel_type_t t)
+{
+    if (t == EXR_PIXEL_UINT)
+        return t;
+    const size_t n = strlen(name);
+    for (int k = 0; k < o->nchan_type; ++k) {
+        const char *e = strrchr(o->chan_type_name[k], '=');
+        if (e && (size_t) (e - o->chan_type_name[k]) == n && !strncmp(o->chan_type_name[k], name, n))
+            t = (exr_pixel_type_t) o->chan_type[k];
+    }
+    return t;
+}
+
 static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colour,
                        const ef_stream_opts *o, ef_err *err)
 {
@@ -564,15 +578,17 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
                           (o->depth_name && p == o->depth_part && !strcmp(e->name.str, o->depth_name)));
         if (o->pixel_type >= 0 && t != EXR_PIXEL_UINT && !keep)
             t = (exr_pixel_type_t) o->pixel_type;
+        t = named_type(o, e->name.str, t);
         if (exr_add_channel(out, p, e->name.str, t, e->p_linear ? EXR_PERCEPTUALLY_LINEAR
                                                                 : EXR_PERCEPTUALLY_LOGARITHMIC,
                             1, 1))
             return ef_fail(err, "cannot add channel '%s'", e->name.str);
     }
     for (int c = 0; colour && c < o->nextra; ++c) {
-        const exr_pixel_type_t t = o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(o->extra[c])
-                                       ? EXR_PIXEL_HALF
-                                       : EXR_PIXEL_FLOAT;
+        const exr_pixel_type_t t =
+            named_type(o, o->extra[c], o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(o->extra[c])
+                                           ? EXR_PIXEL_HALF
+                                           : EXR_PIXEL_FLOAT);
         if (exr_add_channel(out, p, o->extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
             return ef_fail(err, "cannot add channel '%s': %s", o->extra[c], ef_exr_last_core_message());
     }
