@@ -2561,6 +2561,20 @@ static void test_data_type_per_channel(void **state)
                   out.s);
 }
 
+/* --focal-length with --aperture (issue 9): the field of view is
+ * 2 atan(36 / 70) = 54.4322 degrees for a 35 mm lens on a 36 mm back
+ * (by hand); one without the other, or with --fov, is a usage error. */
+static void test_focal_length(void **state)
+{
+    (void) state;
+    assert_status(run("'%s' --explain --focal-length 35 --aperture 36", sample()), 0);
+    if (!strstr(g_out, "54.4322"))
+        fail_msg("--explain does not show a 54.4322 degree field of view:\n%s", g_out);
+    assert_status(run("'%s' --explain --focal-length 35", sample()), 2);
+    assert_err_has("--aperture");
+    assert_status(run("'%s' --explain --focal-length 35 --aperture 36 --fov 40", sample()), 2);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2623,6 +2637,7 @@ int main(void)
         cmocka_unit_test(test_trap_warnings),
         cmocka_unit_test(test_output_formats),
         cmocka_unit_test(test_data_type_per_channel),
+        cmocka_unit_test(test_focal_length),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -4,6 +4,7 @@
 
 #include <float.h>
 #include <getopt.h>
+#include <math.h>
 #include <openexr.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,7 +19,7 @@ enum {
     OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
-    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN
+    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE
 };
 
 static const struct option long_opts[] = {
@@ -39,6 +40,8 @@ static const struct option long_opts[] = {
     { "world-to-camera", required_argument, NULL, OPT_W2C },
     { "camera-to-world", required_argument, NULL, OPT_C2W },
     { "fov", required_argument, NULL, OPT_FOV },
+    { "focal-length", required_argument, NULL, OPT_FOCAL },
+    { "aperture", required_argument, NULL, OPT_APERTURE },
     { "near", required_argument, NULL, OPT_NEAR },
     { "far", required_argument, NULL, OPT_FAR },
     { "compression", required_argument, NULL, OPT_COMPRESSION },
@@ -91,6 +94,8 @@ void ef_options_usage(FILE *out)
             "      --world-to-camera M  16 numbers, row-vector layout as in the file\n"
             "      --camera-to-world M  its inverse\n"
             "      --fov DEG            horizontal field of view\n"
+            "      --focal-length MM --aperture MM  the same from a lens and the film's\n"
+            "                           horizontal aperture (both needed)\n"
             "      --near N, --far F    clip planes for the buffer depth modes\n"
             "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's);\n"
             "                           zip:LEVEL, zips:LEVEL with zlib level 1-9\n"
@@ -247,7 +252,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
 static const struct {
     int opt, wide;
 } numeric_opts[] = { { OPT_FOG_COLOR, 0 }, { OPT_UP_AXIS, 0 }, { OPT_UNITS, 0 }, { OPT_TIME, 0 },
-                     { OPT_AOV_ORIGIN, 0 }, { OPT_FOV, 0 }, { OPT_NEAR, 0 }, { OPT_FAR, 0 },
+                     { OPT_AOV_ORIGIN, 0 }, { OPT_FOV, 0 }, { OPT_FOCAL, 0 }, { OPT_APERTURE, 0 }, { OPT_NEAR, 0 }, { OPT_FAR, 0 },
                      { OPT_W2C, 1 }, { OPT_C2W, 1 } };
 
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
@@ -293,6 +298,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     optind = 0;
     opterr = 0;
     int c;
+    double focal = 0, aperture = 0;
     while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {
         const char *a = optarg;
         *cur_opt = c;
@@ -365,6 +371,15 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
             if (parse_matrix(a, &o->cam.c2w))
                 return ef_fail(err, "--camera-to-world '%s' is not 16 finite numbers", a), EF_PARSE_USAGE;
             break;
+        case OPT_FOCAL:
+        case OPT_APERTURE: {
+            double v;
+            if (ef_parse_numbers(a, &v, 1) || !(v > 0))
+                return ef_fail(err, "--%s '%s' is not a positive length in millimetres",
+                               c == OPT_FOCAL ? "focal-length" : "aperture", a), EF_PARSE_USAGE;
+            *(c == OPT_FOCAL ? &focal : &aperture) = v;
+            break;
+        }
         case OPT_FOV:
             if (parse_num(a, &o->cam.fov) || !(o->cam.fov.v > 0 && o->cam.fov.v < 180))
                 return ef_fail(err, "--fov '%s' is not an angle between 0 and 180 degrees", a),
@@ -437,6 +452,22 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         }
     }
     *cur_arg = NULL;   /* later errors are not about one option's number */
+    if ((focal > 0) != (aperture > 0))
+        return ef_fail(err, "--%s needs --%s too (the horizontal field of view is "
+                            "2 atan(aperture / (2 focal length)))",
+                       focal > 0 ? "focal-length" : "aperture", focal > 0 ? "aperture" : "focal-length"),
+               EF_PARSE_USAGE;
+    if (focal > 0) {
+        if (o->cam.fov.set)
+            return ef_fail(err, "--fov and --focal-length/--aperture both set the field of view; "
+                                "give one"), EF_PARSE_USAGE;
+        o->cam.fov.v = 2 * atan(aperture / (2 * focal)) * (180 / 3.14159265358979323846);
+        o->cam.fov.set = 1;
+        if (!(o->cam.fov.v > 0 && o->cam.fov.v < 180))
+            return ef_fail(err, "--focal-length %g with --aperture %g gives a field of view of %g "
+                                "degrees, not between 0 and 180", focal, aperture, o->cam.fov.v),
+                   EF_PARSE_USAGE;
+    }
     if (optind < argc)
         o->input = argv[optind++];
     if (optind < argc)
