@@ -2575,6 +2575,32 @@ static void test_focal_length(void **state)
     assert_status(run("'%s' --explain --focal-length 35 --aperture 36 --fov 40", sample()), 2);
 }
 
+/* --explain reports what it found before the first thing it could not
+ * find (issue 9): a frame without a camera still shows its channels and
+ * the scene, then the error; a frame without colour shows the scene. */
+static void test_explain_partial(void **state)
+{
+    (void) state;
+    fresh_dir("explainp");
+    path_t nocam = pth("explainp/nocam.exr"), nocol = pth("explainp/nocol.exr");
+    frame_t f;
+    frame_alloc(&f, 16, 8);
+    tu_part p;
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_HALF);
+    write_part(nocam.s, &p);
+    frame_part(&p, &f, 0x10, EXR_PIXEL_HALF);   /* Z only */
+    write_part(nocol.s, &p);
+    frame_free(&f);
+    assert_status(run("'%s' --explain --fog exp:density=0.02", nocam.s), 1);
+    if (!strstr(g_out, "camera: not resolved") || !strstr(g_out, "colour: R, G, B, alpha A") ||
+        !strstr(g_out, "depth: Z") || !strstr(g_out, "fog: exp:density=0.02"))
+        fail_msg("--explain without a camera printed:\n%s", g_out);
+    assert_err_has("no camera pose");
+    assert_status(run("'%s' --explain --fog exp:density=0.02", nocol.s), 1);
+    if (!strstr(g_out, "colour and depth: not found") || !strstr(g_out, "fog: exp:density=0.02"))
+        fail_msg("--explain without colour printed:\n%s", g_out);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2638,6 +2664,7 @@ int main(void)
         cmocka_unit_test(test_output_formats),
         cmocka_unit_test(test_data_type_per_channel),
         cmocka_unit_test(test_focal_length),
+        cmocka_unit_test(test_explain_partial),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

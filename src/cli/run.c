@@ -148,14 +148,30 @@ static void print_vec(FILE *out, const char *label, const double v[3], const cha
 }
 
 /* The resolved camera, channels and conventions, as --explain and -v show them. */
+static void explain_channels(FILE *out, const ef_options *o, const ef_channel_plan *plan,
+                             const ef_depth_conv *conv, int conv_ok);
+static void explain_scene(FILE *out, const ef_options *o, const ef_channel_plan *plan);
+
 static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const ef_channel_plan *plan,
                     const ef_camera *cam, const ef_depth_conv *conv, int conv_ok)
 {
     static const double fwd[3] = { 0, 0, 1 }, upc[3] = { 0, 1, 0 };
     double f[3], u[3];
+    fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
+    if (!plan) {
+        /* What was found before the first thing that was not. */
+        fprintf(out, "colour and depth: not found (see the error)\n");
+        explain_scene(out, o, NULL);
+        return;
+    }
+    if (!cam) {
+        fprintf(out, "camera: not resolved (see the error)\n");
+        explain_channels(out, o, plan, NULL, 0);
+        explain_scene(out, o, plan);
+        return;
+    }
     ef_camera_to_world_dir(cam, fwd, f);
     ef_camera_to_world_dir(cam, upc, u);
-    fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
     fprintf(out, "camera:\n");
     print_vec(out, "position", cam->pos, cam->src_pose);
     print_vec(out, "forward", f, NULL);
@@ -169,15 +185,28 @@ static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const
         fprintf(out, "  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
     if (cam->warning[0])
         fprintf(out, "  warning:    %s\n", cam->warning);
+    explain_channels(out, o, plan, conv, conv_ok);
+    explain_scene(out, o, plan);
+}
+
+/* The colour and depth channels --explain found, and the depth mode. */
+static void explain_channels(FILE *out, const ef_options *o, const ef_channel_plan *plan,
+                             const ef_depth_conv *conv, int conv_ok)
+{
     fprintf(out, "colour: %s, %s, %s%s%s (part %d)\n", plan->rgb[0].name, plan->rgb[1].name,
            plan->rgb[2].name, plan->alpha.part >= 0 ? ", alpha " : ", no alpha (alpha = 1)",
            plan->alpha.part >= 0 ? plan->alpha.name : "", plan->rgb[0].part);
     fprintf(out, "depth: %s (part %d%s%s), mode %s\n", plan->depth.name, plan->depth.part,
            o->depth_file ? " of " : "", o->depth_file ? o->depth_file : "",
            ef_depth_mode_name(o->depth_mode));
-    if (conv_ok && (conv->mode != EF_DEPTH_PLANAR && conv->mode != EF_DEPTH_RADIAL &&
-                    conv->mode != EF_DEPTH_INVERSE))
+    if (conv && conv_ok && (conv->mode != EF_DEPTH_PLANAR && conv->mode != EF_DEPTH_RADIAL &&
+                            conv->mode != EF_DEPTH_INVERSE))
         fprintf(out, "  clip planes near %.9g far %.9g  from %s\n", conv->near_, conv->far_, conv->src_clip);
+}
+
+/* What --explain says of the scene (none of it needs the file). */
+static void explain_scene(FILE *out, const ef_options *o, const ef_channel_plan *plan)
+{
     fprintf(out, "sky rule: depth non-finite, <= 0 (planar/radial/inverse), >= %g once linearised, or at "
            "the far plane (buffer modes)\n", EF_SKY_DISTANCE);
     if (o->scene.sky == EF_SKY_FOG)
@@ -198,7 +227,7 @@ static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const
     if (o->aov) {
         const char *names[EF_AOV_MAX_CHANNELS];
         const int n = ef_aov_channels(o->aov, names);
-        fprintf(out, "aov channels (part %d):", plan->rgb[0].part);
+        fprintf(out, "aov channels (part %d):", plan ? plan->rgb[0].part : -1);
         for (int i = 0; i < n; ++i)
             fprintf(out, " %s", names[i]);
         if (o->aov & EF_AOV_P)
@@ -476,6 +505,8 @@ int ef_main(int argc, char **argv)
         df = &dep;
     }
     if (ef_find_channels(&in, df, o.layer, o.depth_channel, &plan, &err)) {
+        if (o.explain)
+            explain(stdout, &o, &in, NULL, NULL, NULL, 0);
         report(o.input, &err, 1);
         goto done;
     }
@@ -493,6 +524,8 @@ int ef_main(int argc, char **argv)
         goto done;
     }
     if (ef_camera_resolve(&meta, &o.cam, &cam, &err)) {
+        if (o.explain)
+            explain(stdout, &o, &in, &plan, NULL, NULL, 0);
         /* A bad --world-to-camera is a usage error; a bad header is not. */
         status = report(o.input, &err, cam.flag_error ? 2 : 1);
         goto done;
