@@ -2601,6 +2601,50 @@ static void test_explain_partial(void **state)
         fail_msg("--explain without colour printed:\n%s", g_out);
 }
 
+/* A depth covering the whole frame beside a cropped colour render is
+ * cropped to match (issue 9): the output equals the run with a depth file
+ * cropped by hand to the colour's data window. */
+static void test_depth_covers_crop(void **state)
+{
+    (void) state;
+    fresh_dir("depthcrop");
+    path_t col = pth("depthcrop/colour.exr"), full = pth("depthcrop/full.exr"),
+           cut = pth("depthcrop/cut.exr"), o1 = pth("depthcrop/o1.exr"), o2 = pth("depthcrop/o2.exr");
+    frame_t f, c, z;
+    frame_alloc(&f, 16, 8);    /* the full frame's depth */
+    frame_alloc(&c, 8, 4);     /* colour of (4,2)-(11,5) */
+    frame_alloc(&z, 8, 4);     /* the same window of f's depth, by hand */
+    for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 8; ++x)
+            z.c[4][y * 8 + x] = f.c[4][(y + 2) * 16 + (x + 4)];
+    tu_part p;
+    frame_part(&p, &c, 0x0f, EXR_PIXEL_FLOAT);
+    add_camera(&p, 60);
+    p.dw[0] = 4; p.dw[1] = 2; p.dw[2] = 11; p.dw[3] = 5;
+    p.disp[0] = 0; p.disp[1] = 0; p.disp[2] = 15; p.disp[3] = 7;
+    write_part(col.s, &p);
+    frame_part(&p, &f, 0x10, EXR_PIXEL_FLOAT);
+    write_part(full.s, &p);
+    frame_part(&p, &z, 0x10, EXR_PIXEL_FLOAT);
+    p.dw[0] = 4; p.dw[1] = 2; p.dw[2] = 11; p.dw[3] = 5;
+    p.disp[0] = 0; p.disp[1] = 0; p.disp[2] = 15; p.disp[3] = 7;
+    write_part(cut.s, &p);
+    frame_free(&f);
+    frame_free(&c);
+    frame_free(&z);
+    assert_status(run("'%s' --depth '%s' -o '%s' --fog exp:density=0.1", col.s, full.s, o1.s), 0);
+    assert_status(run("'%s' --depth '%s' -o '%s' --fog exp:density=0.1", col.s, cut.s, o2.s), 0);
+    tu_image a, b;
+    assert_int_equal(tu_read_image(o1.s, 0, &a), 0);
+    assert_int_equal(tu_read_image(o2.s, 0, &b), 0);
+    for (int k = 0; k < 4; ++k) {
+        static const char *const ch[4] = { "R", "G", "B", "A" };
+        assert_int_equal(tu_compare_channel(&b, &a, ch[k], 0.0, 0), 0);
+    }
+    tu_image_free(&a);
+    tu_image_free(&b);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2665,6 +2709,7 @@ int main(void)
         cmocka_unit_test(test_data_type_per_channel),
         cmocka_unit_test(test_focal_length),
         cmocka_unit_test(test_explain_partial),
+        cmocka_unit_test(test_depth_covers_crop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -647,7 +647,7 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
     return 0;
 }
 
-/* The depth must cover exactly the colour pixels. */
+/* The depth must hold every colour pixel (it may hold more). */
 static int check_depth_window(const ef_exr_file *in, const ef_exr_file *df,
                               const ef_channel_plan *plan, ef_err *err)
 {
@@ -655,11 +655,15 @@ static int check_depth_window(const ef_exr_file *in, const ef_exr_file *df,
     if (exr_get_data_window(in->ctx, plan->rgb[0].part, &cw) ||
         exr_get_data_window(df->ctx, plan->depth.part, &dw))
         return ef_fail(err, "cannot read the data windows");
-    if (!memcmp(&cw, &dw, sizeof cw))
+    /* A depth that covers the colour's pixels (say the full frame beside a
+     * cropped render) is read where the colour is: the reader fetches any
+     * rectangle by absolute coordinates. */
+    if (dw.min.x <= cw.min.x && dw.min.y <= cw.min.y && dw.max.x >= cw.max.x &&
+        dw.max.y >= cw.max.y)
         return 0;
-    ef_fail(err, "the depth data window (%d,%d)-(%d,%d) [%dx%d] differs from the colour data "
-                 "window (%d,%d)-(%d,%d) [%dx%d] of %s; the depth must cover exactly the colour "
-                 "pixels (re-render or crop the depth to match)",
+    ef_fail(err, "the depth data window (%d,%d)-(%d,%d) [%dx%d] does not cover the colour data "
+                 "window (%d,%d)-(%d,%d) [%dx%d] of %s; the depth must hold every colour pixel "
+                 "(re-render it, or give the depth of the whole frame)",
             dw.min.x, dw.min.y, dw.max.x, dw.max.y, dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1,
             cw.min.x, cw.min.y, cw.max.x, cw.max.y, cw.max.x - cw.min.x + 1, cw.max.y - cw.min.y + 1,
             in->path);
