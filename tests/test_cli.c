@@ -2645,6 +2645,37 @@ static void test_depth_covers_crop(void **state)
     tu_image_free(&b);
 }
 
+/* --camera-convention (issue 9): a matrix pasted from a DCC works as
+ * pasted. By hand: Blender's matrix_world (column vectors) and Maya's
+ * (row vectors) of a camera at (0,0,10) with no rotation look down world
+ * -Z; Nuke's (column vectors) turned -90 degrees about Y looks down +X;
+ * Blender's world-to-camera (the inverse) gives the same camera. */
+static void test_camera_convention(void **state)
+{
+    (void) state;
+    static const struct {
+        const char *conv, *flag, *m, *fwd;
+    } cases[] = {
+        { "exr", "--camera-to-world", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,10,1", "(0, 0, 1)" },
+        { "blender", "--camera-to-world", "1,0,0,0,0,1,0,0,0,0,1,10,0,0,0,1", "(0, 0, -1)" },
+        { "maya", "--camera-to-world", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,10,1", "(0, 0, -1)" },
+        { "houdini", "--camera-to-world", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,10,1", "(0, 0, -1)" },
+        { "usd", "--camera-to-world", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,10,1", "(0, 0, -1)" },
+        { "nuke", "--camera-to-world", "0,0,-1,0,0,1,0,0,1,0,0,10,0,0,0,1", "(1, 0, 0)" },
+        { "blender", "--world-to-camera", "1,0,0,0,0,1,0,0,0,0,1,-10,0,0,0,1", "(0, 0, -1)" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        assert_status(run("'%s' --explain --fov 40 --camera-convention %s %s %s", sample(),
+                          cases[i].conv, cases[i].flag, cases[i].m), 0);
+        char fwd[64];
+        snprintf(fwd, sizeof fwd, "forward     %s", cases[i].fwd);
+        if (!strstr(g_out, "position    (0, 0, 10)") || !strstr(g_out, fwd) ||
+            !strstr(g_out, "up          (0, 1, 0)"))
+            fail_msg("%s %s: --explain printed\n%s", cases[i].conv, cases[i].flag, g_out);
+    }
+    assert_status(run("'%s' --explain --fov 40 --camera-convention max", sample()), 2);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2710,6 +2741,7 @@ int main(void)
         cmocka_unit_test(test_focal_length),
         cmocka_unit_test(test_explain_partial),
         cmocka_unit_test(test_depth_covers_crop),
+        cmocka_unit_test(test_camera_convention),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

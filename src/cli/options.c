@@ -19,7 +19,7 @@ enum {
     OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
-    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE
+    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION
 };
 
 static const struct option long_opts[] = {
@@ -42,6 +42,7 @@ static const struct option long_opts[] = {
     { "fov", required_argument, NULL, OPT_FOV },
     { "focal-length", required_argument, NULL, OPT_FOCAL },
     { "aperture", required_argument, NULL, OPT_APERTURE },
+    { "camera-convention", required_argument, NULL, OPT_CONVENTION },
     { "near", required_argument, NULL, OPT_NEAR },
     { "far", required_argument, NULL, OPT_FAR },
     { "compression", required_argument, NULL, OPT_COMPRESSION },
@@ -94,6 +95,8 @@ void ef_options_usage(FILE *out)
             "      --world-to-camera M  16 numbers, row-vector layout as in the file\n"
             "      --camera-to-world M  its inverse\n"
             "      --fov DEG            horizontal field of view\n"
+            "      --camera-convention C  exr (default), blender, nuke, maya, houdini, usd:\n"
+            "                           the layout of --world-to-camera/--camera-to-world\n"
             "      --focal-length MM --aperture MM  the same from a lens and the film's\n"
             "                           horizontal aperture (both needed)\n"
             "      --near N, --far F    clip planes for the buffer depth modes\n"
@@ -362,6 +365,11 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
                 return ef_fail(err, "--aov-origin '%s' is not X,Y,Z (three finite numbers)", a),
                        EF_PARSE_USAGE;
             o->has_aov_origin = 1;
+            break;
+        case OPT_CONVENTION:
+            if (ef_cam_convention_parse(a, &o->cam.convention))
+                return ef_fail(err, "--camera-convention '%s' is not one of exr, blender, nuke, "
+                                    "maya, houdini, usd", a), EF_PARSE_USAGE;
             break;
         case OPT_W2C:
             if (parse_matrix(a, &o->cam.w2c))

@@ -106,6 +106,37 @@ static void list_attrs(const ef_cam_meta *meta, char *buf, size_t n)
         snprintf(buf, n, "none");
 }
 
+int ef_cam_convention_parse(const char *name, ef_cam_convention *out)
+{
+    static const char *const names[] = { "exr", "blender", "nuke", "maya", "houdini", "usd" };
+    for (int i = 0; i < (int) (sizeof names / sizeof names[0]); ++i)
+        if (!strcmp(name, names[i])) {
+            *out = (ef_cam_convention) i;
+            return 0;
+        }
+    return -1;
+}
+
+/* A flag matrix in exrfog's convention: column-vector layouts transposed,
+ * a -Z-forward camera's Z axis flipped (as for V-Ray's cameraTransform):
+ * row 2 of a camera-to-world, column 2 of a world-to-camera. */
+static ef_mat4 from_convention(const ef_mat4 *m, ef_cam_convention c, int is_w2c)
+{
+    ef_mat4 r = *m;
+    if (c == EF_CONV_BLENDER || c == EF_CONV_NUKE)
+        for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j)
+                r.m[4 * i + j] = m->m[4 * j + i];
+    if (c != EF_CONV_EXR)
+        for (int k = 0; k < 4; ++k) {
+            if (is_w2c)
+                r.m[4 * k + 2] = -r.m[4 * k + 2];
+            else
+                r.m[8 + k] = -r.m[8 + k];
+        }
+    return r;
+}
+
 /* The pose, in precedence order: flags, worldToCamera, V-Ray, Redshift. */
 static int resolve_pose(const ef_cam_meta *meta, const ef_cam_flags *flags,
                         ef_mat4 *c2w, fam *f, ef_camera *cam, ef_err *err)
@@ -113,12 +144,15 @@ static int resolve_pose(const ef_cam_meta *meta, const ef_cam_flags *flags,
     const ef_mat4 *m;
     const char *name;
     int is_w2c = 0, minus_z = 0;
+    ef_mat4 conv;
     *f = FAM_NONE;
     if (flags->w2c.set) {
-        m = &flags->w2c.v, name = "--world-to-camera", is_w2c = 1;
+        conv = from_convention(&flags->w2c.v, flags->convention, 1);
+        m = &conv, name = "--world-to-camera", is_w2c = 1;
         cam->src_pose = "flag --world-to-camera";
     } else if (flags->c2w.set) {
-        m = &flags->c2w.v, name = "--camera-to-world";
+        conv = from_convention(&flags->c2w.v, flags->convention, 0);
+        m = &conv, name = "--camera-to-world";
         cam->src_pose = "flag --camera-to-world";
     } else if (meta->w2c.set) {
         m = &meta->w2c.v, name = "worldToCamera", is_w2c = 1, *f = FAM_EXR;

@@ -36,9 +36,22 @@ typedef struct ef_cam_meta {
 } ef_cam_meta;
 
 /* What the command line forces; each set field overrides the header. */
+/* How a pasted matrix is laid out (--camera-convention): exrfog's own and
+ * OpenEXR's is row vectors (translation in the last row) with the camera
+ * looking down +Z; Blender and Nuke write column vectors (translation in
+ * the last column); every DCC's camera looks down its -Z. */
+typedef enum ef_cam_convention {
+    EF_CONV_EXR = 0, EF_CONV_BLENDER, EF_CONV_NUKE, EF_CONV_MAYA, EF_CONV_HOUDINI, EF_CONV_USD
+} ef_cam_convention;
+
+/* Parses a convention name (exr, blender, nuke, maya, houdini, usd).
+ * Returns 0 or -1. */
+int ef_cam_convention_parse(const char *name, ef_cam_convention *out);
+
 typedef struct ef_cam_flags {
-    ef_opt_mat w2c;           /* --world-to-camera, same convention as the file */
+    ef_opt_mat w2c;           /* --world-to-camera, in the convention below */
     ef_opt_mat c2w;           /* --camera-to-world, its inverse */
+    ef_cam_convention convention;
     ef_opt_num fov;           /* --fov, degrees, horizontal */
     ef_opt_num near_;         /* --near */
     ef_opt_num far_;          /* --far */
