@@ -2676,6 +2676,55 @@ static void test_camera_convention(void **state)
     assert_status(run("'%s' --explain --fov 40 --camera-convention max", sample()), 2);
 }
 
+/* --up-axis auto (issue 9): z under a V-Ray camera (cameraTransform), y
+ * under an OpenEXR worldToCamera: the outputs equal those of --up-axis z
+ * and --up-axis y bit for bit. */
+static void test_up_axis_auto(void **state)
+{
+    (void) state;
+    fresh_dir("upauto");
+    path_t vr = pth("upauto/vray.exr"), ex = pth("upauto/exr.exr"), a = pth("upauto/a.exr"),
+           b = pth("upauto/b.exr");
+    frame_t f;
+    frame_alloc(&f, 16, 8);
+    tu_part p;
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_FLOAT);
+    p.m44[0].name = "cameraTransform";
+    static const float c2w[16] = { 1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 0, 1.7f, 1 };
+    memcpy(p.m44[0].m, c2w, sizeof c2w);
+    p.f[0].name = "cameraFov";
+    p.f[0].v = 50;
+    write_part(vr.s, &p);
+    frame_part(&p, &f, 0x1f, EXR_PIXEL_FLOAT);
+    add_camera(&p, 50);
+    write_part(ex.s, &p);
+    frame_free(&f);
+    static const char *const fog = "--fog height:density=0.2:falloff=0.3:base=0.5";
+    const char *const files[2] = { vr.s, ex.s }, *const axes[2] = { "z", "y" };
+    for (int i = 0; i < 2; ++i) {
+        assert_status(run("'%s' -o '%s' %s --up-axis auto", files[i], a.s, fog), 0);
+        assert_status(run("'%s' -o '%s' %s --up-axis %s", files[i], b.s, fog, axes[i]), 0);
+        tu_image ia, ib;
+        assert_int_equal(tu_read_image(a.s, 0, &ia), 0);
+        assert_int_equal(tu_read_image(b.s, 0, &ib), 0);
+        for (int k = 0; k < 3; ++k) {
+            static const char *const ch[3] = { "R", "G", "B" };
+            assert_int_equal(tu_compare_channel(&ib, &ia, ch[k], 0.0, 0), 0);
+        }
+        tu_image_free(&ia);
+        tu_image_free(&ib);
+    }
+    /* and on the V-Ray frame z really differs from y */
+    assert_status(run("'%s' -o '%s' %s --up-axis auto", vr.s, a.s, fog), 0);
+    assert_status(run("'%s' -o '%s' %s --up-axis y", vr.s, b.s, fog), 0);
+    tu_image ia, ib;
+    assert_int_equal(tu_read_image(a.s, 0, &ia), 0);
+    assert_int_equal(tu_read_image(b.s, 0, &ib), 0);
+    assert_true(tu_compare_channel(&ib, &ia, "R", 0.0, 0) > 0);
+    tu_image_free(&ia);
+    tu_image_free(&ib);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2742,6 +2791,7 @@ int main(void)
         cmocka_unit_test(test_explain_partial),
         cmocka_unit_test(test_depth_covers_crop),
         cmocka_unit_test(test_camera_convention),
+        cmocka_unit_test(test_up_axis_auto),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

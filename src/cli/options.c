@@ -77,7 +77,7 @@ void ef_options_usage(FILE *out)
             "      --sky fog|keep|distance=D  background pixels (default fog)\n"
             "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
             "                           the flags given here override it\n"
-            "      --up-axis y|z|-y|-z|X,Y,Z  up for the height models (default y;\n"
+            "      --up-axis y|z|-y|-z|auto|X,Y,Z  up for the height models (default y;\n"
             "                           Blender and V-Ray scenes are z-up)\n"
             "      --units-per-meter U  scene units per metre (default 1, 100 for cm);\n"
             "                           densities are per metre\n"
@@ -339,8 +339,17 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
             break;
         case OPT_SCENE: o->scene_file = a; break;
         case OPT_UP_AXIS:
+            if (!strcmp(a, "auto")) {
+                /* y until the camera is known (run.c re-reads the SPECs) */
+                o->up_auto = 1;
+                f.up[0] = f.up[2] = 0;
+                f.up[1] = 1;
+                f.has_up = 1;
+                break;
+            }
+            o->up_auto = 0;
             if (ef_parse_up(a, f.up))
-                return ef_fail(err, "--up-axis '%s' is not y, z, -y, -z or X,Y,Z (non-zero)", a),
+                return ef_fail(err, "--up-axis '%s' is not y, z, -y, -z, auto or X,Y,Z (non-zero)", a),
                        EF_PARSE_USAGE;
             f.has_up = 1;
             break;

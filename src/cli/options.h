@@ -14,6 +14,7 @@ typedef struct ef_options {
     ef_depth_mode depth_mode;
     int depth_mode_set;       /* --depth-mode was given */
     int up_set;               /* --up-axis or the scene file's "up" was given */
+    int up_auto;              /* --up-axis auto: z for a Z-up camera family, else y */
     ef_fog_scene scene;
     ef_cam_flags cam;
     int compression;          /* -1: keep the input's */

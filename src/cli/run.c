@@ -361,6 +361,33 @@ static char *history_line(int argc, char **argv, const char *scene_file, ef_err 
     return b;
 }
 
+/* Whether the camera comes from a Z-up family: V-Ray's cameraTransform,
+ * or a flag matrix pasted in Blender's convention. */
+static int z_up_camera(const ef_options *o, const ef_camera *cam)
+{
+    return strstr(cam->src_pose, "cameraTransform") != NULL ||
+           (!strncmp(cam->src_pose, "flag", 4) && o->cam.convention == EF_CONV_BLENDER);
+}
+
+/* --up-axis auto on a Z-up camera: every component read again with z as
+ * the scene's up (models fix their up when they are read). */
+static int reread_scene_z_up(ef_fog_scene *s, ef_err *err)
+{
+    static ef_fog_scene ns;
+    ns = *s;
+    ns.ncomp = 0;
+    ns.ctx.up[0] = ns.ctx.up[1] = 0;
+    ns.ctx.up[2] = 1;
+    for (int i = 0; i < s->ncomp; ++i)
+        if (ef_scene_add(&ns, s->comp[i].spec, err)) {
+            ef_scene_free(&ns);
+            return -1;
+        }
+    ef_scene_free(s);
+    *s = ns;
+    return 0;
+}
+
 static void warn(const char *file, const char *msg)
 {
     fputs("exrfog: ", stderr);
@@ -536,6 +563,10 @@ int ef_main(int argc, char **argv)
         fputs(": warning: ", stderr);
         put_clean(cam.warning);
         fputc('\n', stderr);
+    }
+    if (o.up_auto && z_up_camera(&o, &cam) && reread_scene_z_up(&o.scene, &err)) {
+        report(o.input, &err, 1);
+        goto done;
     }
     if (!o.quiet && !o.explain)
         warn_traps(&o, &in, plan.rgb[0].part, &cam);
