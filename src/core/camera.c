@@ -244,6 +244,33 @@ static void check_aspect(ef_camera *cam, const ef_cam_meta *meta, const char *na
 /* Rays from a projection matrix, classified by where it sends the optical
  * axis (the attribute name is unreliable: Arnold writes screen space under
  * worldToNDC). c2w_hdr is the inverse of the header's own worldToCamera. */
+/* The inverse of a 3x3 (row-major) by cofactors, with the rows scaled to
+ * unit size first so no product overflows. Returns 0, or -1 if singular. */
+static int invert3(const double a[9], double out[9])
+{
+    double s[3], m[9];
+    for (int i = 0; i < 3; ++i) {
+        s[i] = fmax(fmax(fabs(a[3 * i]), fabs(a[3 * i + 1])), fabs(a[3 * i + 2]));
+        if (!(s[i] > 0) || !isfinite(s[i]))
+            return -1;
+        for (int j = 0; j < 3; ++j)
+            m[3 * i + j] = a[3 * i + j] / s[i];
+    }
+    const double c00 = m[4] * m[8] - m[5] * m[7], c01 = m[5] * m[6] - m[3] * m[8],
+                 c02 = m[3] * m[7] - m[4] * m[6];
+    const double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    if (!(fabs(det) > 1e-300) || !isfinite(det))
+        return -1;
+    const double inv[9] = { c00, m[2] * m[7] - m[1] * m[8], m[1] * m[5] - m[2] * m[4],
+                            c01, m[0] * m[8] - m[2] * m[6], m[2] * m[3] - m[0] * m[5],
+                            c02, m[1] * m[6] - m[0] * m[7], m[0] * m[4] - m[1] * m[3] };
+    /* (S M)^-1 = M^-1 S^-1: column j of M^-1 divided by s[j] */
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            out[3 * i + j] = inv[3 * i + j] / det / s[j];
+    return 0;
+}
+
 static int projection_ray(ef_camera *cam, const ef_cam_meta *meta,
                           const ef_mat4 *c2w_hdr, ef_err *err)
 {
@@ -303,15 +330,20 @@ static int projection_ray(ef_camera *cam, const ef_cam_meta *meta,
         A[7] = 1.0 + 2.0 * meta->disp[1] / H;
     }
     A[8] = 1.0;
-    /* B: (sx, sy, 1) -> xyz of (sx, sy, z0, 1) . Q; any z0 gives a point on
-     * the same ray through the camera (z0 = alpha is the point at infinity). */
-    const double z0 = 0.5;
-    double B[9];
-    for (int j = 0; j < 3; ++j) {
-        B[j] = Q.m[j];
-        B[3 + j] = Q.m[4 + j];
-        B[6 + j] = z0 * Q.m[8 + j] + Q.m[12 + j];
-    }
+    /* B: (sx, sy, 1) -> the ray's direction, as the point at infinity
+     * (d, 0) with (d, 0) . Pc = w (sx, sy, z, 1): only Pc's linear rows
+     * 0..2 enter, in columns x, y and w, so the float32 noise of a far
+     * camera's translation row (row 3) never tilts a ray. B is the inverse
+     * of that 3x3. */
+    double L3[9], B[9];
+    static const int col[3] = { 0, 1, 3 };
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            L3[3 * i + j] = p[4 * i + col[j]];
+    if (invert3(L3, B))
+        return ef_fail(err, "%s is singular (not invertible); pass --fov DEG to ignore it",
+                       name);
+    (void) Q;
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j)
             cam->ray[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j]
