@@ -142,7 +142,7 @@ static int load_frame(const char *path, frame *f)
     ef_stream_opts so = { .threads = 1, .compression = EXR_COMPRESSION_NONE, .zip_level = -1,
                           .pixel_type = -1, .param_attr = "model_bench" };
     ef_stream_stats st;
-    const int rc = ef_exr_stream(&in, &in, &plan, out, &so, copy_chunk, f, &st, &err);
+    const int rc = ef_exr_stream_file(&in, &in, &plan, out, &so, copy_chunk, f, &st, &err);
     remove(out);
     rmdir(dir);
     ef_exr_close(&in);
