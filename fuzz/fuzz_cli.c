@@ -125,7 +125,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         argv[argc++] = "--fog";
         argv[argc++] = spec;
     }
-    for (char *p = buf, *nl; p && argc < MAX_ARGS; p = nl ? nl + 1 : NULL) {
+    /* No argument section at all (a bare file in modes 1 and 2) adds none,
+     * so the file itself gets parsed. */
+    for (char *p = alen ? buf : NULL, *nl; p && argc < MAX_ARGS; p = nl ? nl + 1 : NULL) {
         nl = strchr(p, '\n');
         if (nl)
             *nl = '\0';
