@@ -2725,6 +2725,60 @@ static void test_up_axis_auto(void **state)
     tu_image_free(&ib);
 }
 
+/* Rays come from the projection's linear part (issue 9): a far camera's
+ * worldToNDC whose translation row carries float32-sized noise (a few
+ * ulps of its 1e5-sized entries) gives bit-identical positions (fog_P),
+ * so that noise cannot tilt a ray. The camera sits 1e5 from the origin,
+ * looking down -Z with a screen-space projection (Arnold's layout). */
+static void test_projection_translation_noise(void **state)
+{
+    (void) state;
+    fresh_dir("projnoise");
+    path_t a = pth("projnoise/a.exr"), b = pth("projnoise/b.exr"), oa = pth("projnoise/oa.exr"),
+           ob = pth("projnoise/ob.exr");
+    const int W = 16, H = 8;
+    /* worldToCamera: camera at (1e5, 2, 1e5) looking down world -Z (Z flip baked in) */
+    const double w2c[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, -1e5, -2, 1e5, 1 };
+    const double sx = 1.0 / tan(50.0 * 3.14159265358979323846 / 360.0), sy = sx * W / H;
+    const double n = 0.1, fa = 1e5, A = fa / (fa - n), B = -n * fa / (fa - n);
+    const double proj[16] = { sx, 0, 0, 0, 0, sy, 0, 0, 0, 0, A, 1, 0, 0, B, 0 };
+    double w2ndc[16];
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            double v = 0;
+            for (int k = 0; k < 4; ++k)
+                v += w2c[4 * i + k] * proj[4 * k + j];
+            w2ndc[4 * i + j] = v;
+        }
+    frame_t f;
+    frame_alloc(&f, W, H);
+    for (int v = 0; v < 2; ++v) {
+        tu_part p;
+        frame_part(&p, &f, 0x1f, EXR_PIXEL_FLOAT);
+        p.m44[0].name = "worldToCamera";
+        p.m44[1].name = "worldToNDC";
+        for (int k = 0; k < 16; ++k) {
+            p.m44[0].m[k] = (float) w2c[k];
+            p.m44[1].m[k] = (float) w2ndc[k];
+        }
+        if (v) /* the translation row, a few float32 ulps off */
+            for (int k = 12; k < 16; ++k)
+                p.m44[1].m[k] = nextafterf(nextafterf(p.m44[1].m[k], INFINITY), INFINITY);
+        write_part(v ? b.s : a.s, &p);
+    }
+    frame_free(&f);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.01 --aov P", a.s, oa.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.01 --aov P", b.s, ob.s), 0);
+    tu_image ia, ib;
+    assert_int_equal(tu_read_image(oa.s, 0, &ia), 0);
+    assert_int_equal(tu_read_image(ob.s, 0, &ib), 0);
+    static const char *const ch[4] = { "fog_P.X", "fog_P.Y", "fog_P.Z", "R" };
+    for (int k = 0; k < 4; ++k)
+        assert_int_equal(tu_compare_channel(&ia, &ib, ch[k], 0.0, 0), 0);
+    tu_image_free(&ia);
+    tu_image_free(&ib);
+}
+
 int main(void)
 {
     /* Sanitizer reports in the child must not pass for "exit 1". */
@@ -2792,6 +2846,7 @@ int main(void)
         cmocka_unit_test(test_depth_covers_crop),
         cmocka_unit_test(test_camera_convention),
         cmocka_unit_test(test_up_axis_auto),
+        cmocka_unit_test(test_projection_translation_noise),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
