@@ -311,7 +311,7 @@ set format y "10^{%L}"
 set xlabel "fog pass, seconds per frame on 1 thread (log)"
 set ylabel "max |ΔT| over the surface pixels checked (log)"
 set grid xtics ytics mxtics mytics lc rgb '#dddddd'
-set key bottom right box opaque spacing 1.2
+set key right center box opaque spacing 1.2
 set arrow from graph 0, first 2**-11 to graph 1, first 2**-11 nohead dt 2 lc rgb '#888888'
 set label "half-float step just below T = 1 (2^{-11})" at graph 0.98, first 2**-11 right offset 0,0.7 tc rgb '#666666' font ',9'
 plot '$tmp/adaptive.dat' using 1:2 with linespoints pt 7 ps 1.3 lw 2 lc rgb '#1f77b4' title 'noise adaptive (tol)', \\
