@@ -18,7 +18,7 @@
  *
  * FRAME is read the way the CLI reads it: ef_exr_open, ef_find_channels,
  * ef_exr_read_cam_meta, ef_camera_resolve, planar depth, and the frame is
- * decoded through ef_exr_stream (to a scratch copy that is removed).
+ * decoded through ef_exr_stream (bench/bench_frame.c; the encoded copy goes to /dev/null).
  *
  * Output: a Markdown table, or with --tsv one tab-separated line per model:
  *   name  specs(space-separated)  mpix_best  mpix_median  max_dT  max_rel_tau  samples
@@ -33,6 +33,7 @@
 #include <unistd.h>
 
 #include "apply.h"
+#include "bench_frame.h"
 #include "exr_io.h"
 #include "ref.h"
 #include "scene.h"
@@ -65,116 +66,8 @@ static const bench_model models[] = {
 };
 #define NMODELS ((int) (sizeof models / sizeof models[0]))
 
-/* ------------------------------------------------------------ the frame */
-
-typedef struct frame {
-    int x0, y0, w, h;
-    float *rgb[3], *alpha, *depth;
-    ef_camera cam;
-    ef_depth_conv conv;
-} frame;
-
-static void copy_chunk(void *user, const ef_chunk *ch)
-{
-    frame *f = user;
-    for (int yy = 0; yy < ch->h; ++yy) {
-        const size_t dst = (size_t) (ch->y0 - f->y0 + yy) * (size_t) f->w +
-                           (size_t) (ch->x0 - f->x0);
-        const size_t src = (size_t) yy * (size_t) ch->w;
-        const size_t n = (size_t) ch->w * sizeof(float);
-        for (int k = 0; k < 3; ++k)
-            memcpy(f->rgb[k] + dst, ch->rgb[k] + src, n);
-        if (ch->alpha)
-            memcpy(f->alpha + dst, ch->alpha + src, n);
-        memcpy(f->depth + dst, ch->depth + src, n);
-    }
-}
-
-static int load_frame(const char *path, frame *f)
-{
-    ef_exr_file in = { 0 };
-    ef_err err;
-    ef_channel_plan plan;
-    ef_cam_meta meta;
-    ef_cam_flags flags;
-    memset(&flags, 0, sizeof flags);
-    memset(f, 0, sizeof *f);
-    if (ef_exr_open(path, &in, &err) || ef_find_channels(&in, &in, NULL, NULL, &plan, &err) ||
-        ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
-        ef_camera_resolve(&meta, &flags, &f->cam, &err) ||
-        ef_depth_conv_init(&f->conv, EF_DEPTH_PLANAR, &f->cam, &err)) {
-        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
-        ef_exr_close(&in);
-        return -1;
-    }
-    exr_attr_box2i_t dw;
-    if (exr_get_data_window(in.ctx, plan.rgb[0].part, &dw) != EXR_ERR_SUCCESS) {
-        fprintf(stderr, PROG ": %s: cannot read the data window\n", path);
-        ef_exr_close(&in);
-        return -1;
-    }
-    f->x0 = dw.min.x;
-    f->y0 = dw.min.y;
-    f->w = dw.max.x - dw.min.x + 1;
-    f->h = dw.max.y - dw.min.y + 1;
-    const size_t n = (size_t) f->w * (size_t) f->h;
-    for (int k = 0; k < 3; ++k)
-        f->rgb[k] = calloc(n, sizeof(float));
-    f->alpha = plan.alpha.part >= 0 ? calloc(n, sizeof(float)) : NULL;
-    f->depth = calloc(n, sizeof(float));
-    if (!f->rgb[0] || !f->rgb[1] || !f->rgb[2] || !f->depth ||
-        (plan.alpha.part >= 0 && !f->alpha)) {
-        fprintf(stderr, PROG ": out of memory\n");
-        ef_exr_close(&in);
-        return -1;
-    }
-
-    /* Decode through the library's stream; its output is a scratch copy. */
-    const char *tmpdir = getenv("TMPDIR");
-    char dir[4096], out[4200];
-    snprintf(dir, sizeof dir, "%s/model_bench.XXXXXX", tmpdir && *tmpdir ? tmpdir : "/tmp");
-    if (!mkdtemp(dir)) {
-        fprintf(stderr, PROG ": mkdtemp %s: %s\n", dir, strerror(errno));
-        ef_exr_close(&in);
-        return -1;
-    }
-    snprintf(out, sizeof out, "%s/copy.exr", dir);
-    ef_stream_opts so = { .threads = 1, .compression = EXR_COMPRESSION_NONE, .zip_level = -1,
-                          .pixel_type = -1, .param_attr = "model_bench" };
-    ef_stream_stats st;
-    const int rc = ef_exr_stream_file(&in, &in, &plan, out, &so, copy_chunk, f, &st, &err);
-    remove(out);
-    rmdir(dir);
-    ef_exr_close(&in);
-    if (rc) {
-        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
-        return -1;
-    }
-    return 0;
-}
-
-static void free_frame(frame *f)
-{
-    for (int k = 0; k < 3; ++k)
-        free(f->rgb[k]);
-    free(f->alpha);
-    free(f->depth);
-}
 
 /* ------------------------------------------------------------ timing */
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    const double x = *(const double *) a, y = *(const double *) b;
-    return (x > y) - (x < y);
-}
 
 /* Best and median seconds of ef_fog_block over the whole frame. */
 static int time_pass(const frame *f, const ef_fog_scene *s, int runs, double *best,
@@ -201,13 +94,13 @@ static int time_pass(const frame *f, const ef_fog_scene *s, int runs, double *be
             memcpy(rgb[k], f->rgb[k], n * sizeof(float));
         if (alpha)
             memcpy(alpha, f->alpha, n * sizeof(float));
-        const double a = now();
+        const double a = bench_now();
         ef_fog_block(&pass, f->x0, f->y0, f->w, f->h, rgb, alpha, f->depth);
-        t[r] = now() - a;
+        t[r] = bench_now() - a;
         sink += rgb[0][n / 2];
     }
     (void) sink;
-    qsort(t, (size_t) runs, sizeof *t, cmp_double);
+    qsort(t, (size_t) runs, sizeof *t, bench_cmp_double);
     *best = t[0];
     *median = runs % 2 ? t[runs / 2] : 0.5 * (t[runs / 2 - 1] + t[runs / 2]);
     for (int k = 0; k < 3; ++k)
@@ -352,7 +245,7 @@ int main(int argc, char **argv)
         return usage();
 
     frame f;
-    if (load_frame(path, &f))
+    if (bench_load_frame(PROG, path, &f))
         return 1;
     const double mpix = (double) f.w * (double) f.h / 1e6;
     fprintf(stderr, PROG ": %s: %dx%d, %d timed runs per model, accuracy on every %d-th pixel\n",
@@ -382,7 +275,7 @@ int main(int argc, char **argv)
             fprintf(stderr, PROG ": out of memory\n");
             bad = 1;
         }
-        const double a = now();
+        const double a = bench_now();
         if (!bad && check_accuracy(&f, &s, step, &acc)) {
             fprintf(stderr, PROG ": %s: the reference integrator failed\n", models[m].name);
             bad = 1;
@@ -394,7 +287,7 @@ int main(int argc, char **argv)
         }
         fprintf(stderr, PROG ": %-28s %7.2f Mpixel/s best, %7.2f median; %ld rays (%ld fogged) "
                         "checked in %.1f s\n",
-                models[m].name, mpix / best, mpix / med, acc.samples, acc.fogged, now() - a);
+                models[m].name, mpix / best, mpix / med, acc.samples, acc.fogged, bench_now() - a);
         if (acc.mismatched_inf)
             fprintf(stderr, PROG ": %s: %ld rays where only one of closed/reference is infinite\n",
                     models[m].name, acc.mismatched_inf);
@@ -410,6 +303,6 @@ int main(int argc, char **argv)
         }
         fflush(stdout);
     }
-    free_frame(&f);
+    bench_free_frame(&f);
     return status;
 }

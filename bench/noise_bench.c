@@ -42,7 +42,7 @@
  *
  * FRAME is read the way the CLI reads it (ef_exr_open, ef_find_channels,
  * ef_exr_read_cam_meta, ef_camera_resolve, planar depth) and decoded once
- * through ef_exr_stream (to a scratch copy that is removed).
+ * through ef_exr_stream (bench/bench_frame.c; the encoded copy goes to /dev/null).
  *
  * Output: a Markdown table, or with --tsv one tab-separated line per entry:
  *   family name spec timed sample runs mpix_best mpix_median frame_s evals_px
@@ -61,6 +61,7 @@
 #include <unistd.h>
 
 #include "apply.h"
+#include "bench_frame.h"
 #include "exr_io.h"
 #include "ref.h"
 #include "scene.h"
@@ -105,116 +106,7 @@ static const entry entries[] = {
 };
 #define NENTRIES ((int) (sizeof entries / sizeof entries[0]))
 
-/* ------------------------------------------------------------ the frame */
-
-typedef struct frame {
-    int x0, y0, w, h;
-    float *rgb[3], *alpha, *depth;
-    ef_camera cam;
-    ef_depth_conv conv;
-} frame;
-
-static void copy_chunk(void *user, const ef_chunk *ch)
-{
-    frame *f = user;
-    for (int yy = 0; yy < ch->h; ++yy) {
-        const size_t dst = (size_t) (ch->y0 - f->y0 + yy) * (size_t) f->w +
-                           (size_t) (ch->x0 - f->x0);
-        const size_t src = (size_t) yy * (size_t) ch->w;
-        const size_t n = (size_t) ch->w * sizeof(float);
-        for (int k = 0; k < 3; ++k)
-            memcpy(f->rgb[k] + dst, ch->rgb[k] + src, n);
-        if (ch->alpha)
-            memcpy(f->alpha + dst, ch->alpha + src, n);
-        memcpy(f->depth + dst, ch->depth + src, n);
-    }
-}
-
-static int load_frame(const char *path, frame *f)
-{
-    ef_exr_file in = { 0 };
-    ef_err err;
-    ef_channel_plan plan;
-    ef_cam_meta meta;
-    ef_cam_flags flags;
-    memset(&flags, 0, sizeof flags);
-    memset(f, 0, sizeof *f);
-    if (ef_exr_open(path, &in, &err) || ef_find_channels(&in, &in, NULL, NULL, &plan, &err) ||
-        ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err) ||
-        ef_camera_resolve(&meta, &flags, &f->cam, &err) ||
-        ef_depth_conv_init(&f->conv, EF_DEPTH_PLANAR, &f->cam, &err)) {
-        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
-        ef_exr_close(&in);
-        return -1;
-    }
-    exr_attr_box2i_t dw;
-    if (exr_get_data_window(in.ctx, plan.rgb[0].part, &dw) != EXR_ERR_SUCCESS) {
-        fprintf(stderr, PROG ": %s: cannot read the data window\n", path);
-        ef_exr_close(&in);
-        return -1;
-    }
-    f->x0 = dw.min.x;
-    f->y0 = dw.min.y;
-    f->w = dw.max.x - dw.min.x + 1;
-    f->h = dw.max.y - dw.min.y + 1;
-    const size_t n = (size_t) f->w * (size_t) f->h;
-    for (int k = 0; k < 3; ++k)
-        f->rgb[k] = calloc(n, sizeof(float));
-    f->alpha = plan.alpha.part >= 0 ? calloc(n, sizeof(float)) : NULL;
-    f->depth = calloc(n, sizeof(float));
-    if (!f->rgb[0] || !f->rgb[1] || !f->rgb[2] || !f->depth ||
-        (plan.alpha.part >= 0 && !f->alpha)) {
-        fprintf(stderr, PROG ": out of memory\n");
-        ef_exr_close(&in);
-        return -1;
-    }
-
-    /* Decode through the library's stream; its output is a scratch copy. */
-    const char *tmpdir = getenv("TMPDIR");
-    char dir[4096], out[4200];
-    snprintf(dir, sizeof dir, "%s/noise_bench.XXXXXX", tmpdir && *tmpdir ? tmpdir : "/tmp");
-    if (!mkdtemp(dir)) {
-        fprintf(stderr, PROG ": mkdtemp %s: %s\n", dir, strerror(errno));
-        ef_exr_close(&in);
-        return -1;
-    }
-    snprintf(out, sizeof out, "%s/copy.exr", dir);
-    ef_stream_opts so = { .threads = 1, .compression = EXR_COMPRESSION_NONE, .zip_level = -1,
-                          .pixel_type = -1, .param_attr = "noise_bench" };
-    ef_stream_stats st;
-    const int rc = ef_exr_stream_file(&in, &in, &plan, out, &so, copy_chunk, f, &st, &err);
-    remove(out);
-    rmdir(dir);
-    ef_exr_close(&in);
-    if (rc) {
-        fprintf(stderr, PROG ": %s: %s\n", path, err.msg);
-        return -1;
-    }
-    return 0;
-}
-
-static void free_frame(frame *f)
-{
-    for (int k = 0; k < 3; ++k)
-        free(f->rgb[k]);
-    free(f->alpha);
-    free(f->depth);
-}
-
 /* ------------------------------------------------------------ timing */
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    const double x = *(const double *) a, y = *(const double *) b;
-    return (x > y) - (x < y);
-}
 
 typedef struct planes {
     float *rgb[3], *alpha;
@@ -235,7 +127,7 @@ static double pass_pixels(const frame *f, const ef_fog_pass *pass, planes *p, in
     if (p->alpha)
         memcpy(p->alpha, f->alpha, n * sizeof(float));
     long px = 0;
-    const double a = now();
+    const double a = bench_now();
     if (k == 1) {
         ef_fog_block(pass, f->x0, f->y0, f->w, f->h, p->rgb, p->alpha, f->depth);
         px = (long) n;
@@ -253,7 +145,7 @@ static double pass_pixels(const frame *f, const ef_fog_pass *pass, planes *p, in
             px += w;
         }
     }
-    const double t = now() - a;
+    const double t = bench_now() - a;
     *npx = px;
     return t;
 }
@@ -293,7 +185,7 @@ static int time_pass(const frame *f, const ef_fog_scene *s, int max_runs, double
         --runs;
     for (int r = 0; r < runs; ++r)
         t[r] = pass_pixels(f, &pass, &p, k, &px);
-    qsort(t, (size_t) runs, sizeof *t, cmp_double);
+    qsort(t, (size_t) runs, sizeof *t, bench_cmp_double);
     tm->k = k;
     tm->runs = runs;
     tm->px = px;
@@ -393,7 +285,7 @@ static int compute_yard(const frame *f, grid *g, int which, int threads)
         return -1;
     }
     ef_scene_bind(&s, f->cam.pos);
-    const double a = now();
+    const double a = bench_now();
     yard_job job[16];
     pthread_t th[16];
     if (threads < 1)
@@ -416,7 +308,7 @@ static int compute_yard(const frame *f, grid *g, int which, int threads)
     ef_scene_free(&s);
     fprintf(stderr, PROG ": yardstick %s%s over %d grid pixels on %d threads in %.1f s\n",
             which == Y_SEP_EXACT ? "" : "ef_ref_tau of ", yard_spec[which], g->n, threads,
-            now() - a);
+            bench_now() - a);
     if (failed) {
         fprintf(stderr, PROG ": the reference integrator failed on %d pixels\n", failed);
         return -1;
@@ -475,7 +367,7 @@ static int check_accuracy(const grid *g, const ef_fog_component *c, int which, i
     }
     acc->evals_per_px = counted ? evals / counted : 0;
     if (acc->surface > 0) {
-        qsort(dts, (size_t) acc->surface, sizeof *dts, cmp_double);
+        qsort(dts, (size_t) acc->surface, sizeof *dts, bench_cmp_double);
         acc->max_dT = dts[acc->surface - 1];
         long q = (long) ceil(0.999 * (double) acc->surface) - 1;
         if (q < 0)
@@ -532,7 +424,7 @@ int main(int argc, char **argv)
         return usage();
 
     frame f;
-    if (load_frame(path, &f))
+    if (bench_load_frame(PROG, path, &f))
         return 1;
     fprintf(stderr, PROG ": %s: %dx%d; fog pass up to %d runs within %.0f s per entry; "
                     "accuracy on every %d-th pixel each way\n",
@@ -577,12 +469,12 @@ int main(int argc, char **argv)
         }
         ef_scene_bind(&s, f.cam.pos);   /* as the CLI does, once per frame */
         timing tm = { 0, 0, 0, 0, 0 };
-        const double a = now();
+        const double a = bench_now();
         if (E->timed && time_pass(&f, &s, runs, budget, force_k, &tm)) {
             fprintf(stderr, PROG ": out of memory\n");
             return 1;
         }
-        const double b = now();
+        const double b = bench_now();
         accuracy acc = { 0 };
         const int have = E->yard != Y_NONE;
         if (have && check_accuracy(&g, &s.comp[0], E->yard, E->timed, &acc)) {
@@ -605,7 +497,7 @@ int main(int argc, char **argv)
                 E->name, med, pass, b - a, evals);
         if (have)
             fprintf(stderr, ", max |dT| %.3g, 99.9th %.3g, covered %.4f on %ld pixels (%.1f s)",
-                    acc.max_dT, acc.p999_dT, acc.covered, acc.surface, now() - b);
+                    acc.max_dT, acc.p999_dT, acc.covered, acc.surface, bench_now() - b);
         fprintf(stderr, "\n");
         if (tsv) {
             printf("%s\t%s\t%s\t%d\t%d\t%d\t%s\t%s\t%s\t%s", E->family, E->name, E->spec,
@@ -626,6 +518,6 @@ int main(int argc, char **argv)
         fflush(stdout);
     }
     free_grid(&g);
-    free_frame(&f);
+    bench_free_frame(&f);
     return status;
 }
