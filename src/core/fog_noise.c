@@ -1579,6 +1579,19 @@ static int opaque_cut(const rayc *R, long double t0, long double *tend)
     return 1;
 }
 
+/* Whether the envelope e^(-k (h - base)) passes e^690 (about 1e300) on
+ * [t0, t1] (far below base, or a base far above the scene): the fog is
+ * opaque there, and its integral would overflow to inf - inf. The envelope
+ * is monotone along a ray, so its largest value is at the lower end; the
+ * test is on the exponent, no exp per ray. */
+static int env_overflows(const nstate *s, double h0, double hs, double t0, double t1)
+{
+    if (!(s->k > 0))
+        return 0;
+    const double hlow = hs > 0 ? h0 + hs * t0 : hs < 0 ? h0 + hs * t1 : h0;
+    return !(-s->k * hlow < 690);
+}
+
 /* The seed's evaluation from the merged tables, in plain double: per pixel
  * the cost of a few table lookups (the shared path's long double set-up
  * would cost more than the evaluation). Sky rays whose envelope lets them
@@ -1605,8 +1618,7 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
         t1 = t0 + log(B / 1e-6) / a;
         tail = B * exp(-s->k * (h0 + hs * t1)) / a;
     }
-    if (s->k > 0 && !(-s->k * (h0 + hs * (hs > 0 ? t0 : t1)) < 690)) {
-        /* The envelope passes 1e300 on the segment: opaque (see tau_noise_info). */
+    if (env_overflows(s, h0, hs, t0, t1)) {
         for (int k = 0; k < 3; ++k)
             tau[k] = s->rho[k] > 0 ? INFINITY : 0;
         return;
@@ -1653,10 +1665,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
             tau[k] = s->rho[k] > 0 ? INFINITY : 0;
         return;
     }
-    if (s->k > 0 && !(fmaxl(env_at(&R, t0), env_at(&R, isinf(t1) ? t0 : t1)) < 1e300L)) {
-        /* The envelope e^(-k (h - base)) passes 1e300 on the segment (far
-         * below base, or base far above the scene): the fog is opaque
-         * there, and its integral would overflow to inf - inf. */
+    if (env_overflows(s, (double) R.h0, (double) R.hs, (double) t0, (double) t1)) {
         for (int k = 0; k < 3; ++k)
             tau[k] = s->rho[k] > 0 ? INFINITY : 0;
         return;
