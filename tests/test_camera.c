@@ -633,78 +633,75 @@ static void test_pixel_centres(void **state)
     assert_vec(d, -0.5, 0.25, 1.0, 1e-15);
 }
 
-/* A pose with a uniform scale s (worldToCamera = s * rigid in its 3x3 and
- * translation) is the rigid camera with camera units of 1/s world units:
- * same position and ray directions, world distance = depth / s. Checked
- * against the rigid camera's reconstruction, for s near both ends of the
- * accepted range; 1e300 is refused with a message; a shear warns. */
-static void test_scaled_pose(void **state)
+/* Arnold's worldToCamera with its 3x3 and translation scaled by s, and
+ * --fov 50, on a 150 x 100 frame. */
+static int resolve_scaled(double s, ef_camera *c, ef_err *err)
 {
-    (void)state;
-    static const double scales[] = { 1e-25, 3.7e-9, 0.5, 1e7 };   /* depth 10 s stays below EF_SKY_DISTANCE */
-    ef_cam_meta m;
-    ef_cam_flags fl = {0};
-    ef_camera rigid, c;
-    ef_err err = {0};
-    ef_depth_conv conv;
-    arnold_meta(&m);
-    assert_int_equal(ef_camera_resolve(&m, &fl, &rigid, &err), 0);
-    assert_true(rigid.unit == 1.0);
-    assert_int_equal(ef_depth_conv_init(&conv, EF_DEPTH_PLANAR, &rigid, &err), 0);
-    for (size_t k = 0; k < sizeof scales / sizeof scales[0]; ++k) {
-        const double s = scales[k];
-        double w[16];
-        memcpy(w, arnold_w2c, sizeof w);
-        for (int i = 0; i < 4; ++i)
-            for (int j = 0; j < 3; ++j)
-                w[4 * i + j] *= s;
-        ef_cam_meta ms;
-        ef_cam_meta_init(&ms, 0, 0, 149, 99);
-        set_mat(&ms.w2c, mk(w));
-        ef_cam_flags ff = {0};
-        ff.fov.set = 1;
-        ff.fov.v = 50;
-        ef_cam_flags fr = ff;
-        assert_int_equal(ef_camera_resolve(&ms, &ff, &c, &err), 0);
-        ef_cam_meta mr;
-        ef_cam_meta_init(&mr, 0, 0, 149, 99);
-        set_mat(&mr.w2c, mk(arnold_w2c));
-        assert_int_equal(ef_camera_resolve(&mr, &fr, &rigid, &err), 0);
-        assert_true(fabs(c.unit * s - 1) < 1e-12);
-        assert_vec(c.pos, rigid.pos[0], rigid.pos[1], rigid.pos[2], 1e-12);
-        assert_true(c.warning[0] == '\0');
-        for (int px = 0; px < 150; px += 37) {
-            const double depth = 10.0 * s;   /* camera units of the scaled pose */
-            ef_ray a, b;
-            ef_reconstruct(&c, &conv, px, 60, depth, &a);
-            ef_reconstruct(&rigid, &conv, px, 60, 10.0, &b);
-            for (int i = 0; i < 3; ++i)
-                assert_true(fabs(a.dir[i] - b.dir[i]) < 1e-14);
-            if (!(fabs(a.dist - b.dist) < 1e-12 * b.dist))
-                fail_msg("s %g px %d: dist %.17g, rigid %.17g", s, px, a.dist, b.dist);
-            assert_true(isfinite(a.dist));
-        }
-    }
-    /* Beyond 1e30 either way: refused, saying why. */
     double w[16];
     memcpy(w, arnold_w2c, sizeof w);
     for (int i = 0; i < 4; ++i)
         for (int j = 0; j < 3; ++j)
-            w[4 * i + j] *= 1e300;
-    ef_cam_meta mh;
-    ef_cam_meta_init(&mh, 0, 0, 149, 99);
-    set_mat(&mh.w2c, mk(w));
-    ef_cam_flags ff = {0};
-    ff.fov.set = 1;
-    ff.fov.v = 50;
-    assert_int_equal(ef_camera_resolve(&mh, &ff, &c, &err), -1);
+            w[4 * i + j] *= s;
+    ef_cam_meta m;
+    ef_cam_meta_init(&m, 0, 0, 149, 99);
+    set_mat(&m.w2c, mk(w));
+    ef_cam_flags fl = {0};
+    fl.fov.set = 1;
+    fl.fov.v = 50;
+    return ef_camera_resolve(&m, &fl, c, err);
+}
+
+/* A pose with a uniform scale s (worldToCamera = s * rigid in its 3x3 and
+ * translation) is the rigid camera with camera units of 1/s world units.
+ * By hand: the camera sits at (0, 0, 7.2625) looking down world -Z; pixel
+ * (px, 60) of the 150-wide, 50-degree frame has the camera-space direction
+ * (dx, dy, 1) with dx = (px + 0.5 - 75) t, |dy| = 10.5 t, t = 2 tan(25 deg)
+ * / 150, so a planar depth of 10 s camera units is 10 |(dx, dy, 1)| world
+ * units away. Checked for s near both ends of the accepted range; 1e300 is
+ * refused with a message; a shear warns. */
+static void test_scaled_pose(void **state)
+{
+    (void)state;
+    static const double scales[] = { 1e-25, 3.7e-9, 0.5, 1e7 };   /* depth 10 s stays below EF_SKY_DISTANCE */
+    const double t = 2 * tan(25 * PI / 180) / 150;
+    ef_camera c;
+    ef_err err = {0};
+    for (size_t k = 0; k < sizeof scales / sizeof scales[0]; ++k) {
+        const double s = scales[k];
+        assert_int_equal(resolve_scaled(s, &c, &err), 0);
+        ef_depth_conv conv;
+        assert_int_equal(ef_depth_conv_init(&conv, EF_DEPTH_PLANAR, &c, &err), 0);
+        assert_true(fabs(c.unit * s - 1) < 1e-12);
+        assert_vec(c.pos, 0, 0, 7.2625, 1e-12);
+        assert_true(c.warning[0] == '\0');
+        for (int px = 0; px < 150; px += 37) {
+            const double dx = (px + 0.5 - 75) * t, dy = 10.5 * t, n = sqrt(dx * dx + dy * dy + 1);
+            ef_ray r;
+            ef_reconstruct(&c, &conv, px, 60, 10.0 * s, &r);
+            if (!(fabs(r.dist - 10 * n) < 1e-12 * 10 * n))
+                fail_msg("s %g px %d: dist %.17g, by hand %.17g", s, px, r.dist, 10 * n);
+            assert_true(fabs(r.dir[0] - dx / n) < 1e-14);
+            assert_true(fabs(fabs(r.dir[1]) - dy / n) < 1e-14);
+            assert_true(fabs(r.dir[2] + 1 / n) < 1e-14);
+        }
+    }
+    /* Beyond 1e30 either way: refused, saying why. */
+    assert_int_equal(resolve_scaled(1e300, &c, &err), -1);
     assert_non_null(strstr(err.msg, "between 1e-30 and 1e30"));
     assert_int_equal(c.flag_error, 0);
+    assert_int_equal(resolve_scaled(1e-300, &c, &err), -1);
+    assert_non_null(strstr(err.msg, "between 1e-30 and 1e30"));
     /* A shear: accepted with a warning. */
+    double w[16];
     memcpy(w, arnold_w2c, sizeof w);
     w[4] = 0.5;
-    set_mat(&mh.w2c, mk(w));
-    assert_int_equal(ef_camera_resolve(&mh, &ff, &c, &err), 0);
+    ef_cam_meta m;
+    ef_cam_meta_init(&m, 0, 0, 149, 99);
+    set_mat(&m.w2c, mk(w));
+    ef_cam_flags fl = {0};
+    fl.fov.set = 1;
+    fl.fov.v = 50;
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
     assert_non_null(strstr(c.warning, "not rigid"));
 }
 
