@@ -174,6 +174,8 @@ static void record_option(ef_options *o, int c, const char *arg)
 void ef_options_free(ef_options *o)
 {
     ef_scene_free(&o->scene);
+    free(o->scene_text);
+    o->scene_text = NULL;
 }
 
 /* What the command line said about the scene, applied once every option is
@@ -240,6 +242,8 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
             ef_scene_file_free(&sf);
             return EF_PARSE_FAIL;
         }
+    o->scene_text = sf.text;   /* kept for exrfog/history: the file is read once */
+    sf.text = NULL;
     ef_scene_file_free(&sf);
     for (int i = 0; i < f->nspec; ++i)
         if (ef_scene_add(s, f->specs[i], err))

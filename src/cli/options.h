@@ -11,6 +11,7 @@
 
 typedef struct ef_options {
     const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;
+    char *scene_text;         /* the scene file's contents as read (owned), or NULL */
     ef_depth_mode depth_mode;
     int depth_mode_set;       /* --depth-mode was given */
     int up_set;               /* --up-axis or the scene file's "up" was given */

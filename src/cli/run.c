@@ -20,7 +20,6 @@
 #include "preview.h"
 #include "recon.h"
 #include "scene.h"
-#include "scene_file.h"
 #include "version.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
@@ -320,8 +319,8 @@ static int history_skip(char **argv, int argc, int i)
 
 /* The line this run adds to exrfog/history: the version, the command line
  * shell-quoted (less what cannot change the output) and the scene file's
- * contents, indented. NULL when out of memory. */
-static char *history_line(int argc, char **argv, const char *scene_file, ef_err *err)
+ * contents as read, indented. NULL when out of memory. */
+static char *history_line(int argc, char **argv, const char *scene_file, const char *scene_text)
 {
     char *b = NULL;
     size_t len = 0, cap = 0;
@@ -339,23 +338,19 @@ static char *history_line(int argc, char **argv, const char *scene_file, ef_err 
         }
         ++i;
     }
-    if (scene_file) {
-        char *text = NULL;
-        if (ef_read_text_file(scene_file, &text, err) == 0) {
-            int fail = grow(&b, &len, &cap, "\n  scene ", 9) ||
-                       grow(&b, &len, &cap, scene_file, strlen(scene_file)) ||
-                       grow(&b, &len, &cap, ":", 1);
-            for (const char *l = text; !fail && *l;) {
-                const char *nl = strchr(l, '\n');
-                const size_t n = nl ? (size_t) (nl - l) : strlen(l);
-                fail = grow(&b, &len, &cap, "\n    ", 5) || grow(&b, &len, &cap, l, n);
-                l += n + (nl != NULL);
-            }
-            free(text);
-            if (fail) {
-                free(b);
-                return NULL;
-            }
+    if (scene_file && scene_text) {
+        int fail = grow(&b, &len, &cap, "\n  scene ", 9) ||
+                   grow(&b, &len, &cap, scene_file, strlen(scene_file)) ||
+                   grow(&b, &len, &cap, ":", 1);
+        for (const char *l = scene_text; !fail && *l;) {
+            const char *nl = strchr(l, '\n');
+            const size_t n = nl ? (size_t) (nl - l) : strlen(l);
+            fail = grow(&b, &len, &cap, "\n    ", 5) || grow(&b, &len, &cap, l, n);
+            l += n + (nl != NULL);
+        }
+        if (fail) {
+            free(b);
+            return NULL;
         }
     }
     return b;
@@ -616,7 +611,7 @@ int ef_main(int argc, char **argv)
             fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
                             "output part is single-level\n", o.input, p);
 
-    history = history_line(argc, typed, o.scene_file, &err);
+    history = history_line(argc, typed, o.scene_file, o.scene_text);
     if (!history) {
         ef_fail(&err, "out of memory for the history attribute");
         report(o.output, &err, 1);

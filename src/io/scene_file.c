@@ -587,10 +587,12 @@ int ef_scene_file_read(const char *path, ef_scene_file *out, ef_err *err)
     json_error_t jerr;
     json_t *root = json_loadb(text + skip, strlen(text + skip),
                               JSON_REJECT_DUPLICATES | JSON_DECODE_INT_AS_REAL, &jerr);
-    free(text);
-    if (!root)
+    out->text = text;
+    if (!root) {
+        ef_scene_file_free(out);
         return ef_fail(err, "line %d, column %d: %s%s", jerr.line, jerr.column, jerr.text,
                        strstr(jerr.text, "near '/") ? " (JSON has no comments)" : "");
+    }
     const int rc = read_root(root, path, out, err);
     json_decref(root);
     if (rc) {
@@ -607,4 +609,6 @@ void ef_scene_file_free(ef_scene_file *f)
         f->specs[i] = NULL;
     }
     f->nspec = 0;
+    free(f->text);
+    f->text = NULL;
 }

@@ -16,13 +16,14 @@ typedef struct ef_scene_file {
     double color[3], up[3], units, time;
     unsigned aov;                            /* EF_AOV_* bits of "aov" (0: none) */
     char sky[64];                            /* as --sky takes it: fog, keep, distance=D */
+    char *text;                              /* the file as read, for provenance */
 } ef_scene_file;
 
 /* Reads and checks path. On error returns -1; the message names the
  * offending key and its path in the file (e.g. "fog[1].density: ..."). */
 int ef_scene_file_read(const char *path, ef_scene_file *out, ef_err *err);
 
-/* Releases the SPEC strings. */
+/* Releases the SPEC strings and the text. */
 void ef_scene_file_free(ef_scene_file *f);
 
 /* Reads a whole text file into a malloc'd NUL-terminated buffer (the fog
