@@ -639,39 +639,43 @@ static double octave_at(rayc *R, int i, long double t)
     return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
 }
 
-/* Octave i of the factor along axis a at its coordinate u (precise: a
- * long double split, for the reference's density). */
-static double factor_octave_ld(const nstate *s, int a, int i, long double u)
+/* Octave i of the factor along axis a, whose own coordinate is split into
+ * cell xa and fraction fa (the other two are the factor's constants). */
+static double factor_octave_at(const nstate *s, int a, int i, int64_t xa, double fa)
 {
     int64_t X[3];
     double f[3];
     int j = 0;
     for (int b = 0; b < 3; ++b) {
-        if (b == a)
-            split_ld(u, &X[b], &f[b]);
-        else
+        if (b == a) {
+            X[b] = xa;
+            f[b] = fa;
+        } else {
             ef_noise_split(s->fixed[a][i][j++], &X[b], &f[b]);
+        }
     }
     ef_noise_cell nc;
     ef_noise_cell_at(X[0], X[1], X[2], &nc);
     return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
 }
 
+/* Octave i of the factor along axis a at its coordinate u (precise: a
+ * long double split, for the reference's density). */
+static double factor_octave_ld(const nstate *s, int a, int i, long double u)
+{
+    int64_t x;
+    double f;
+    split_ld(u, &x, &f);
+    return factor_octave_at(s, a, i, x, f);
+}
+
 /* Octave i of the factor along axis a at its coordinate u. */
 static double factor_octave(const nstate *s, int a, int i, double u)
 {
-    int64_t X[3];
-    double f[3];
-    int j = 0;
-    for (int b = 0; b < 3; ++b) {
-        if (b == a)
-            ef_noise_split(u, &X[b], &f[b]);
-        else
-            ef_noise_split(s->fixed[a][i][j++], &X[b], &f[b]);
-    }
-    ef_noise_cell nc;
-    ef_noise_cell_at(X[0], X[1], X[2], &nc);
-    return ef_noise_cell_eval(&nc, f[0], f[1], f[2]);
+    int64_t x;
+    double f;
+    ef_noise_split(u, &x, &f);
+    return factor_octave_at(s, a, i, x, f);
 }
 
 /* max(0, 1 + c fbm) of the noise model, or the product of the separable
