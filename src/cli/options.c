@@ -19,7 +19,8 @@ enum {
     OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
-    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION
+    OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
+    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW
 };
 
 static const struct option long_opts[] = {
@@ -35,6 +36,10 @@ static const struct option long_opts[] = {
     { "up-axis", required_argument, NULL, OPT_UP_AXIS },
     { "units-per-meter", required_argument, NULL, OPT_UNITS },
     { "time", required_argument, NULL, OPT_TIME },
+    { "frames", required_argument, NULL, OPT_FRAMES },
+    { "fps", required_argument, NULL, OPT_FPS },
+    { "keep-going", no_argument, NULL, OPT_KEEP_GOING },
+    { "view", required_argument, NULL, OPT_VIEW },
     { "aov", required_argument, NULL, OPT_AOV },
     { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
@@ -62,6 +67,7 @@ void ef_options_usage(FILE *out)
 {
     fprintf(out,
             "usage: exrfog [OPTIONS] INPUT -o OUTPUT\n"
+            "       exrfog [OPTIONS] shot.#.exr -o fog.#.exr [--frames 1-100]\n"
             "Puts physically correct fog into a rendered EXR, using its depth and camera.\n"
             "\n"
             "  -o, --output FILE        output EXR (may equal INPUT; written atomically)\n"
@@ -81,7 +87,14 @@ void ef_options_usage(FILE *out)
             "                           Blender and V-Ray scenes are z-up)\n"
             "      --units-per-meter U  scene units per metre (default 1, 100 for cm);\n"
             "                           densities are per metre\n"
-            "      --time T             time in seconds for velocity= keys (default 0)\n"
+            "      --time T             time in seconds for velocity= keys (default: the\n"
+            "                           frame / --fps in a sequence, else 0)\n"
+            "      --frames LIST        frames of a sequence: 1-100, 1-100x2, 1,5,10-20\n"
+            "                           (default: every frame on disk matching INPUT)\n"
+            "      --fps N              frames per second for the default time (default 24)\n"
+            "      --keep-going         a failed frame does not stop the sequence\n"
+            "      --view NAME          fog this view of a stereo/multi-view file, repeatable\n"
+            "                           (default: every view with a camera)\n"
             "      --aov LIST           extra output channels, repeatable: a comma list of\n"
             "                           fog (fog.R,G,B,A), T (fog_T.R,G,B), error\n"
             "                           (fog_error.R,G,B), P (fog_P.X,Y,Z), distance\n"
@@ -158,7 +171,7 @@ static void record(ef_options *o, const char *a)
  * file (threads, messages, preview): equal outputs get equal headers. */
 static void record_option(ef_options *o, int c, const char *arg)
 {
-    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_PREVIEW || c == 'v' || c == 'q' || c == 'o')
+    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES || c == OPT_PREVIEW || c == 'v' || c == 'q' || c == 'o')
         return;
     for (const struct option *lo = long_opts; lo->name; ++lo)
         if (lo->val == c) {
@@ -207,6 +220,7 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
             s->ctx.units_per_meter = sf.units;
         if (sf.has_time)
             s->ctx.time = sf.time;
+        o->time_set |= sf.has_time;
         o->aov |= sf.aov;
         if (sf.has_sky && ef_scene_parse_sky(s, sf.sky, err)) {
             char msg[sizeof err->msg];
@@ -226,6 +240,7 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
         s->ctx.units_per_meter = f->units;
     if (f->has_time)
         s->ctx.time = f->time;
+    o->time_set |= f->has_time;
     if (f->has_sky && ef_scene_parse_sky(s, f->sky, err))
         return ef_scene_file_free(&sf), EF_PARSE_USAGE;
     s->ctx.read_file = ef_read_text_file;
@@ -258,7 +273,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
 /* The numeric options, for the "out of range" message (wide: matrices). */
 static const struct {
     int opt, wide;
-} numeric_opts[] = { { OPT_FOG_COLOR, 0 }, { OPT_UP_AXIS, 0 }, { OPT_UNITS, 0 }, { OPT_TIME, 0 },
+} numeric_opts[] = { { OPT_FOG_COLOR, 0 }, { OPT_UP_AXIS, 0 }, { OPT_UNITS, 0 }, { OPT_TIME, 0 }, { OPT_FPS, 0 },
                      { OPT_AOV_ORIGIN, 0 }, { OPT_FOV, 0 }, { OPT_FOCAL, 0 }, { OPT_APERTURE, 0 }, { OPT_NEAR, 0 }, { OPT_FAR, 0 },
                      { OPT_W2C, 1 }, { OPT_C2W, 1 } };
 
@@ -299,6 +314,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     o->compression = -1;
     o->zip_level = -1;
     o->pixel_type = -1;
+    o->fps = 24;
     /* 0, not 1: glibc then also forgets where it was inside a cluster of
      * short options, so a second parse in one process (a library host, the
      * fuzzer) never reads the previous argv. */
@@ -368,6 +384,21 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
                 return ef_fail(err, "--time '%s' is not a finite number (seconds)", a),
                        EF_PARSE_USAGE;
             f.has_time = 1;
+            break;
+        case OPT_FRAMES: o->frames = a; break;
+        case OPT_FPS:
+            if (ef_parse_numbers(a, &o->fps, 1) || !(o->fps > 0))
+                return ef_fail(err, "--fps '%s' is not a positive number of frames per second", a),
+                       EF_PARSE_USAGE;
+            break;
+        case OPT_KEEP_GOING: o->keep_going = 1; break;
+        case OPT_VIEW:
+            if (!a[0])
+                return ef_fail(err, "--view: the view name is empty (e.g. --view left)"), EF_PARSE_USAGE;
+            if (o->nviews >= (int) (sizeof o->views / sizeof o->views[0]))
+                return ef_fail(err, "too many --view (at most %d)",
+                               (int) (sizeof o->views / sizeof o->views[0])), EF_PARSE_USAGE;
+            o->views[o->nviews++] = a;
             break;
         case OPT_AOV:
             if (ef_aov_parse(a, &o->aov, "--aov", err))

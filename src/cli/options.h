@@ -25,6 +25,12 @@ typedef struct ef_options {
     const char *chan_type_name[EF_MAX_CHAN_TYPES];
     int chan_type[EF_MAX_CHAN_TYPES], nchan_type;
     int threads;              /* 0: all cores */
+    const char *frames;       /* --frames LIST, or NULL: every frame on disk */
+    double fps;               /* --fps, for the default time of a frame */
+    int keep_going;           /* --keep-going */
+    int time_set;             /* --time or the scene file's "time" was given */
+    const char *views[16];    /* --view NAME, repeatable */
+    int nviews;
     int explain, stats, verbose, quiet;
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */
     int has_aov_origin;       /* --aov-origin given */

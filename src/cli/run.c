@@ -11,6 +11,8 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "apply.h"
@@ -21,6 +23,7 @@
 #include "recon.h"
 #include "scene.h"
 #include "version.h"
+#include "frames.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
  * bytes there are not one (overlong, surrogate, beyond U+10FFFF, cut). */
@@ -70,15 +73,100 @@ static void put_clean(const char *s)
     }
 }
 
+static struct progress *active_pg;
+static void progress_clear(struct progress *pg);
+
 /* Prints "exrfog: FILE: message"; the callee's idea of FILE wins. */
 static int report(const char *file, const ef_err *err, int status)
 {
+    progress_clear(active_pg);
     fputs("exrfog: ", stderr);
     put_clean(err->file ? err->file : file);
     fputs(": ", stderr);
     put_clean(err->msg);
     fputc('\n', stderr);
     return status;
+}
+
+/* The progress bar on a terminal: frames done, pixels, elapsed, ETA.
+ * Workers add their pixels; whoever finds the last drawing 0.2 s old
+ * draws, under a try-lock so no worker ever waits for the terminal. */
+struct progress {
+    int nframes, done;        /* frames in the run; finished so far */
+    long frame;               /* the current frame's number */
+    int has_frame;
+    double t0, last;
+    double frame_px;          /* pixels of the current frame */
+    _Atomic long px;          /* pixels of the current frame fogged */
+    double px_total;          /* pixels of the finished frames */
+    pthread_mutex_t lock;
+    int drawn;                /* a line is on the terminal */
+};
+typedef struct progress progress;
+
+static double wall_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
+}
+
+static void hms(char *b, size_t n, double s)
+{
+    const long t = s > 0 && s < 1e7 ? (long) (s + 0.5) : 0;
+    if (t >= 3600)
+        snprintf(b, n, "%ld:%02ld:%02ld", t / 3600, t / 60 % 60, t % 60);
+    else
+        snprintf(b, n, "%ld:%02ld", t / 60, t % 60);
+}
+
+/* Draws the bar (pg->lock held). */
+static void progress_draw(progress *pg, double t)
+{
+    const double px = (double) pg->px;
+    const double frac = pg->frame_px > 0 ? (px < pg->frame_px ? px / pg->frame_px : 1.0) : 0.0;
+    const double all = pg->nframes > 0 ? (pg->done + frac) / pg->nframes : frac;
+    char bar[31], el[32], eta[32], fr[64] = "";
+    const int fill = (int) (all * 30.0);
+    for (int i = 0; i < 30; ++i)
+        bar[i] = i < fill ? '#' : '.';
+    bar[30] = '\0';
+    hms(el, sizeof el, t - pg->t0);
+    if (all > 0.001)
+        hms(eta, sizeof eta, (t - pg->t0) * (1.0 - all) / all);
+    else
+        snprintf(eta, sizeof eta, "?");
+    if (pg->has_frame)
+        snprintf(fr, sizeof fr, "frame %ld (%d/%d) ", pg->frame, pg->done + 1, pg->nframes);
+    fprintf(stderr, "\r\033[Kexrfog: %s[%s] %3.0f%%  %.1f Mpx  %s elapsed  ETA %s", fr, bar,
+            100.0 * all, (pg->px_total + px) / 1e6, el, eta);
+    fflush(stderr);
+    pg->drawn = 1;
+    pg->last = t;
+}
+
+static void progress_add(progress *pg, long px)
+{
+    pg->px += px;
+    const double t = wall_now();
+    if (t - pg->last < 0.2 || pthread_mutex_trylock(&pg->lock))
+        return;
+    if (t - pg->last >= 0.2)
+        progress_draw(pg, t);
+    pthread_mutex_unlock(&pg->lock);
+}
+
+/* Takes the bar off the terminal so a message can be printed. */
+static void progress_clear(progress *pg)
+{
+    if (!pg || !pg->drawn)
+        return;
+    pthread_mutex_lock(&pg->lock);
+    fputs("\r\033[K", stderr);
+    fflush(stderr);
+    pg->drawn = 0;
+    pg->last = 0;
+    pthread_mutex_unlock(&pg->lock);
 }
 
 /* Per-run state shared read-only by the worker threads, except the
@@ -89,6 +177,7 @@ typedef struct fog_job {
     double aov_origin[3];
     ef_tau_stats *stats;      /* per component, or NULL without --stats */
     pthread_mutex_t lock;
+    progress *pg;             /* NULL without a progress bar */
     /* preview: every step-th pixel of the data window */
     unsigned char *preview;
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
@@ -123,6 +212,8 @@ static void fog_chunk(void *user, const ef_chunk *ck)
             ef_tau_stats_merge(&j->stats[i], &st[i]);
         pthread_mutex_unlock(&j->lock);
     }
+    if (j->pg)
+        progress_add(j->pg, (long) ck->w * ck->h);
     if (!j->preview)
         return;
     for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
@@ -300,8 +391,8 @@ static int grow_quoted(char **b, size_t *len, size_t *cap, const char *a)
 static int history_skip(char **argv, int argc, int i)
 {
     const char *a = argv[i];
-    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o" };
-    static const char *const alone[] = { "--stats", "--verbose", "--quiet" };
+    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o", "--frames" };
+    static const char *const alone[] = { "--stats", "--verbose", "--quiet", "--keep-going" };
     for (size_t k = 0; k < sizeof with_arg / sizeof with_arg[0]; ++k) {
         const size_t n = strlen(with_arg[k]);
         if (!strcmp(a, with_arg[k]))
@@ -364,15 +455,16 @@ static int z_up_camera(const ef_options *o, const ef_camera *cam)
            (!strncmp(cam->src_pose, "flag", 4) && o->cam.convention == EF_CONV_BLENDER);
 }
 
-/* --up-axis auto on a Z-up camera: every component read again with z as
- * the scene's up (models fix their up when they are read). */
-static int reread_scene_z_up(ef_fog_scene *s, ef_err *err)
+/* Reads every component again under a new up axis (NULL: keep) and time:
+ * models fix their up and time when they are read. */
+static int rebuild_scene(ef_fog_scene *s, const double *up, double time, ef_err *err)
 {
     static ef_fog_scene ns;
     ns = *s;
     ns.ncomp = 0;
-    ns.ctx.up[0] = ns.ctx.up[1] = 0;
-    ns.ctx.up[2] = 1;
+    if (up)
+        memcpy(ns.ctx.up, up, sizeof ns.ctx.up);
+    ns.ctx.time = time;
     for (int i = 0; i < s->ncomp; ++i)
         if (ef_scene_add(&ns, s->comp[i].spec, err)) {
             ef_scene_free(&ns);
@@ -385,6 +477,7 @@ static int reread_scene_z_up(ef_fog_scene *s, ef_err *err)
 
 static void warn(const char *file, const char *msg)
 {
+    progress_clear(active_pg);
     fputs("exrfog: ", stderr);
     put_clean(file);
     fputs(": warning: ", stderr);
@@ -415,6 +508,453 @@ static int cpu_count(void)
     return n < 1 ? 1 : n > 256 ? 256 : (int) n;
 }
 
+/* What one frame of a run needs besides the options. */
+typedef struct frame_ctx {
+    int argc;
+    char **typed;             /* the command line as typed, for the history */
+    progress *pg;             /* NULL: no progress bar */
+    int has_frame;            /* a frame of a sequence: */
+    long frame;               /* its number */
+} frame_ctx;
+
+/* Fogs one image: o->input, o->output, o->depth_file and o->preview name
+ * this frame's files. Returns the exit status and prints every message. */
+static int run_frame(ef_options *o, const frame_ctx *fr)
+{
+    ef_err err = {0};
+    /* A frame's time is frame / fps unless --time or the scene file says. */
+    if (fr->has_frame && !o->time_set &&
+        rebuild_scene(&o->scene, NULL, (double) fr->frame / o->fps, &err)) {
+        return report(o->input, &err, 1);
+    }
+    ef_exr_file in = { 0 }, dep = { 0 };
+    const ef_exr_file *df = &in;
+    ef_channel_plan plan;
+    ef_cam_meta meta;
+    ef_camera cam;
+    ef_depth_conv conv;
+    static fog_job job;
+    memset(&job, 0, sizeof job);
+    job.pv_step = 1;
+    job.pg = fr->pg;
+    pthread_mutex_init(&job.lock, NULL);
+    const char *aov_names[EF_AOV_MAX_CHANNELS];
+    const int naov = ef_aov_channels(o->aov, aov_names);
+    int status = 1;
+    ef_output out, pv, mid;
+    char *history = NULL;
+    out.fd = pv.fd = mid.fd = -1;
+    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = '\0';
+    /* OUTPUT's extension chooses the format: .exr (or none) is written here,
+     * anything else through OpenImageIO from an EXR beside it. */
+    const char *ext = o->output ? strrchr(o->output, '.') : NULL;
+    if (ext && strchr(ext, '/'))
+        ext = NULL;
+    const int foreign = ext && strcasecmp(ext, ".exr") != 0;
+    if (!o->explain) {
+        /* Everything about the destinations is checked, and their temporary
+         * files made, before a pixel is read. */
+        ef_output_signals();
+        if (o->preview) {
+            char msg[512];
+            if (!strcmp(o->preview, o->output) || ef_output_same_file(o->preview, o->output) ||
+                ef_output_same_file(o->preview, o->input) ||
+                (o->depth_file && ef_output_same_file(o->preview, o->depth_file))) {
+                ef_fail(&err, "--preview names the same file as INPUT, --depth or -o; give the "
+                              "preview its own name");
+                status = report(o->preview, &err, 2);
+                goto done;
+            }
+            if (ef_preview_check(o->preview, msg, sizeof msg)) {
+                ef_fail(&err, "--preview: %s", msg);
+                status = report(o->preview, &err, 2);
+                goto done;
+            }
+            const char *dot = strrchr(o->preview, '.'), *slash = strrchr(o->preview, '/');
+            const int rc = ef_output_open(&pv, o->preview, dot && (!slash || dot > slash) ? dot : NULL,
+                                          &err);
+            if (rc) {
+                status = report(o->preview, &err, rc);
+                goto done;
+            }
+        }
+        if (foreign) {
+            char msg[512];
+            if (naov) {
+                ef_fail(&err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
+                              "colour and alpha only", ext);
+                status = report(o->output, &err, 2);
+                goto done;
+            }
+            if (ef_preview_check(o->output, msg, sizeof msg)) {
+                ef_fail(&err, "no writer for '%s' files (exrfog writes .exr itself, and through "
+                              "OpenImageIO .tif, .png, .jpg, .dpx and the rest): %s", ext, msg);
+                status = report(o->output, &err, 2);
+                goto done;
+            }
+        }
+        const int rc = ef_output_open(&out, o->output, foreign ? ext : NULL, &err);
+        if (rc) {
+            status = report(o->output, &err, rc);
+            goto done;
+        }
+        if (foreign && (status = ef_output_open(&mid, o->output, ".exr", &err)) != 0) {
+            status = report(o->output, &err, status);
+            goto done;
+        }
+    }
+    if (ef_exr_open(o->input, &in, &err)) {
+        report(o->input, &err, 1);
+        goto done;
+    }
+    if (o->depth_file) {
+        if (ef_exr_open(o->depth_file, &dep, &err)) {
+            report(o->depth_file, &err, 1);
+            goto done;
+        }
+        df = &dep;
+    }
+    if (ef_find_channels(&in, df, o->layer, o->depth_channel, &plan, &err)) {
+        if (o->explain)
+            explain(stdout, o, &in, NULL, NULL, NULL, 0);
+        report(o->input, &err, 1);
+        goto done;
+    }
+    const char *clash = ef_exr_part_has_any(&in, plan.rgb[0].part, aov_names, naov);
+    if (clash) {
+        char list[64];
+        ef_aov_list(o->aov, list, sizeof list);
+        ef_fail(&err, "--aov %s: the colour part already has a channel '%s'; the AOV would "
+                      "overwrite it (leave that AOV out, or rename the channel)", list, clash);
+        status = report(o->input, &err, 2);
+        goto done;
+    }
+    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err)) {
+        report(o->input, &err, 1);
+        goto done;
+    }
+    if (ef_camera_resolve(&meta, &o->cam, &cam, &err)) {
+        if (o->explain)
+            explain(stdout, o, &in, &plan, NULL, NULL, 0);
+        /* A bad --world-to-camera is a usage error; a bad header is not. */
+        status = report(o->input, &err, cam.flag_error ? 2 : 1);
+        goto done;
+    }
+    if (cam.warning[0] && !o->quiet && !o->explain) {
+        fputs("exrfog: ", stderr);
+        put_clean(o->input);
+        fputs(": warning: ", stderr);
+        put_clean(cam.warning);
+        fputc('\n', stderr);
+    }
+    static const double z_up[3] = { 0, 0, 1 };
+    if (o->up_auto && z_up_camera(o, &cam) && rebuild_scene(&o->scene, z_up, o->scene.ctx.time, &err)) {
+        report(o->input, &err, 1);
+        goto done;
+    }
+    if (!o->quiet && !o->explain)
+        warn_traps(o, &in, plan.rgb[0].part, &cam);
+    int conv_ok = ef_depth_conv_init(&conv, o->depth_mode, &cam, &err) == 0;
+    if (o->explain) {
+        explain(stdout, o, &in, &plan, &cam, &conv, conv_ok);
+        if (!conv_ok)
+            printf("depth conversion: %s\n", err.msg);
+        status = 0;
+        goto done;
+    }
+    if (!conv_ok) {
+        report(o->input, &err, 1);
+        goto done;
+    }
+
+    ef_scene_bind(&o->scene, cam.pos);
+    job.pass = (ef_fog_pass){ &cam, &conv, &o->scene };
+    job.aov = o->aov;
+    memcpy(job.aov_origin, o->aov_origin, sizeof job.aov_origin);
+    if (o->stats) {
+        job.stats = calloc((size_t) o->scene.ncomp + 1, sizeof *job.stats);
+        if (!job.stats) {
+            ef_fail(&err, "out of memory for the statistics");
+            report(o->output, &err, 1);
+            goto done;
+        }
+    }
+    exr_attr_box2i_t dw;
+    exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
+    if (fr->pg) {
+        fr->pg->frame_px = (double) (dw.max.x - dw.min.x + 1) * (double) (dw.max.y - dw.min.y + 1);
+        fr->pg->px = 0;
+    }
+    if (o->preview) {
+        int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+        job.pv_step = (w > h ? w : h) / 2048 + 1;
+        job.pv_w = (w + job.pv_step - 1) / job.pv_step;
+        job.pv_h = (h + job.pv_step - 1) / job.pv_step;
+        job.dw_x0 = dw.min.x;
+        job.dw_y0 = dw.min.y;
+        job.preview = calloc((size_t) job.pv_w * (size_t) job.pv_h, 3);
+        if (!job.preview) {
+            ef_fail(&err, "out of memory for the preview");
+            report(o->preview, &err, 1);
+            goto done;
+        }
+    }
+    for (int p = 0; p < in.nparts && !o->quiet; ++p)
+        if (ef_exr_part_is_multilevel(&in, p))
+            fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
+                            "output part is single-level\n", o->input, p);
+
+    history = history_line(fr->argc, fr->typed, o->scene_file, o->scene_text);
+    if (!history) {
+        ef_fail(&err, "out of memory for the history attribute");
+        report(o->output, &err, 1);
+        goto done;
+    }
+    /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
+    const int cpus = cpu_count();
+    if (o->threads > cpus && o->verbose)
+        fprintf(stderr, "exrfog: note: --threads %d capped at the %d CPUs\n", o->threads, cpus);
+    ef_stream_opts so = { .threads = o->threads && o->threads < cpus ? o->threads : cpus,
+                          .compression = o->compression,
+                          .zip_level = o->zip_level,
+                          .pixel_type = o->pixel_type,
+                          .chan_type_name = o->chan_type_name,
+                          .chan_type = o->chan_type,
+                          .nchan_type = o->nchan_type,
+                          .depth_name = df == &in ? plan.depth.name : NULL,
+                          .depth_part = plan.depth.part,
+                          .param_attr = o->params,
+                          .history = history,
+                          .extra = aov_names,
+                          .nextra = naov,
+                          .has_origin_attr = o->has_aov_origin,
+                          .origin_attr = { o->aov_origin[0], o->aov_origin[1], o->aov_origin[2] } };
+    ef_stream_stats st;
+    if (o->verbose) {
+        explain(stderr, o, &in, &plan, &cam, &conv, conv_ok);
+        fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o->input, o->output, so.threads,
+                so.threads > 1 ? "s" : "");
+    }
+    if (ef_exr_stream(&in, df, &plan, o->output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
+                      &st, &err)) {
+        report(o->output, &err, 1);
+        goto done;
+    }
+    if (foreign) {
+        /* Colour and alpha of the fogged part, in OUTPUT's format. */
+        const char *names[4] = { plan.rgb[0].name, plan.rgb[1].name, plan.rgb[2].name,
+                                 plan.alpha.part >= 0 ? plan.alpha.name : NULL };
+        char msg[512];
+        close(mid.fd);
+        mid.fd = -1;
+        close(out.fd);
+        out.fd = -1;
+        if (ef_oiio_convert_exr(mid.tmp, plan.rgb[0].part, names, names[3] ? 4 : 3, out.tmp, msg,
+                                sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            report(o->output, &err, 1);
+            goto done;
+        }
+        ef_output_abort(&mid);
+    }
+    if (job.preview) {
+        /* The preview goes in place first: when it fails, OUTPUT (which
+         * may be the input) is left as it was and the run fails. */
+        char msg[512];
+        close(pv.fd);
+        pv.fd = -1;
+        if (ef_preview_write(pv.tmp, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
+            ef_fail(&err, "%s; nothing was written", msg);
+            report(o->preview, &err, 1);
+            goto done;
+        }
+        if (ef_output_commit(&pv, &err)) {
+            report(o->preview, &err, 1);
+            goto done;
+        }
+    }
+    if (ef_output_commit(&out, &err)) {
+        report(o->output, &err, 1);
+        goto done;
+    }
+    status = 0;
+    if (o->stats) {
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
+        fprintf(stderr,
+                "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode %.3f s, "
+                "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
+                st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
+                (double) ru.ru_maxrss / 1024.0);
+        print_tau_stats(&o->scene, job.stats);
+    }
+done:
+    free(history);
+    ef_output_abort(&mid);
+    ef_output_abort(&pv);
+    ef_output_abort(&out);
+    free(job.preview);
+    free(job.stats);
+    pthread_mutex_destroy(&job.lock);
+    ef_exr_close(&dep);
+    ef_exr_close(&in);
+    return status;
+}
+
+/* Appends frame f to a comma list in b (at most len), ending in "..."
+ * once it is full. */
+static void list_frame(char *b, size_t len, long f)
+{
+    const size_t at = strlen(b);
+    if (at + 24 >= len) {
+        if (at + 4 < len && strcmp(b + at - 3, "..."))
+            snprintf(b + at, len - at, ", ...");
+        return;
+    }
+    snprintf(b + at, len - at, "%s%ld", at ? ", " : "", f);
+}
+
+/* Runs every frame of a sequence in order: the frames of --frames, or
+ * every frame on disk matching INPUT. Missing frames are found before any
+ * work; a failed frame stops the run unless --keep-going, which fogs the
+ * others and names every failure at the end. */
+static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pin)
+{
+    const char *pattern = o->input, *out_pat = o->output, *dep_pat = o->depth_file,
+               *pv_pat = o->preview;
+    ef_frame_pattern pout = { 0 }, pdep = { 0 }, ppv = { 0 };
+    ef_err err = { 0 };
+    if (out_pat && !ef_frame_pattern_find(out_pat, &pout)) {
+        fprintf(stderr, "exrfog: INPUT is a sequence (%s) but -o %s has no frame pattern; every "
+                        "frame would overwrite it (write e.g. -o fog.#.exr)\n", pattern, out_pat);
+        return 2;
+    }
+    if (pv_pat && !ef_frame_pattern_find(pv_pat, &ppv)) {
+        fprintf(stderr, "exrfog: INPUT is a sequence (%s) but --preview %s has no frame pattern "
+                        "(write e.g. --preview fog.#.png)\n", pattern, pv_pat);
+        return 2;
+    }
+    if (dep_pat)
+        ef_frame_pattern_find(dep_pat, &pdep);   /* one depth for every frame is allowed */
+    long *frames = NULL;
+    int n = 0;
+    if (o->frames ? ef_frames_parse(o->frames, &frames, &n, &err)
+                  : ef_frames_on_disk(pattern, pin, &frames, &n, &err)) {
+        if (o->frames) {
+            fprintf(stderr, "exrfog: %s\n", err.msg);
+            return 2;
+        }
+        return report(pattern, &err, 1);
+    }
+    if (n == 0) {
+        if (pin->len > 1 && pattern[pin->at] == '#')
+            ef_fail(&err, "no file on disk matches this frame pattern; as in oiiotool, each # "
+                          "is four digits, so %d #s are %d digits (write shot.#.exr or "
+                          "shot.%%04d.exr for shot.0001.exr)", (int) pin->len, pin->width);
+        else
+            ef_fail(&err, "no file on disk matches this frame pattern (check the name and the "
+                          "padding: # is 4 digits, @ one digit, %%04d four)");
+        return report(pattern, &err, 1);
+    }
+    static char in_path[4096], out_path[4096], dep_path[4096], pv_path[4096];
+    char missing[400] = "";
+    int nmissing = 0;
+    unsigned char *skip = calloc((size_t) n, 1);
+    if (!skip) {
+        free(frames);
+        fputs("exrfog: out of memory\n", stderr);
+        return 1;
+    }
+    for (int i = 0; i < n; ++i) {
+        struct stat st;
+        const int bad = ef_frame_path(pattern, pin, frames[i], in_path, sizeof in_path) ||
+                        stat(in_path, &st) ||
+                        (dep_pat && (ef_frame_path(dep_pat, &pdep, frames[i], dep_path,
+                                                   sizeof dep_path) || stat(dep_path, &st)));
+        if (bad) {
+            skip[i] = 1;
+            ++nmissing;
+            list_frame(missing, sizeof missing, frames[i]);
+        }
+    }
+    int status = 0;
+    if (nmissing && !o->keep_going) {
+        fprintf(stderr, "exrfog: %s: %d of %d frame%s missing on disk%s: %s; nothing was "
+                        "written (render them, choose others with --frames, or pass "
+                        "--keep-going)\n", pattern, nmissing, n, n > 1 ? "s" : "",
+                dep_pat && pdep.has ? " (colour or depth)" : "", missing);
+        free(skip);
+        free(frames);
+        return 1;
+    }
+    if (o->explain)
+        printf("sequence: %s, %d frame%s (%ld to %ld), time = frame / %g fps%s\n", pattern, n,
+               n > 1 ? "s" : "", frames[0], frames[n - 1], o->fps,
+               o->time_set ? " (overridden by --time or the scene file)" : "");
+    char failed[400] = "";
+    int nfailed = 0;
+    if (fr->pg)
+        fr->pg->nframes = n - nmissing;
+    for (int i = 0; i < n; ++i) {
+        if (skip[i]) {
+            ++nfailed;
+            list_frame(failed, sizeof failed, frames[i]);
+            continue;
+        }
+        if (ef_frame_path(pattern, pin, frames[i], in_path, sizeof in_path) ||
+            (out_pat && ef_frame_path(out_pat, &pout, frames[i], out_path, sizeof out_path)) ||
+            (dep_pat && ef_frame_path(dep_pat, &pdep, frames[i], dep_path, sizeof dep_path)) ||
+            (pv_pat && ef_frame_path(pv_pat, &ppv, frames[i], pv_path, sizeof pv_path))) {
+            fprintf(stderr, "exrfog: %s: the path of frame %ld is too long\n", pattern, frames[i]);
+            status = 1;
+            break;
+        }
+        o->input = in_path;
+        o->output = out_pat ? out_path : NULL;
+        o->depth_file = dep_pat ? dep_path : NULL;
+        o->preview = pv_pat ? pv_path : NULL;
+        fr->has_frame = 1;
+        fr->frame = frames[i];
+        if (fr->pg) {
+            fr->pg->has_frame = 1;
+            fr->pg->frame = frames[i];
+        }
+        const int rc = run_frame(o, fr);
+        if (fr->pg) {
+            fr->pg->done++;
+            fr->pg->px_total += fr->pg->frame_px;
+            fr->pg->frame_px = 0;
+            fr->pg->px = 0;
+        }
+        if (o->explain)
+            break;   /* the first frame tells what every frame is read as */
+        if (rc == 0)
+            continue;
+        /* A usage error is the same for every frame. */
+        if (rc == 2 || !o->keep_going) {
+            status = rc;
+            if (rc != 2 && i + 1 < n)
+                fprintf(stderr, "exrfog: %s: stopped at frame %ld; frames before it are written, "
+                                "none after (--keep-going fogs the others)\n", pattern, frames[i]);
+            break;
+        }
+        ++nfailed;
+        list_frame(failed, sizeof failed, frames[i]);
+    }
+    if (status == 0 && nfailed) {
+        progress_clear(fr->pg);
+        fprintf(stderr, "exrfog: %s: %d of %d frames failed: %s\n", pattern, nfailed, n, failed);
+        status = 1;
+    }
+    o->input = pattern;
+    o->output = out_pat;
+    o->depth_file = dep_pat;
+    o->preview = pv_pat;
+    free(skip);
+    free(frames);
+    return status;
+}
+
 int ef_main(int argc, char **argv)
 {
     static ef_options o;
@@ -440,272 +980,32 @@ int ef_main(int argc, char **argv)
         return 2;
     }
 
-    ef_exr_file in = { 0 }, dep = { 0 };
-    const ef_exr_file *df = &in;
-    ef_channel_plan plan;
-    ef_cam_meta meta;
-    ef_camera cam;
-    ef_depth_conv conv;
-    static fog_job job;
-    memset(&job, 0, sizeof job);
-    job.pv_step = 1;
-    pthread_mutex_init(&job.lock, NULL);
-    const char *aov_names[EF_AOV_MAX_CHANNELS];
-    const int naov = ef_aov_channels(o.aov, aov_names);
-    int status = 1;
-    ef_output out, pv, mid;
-    char *history = NULL;
-    out.fd = pv.fd = mid.fd = -1;
-    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = '\0';
-    /* OUTPUT's extension chooses the format: .exr (or none) is written here,
-     * anything else through OpenImageIO from an EXR beside it. */
-    const char *ext = o.output ? strrchr(o.output, '.') : NULL;
-    if (ext && strchr(ext, '/'))
-        ext = NULL;
-    const int foreign = ext && strcasecmp(ext, ".exr") != 0;
-    if (!o.explain) {
-        /* Everything about the destinations is checked, and their temporary
-         * files made, before a pixel is read. */
-        ef_output_signals();
-        if (o.preview) {
-            char msg[512];
-            if (!strcmp(o.preview, o.output) || ef_output_same_file(o.preview, o.output) ||
-                ef_output_same_file(o.preview, o.input) ||
-                (o.depth_file && ef_output_same_file(o.preview, o.depth_file))) {
-                ef_fail(&err, "--preview names the same file as INPUT, --depth or -o; give the "
-                              "preview its own name");
-                status = report(o.preview, &err, 2);
-                goto done;
-            }
-            if (ef_preview_check(o.preview, msg, sizeof msg)) {
-                ef_fail(&err, "--preview: %s", msg);
-                status = report(o.preview, &err, 2);
-                goto done;
-            }
-            const char *dot = strrchr(o.preview, '.'), *slash = strrchr(o.preview, '/');
-            const int rc = ef_output_open(&pv, o.preview, dot && (!slash || dot > slash) ? dot : NULL,
-                                          &err);
-            if (rc) {
-                status = report(o.preview, &err, rc);
-                goto done;
-            }
+    frame_ctx fr = { .argc = argc, .typed = typed };
+    static progress pg;
+    pthread_mutex_init(&pg.lock, NULL);
+    pg.t0 = wall_now();
+    if (!o.quiet && !o.explain && isatty(STDERR_FILENO)) {
+        fr.pg = &pg;
+        active_pg = &pg;
+    }
+    int status = 0;
+    ef_frame_pattern pin;
+    if (!ef_frame_pattern_find(o.input, &pin)) {
+        if (o.frames) {
+            fputs("exrfog: --frames needs a frame pattern in INPUT (shot.#.exr, shot.%04d.exr "
+                  "or shot.@@@@.exr)\n", stderr);
+            status = 2;
+        } else {
+            pg.nframes = 1;
+            status = run_frame(&o, &fr);
         }
-        if (foreign) {
-            char msg[512];
-            if (naov) {
-                ef_fail(&err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
-                              "colour and alpha only", ext);
-                status = report(o.output, &err, 2);
-                goto done;
-            }
-            if (ef_preview_check(o.output, msg, sizeof msg)) {
-                ef_fail(&err, "no writer for '%s' files (exrfog writes .exr itself, and through "
-                              "OpenImageIO .tif, .png, .jpg, .dpx and the rest): %s", ext, msg);
-                status = report(o.output, &err, 2);
-                goto done;
-            }
-        }
-        const int rc = ef_output_open(&out, o.output, foreign ? ext : NULL, &err);
-        if (rc) {
-            status = report(o.output, &err, rc);
-            goto done;
-        }
-        if (foreign && (status = ef_output_open(&mid, o.output, ".exr", &err)) != 0) {
-            status = report(o.output, &err, status);
-            goto done;
-        }
+    } else {
+        status = run_sequence(&o, &fr, &pin);
     }
-    if (ef_exr_open(o.input, &in, &err)) {
-        report(o.input, &err, 1);
-        goto done;
-    }
-    if (o.depth_file) {
-        if (ef_exr_open(o.depth_file, &dep, &err)) {
-            report(o.depth_file, &err, 1);
-            goto done;
-        }
-        df = &dep;
-    }
-    if (ef_find_channels(&in, df, o.layer, o.depth_channel, &plan, &err)) {
-        if (o.explain)
-            explain(stdout, &o, &in, NULL, NULL, NULL, 0);
-        report(o.input, &err, 1);
-        goto done;
-    }
-    const char *clash = ef_exr_part_has_any(&in, plan.rgb[0].part, aov_names, naov);
-    if (clash) {
-        char list[64];
-        ef_aov_list(o.aov, list, sizeof list);
-        ef_fail(&err, "--aov %s: the colour part already has a channel '%s'; the AOV would "
-                      "overwrite it (leave that AOV out, or rename the channel)", list, clash);
-        status = report(o.input, &err, 2);
-        goto done;
-    }
-    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err)) {
-        report(o.input, &err, 1);
-        goto done;
-    }
-    if (ef_camera_resolve(&meta, &o.cam, &cam, &err)) {
-        if (o.explain)
-            explain(stdout, &o, &in, &plan, NULL, NULL, 0);
-        /* A bad --world-to-camera is a usage error; a bad header is not. */
-        status = report(o.input, &err, cam.flag_error ? 2 : 1);
-        goto done;
-    }
-    if (cam.warning[0] && !o.quiet && !o.explain) {
-        fputs("exrfog: ", stderr);
-        put_clean(o.input);
-        fputs(": warning: ", stderr);
-        put_clean(cam.warning);
-        fputc('\n', stderr);
-    }
-    if (o.up_auto && z_up_camera(&o, &cam) && reread_scene_z_up(&o.scene, &err)) {
-        report(o.input, &err, 1);
-        goto done;
-    }
-    if (!o.quiet && !o.explain)
-        warn_traps(&o, &in, plan.rgb[0].part, &cam);
-    int conv_ok = ef_depth_conv_init(&conv, o.depth_mode, &cam, &err) == 0;
-    if (o.explain) {
-        explain(stdout, &o, &in, &plan, &cam, &conv, conv_ok);
-        if (!conv_ok)
-            printf("depth conversion: %s\n", err.msg);
-        status = 0;
-        goto done;
-    }
-    if (!conv_ok) {
-        report(o.input, &err, 1);
-        goto done;
-    }
-
-    ef_scene_bind(&o.scene, cam.pos);
-    job.pass = (ef_fog_pass){ &cam, &conv, &o.scene };
-    job.aov = o.aov;
-    memcpy(job.aov_origin, o.aov_origin, sizeof job.aov_origin);
-    if (o.stats) {
-        job.stats = calloc((size_t) o.scene.ncomp + 1, sizeof *job.stats);
-        if (!job.stats) {
-            ef_fail(&err, "out of memory for the statistics");
-            report(o.output, &err, 1);
-            goto done;
-        }
-    }
-    exr_attr_box2i_t dw;
-    exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
-    if (o.preview) {
-        int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
-        job.pv_step = (w > h ? w : h) / 2048 + 1;
-        job.pv_w = (w + job.pv_step - 1) / job.pv_step;
-        job.pv_h = (h + job.pv_step - 1) / job.pv_step;
-        job.dw_x0 = dw.min.x;
-        job.dw_y0 = dw.min.y;
-        job.preview = calloc((size_t) job.pv_w * (size_t) job.pv_h, 3);
-        if (!job.preview) {
-            ef_fail(&err, "out of memory for the preview");
-            report(o.preview, &err, 1);
-            goto done;
-        }
-    }
-    for (int p = 0; p < in.nparts && !o.quiet; ++p)
-        if (ef_exr_part_is_multilevel(&in, p))
-            fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
-                            "output part is single-level\n", o.input, p);
-
-    history = history_line(argc, typed, o.scene_file, o.scene_text);
-    if (!history) {
-        ef_fail(&err, "out of memory for the history attribute");
-        report(o.output, &err, 1);
-        goto done;
-    }
-    /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
-    const int cpus = cpu_count();
-    if (o.threads > cpus && o.verbose)
-        fprintf(stderr, "exrfog: note: --threads %d capped at the %d CPUs\n", o.threads, cpus);
-    ef_stream_opts so = { .threads = o.threads && o.threads < cpus ? o.threads : cpus,
-                          .compression = o.compression,
-                          .zip_level = o.zip_level,
-                          .pixel_type = o.pixel_type,
-                          .chan_type_name = o.chan_type_name,
-                          .chan_type = o.chan_type,
-                          .nchan_type = o.nchan_type,
-                          .depth_name = df == &in ? plan.depth.name : NULL,
-                          .depth_part = plan.depth.part,
-                          .param_attr = o.params,
-                          .history = history,
-                          .extra = aov_names,
-                          .nextra = naov,
-                          .has_origin_attr = o.has_aov_origin,
-                          .origin_attr = { o.aov_origin[0], o.aov_origin[1], o.aov_origin[2] } };
-    ef_stream_stats st;
-    if (o.verbose) {
-        explain(stderr, &o, &in, &plan, &cam, &conv, conv_ok);
-        fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o.input, o.output, so.threads,
-                so.threads > 1 ? "s" : "");
-    }
-    if (ef_exr_stream(&in, df, &plan, o.output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
-                      &st, &err)) {
-        report(o.output, &err, 1);
-        goto done;
-    }
-    if (foreign) {
-        /* Colour and alpha of the fogged part, in OUTPUT's format. */
-        const char *names[4] = { plan.rgb[0].name, plan.rgb[1].name, plan.rgb[2].name,
-                                 plan.alpha.part >= 0 ? plan.alpha.name : NULL };
-        char msg[512];
-        close(mid.fd);
-        mid.fd = -1;
-        close(out.fd);
-        out.fd = -1;
-        if (ef_oiio_convert_exr(mid.tmp, plan.rgb[0].part, names, names[3] ? 4 : 3, out.tmp, msg,
-                                sizeof msg)) {
-            ef_fail(&err, "%s", msg);
-            report(o.output, &err, 1);
-            goto done;
-        }
-        ef_output_abort(&mid);
-    }
-    if (job.preview) {
-        /* The preview goes in place first: when it fails, OUTPUT (which
-         * may be the input) is left as it was and the run fails. */
-        char msg[512];
-        close(pv.fd);
-        pv.fd = -1;
-        if (ef_preview_write(pv.tmp, job.pv_w, job.pv_h, job.preview, msg, sizeof msg)) {
-            ef_fail(&err, "%s; nothing was written", msg);
-            report(o.preview, &err, 1);
-            goto done;
-        }
-        if (ef_output_commit(&pv, &err)) {
-            report(o.preview, &err, 1);
-            goto done;
-        }
-    }
-    if (ef_output_commit(&out, &err)) {
-        report(o.output, &err, 1);
-        goto done;
-    }
-    status = 0;
-    if (o.stats) {
-        struct rusage ru;
-        getrusage(RUSAGE_SELF, &ru);
-        fprintf(stderr,
-                "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode %.3f s, "
-                "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
-                st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
-                (double) ru.ru_maxrss / 1024.0);
-        print_tau_stats(&o.scene, job.stats);
-    }
-done:
-    free(history);
+    progress_clear(active_pg);
+    active_pg = NULL;
+    pthread_mutex_destroy(&pg.lock);
     free(typed);
-    ef_output_abort(&mid);
-    ef_output_abort(&pv);
-    ef_output_abort(&out);
-    free(job.preview);
-    free(job.stats);
-    pthread_mutex_destroy(&job.lock);
-    ef_exr_close(&dep);
-    ef_exr_close(&in);
     ef_options_free(&o);
     return status;
 }

@@ -1,0 +1,396 @@
+/* Pipeline features of issue 9 through the exrfog binary: frame
+ * sequences (patterns, --frames, per-frame cameras and time, missing and
+ * failed frames, --keep-going, the progress bar under a pseudo-terminal,
+ * the GNU parallel recipe) and multi-view files. Expected values come from
+ * the pinhole model worked out here, not from exrfog's own code. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+#include "frames.h"
+#include "testutil.h"
+
+#define W 8
+#define H 6
+#define HFOV 90.0
+
+static char g_dir[1024];
+
+/* A fresh scratch directory for one test; returns its path. */
+static const char *fresh(const char *name)
+{
+    char *p = tu_path(name);
+    snprintf(g_dir, sizeof g_dir, "%s", p);
+    free(p);
+    char cmd[2200];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s' && mkdir -p '%s'", g_dir, g_dir);
+    assert_int_equal(system(cmd), 0);
+    return g_dir;
+}
+
+/* One frame: colour 0.5, alpha 1, planar depth 5 (one sky pixel at 0),
+ * camera at (cx, 0, 0) looking down +Z (worldToCamera is the translation
+ * by -cx, row-vector layout), horizontal fov 90. */
+static void write_frame(const char *path, double cx)
+{
+    static float c[W * H], a[W * H], z[W * H];
+    for (int i = 0; i < W * H; ++i) {
+        c[i] = 0.5f;
+        a[i] = 1.0f;
+        z[i] = i == 0 ? 0.0f : 5.0f;
+    }
+    tu_part p;
+    tu_part_init(&p, W, H);
+    tu_part_add(&p, "R", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "G", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "B", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "A", EXR_PIXEL_FLOAT, a);
+    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, z);
+    static const float id[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    p.m44[0].name = "worldToCamera";
+    memcpy(p.m44[0].m, id, sizeof id);
+    p.m44[0].m[12] = (float) -cx;
+    p.f[0].name = "CameraFov";
+    p.f[0].v = (float) HFOV;
+    assert_int_equal(tu_write_exr(path, &p, 1), 0);
+}
+
+static char *in_dir(const char *fmt, ...)
+{
+    char name[512], *out = malloc(2048);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(name, sizeof name, fmt, ap);
+    va_end(ap);
+    snprintf(out, 2048, "%s/%s", g_dir, name);
+    return out;
+}
+
+/* Writes frames first..last of dir/shot.####.exr (4-digit), camera at x = 10 * frame. */
+static void write_sequence(int first, int last)
+{
+    for (int f = first; f <= last; ++f) {
+        char *p = in_dir("shot.%04d.exr", f);
+        write_frame(p, 10.0 * f);
+        free(p);
+    }
+}
+
+/* fog_P of the output frame must be the frame's camera (10 f, 0, 0) plus
+ * depth 5 along the pinhole ray of each pixel: ((u - 1/2)/a, -(v - 1/2)/b, 1)
+ * with a = 1/2 / tan(45 deg), b = a W / H. */
+static void check_positions(const char *out, int frame)
+{
+    tu_image img;
+    assert_int_equal(tu_read_image(out, 0, &img), 0);
+    const float *P[3] = { tu_image_f(&img, "fog_P.X"), tu_image_f(&img, "fog_P.Y"),
+                          tu_image_f(&img, "fog_P.Z") };
+    assert_non_null(P[0]);
+    const double a = 0.5, b = a * W / H;
+    long bad = 0;
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            const int i = y * W + x;
+            if (i == 0)
+                continue;   /* sky */
+            const double u = (x + 0.5) / W, v = (y + 0.5) / H;
+            const double e[3] = { 10.0 * frame + 5.0 * (u - 0.5) / a, 5.0 * -(v - 0.5) / b, 5.0 };
+            for (int k = 0; k < 3; ++k)
+                bad += fabs(P[k][i] - e[k]) > 1e-5 * (1 + fabs(e[k]));
+        }
+    tu_image_free(&img);
+    assert_int_equal(bad, 0);
+}
+
+static void test_frame_patterns(void **state)
+{
+    (void) state;
+    static const struct {
+        const char *path;
+        long frame;
+        const char *want;
+    } cases[] = {
+        { "a/shot.#.exr", 7, "a/shot.0007.exr" },
+        { "shot.##.exr", 7, "shot.00000007.exr" },
+        { "shot.@@@.exr", 42, "shot.042.exr" },
+        { "shot.@.exr", 1234, "shot.1234.exr" },
+        { "shot.%04d.exr", -3, "shot.-003.exr" },
+        { "shot.%d.exr", 12, "shot.12.exr" },
+        { "take#2/shot.%03d.exr", 5, "take#2/shot.005.exr" },
+        { "plain.exr", 5, "plain.exr" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+        ef_frame_pattern p;
+        char out[256];
+        ef_frame_pattern_find(cases[i].path, &p);
+        assert_int_equal(ef_frame_path(cases[i].path, &p, cases[i].frame, out, sizeof out), 0);
+        assert_string_equal(out, cases[i].want);
+    }
+    static const struct {
+        const char *text;
+        int n;
+        long first, last;
+    } lists[] = { { "1-100", 100, 1, 100 }, { "1-100x2", 50, 1, 99 }, { "1,5,10-20", 13, 1, 20 },
+                  { "-5--1", 5, -5, -1 }, { "1001", 1, 1001, 1001 } };
+    for (size_t i = 0; i < sizeof lists / sizeof lists[0]; ++i) {
+        long *f;
+        int n;
+        ef_err err = { 0 };
+        assert_int_equal(ef_frames_parse(lists[i].text, &f, &n, &err), 0);
+        assert_int_equal(n, lists[i].n);
+        assert_int_equal(f[0], lists[i].first);
+        assert_int_equal(f[n - 1], lists[i].last);
+        free(f);
+    }
+    static const char *const bad[] = { "", "1-", "a", "10-1", "1-10x0", "1,,2", "1-10y2", "1,", "5-3" };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+        long *f;
+        int n;
+        ef_err err = { 0 };
+        assert_int_equal(ef_frames_parse(bad[i], &f, &n, &err), -1);
+        assert_non_null(strstr(err.msg, "--frames"));
+    }
+}
+
+/* The frames on disk that match: exact padding, longer numbers without a
+ * leading zero, negative frames; never look-alikes. */
+static void test_frames_on_disk(void **state)
+{
+    (void) state;
+    fresh("ondisk");
+    static const char *const names[] = { "s.0001.exr", "s.0002.exr", "s.10000.exr", "s.-001.exr",
+                                         "s.001.exr", "s.00002.exr", "s.0003.exr.bak",
+                                         "t.0004.exr", "s.00a1.exr" };
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; ++i) {
+        char *p = in_dir("%s", names[i]);
+        assert_int_equal(tu_write_bytes(p, "x", 1), 0);
+        free(p);
+    }
+    char *pat = in_dir("s.#.exr");
+    ef_frame_pattern p;
+    ef_frame_pattern_find(pat, &p);
+    long *f;
+    int n;
+    ef_err err = { 0 };
+    assert_int_equal(ef_frames_on_disk(pat, &p, &f, &n, &err), 0);
+    assert_int_equal(n, 4);
+    assert_int_equal(f[0], -1);
+    assert_int_equal(f[1], 1);
+    assert_int_equal(f[2], 2);
+    assert_int_equal(f[3], 10000);
+    free(f);
+    free(pat);
+}
+
+/* Each frame is fogged with its own header camera, into its own output. */
+static void test_sequence_cameras(void **state)
+{
+    (void) state;
+    fresh("seqcam");
+    write_sequence(1, 3);
+    assert_run(0, "'%s/shot.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05 --aov P", g_dir, g_dir);
+    for (int f = 1; f <= 3; ++f) {
+        char *o = in_dir("out.%04d.exr", f);
+        check_positions(o, f);
+        free(o);
+    }
+    /* %04d and @@@@ name the same frames; --frames picks a subset */
+    fresh("seqcam2");
+    write_sequence(1, 3);
+    assert_run(0, "'%s/shot.%%04d.exr' -o '%s/pct.@@@@.exr' --frames 1-3x2 --fog exp:density=0.05 "
+                  "--aov P", g_dir, g_dir);
+    char *o1 = in_dir("pct.0001.exr"), *o2 = in_dir("pct.0002.exr"), *o3 = in_dir("pct.0003.exr");
+    check_positions(o1, 1);
+    check_positions(o3, 3);
+    assert_false(tu_exists(o2));
+    free(o1);
+    free(o2);
+    free(o3);
+}
+
+/* --time defaults to frame / --fps: frame 2 of a sequence equals the
+ * single file run with --time 2/24 (and 2/12 with --fps 12) bit for bit,
+ * and an explicit --time overrides every frame. */
+static void test_sequence_time(void **state)
+{
+    (void) state;
+    fresh("seqtime");
+    write_sequence(1, 2);
+    static const char *const fog = "--fog noise:density=0.2:scale=2:velocity=3,0,0:method=exact";
+    assert_run(0, "'%s/shot.#.exr' -o '%s/seq.#.exr' %s", g_dir, g_dir, fog);
+    assert_run(0, "'%s/shot.0002.exr' -o '%s/single.exr' %s --time %.17g", g_dir, g_dir, fog,
+               2.0 / 24.0);
+    char *seq2 = in_dir("seq.0002.exr"), *seq1 = in_dir("seq.0001.exr"), *single = in_dir("single.exr");
+    assert_int_equal(tu_compare_files(single, seq2, -1, NULL), 0);
+    assert_run(0, "'%s/shot.#.exr' -o '%s/seq.#.exr' %s --fps 12", g_dir, g_dir, fog);
+    assert_run(0, "'%s/shot.0002.exr' -o '%s/single.exr' %s --time %.17g", g_dir, g_dir, fog,
+               2.0 / 12.0);
+    assert_int_equal(tu_compare_files(single, seq2, -1, NULL), 0);
+    /* the time really moves the fog: frame 1 and 2 at one time differ only by the camera */
+    assert_run(0, "'%s/shot.#.exr' -o '%s/seq.#.exr' %s --time 0.5", g_dir, g_dir, fog);
+    assert_run(0, "'%s/shot.0001.exr' -o '%s/single.exr' %s --time 0.5", g_dir, g_dir, fog);
+    assert_int_equal(tu_compare_files(single, seq1, -1, NULL), 0);
+    assert_run(0, "'%s/shot.0001.exr' -o '%s/single.exr' %s --time 0", g_dir, g_dir, fog);
+    assert_true(tu_compare_files(single, seq1, -1, NULL) > 0);
+    free(seq1);
+    free(seq2);
+    free(single);
+}
+
+/* Missing frames are named before any work; a failed frame stops the run
+ * unless --keep-going, which fogs the others and names every failure. */
+static void test_sequence_failures(void **state)
+{
+    (void) state;
+    fresh("seqfail");
+    write_sequence(1, 3);
+    char *o1 = in_dir("out.0001.exr"), *o2 = in_dir("out.0002.exr"), *o3 = in_dir("out.0003.exr");
+    assert_run(1, "'%s/shot.#.exr' -o '%s/out.#.exr' --frames 1-5 --fog exp:density=0.05", g_dir,
+               g_dir);
+    assert_non_null(strstr(tu_err, "2 of 5 frames missing on disk"));
+    assert_non_null(strstr(tu_err, ": 4, 5;"));
+    assert_false(tu_exists(o1));
+    /* no match at all, and the oiiotool padding hint */
+    assert_run(1, "'%s/none.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "no file on disk matches"));
+    assert_run(1, "'%s/shot.####.exr' -o '%s/out.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "each # is four digits"));
+    /* frame 2 corrupt: without --keep-going frame 1 is written, 3 is not */
+    char *s2 = in_dir("shot.0002.exr");
+    assert_int_equal(tu_write_bytes(s2, "v/1\001 not an exr", 16), 0);
+    assert_run(1, "'%s/shot.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "shot.0002.exr"));
+    assert_non_null(strstr(tu_err, "stopped at frame 2"));
+    assert_true(tu_exists(o1));
+    assert_false(tu_exists(o2));
+    assert_false(tu_exists(o3));
+    unlink(o1);
+    assert_run(1, "'%s/shot.#.exr' -o '%s/out.#.exr' --frames 1-4 --keep-going --fog "
+                  "exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "2 of 4 frames failed: 2, 4"));
+    assert_true(tu_exists(o1));
+    assert_false(tu_exists(o2));
+    assert_true(tu_exists(o3));
+    /* usage errors */
+    assert_run(2, "'%s/shot.#.exr' -o '%s/out.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "no frame pattern"));
+    assert_run(2, "'%s/shot.0001.exr' -o '%s/out.exr' --frames 1-3 --fog exp:density=0.05", g_dir,
+               g_dir);
+    assert_run(2, "'%s/shot.#.exr' -o '%s/out.#.exr' --frames 3-1 --fog exp:density=0.05", g_dir,
+               g_dir);
+    assert_run(2, "'%s/shot.#.exr' -o '%s/out.#.exr' --fps 0 --fog exp:density=0.05", g_dir, g_dir);
+    free(s2);
+    free(o1);
+    free(o2);
+    free(o3);
+}
+
+/* The progress bar appears on a terminal (a pseudo-terminal made by
+ * script(1)) and never in a pipe or with -q. */
+static void test_progress_bar(void **state)
+{
+    (void) state;
+    if (system("command -v script >/dev/null 2>&1"))
+        skip();
+    fresh("progress");
+    write_sequence(1, 3);
+    const char *bin = getenv("EXRFOG_BIN");
+    char cmd[4096], out[8192] = "";
+    snprintf(cmd, sizeof cmd,
+             "script -qec \"'%s' '%s/shot.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05\" "
+             "/dev/null </dev/null",
+             bin, g_dir, g_dir);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    const size_t n = fread(out, 1, sizeof out - 1, p);
+    out[n] = '\0';
+    assert_int_equal(pclose(p), 0);
+    /* the last drawing shows the last frame, or the bar is cleared at the
+     * end: at least the final clear sequence and no error */
+    assert_non_null(strstr(out, "\033[K"));
+    assert_null(strstr(out, "error"));
+    /* a slow run draws: many frames of a heavier model */
+    write_sequence(4, 12);
+    snprintf(cmd, sizeof cmd,
+             "script -qec \"'%s' '%s/shot.#.exr' -o '%s/out.#.exr' --fog "
+             "noise:density=0.2:scale=0.01:octaves=8:method=exact --threads 1\" /dev/null "
+             "</dev/null", bin, g_dir, g_dir);
+    p = popen(cmd, "r");
+    assert_non_null(p);
+    const size_t m = fread(out, 1, sizeof out - 1, p);
+    out[m] = '\0';
+    assert_int_equal(pclose(p), 0);
+    if (!strstr(out, "ETA") || !strstr(out, "elapsed") || !strstr(out, "/12)"))
+        fail_msg("no progress bar on the terminal: '%s'", out);
+    /* not a terminal, or -q: nothing at all */
+    assert_run(0, "'%s/shot.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_string_equal(tu_err, "");
+    snprintf(cmd, sizeof cmd,
+             "script -qec \"'%s' '%s/shot.#.exr' -o '%s/out.#.exr' --fog exp:density=0.05 -q\" "
+             "/dev/null </dev/null", bin, g_dir, g_dir);
+    p = popen(cmd, "r");
+    const size_t q = fread(out, 1, sizeof out - 1, p);
+    out[q] = '\0';
+    assert_int_equal(pclose(p), 0);
+    assert_string_equal(out, "");
+}
+
+/* The render-farm recipe (samples/farm/exrfog-parallel.sh, GNU parallel):
+ * chunks of frames as parallel jobs give the same pixels as one run. */
+static void test_parallel_recipe(void **state)
+{
+    (void) state;
+    if (system("command -v parallel >/dev/null 2>&1"))
+        skip();
+    fresh("farm");
+    write_sequence(1, 5);
+    const char *src = getenv("EXRFOG_SOURCE_DIR"), *bin = getenv("EXRFOG_BIN");
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd,
+             "EXRFOG='%s' '%s/samples/farm/exrfog-parallel.sh' -j 2 -c 2 1-5 -- '%s/shot.#.exr' "
+             "-o '%s/par.#.exr' --fog exp:density=0.05 >'%s/log' 2>&1",
+             bin, src, g_dir, g_dir, g_dir);
+    if (system(cmd)) {
+        snprintf(cmd, sizeof cmd, "cat '%s/log' >&2", g_dir);
+        (void) system(cmd);
+        fail_msg("the parallel recipe failed");
+    }
+    assert_run(0, "'%s/shot.#.exr' -o '%s/one.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    for (int f = 1; f <= 5; ++f) {
+        char *a = in_dir("par.%04d.exr", f), *b = in_dir("one.%04d.exr", f);
+        assert_int_equal(tu_compare_files(b, a, -1, NULL), 0);
+        free(a);
+        free(b);
+    }
+    /* a failing chunk makes the recipe fail */
+    char *s3 = in_dir("shot.0003.exr");
+    assert_int_equal(tu_write_bytes(s3, "junk", 4), 0);
+    snprintf(cmd, sizeof cmd,
+             "EXRFOG='%s' '%s/samples/farm/exrfog-parallel.sh' -j 2 -c 2 1-5 -- '%s/shot.#.exr' "
+             "-o '%s/par.#.exr' --fog exp:density=0.05 >'%s/log' 2>&1",
+             bin, src, g_dir, g_dir, g_dir);
+    assert_true(system(cmd) != 0);
+    free(s3);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_frame_patterns),
+        cmocka_unit_test(test_frames_on_disk),
+        cmocka_unit_test(test_sequence_cameras),
+        cmocka_unit_test(test_sequence_time),
+        cmocka_unit_test(test_sequence_failures),
+        cmocka_unit_test(test_progress_bar),
+        cmocka_unit_test(test_parallel_recipe),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
