@@ -235,41 +235,178 @@ static const qchan *find_depth(const qlist *q, const char *prefix, const char *v
     return NULL;
 }
 
+/* The colour and depth search over prepared channel lists. */
+static int find_in_lists(const qlist *q, const qlist *dq, int separate, const char *layer,
+                         const char *depth_channel, ef_channel_plan *plan, ef_err *err)
+{
+    char prefix[256], all[800];
+    memset(plan, 0, sizeof *plan);
+    if (find_colour(q, layer, plan, prefix, sizeof prefix, err))
+        return -1;
+    const char *view = q->n ? q->c[0].view : "";
+    for (int i = 0; i < q->n; ++i)
+        if (q->c[i].part == plan->rgb[0].part)
+            view = q->c[i].view;
+    const qchan *d;
+    if (depth_channel) {
+        d = find(dq, depth_channel, view);
+        if (!d) {
+            list_all(dq, all, sizeof all);
+            return ef_fail(err, "no channel named '%s' for --depth-channel (channels: %s)",
+                           depth_channel, all);
+        }
+    } else if (!(d = find_depth(dq, prefix, view)) && separate) {
+        d = find(dq, "Z", NULL);   /* a separate depth file may hold only Z */
+    }
+    if (!d) {
+        list_all(dq, all, sizeof all);
+        return ef_fail(err, "no depth channel found (looked for Z, depth.Z, *.Depth.Z beside the "
+                            "colour; channels: %s); choose one with --depth-channel NAME or "
+                            "--depth FILE", all);
+    }
+    set_ref(&plan->depth, d);
+    return 0;
+}
+
 int ef_find_channels(const ef_exr_file *f, const ef_exr_file *df, const char *layer,
                      const char *depth_channel, ef_channel_plan *plan, ef_err *err)
 {
     qlist q = { 0 }, dq = { 0 };
-    char prefix[256], all[800];
+    int rc = -1;
+    memset(plan, 0, sizeof *plan);
+    if (build_list(f, &q) || build_list(df, &dq))
+        ef_fail(err, "out of memory listing channels");
+    else
+        rc = find_in_lists(&q, &dq, df != f, layer, depth_channel, plan, err);
+    free(q.c);
+    free(dq.c);
+    return rc;
+}
+
+/* The multiView attribute of part p: count of names copied (0: none). */
+static int multiview_names(const ef_exr_file *f, int p, char names[][64], int max)
+{
+    const exr_attribute_t *a = NULL;
+    if (exr_get_attribute_by_name(f->ctx, p, "multiView", &a) != EXR_ERR_SUCCESS || !a ||
+        a->type != EXR_ATTR_STRING_VECTOR || !a->stringvector)
+        return 0;
+    int n = 0;
+    for (int i = 0; i < a->stringvector->n_strings && n < max; ++i) {
+        const exr_attr_string_t *sv = &a->stringvector->strings[i];
+        if (sv->length <= 0 || sv->length >= 64)
+            continue;
+        snprintf(names[n], 64, "%.*s", (int) sv->length, sv->str);
+        ++n;
+    }
+    return n;
+}
+
+int ef_exr_views(const ef_exr_file *f, char names[][64], int max)
+{
+    if (f->nparts == 1)
+        return multiview_names(f, 0, names, max);
+    int n = 0;
+    for (int p = 0; p < f->nparts && n < max; ++p) {
+        const char *v = NULL;
+        int32_t vl = 0;
+        if (exr_attr_get_string(f->ctx, p, "view", &vl, &v) != EXR_ERR_SUCCESS || !v || vl <= 0 ||
+            vl >= 64)
+            continue;
+        int seen = 0;
+        for (int k = 0; k < n; ++k)
+            seen |= (int) strlen(names[k]) == vl && !strncmp(names[k], v, (size_t) vl);
+        if (!seen)
+            snprintf(names[n++], 64, "%.*s", (int) vl, v);
+    }
+    return n;
+}
+
+/* The view component of a single-part multi-view channel name: the
+ * second-to-last segment when it is one of the views ("left.R",
+ * "diffuse.left.R"); NULL for the default view's names. */
+static const char *name_view(const char *name, char views[][64], int nviews, size_t *at,
+                             size_t *len)
+{
+    const char *last = strrchr(name, '.');
+    if (!last)
+        return NULL;
+    const char *b = last;
+    while (b > name && b[-1] != '.')
+        --b;
+    for (int k = 0; k < nviews; ++k)
+        if ((size_t) (last - b) == strlen(views[k]) && !strncmp(b, views[k], (size_t) (last - b))) {
+            *at = (size_t) (b - name);
+            *len = (size_t) (last - b) + 1;
+            return views[k];
+        }
+    return NULL;
+}
+
+/* Keeps the channels of one view: in a multiView part, those of the view
+ * renamed without it (left.R -> R), or the unnamed ones for the default
+ * view; in a multi-part file, the parts of that view, and view-less parts
+ * when keep_plain. */
+static void filter_view(const ef_exr_file *f, qlist *q, const char *view, int keep_plain)
+{
+    char views[EF_MAX_VIEWS][64];
+    const int mv = f->nparts == 1 ? multiview_names(f, 0, views, EF_MAX_VIEWS) : 0;
+    int n = 0;
+    for (int i = 0; i < q->n; ++i) {
+        qchan c = q->c[i];
+        int keep;
+        if (mv) {
+            size_t at = 0, len = 0;
+            const char *v = name_view(c.name, views, mv, &at, &len);
+            if (v && !strcmp(v, views[0]) && strcmp(view, views[0]))
+                v = NULL;   /* the default view's name written out: not another view's */
+            keep = v ? !strcmp(v, view) : !strcmp(view, views[0]);
+            if (keep && v)
+                memmove(c.name + at, c.name + at + len, strlen(c.name + at + len) + 1);
+        } else {
+            keep = !strcmp(c.view, view) || (keep_plain && !c.view[0]);
+        }
+        if (keep)
+            q->c[n++] = c;
+    }
+    q->n = n;
+}
+
+int ef_find_view_channels(const ef_exr_file *f, const ef_exr_file *df, const char *view,
+                          const char *layer, const char *depth_channel, ef_channel_plan *plan,
+                          ef_err *err)
+{
+    qlist q = { 0 }, dq = { 0 };
     int rc = -1;
     memset(plan, 0, sizeof *plan);
     if (build_list(f, &q) || build_list(df, &dq)) {
         ef_fail(err, "out of memory listing channels");
         goto done;
     }
-    if (find_colour(&q, layer, plan, prefix, sizeof prefix, err))
-        goto done;
-    const char *view = q.c[0].view;
-    for (int i = 0; i < q.n; ++i)
-        if (q.c[i].part == plan->rgb[0].part)
-            view = q.c[i].view;
-    const qchan *d;
-    if (depth_channel) {
-        d = find(&dq, depth_channel, view);
-        if (!d) {
-            list_all(&dq, all, sizeof all);
-            ef_fail(err, "no channel named '%s' for --depth-channel (channels: %s)", depth_channel, all);
-            goto done;
-        }
-    } else if (!(d = find_depth(&dq, prefix, view)) && df != f) {
-        d = find(&dq, "Z", NULL);   /* a separate depth file may hold only Z */
-    }
-    if (!d) {
-        list_all(&dq, all, sizeof all);
-        ef_fail(err, "no depth channel found (looked for Z, depth.Z, *.Depth.Z beside the colour; "
-                     "channels: %s); choose one with --depth-channel NAME or --depth FILE", all);
+    char views[EF_MAX_VIEWS][64];
+    filter_view(f, &q, view, 0);
+    if (df == f || ef_exr_views(df, views, EF_MAX_VIEWS) > 0)
+        filter_view(df, &dq, view, 1);
+    if (find_in_lists(&q, &dq, df != f, layer, depth_channel, plan, err)) {
+        char msg[sizeof err->msg];
+        snprintf(msg, sizeof msg, "%s", err->msg);
+        ef_fail(err, "view '%s': %s", view, msg);
         goto done;
     }
-    set_ref(&plan->depth, d);
+    snprintf(plan->view, sizeof plan->view, "%s", view);
+    if (f->nparts == 1 && multiview_names(f, 0, views, EF_MAX_VIEWS) > 0) {
+        plan->default_view = !strcmp(views[0], view);
+        if (!plan->default_view)
+            snprintf(plan->chan_view, sizeof plan->chan_view, "%s", view);
+    }
+    /* The names as the file has them, for messages and --explain. */
+    ef_chan_ref *refs[5] = { &plan->rgb[0], &plan->rgb[1], &plan->rgb[2], &plan->alpha, &plan->depth };
+    for (int k = 0; k < 5; ++k) {
+        const ef_exr_file *src = k == 4 ? df : f;
+        const exr_attr_chlist_t *cl;
+        if (refs[k]->part >= 0 && f->nparts == 1 && src == f &&
+            exr_get_channels(src->ctx, refs[k]->part, &cl) == EXR_ERR_SUCCESS)
+            snprintf(refs[k]->name, sizeof refs[k]->name, "%s", cl->entries[refs[k]->index].name.str);
+    }
     rc = 0;
 done:
     free(q.c);

@@ -51,7 +51,16 @@ typedef struct ef_channel_plan {
     ef_chan_ref rgb[3];
     ef_chan_ref alpha;        /* part == -1 when the colour has no alpha */
     ef_chan_ref depth;        /* in depth_file */
+    char view[64];            /* the view these channels show, "" in a file without views */
+    /* The view inserted in the names of channels exrfog adds (AOVs), as
+     * OpenEXR names a non-default view's channels in a single-part
+     * multi-view file (fog.R -> fog.left.R); "" otherwise. */
+    char chan_view[64];
+    int default_view;         /* 1: the default (first) view of a multiView part */
 } ef_channel_plan;
+
+/* Views a file or a selection can hold. */
+#define EF_MAX_VIEWS 8
 
 /* Finds colour in f (layer NULL: automatic) and depth in depth_file (which
  * may be f; depth_channel NULL: automatic). Never picks look-alikes such as
@@ -59,6 +68,22 @@ typedef struct ef_channel_plan {
  * what the file has and the flag that chooses explicitly. */
 int ef_find_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const char *layer,
                      const char *depth_channel, ef_channel_plan *plan, ef_err *err);
+
+/* The views of f: the multiView attribute of a single-part file (the
+ * first is the default view), or the distinct "view" attributes of a
+ * multi-part file's parts, in part order. Returns the count (0: no views),
+ * at most max. */
+int ef_exr_views(const ef_exr_file *f, char names[][64], int max);
+
+/* Finds the colour and depth of view `view` of f, as ef_find_channels does
+ * within the view's channels only: in a multiView part, the default view's
+ * unprefixed channels or another view's (left.R, layer.left.R); in a
+ * multi-part file, the parts whose "view" is this view (and parts without
+ * a view for depth). A depth file with views is searched the same way;
+ * one without views gives its depth to every view. */
+int ef_find_view_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const char *view,
+                          const char *layer, const char *depth_channel, ef_channel_plan *plan,
+                          ef_err *err);
 
 /* Channels the stream can add to the colour part (ef_stream_opts.extra). */
 #define EF_MAX_EXTRA_CHANNELS 16
@@ -68,6 +93,7 @@ int ef_find_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const 
  * is the plane of opts->extra[i] (zeroed before the callback), which the
  * callback fills. */
 typedef struct ef_chunk {
+    int view;                 /* index of the plan (view) these channels belong to */
     int x0, y0, w, h;
     float *rgb[3];
     float *alpha;
@@ -88,6 +114,7 @@ typedef struct ef_stream_stats {
 
 typedef struct ef_stream_opts {
     int threads;              /* >= 1 */
+    int nplans;               /* plans (views) in the plan array; 0 means 1 */
     int compression;          /* exr_compression_t, or -1 to keep each part's */
     int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */
     int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep;
@@ -111,7 +138,9 @@ typedef struct ef_stream_opts {
 
 /* Writes every part of in to out_fd (a new, empty file the caller opened
  * for writing; it picks the temporary name, renames or removes it), calling
- * fn on each unit of the colour part with its depth. out_path names the
+ * fn on each unit of the colour of each of opts->nplans plans (views; the
+ * chunk says which) with its depth; every plan gets the extra channels,
+ * named with its chan_view. out_path names the
  * output in messages. Every channel is written back; header attributes are
  * copied. Returns 0, or -1 with a message about out_path or an input. */
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *depth_file,

@@ -225,11 +225,16 @@ typedef struct part_job {
     int nextra;               /* colour part: channels added after the nch read */
     const char *const *extra; /* their names */
     uint8_t *as_float;        /* per channel: the callback sees it as float */
-    int colour;               /* 1: this is the part the callback edits */
-    const ef_channel_plan *plan;
-    exr_const_context_t depth_ctx;
-    int depth_part;           /* part in depth_ctx, when separate */
-    int depth_local;          /* channel index of depth in this part, or -1 */
+    /* The plans (views) whose colour is in this part: the callback edits
+     * each in turn. Target t's extra channels are planes nch + t*nx ... */
+    int ntarget, nx;
+    struct {
+        int plan;                 /* index in the plan array */
+        const ef_channel_plan *pl;
+        exr_const_context_t depth_ctx;
+        int depth_part;           /* part in depth_ctx, when separate */
+        int depth_local;          /* channel index of depth in this part, or -1 */
+    } t[EF_MAX_VIEWS];
     ef_chunk_fn fn;
     void *user;
     atomic_int next_unit;
@@ -338,9 +343,10 @@ static void *worker(void *arg)
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
     int dec_ready = 0, enc_ready = 0;
-    depth_reader dr = { 0 };
+    depth_reader dr[EF_MAX_VIEWS];
+    memset(dr, 0, sizeof dr);
     out_buf ob = { 0 };
-    float *depth = NULL;
+    float *depth[EF_MAX_VIEWS] = { NULL };
     /* A unit never exceeds the data window, whatever the tile size claims. */
     size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
                                   (size_t) (j->g.th < j->g.height ? j->g.th : j->g.height)
@@ -350,18 +356,21 @@ static void *worker(void *arg)
     int ok = planes != NULL;
     for (int k = 0; ok && k < nplanes; ++k)
         ok = (planes[k] = malloc(cap * 4)) != NULL;
-    if (ok && j->colour && j->depth_local < 0) {
+    for (int t = 0; ok && t < j->ntarget; ++t) {
+        if (j->t[t].depth_local >= 0)
+            continue;
         const exr_attr_chlist_t *dcl;
-        dr.ctx = j->depth_ctx;
-        dr.part = j->depth_part;
-        dr.chan = j->plan->depth.index;
-        ok = !exr_get_channels(dr.ctx, dr.part, &dcl) && !geom_init(dr.ctx, dr.part, 1, &dr.g);
-        dr.nch = ok ? dcl->num_channels : 0;
-        ok = ok && (dr.planes = calloc((size_t) dr.nch, sizeof *dr.planes)) != NULL &&
-             (dr.as_float = calloc((size_t) dr.nch, 1)) != NULL &&
-             (depth = malloc(cap * sizeof *depth)) != NULL;
+        depth_reader *r = &dr[t];
+        r->ctx = j->t[t].depth_ctx;
+        r->part = j->t[t].depth_part;
+        r->chan = j->t[t].pl->depth.index;
+        ok = !exr_get_channels(r->ctx, r->part, &dcl) && !geom_init(r->ctx, r->part, 1, &r->g);
+        r->nch = ok ? dcl->num_channels : 0;
+        ok = ok && (r->planes = calloc((size_t) r->nch, sizeof *r->planes)) != NULL &&
+             (r->as_float = calloc((size_t) r->nch, 1)) != NULL &&
+             (depth[t] = malloc(cap * sizeof *depth[t])) != NULL;
         if (ok)
-            dr.as_float[dr.chan] = 1;
+            r->as_float[r->chan] = 1;
     }
     if (!ok)
         job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
@@ -391,33 +400,37 @@ static void *worker(void *arg)
                 goto out;
             }
         }
-        if (j->colour && j->depth_local < 0 && depth_read(&dr, x0, y0, w, h, depth)) {
-            job_fail(j, j->depth_path, j->depth_path == j->in_path
-                                           ? "cannot decode the depth part's chunk at scanline %d, "
-                                             "the file is truncated or corrupt"
-                                           : "cannot decode the depth chunk at scanline %d, the "
-                                             "depth file is truncated or corrupt",
-                     y0, ef_exr_last_core_message());
-            goto out;
-        }
+        for (int t = 0; t < j->ntarget; ++t)
+            if (j->t[t].depth_local < 0 && depth_read(&dr[t], x0, y0, w, h, depth[t])) {
+                job_fail(j, j->depth_path,
+                         j->depth_path == j->in_path
+                             ? "cannot decode the depth part's chunk at scanline %d, the file is "
+                               "truncated or corrupt"
+                             : "cannot decode the depth chunk at scanline %d, the depth file is "
+                               "truncated or corrupt",
+                         y0, ef_exr_last_core_message());
+                goto out;
+            }
         double t1 = now();
         td += t1 - t0;
-        if (j->colour) {
+        for (int t = 0; t < j->ntarget; ++t) {
+            const ef_channel_plan *pl = j->t[t].pl;
             ef_chunk ck;
             memset(&ck, 0, sizeof ck);
+            ck.view = j->t[t].plan;
             ck.x0 = x0;
             ck.y0 = y0;
             ck.w = w;
             ck.h = h;
             for (int k = 0; k < 3; ++k)
-                ck.rgb[k] = planes[j->plan->rgb[k].index];
-            ck.nextra = j->nextra;
-            for (int k = 0; k < j->nextra; ++k) {
-                ck.extra[k] = planes[j->nch + k];
+                ck.rgb[k] = planes[pl->rgb[k].index];
+            ck.nextra = j->nx;
+            for (int k = 0; k < j->nx; ++k) {
+                ck.extra[k] = planes[j->nch + t * j->nx + k];
                 memset(ck.extra[k], 0, (size_t) w * (size_t) h * sizeof(float));
             }
-            ck.alpha = j->plan->alpha.part >= 0 ? planes[j->plan->alpha.index] : NULL;
-            ck.depth = j->depth_local >= 0 ? planes[j->depth_local] : depth;
+            ck.alpha = pl->alpha.part >= 0 ? planes[pl->alpha.index] : NULL;
+            ck.depth = j->t[t].depth_local >= 0 ? planes[j->t[t].depth_local] : depth[t];
             j->fn(j->user, &ck);
         }
         double t2 = now();
@@ -482,8 +495,10 @@ out:
         exr_decoding_destroy(j->in, &dec);
     if (enc_ready)
         exr_encoding_destroy(j->out, &enc);
-    depth_reader_free(&dr);
-    free(depth);
+    for (int t = 0; t < j->ntarget; ++t) {
+        depth_reader_free(&dr[t]);
+        free(depth[t]);
+    }
     free(ob.data);
     for (int k = 0; planes && k < nplanes; ++k)
         free(planes[k]);
@@ -534,6 +549,15 @@ int ef_data_channel(const char *name)
     return 0;
 }
 
+/* Whether the colour of one of the plans is in part p. */
+static int plan_in_part(const ef_channel_plan *plans, int nplans, int p)
+{
+    for (int k = 0; k < nplans; ++k)
+        if (plans[k].rgb[0].part == p)
+            return 1;
+    return 0;
+}
+
 /* -d NAME=TYPE: the last override naming this channel wins; uint stays. */
 static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, exr_pixel_type_t t)
 {
@@ -548,9 +572,11 @@ static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, ex
     return t;
 }
 
-static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colour,
-                       const ef_stream_opts *o, ef_err *err)
+static int define_part(const ef_exr_file *in, exr_context_t out, int p,
+                       const char *const *extra, int nextra, const ef_channel_plan *plans,
+                       int nplans, const ef_exr_file *df, const ef_stream_opts *o, ef_err *err)
 {
+    const int colour = nextra > 0 || (nplans > 0 && plan_in_part(plans, nplans, p));
     const char *name = NULL;
     exr_storage_t st;
     exr_compression_t comp;
@@ -573,9 +599,10 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
     for (int c = 0; c < cl->num_channels; ++c) {
         const exr_attr_chlist_entry_t *e = &cl->entries[c];
         exr_pixel_type_t t = e->pixel_type;
-        const int keep = o->pixel_type == EXR_PIXEL_HALF &&
-                         (ef_data_channel(e->name.str) ||
-                          (o->depth_name && p == o->depth_part && !strcmp(e->name.str, o->depth_name)));
+        int read_depth = o->depth_name && p == o->depth_part && !strcmp(e->name.str, o->depth_name);
+        for (int k = 0; k < nplans; ++k)
+            read_depth |= df == in && plans[k].depth.part == p && plans[k].depth.index == c;
+        const int keep = o->pixel_type == EXR_PIXEL_HALF && (ef_data_channel(e->name.str) || read_depth);
         if (o->pixel_type >= 0 && t != EXR_PIXEL_UINT && !keep)
             t = (exr_pixel_type_t) o->pixel_type;
         t = named_type(o, e->name.str, t);
@@ -584,13 +611,13 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p, int colo
                             1, 1))
             return ef_fail(err, "cannot add channel '%s'", e->name.str);
     }
-    for (int c = 0; colour && c < o->nextra; ++c) {
+    for (int c = 0; c < nextra; ++c) {
         const exr_pixel_type_t t =
-            named_type(o, o->extra[c], o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(o->extra[c])
-                                           ? EXR_PIXEL_HALF
-                                           : EXR_PIXEL_FLOAT);
-        if (exr_add_channel(out, p, o->extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
-            return ef_fail(err, "cannot add channel '%s': %s", o->extra[c], ef_exr_last_core_message());
+            named_type(o, extra[c], o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(extra[c])
+                                        ? EXR_PIXEL_HALF
+                                        : EXR_PIXEL_FLOAT);
+        if (exr_add_channel(out, p, extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
+            return ef_fail(err, "cannot add channel '%s': %s", extra[c], ef_exr_last_core_message());
     }
     if (colour && o->has_origin_attr) {
         const exr_attr_v3d_t v = { .x = o->origin_attr[0], .y = o->origin_attr[1], .z = o->origin_attr[2] };
@@ -672,8 +699,8 @@ static int check_depth_window(const ef_exr_file *in, const ef_exr_file *df,
 }
 
 static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t out,
-                    const char *out_path, int p,
-                    const ef_channel_plan *plan, const ef_stream_opts *o, ef_chunk_fn fn,
+                    const char *out_path, int p, const ef_channel_plan *plans, int nplans,
+                    const char *const *extra, int nx, const ef_stream_opts *o, ef_chunk_fn fn,
                     void *user, ef_stream_stats *stats, ef_err *err)
 {
     part_job j;
@@ -684,15 +711,17 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.depth_path = df->path;
     j.out_path = out_path;
     j.part = p;
-    j.plan = plan;
     j.fn = fn;
     j.user = user;
-    j.colour = p == plan->rgb[0].part;
-    j.depth_local = -1;
-    if (j.colour) {
-        j.nextra = o->nextra;
-        j.extra = o->extra;
-    }
+    for (int k = 0; k < nplans; ++k)
+        if (plans[k].rgb[0].part == p) {
+            j.t[j.ntarget].plan = k;
+            j.t[j.ntarget].pl = &plans[k];
+            j.ntarget++;
+        }
+    j.nx = j.ntarget ? nx : 0;
+    j.nextra = j.nx * j.ntarget;
+    j.extra = extra;
     if (exr_get_scanlines_per_chunk(out, p, &j.out_rows) || j.out_rows < 1)
         j.out_rows = 1;
     if (geom_init(in->ctx, p, j.out_rows, &j.g))
@@ -702,17 +731,19 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.as_float = calloc((size_t) j.nch, 1);
     if (!j.as_float)
         return ef_fail(err, "out of memory");
-    if (j.colour) {
+    for (int t = 0; t < j.ntarget; ++t) {
+        const ef_channel_plan *plan = j.t[t].pl;
         for (int k = 0; k < 3; ++k)
             j.as_float[plan->rgb[k].index] = 1;
         if (plan->alpha.part >= 0)
             j.as_float[plan->alpha.index] = 1;
+        j.t[t].depth_local = -1;
         if (df == in && plan->depth.part == p) {
-            j.depth_local = plan->depth.index;
-            j.as_float[j.depth_local] = 1;
+            j.t[t].depth_local = plan->depth.index;
+            j.as_float[plan->depth.index] = 1;
         } else {
-            j.depth_ctx = df->ctx;
-            j.depth_part = plan->depth.part;
+            j.t[t].depth_ctx = df->ctx;
+            j.t[t].depth_part = plan->depth.part;
         }
     }
     atomic_init(&j.next_unit, 0);
@@ -816,14 +847,34 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     exr_context_t out = NULL;
     double t0 = now();
     memset(stats, 0, sizeof *stats);
-    if (check_depth_window(in, df, plan, err))
-        return -1;
+    const int nplans = o->nplans > 0 ? o->nplans : 1;
+    if (nplans > EF_MAX_VIEWS)
+        return ef_fail(err, "internal error: %d views (at most %d)", nplans, EF_MAX_VIEWS);
     if (o->nextra < 0 || o->nextra > EF_MAX_EXTRA_CHANNELS)
         return ef_fail(err, "internal error: %d extra channels (at most %d)", o->nextra,
                        EF_MAX_EXTRA_CHANNELS);
-    const char *clash = ef_exr_part_has_any(in, plan->rgb[0].part, o->extra, o->nextra);
-    if (clash)
-        return ef_fail(err, "part %d already has a channel '%s'", plan->rgb[0].part, clash);
+    /* Each plan's extra channels, named with its view where the file
+     * names a view's channels that way (fog.R -> fog.left.R). */
+    char names[EF_MAX_VIEWS][EF_MAX_EXTRA_CHANNELS][192];
+    const char *xname[EF_MAX_VIEWS][EF_MAX_EXTRA_CHANNELS];
+    for (int k = 0; k < nplans; ++k) {
+        if (check_depth_window(in, df, &plan[k], err))
+            return -1;
+        for (int c = 0; c < o->nextra; ++c) {
+            const char *e = o->extra[c], *dot = strrchr(e, '.');
+            if (plan[k].chan_view[0] && dot)
+                snprintf(names[k][c], sizeof names[k][c], "%.*s.%s%s", (int) (dot - e), e,
+                         plan[k].chan_view, dot);
+            else if (plan[k].chan_view[0])
+                snprintf(names[k][c], sizeof names[k][c], "%s.%s", plan[k].chan_view, e);
+            else
+                snprintf(names[k][c], sizeof names[k][c], "%s", e);
+            xname[k][c] = names[k][c];
+        }
+        const char *clash = ef_exr_part_has_any(in, plan[k].rgb[0].part, xname[k], o->nextra);
+        if (clash)
+            return ef_fail(err, "part %d already has a channel '%s'", plan[k].rgb[0].part, clash);
+    }
     ef_exr_init_context(&init);
     out_sink sink = { out_fd, 0 };
     init.user_data = &sink;
@@ -841,13 +892,34 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
         err->file = out_path;
         return -1;
     }
+    /* Per part, the extra channels of the plans whose colour is there, in
+     * plan order (run_part finds target t's at t * nextra). */
+    const char **part_extra = calloc((size_t) nplans * (size_t) (o->nextra + 1), sizeof *part_extra);
+    if (!part_extra) {
+        exr_finish(&out);
+        return ef_fail(err, "out of memory");
+    }
     int rc = 0;
-    for (int p = 0; p < in->nparts && !rc; ++p)
-        rc = define_part(in, out, p, p == plan->rgb[0].part, o, err);
+    for (int p = 0; p < in->nparts && !rc; ++p) {
+        int n = 0;
+        for (int k = 0; k < nplans; ++k)
+            if (plan[k].rgb[0].part == p)
+                for (int c = 0; c < o->nextra; ++c)
+                    part_extra[n++] = xname[k][c];
+        rc = define_part(in, out, p, part_extra, n, plan, nplans, df, o, err);
+    }
     if (!rc && exr_write_header(out))
         rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
-    for (int p = 0; p < in->nparts && !rc; ++p)
-        rc = run_part(in, df, out, out_path, p, plan, o, fn, user, stats, err);
+    for (int p = 0; p < in->nparts && !rc; ++p) {
+        int n = 0;
+        for (int k = 0; k < nplans; ++k)
+            if (plan[k].rgb[0].part == p)
+                for (int c = 0; c < o->nextra; ++c)
+                    part_extra[n++] = xname[k][c];
+        rc = run_part(in, df, out, out_path, p, plan, nplans, part_extra, o->nextra, o, fn, user,
+                      stats, err);
+    }
+    free(part_extra);
     if (exr_finish(&out) && !rc)
         rc = ef_fail(err, "cannot finish the output: %s", ef_exr_last_core_message());
     if (rc && sink.errnum) {
