@@ -524,7 +524,7 @@ static int read_frames(ef_camera_file *cf, const json_t *v, const char *path, co
 static int read_json(ef_camera_file *cf, const char *text, ef_err *err)
 {
     json_error_t jerr;
-    json_t *root = json_loadb(text, strlen(text), JSON_REJECT_DUPLICATES |
+    json_t *root = json_loadb(text, strlen(text), JSON_REJECT_DUPLICATES | JSON_DECODE_ANY |
                               JSON_DECODE_INT_AS_REAL, &jerr);
     if (!root)
         return ef_fail(err, "line %d, column %d: %s%s", jerr.line, jerr.column, jerr.text,
