@@ -491,6 +491,67 @@ static void test_missing_frame(void **state)
     assert_contains(e2.msg, "cannot open");
 }
 
+/* The examples in docs/camera-file.md read as documented. */
+static char *doc_block(const char *doc, const char *fence)
+{
+    const char *a = strstr(doc, fence);
+    assert_non_null(a);
+    a = strchr(a, '\n') + 1;
+    const char *b = strstr(a, "```");
+    assert_non_null(b);
+    char *out = malloc((size_t) (b - a) + 1);
+    memcpy(out, a, (size_t) (b - a));
+    out[b - a] = '\0';
+    return out;
+}
+
+static void test_doc_examples(void **state)
+{
+    (void) state;
+    const char *src = getenv("EXRFOG_SOURCE_DIR");
+    if (!src)
+        skip();
+    char path[1024];
+    snprintf(path, sizeof path, "%s/docs/camera-file.md", src);
+    FILE *fp = fopen(path, "rb");
+    assert_non_null(fp);
+    static char doc[1 << 16];
+    const size_t n = fread(doc, 1, sizeof doc - 1, fp);
+    fclose(fp);
+    doc[n] = '\0';
+
+    char *json = doc_block(doc, "```json");
+    ef_camera_file *cf = load("doc.json", json, EF_CONV_EXR);
+    free(json);
+    assert_string_equal(ef_camera_file_describe(cf),
+                        "JSON, convention blender, 2 frames 1001 to 1002");
+    /* Blender's rotation (90, 0, 0) at (0, -10, 1.5): looks along +Y, up +Z;
+     * 2 atan(36 / 70) horizontal fov. */
+    ef_cam_meta m;
+    ef_cam_meta_init(&m, 0, 0, 100, 50);
+    ef_cam_flags fl = {0};
+    ef_err err = {0};
+    ef_camera cam;
+    assert_int_equal(ef_camera_file_frame(cf, 1001, &fl, &err), 0);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &cam, &err), 0);
+    const double pos[3] = { 0, -10, 1.5 }, fwd[3] = { 0, 1, 0 }, z[3] = { 0, 0, 1 };
+    assert_vec(cam.pos, pos, TOL);
+    double w[3];
+    ef_camera_to_world_dir(&cam, z, w);
+    assert_vec(w, fwd, TOL);
+    assert_close(cam.hfov_deg, 2 * atan(36.0 / 70.0) * 180 / PI, 1e-9);
+    assert_close(cam.near_.v, 0.1, 0.0);
+    assert_close(cam.far_.v, 1000, 0.0);
+    ef_camera_file_free(cf);
+
+    char *chan = doc_block(doc, "```\n# written by Nuke");
+    cf = load("doc.chan", chan, EF_CONV_EXR);
+    free(chan);
+    assert_string_equal(ef_camera_file_describe(cf),
+                        "Nuke .chan, rotation order ZXY, 2 frames 1001 to 1002, vertical fov");
+    ef_camera_file_free(cf);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -500,6 +561,7 @@ int main(void)
         cmocka_unit_test(test_chan),
         cmocka_unit_test(test_chan_errors),
         cmocka_unit_test(test_missing_frame),
+        cmocka_unit_test(test_doc_examples),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
