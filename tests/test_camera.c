@@ -705,6 +705,57 @@ static void test_scaled_pose(void **state)
     assert_non_null(strstr(c.warning, "not rigid"));
 }
 
+/* A vertical fov (a camera file's, e.g. Nuke .chan) becomes the horizontal
+ * one through the display window's aspect and the pixel aspect. By hand:
+ * 200x100 pixels, vfov 90 => tan(v/2) = 1, tan(h/2) = 1 * 200/100 = 2,
+ * h = 2 atan 2 = 126.86989764584402 degrees; the top-left pixel's centre
+ * (0.5, 0.5) is at u = 0.0025, v = 0.005: dir = (-2 * 0.995, 1 * 0.99, 1). */
+static void test_vfov(void **state)
+{
+    (void)state;
+    ef_cam_meta m;
+    ef_cam_flags fl = {0};
+    ef_camera c;
+    ef_err err = {0};
+    const double id[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    ef_cam_meta_init(&m, 0, 0, 199, 99);
+    set_mat(&fl.w2c, mk(id));
+    set_num(&fl.vfov, 90.0);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
+    assert_close(c.hfov_deg, 126.86989764584402, 1e-12);
+    assert_contains(c.src_fov, "vertical");
+    double d[3];
+    ef_camera_ray(&c, 0, 0, d);
+    assert_vec(d, -1.99, 0.99, 1.0, 1e-14);
+    /* The bottom-right pixel: the mirror image. */
+    ef_camera_ray(&c, 199, 99, d);
+    assert_vec(d, 1.99, -0.99, 1.0, 1e-14);
+
+    /* Square pixels of aspect 2 on a 100x100 window: tan(h/2) = 1 * 100 * 2 / 100
+     * = 2 again; the vertical half-angle stays 45 degrees (top edge at y = 1). */
+    ef_cam_meta_init(&m, 0, 0, 99, 99);
+    m.pixel_aspect = 2.0;
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), 0);
+    assert_close(c.hfov_deg, 126.86989764584402, 1e-12);
+    ef_camera_ray(&c, 0, 0, d);
+    assert_vec(d, -1.98, 0.99, 1.0, 1e-14);
+
+    /* A vfov outside (0, 180) and a NaN one. */
+    set_num(&fl.vfov, 180.0);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), -1);
+    assert_contains(err.msg, "vfov");
+    set_num(&fl.vfov, NAN);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), -1);
+    assert_contains(err.msg, "NaN");
+
+    /* Both a horizontal and a vertical fov: a usage error. */
+    set_num(&fl.vfov, 40.0);
+    set_num(&fl.fov, 50.0);
+    assert_int_equal(ef_camera_resolve(&m, &fl, &c, &err), -1);
+    assert_contains(err.msg, "only one");
+    assert_true(c.flag_error);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -720,6 +771,7 @@ int main(void)
         cmocka_unit_test(test_pixel_centres),
         cmocka_unit_test(test_aspect_warning),
         cmocka_unit_test(test_scaled_pose),
+        cmocka_unit_test(test_vfov),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

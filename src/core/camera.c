@@ -385,8 +385,28 @@ static int resolve_lens(const ef_cam_meta *meta, const ef_cam_flags *flags, fam 
                         const ef_mat4 *c2w, fam *lf, ef_camera *cam, ef_err *err)
 {
     *lf = FAM_NONE;
+    if (flags->fov.set && flags->vfov.set) {
+        cam->flag_error = 1;
+        return ef_fail(err, "both a horizontal (--fov %g) and a vertical (vfov %g) field of "
+                            "view are given; give only one", flags->fov.v, flags->vfov.v);
+    }
     if (flags->fov.set)
         return use_fov(cam, meta, flags->fov.v, "--fov", "flag --fov", err);
+    if (flags->vfov.set) {
+        /* tan(h/2) = tan(v/2) * W * pixelAspect / H over the display window. */
+        const double v = flags->vfov.v;
+        if (check_num(v, "the vertical fov (vfov)", err))
+            return -1;
+        if (!(v > 0.0 && v < 180.0))
+            return ef_fail(err, "the vertical fov (vfov) is %g degrees; it must be between 0 "
+                                "and 180", v);
+        const double W = meta->disp[2] - meta->disp[0] + 1.0;
+        const double H = meta->disp[3] - meta->disp[1] + 1.0;
+        const double h = 2.0 * atan(tan(v * (EF_PI / 360.0)) * W * meta->pixel_aspect / H)
+                         * (180.0 / EF_PI);
+        return use_fov(cam, meta, h, "the vertical fov (vfov)",
+                       "vertical fov (vfov, via the display window's aspect)", err);
+    }
     const int exr = pf == FAM_EXR || pf == FAM_NONE;
     if (exr && meta->w2c.set && (meta->w2screen.set || meta->w2ndc.set)) {
         ef_mat4 hdr_c2w = *c2w;

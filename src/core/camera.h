@@ -53,6 +53,10 @@ typedef struct ef_cam_flags {
     ef_opt_mat c2w;           /* --camera-to-world, its inverse */
     ef_cam_convention convention;
     ef_opt_num fov;           /* --fov, degrees, horizontal */
+    ef_opt_num vfov;          /* degrees, vertical (a camera file's, e.g. Nuke .chan);
+                               * turned into a horizontal fov with the display
+                               * window's aspect times the pixel aspect. Setting
+                               * both fov and vfov is an error. */
     ef_opt_num near_;         /* --near */
     ef_opt_num far_;          /* --far */
 } ef_cam_flags;
