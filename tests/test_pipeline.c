@@ -36,30 +36,53 @@ static const char *fresh(const char *name)
     return g_dir;
 }
 
-/* One frame: colour 0.5, alpha 1, planar depth 5 (one sky pixel at 0),
- * camera at (cx, 0, 0) looking down +Z (worldToCamera is the translation
- * by -cx, row-vector layout), horizontal fov 90. */
+static float g_c[W * H], g_c2[W * H], g_a[W * H], g_z[W * H];
+
+/* The planes of a frame: colour 0.5 (0.25 for a second view), alpha 1,
+ * planar depth 5 with one sky pixel (depth 0) at pixel 0. */
+static void planes_init(void)
+{
+    for (int i = 0; i < W * H; ++i) {
+        g_c[i] = 0.5f;
+        g_c2[i] = 0.25f;
+        g_a[i] = 1.0f;
+        g_z[i] = i == 0 ? 0.0f : 5.0f;
+    }
+}
+
+/* Adds R, G, B, A, Z with the given prefix ("" or "left.") to p. */
+static void add_rgbaz(tu_part *p, const char *prefix, const float *c)
+{
+    static char names[8][5][32];
+    static int slot;
+    char (*n)[32] = names[slot++ % 8];
+    static const char *const ch[5] = { "R", "G", "B", "A", "Z" };
+    for (int k = 0; k < 5; ++k) {
+        snprintf(n[k], 32, "%s%s", prefix, ch[k]);
+        tu_part_add(p, n[k], EXR_PIXEL_FLOAT, k < 3 ? c : k == 3 ? g_a : g_z);
+    }
+}
+
+/* A camera at (cx, 0, 0) looking down +Z (worldToCamera is the
+ * translation by -cx, row-vector layout), horizontal fov 90. */
+static void set_camera(tu_part *p, double cx)
+{
+    static const float id[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    p->m44[0].name = "worldToCamera";
+    memcpy(p->m44[0].m, id, sizeof id);
+    p->m44[0].m[12] = (float) -cx;
+    p->f[0].name = "CameraFov";
+    p->f[0].v = (float) HFOV;
+}
+
+/* One frame with a camera at (cx, 0, 0). */
 static void write_frame(const char *path, double cx)
 {
-    static float c[W * H], a[W * H], z[W * H];
-    for (int i = 0; i < W * H; ++i) {
-        c[i] = 0.5f;
-        a[i] = 1.0f;
-        z[i] = i == 0 ? 0.0f : 5.0f;
-    }
+    planes_init();
     tu_part p;
     tu_part_init(&p, W, H);
-    tu_part_add(&p, "R", EXR_PIXEL_FLOAT, c);
-    tu_part_add(&p, "G", EXR_PIXEL_FLOAT, c);
-    tu_part_add(&p, "B", EXR_PIXEL_FLOAT, c);
-    tu_part_add(&p, "A", EXR_PIXEL_FLOAT, a);
-    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, z);
-    static const float id[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
-    p.m44[0].name = "worldToCamera";
-    memcpy(p.m44[0].m, id, sizeof id);
-    p.m44[0].m[12] = (float) -cx;
-    p.f[0].name = "CameraFov";
-    p.f[0].v = (float) HFOV;
+    add_rgbaz(&p, "", g_c);
+    set_camera(&p, cx);
     assert_int_equal(tu_write_exr(path, &p, 1), 0);
 }
 
@@ -87,12 +110,16 @@ static void write_sequence(int first, int last)
 /* fog_P of the output frame must be the frame's camera (10 f, 0, 0) plus
  * depth 5 along the pinhole ray of each pixel: ((u - 1/2)/a, -(v - 1/2)/b, 1)
  * with a = 1/2 / tan(45 deg), b = a W / H. */
-static void check_positions(const char *out, int frame)
+static void check_positions_mirror(const char *out, int part, const char *view, double cx,
+                                   double sx)
 {
     tu_image img;
-    assert_int_equal(tu_read_image(out, 0, &img), 0);
-    const float *P[3] = { tu_image_f(&img, "fog_P.X"), tu_image_f(&img, "fog_P.Y"),
-                          tu_image_f(&img, "fog_P.Z") };
+    char nx[64], ny[64], nz[64];
+    snprintf(nx, sizeof nx, "fog_P.%s%sX", view, view[0] ? "." : "");
+    snprintf(ny, sizeof ny, "fog_P.%s%sY", view, view[0] ? "." : "");
+    snprintf(nz, sizeof nz, "fog_P.%s%sZ", view, view[0] ? "." : "");
+    assert_int_equal(tu_read_image(out, part, &img), 0);
+    const float *P[3] = { tu_image_f(&img, nx), tu_image_f(&img, ny), tu_image_f(&img, nz) };
     assert_non_null(P[0]);
     const double a = 0.5, b = a * W / H;
     long bad = 0;
@@ -102,12 +129,22 @@ static void check_positions(const char *out, int frame)
             if (i == 0)
                 continue;   /* sky */
             const double u = (x + 0.5) / W, v = (y + 0.5) / H;
-            const double e[3] = { 10.0 * frame + 5.0 * (u - 0.5) / a, 5.0 * -(v - 0.5) / b, 5.0 };
+            const double e[3] = { cx + sx * 5.0 * (u - 0.5) / a, 5.0 * -(v - 0.5) / b, 5.0 };
             for (int k = 0; k < 3; ++k)
                 bad += fabs(P[k][i] - e[k]) > 1e-5 * (1 + fabs(e[k]));
         }
     tu_image_free(&img);
     assert_int_equal(bad, 0);
+}
+
+static void check_positions_in(const char *out, int part, const char *view, double cx)
+{
+    check_positions_mirror(out, part, view, cx, 1.0);
+}
+
+static void check_positions(const char *out, int frame)
+{
+    check_positions_in(out, 0, "", 10.0 * frame);
 }
 
 static void test_frame_patterns(void **state)
@@ -381,6 +418,240 @@ static void test_parallel_recipe(void **state)
     free(s3);
 }
 
+/* --camera-file: frames without a header camera take theirs from a JSON
+ * file (camera at x = 10 f, OpenEXR convention) or a Nuke .chan (the same
+ * positions, turned 180 degrees about y so that the -Z-looking Nuke camera
+ * looks down world +Z with its x mirrored; the vertical fov 2 atan(3/4)
+ * is the horizontal 90 of the 8x6 frame). */
+static void test_camera_file(void **state)
+{
+    (void) state;
+    fresh("camfile");
+    planes_init();
+    for (int f = 1; f <= 3; ++f) {
+        tu_part p;
+        tu_part_init(&p, W, H);
+        add_rgbaz(&p, "", g_c);
+        char *path = in_dir("shot.%04d.exr", f);
+        assert_int_equal(tu_write_exr(path, &p, 1), 0);
+        free(path);
+    }
+    char *json = in_dir("cams.json"), *chan = in_dir("cams.chan");
+    FILE *j = fopen(json, "w");
+    assert_non_null(j);
+    fprintf(j, "{\"convention\": \"exr\", \"fov\": 90, \"frames\": {");
+    for (int f = 1; f <= 3; ++f)
+        fprintf(j, "%s\"%d\": {\"camera_to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0, %d,0,0,1]}",
+                f > 1 ? ", " : "", f, 10 * f);
+    fprintf(j, "}}\n");
+    fclose(j);
+    FILE *c = fopen(chan, "w");
+    assert_non_null(c);
+    fprintf(c, "# frame tx ty tz rx ry rz vfov\n");
+    for (int f = 1; f <= 3; ++f)
+        fprintf(c, "%d %d 0 0 0 180 0 %.17g\n", f, 10 * f, 2.0 * atan(0.75) * 180.0 / 3.14159265358979323846);
+    fclose(c);
+    assert_run(0, "'%s/shot.#.exr' -o '%s/j.#.exr' --camera-file '%s' --fog exp:density=0.05 "
+                  "--aov P", g_dir, g_dir, json);
+    assert_run(0, "'%s/shot.#.exr' -o '%s/c.#.exr' --camera-file '%s' --fog exp:density=0.05 "
+                  "--aov P", g_dir, g_dir, chan);
+    for (int f = 1; f <= 3; ++f) {
+        char *a = in_dir("j.%04d.exr", f), *b = in_dir("c.%04d.exr", f);
+        check_positions_mirror(a, 0, "", 10.0 * f, 1.0);
+        check_positions_mirror(b, 0, "", 10.0 * f, -1.0);
+        free(a);
+        free(b);
+    }
+    /* a single frame takes its number from its name */
+    char *one = in_dir("one.exr");
+    assert_run(0, "'%s/shot.0002.exr' -o '%s' --camera-file '%s' --fog exp:density=0.05 --aov P",
+               g_dir, one, json);
+    check_positions_mirror(one, 0, "", 20.0, 1.0);
+    /* --explain says where the camera came from */
+    assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s'", g_dir, chan);
+    assert_non_null(strstr(tu_out, "frame 3"));
+    assert_non_null(strstr(tu_out, "camera file"));
+    /* a frame the file lacks is named */
+    char *s4 = in_dir("shot.0004.exr");
+    write_frame(s4, 0);
+    assert_run(1, "'%s/shot.#.exr' -o '%s/j.#.exr' --camera-file '%s' --fog exp:density=0.05",
+               g_dir, g_dir, json);
+    assert_non_null(strstr(tu_err, "frame 4"));
+    /* one pose source only */
+    assert_run(2, "'%s/shot.#.exr' -o '%s/j.#.exr' --camera-file '%s' --camera-to-world "
+                  "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --fog exp:density=0.05", g_dir, g_dir, json);
+    free(s4);
+    free(one);
+    free(json);
+    free(chan);
+}
+
+/* The channel `name` of part `part` is bit-identical in a and b. */
+static void check_same_channel(const char *a, const char *b, int part, const char *name)
+{
+    tu_image ia, ib;
+    assert_int_equal(tu_read_image(a, part, &ia), 0);
+    assert_int_equal(tu_read_image(b, part, &ib), 0);
+    assert_int_equal(tu_compare_channel(&ia, &ib, name, 0.0, 0), 0);
+    tu_image_free(&ia);
+    tu_image_free(&ib);
+}
+
+/* Whether channel `name` of part `part` differs between a and b. */
+static int channel_differs(const char *a, const char *b, int part, const char *name)
+{
+    int wa, ha, wb, hb;
+    float *x = tu_read_channel(a, part, name, &wa, &ha), *y = tu_read_channel(b, part, name, &wb, &hb);
+    assert_non_null(x);
+    assert_non_null(y);
+    const int d = memcmp(x, y, sizeof(float) * (size_t) wa * (size_t) ha) != 0;
+    free(x);
+    free(y);
+    return d;
+}
+
+/* Multi-part views: each part has its view and its own camera; both are
+ * fogged by default, each from its own camera; --view picks one and the
+ * other is copied bit for bit with a warning. */
+static void test_views_multipart(void **state)
+{
+    (void) state;
+    fresh("mpviews");
+    planes_init();
+    tu_part p[2];
+    for (int k = 0; k < 2; ++k) {
+        tu_part_init(&p[k], W, H);
+        p[k].name = k ? "rgba.right" : "rgba.left";
+        p[k].str_name = "view";
+        p[k].str_value = k ? "right" : "left";
+        add_rgbaz(&p[k], "", k ? g_c2 : g_c);
+        set_camera(&p[k], k ? 1.0 : -1.0);
+    }
+    char *in = in_dir("stereo.exr"), *out = in_dir("out.exr");
+    assert_int_equal(tu_write_exr(in, p, 2), 0);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P", in, out);
+    check_positions_in(out, 0, "", -1.0);
+    check_positions_in(out, 1, "", 1.0);
+    assert_true(channel_differs(in, out, 1, "R"));
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view right", in, out);
+    check_positions_in(out, 1, "", 1.0);
+    assert_non_null(strstr(tu_err, "view 'left' is not fogged"));
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --view right", in, out);
+    assert_int_equal(tu_compare_files(in, out, 1, NULL), 0);
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.05 --view middle", in, out);
+    assert_non_null(strstr(tu_err, "its views: left, right"));
+    /* flags give one camera: with two views the user must say whose */
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.05 --fov 40 --camera-to-world "
+                  "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1", in, out);
+    assert_non_null(strstr(tu_err, "--view"));
+    /* the right eye loses its camera: never skipped silently */
+    p[1].m44[0].name = NULL;
+    p[1].f[0].name = NULL;
+    assert_int_equal(tu_write_exr(in, p, 2), 0);
+    unlink(out);
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.05", in, out);
+    assert_non_null(strstr(tu_err, "right has no camera of its own"));
+    assert_non_null(strstr(tu_err, "--view left"));
+    assert_false(tu_exists(out));
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view left", in, out);
+    check_positions_in(out, 0, "", -1.0);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --view left", in, out);
+    assert_int_equal(tu_compare_files(in, out, 0, NULL), 0);
+    /* and with flags for the chosen eye */
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view right --fov 90 "
+                  "--world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,-3,0,0,1", in, out);
+    check_positions_in(out, 1, "", 3.0);
+    free(in);
+    free(out);
+}
+
+/* Single-part multi-view (multiView = right, left): the default view's
+ * channels are unprefixed and the header camera is its; left.* is the
+ * other eye, whose AOVs are named fog_P.left.X as OpenEXR names views. */
+static void test_views_singlepart(void **state)
+{
+    (void) state;
+    fresh("spviews");
+    planes_init();
+    tu_part p;
+    tu_part_init(&p, W, H);
+    add_rgbaz(&p, "", g_c);
+    add_rgbaz(&p, "left.", g_c2);
+    p.multiview[0] = "right";
+    p.multiview[1] = "left";
+    set_camera(&p, 1.0);
+    char *in = in_dir("stereo.exr"), *out = in_dir("out.exr");
+    assert_int_equal(tu_write_exr(in, &p, 1), 0);
+    /* the left eye has no camera of its own */
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.05", in, out);
+    assert_non_null(strstr(tu_err, "left has no camera of its own"));
+    assert_non_null(strstr(tu_err, "--view right"));
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view right", in, out);
+    check_positions_in(out, 0, "", 1.0);
+    check_same_channel(in, out, 0, "left.R");
+    check_same_channel(in, out, 0, "left.Z");
+    assert_true(channel_differs(in, out, 0, "R"));
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view left --fov 90 "
+                  "--world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,1,0,0,1", in, out);
+    check_positions_in(out, 0, "left", -1.0);
+    check_same_channel(in, out, 0, "R");
+    assert_true(channel_differs(in, out, 0, "left.R"));
+    assert_run(0, "'%s' --explain --fog exp:density=0.05 --view left --fov 90 "
+                  "--world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,1,0,0,1", in);
+    assert_non_null(strstr(tu_out, "colour: left.R, left.G, left.B, alpha left.A"));
+    assert_non_null(strstr(tu_out, "depth: left.Z"));
+    free(in);
+    free(out);
+}
+
+/* The public Beachball multipart stereo frame: its left view (parts
+ * rgba_left and depth_left) is selectable; with a camera given by flags
+ * its fog follows depth_left's Z exactly, and the right eye's parts are
+ * copied bit for bit. */
+static void test_beachball_left(void **state)
+{
+    (void) state;
+    const char *real = tu_real_exr_dir();
+    if (!real)
+        skip();
+    fresh("beachball");
+    char in[1024];
+    snprintf(in, sizeof in, "%s/beachball-multipart.0001.exr", real);
+    if (!tu_exists(in))
+        skip();
+    char *out = in_dir("left.exr");
+    assert_run(0, "'%s' -o '%s' --view left --fov 40 --camera-to-world "
+                  "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --fog exp:density=0.1 --fog-color 0.25,0.5,0.75",
+               in, out);
+    assert_non_null(strstr(tu_err, "view 'right' is not fogged"));
+    int rgba_left = -1, depth_left = -1;
+    const int np = tu_nparts(in);
+    for (int k = 0; k < np; ++k) {
+        tu_image img;
+        assert_int_equal(tu_read_image(in, k, &img), 0);
+        if (!strcmp(img.name, "rgba_left"))
+            rgba_left = k;
+        if (!strcmp(img.name, "depth_left"))
+            depth_left = k;
+        tu_image_free(&img);
+    }
+    assert_true(rgba_left >= 0 && depth_left >= 0);
+    assert_int_equal(tu_compare_files(in, out, rgba_left, NULL), 0);
+    tu_pinhole pin;
+    tu_image img;
+    assert_int_equal(tu_read_image(in, rgba_left, &img), 0);
+    tu_pinhole_fov(&pin, img.disp, 40.0);
+    tu_image_free(&img);
+    tu_fog_check fc;
+    tu_fog_check_init(&fc, in, out, &pin, 0.1);
+    fc.in_part = fc.out_part = rgba_left;
+    fc.depth = in;
+    fc.depth_part = depth_left;
+    assert_int_equal(tu_check_fog(&fc), 0);
+    assert_true(fc.fogged > 1000);
+    free(out);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -391,6 +662,10 @@ int main(void)
         cmocka_unit_test(test_sequence_failures),
         cmocka_unit_test(test_progress_bar),
         cmocka_unit_test(test_parallel_recipe),
+        cmocka_unit_test(test_camera_file),
+        cmocka_unit_test(test_views_multipart),
+        cmocka_unit_test(test_views_singlepart),
+        cmocka_unit_test(test_beachball_left),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -116,6 +116,11 @@ int tu_write_exr(const char *path, const tu_part *parts, int nparts)
             rv = exr_attr_set_float(f, pi, p->f[a].name, p->f[a].v);
         if (!rv && p->str_name)
             rv = exr_attr_set_string(f, pi, p->str_name, p->str_value);
+        int nmv = 0;
+        while (nmv < 4 && p->multiview[nmv])
+            ++nmv;
+        if (!rv && nmv)
+            rv = exr_attr_set_string_vector(f, pi, "multiView", nmv, (const char **) p->multiview);
     }
     if (!rv)
         rv = exr_write_header(f);

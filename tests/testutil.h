@@ -28,6 +28,7 @@ typedef struct tu_part {
     tu_attr_m44 m44[4];               /* name NULL ends the list */
     tu_attr_float f[4];
     const char *str_name, *str_value; /* one optional string attribute */
+    const char *multiview[4];         /* a multiView attribute (NULL ends it) */
 } tu_part;
 
 /* Fills p with a single unnamed scanline part of w x h at (0,0), ZIP. */

@@ -20,7 +20,7 @@ enum {
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
-    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW
+    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE
 };
 
 static const struct option long_opts[] = {
@@ -40,6 +40,7 @@ static const struct option long_opts[] = {
     { "fps", required_argument, NULL, OPT_FPS },
     { "keep-going", no_argument, NULL, OPT_KEEP_GOING },
     { "view", required_argument, NULL, OPT_VIEW },
+    { "camera-file", required_argument, NULL, OPT_CAMERA_FILE },
     { "aov", required_argument, NULL, OPT_AOV },
     { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
@@ -108,6 +109,7 @@ void ef_options_usage(FILE *out)
             "      --world-to-camera M  16 numbers, row-vector layout as in the file\n"
             "      --camera-to-world M  its inverse\n"
             "      --fov DEG            horizontal field of view\n"
+            "      --camera-file FILE   per-frame cameras: JSON or Nuke .chan (see exrfog(1))\n"
             "      --camera-convention C  exr (default), blender, nuke, maya, houdini, usd:\n"
             "                           the layout of --world-to-camera/--camera-to-world\n"
             "      --focal-length MM --aperture MM  the same from a lens and the film's\n"
@@ -392,6 +394,11 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
                        EF_PARSE_USAGE;
             break;
         case OPT_KEEP_GOING: o->keep_going = 1; break;
+        case OPT_CAMERA_FILE:
+            if (!a[0])
+                return ef_fail(err, "--camera-file: the file name is empty"), EF_PARSE_USAGE;
+            o->camera_file = a;
+            break;
         case OPT_VIEW:
             if (!a[0])
                 return ef_fail(err, "--view: the view name is empty (e.g. --view left)"), EF_PARSE_USAGE;
@@ -504,6 +511,9 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         }
     }
     *cur_arg = NULL;   /* later errors are not about one option's number */
+    if (o->camera_file && (o->cam.w2c.set || o->cam.c2w.set))
+        return ef_fail(err, "--camera-file and --%s both give the camera's pose; give one",
+                       o->cam.w2c.set ? "world-to-camera" : "camera-to-world"), EF_PARSE_USAGE;
     if ((focal > 0) != (aperture > 0))
         return ef_fail(err, "--%s needs --%s too (the horizontal field of view is "
                             "2 atan(aperture / (2 focal length)))",

@@ -30,6 +30,7 @@ typedef struct ef_options {
     int keep_going;           /* --keep-going */
     int time_set;             /* --time or the scene file's "time" was given */
     const char *views[16];    /* --view NAME, repeatable */
+    const char *camera_file;  /* --camera-file FILE (may hold a frame pattern) */
     int nviews;
     int explain, stats, verbose, quiet;
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */

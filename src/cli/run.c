@@ -24,6 +24,7 @@
 #include "scene.h"
 #include "version.h"
 #include "frames.h"
+#include "camera_file.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
  * bytes there are not one (overlong, surrogate, beyond U+10FFFF, cut). */
@@ -172,7 +173,7 @@ static void progress_clear(progress *pg)
 /* Per-run state shared read-only by the worker threads, except the
  * statistics, which each unit adds under the lock. */
 typedef struct fog_job {
-    ef_fog_pass pass;
+    ef_fog_pass pass[EF_MAX_VIEWS];   /* per view (ef_chunk.view) */
     unsigned aov;             /* EF_AOV_* bits, in the stream's extra channels */
     double aov_origin[3];
     ef_tau_stats *stats;      /* per component, or NULL without --stats */
@@ -201,10 +202,10 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
     /* Statistics per unit, merged once: no lock per pixel. */
     ef_tau_stats st[EF_FOG_MAX_COMPONENTS];
-    const int ncomp = j->pass.scene->ncomp;
+    const int ncomp = j->pass[0].scene->ncomp;
     if (j->stats)
         memset(st, 0, sizeof st);
-    ef_fog_block_aov(&j->pass, ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth, &aov,
+    ef_fog_block_aov(&j->pass[ck->view], ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth, &aov,
                      j->stats ? st : NULL);
     if (j->stats) {
         pthread_mutex_lock(&j->lock);
@@ -214,7 +215,7 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     }
     if (j->pg)
         progress_add(j->pg, (long) ck->w * ck->h);
-    if (!j->preview)
+    if (!j->preview || ck->view != 0)
         return;
     for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
         if ((y - j->dw_y0) % j->pv_step)
@@ -250,7 +251,7 @@ static void explain(FILE *out, const ef_options *o, const ef_exr_file *in, const
     fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
     if (!plan) {
         /* What was found before the first thing that was not. */
-        fprintf(out, "colour and depth: not found (see the error)\n");
+        fprintf(out, "colour, depth and views: not resolved (see the error)\n");
         explain_scene(out, o, NULL);
         return;
     }
@@ -449,10 +450,10 @@ static char *history_line(int argc, char **argv, const char *scene_file, const c
 
 /* Whether the camera comes from a Z-up family: V-Ray's cameraTransform,
  * or a flag matrix pasted in Blender's convention. */
-static int z_up_camera(const ef_options *o, const ef_camera *cam)
+static int z_up_camera(const ef_cam_flags *flags, const ef_camera *cam)
 {
     return strstr(cam->src_pose, "cameraTransform") != NULL ||
-           (!strncmp(cam->src_pose, "flag", 4) && o->cam.convention == EF_CONV_BLENDER);
+           ((flags->w2c.set || flags->c2w.set) && flags->convention == EF_CONV_BLENDER);
 }
 
 /* Reads every component again under a new up axis (NULL: keep) and time:
@@ -517,6 +518,186 @@ typedef struct frame_ctx {
     long frame;               /* its number */
 } frame_ctx;
 
+/* The camera file, read once per path (a pattern gives one per frame). */
+static ef_camera_file *g_camfile;
+static char g_camfile_path[4096];
+
+/* The frame a single image stands for: the last group of digits of its
+ * file name (shot.1042.exr -> 1042), or -1 when it has none. */
+static int frame_of_name(const char *path, long *frame)
+{
+    const char *name = strrchr(path, '/');
+    name = name ? name + 1 : path;
+    const char *end = NULL, *beg = NULL;
+    for (const char *c = name; *c; ++c)
+        if (*c >= '0' && *c <= '9') {
+            if (!end || c[-1] < '0' || c[-1] > '9')
+                beg = c;
+            end = c + 1;
+        }
+    if (!end || end - beg > 9)
+        return -1;
+    *frame = strtol(beg, NULL, 10);
+    if (beg > name && beg[-1] == '-')
+        *frame = -*frame;
+    return 0;
+}
+
+/* The camera flags of this frame: the command line's, over the camera
+ * file's camera for the frame when --camera-file is given (src then says
+ * where it came from). Returns 0, or an exit status with err set. */
+static int camera_flags(const ef_options *o, const frame_ctx *fr, ef_cam_flags *flags, char *src,
+                        size_t srclen, ef_err *err)
+{
+    src[0] = '\0';
+    if (!o->camera_file)
+        return 0;
+    char path[4096];
+    ef_frame_pattern pat;
+    ef_frame_pattern_find(o->camera_file, &pat);
+    if (pat.has && !fr->has_frame) {
+        ef_fail(err, "--camera-file has a frame pattern but INPUT is a single image; give INPUT "
+                     "a pattern too (shot.#.exr --frames N)");
+        return 2;
+    }
+    if (ef_frame_path(o->camera_file, &pat, fr->frame, path, sizeof path))
+        return ef_fail(err, "the camera file's path is too long"), 1;
+    if (!g_camfile || strcmp(path, g_camfile_path)) {
+        ef_camera_file_free(g_camfile);
+        g_camfile = NULL;
+        if (ef_camera_file_read(path, o->cam.convention, &g_camfile, err)) {
+            if (!err->file)
+                ef_err_set_file(err, path);
+            return 1;
+        }
+        snprintf(g_camfile_path, sizeof g_camfile_path, "%s", path);
+    }
+    long frame = fr->frame;
+    double first = 0, last = 0;
+    int count = 0;
+    ef_camera_file_frames(g_camfile, &first, &last, &count);
+    if (!fr->has_frame && frame_of_name(o->input, &frame)) {
+        if (count != 1) {
+            ef_fail(err, "INPUT's name holds no frame number and the camera file has %d frames; "
+                         "name the frame with a pattern and --frames (shot.#.exr --frames N)",
+                    count);
+            ef_err_set_file(err, path);
+            return 1;
+        }
+        frame = (long) first;
+    }
+    ef_cam_flags f = *flags;
+    if (ef_camera_file_frame(g_camfile, (double) frame, &f, err)) {
+        ef_err_set_file(err, path);
+        return 1;
+    }
+    /* The command line's lens and clip planes win over the file's. */
+    if (flags->fov.set) {
+        f.fov = flags->fov;
+        f.vfov.set = 0;
+    }
+    if (flags->near_.set)
+        f.near_ = flags->near_;
+    if (flags->far_.set)
+        f.far_ = flags->far_;
+    *flags = f;
+    snprintf(src, srclen, "camera file %.300s, frame %ld (%.200s)", path, frame,
+             ef_camera_file_describe(g_camfile));
+    return 0;
+}
+
+/* Whether view v's camera can be resolved: a multi-part view's from its
+ * part's header, a single-part file's only for the default view; flags
+ * (one selected view) always. */
+static int view_has_camera(const ef_options *o, const ef_exr_file *in, const ef_channel_plan *pl)
+{
+    if (o->camera_file || o->cam.w2c.set || o->cam.c2w.set)
+        return 1;
+    if (in->nparts == 1 && !pl->default_view)
+        return 0;
+    ef_cam_meta meta;
+    static ef_camera cam;
+    ef_err e = { 0 };
+    return ef_exr_read_cam_meta(in, pl->rgb[0].part, &meta, &e) == 0 &&
+           ef_camera_resolve(&meta, &o->cam, &cam, &e) == 0;
+}
+
+/* Chooses what to fog: the one colour of a file without views, or its
+ * views (all, or those of --view), each found with its own channels.
+ * Returns 0, or the exit status with err set. */
+static int choose_views(const ef_options *o, const ef_exr_file *in, const ef_exr_file *df,
+                        char views[][64], int nv, ef_channel_plan *plans, int *nplans, ef_err *err)
+{
+    char list[400] = "";
+    for (int k = 0; k < nv; ++k)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", k ? ", " : "", views[k]);
+    if (nv == 0) {
+        if (o->nviews)
+            return ef_fail(err, "--view %s: INPUT has no views (no multiView attribute and no "
+                                "part with a view)", o->views[0]), 2;
+        *nplans = 1;
+        return ef_find_channels(in, df, o->layer, o->depth_channel, &plans[0], err) ? 1 : 0;
+    }
+    const char *sel[EF_MAX_VIEWS];
+    int ns = 0;
+    for (int i = 0; i < o->nviews; ++i) {
+        int found = -1;
+        for (int k = 0; k < nv; ++k)
+            if (!strcmp(views[k], o->views[i]))
+                found = k;
+        if (found < 0)
+            return ef_fail(err, "--view %s: INPUT has no such view (its views: %s)", o->views[i],
+                           list), 2;
+        int dup = 0;
+        for (int k = 0; k < ns; ++k)
+            dup |= !strcmp(sel[k], views[found]);
+        if (!dup && ns < EF_MAX_VIEWS)
+            sel[ns++] = views[found];
+    }
+    if (!o->nviews)
+        for (int k = 0; k < nv; ++k)
+            sel[ns++] = views[k];
+    if (ns > 1 && (o->camera_file || o->cam.w2c.set || o->cam.c2w.set))
+        return ef_fail(err, "INPUT has the views %s and the camera flags give one camera; choose "
+                            "the view it belongs to with --view NAME (run once per view)", list), 2;
+    char nocam[300] = "", withcam[300] = "";
+    for (int k = 0; k < ns; ++k) {
+        if (ef_find_view_channels(in, df, sel[k], o->layer, o->depth_channel, &plans[k], err))
+            return 1;
+        char *l = view_has_camera(o, in, &plans[k]) ? withcam : nocam;
+        snprintf(l + strlen(l), 300 - strlen(l), "%s%s", l[0] ? ", " : "", sel[k]);
+    }
+    *nplans = ns;
+    if (nocam[0] && !o->nviews) {
+        if (withcam[0])
+            return ef_fail(err, "the view%s %s %s no camera of its own, and exrfog fogs every "
+                                "view unless told: fog the others with --view %s, or give %s "
+                                "camera (--camera-file, or --camera-to-world with --fov) with "
+                                "--view", strchr(nocam, ',') ? "s" : "", nocam,
+                           strchr(nocam, ',') ? "have" : "has", withcam,
+                           strchr(nocam, ',') ? "their" : "its"), 1;
+        /* no view has a camera: the single-view message, with the fix */
+        return ef_fail(err, "no view has a camera (views: %s%s); give one with --camera-file or "
+                            "--camera-to-world and --fov, and choose its view with --view", list,
+                       in->nparts == 1 ? "; a single-part file's header camera is the default "
+                                         "view's" : ""), 1;
+    }
+    if (o->nviews && !o->quiet && !o->explain)
+        for (int k = 0; k < nv; ++k) {
+            int chosen = 0;
+            for (int i = 0; i < ns; ++i)
+                chosen |= !strcmp(sel[i], views[k]);
+            if (!chosen) {
+                char msg[200];
+                snprintf(msg, sizeof msg, "view '%.64s' is not fogged (not chosen with --view); "
+                                          "it is copied unchanged", views[k]);
+                warn(o->input, msg);
+            }
+        }
+    return 0;
+}
+
+
 /* Fogs one image: o->input, o->output, o->depth_file and o->preview name
  * this frame's files. Returns the exit status and prints every message. */
 static int run_frame(ef_options *o, const frame_ctx *fr)
@@ -529,10 +710,14 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     }
     ef_exr_file in = { 0 }, dep = { 0 };
     const ef_exr_file *df = &in;
-    ef_channel_plan plan;
+    static ef_channel_plan plans[EF_MAX_VIEWS];
     ef_cam_meta meta;
-    ef_camera cam;
-    ef_depth_conv conv;
+    static ef_camera cams[EF_MAX_VIEWS];
+    static ef_depth_conv convs[EF_MAX_VIEWS];
+    static ef_fog_scene view_scene[EF_MAX_VIEWS];
+    static char camfile_src[600];
+    int nview_scene = 0;
+    camfile_src[0] = '\0';
     static fog_job job;
     memset(&job, 0, sizeof job);
     job.pv_step = 1;
@@ -614,14 +799,20 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         }
         df = &dep;
     }
-    if (ef_find_channels(&in, df, o->layer, o->depth_channel, &plan, &err)) {
-        if (o->explain)
+    /* The views to fog: every view of a multi-view file (or those of
+     * --view), each with its channels and its own camera. */
+    char views[EF_MAX_VIEWS][64];
+    const int nfile_views = ef_exr_views(&in, views, EF_MAX_VIEWS);
+    int nplans = 0;
+    if ((status = choose_views(o, &in, df, views, nfile_views, plans, &nplans, &err)) != 0) {
+        if (o->explain && status == 1)
             explain(stdout, o, &in, NULL, NULL, NULL, 0);
-        report(o->input, &err, 1);
+        report(o->input, &err, status);
         goto done;
     }
-    const char *clash = ef_exr_part_has_any(&in, plan.rgb[0].part, aov_names, naov);
-    if (clash) {
+    status = 1;
+    const char *clash = ef_exr_part_has_any(&in, plans[0].rgb[0].part, aov_names, naov);
+    if (clash && !plans[0].chan_view[0]) {
         char list[64];
         ef_aov_list(o->aov, list, sizeof list);
         ef_fail(&err, "--aov %s: the colour part already has a channel '%s'; the AOV would "
@@ -629,46 +820,102 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         status = report(o->input, &err, 2);
         goto done;
     }
-    if (ef_exr_read_cam_meta(&in, plan.rgb[0].part, &meta, &err)) {
-        report(o->input, &err, 1);
+    if (foreign && nplans > 1) {
+        ef_fail(&err, "%s holds one image and INPUT has %d views (%s, ...); choose one with --view "
+                      "NAME", strrchr(o->output, '.'), nplans, plans[0].view);
+        status = report(o->output, &err, 2);
         goto done;
     }
-    if (ef_camera_resolve(&meta, &o->cam, &cam, &err)) {
-        if (o->explain)
-            explain(stdout, o, &in, &plan, NULL, NULL, 0);
-        /* A bad --world-to-camera is a usage error; a bad header is not. */
-        status = report(o->input, &err, cam.flag_error ? 2 : 1);
-        goto done;
+    for (int v = 0; v < nplans; ++v) {
+        const ef_channel_plan *const pl = &plans[v];
+        ef_camera *const cam = &cams[v];
+        ef_cam_flags flags = o->cam;
+        if ((status = camera_flags(o, fr, &flags, camfile_src, sizeof camfile_src, &err)) != 0) {
+            report(o->camera_file, &err, status);
+            goto done;
+        }
+        status = 1;
+        /* In a single-part multi-view file the header's camera is the
+         * default view's: another view has no camera of its own. */
+        if (pl->view[0] && in.nparts == 1 && !pl->default_view) {
+            exr_attr_box2i_t disp;
+            exr_get_display_window(in.ctx, 0, &disp);
+            ef_cam_meta_init(&meta, disp.min.x, disp.min.y, disp.max.x, disp.max.y);
+            float pa = 1;
+            if (exr_get_pixel_aspect_ratio(in.ctx, 0, &pa) == EXR_ERR_SUCCESS && pa > 0)
+                meta.pixel_aspect = pa;
+        } else if (ef_exr_read_cam_meta(&in, pl->rgb[0].part, &meta, &err)) {
+            report(o->input, &err, 1);
+            goto done;
+        }
+        if (ef_camera_resolve(&meta, &flags, cam, &err)) {
+            if (o->explain)
+                explain(stdout, o, &in, pl, NULL, NULL, 0);
+            if (pl->view[0]) {
+                char msg[sizeof err.msg];
+                snprintf(msg, sizeof msg, "%s", err.msg);
+                ef_fail(&err, "view '%s': %s%s", pl->view, msg,
+                        in.nparts == 1 && !pl->default_view
+                            ? " (in a single-part multi-view file the header's camera is the "
+                              "default view's)"
+                            : "");
+            }
+            /* A bad --world-to-camera is a usage error; a bad header is not. */
+            status = report(o->input, &err, cam->flag_error ? 2 : 1);
+            goto done;
+        }
+        if (camfile_src[0])
+            cam->src_pose = camfile_src;
+        if (cam->warning[0] && !o->quiet && !o->explain) {
+            progress_clear(active_pg);
+            fputs("exrfog: ", stderr);
+            put_clean(o->input);
+            fputs(": warning: ", stderr);
+            put_clean(cam->warning);
+            fputc('\n', stderr);
+        }
+        static const double z_up[3] = { 0, 0, 1 };
+        if (v == 0 && o->up_auto && z_up_camera(&flags, cam) &&
+            rebuild_scene(&o->scene, z_up, o->scene.ctx.time, &err)) {
+            report(o->input, &err, 1);
+            goto done;
+        }
+        if (v == 0 && !o->quiet && !o->explain)
+            warn_traps(o, &in, pl->rgb[0].part, cam);
+        int conv_ok = ef_depth_conv_init(&convs[v], o->depth_mode, cam, &err) == 0;
+        if (o->explain) {
+            if (pl->view[0])
+                printf("%sview: %s%s\n", v ? "\n" : "", pl->view,
+                       pl->default_view ? " (default view)" : "");
+            explain(stdout, o, &in, pl, cam, &convs[v], conv_ok);
+            if (!conv_ok)
+                printf("depth conversion: %s\n", err.msg);
+            continue;
+        }
+        if (!conv_ok) {
+            report(o->input, &err, 1);
+            goto done;
+        }
+        /* Each view binds the scene to its own camera: a copy per view. */
+        ef_fog_scene *sc = &o->scene;
+        if (v > 0) {
+            view_scene[v] = o->scene;
+            view_scene[v].ncomp = 0;
+            nview_scene = v + 1;
+            for (int i = 0; i < o->scene.ncomp; ++i)
+                if (ef_scene_add(&view_scene[v], o->scene.comp[i].spec, &err)) {
+                    report(o->input, &err, 1);
+                    goto done;
+                }
+            sc = &view_scene[v];
+        }
+        ef_scene_bind(sc, cam->pos);
+        job.pass[v] = (ef_fog_pass){ cam, &convs[v], sc };
     }
-    if (cam.warning[0] && !o->quiet && !o->explain) {
-        fputs("exrfog: ", stderr);
-        put_clean(o->input);
-        fputs(": warning: ", stderr);
-        put_clean(cam.warning);
-        fputc('\n', stderr);
-    }
-    static const double z_up[3] = { 0, 0, 1 };
-    if (o->up_auto && z_up_camera(o, &cam) && rebuild_scene(&o->scene, z_up, o->scene.ctx.time, &err)) {
-        report(o->input, &err, 1);
-        goto done;
-    }
-    if (!o->quiet && !o->explain)
-        warn_traps(o, &in, plan.rgb[0].part, &cam);
-    int conv_ok = ef_depth_conv_init(&conv, o->depth_mode, &cam, &err) == 0;
     if (o->explain) {
-        explain(stdout, o, &in, &plan, &cam, &conv, conv_ok);
-        if (!conv_ok)
-            printf("depth conversion: %s\n", err.msg);
         status = 0;
         goto done;
     }
-    if (!conv_ok) {
-        report(o->input, &err, 1);
-        goto done;
-    }
-
-    ef_scene_bind(&o->scene, cam.pos);
-    job.pass = (ef_fog_pass){ &cam, &conv, &o->scene };
     job.aov = o->aov;
     memcpy(job.aov_origin, o->aov_origin, sizeof job.aov_origin);
     if (o->stats) {
@@ -680,7 +927,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         }
     }
     exr_attr_box2i_t dw;
-    exr_get_data_window(in.ctx, plan.rgb[0].part, &dw);
+    exr_get_data_window(in.ctx, plans[0].rgb[0].part, &dw);
     if (fr->pg) {
         fr->pg->frame_px = (double) (dw.max.x - dw.min.x + 1) * (double) (dw.max.y - dw.min.y + 1);
         fr->pg->px = 0;
@@ -721,8 +968,8 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
                           .chan_type_name = o->chan_type_name,
                           .chan_type = o->chan_type,
                           .nchan_type = o->nchan_type,
-                          .depth_name = df == &in ? plan.depth.name : NULL,
-                          .depth_part = plan.depth.part,
+                          .depth_name = NULL,
+                          .depth_part = -1,
                           .param_attr = o->params,
                           .history = history,
                           .extra = aov_names,
@@ -731,25 +978,27 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
                           .origin_attr = { o->aov_origin[0], o->aov_origin[1], o->aov_origin[2] } };
     ef_stream_stats st;
     if (o->verbose) {
-        explain(stderr, o, &in, &plan, &cam, &conv, conv_ok);
+        for (int v = 0; v < nplans; ++v)
+            explain(stderr, o, &in, &plans[v], &cams[v], &convs[v], 1);
         fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o->input, o->output, so.threads,
                 so.threads > 1 ? "s" : "");
     }
-    if (ef_exr_stream(&in, df, &plan, o->output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
+    so.nplans = nplans;
+    if (ef_exr_stream(&in, df, plans, o->output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
                       &st, &err)) {
         report(o->output, &err, 1);
         goto done;
     }
     if (foreign) {
         /* Colour and alpha of the fogged part, in OUTPUT's format. */
-        const char *names[4] = { plan.rgb[0].name, plan.rgb[1].name, plan.rgb[2].name,
-                                 plan.alpha.part >= 0 ? plan.alpha.name : NULL };
+        const char *names[4] = { plans[0].rgb[0].name, plans[0].rgb[1].name, plans[0].rgb[2].name,
+                                 plans[0].alpha.part >= 0 ? plans[0].alpha.name : NULL };
         char msg[512];
         close(mid.fd);
         mid.fd = -1;
         close(out.fd);
         out.fd = -1;
-        if (ef_oiio_convert_exr(mid.tmp, plan.rgb[0].part, names, names[3] ? 4 : 3, out.tmp, msg,
+        if (ef_oiio_convert_exr(mid.tmp, plans[0].rgb[0].part, names, names[3] ? 4 : 3, out.tmp, msg,
                                 sizeof msg)) {
             ef_fail(&err, "%s", msg);
             report(o->output, &err, 1);
@@ -796,6 +1045,8 @@ done:
     free(job.preview);
     free(job.stats);
     pthread_mutex_destroy(&job.lock);
+    for (int v = 1; v < nview_scene; ++v)
+        ef_scene_free(&view_scene[v]);
     ef_exr_close(&dep);
     ef_exr_close(&in);
     return status;
@@ -1004,6 +1255,8 @@ int ef_main(int argc, char **argv)
     }
     progress_clear(active_pg);
     active_pg = NULL;
+    ef_camera_file_free(g_camfile);
+    g_camfile = NULL;
     pthread_mutex_destroy(&pg.lock);
     free(typed);
     ef_options_free(&o);

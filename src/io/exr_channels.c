@@ -217,6 +217,10 @@ static const qchan *find_depth(const qlist *q, const char *prefix, const char *v
     if (!prefix[0] || !strcmp(prefix, "rgba") || !strcmp(prefix, "rgb") || !strcmp(prefix, "RGBA")) {
         if ((c = find(q, "Z", view)))
             return c;
+        /* a multi-part file's "rgba" part with its own Z (rgba.Z) */
+        join(prefix, "Z", name, sizeof name);
+        if (prefix[0] && (c = find(q, name, view)))
+            return c;
     } else {
         join(prefix, "Z", name, sizeof name);
         if ((c = find(q, name, view)))
