@@ -247,7 +247,7 @@ static void test_names_aliases_roles(void **state)
         {"Utility - sRGB - Texture", "sRGB - Texture"},
         {"Non-Color", "Raw"},
         {"lin_rec2020", "Linear Rec.2020"},
-        {"scene_linear", "ACEScg"},
+        {"scene_linear", "Linear Rec.709 (sRGB)"},
         {"srgb_display", "sRGB - Display"},
     };
     char name[256];
@@ -265,7 +265,7 @@ static void test_names_aliases_roles(void **state)
     assert_false(ef_ocio_space_exists(g_ocio, "lin_srgb", name, 5));
 
     assert_int_equal(ef_ocio_role(g_ocio, "scene_linear", name, sizeof name), 0);
-    assert_string_equal(name, "ACEScg");
+    assert_string_equal(name, "Linear Rec.709 (sRGB)");
     assert_int_equal(ef_ocio_role(g_ocio, "data", name, sizeof name), 0);
     assert_string_equal(name, "Raw");
     assert_int_equal(ef_ocio_role(g_ocio, "color_picking", name, sizeof name), 0);
@@ -375,7 +375,7 @@ static void test_parse_spaces(void **state)
     snprintf(text, sizeof text, "ACEScct:%.9f,%.9f,%.9f", cct, cct, cct);
     parse_ok(text, "ACEScg", (double[3]){0.18, 0.18, 0.18}, 1e-5);
     /* A role works as a space name; data is never converted. */
-    parse_ok("scene_linear:0.5,0.25,1", "ACEScg", (double[3]){0.5, 0.25, 1}, 0);
+    parse_ok("scene_linear:0.5,0.25,1", "Linear Rec.709 (sRGB)", (double[3]){0.5, 0.25, 1}, 0);
     parse_ok("Raw:0.5,0.25,1", "ACEScg", (double[3]){0.5, 0.25, 1}, 0);
 }
 

@@ -652,6 +652,143 @@ static void test_beachball_left(void **state)
     free(out);
 }
 
+/* One frame of colour v, depth 5 (pixel 0 sky), camera at the origin,
+ * with an optional string attribute (a colour space). */
+static void write_colour_frame(const char *path, float v, const char *attr, const char *value)
+{
+    planes_init();
+    static float c[W * H];
+    for (int i = 0; i < W * H; ++i)
+        c[i] = v;
+    tu_part p;
+    tu_part_init(&p, W, H);
+    add_rgbaz(&p, "", c);
+    set_camera(&p, 0.0);
+    p.str_name = attr;
+    p.str_value = value;
+    assert_int_equal(tu_write_exr(path, &p, 1), 0);
+}
+
+/* Colours in any form land in the image's working space (issue 9):
+ * #RRGGBB is sRGB-decoded ((128/255 + 0.055)/1.055)^2.4 = 0.2158605; a
+ * colour named in the working space is taken as is; Rec.709 red in an
+ * ACEScg image is the first column of the published Bradford Rec.709 ->
+ * AP1 matrix (0.6130974, 0.0701937, 0.0206156); the header's colorSpace,
+ * oiio:ColorSpace or arnold/color_space names the working space, and
+ * --colorspace overrides it. Every output pixel is checked against the
+ * exp fog with that colour. */
+static void test_colour_spaces(void **state)
+{
+    (void) state;
+    fresh("colour");
+    tu_pinhole pin;
+    const int disp[4] = { 0, 0, W - 1, H - 1 };
+    tu_pinhole_fov(&pin, disp, HFOV);
+    static const struct {
+        const char *attr, *value, *flag, *arg, *extra;
+        double F[3];
+    } cases[] = {
+        { NULL, NULL, "--fog-color", "#808080", "", { 0.2158605, 0.2158605, 0.2158605 } },
+        { NULL, NULL, "--fog", "exp:density=0.2:color=#ff8000", "", { 1.0, 0.2158605, 0.0 } },
+        { "colorSpace", "ACEScg", "--fog-color", "lin_srgb:1,0,0", "",
+          { 0.6130974, 0.0701937, 0.0206156 } },
+        { "oiio:ColorSpace", "acescg", "--fog", "exp:density=0.2:color=Linear Rec.709 (sRGB):1,0,0",
+          "", { 0.6130974, 0.0701937, 0.0206156 } },
+        { "arnold/color_space", "ACES - ACEScg", "--fog-color", "ACEScg:0.5,0.25,0.125", "",
+          { 0.5, 0.25, 0.125 } },
+        { "colorSpace", "ACEScg", "--fog-color", "0.3,0.2,0.1", "", { 0.3, 0.2, 0.1 } },
+        { "colorSpace", "lin_srgb", "--fog-color", "lin_srgb:1,0,0", "--colorspace ACEScg",
+          { 0.6130974, 0.0701937, 0.0206156 } },
+    };
+    char *in = in_dir("in.exr"), *out = in_dir("out.exr");
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; ++k) {
+        write_colour_frame(in, 0.5f, cases[k].attr, cases[k].value);
+        const int spec = !strcmp(cases[k].flag, "--fog");
+        assert_run(0, "'%s' -o '%s' %s%s '%s' %s", in, out, spec ? "" : "--fog exp:density=0.2 ",
+                   cases[k].flag, cases[k].arg, cases[k].extra);
+        tu_fog_check fc;
+        tu_fog_check_init(&fc, in, out, &pin, 0.2);
+        memcpy(fc.F, cases[k].F, sizeof fc.F);
+        fc.extra_rel = 2e-6;   /* the published matrix's 7 digits */
+        if (tu_check_fog(&fc))
+            fail_msg("case %zu (%s %s %s)", k, cases[k].flag, cases[k].arg, cases[k].extra);
+    }
+    /* --explain says which space and where it came from */
+    write_colour_frame(in, 0.5f, "colorSpace", "ACEScg");
+    assert_run(0, "'%s' --explain --fog exp:density=0.2", in);
+    assert_non_null(strstr(tu_out, "working colour space: ACEScg  from header colorSpace 'ACEScg'"));
+    write_colour_frame(in, 0.5f, NULL, NULL);
+    assert_run(0, "'%s' --explain --fog exp:density=0.2", in);
+    assert_non_null(strstr(tu_out, "working colour space: Linear Rec.709 (sRGB)  from the config's "
+                                   "scene_linear role"));
+    /* errors: an unknown space (usage), a header space the config lacks,
+     * a colour outside the working gamut, a broken $OCIO */
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.2 --fog-color Bogus:1,0,0", in, out);
+    assert_non_null(strstr(tu_err, "unknown colour space 'Bogus'"));
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.2 --colorspace Bogus --preview '%s/p.png'", in,
+               out, g_dir);
+    write_colour_frame(in, 0.5f, "colorSpace", "Weird Space");
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.2 --fog-color '#ffffff'", in, out);
+    assert_non_null(strstr(tu_err, "colorSpace 'Weird Space'"));
+    write_colour_frame(in, 0.5f, NULL, NULL);
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.2 --fog-color ACEScg:1,0,0", in, out);
+    assert_non_null(strstr(tu_err, "outside its gamut"));
+    setenv("OCIO", "/nonexistent/config.ocio", 1);
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.2 --fog-color '#ffffff'", in, out);
+    assert_non_null(strstr(tu_err, "$OCIO"));
+    /* plain colours need no config at all */
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.2 --fog-color 0.5,0.5,0.5", in, out);
+    unsetenv("OCIO");
+    free(in);
+    free(out);
+}
+
+/* The mean of the preview's 8-bit pixels as oiiotool --stats reports
+ * them (0..255), or -1. */
+static double preview_mean(const char *png)
+{
+    char cmd[2048], line[512];
+    snprintf(cmd, sizeof cmd, "oiiotool --stats '%s' 2>/dev/null", png);
+    FILE *p = popen(cmd, "r");
+    double m = -1;
+    while (p && fgets(line, sizeof line, p))
+        if (strstr(line, "Stats Avg:"))
+            sscanf(strstr(line, "Stats Avg:") + 10, "%lf", &m);
+    if (p)
+        pclose(p);
+    return m;
+}
+
+/* The preview goes through an OCIO display and view: mid grey 0.18 is
+ * sRGB-encoded 0.46135 -> 118/255 by default (sRGB - Display,
+ * Un-tone-mapped), 46/255 through the Raw view; an unknown view is a
+ * usage error that lists the config's displays and views. */
+static void test_preview_view(void **state)
+{
+    (void) state;
+    if (system("command -v oiiotool >/dev/null 2>&1"))
+        skip();
+    fresh("pview");
+    char *in = in_dir("in.exr"), *out = in_dir("out.exr"), *png = in_dir("p.png");
+    write_colour_frame(in, 0.18f, NULL, NULL);
+    /* a fog too thin to change a value in 8 bits, and a sky pixel kept */
+    assert_run(0, "'%s' -o '%s' --fog exp:density=1e-9 --sky keep --preview '%s'", in, out, png);
+    double m = preview_mean(png);
+    if (fabs(m - 118.0) > 1e-9)
+        fail_msg("default view: mean %g, expected 118", m);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=1e-9 --sky keep --preview '%s' --preview-view "
+                  "'sRGB - Display, Raw'", in, out, png);
+    m = preview_mean(png);
+    if (fabs(m - 46.0) > 1e-9)
+        fail_msg("Raw view: mean %g, expected 46", m);
+    assert_run(2, "'%s' -o '%s' --fog exp:density=1e-9 --preview '%s' --preview-view "
+                  "'sRGB - Display, Filmic'", in, out, png);
+    assert_non_null(strstr(tu_err, "Un-tone-mapped"));
+    free(in);
+    free(out);
+    free(png);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -663,6 +800,8 @@ int main(void)
         cmocka_unit_test(test_progress_bar),
         cmocka_unit_test(test_parallel_recipe),
         cmocka_unit_test(test_camera_file),
+        cmocka_unit_test(test_colour_spaces),
+        cmocka_unit_test(test_preview_view),
         cmocka_unit_test(test_views_multipart),
         cmocka_unit_test(test_views_singlepart),
         cmocka_unit_test(test_beachball_left),

@@ -11,6 +11,7 @@
 
 #include "aov.h"
 #include "exr_io.h"
+#include "colour.h"
 #include "ocio_shim.h"
 #include "scene_file.h"
 #include "version.h"
@@ -20,7 +21,8 @@ enum {
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
-    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE
+    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE,
+    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW
 };
 
 static const struct option long_opts[] = {
@@ -41,6 +43,9 @@ static const struct option long_opts[] = {
     { "keep-going", no_argument, NULL, OPT_KEEP_GOING },
     { "view", required_argument, NULL, OPT_VIEW },
     { "camera-file", required_argument, NULL, OPT_CAMERA_FILE },
+    { "colorconfig", required_argument, NULL, OPT_COLORCONFIG },
+    { "colorspace", required_argument, NULL, OPT_COLORSPACE },
+    { "preview-view", required_argument, NULL, OPT_PREVIEW_VIEW },
     { "aov", required_argument, NULL, OPT_AOV },
     { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
@@ -80,7 +85,12 @@ void ef_options_usage(FILE *out)
             "                           density may be R,G,B or visibility=V (metres);\n"
             "                           color=R,G,B: the component's own colour;\n"
             "                           distance=radial|planar (linear, exp, exp2)\n"
-            "      --fog-color R,G,B    scene-linear fog colour (default %g,%g,%g)\n"
+            "      --fog-color COLOR    fog colour (default %g,%g,%g): R,G,B in the working\n"
+            "                           space, #RRGGBB (sRGB) or SPACE:R,G,B (any OCIO space);\n"
+            "                           color= in a SPEC takes the same forms\n"
+            "      --colorconfig FILE   OpenColorIO config (default $OCIO, else exrfog's own)\n"
+            "      --colorspace NAME    the image's working space (default: from the header,\n"
+            "                           else the config's scene_linear)\n"
             "      --sky fog|keep|distance=D  background pixels (default fog)\n"
             "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
             "                           the flags given here override it\n"
@@ -120,7 +130,8 @@ void ef_options_usage(FILE *out)
             "  -d, --data-type T        half|float output for half/float channels (depth,\n"
             "                           P and ids stay float), or CHANNEL=half|float\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
-            "      --preview FILE       also write an sRGB preview (PNG, JPEG, ...)\n"
+            "      --preview FILE       also write a preview (PNG, JPEG, ...) through an OCIO view\n"
+            "      --preview-view \"DISPLAY, VIEW\"  its display and view (default: the config's)\n"
             "      --explain            print the resolved camera and conventions, write nothing\n"
             "      --stats              print per-stage timings and peak memory, and the cost\n"
             "                           and error of each noise component\n"
@@ -173,7 +184,8 @@ static void record(ef_options *o, const char *a)
  * file (threads, messages, preview): equal outputs get equal headers. */
 static void record_option(ef_options *o, int c, const char *arg)
 {
-    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES || c == OPT_PREVIEW || c == 'v' || c == 'q' || c == 'o')
+    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES ||
+        c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' || c == 'q' || c == 'o')
         return;
     for (const struct option *lo = long_opts; lo->name; ++lo)
         if (lo->val == c) {
@@ -199,7 +211,8 @@ typedef struct scene_flags {
     const char *specs[EF_FOG_MAX_COMPONENTS];
     int nspec;
     int has_color, has_sky, has_up, has_units, has_time;
-    double color[3], up[3], units, time;
+    double up[3], units, time;
+    const char *color_text;
     const char *sky;
 } scene_flags;
 
@@ -233,8 +246,24 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
             return EF_PARSE_FAIL;
         }
     }
-    if (f->has_color)
-        memcpy(s->color, f->color, sizeof s->color);
+    if (f->has_color) {
+        const char *t = f->color_text;
+        if (ef_colour_parse(NULL, t, s->color, err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            if (ef_out_of_range(t, 0))
+                ef_fail(err, "--fog-color '%s' is out of range (numbers are 0 or between 2.2e-308 "
+                             "and 1.8e308 in magnitude; colours at most 65504)", t);
+            else if (t[0] != '#' && !strchr(t, ':'))
+                ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers from 0 to %g), #RRGGBB "
+                             "or SPACE:R,G,B", t, EF_COLOR_MAX);
+            else
+                ef_fail(err, "--fog-color '%s': %s", t, msg);
+            ef_scene_file_free(&sf);
+            /* a config that cannot be opened is a runtime error */
+            return strstr(msg, "colour management:") ? EF_PARSE_FAIL : EF_PARSE_USAGE;
+        }
+    }
     if (f->has_up)
         memcpy(s->ctx.up, f->up, sizeof s->ctx.up);
     o->up_set |= f->has_up;
@@ -246,6 +275,7 @@ static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *
     if (f->has_sky && ef_scene_parse_sky(s, f->sky, err))
         return ef_scene_file_free(&sf), EF_PARSE_USAGE;
     s->ctx.read_file = ef_read_text_file;
+    s->ctx.parse_color = ef_colour_parse;
     for (int i = 0; i < sf.nspec; ++i)
         if (ef_scene_add(s, sf.specs[i], err)) {
             /* A profile the component names keeps its own name in the message. */
@@ -353,12 +383,21 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
             f.specs[f.nspec++] = a;
             break;
         case OPT_FOG_COLOR:
-            if (ef_parse_color(a, f.color))
-                return ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers from 0 to %g)", a,
-                               EF_COLOR_MAX),
-                       EF_PARSE_USAGE;
+            /* read once every option is known (--colorconfig) */
+            f.color_text = o->fog_color = a;
             f.has_color = 1;
             break;
+        case OPT_COLORCONFIG:
+            if (!a[0])
+                return ef_fail(err, "--colorconfig: the file name is empty"), EF_PARSE_USAGE;
+            o->colorconfig = a;
+            break;
+        case OPT_COLORSPACE:
+            if (!a[0])
+                return ef_fail(err, "--colorspace: the name is empty (e.g. ACEScg)"), EF_PARSE_USAGE;
+            o->colorspace = a;
+            break;
+        case OPT_PREVIEW_VIEW: o->preview_view = a; break;
         case OPT_SCENE: o->scene_file = a; break;
         case OPT_UP_AXIS:
             if (!strcmp(a, "auto")) {
@@ -546,6 +585,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     if (o->preview && !o->preview[0])
         return ef_fail(err, "--preview: the file name is empty (give a name such as preview.png)"),
                EF_PARSE_USAGE;
+    ef_colour_setup(o->colorconfig, o->colorspace);
     const ef_parse_result br = build_scene(o, &f, err);
     if (br != EF_PARSE_RUN)
         return br;

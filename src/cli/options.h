@@ -31,6 +31,10 @@ typedef struct ef_options {
     int time_set;             /* --time or the scene file's "time" was given */
     const char *views[16];    /* --view NAME, repeatable */
     const char *camera_file;  /* --camera-file FILE (may hold a frame pattern) */
+    const char *colorconfig;  /* --colorconfig FILE, or NULL */
+    const char *colorspace;   /* --colorspace NAME, or NULL */
+    const char *preview_view; /* --preview-view "DISPLAY, VIEW", or NULL */
+    const char *fog_color;    /* --fog-color as written (read again per working space) */
     int nviews;
     int explain, stats, verbose, quiet;
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */

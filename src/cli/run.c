@@ -24,6 +24,7 @@
 #include "scene.h"
 #include "version.h"
 #include "frames.h"
+#include "colour.h"
 #include "camera_file.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
@@ -179,19 +180,20 @@ typedef struct fog_job {
     ef_tau_stats *stats;      /* per component, or NULL without --stats */
     pthread_mutex_t lock;
     progress *pg;             /* NULL without a progress bar */
+    const ef_ocio_display *disp;  /* the preview's display transform */
     /* preview: every step-th pixel of the data window */
     unsigned char *preview;
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
 } fog_job;
 
-static unsigned char srgb8(double v)
+/* A display-referred value (0..1) to 8 bits. */
+static unsigned char display8(float v)
 {
     if (!(v > 0))
         return 0;
     if (v >= 1)
         return 255;
-    double s = v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1 / 2.4) - 0.055;
-    return (unsigned char) lrint(s * 255.0);
+    return (unsigned char) lrintf(v * 255.0f);
 }
 
 static void fog_chunk(void *user, const ef_chunk *ck)
@@ -217,19 +219,30 @@ static void fog_chunk(void *user, const ef_chunk *ck)
         progress_add(j->pg, (long) ck->w * ck->h);
     if (!j->preview || ck->view != 0)
         return;
+    /* The unit's preview pixels through the display transform, then 8 bits. */
+    const int sx0 = ((ck->x0 - j->dw_x0) + j->pv_step - 1) / j->pv_step;
+    const int sx1 = (ck->x0 + ck->w - 1 - j->dw_x0) / j->pv_step;
+    if (sx1 < sx0)
+        return;
+    const int nx = sx1 - sx0 + 1;
+    float *row = malloc(sizeof(float) * 3 * (size_t) nx);
+    if (!row)
+        return;   /* the preview stays black there; memory is gone anyway */
     for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
         if ((y - j->dw_y0) % j->pv_step)
             continue;
-        for (int x = ck->x0; x < ck->x0 + ck->w; ++x) {
-            if ((x - j->dw_x0) % j->pv_step)
-                continue;
+        for (int k = 0; k < nx; ++k) {
+            const int x = j->dw_x0 + (sx0 + k) * j->pv_step;
             const size_t i = (size_t) (y - ck->y0) * (size_t) ck->w + (size_t) (x - ck->x0);
-            unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w +
-                                                 (size_t) ((x - j->dw_x0) / j->pv_step));
-            for (int k = 0; k < 3; ++k)
-                p[k] = srgb8(ck->rgb[k][i]);
+            for (int c = 0; c < 3; ++c)
+                row[3 * k + c] = ck->rgb[c][i];
         }
+        ef_ocio_display_apply(j->disp, row, nx);
+        unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w + (size_t) sx0);
+        for (int k = 0; k < 3 * nx; ++k)
+            p[k] = display8(row[k]);
     }
+    free(row);
 }
 
 static void print_vec(FILE *out, const char *label, const double v[3], const char *src)
@@ -315,6 +328,9 @@ static void explain_scene(FILE *out, const ef_options *o, const ef_channel_plan 
             o->scene.ctx.up[1], o->scene.ctx.up[2], o->scene.ctx.units_per_meter,
             o->scene_file ? "; scene file " : "", o->scene_file ? o->scene_file : "");
     fprintf(out, "time: %.9g s\n", o->scene.ctx.time);
+    if (ef_colour_space()[0])
+        fprintf(out, "working colour space: %s  from %s; OpenColorIO config: %s\n",
+                ef_colour_space(), ef_colour_space_source(), ef_colour_config_where());
     if (o->aov) {
         const char *names[EF_AOV_MAX_CHANNELS];
         const int n = ef_aov_channels(o->aov, names);
@@ -716,6 +732,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     static ef_depth_conv convs[EF_MAX_VIEWS];
     static ef_fog_scene view_scene[EF_MAX_VIEWS];
     static char camfile_src[600];
+    ef_ocio_display *disp = NULL;
     int nview_scene = 0;
     camfile_src[0] = '\0';
     static fog_job job;
@@ -755,6 +772,21 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
                 status = report(o->preview, &err, 2);
                 goto done;
             }
+            /* the display and view exist (the working space comes later) */
+            const ef_ocio *cfg = ef_colour_config(&err);
+            if (!cfg) {
+                report(o->preview, &err, 1);
+                goto done;
+            }
+            char used[300], vmsg[1200];
+            ef_ocio_display *d = ef_ocio_display_open(cfg, NULL, o->preview_view, used, sizeof used,
+                                                      vmsg, sizeof vmsg);
+            if (!d) {
+                ef_fail(&err, "--preview-view: %s", vmsg);
+                status = report(o->preview, &err, 2);
+                goto done;
+            }
+            ef_ocio_display_close(d);
             const char *dot = strrchr(o->preview, '.'), *slash = strrchr(o->preview, '/');
             const int rc = ef_output_open(&pv, o->preview, dot && (!slash || dot > slash) ? dot : NULL,
                                           &err);
@@ -810,7 +842,21 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         report(o->input, &err, status);
         goto done;
     }
+    /* The working space, when colours or the preview need it; colours
+     * written as #RRGGBB or SPACE:R,G,B are then read again in it. */
+    if ((status = ef_colour_working(&in, plans[0].rgb[0].part,
+                                    ef_colour_converted() || o->preview || o->explain, &err)) != 0) {
+        report(o->input, &err, status);
+        goto done;
+    }
     status = 1;
+    if (ef_colour_converted()) {
+        if (rebuild_scene(&o->scene, NULL, o->scene.ctx.time, &err) ||
+            (o->fog_color && ef_colour_parse(NULL, o->fog_color, o->scene.color, &err))) {
+            report(o->input, &err, 1);
+            goto done;
+        }
+    }
     const char *clash = ef_exr_part_has_any(&in, plans[0].rgb[0].part, aov_names, naov);
     if (clash && !plans[0].chan_view[0]) {
         char list[64];
@@ -939,6 +985,20 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         job.pv_h = (h + job.pv_step - 1) / job.pv_step;
         job.dw_x0 = dw.min.x;
         job.dw_y0 = dw.min.y;
+        char used[300], msg[1200];
+        const ef_ocio *cfg = ef_colour_config(&err);
+        if (!cfg) {
+            report(o->preview, &err, 1);
+            goto done;
+        }
+        disp = ef_ocio_display_open(cfg, ef_colour_space(), o->preview_view, used, sizeof used, msg,
+                                    sizeof msg);
+        if (!disp) {
+            ef_fail(&err, "--preview-view: %s", msg);
+            report(o->preview, &err, 2);
+            goto done;
+        }
+        job.disp = disp;
         job.preview = calloc((size_t) job.pv_w * (size_t) job.pv_h, 3);
         if (!job.preview) {
             ef_fail(&err, "out of memory for the preview");
@@ -1047,6 +1107,7 @@ done:
     pthread_mutex_destroy(&job.lock);
     for (int v = 1; v < nview_scene; ++v)
         ef_scene_free(&view_scene[v]);
+    ef_ocio_display_close(disp);
     ef_exr_close(&dep);
     ef_exr_close(&in);
     return status;
@@ -1257,6 +1318,7 @@ int ef_main(int argc, char **argv)
     active_pg = NULL;
     ef_camera_file_free(g_camfile);
     g_camfile = NULL;
+    ef_colour_close();
     pthread_mutex_destroy(&pg.lock);
     free(typed);
     ef_options_free(&o);

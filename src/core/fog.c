@@ -32,6 +32,8 @@ void ef_fog_context_init(ef_fog_context *ctx)
     ctx->up[2] = 0.0;
     ctx->units_per_meter = 1.0;
     ctx->read_file = NULL;
+    ctx->parse_color = NULL;
+    ctx->color_user = NULL;
     ctx->time = 0.0;
 }
 
@@ -252,14 +254,16 @@ static void list_keys(const ef_fog_model *m, char *buf, size_t len)
     strncat(buf, "color", len - strlen(buf) - 1);
 }
 
-static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec, ef_err *err);
+static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec,
+                             const ef_fog_context *ctx, ef_err *err);
 
 /* Applies one KEY=VALUE token (tok is modified in place); a number that
  * overflows or underflows is called out of range, whatever the key. */
-static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err *err)
+static int parse_token(ef_fog_component *c, char *tok, const char *spec, const ef_fog_context *ctx,
+                       ef_err *err)
 {
     const char *eq = strchr(tok, '=');
-    if (parse_token_inner(c, tok, spec, err) == 0)
+    if (parse_token_inner(c, tok, spec, ctx, err) == 0)
         return 0;
     if (eq && ef_out_of_range(eq + 1, 0) && !strstr(err->msg, "out of range") &&
         !strstr(err->msg, "unknown key") && !strstr(err->msg, "twice"))
@@ -268,7 +272,8 @@ static int parse_token(ef_fog_component *c, char *tok, const char *spec, ef_err 
     return -1;
 }
 
-static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec, ef_err *err)
+static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec,
+                             const ef_fog_context *ctx, ef_err *err)
 {
     char *eq = strchr(tok, '=');
     char keys[256];
@@ -282,9 +287,16 @@ static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec, e
     if (!strcmp(key, "color")) {
         if (c->has_color)
             return ef_fail(err, "fog spec '%s': key 'color' is given twice", spec);
-        if (ef_parse_color(val, c->color))
+        if (ctx->parse_color) {
+            if (ctx->parse_color(ctx->color_user, val, c->color, err)) {
+                char msg[sizeof err->msg];
+                snprintf(msg, sizeof msg, "%s", err->msg);
+                return ef_fail(err, "fog spec '%s': color='%s': %s", spec, val, msg);
+            }
+        } else if (ef_parse_color(val, c->color)) {
             return ef_fail(err, "fog spec '%s': color='%s' is not R,G,B (numbers from 0 to %g)",
                            spec, val, EF_COLOR_MAX);
+        }
         c->has_color = 1;
         return 0;
     }
@@ -385,11 +397,22 @@ int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *
     c->model = ef_fog_model_find(name);
     if (!c->model)
         return ef_fail(err, "fog spec '%s': unknown model '%s' (models: %s)", spec, name, models);
-    for (char *tok = strtok_r(NULL, ":", &save); tok; tok = strtok_r(NULL, ":", &save))
-        if (parse_token(c, tok, c->spec, err)) {
+    char *tok = strtok_r(NULL, ":", &save);
+    while (tok) {
+        char *next = strtok_r(NULL, ":", &save);
+        /* color=SPACE:R,G,B holds the SPEC separator: the part after it
+         * has no '=' and belongs to the colour (strtok_r left the two
+         * tokens adjacent, so the ':' is put back). */
+        while (next && !strncmp(tok, "color=", 6) && !strchr(next, '=')) {
+            next[-1] = ':';
+            next = strtok_r(NULL, ":", &save);
+        }
+        if (parse_token(c, tok, c->spec, ctx, err)) {
             ef_fog_free(c);
             return -1;
         }
+        tok = next;
+    }
     if (!c->has_up)
         memcpy(c->up, ctx->up, sizeof c->up);
     if (c->model->finish(c, ctx, err)) {

@@ -27,6 +27,11 @@ typedef struct ef_fog_context {
     /* Reads a whole text file (file= keys) into a malloc'd, NUL-terminated
      * buffer; NULL means files cannot be read here. The core does no I/O. */
     int (*read_file)(const char *path, char **text, ef_err *err);
+    /* Turns a color= value into the working space's R,G,B (colour
+     * management lives outside the core); NULL: plain numbers only
+     * (ef_parse_color). Returns 0, or -1 with err set. */
+    int (*parse_color)(void *user, const char *text, double out[3], ef_err *err);
+    void *color_user;
 } ef_fog_context;
 
 struct ef_fog_model;
