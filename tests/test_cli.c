@@ -2597,7 +2597,8 @@ static void test_explain_partial(void **state)
         fail_msg("--explain without a camera printed:\n%s", g_out);
     assert_err_has("no camera pose");
     assert_status(run("'%s' --explain --fog exp:density=0.02", nocol.s), 1);
-    if (!strstr(g_out, "colour and depth: not found") || !strstr(g_out, "fog: exp:density=0.02"))
+    if (!strstr(g_out, "colour, depth and views: not resolved") ||
+        !strstr(g_out, "fog: exp:density=0.02"))
         fail_msg("--explain without colour printed:\n%s", g_out);
 }
 

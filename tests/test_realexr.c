@@ -325,15 +325,19 @@ static void test_beachball_singlepart(void **state)
     char *path = real("beachball-singlepart.0001.exr");
     char *out = tu_path("real_beachball_single.exr");
     expect_no_camera(path, out);
-    assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
+    /* two views and one camera from the flags: the view must be named */
+    assert_run(2, "--explain '%s' " NO_CAMERA_FLAGS, path);
+    assert_contains(tu_err, "--view");
+    assert_run(0, "--explain '%s' --view right " NO_CAMERA_FLAGS, path);
     assert_contains(tu_out, "depth: Z (part 0)");
     assert_contains(tu_out, "colour: R, G, B, alpha A (part 0)");
     /* The other view: its own depth, not the default view's Z. */
     assert_run(0, "--explain '%s' --layer left " NO_CAMERA_FLAGS, path);
     assert_contains(tu_out, "colour: left.R, left.G, left.B, alpha left.A (part 0)");
     assert_contains(tu_out, "depth: left.Z (part 0)");
-    assert_run(0, "'%s' -o '%s' --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
-               path, out);
+    assert_run(0, "'%s' -o '%s' --view right --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 "
+                  NO_CAMERA_FLAGS, path, out);
+    assert_contains(tu_err, "view 'left' is not fogged");
     check_files(path, out, 0, RGBA);
     const int disp[4] = { 0, 0, 2047, 1555 };
     tu_pinhole pin;
@@ -355,11 +359,11 @@ static void test_beachball_multipart(void **state)
     char *out = tu_path("real_beachball_multi.exr");
     assert_int_equal(tu_nparts(path), 10);
     expect_no_camera(path, out);
-    assert_run(0, "--explain '%s' " NO_CAMERA_FLAGS, path);
+    assert_run(0, "--explain '%s' --view right " NO_CAMERA_FLAGS, path);
     assert_contains(tu_out, "depth: depth.Z (part 5)");
     assert_contains(tu_out, "colour: rgba.R, rgba.G, rgba.B, alpha rgba.A (part 0)");
-    assert_run(0, "'%s' -o '%s' --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 " NO_CAMERA_FLAGS,
-               path, out);
+    assert_run(0, "'%s' -o '%s' --view right --fog exp:density=0.1 --fog-color 0.25,0.5,0.75 "
+                  NO_CAMERA_FLAGS, path, out);
     check_files(path, out, 0, RGBA);
     const int disp[4] = { 0, 0, 2047, 1555 };
     tu_pinhole pin;

@@ -656,13 +656,24 @@ static int choose_views(const ef_options *o, const ef_exr_file *in, const ef_exr
     }
     const char *sel[EF_MAX_VIEWS];
     int ns = 0;
-    for (int i = 0; i < o->nviews; ++i) {
+    /* --layer naming a view (left.R ...) chooses that view, as it did
+     * before views were understood. */
+    const char *layer = o->layer;
+    const char *const *want = o->views;
+    int nwant = o->nviews;
+    for (int k = 0; layer && !nwant && k < nv; ++k)
+        if (!strcmp(layer, views[k])) {
+            want = &o->layer;
+            nwant = 1;
+            layer = NULL;
+        }
+    for (int i = 0; i < nwant; ++i) {
         int found = -1;
         for (int k = 0; k < nv; ++k)
-            if (!strcmp(views[k], o->views[i]))
+            if (!strcmp(views[k], want[i]))
                 found = k;
         if (found < 0)
-            return ef_fail(err, "--view %s: INPUT has no such view (its views: %s)", o->views[i],
+            return ef_fail(err, "--view %s: INPUT has no such view (its views: %s)", want[i],
                            list), 2;
         int dup = 0;
         for (int k = 0; k < ns; ++k)
@@ -670,7 +681,7 @@ static int choose_views(const ef_options *o, const ef_exr_file *in, const ef_exr
         if (!dup && ns < EF_MAX_VIEWS)
             sel[ns++] = views[found];
     }
-    if (!o->nviews)
+    if (!nwant)
         for (int k = 0; k < nv; ++k)
             sel[ns++] = views[k];
     if (ns > 1 && (o->camera_file || o->cam.w2c.set || o->cam.c2w.set))
@@ -678,13 +689,13 @@ static int choose_views(const ef_options *o, const ef_exr_file *in, const ef_exr
                             "the view it belongs to with --view NAME (run once per view)", list), 2;
     char nocam[300] = "", withcam[300] = "";
     for (int k = 0; k < ns; ++k) {
-        if (ef_find_view_channels(in, df, sel[k], o->layer, o->depth_channel, &plans[k], err))
+        if (ef_find_view_channels(in, df, sel[k], layer, o->depth_channel, &plans[k], err))
             return 1;
         char *l = view_has_camera(o, in, &plans[k]) ? withcam : nocam;
         snprintf(l + strlen(l), 300 - strlen(l), "%s%s", l[0] ? ", " : "", sel[k]);
     }
     *nplans = ns;
-    if (nocam[0] && !o->nviews) {
+    if (nocam[0] && !nwant) {
         if (withcam[0])
             return ef_fail(err, "the view%s %s %s no camera of its own, and exrfog fogs every "
                                 "view unless told: fog the others with --view %s, or give %s "
@@ -692,13 +703,16 @@ static int choose_views(const ef_options *o, const ef_exr_file *in, const ef_exr
                                 "--view", strchr(nocam, ',') ? "s" : "", nocam,
                            strchr(nocam, ',') ? "have" : "has", withcam,
                            strchr(nocam, ',') ? "their" : "its"), 1;
-        /* no view has a camera: the single-view message, with the fix */
-        return ef_fail(err, "no view has a camera (views: %s%s); give one with --camera-file or "
-                            "--camera-to-world and --fov, and choose its view with --view", list,
+        /* one view: the camera's own message says what is missing */
+        if (ns == 1)
+            return 0;
+        return ef_fail(err, "no view has a camera (views: %s%s); give one with --camera-file, or "
+                            "--world-to-camera M or --camera-to-world M and --fov DEG, and choose "
+                            "its view with --view", list,
                        in->nparts == 1 ? "; a single-part file's header camera is the default "
                                          "view's" : ""), 1;
     }
-    if (o->nviews && !o->quiet && !o->explain)
+    if (nwant && !o->quiet && !o->explain)
         for (int k = 0; k < nv; ++k) {
             int chosen = 0;
             for (int i = 0; i < ns; ++i)
