@@ -789,6 +789,178 @@ static void test_preview_view(void **state)
     free(png);
 }
 
+/* 4x4 inverse in long double (Gauss-Jordan, partial pivoting). */
+static void inv4l(const long double *a, long double *out)
+{
+    long double m[4][8];
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 8; ++j)
+            m[i][j] = j < 4 ? a[4 * i + j] : (long double) (j - 4 == i);
+    for (int c = 0; c < 4; ++c) {
+        int piv = c;
+        for (int r = c + 1; r < 4; ++r)
+            if (fabsl(m[r][c]) > fabsl(m[piv][c]))
+                piv = r;
+        for (int j = 0; j < 8; ++j) {
+            const long double t = m[c][j];
+            m[c][j] = m[piv][j];
+            m[piv][j] = t;
+        }
+        const long double d = m[c][c];
+        for (int j = 0; j < 8; ++j)
+            m[c][j] /= d;
+        for (int r = 0; r < 4; ++r)
+            if (r != c) {
+                const long double f = m[r][c];
+                for (int j = 0; j < 8; ++j)
+                    m[r][j] -= f * m[c][j];
+            }
+    }
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            out[4 * i + j] = m[i][j + 4];
+}
+
+/* Full precision from float32 headers (issue 9): a float64 camera far
+ * from the origin (3000, 1.7, -2000), yawed 30 degrees and pitched 2
+ * degrees down over the ground y = 0, is written as m44f worldToCamera and
+ * worldToNDC (Arnold's screen-space layout) with float32 planar depth.
+ * The best reconstruction those float32 numbers allow is computed here in
+ * long double (exact inverse of the float32 pose, the float32
+ * projection's linear part for the ray, the float32 depth); exrfog's
+ * fog_P at grazing ground pixels (under 3 degrees of incidence) must be
+ * within 1.5x of its error against the float64 truth (plus fog_P's own
+ * float32 rounding). */
+static void test_float32_header_precision(void **state)
+{
+    (void) state;
+    fresh("f32prec");
+    enum { PW = 96, PH = 48 };
+    const double pi = 3.14159265358979323846, yaw = 30 * pi / 180, pitch = 2 * pi / 180;
+    const double pos[3] = { 3000.0, 1.7, -2000.0 };
+    /* camera-to-world rows: X, Y, Z axes and position (row vectors) */
+    const double cy = cos(yaw), sy = sin(yaw), cp = cos(pitch), sp = sin(pitch);
+    const double c2w[16] = { cy, 0, -sy, 0, sy * sp, cp, cy * sp, 0, sy * cp, -sp, cy * cp, 0,
+                             pos[0], pos[1], pos[2], 1 };
+    long double c2wl[16], w2cl[16];
+    for (int k = 0; k < 16; ++k)
+        c2wl[k] = c2w[k];
+    inv4l(c2wl, w2cl);
+    const double px = 1.0 / tan(25.0 * pi / 180), py = px * PW / PH;
+    const double n = 0.1, fa = 1e5, A = fa / (fa - n), B = -n * fa / (fa - n);
+    const double proj[16] = { px, 0, 0, 0, 0, py, 0, 0, 0, 0, A, 1, 0, 0, B, 0 };
+    tu_part p;
+    tu_part_init(&p, PW, PH);
+    p.m44[0].name = "worldToCamera";
+    p.m44[1].name = "worldToNDC";
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            long double v = 0;
+            for (int k = 0; k < 4; ++k)
+                v += w2cl[4 * i + k] * proj[4 * k + j];
+            p.m44[0].m[4 * i + j] = (float) w2cl[4 * i + j];
+            p.m44[1].m[4 * i + j] = (float) v;
+        }
+    /* the truth: each pixel's float64 ray to the ground */
+    static float c[PW * PH], a[PW * PH], z[PW * PH];
+    static double truth[PW * PH][3];
+    static unsigned char grazing[PW * PH];
+    int ngrazing = 0;
+    for (int y = 0; y < PH; ++y)
+        for (int x = 0; x < PW; ++x) {
+            const int i = y * PW + x;
+            const double sxs = 2.0 * (x + 0.5) / PW - 1.0, sys = 1.0 - 2.0 * (y + 0.5) / PH;
+            const double d[3] = { sxs / px, sys / py, 1.0 };
+            double wd[3];
+            for (int k = 0; k < 3; ++k)
+                wd[k] = d[0] * c2w[k] + d[1] * c2w[4 + k] + d[2] * c2w[8 + k];
+            c[i] = 0.5f;
+            a[i] = 1.0f;
+            z[i] = 0.0f;   /* sky above the horizon */
+            if (wd[1] >= 0)
+                continue;
+            const double t = -pos[1] / wd[1];
+            z[i] = (float) t;
+            for (int k = 0; k < 3; ++k)
+                truth[i][k] = pos[k] + t * wd[k];
+            const double len = sqrt(wd[0] * wd[0] + wd[1] * wd[1] + wd[2] * wd[2]);
+            grazing[i] = -wd[1] / len < sin(3 * pi / 180) && t < 1e4;
+            ngrazing += grazing[i];
+        }
+    assert_true(ngrazing > 100);
+    tu_part_add(&p, "R", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "G", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "B", EXR_PIXEL_FLOAT, c);
+    tu_part_add(&p, "A", EXR_PIXEL_FLOAT, a);
+    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, z);
+    char *in = in_dir("grazing.exr"), *out = in_dir("out.exr");
+    assert_int_equal(tu_write_exr(in, &p, 1), 0);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.001 --aov P --aov-origin 3000,0,-2000", in, out);
+    tu_image img;
+    assert_int_equal(tu_read_image(out, 0, &img), 0);
+    const float *P[3] = { tu_image_f(&img, "fog_P.X"), tu_image_f(&img, "fog_P.Y"),
+                          tu_image_f(&img, "fog_P.Z") };
+    assert_non_null(P[0]);
+    /* the best reconstruction from the float32 header */
+    long double Mf[16], Nf[16], c2wf[16], L[16];
+    for (int k = 0; k < 16; ++k) {
+        Mf[k] = p.m44[0].m[k];
+        Nf[k] = p.m44[1].m[k];
+    }
+    inv4l(Mf, c2wf);
+    for (int i = 0; i < 4; ++i)   /* camera -> screen: c2w . worldToNDC */
+        for (int j = 0; j < 4; ++j) {
+            long double v = 0;
+            for (int k = 0; k < 4; ++k)
+                v += c2wf[4 * i + k] * Nf[4 * k + j];
+            L[4 * i + j] = v;
+        }
+    const long double origin[3] = { 3000, 0, -2000 };
+    double worst_ratio = 0, err_ef_max = 0, err_best_max = 0;
+    long bad = 0;
+    for (int i = 0; i < PW * PH; ++i) {
+        if (!grazing[i])
+            continue;
+        const int x = i % PW, y = i / PW;
+        const long double sxs = 2.0L * (x + 0.5L) / PW - 1.0L, sys = 1.0L - 2.0L * (y + 0.5L) / PH;
+        /* direction (dx, dy, 1) whose screen position is (sxs, sys), from
+         * the linear part: (d . L[:,0]) / (d . L[:,3]) = sxs, likewise y */
+        const long double a11 = L[0] - sxs * L[3], a12 = L[4] - sxs * L[7], b1 = -(L[8] - sxs * L[11]);
+        const long double a21 = L[1] - sys * L[3], a22 = L[5] - sys * L[7], b2 = -(L[9] - sys * L[11]);
+        const long double det = a11 * a22 - a12 * a21;
+        const long double dx = (b1 * a22 - a12 * b2) / det, dy = (a11 * b2 - b1 * a21) / det;
+        const long double q[3] = { dx * z[i], dy * z[i], z[i] };
+        double eb = 0, ee = 0, floor2 = 0;
+        for (int k = 0; k < 3; ++k) {
+            const long double best = q[0] * c2wf[k] + q[1] * c2wf[4 + k] + q[2] * c2wf[8 + k] + c2wf[12 + k];
+            const long double tr = truth[i][k];
+            const double db = (double) (best - tr);
+            const double de = (double) ((long double) P[k][i] + origin[k] - tr);
+            const double ulp = nextafterf(fabsf(P[k][i]), INFINITY) - fabsf(P[k][i]);
+            eb += db * db;
+            ee += de * de;
+            floor2 += 0.25 * ulp * ulp;
+        }
+        eb = sqrt(eb);
+        ee = sqrt(ee);
+        if (ee > err_ef_max)
+            err_ef_max = ee;
+        if (eb > err_best_max)
+            err_best_max = eb;
+        if (ee > 1.5 * eb + sqrt(floor2))
+            ++bad;
+        const double r = ee / (eb + sqrt(floor2));
+        if (r > worst_ratio)
+            worst_ratio = r;
+    }
+    tu_image_free(&img);
+    print_message("  %d grazing pixels: max error exrfog %.3g m, best %.3g m; worst ratio %.3f\n",
+                  ngrazing, err_ef_max, err_best_max, worst_ratio);
+    assert_int_equal(bad, 0);
+    free(in);
+    free(out);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -800,6 +972,7 @@ int main(void)
         cmocka_unit_test(test_progress_bar),
         cmocka_unit_test(test_parallel_recipe),
         cmocka_unit_test(test_camera_file),
+        cmocka_unit_test(test_float32_header_precision),
         cmocka_unit_test(test_colour_spaces),
         cmocka_unit_test(test_preview_view),
         cmocka_unit_test(test_views_multipart),
