@@ -961,6 +961,61 @@ static void test_float32_header_precision(void **state)
     free(out);
 }
 
+/* Depth from any file OpenImageIO reads (issue 9): a 32-bit float TIFF
+ * holding the depth of the whole frame fogs the colour (here cropped to a
+ * data window inside it) exactly as the same depth in an EXR does, and
+ * the temporary EXR made from it is gone afterwards. */
+static void test_depth_tiff(void **state)
+{
+    (void) state;
+    if (system("command -v oiiotool >/dev/null 2>&1"))
+        skip();
+    fresh("depthtif");
+    planes_init();
+    static float zf[W * H], cc[W * H];
+    for (int i = 0; i < W * H; ++i) {
+        zf[i] = 2.0f + 0.37f * (float) i;
+        cc[i] = 0.5f;
+    }
+    /* the colour: the 4x3 crop at (2,1) of the 8x6 frame, with the camera */
+    tu_part cp;
+    tu_part_init(&cp, 4, 3);
+    cp.dw[0] = 2; cp.dw[1] = 1; cp.dw[2] = 5; cp.dw[3] = 3;
+    cp.disp[0] = 0; cp.disp[1] = 0; cp.disp[2] = W - 1; cp.disp[3] = H - 1;
+    tu_part_add(&cp, "R", EXR_PIXEL_FLOAT, cc);
+    tu_part_add(&cp, "G", EXR_PIXEL_FLOAT, cc);
+    tu_part_add(&cp, "B", EXR_PIXEL_FLOAT, cc);
+    set_camera(&cp, 0.0);
+    tu_part dp;
+    tu_part_init(&dp, W, H);
+    tu_part_add(&dp, "Z", EXR_PIXEL_FLOAT, zf);
+    char *col = in_dir("colour.exr"), *dex = in_dir("depth.exr"), *dtif = in_dir("depth.tif"),
+         *o1 = in_dir("o1.exr"), *o2 = in_dir("o2.exr");
+    assert_int_equal(tu_write_exr(col, &cp, 1), 0);
+    assert_int_equal(tu_write_exr(dex, &dp, 1), 0);
+    char cmd[4096];
+    snprintf(cmd, sizeof cmd, "oiiotool '%s' -d float -o '%s'", dex, dtif);
+    assert_int_equal(system(cmd), 0);
+    setenv("TMPDIR", g_dir, 1);
+    assert_run(0, "'%s' --depth '%s' -o '%s' --fog exp:density=0.05", col, dtif, o1);
+    assert_run(0, "'%s' --depth '%s' -o '%s' --fog exp:density=0.05", col, dex, o2);
+    assert_int_equal(tu_compare_files(o2, o1, -1, NULL), 0);
+    assert_true(channel_differs(col, o1, 0, "R"));
+    snprintf(cmd, sizeof cmd, "ls -a '%s' | grep -q exrfog-depth", g_dir);
+    assert_true(system(cmd) != 0);
+    /* a depth file nothing can read */
+    assert_int_equal(tu_write_bytes(dtif, "not an image", 12), 0);
+    assert_run(1, "'%s' --depth '%s' -o '%s' --fog exp:density=0.05", col, dtif, o1);
+    assert_non_null(strstr(tu_err, "depth.tif"));
+    assert_true(system(cmd) != 0);
+    unsetenv("TMPDIR");
+    free(col);
+    free(dex);
+    free(dtif);
+    free(o1);
+    free(o2);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -972,6 +1027,7 @@ int main(void)
         cmocka_unit_test(test_progress_bar),
         cmocka_unit_test(test_parallel_recipe),
         cmocka_unit_test(test_camera_file),
+        cmocka_unit_test(test_depth_tiff),
         cmocka_unit_test(test_float32_header_precision),
         cmocka_unit_test(test_colour_spaces),
         cmocka_unit_test(test_preview_view),

@@ -15,7 +15,7 @@
 
 /* The temporary files a signal must remove, and the message it prints.
  * Written before a slot is marked live, read only by the handler. */
-#define SLOTS 3
+#define SLOTS 6
 static char slot_path[SLOTS][PATH_MAX];
 static volatile sig_atomic_t slot_live[SLOTS];
 static char sig_prefix[PATH_MAX + 64];

@@ -534,6 +534,18 @@ typedef struct frame_ctx {
     long frame;               /* its number */
 } frame_ctx;
 
+/* Whether path starts with OpenEXR's magic number (unreadable: no). */
+static int is_exr_file(const char *path)
+{
+    unsigned char m[4] = { 0 };
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return 1;   /* let the EXR reader say what is wrong */
+    const size_t n = fread(m, 1, 4, f);
+    fclose(f);
+    return n == 4 && m[0] == 0x76 && m[1] == 0x2f && m[2] == 0x31 && m[3] == 0x01;
+}
+
 /* The camera file, read once per path (a pattern gives one per frame). */
 static ef_camera_file *g_camfile;
 static char g_camfile_path[4096];
@@ -757,10 +769,10 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     const int naov = ef_aov_channels(o->aov, aov_names);
     int status = 1;
-    ef_output out, pv, mid;
+    ef_output out, pv, mid, dconv;
     char *history = NULL;
-    out.fd = pv.fd = mid.fd = -1;
-    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = '\0';
+    out.fd = pv.fd = mid.fd = dconv.fd = -1;
+    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = dconv.tmp[0] = '\0';
     /* OUTPUT's extension chooses the format: .exr (or none) is written here,
      * anything else through OpenImageIO from an EXR beside it. */
     const char *ext = o->output ? strrchr(o->output, '.') : NULL;
@@ -839,10 +851,29 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         goto done;
     }
     if (o->depth_file) {
-        if (ef_exr_open(o->depth_file, &dep, &err)) {
+        /* A depth in another format (a 32-bit TIFF pass) is read through
+         * OpenImageIO into a temporary float EXR. */
+        const char *dpath = o->depth_file;
+        if (!is_exr_file(o->depth_file)) {
+            char name[PATH_MAX], msg[600];
+            const char *tmpdir = getenv("TMPDIR");
+            snprintf(name, sizeof name, "%s/exrfog-depth", tmpdir && tmpdir[0] ? tmpdir : "/tmp");
+            if (ef_output_open(&dconv, name, ".exr", &err)) {
+                report(o->depth_file, &err, 1);
+                goto done;
+            }
+            if (ef_oiio_image_to_exr(o->depth_file, dconv.fd, msg, sizeof msg)) {
+                ef_fail(&err, "%s", msg);
+                report(o->depth_file, &err, 1);
+                goto done;
+            }
+            dpath = dconv.tmp;
+        }
+        if (ef_exr_open(dpath, &dep, &err)) {
             report(o->depth_file, &err, 1);
             goto done;
         }
+        dep.path = o->depth_file;   /* messages name the user's file */
         df = &dep;
     }
     /* The views to fog: every view of a multi-view file (or those of
@@ -1116,6 +1147,7 @@ done:
     ef_output_abort(&mid);
     ef_output_abort(&pv);
     ef_output_abort(&out);
+    ef_output_abort(&dconv);
     free(job.preview);
     free(job.stats);
     pthread_mutex_destroy(&job.lock);

@@ -40,37 +40,42 @@ static void *load_module(char *err, size_t errlen)
     return h;
 }
 
+/* The module's function `name`, with the module handle to close after. */
+static void *module_sym(const char *name, void **mod, char *err, size_t errlen)
+{
+    *mod = load_module(err, errlen);
+    if (!*mod)
+        return NULL;
+    void *f = dlsym(*mod, name);
+    if (!f) {
+        snprintf(err, errlen, "the OpenImageIO module lacks %s (reinstall exrfog)", name);
+        dlclose(*mod);
+        *mod = NULL;
+    }
+    return f;
+}
+
 int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, char *err,
                      size_t errlen)
 {
-    void *mod = load_module(err, errlen);
-    if (!mod)
-        return -1;
+    void *mod;
     int (*fn)(const char *, int, int, const unsigned char *, char *, size_t);
-    *(void **) &fn = dlsym(mod, "ef_oiio_write_rgb8");
-    if (!fn) {
-        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_write_rgb8");
-        dlclose(mod);
+    *(void **) &fn = module_sym("ef_oiio_write_rgb8", &mod, err, errlen);
+    if (!fn)
         return -1;
-    }
-    int rc = fn(path, w, h, rgb, err, errlen);
+    const int rc = fn(path, w, h, rgb, err, errlen);
     dlclose(mod);
     return rc;
 }
 
 int ef_preview_check(const char *path, char *err, size_t errlen)
 {
-    void *mod = load_module(err, errlen);
-    if (!mod)
-        return -1;
+    void *mod;
     int (*fn)(const char *, char *, size_t);
-    *(void **) &fn = dlsym(mod, "ef_oiio_can_write");
-    if (!fn) {
-        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_can_write");
-        dlclose(mod);
+    *(void **) &fn = module_sym("ef_oiio_can_write", &mod, err, errlen);
+    if (!fn)
         return -1;
-    }
-    int rc = fn(path, err, errlen);
+    const int rc = fn(path, err, errlen);
     dlclose(mod);
     return rc;
 }
@@ -78,17 +83,24 @@ int ef_preview_check(const char *path, char *err, size_t errlen)
 int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
                         const char *dst, char *err, size_t errlen)
 {
-    void *mod = load_module(err, errlen);
-    if (!mod)
-        return -1;
+    void *mod;
     int (*fn)(const char *, int, const char *const *, int, const char *, char *, size_t);
-    *(void **) &fn = dlsym(mod, "ef_oiio_convert");
-    if (!fn) {
-        snprintf(err, errlen, "the OpenImageIO module lacks ef_oiio_convert");
-        dlclose(mod);
+    *(void **) &fn = module_sym("ef_oiio_convert", &mod, err, errlen);
+    if (!fn)
         return -1;
-    }
-    int rc = fn(src, part, names, n, dst, err, errlen);
+    const int rc = fn(src, part, names, n, dst, err, errlen);
+    dlclose(mod);
+    return rc;
+}
+
+int ef_oiio_image_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
+{
+    void *mod;
+    int (*fn)(const char *, int, char *, size_t);
+    *(void **) &fn = module_sym("ef_oiio_to_exr", &mod, err, errlen);
+    if (!fn)
+        return -1;
+    const int rc = fn(src, dst_fd, err, errlen);
     dlclose(mod);
     return rc;
 }

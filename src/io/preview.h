@@ -23,6 +23,13 @@ int ef_preview_check(const char *path, char *err, size_t errlen);
 int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
                         const char *dst, char *err, size_t errlen);
 
+/* Reads the first image of src (any format OpenImageIO reads: a 32-bit
+ * TIFF depth pass...) as float and writes it to the open descriptor dst_fd
+ * as a float EXR, ZIP, with its channel names (a single channel is
+ * called Z) and its origin and full window. Returns 0, or -1 with a
+ * message. */
+int ef_oiio_image_to_exr(const char *src, int dst_fd, char *err, size_t errlen);
+
 #ifdef __cplusplus
 }
 #endif
