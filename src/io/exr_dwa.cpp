@@ -334,7 +334,14 @@ void transcode(const char *in_path, int out_fd, const char *out_name, int dwa_pa
                 h.dwaCompressionLevel() = level;
                 h.insert("dwaCompressionLevel", FloatAttribute(level));
             } else if (la) {
-                h.erase("dwaCompressionLevel");  // would describe a compression no longer used
+                // The level would describe a compression no longer used.
+                // Header::erase leaks the attribute in OpenEXR 3.1.5, so
+                // the header is rebuilt without it.
+                Header stripped;
+                for (Header::ConstIterator i = h.begin(); i != h.end(); ++i)
+                    if (strcmp(i.name(), "dwaCompressionLevel"))
+                        stripped.insert(i.name(), i.attribute());
+                h = stripped;
             }
         }
         headers.push_back(h);
