@@ -167,9 +167,17 @@ int ef_data_channel(const char *name);
  * has, or NULL when it has none of them. */
 const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *const *names, int n);
 
-/* Parses a --compression value, NAME or zip:LEVEL / zips:LEVEL (1..9);
- * DWAA/DWAB are refused with a message. *level is -1 without a level.
+/* Parses a --compression value: NAME, zip:LEVEL / zips:LEVEL (zlib, 1..9)
+ * or dwaa:LEVEL / dwab:LEVEL (a positive dwaCompressionLevel, as oiiotool).
+ * *level is the zlib level or -1 without one; *dwa_level is the DWA level
+ * (45 when DWA is named without one) or -1 for other compressions.
+ * DWAA/DWAB are accepted: they need the C++ transcoder (exr_dwa.h).
  * Returns 0 or -1. */
+int ef_compression_parse_ex(const char *name, int *compression, int *level, float *dwa_level,
+                            ef_err *err);
+/* ef_compression_parse_ex without DWA: DWAA/DWAB are refused with a
+ * message (the command line's behaviour until it routes DWA output through
+ * ef_dwa_transcode). */
 int ef_compression_parse(const char *name, int *compression, int *level, ef_err *err);
 /* Shared inside the adapter: a context initializer whose error handler
  * keeps Core's last message (per thread) instead of printing it. */

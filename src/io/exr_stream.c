@@ -971,12 +971,14 @@ const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *cons
 static const char *const comp_names[] = { "none", "rle", "zips", "zip", "piz",
                                           "pxr24", "b44", "b44a", "dwaa", "dwab" };
 
-int ef_compression_parse(const char *text, int *compression, int *level, ef_err *err)
+int ef_compression_parse_ex(const char *text, int *compression, int *level, float *dwa_level,
+                            ef_err *err)
 {
     char name[16];
     const char *colon = strchr(text, ':');
     size_t len = colon ? (size_t) (colon - text) : strlen(text);
     *level = -1;
+    *dwa_level = -1.0f;
     if (len >= sizeof name)
         len = sizeof name - 1;
     memcpy(name, text, len);
@@ -984,21 +986,45 @@ int ef_compression_parse(const char *text, int *compression, int *level, ef_err 
     for (int i = 0; i < (int) (sizeof comp_names / sizeof comp_names[0]); ++i) {
         if (strcmp(name, comp_names[i]))
             continue;
-        if (i == EXR_COMPRESSION_DWAA || i == EXR_COMPRESSION_DWAB)
-            return ef_fail(err, "--compression %s: DWA compression is not available yet "
-                                "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", text);
-        if (colon) {
+        const int dwa = i == EXR_COMPRESSION_DWAA || i == EXR_COMPRESSION_DWAB;
+        if (dwa)
+            *dwa_level = 45.0f;   /* the library's default, as oiiotool */
+        if (colon && dwa) {
+            char *end;
+            errno = 0;
+            double l = strtod(colon + 1, &end);
+            if (colon[1] == '\0' || *end || errno || !(l > 0) || l > 1e6)
+                return ef_fail(err, "--compression '%s': the DWA level must be a positive "
+                                    "number (45 by default; higher is smaller and lossier), "
+                                    "e.g. %s:45", text, comp_names[i]);
+            *dwa_level = (float) l;
+        } else if (colon) {
             char *end;
             long l = strtol(colon + 1, &end, 10);
             if ((i != EXR_COMPRESSION_ZIP && i != EXR_COMPRESSION_ZIPS) || colon[1] == '\0' ||
                 *end || l < 1 || l > 9)
-                return ef_fail(err, "--compression '%s': only zip and zips take a level, "
-                                    "from 1 (fastest) to 9 (smallest)", text);
+                return ef_fail(err, "--compression '%s': only zip and zips (zlib level, from 1 "
+                                    "(fastest) to 9 (smallest)) and dwaa and dwab (a positive "
+                                    "quantisation level, 45 by default) take a level", text);
             *level = (int) l;
         }
         *compression = i;
         return 0;
     }
     return ef_fail(err, "--compression '%s' is not one of none, rle, zips, zip, piz, pxr24, b44, "
-                        "b44a (zip and zips take :LEVEL, 1-9)", text);
+                        "b44a, dwaa, dwab (zip and zips take :LEVEL, 1-9; dwaa and dwab take "
+                        ":LEVEL, a positive number, 45 by default)", text);
+}
+
+int ef_compression_parse(const char *text, int *compression, int *level, ef_err *err)
+{
+    float dwa_level;
+    int c;
+    if (ef_compression_parse_ex(text, &c, level, &dwa_level, err))
+        return -1;
+    if (c == EXR_COMPRESSION_DWAA || c == EXR_COMPRESSION_DWAB)
+        return ef_fail(err, "--compression %s: DWA compression is not available yet "
+                            "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", text);
+    *compression = c;
+    return 0;
 }
