@@ -240,37 +240,32 @@ static void test_parse(void **state)
     ef_err err;
     int c, zl;
     float dl;
-    assert_int_equal(ef_compression_parse_ex("dwaa", &c, &zl, &dl, &err), 0);
+    assert_int_equal(ef_compression_parse("dwaa", &c, &zl, &dl, &err), 0);
     assert_int_equal(c, EXR_COMPRESSION_DWAA);
     assert_int_equal(zl, -1);
     assert_close(dl, 45, 0);
-    assert_int_equal(ef_compression_parse_ex("dwab:100", &c, &zl, &dl, &err), 0);
+    assert_int_equal(ef_compression_parse("dwab:100", &c, &zl, &dl, &err), 0);
     assert_int_equal(c, EXR_COMPRESSION_DWAB);
     assert_close(dl, 100, 0);
-    assert_int_equal(ef_compression_parse_ex("dwaa:2.5", &c, &zl, &dl, &err), 0);
+    assert_int_equal(ef_compression_parse("dwaa:2.5", &c, &zl, &dl, &err), 0);
     assert_close(dl, 2.5, 0);
-    assert_int_equal(ef_compression_parse_ex("zip:7", &c, &zl, &dl, &err), 0);
+    assert_int_equal(ef_compression_parse("zip:7", &c, &zl, &dl, &err), 0);
     assert_int_equal(c, EXR_COMPRESSION_ZIP);
     assert_int_equal(zl, 7);
     assert_close(dl, -1, 0);
-    assert_int_equal(ef_compression_parse_ex("piz", &c, &zl, &dl, &err), 0);
+    assert_int_equal(ef_compression_parse("piz", &c, &zl, &dl, &err), 0);
     assert_int_equal(c, EXR_COMPRESSION_PIZ);
     static const char *const bad[] = { "dwaa:0", "dwaa:-3", "dwab:", "dwaa:x", "dwaa:nan",
                                        "dwaa:inf", "zip:45", "zip:0", "piz:3", "dwac", "" };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
         err.msg[0] = '\0';
-        assert_int_equal(ef_compression_parse_ex(bad[i], &c, &zl, &dl, &err), -1);
+        assert_int_equal(ef_compression_parse(bad[i], &c, &zl, &dl, &err), -1);
         assert_true(strlen(err.msg) > 20);
     }
-    assert_int_equal(ef_compression_parse_ex("dwaa:x", &c, &zl, &dl, &err), -1);
+    assert_int_equal(ef_compression_parse("dwaa:x", &c, &zl, &dl, &err), -1);
     assert_contains(err.msg, "positive");
-    assert_int_equal(ef_compression_parse_ex("lzw", &c, &zl, &dl, &err), -1);
+    assert_int_equal(ef_compression_parse("lzw", &c, &zl, &dl, &err), -1);
     assert_contains(err.msg, "dwab");
-    /* The old entry point keeps refusing DWA until the CLI routes it. */
-    assert_int_equal(ef_compression_parse("dwaa:45", &c, &zl, &err), -1);
-    assert_contains(err.msg, "DWA");
-    assert_int_equal(ef_compression_parse("zip:3", &c, &zl, &err), 0);
-    assert_int_equal(zl, 3);
 }
 
 /* ZIP -> DWAA (default level) -> ZIP, scanline and tiled parts. */
@@ -683,6 +678,87 @@ static void test_real(void **state)
     free(zip);
 }
 
+/* The command line with DWA (issue 9): --compression dwaa:60 writes a
+ * DWAA file of level 60 whose depth is the input's bit for bit; that file
+ * as INPUT is decoded (by the C++ library) and written back as DWAA level
+ * 60, depth again bit-exact; --compression zip on it writes ZIP whose
+ * colour is the exp fog of the DWA-decoded colour (checked per pixel). */
+static void test_cli_dwa(void **state)
+{
+    (void) state;
+    enum { CW = 64, CH = 40 };
+    static float r[CW * CH], g[CW * CH], b[CW * CH], a[CW * CH], z[CW * CH];
+    for (int i = 0; i < CW * CH; ++i) {
+        const int x = i % CW, y = i / CW;
+        r[i] = 0.2f + 0.6f * (float) x / CW;
+        g[i] = 0.3f + 0.4f * (float) y / CH;
+        b[i] = 0.5f;
+        a[i] = 1.0f;
+        z[i] = 3.0f + 0.05f * (float) (x + y);
+    }
+    tu_part p;
+    tu_part_init(&p, CW, CH);
+    tu_part_add(&p, "R", EXR_PIXEL_HALF, r);
+    tu_part_add(&p, "G", EXR_PIXEL_HALF, g);
+    tu_part_add(&p, "B", EXR_PIXEL_HALF, b);
+    tu_part_add(&p, "A", EXR_PIXEL_HALF, a);
+    tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, z);
+    static const float id[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    p.m44[0].name = "worldToCamera";
+    memcpy(p.m44[0].m, id, sizeof id);
+    p.f[0].name = "CameraFov";
+    p.f[0].v = 60.0f;
+    char *in = tu_path("cli_dwa_in.exr"), *d1 = tu_path("cli_dwa_1.exr"),
+         *d2 = tu_path("cli_dwa_2.exr"), *zp = tu_path("cli_dwa_zip.exr"),
+         *dec = tu_path("cli_dwa_1_decoded.exr");
+    assert_int_equal(tu_write_exr(in, &p, 1), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.05 --fog-color 0.25,0.5,0.75 "
+                             "--compression dwaa:60", in, d1), 0);
+    dwa_ref_info info;
+    for (int k = 0; k < 2; ++k) {
+        if (k)
+            assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.05", d1, d2), 0);
+        const char *f = k ? d2 : d1;
+        assert_int_equal(dwa_ref_header(f, 0, &info), 0);
+        assert_int_equal(info.compression, EXR_COMPRESSION_DWAA);
+        assert_true(info.level == 60.0f);
+        int w, h;
+        float *zo = dwa_ref_read(f, 0, "Z", &w, &h);
+        assert_non_null(zo);
+        assert_int_equal(memcmp(zo, z, sizeof z), 0);
+        free(zo);
+    }
+    /* the DWA input decoded by the reference library, as a ZIP file, is
+     * what the fog must start from */
+    int w, h;
+    float *pl[5];
+    static const char *const names[5] = { "R", "G", "B", "A", "Z" };
+    tu_part q;
+    tu_part_init(&q, CW, CH);
+    for (int k = 0; k < 5; ++k) {
+        pl[k] = dwa_ref_read(d1, 0, names[k], &w, &h);
+        assert_non_null(pl[k]);
+        tu_part_add(&q, names[k], k < 4 ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT, pl[k]);
+    }
+    assert_int_equal(tu_write_exr(dec, &q, 1), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.05 --fog-color 0.25,0.5,0.75 "
+                             "--compression zip", d1, zp), 0);
+    tu_pinhole pin;
+    const int disp[4] = { 0, 0, CW - 1, CH - 1 };
+    tu_pinhole_fov(&pin, disp, 60.0);
+    tu_fog_check fc;
+    tu_fog_check_init(&fc, dec, zp, &pin, 0.05);
+    assert_int_equal(tu_check_fog(&fc), 0);
+    assert_true(fc.fogged > 100);
+    for (int k = 0; k < 5; ++k)
+        free(pl[k]);
+    free(in);
+    free(d1);
+    free(d2);
+    free(zp);
+    free(dec);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -691,6 +767,7 @@ int main(void)
         cmocka_unit_test(test_dwab_level),
         cmocka_unit_test(test_damaged),
         cmocka_unit_test(test_real),
+        cmocka_unit_test(test_cli_dwa),
         cmocka_unit_test(test_memory_4k),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -390,32 +390,6 @@ static void test_compression_input(void **state)
     scene_free(&s);
 }
 
-static void test_dwa_refused(void **state)
-{
-    (void) state;
-    const int dw[4] = { 0, 0, 15, 11 };
-    scene s;
-    cam c;
-    tu_part p;
-    scene_make(&s, dw, dw, 303);
-    cam_make(&c, dw, 60.0, 0.0, 0.0);
-    scene_part(&p, &s, EXR_PIXEL_HALF, EXR_PIXEL_FLOAT);
-    cam_attach(&c, &p);
-    char *in = tu_path("io_dwa_in.exr"), *out = tu_path("io_dwa_out.exr");
-    write_exr(in, &p, 1);
-    remove(out);
-    static const char *const dwa[] = { "dwaa", "dwab" };
-    for (int i = 0; i < 2; ++i) {
-        assert_run(2, "'%s' -o '%s' " FOG " --compression %s", in, out, dwa[i]);
-        assert_contains(tu_err, dwa[i]);
-        assert_contains(tu_err, "DWA");
-        assert_no_output(out);
-    }
-    free(in);
-    free(out);
-    scene_free(&s);
-}
-
 /* ------------------------------------------------------------------ */
 /* Tiles                                                               */
 
@@ -1443,7 +1417,6 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_compression_output),
         cmocka_unit_test(test_compression_input),
-        cmocka_unit_test(test_dwa_refused),
         cmocka_unit_test(test_tiled),
         cmocka_unit_test(test_tiny_images),
         cmocka_unit_test(test_multipart_nuke),

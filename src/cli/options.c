@@ -125,8 +125,9 @@ void ef_options_usage(FILE *out)
             "      --focal-length MM --aperture MM  the same from a lens and the film's\n"
             "                           horizontal aperture (both needed)\n"
             "      --near N, --far F    clip planes for the buffer depth modes\n"
-            "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a (default: input's);\n"
-            "                           zip:LEVEL, zips:LEVEL with zlib level 1-9\n"
+            "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a|dwaa|dwab (default:\n"
+            "                           the input's); zip:LEVEL, zips:LEVEL with zlib level\n"
+            "                           1-9; dwaa:LEVEL, dwab:LEVEL (default 45)\n"
             "  -d, --data-type T        half|float output for half/float channels (depth,\n"
             "                           P and ids stay float), or CHANNEL=half|float\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
@@ -345,6 +346,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     o->depth_mode = EF_DEPTH_PLANAR;
     o->compression = -1;
     o->zip_level = -1;
+    o->dwa_level = -1;
     o->pixel_type = -1;
     o->fps = 24;
     /* 0, not 1: glibc then also forgets where it was inside a cluster of
@@ -492,7 +494,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
                 return ef_fail(err, "--far '%s' is not a positive number", a), EF_PARSE_USAGE;
             break;
         case OPT_COMPRESSION:
-            if (ef_compression_parse(a, &o->compression, &o->zip_level, err))
+            if (ef_compression_parse(a, &o->compression, &o->zip_level, &o->dwa_level, err))
                 return EF_PARSE_USAGE;
             break;
         case 'd': {

@@ -25,6 +25,7 @@
 #include "version.h"
 #include "frames.h"
 #include "colour.h"
+#include "exr_dwa.h"
 #include "camera_file.h"
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
@@ -322,7 +323,7 @@ static void explain_scene(FILE *out, const ef_options *o, const ef_channel_plan 
                o->scene.sky_distance, o->scene.sky_distance);
     for (int i = 0; i < o->scene.ncomp; ++i)
         fprintf(out, "fog: %s\n", o->scene.comp[i].spec);
-    fprintf(out, "fog colour: %g, %g, %g (scene-linear)\n", o->scene.color[0], o->scene.color[1],
+    fprintf(out, "fog colour: %g, %g, %g (working space)\n", o->scene.color[0], o->scene.color[1],
            o->scene.color[2]);
     fprintf(out, "up axis: %g, %g, %g; %g scene units per metre%s%s\n", o->scene.ctx.up[0],
             o->scene.ctx.up[1], o->scene.ctx.up[2], o->scene.ctx.units_per_meter,
@@ -534,10 +535,21 @@ typedef struct frame_ctx {
     long frame;               /* its number */
 } frame_ctx;
 
-/* Whether path starts with OpenEXR's magic number (unreadable: no). */
+/* Whether path is a regular file (opening a FIFO would block: the EXR
+ * reader refuses those with a message). */
+static int regular_file(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 && S_ISREG(st.st_mode);
+}
+
+/* Whether path starts with OpenEXR's magic number; anything but a
+ * readable regular file counts as one, for the EXR reader to explain. */
 static int is_exr_file(const char *path)
 {
     unsigned char m[4] = { 0 };
+    if (!regular_file(path))
+        return 1;
     FILE *f = fopen(path, "rb");
     if (!f)
         return 1;   /* let the EXR reader say what is wrong */
@@ -769,10 +781,10 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     const int naov = ef_aov_channels(o->aov, aov_names);
     int status = 1;
-    ef_output out, pv, mid, dconv;
+    ef_output out, pv, mid, dconv, din;
     char *history = NULL;
-    out.fd = pv.fd = mid.fd = dconv.fd = -1;
-    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = dconv.tmp[0] = '\0';
+    out.fd = pv.fd = mid.fd = dconv.fd = din.fd = -1;
+    out.tmp[0] = pv.tmp[0] = mid.tmp[0] = dconv.tmp[0] = din.tmp[0] = '\0';
     /* OUTPUT's extension chooses the format: .exr (or none) is written here,
      * anything else through OpenImageIO from an EXR beside it. */
     const char *ext = o->output ? strrchr(o->output, '.') : NULL;
@@ -846,10 +858,38 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
             goto done;
         }
     }
-    if (ef_exr_open(o->input, &in, &err)) {
+    /* DWA parts (which OpenEXRCore 3.1.5 cannot decode) are decoded by the
+     * OpenEXR C++ library into a temporary ZIP file first; the output is
+     * encoded back to DWA after the pass unless --compression says
+     * otherwise. */
+    const char *ipath = o->input;
+    ef_dwa_info dwa = { 0 };
+    {
+        ef_err derr = { 0 };
+        if (!regular_file(o->input) || ef_exr_dwa_info(o->input, &dwa, &derr))
+            dwa.ndwa = 0;   /* not an EXR: the reader below says what is wrong */
+    }
+    if (dwa.ndwa > 0) {
+        char name[PATH_MAX], msg[800];
+        const char *tmpdir = getenv("TMPDIR");
+        snprintf(name, sizeof name, "%s/exrfog-dwa", tmpdir && tmpdir[0] ? tmpdir : "/tmp");
+        if (ef_output_open(&din, name, ".exr", &err)) {
+            report(o->input, &err, 1);
+            goto done;
+        }
+        if (ef_dwa_transcode(o->input, din.fd, din.tmp, EXR_COMPRESSION_ZIP, -1, -1.0f,
+                             o->threads ? o->threads : cpu_count(), msg, sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            report(o->input, &err, 1);
+            goto done;
+        }
+        ipath = din.tmp;
+    }
+    if (ef_exr_open(ipath, &in, &err)) {
         report(o->input, &err, 1);
         goto done;
     }
+    in.path = o->input;   /* messages name the user's file */
     if (o->depth_file) {
         /* A depth in another format (a 32-bit TIFF pass) is read through
          * OpenImageIO into a temporary float EXR. */
@@ -1089,10 +1129,48 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
                 so.threads > 1 ? "s" : "");
     }
     so.nplans = nplans;
-    if (ef_exr_stream(&in, df, plans, o->output, foreign ? mid.fd : out.fd, &so, fog_chunk, &job,
-                      &st, &err)) {
+    /* DWA output (asked for, or kept from a DWA input): the pass writes a
+     * lossless temporary EXR that the C++ library encodes at the end. */
+    int dwa_out = -1;
+    float dwa_level = o->dwa_level;
+    if (!foreign && (o->compression == EXR_COMPRESSION_DWAA || o->compression == EXR_COMPRESSION_DWAB)) {
+        dwa_out = o->compression;
+    } else if (!foreign && o->compression < 0 && dwa.ndwa > 0) {
+        if (dwa.ndwa == dwa.nparts && !dwa.mixed) {
+            dwa_out = dwa.compression;
+            dwa_level = dwa.level > 0 ? dwa.level : EF_DWA_DEFAULT_LEVEL;
+        } else if (!o->quiet) {
+            warn(o->input, "some parts are DWA and others are not (or DWAA and DWAB are mixed); "
+                           "the DWA parts are written ZIP-compressed (--compression dwaa or dwab "
+                           "writes every part so)");
+        }
+    }
+    if (dwa_out >= 0) {
+        so.compression = EXR_COMPRESSION_ZIP;
+        so.zip_level = 1;
+        if ((status = ef_output_open(&mid, o->output, ".exr", &err)) != 0) {
+            report(o->output, &err, status);
+            status = 1;
+            goto done;
+        }
+    }
+    if (ef_exr_stream(&in, df, plans, o->output, foreign || dwa_out >= 0 ? mid.fd : out.fd, &so,
+                      fog_chunk, &job, &st, &err)) {
         report(o->output, &err, 1);
         goto done;
+    }
+    if (dwa_out >= 0) {
+        char msg[800];
+        close(mid.fd);
+        mid.fd = -1;
+        if (ef_dwa_transcode(mid.tmp, out.fd, o->output, -1, dwa_out,
+                             dwa_level > 0 ? dwa_level : EF_DWA_DEFAULT_LEVEL, so.threads, msg,
+                             sizeof msg)) {
+            ef_fail(&err, "%s", msg);
+            report(o->output, &err, 1);
+            goto done;
+        }
+        ef_output_abort(&mid);
     }
     if (foreign) {
         /* Colour and alpha of the fogged part, in OUTPUT's format. */
@@ -1148,6 +1226,7 @@ done:
     ef_output_abort(&pv);
     ef_output_abort(&out);
     ef_output_abort(&dconv);
+    ef_output_abort(&din);
     free(job.preview);
     free(job.stats);
     pthread_mutex_destroy(&job.lock);

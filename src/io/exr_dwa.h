@@ -28,6 +28,16 @@ int ef_exr_dwa_parts(const struct ef_exr_file *f);
  * Core can open. */
 int ef_exr_dwa_parts_path(const char *path, ef_err *err);
 
+/* What a file's DWA parts are: how many parts, how many DWA, the first DWA
+ * part's compression (EXR_COMPRESSION_DWAA/DWAB) and dwaCompressionLevel
+ * (-1 when absent), and whether DWA parts differ in kind. Reads headers
+ * only. Returns 0, or -1 with a message (not an EXR...). */
+typedef struct ef_dwa_info {
+    int nparts, ndwa, compression, mixed;
+    float level;
+} ef_dwa_info;
+int ef_exr_dwa_info(const char *path, ef_dwa_info *info, ef_err *err);
+
 /* Copies every part of in_path to out_fd (a new, empty, seekable file the
  * caller opened for writing; it owns the name, renames or removes it;
  * out_name only names it in messages and is never opened):

@@ -173,12 +173,8 @@ const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *cons
  * (45 when DWA is named without one) or -1 for other compressions.
  * DWAA/DWAB are accepted: they need the C++ transcoder (exr_dwa.h).
  * Returns 0 or -1. */
-int ef_compression_parse_ex(const char *name, int *compression, int *level, float *dwa_level,
-                            ef_err *err);
-/* ef_compression_parse_ex without DWA: DWAA/DWAB are refused with a
- * message (the command line's behaviour until it routes DWA output through
- * ef_dwa_transcode). */
-int ef_compression_parse(const char *name, int *compression, int *level, ef_err *err);
+int ef_compression_parse(const char *name, int *compression, int *level, float *dwa_level,
+                         ef_err *err);
 /* Shared inside the adapter: a context initializer whose error handler
  * keeps Core's last message (per thread) instead of printing it. */
 void ef_exr_init_context(exr_context_initializer_t *init);

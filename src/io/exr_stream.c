@@ -971,8 +971,8 @@ const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *cons
 static const char *const comp_names[] = { "none", "rle", "zips", "zip", "piz",
                                           "pxr24", "b44", "b44a", "dwaa", "dwab" };
 
-int ef_compression_parse_ex(const char *text, int *compression, int *level, float *dwa_level,
-                            ef_err *err)
+int ef_compression_parse(const char *text, int *compression, int *level, float *dwa_level,
+                         ef_err *err)
 {
     char name[16];
     const char *colon = strchr(text, ':');
@@ -1016,15 +1016,3 @@ int ef_compression_parse_ex(const char *text, int *compression, int *level, floa
                         ":LEVEL, a positive number, 45 by default)", text);
 }
 
-int ef_compression_parse(const char *text, int *compression, int *level, ef_err *err)
-{
-    float dwa_level;
-    int c;
-    if (ef_compression_parse_ex(text, &c, level, &dwa_level, err))
-        return -1;
-    if (c == EXR_COMPRESSION_DWAA || c == EXR_COMPRESSION_DWAB)
-        return ef_fail(err, "--compression %s: DWA compression is not available yet "
-                            "(OpenEXRCore 3.1.5 cannot write it); use zip or piz", text);
-    *compression = c;
-    return 0;
-}
