@@ -6,6 +6,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,6 +28,37 @@
 #include "colour.h"
 #include "exr_dwa.h"
 #include "camera_file.h"
+
+/* Where messages go: stderr for the command line; the library may point
+ * it elsewhere (exrfog_run). The last error is kept for exrfog_error. */
+static FILE *g_msg;
+static char g_last_error[2048];
+
+static FILE *msg_out(void)
+{
+    return g_msg ? g_msg : stderr;
+}
+
+static void put_clean(const char *s);
+
+/* Prints "exrfog: " and the formatted error, keeps it for exrfog_error,
+ * and returns status. */
+static int say_error(int status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+static int say_error(int status, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(g_last_error, sizeof g_last_error, fmt, ap);
+    va_end(ap);
+    fputs("exrfog: ", msg_out());
+    put_clean(g_last_error);
+    fputc('\n', msg_out());
+    return status;
+}
 
 /* The length of the valid UTF-8 sequence at s (1..4), or 0 when the
  * bytes there are not one (overlong, surrogate, beyond U+10FFFF, cut). */
@@ -61,16 +93,16 @@ static void put_clean(const char *s)
 {
     for (const unsigned char *c = (const unsigned char *) s; *c;) {
         if (*c < 0x20 || *c == 0x7f) {
-            fprintf(stderr, "\\x%02x", *c++);
+            fprintf(msg_out(), "\\x%02x", *c++);
         } else if (*c < 0x80) {
-            fputc(*c++, stderr);
+            fputc(*c++, msg_out());
         } else {
             const int n = utf8_len(c);
             if (!n) {
-                fprintf(stderr, "\\x%02x", *c++);
+                fprintf(msg_out(), "\\x%02x", *c++);
                 continue;
             }
-            fwrite(c, 1, (size_t) n, stderr);
+            fwrite(c, 1, (size_t) n, msg_out());
             c += n;
         }
     }
@@ -83,11 +115,12 @@ static void progress_clear(struct progress *pg);
 static int report(const char *file, const ef_err *err, int status)
 {
     progress_clear(active_pg);
-    fputs("exrfog: ", stderr);
+    snprintf(g_last_error, sizeof g_last_error, "%s: %s", err->file ? err->file : file, err->msg);
+    fputs("exrfog: ", msg_out());
     put_clean(err->file ? err->file : file);
-    fputs(": ", stderr);
+    fputs(": ", msg_out());
     put_clean(err->msg);
-    fputc('\n', stderr);
+    fputc('\n', msg_out());
     return status;
 }
 
@@ -104,6 +137,10 @@ struct progress {
     double px_total;          /* pixels of the finished frames */
     pthread_mutex_t lock;
     int drawn;                /* a line is on the terminal */
+    int draw;                 /* draw the bar (stderr is a terminal) */
+    int (*hook)(void *user, double fraction);   /* the library's callback, or NULL */
+    void *hook_user;
+    volatile int cancel;      /* the hook asked to stop */
 };
 typedef struct progress progress;
 
@@ -124,11 +161,12 @@ static void hms(char *b, size_t n, double s)
 }
 
 /* Draws the bar (pg->lock held). */
+static double progress_fraction(const progress *pg);
+
 static void progress_draw(progress *pg, double t)
 {
     const double px = (double) pg->px;
-    const double frac = pg->frame_px > 0 ? (px < pg->frame_px ? px / pg->frame_px : 1.0) : 0.0;
-    const double all = pg->nframes > 0 ? (pg->done + frac) / pg->nframes : frac;
+    const double all = progress_fraction(pg);
     char bar[31], el[32], eta[32], fr[64] = "";
     const int fill = (int) (all * 30.0);
     for (int i = 0; i < 30; ++i)
@@ -141,11 +179,19 @@ static void progress_draw(progress *pg, double t)
         snprintf(eta, sizeof eta, "?");
     if (pg->has_frame)
         snprintf(fr, sizeof fr, "frame %ld (%d/%d) ", pg->frame, pg->done + 1, pg->nframes);
-    fprintf(stderr, "\r\033[Kexrfog: %s[%s] %3.0f%%  %.1f Mpx  %s elapsed  ETA %s", fr, bar,
+    fprintf(msg_out(), "\r\033[Kexrfog: %s[%s] %3.0f%%  %.1f Mpx  %s elapsed  ETA %s", fr, bar,
             100.0 * all, (pg->px_total + px) / 1e6, el, eta);
-    fflush(stderr);
+    fflush(msg_out());
     pg->drawn = 1;
     pg->last = t;
+}
+
+/* The share of the run done: finished frames plus the current one's. */
+static double progress_fraction(const progress *pg)
+{
+    const double px = (double) pg->px;
+    const double frac = pg->frame_px > 0 ? (px < pg->frame_px ? px / pg->frame_px : 1.0) : 0.0;
+    return pg->nframes > 0 ? (pg->done + frac) / pg->nframes : frac;
 }
 
 static void progress_add(progress *pg, long px)
@@ -154,8 +200,13 @@ static void progress_add(progress *pg, long px)
     const double t = wall_now();
     if (t - pg->last < 0.2 || pthread_mutex_trylock(&pg->lock))
         return;
-    if (t - pg->last >= 0.2)
-        progress_draw(pg, t);
+    if (t - pg->last >= 0.2) {
+        if (pg->hook && pg->hook(pg->hook_user, progress_fraction(pg)))
+            pg->cancel = 1;
+        if (pg->draw)
+            progress_draw(pg, t);
+        pg->last = t;
+    }
     pthread_mutex_unlock(&pg->lock);
 }
 
@@ -165,8 +216,8 @@ static void progress_clear(progress *pg)
     if (!pg || !pg->drawn)
         return;
     pthread_mutex_lock(&pg->lock);
-    fputs("\r\033[K", stderr);
-    fflush(stderr);
+    fputs("\r\033[K", msg_out());
+    fflush(msg_out());
     pg->drawn = 0;
     pg->last = 0;
     pthread_mutex_unlock(&pg->lock);
@@ -200,6 +251,8 @@ static unsigned char display8(float v)
 static void fog_chunk(void *user, const ef_chunk *ck)
 {
     fog_job *j = user;
+    if (j->pg && j->pg->cancel)
+        return;   /* the output is thrown away: no work for it */
     ef_aov_out aov;
     ef_aov_bind(&aov, j->aov, ck->extra);
     memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
@@ -356,7 +409,7 @@ static void print_tau_stats(const ef_fog_scene *s, const ef_tau_stats *st)
             continue;
         const ef_tau_stats *t = &st[i];
         const double n = t->pixels > 0 ? t->pixels : 1.0;
-        fprintf(stderr,
+        fprintf(msg_out(),
                 "exrfog: stats: fog[%d] %.60s%s: %.0f pixels; per pixel: noise evaluations mean "
                 "%.1f max %.0f, cells walked mean %.1f, octaves dropped mean %.2f; error "
                 "estimate (tau) max %.3g mean %.3g\n",
@@ -496,11 +549,11 @@ static int rebuild_scene(ef_fog_scene *s, const double *up, double time, ef_err 
 static void warn(const char *file, const char *msg)
 {
     progress_clear(active_pg);
-    fputs("exrfog: ", stderr);
+    fputs("exrfog: ", msg_out());
     put_clean(file);
-    fputs(": warning: ", stderr);
-    fputs(msg, stderr);
-    fputc('\n', stderr);
+    fputs(": warning: ", msg_out());
+    fputs(msg, msg_out());
+    fputc('\n', msg_out());
 }
 
 /* Silent traps of real renders, each with its fix: Nuke's depth.Z is 1/z;
@@ -999,11 +1052,11 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
             cam->src_pose = camfile_src;
         if (cam->warning[0] && !o->quiet && !o->explain) {
             progress_clear(active_pg);
-            fputs("exrfog: ", stderr);
+            fputs("exrfog: ", msg_out());
             put_clean(o->input);
-            fputs(": warning: ", stderr);
+            fputs(": warning: ", msg_out());
             put_clean(cam->warning);
-            fputc('\n', stderr);
+            fputc('\n', msg_out());
         }
         static const double z_up[3] = { 0, 0, 1 };
         if (v == 0 && o->up_auto && z_up_camera(&flags, cam) &&
@@ -1093,7 +1146,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     }
     for (int p = 0; p < in.nparts && !o->quiet; ++p)
         if (ef_exr_part_is_multilevel(&in, p))
-            fprintf(stderr, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
+            fprintf(msg_out(), "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
                             "output part is single-level\n", o->input, p);
 
     history = history_line(fr->argc, fr->typed, o->scene_file, o->scene_text);
@@ -1105,7 +1158,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
     const int cpus = cpu_count();
     if (o->threads > cpus && o->verbose)
-        fprintf(stderr, "exrfog: note: --threads %d capped at the %d CPUs\n", o->threads, cpus);
+        fprintf(msg_out(), "exrfog: note: --threads %d capped at the %d CPUs\n", o->threads, cpus);
     ef_stream_opts so = { .threads = o->threads && o->threads < cpus ? o->threads : cpus,
                           .compression = o->compression,
                           .zip_level = o->zip_level,
@@ -1124,8 +1177,8 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     ef_stream_stats st;
     if (o->verbose) {
         for (int v = 0; v < nplans; ++v)
-            explain(stderr, o, &in, &plans[v], &cams[v], &convs[v], 1);
-        fprintf(stderr, "exrfog: %s -> %s with %d thread%s\n", o->input, o->output, so.threads,
+            explain(msg_out(), o, &in, &plans[v], &cams[v], &convs[v], 1);
+        fprintf(msg_out(), "exrfog: %s -> %s with %d thread%s\n", o->input, o->output, so.threads,
                 so.threads > 1 ? "s" : "");
     }
     so.nplans = nplans;
@@ -1157,6 +1210,11 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     if (ef_exr_stream(&in, df, plans, o->output, foreign || dwa_out >= 0 ? mid.fd : out.fd, &so,
                       fog_chunk, &job, &st, &err)) {
         report(o->output, &err, 1);
+        goto done;
+    }
+    if (fr->pg && fr->pg->cancel) {
+        ef_fail(&err, "cancelled; nothing was written");
+        status = report(o->output, &err, 3);
         goto done;
     }
     if (dwa_out >= 0) {
@@ -1213,7 +1271,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     if (o->stats) {
         struct rusage ru;
         getrusage(RUSAGE_SELF, &ru);
-        fprintf(stderr,
+        fprintf(msg_out(),
                 "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode %.3f s, "
                 "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
                 st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
@@ -1262,14 +1320,12 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     ef_frame_pattern pout = { 0 }, pdep = { 0 }, ppv = { 0 };
     ef_err err = { 0 };
     if (out_pat && !ef_frame_pattern_find(out_pat, &pout)) {
-        fprintf(stderr, "exrfog: INPUT is a sequence (%s) but -o %s has no frame pattern; every "
-                        "frame would overwrite it (write e.g. -o fog.#.exr)\n", pattern, out_pat);
-        return 2;
+        return say_error(2, "INPUT is a sequence (%s) but -o %s has no frame pattern; every frame "
+                            "would overwrite it (write e.g. -o fog.#.exr)", pattern, out_pat);
     }
     if (pv_pat && !ef_frame_pattern_find(pv_pat, &ppv)) {
-        fprintf(stderr, "exrfog: INPUT is a sequence (%s) but --preview %s has no frame pattern "
-                        "(write e.g. --preview fog.#.png)\n", pattern, pv_pat);
-        return 2;
+        return say_error(2, "INPUT is a sequence (%s) but --preview %s has no frame pattern "
+                            "(write e.g. --preview fog.#.png)", pattern, pv_pat);
     }
     if (dep_pat)
         ef_frame_pattern_find(dep_pat, &pdep);   /* one depth for every frame is allowed */
@@ -1278,8 +1334,7 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     if (o->frames ? ef_frames_parse(o->frames, &frames, &n, &err)
                   : ef_frames_on_disk(pattern, pin, &frames, &n, &err)) {
         if (o->frames) {
-            fprintf(stderr, "exrfog: %s\n", err.msg);
-            return 2;
+            return say_error(2, "%s", err.msg);
         }
         return report(pattern, &err, 1);
     }
@@ -1299,7 +1354,7 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     unsigned char *skip = calloc((size_t) n, 1);
     if (!skip) {
         free(frames);
-        fputs("exrfog: out of memory\n", stderr);
+        fputs("exrfog: out of memory\n", msg_out());
         return 1;
     }
     for (int i = 0; i < n; ++i) {
@@ -1316,10 +1371,10 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     }
     int status = 0;
     if (nmissing && !o->keep_going) {
-        fprintf(stderr, "exrfog: %s: %d of %d frame%s missing on disk%s: %s; nothing was "
-                        "written (render them, choose others with --frames, or pass "
-                        "--keep-going)\n", pattern, nmissing, n, n > 1 ? "s" : "",
-                dep_pat && pdep.has ? " (colour or depth)" : "", missing);
+        say_error(1, "%s: %d of %d frame%s missing on disk%s: %s; nothing was written (render "
+                     "them, choose others with --frames, or pass --keep-going)", pattern,
+                  nmissing, n, n > 1 ? "s" : "", dep_pat && pdep.has ? " (colour or depth)" : "",
+                  missing);
         free(skip);
         free(frames);
         return 1;
@@ -1342,8 +1397,7 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
             (out_pat && ef_frame_path(out_pat, &pout, frames[i], out_path, sizeof out_path)) ||
             (dep_pat && ef_frame_path(dep_pat, &pdep, frames[i], dep_path, sizeof dep_path)) ||
             (pv_pat && ef_frame_path(pv_pat, &ppv, frames[i], pv_path, sizeof pv_path))) {
-            fprintf(stderr, "exrfog: %s: the path of frame %ld is too long\n", pattern, frames[i]);
-            status = 1;
+            status = say_error(1, "%s: the path of frame %ld is too long", pattern, frames[i]);
             break;
         }
         o->input = in_path;
@@ -1367,11 +1421,11 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
             break;   /* the first frame tells what every frame is read as */
         if (rc == 0)
             continue;
-        /* A usage error is the same for every frame. */
-        if (rc == 2 || !o->keep_going) {
+        /* A usage error is the same for every frame; a cancel stops all. */
+        if (rc == 2 || rc == 3 || !o->keep_going) {
             status = rc;
-            if (rc != 2 && i + 1 < n)
-                fprintf(stderr, "exrfog: %s: stopped at frame %ld; frames before it are written, "
+            if (rc == 1 && i + 1 < n)
+                fprintf(msg_out(), "exrfog: %s: stopped at frame %ld; frames before it are written, "
                                 "none after (--keep-going fogs the others)\n", pattern, frames[i]);
             break;
         }
@@ -1380,8 +1434,7 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     }
     if (status == 0 && nfailed) {
         progress_clear(fr->pg);
-        fprintf(stderr, "exrfog: %s: %d of %d frames failed: %s\n", pattern, nfailed, n, failed);
-        status = 1;
+        status = say_error(1, "%s: %d of %d frames failed: %s", pattern, nfailed, n, failed);
     }
     o->input = pattern;
     o->output = out_pat;
@@ -1392,14 +1445,15 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
     return status;
 }
 
-int ef_main(int argc, char **argv)
+/* One run of the program with its messages going to msg_out(). */
+static int run_main(int argc, char **argv, int (*hook)(void *, double), void *hook_user)
 {
     static ef_options o;
     ef_err err = {0};
     /* The command line as typed, for the history: getopt permutes argv. */
     char **typed = malloc(((size_t) argc + 1) * sizeof *typed);
     if (!typed) {
-        fputs("exrfog: out of memory\n", stderr);
+        fputs("exrfog: out of memory\n", msg_out());
         return 1;
     }
     memcpy(typed, argv, ((size_t) argc + 1) * sizeof *typed);
@@ -1411,17 +1465,18 @@ int ef_main(int argc, char **argv)
             return 0;
         if (pr == EF_PARSE_FAIL)
             return report(err.file, &err, 1);
-        fputs("exrfog: ", stderr);
-        put_clean(err.msg);
-        fputc('\n', stderr);
-        return 2;
+        return say_error(2, "%s", err.msg);
     }
 
     frame_ctx fr = { .argc = argc, .typed = typed };
     static progress pg;
+    memset(&pg, 0, sizeof pg);
     pthread_mutex_init(&pg.lock, NULL);
     pg.t0 = wall_now();
-    if (!o.quiet && !o.explain && isatty(STDERR_FILENO)) {
+    pg.hook = hook;
+    pg.hook_user = hook_user;
+    pg.draw = !o.quiet && !o.explain && !g_msg && isatty(STDERR_FILENO);
+    if (pg.draw || (hook && !o.explain)) {
         fr.pg = &pg;
         active_pg = &pg;
     }
@@ -1429,9 +1484,8 @@ int ef_main(int argc, char **argv)
     ef_frame_pattern pin;
     if (!ef_frame_pattern_find(o.input, &pin)) {
         if (o.frames) {
-            fputs("exrfog: --frames needs a frame pattern in INPUT (shot.#.exr, shot.%04d.exr "
-                  "or shot.@@@@.exr)\n", stderr);
-            status = 2;
+            status = say_error(2, "--frames needs a frame pattern in INPUT (shot.#.exr, "
+                                  "shot.%%04d.exr or shot.@@@@.exr)");
         } else {
             pg.nframes = 1;
             status = run_frame(&o, &fr);
@@ -1447,5 +1501,22 @@ int ef_main(int argc, char **argv)
     pthread_mutex_destroy(&pg.lock);
     free(typed);
     ef_options_free(&o);
+    return status;
+}
+
+int ef_main(int argc, char **argv)
+{
+    g_msg = NULL;
+    return run_main(argc, argv, NULL, NULL);
+}
+
+int ef_run_lib(int argc, char **argv, FILE *msgs, int (*progress)(void *, double), void *user,
+               char *err, size_t errlen)
+{
+    g_msg = msgs;
+    g_last_error[0] = '\0';
+    const int status = run_main(argc, argv, progress, user);
+    g_msg = NULL;
+    snprintf(err, errlen, "%s", status ? g_last_error : "");
     return status;
 }

@@ -1,0 +1,145 @@
+/* libexrfog: physically correct fog for rendered images, as a C library.
+ *
+ * The style is OpenEXRCore's: opaque objects made and released by the
+ * caller, every call returns an exrfog_result, memory the caller passes
+ * stays the caller's, and the text of the last failure is kept per context
+ * (exrfog_error). The exrfog command line is one client of this API.
+ *
+ * Thread safety: a context is used by one thread at a time (its error text
+ * is per context); make one per thread. Scenes and cameras are read-only
+ * once made: any number of threads may pass the same ones to
+ * exrfog_fog_pixels at once, each with its own context. exrfog_run may run
+ * in several threads at once, each with its own context.
+ *
+ * ABI: the library's soname carries EXRFOG_VERSION_MAJOR; within a major
+ * version functions are only added, structs passed by pointer only grow at
+ * their end (their first member is their size), and enum values keep their
+ * numbers. Before 1.0 (now) a minor version may break the ABI. */
+#ifndef EXRFOG_H
+#define EXRFOG_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define EXRFOG_VERSION_MAJOR 0
+#define EXRFOG_VERSION_MINOR 1
+#define EXRFOG_VERSION_PATCH 0
+#define EXRFOG_VERSION "0.1.0"
+
+#if defined(__GNUC__)
+#define EXRFOG_API __attribute__((visibility("default")))
+#else
+#define EXRFOG_API
+#endif
+
+/* Results: the command line's exit statuses, plus cancellation. */
+typedef enum exrfog_result {
+    EXRFOG_OK = 0,
+    EXRFOG_ERROR = 1,        /* bad input, I/O, no camera...: exrfog_error says what */
+    EXRFOG_USAGE = 2,        /* a bad argument or option */
+    EXRFOG_CANCELLED = 3     /* the progress callback asked to stop; nothing was written */
+} exrfog_result;
+
+/* The version of the library actually loaded ("0.1.0"). */
+EXRFOG_API const char *exrfog_version(void);
+
+typedef struct exrfog_context exrfog_context;
+
+/* A new context, or NULL when out of memory. */
+EXRFOG_API exrfog_context *exrfog_context_create(void);
+/* Releases a context (NULL is fine). */
+EXRFOG_API void exrfog_context_destroy(exrfog_context *ctx);
+/* The last failure of a call made with ctx, as the command line prints it
+ * without its "exrfog: " prefix ("FILE: what is wrong (how to fix it)");
+ * "" after a success. Valid until the next call with ctx. */
+EXRFOG_API const char *exrfog_error(const exrfog_context *ctx);
+
+/* Progress of exrfog_run: called from worker threads (serialised by the
+ * library) with the fraction done (0..1) of the whole run; returning
+ * non-zero cancels the run (EXRFOG_CANCELLED, no output written). */
+typedef int (*exrfog_progress_fn)(void *user, double fraction);
+EXRFOG_API void exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user);
+
+/* Whether messages (errors, warnings) also go to stderr as the command
+ * line prints them (default 0: only exrfog_error keeps the failure). */
+EXRFOG_API void exrfog_set_print(exrfog_context *ctx, int print);
+
+/* ---------------------------------------------------------------- scenes */
+
+typedef struct exrfog_scene exrfog_scene;
+
+/* Parses a fog scene: the SPECs of --fog (MODEL[:KEY=VALUE]...) and/or a
+ * scene file (JSON, as --scene; NULL for none), with the fog colour R,G,B
+ * in the working space (NULL: the default 0.7,0.75,0.8). Nothing but the
+ * scene file (and profile files it names) is read: this validates a scene
+ * with no image at hand. */
+EXRFOG_API exrfog_result exrfog_scene_create(exrfog_context *ctx, const char *const *specs,
+                                             int nspecs, const char *scene_file,
+                                             const double *color, exrfog_scene **out);
+EXRFOG_API void exrfog_scene_destroy(exrfog_scene *scene);
+
+/* --------------------------------------------------------------- cameras */
+
+typedef struct exrfog_camera exrfog_camera;
+
+/* A pinhole camera from a 4x4 camera-to-world matrix (16 numbers, laid out
+ * in `convention`: "exr", "blender", "nuke", "maya", "houdini" or "usd"; see
+ * exrfog(1) CAMERAS), a horizontal field of view in degrees, and the image's
+ * display window (xmin, ymin, xmax, ymax inclusive, square pixels). */
+EXRFOG_API exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx,
+                                                   const double camera_to_world[16],
+                                                   const char *convention, double hfov_deg,
+                                                   const int display_window[4],
+                                                   exrfog_camera **out);
+/* The camera of an EXR file's header (colour part), as the command line
+ * resolves it (worldToCamera with worldToNDC/worldToScreen or a fov,
+ * V-Ray, Redshift). */
+EXRFOG_API exrfog_result exrfog_camera_from_file(exrfog_context *ctx, const char *path,
+                                                 exrfog_camera **out);
+/* The camera's position in world space. */
+EXRFOG_API void exrfog_camera_position(const exrfog_camera *cam, double pos[3]);
+EXRFOG_API void exrfog_camera_destroy(exrfog_camera *cam);
+
+/* ---------------------------------------------------------------- pixels */
+
+/* A rectangle of the caller's pixels, fogged in place: float planes whose
+ * pixel (x0 + i, y0 + j) is at plane[j * stride + i] (stride in floats,
+ * >= width). alpha may be NULL (alpha 1). depth is planar camera depth
+ * unless depth_mode says otherwise (the names of --depth-mode). The
+ * optional AOV planes (NULL: not wanted) get the transmittance fog_T, its
+ * error bound fog_error and the world position fog_P, as the command line
+ * writes them. */
+typedef struct exrfog_image {
+    size_t size;                 /* sizeof(exrfog_image): the ABI check */
+    int x0, y0, width, height;   /* absolute pixels, as in the display window */
+    ptrdiff_t stride;
+    float *rgb[3];
+    float *alpha;
+    const float *depth;
+    const char *depth_mode;      /* NULL: "planar" */
+    float *T[3];                 /* optional AOVs */
+    float *error[3];
+    float *P[3];
+} exrfog_image;
+
+/* Fogs img in place with scene seen from cam. Safe to call from several
+ * threads at once on disjoint rectangles (one context each). */
+EXRFOG_API exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
+                                           const exrfog_camera *cam, exrfog_image *img);
+
+/* -------------------------------------------------------- the whole run */
+
+/* Runs exrfog on files with the command line's arguments (argv[0] is the
+ * program name, then options and INPUT as exrfog(1) documents them):
+ * sequences, views, colour management, every format. The progress
+ * callback and cancellation apply. */
+EXRFOG_API exrfog_result exrfog_run(exrfog_context *ctx, int argc, const char *const *argv);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
