@@ -138,6 +138,16 @@ EXRFOG_API exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_sce
  * callback and cancellation apply. */
 EXRFOG_API exrfog_result exrfog_run(exrfog_context *ctx, int argc, const char *const *argv);
 
+/* What exrfog_run would read and do, without writing anything: the facts
+ * of `exrfog --explain --json` (camera per view, channels, depth mode,
+ * scene, working colour space) as a JSON object in *json, which the
+ * caller releases with exrfog_free. argv as for exrfog_run (no -o needed). */
+EXRFOG_API exrfog_result exrfog_explain(exrfog_context *ctx, int argc, const char *const *argv,
+                                        char **json);
+
+/* Releases memory the library returned. */
+EXRFOG_API void exrfog_free(void *p);
+
 #ifdef __cplusplus
 }
 #endif

@@ -22,7 +22,7 @@ enum {
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE,
-    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW
+    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON
 };
 
 static const struct option long_opts[] = {
@@ -61,6 +61,7 @@ static const struct option long_opts[] = {
     { "threads", required_argument, NULL, OPT_THREADS },
     { "preview", required_argument, NULL, OPT_PREVIEW },
     { "explain", no_argument, NULL, OPT_EXPLAIN },
+    { "json", no_argument, NULL, OPT_JSON },
     { "stats", no_argument, NULL, OPT_STATS },
     { "verbose", no_argument, NULL, 'v' },
     { "quiet", no_argument, NULL, 'q' },
@@ -134,6 +135,7 @@ void ef_options_usage(FILE *out)
             "      --preview FILE       also write a preview (PNG, JPEG, ...) through an OCIO view\n"
             "      --preview-view \"DISPLAY, VIEW\"  its display and view (default: the config's)\n"
             "      --explain            print the resolved camera and conventions, write nothing\n"
+            "      --json               with --explain: the same facts as one JSON object\n"
             "      --stats              print per-stage timings and peak memory, and the cost\n"
             "                           and error of each noise component\n"
             "  -v, --verbose  -q, --quiet  -h, --help  --version\n"
@@ -531,6 +533,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
             break;
         }
         case OPT_EXPLAIN: o->explain = 1; break;
+        case OPT_JSON: o->json = 1; break;
         case OPT_STATS: o->stats = 1; break;
         case 'v': o->verbose++; break;
         case 'q': o->quiet = 1; break;
@@ -580,6 +583,9 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         record(o, o->input);
     if (!o->input)
         return ef_fail(err, "no INPUT given (usage: exrfog [OPTIONS] INPUT -o OUTPUT)"), EF_PARSE_USAGE;
+    if (o->json && !o->explain)
+        return ef_fail(err, "--json goes with --explain (exrfog --explain --json INPUT)"),
+               EF_PARSE_USAGE;
     if (!o->explain && !o->output)
         return ef_fail(err, "no output given (add -o OUTPUT)"), EF_PARSE_USAGE;
     if (o->output && !o->output[0])

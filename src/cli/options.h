@@ -37,7 +37,7 @@ typedef struct ef_options {
     const char *preview_view; /* --preview-view "DISPLAY, VIEW", or NULL */
     const char *fog_color;    /* --fog-color as written (read again per working space) */
     int nviews;
-    int explain, stats, verbose, quiet;
+    int explain, json, stats, verbose, quiet;
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */
     int has_aov_origin;       /* --aov-origin given */
     double aov_origin[3];     /* subtracted from fog_P */

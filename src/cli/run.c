@@ -39,6 +39,14 @@ static FILE *msg_out(void)
     return g_msg ? g_msg : stderr;
 }
 
+/* Where --explain writes: stdout, or the library's buffer. */
+static FILE *g_out;
+
+static FILE *out_stream(void)
+{
+    return g_out ? g_out : stdout;
+}
+
 static void put_clean(const char *s);
 
 /* Prints "exrfog: " and the formatted error, keeps it for exrfog_error,
@@ -396,6 +404,153 @@ static void explain_scene(FILE *out, const ef_options *o, const ef_channel_plan 
                     o->aov_origin[1], o->aov_origin[2]);
         fputc('\n', out);
     }
+}
+
+/* A JSON string (NULL: null), escaped. */
+static void json_str(FILE *out, const char *v)
+{
+    if (!v) {
+        fputs("null", out);
+        return;
+    }
+    fputc('"', out);
+    for (const unsigned char *c = (const unsigned char *) v; *c; ++c) {
+        if (*c == '"' || *c == '\\')
+            fprintf(out, "\\%c", *c);
+        else if (*c < 0x20)
+            fprintf(out, "\\u%04x", *c);
+        else
+            fputc(*c, out);
+    }
+    fputc('"', out);
+}
+
+/* A JSON number (non-finite: null, which JSON has instead). */
+static void json_num(FILE *out, double v)
+{
+    if (isfinite(v))
+        fprintf(out, "%.17g", v);
+    else
+        fputs("null", out);
+}
+
+static void json_vec(FILE *out, const double *v, int n)
+{
+    fputc('[', out);
+    for (int k = 0; k < n; ++k) {
+        if (k)
+            fputs(", ", out);
+        json_num(out, v[k]);
+    }
+    fputc(']', out);
+}
+
+/* --explain --json: the facts of --explain as one JSON object, for scripts
+ * (and exrfog.explain() in Python). */
+static void explain_json(FILE *out, const ef_options *o, const ef_exr_file *in,
+                         const ef_channel_plan *plans, const ef_camera *cams,
+                         const ef_depth_conv *convs, const int *conv_ok, int nplans)
+{
+    static const double fwd[3] = { 0, 0, 1 }, upc[3] = { 0, 1, 0 };
+    fputs("{\n  \"version\": ", out);
+    json_str(out, EXRFOG_VERSION);
+    fputs(",\n  \"input\": ", out);
+    json_str(out, in->path);
+    fprintf(out, ",\n  \"parts\": %d,\n  \"views\": [", in->nparts);
+    for (int v = 0; v < nplans; ++v) {
+        const ef_channel_plan *pl = &plans[v];
+        const ef_camera *cam = &cams[v];
+        double f[3], u[3];
+        ef_camera_to_world_dir(cam, fwd, f);
+        ef_camera_to_world_dir(cam, upc, u);
+        fputs(v ? ",\n    {" : "\n    {", out);
+        fputs("\"view\": ", out);
+        json_str(out, pl->view[0] ? pl->view : NULL);
+        fprintf(out, ", \"default_view\": %s,\n     \"camera\": {\"position\": ",
+                pl->default_view ? "true" : "false");
+        json_vec(out, cam->pos, 3);
+        fputs(", \"forward\": ", out);
+        json_vec(out, f, 3);
+        fputs(", \"up\": ", out);
+        json_vec(out, u, 3);
+        fputs(", \"hfov_deg\": ", out);
+        json_num(out, cam->hfov_deg);
+        fputs(", \"near\": ", out);
+        if (cam->near_.set)
+            json_num(out, cam->near_.v);
+        else
+            fputs("null", out);
+        fputs(", \"far\": ", out);
+        if (cam->far_.set)
+            json_num(out, cam->far_.v);
+        else
+            fputs("null", out);
+        fputs(", \"pose_source\": ", out);
+        json_str(out, cam->src_pose);
+        fputs(", \"fov_source\": ", out);
+        json_str(out, cam->src_fov);
+        fputs(", \"projection\": ", out);
+        json_str(out, cam->proj != EF_PROJ_NONE ? cam->src_proj : NULL);
+        fputs(", \"warning\": ", out);
+        json_str(out, cam->warning[0] ? cam->warning : NULL);
+        fprintf(out, "},\n     \"colour\": {\"part\": %d, \"channels\": [", pl->rgb[0].part);
+        for (int k = 0; k < 3; ++k) {
+            json_str(out, pl->rgb[k].name);
+            fputs(k < 2 ? ", " : "], \"alpha\": ", out);
+        }
+        json_str(out, pl->alpha.part >= 0 ? pl->alpha.name : NULL);
+        fputs("},\n     \"depth\": {\"file\": ", out);
+        json_str(out, o->depth_file ? o->depth_file : in->path);
+        fprintf(out, ", \"part\": %d, \"channel\": ", pl->depth.part);
+        json_str(out, pl->depth.name);
+        fputs(", \"mode\": ", out);
+        json_str(out, ef_depth_mode_name(o->depth_mode));
+        fputs(", \"conversion_error\": ", out);
+        json_str(out, conv_ok[v] ? NULL : "the depth mode needs clip planes or a projection");
+        (void) convs;
+        fputs("}}", out);
+    }
+    fputs("\n  ],\n  \"sky\": ", out);
+    json_str(out, o->scene.sky == EF_SKY_FOG ? "fog" : o->scene.sky == EF_SKY_KEEP ? "keep" : "distance");
+    fputs(", \"sky_distance\": ", out);
+    json_num(out, o->scene.sky == EF_SKY_DISTANCE_MODE ? o->scene.sky_distance : NAN);
+    fputs(",\n  \"fog\": [", out);
+    for (int i = 0; i < o->scene.ncomp; ++i) {
+        if (i)
+            fputs(", ", out);
+        json_str(out, o->scene.comp[i].spec);
+    }
+    fputs("],\n  \"fog_colour\": ", out);
+    json_vec(out, o->scene.color, 3);
+    fputs(", \"up\": ", out);
+    json_vec(out, o->scene.ctx.up, 3);
+    fputs(", \"units_per_meter\": ", out);
+    json_num(out, o->scene.ctx.units_per_meter);
+    fputs(", \"time\": ", out);
+    json_num(out, o->scene.ctx.time);
+    fputs(",\n  \"colour_space\": ", out);
+    if (ef_colour_space()[0]) {
+        fputs("{\"name\": ", out);
+        json_str(out, ef_colour_space());
+        fputs(", \"source\": ", out);
+        json_str(out, ef_colour_space_source());
+        fputs(", \"config\": ", out);
+        json_str(out, ef_colour_config_where());
+        fputc('}', out);
+    } else {
+        fputs("null", out);
+    }
+    const char *names[EF_AOV_MAX_CHANNELS];
+    const int n = ef_aov_channels(o->aov, names);
+    fputs(",\n  \"aov\": [", out);
+    for (int i = 0; i < n; ++i) {
+        if (i)
+            fputs(", ", out);
+        json_str(out, names[i]);
+    }
+    fputs("], \"aov_origin\": ", out);
+    json_vec(out, o->aov_origin, 3);
+    fputs("\n}\n", out);
 }
 
 /* --stats: one line per component whose optical depth is numerical. Only
@@ -821,6 +976,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     ef_cam_meta meta;
     static ef_camera cams[EF_MAX_VIEWS];
     static ef_depth_conv convs[EF_MAX_VIEWS];
+    int convs_ok[EF_MAX_VIEWS] = { 0 };
     static ef_fog_scene view_scene[EF_MAX_VIEWS];
     static char camfile_src[600];
     ef_ocio_display *disp = NULL;
@@ -976,7 +1132,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     int nplans = 0;
     if ((status = choose_views(o, &in, df, views, nfile_views, plans, &nplans, &err)) != 0) {
         if (o->explain && status == 1)
-            explain(stdout, o, &in, NULL, NULL, NULL, 0);
+            explain(out_stream(), o, &in, NULL, NULL, NULL, 0);
         report(o->input, &err, status);
         goto done;
     }
@@ -1034,7 +1190,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         }
         if (ef_camera_resolve(&meta, &flags, cam, &err)) {
             if (o->explain)
-                explain(stdout, o, &in, pl, NULL, NULL, 0);
+                explain(out_stream(), o, &in, pl, NULL, NULL, 0);
             if (pl->view[0]) {
                 char msg[sizeof err.msg];
                 snprintf(msg, sizeof msg, "%s", err.msg);
@@ -1067,13 +1223,16 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         if (v == 0 && !o->quiet && !o->explain)
             warn_traps(o, &in, pl->rgb[0].part, cam);
         int conv_ok = ef_depth_conv_init(&convs[v], o->depth_mode, cam, &err) == 0;
+        convs_ok[v] = conv_ok;
+        if (o->explain && o->json)
+            continue;
         if (o->explain) {
             if (pl->view[0])
-                printf("%sview: %s%s\n", v ? "\n" : "", pl->view,
+                fprintf(out_stream(), "%sview: %s%s\n", v ? "\n" : "", pl->view,
                        pl->default_view ? " (default view)" : "");
-            explain(stdout, o, &in, pl, cam, &convs[v], conv_ok);
+            explain(out_stream(), o, &in, pl, cam, &convs[v], conv_ok);
             if (!conv_ok)
-                printf("depth conversion: %s\n", err.msg);
+                fprintf(out_stream(), "depth conversion: %s\n", err.msg);
             continue;
         }
         if (!conv_ok) {
@@ -1097,6 +1256,8 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         job.pass[v] = (ef_fog_pass){ cam, &convs[v], sc };
     }
     if (o->explain) {
+        if (o->json)
+            explain_json(out_stream(), o, &in, plans, cams, convs, convs_ok, nplans);
         status = 0;
         goto done;
     }
@@ -1379,8 +1540,8 @@ static int run_sequence(ef_options *o, frame_ctx *fr, const ef_frame_pattern *pi
         free(frames);
         return 1;
     }
-    if (o->explain)
-        printf("sequence: %s, %d frame%s (%ld to %ld), time = frame / %g fps%s\n", pattern, n,
+    if (o->explain && !o->json)
+        fprintf(out_stream(), "sequence: %s, %d frame%s (%ld to %ld), time = frame / %g fps%s\n", pattern, n,
                n > 1 ? "s" : "", frames[0], frames[n - 1], o->fps,
                o->time_set ? " (overridden by --time or the scene file)" : "");
     char failed[400] = "";
@@ -1510,13 +1671,15 @@ int ef_main(int argc, char **argv)
     return run_main(argc, argv, NULL, NULL);
 }
 
-int ef_run_lib(int argc, char **argv, FILE *msgs, int (*progress)(void *, double), void *user,
-               char *err, size_t errlen)
+int ef_run_lib(int argc, char **argv, FILE *msgs, FILE *out, int (*progress)(void *, double),
+               void *user, char *err, size_t errlen)
 {
     g_msg = msgs;
+    g_out = out;
     g_last_error[0] = '\0';
     const int status = run_main(argc, argv, progress, user);
     g_msg = NULL;
+    g_out = NULL;
     snprintf(err, errlen, "%s", status ? g_last_error : "");
     return status;
 }

@@ -291,10 +291,52 @@ exrfog_result exrfog_run(exrfog_context *ctx, int argc, const char *const *argv)
     for (int i = 0; i < argc; ++i)
         args[i] = (char *) argv[i];
     FILE *sink = ctx->print ? NULL : fopen("/dev/null", "w");
-    const int rc = ef_run_lib(argc, args, ctx->print ? NULL : sink, ctx->progress,
+    const int rc = ef_run_lib(argc, args, ctx->print ? NULL : sink, NULL, ctx->progress,
                               ctx->progress_user, ctx->error, sizeof ctx->error);
     if (sink)
         fclose(sink);
     free(args);
     return rc == 0 ? EXRFOG_OK : rc == 2 ? EXRFOG_USAGE : rc == 3 ? EXRFOG_CANCELLED : EXRFOG_ERROR;
+}
+
+exrfog_result exrfog_explain(exrfog_context *ctx, int argc, const char *const *argv, char **json)
+{
+    *json = NULL;
+    ctx->error[0] = '\0';
+    char **args = calloc((size_t) argc + 3, sizeof *args);
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *mem = open_memstream(&buf, &len);
+    FILE *sink = ctx->print ? NULL : fopen("/dev/null", "w");
+    if (!args || !mem) {
+        free(args);
+        if (mem)
+            fclose(mem);
+        free(buf);
+        if (sink)
+            fclose(sink);
+        snprintf(ctx->error, sizeof ctx->error, "out of memory");
+        return EXRFOG_ERROR;
+    }
+    for (int i = 0; i < argc; ++i)
+        args[i] = (char *) argv[i];
+    args[argc] = (char *) "--explain";
+    args[argc + 1] = (char *) "--json";
+    const int rc = ef_run_lib(argc + 2, args, ctx->print ? NULL : sink, mem, NULL, NULL,
+                              ctx->error, sizeof ctx->error);
+    fclose(mem);
+    if (sink)
+        fclose(sink);
+    free(args);
+    if (rc) {
+        free(buf);
+        return rc == 2 ? EXRFOG_USAGE : EXRFOG_ERROR;
+    }
+    *json = buf;
+    return EXRFOG_OK;
+}
+
+void exrfog_free(void *p)
+{
+    free(p);
 }
