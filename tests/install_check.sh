@@ -32,4 +32,10 @@ PKG_CONFIG_PATH="$libdir/pkgconfig" cc $flags "$src/tests/external/use_exrfog.c"
   -lm -o "$d/static_use"
 mkdir "$d/st"
 "$d/static_use" "$src/samples/sample.exr" "$d/st"
+# the installed Python module finds the installed library by itself
+if command -v python3 >/dev/null 2>&1 && [ "$sanitize" != 1 ]; then
+  env -u LD_LIBRARY_PATH PYTHONPATH="$d/prefix/lib/python3/dist-packages" python3 -c \
+    "import exrfog; assert exrfog.library_version() == exrfog.version; exrfog.fog('$src/samples/sample.exr', '$d/py.exr', fog='exp:density=0.02')"
+  [ -s "$d/py.exr" ]
+fi
 echo "install check passed"
