@@ -5,6 +5,8 @@
 // function of this file.
 #include <OpenColorIO/OpenColorIO.h>
 
+#include <dlfcn.h>
+
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -23,6 +25,10 @@ namespace OCIO = OCIO_NAMESPACE;
 #endif
 #ifndef EXRFOG_OCIO_CONFIG_BUILD
 #define EXRFOG_OCIO_CONFIG_BUILD ""
+#endif
+
+#ifndef EXRFOG_OCIO_CONFIG_RELATIVE
+#define EXRFOG_OCIO_CONFIG_RELATIVE ""
 #endif
 
 struct ef_ocio {
@@ -322,7 +328,21 @@ extern "C" ef_ocio *ef_ocio_open(const char *path, char *where, size_t where_len
         desc = "$OCIO=" + file;
         fix = "fix or unset $OCIO, or pass --colorconfig FILE";
     } else {
-        file = is_file(EXRFOG_OCIO_CONFIG_INSTALL) ? EXRFOG_OCIO_CONFIG_INSTALL : EXRFOG_OCIO_CONFIG_BUILD;
+        /* Beside the installed library or program first (a package
+         * installs under another prefix than the build was configured
+         * with), then the configured prefix, then the source tree. */
+        Dl_info info;
+        std::string beside;
+        if (dladdr(reinterpret_cast<void *>(&ef_ocio_version), &info) && info.dli_fname &&
+            *EXRFOG_OCIO_CONFIG_RELATIVE) {
+            std::string lib = info.dli_fname;
+            const size_t slash = lib.rfind('/');
+            if (slash != std::string::npos)
+                beside = lib.substr(0, slash + 1) + EXRFOG_OCIO_CONFIG_RELATIVE;
+        }
+        file = !beside.empty() && is_file(beside.c_str())  ? beside
+               : is_file(EXRFOG_OCIO_CONFIG_INSTALL)        ? std::string(EXRFOG_OCIO_CONFIG_INSTALL)
+                                                            : std::string(EXRFOG_OCIO_CONFIG_BUILD);
         desc = "exrfog's config " + file;
         fix = "reinstall exrfog, or pass --colorconfig FILE or set $OCIO";
     }

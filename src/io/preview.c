@@ -11,26 +11,35 @@
 
 #define MODULE_NAME "libexrfog_oiio.so"
 
-/* The module sits beside the executable (build tree) or in
- * ../lib/exrfog (installed); $EXRFOG_MODULE_DIR overrides both. */
+/* The module sits beside the library that holds this code or in its
+ * exrfog/ subdirectory (installed: LIBDIR/exrfog), beside the executable
+ * (build tree) or in ../lib/exrfog; $EXRFOG_MODULE_DIR overrides all. */
 static void *load_module(char *err, size_t errlen)
 {
-    char exe[PATH_MAX], path[PATH_MAX + 64];
+    char dirs[3][PATH_MAX], path[PATH_MAX + 64];
+    int nd = 0;
     const char *env = getenv("EXRFOG_MODULE_DIR");
     void *h = NULL;
     if (env) {
         snprintf(path, sizeof path, "%s/%s", env, MODULE_NAME);
         h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     }
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-    if (!h && n > 0) {
-        exe[n] = '\0';
-        char *slash = strrchr(exe, '/');
-        if (slash)
-            *slash = '\0';
-        static const char *const rel[] = { "", "/../lib/exrfog" };
+    Dl_info info;
+    if (dladdr((void *) &load_module, &info) && info.dli_fname)
+        snprintf(dirs[nd++], PATH_MAX, "%s", info.dli_fname);
+    ssize_t n = readlink("/proc/self/exe", dirs[nd], PATH_MAX - 1);
+    if (n > 0) {
+        dirs[nd][n] = '\0';
+        ++nd;
+    }
+    for (int d = 0; !h && d < nd; ++d) {
+        char *slash = strrchr(dirs[d], '/');
+        if (!slash)
+            continue;
+        *slash = '\0';
+        static const char *const rel[] = { "", "/exrfog", "/../lib/exrfog" };
         for (size_t i = 0; !h && i < sizeof rel / sizeof rel[0]; ++i) {
-            snprintf(path, sizeof path, "%s%s/%s", exe, rel[i], MODULE_NAME);
+            snprintf(path, sizeof path, "%s%s/%s", dirs[d], rel[i], MODULE_NAME);
             h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
         }
     }

@@ -1,0 +1,225 @@
+"""exrfog for Blender: physically correct fog on renders, with Blender's camera.
+
+Blender writes no camera into its EXRs. This add-on hands the scene camera
+to exrfog in Blender's own convention (matrix_world as Blender prints it,
+the lens and sensor fit as a horizontal field of view, the clip range):
+
+* after each render written as a multilayer EXR with the Depth pass, the
+  frame is fogged into the output path set in the panel (Output
+  Properties > exrfog), when "Fog after render" is on;
+* "Fog EXR" fogs a chosen EXR with the current frame's camera;
+* "Write camera file" writes a camera file (exrfog --camera-file) for the
+  frame range, so any later exrfog run finds the cameras.
+
+The fog (exrfog SPECs), its colour and extra options are stored in the
+.blend. exrfog is run as a program (the "exrfog program" setting, default
+exrfog on PATH).
+"""
+
+bl_info = {
+    "name": "exrfog",
+    "author": "exrfog",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Output > exrfog",
+    "description": "Physically correct fog on renders with exrfog, using the scene camera",
+    "category": "Render",
+}
+
+import json
+import math
+import os
+import shlex
+import subprocess
+
+import bpy
+from bpy.app.handlers import persistent
+
+
+def horizontal_fov(scene, cam):
+    """The horizontal field of view (degrees) of a perspective camera as
+    Blender frames it: the sensor fit decides which side the sensor width
+    (or height) spans, on the render's pixel-aspect-corrected size."""
+    r = scene.render
+    w = r.resolution_x * r.pixel_aspect_x
+    h = r.resolution_y * r.pixel_aspect_y
+    d = cam.data
+    if d.type != 'PERSP':
+        raise ValueError("exrfog needs a perspective camera (this one is %s)" % d.type)
+    fit = d.sensor_fit
+    if fit == 'AUTO':
+        fit = 'HORIZONTAL' if w >= h else 'VERTICAL'
+        size = d.sensor_width
+    else:
+        size = d.sensor_width if fit == 'HORIZONTAL' else d.sensor_height
+    half = math.atan(size / (2.0 * d.lens))
+    if fit == 'HORIZONTAL':
+        return math.degrees(2.0 * half)
+    return math.degrees(2.0 * math.atan(math.tan(half) * w / h))
+
+
+def camera_entry(scene, cam):
+    """One frame's camera in exrfog's camera-file form (Blender convention)."""
+    m = cam.matrix_world
+    return {
+        "camera_to_world": [m[i][j] for i in range(4) for j in range(4)],
+        "fov": horizontal_fov(scene, cam),
+        "near": cam.data.clip_start,
+        "far": cam.data.clip_end,
+    }
+
+
+def camera_args(scene, cam):
+    """exrfog's flags for the camera at the current frame."""
+    e = camera_entry(scene, cam)
+    if abs(cam.data.shift_x) > 0 or abs(cam.data.shift_y) > 0:
+        print("exrfog: warning: the camera's lens shift is ignored (exrfog's pinhole is centred)")
+    return ["--camera-convention", "blender",
+            "--camera-to-world", ",".join(repr(v) for v in e["camera_to_world"]),
+            "--fov", repr(e["fov"]), "--near", repr(e["near"]), "--far", repr(e["far"])]
+
+
+def exrfog_command(scene, input_path, output_path):
+    """The exrfog command line for a multilayer EXR of this scene."""
+    s = scene.exrfog
+    layer = bpy.context.view_layer.name if bpy.context.view_layer else scene.view_layers[0].name
+    args = [s.program, input_path, "-o", output_path,
+            "--layer", layer + ".Combined", "--depth-channel", layer + ".Depth.Z",
+            "--up-axis", "z", "--units-per-meter", repr(1.0 / scene.unit_settings.scale_length)]
+    args += camera_args(scene, scene.camera)
+    for spec in s.fog.split():
+        args += ["--fog", spec]
+    args += ["--fog-color", ",".join(repr(c) for c in s.fog_color)]
+    args += shlex.split(s.extra)
+    return args
+
+
+def run_exrfog(args):
+    """Runs exrfog; raises RuntimeError with its message on failure."""
+    r = subprocess.run(args, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr.strip() or "exrfog exited %d" % r.returncode)
+    return r
+
+
+def fog_output_path(scene, frame):
+    return bpy.path.abspath(scene.exrfog.output.replace("####", "%04d" % frame))
+
+
+class ExrfogSettings(bpy.types.PropertyGroup):
+    enabled: bpy.props.BoolProperty(
+        name="Fog after render", default=False,
+        description="Fog every rendered multilayer EXR (with the Depth pass) into the output path")
+    program: bpy.props.StringProperty(name="exrfog program", default="exrfog",
+                                      description="The exrfog executable")
+    fog: bpy.props.StringProperty(
+        name="Fog", default="exp:density=0.02",
+        description="exrfog fog SPECs, separated by spaces (see exrfog(1))")
+    fog_color: bpy.props.FloatVectorProperty(name="Fog colour", subtype='COLOR', size=3,
+                                             default=(0.7, 0.75, 0.8), min=0.0)
+    output: bpy.props.StringProperty(name="Output", default="//fog_####.exr", subtype='FILE_PATH',
+                                     description="Where fogged frames go (#### = frame)")
+    extra: bpy.props.StringProperty(name="Extra options", default="",
+                                    description="More exrfog options, as on a command line")
+    camera_file: bpy.props.StringProperty(name="Camera file", default="//cameras.json",
+                                          subtype='FILE_PATH')
+
+
+class EXRFOG_OT_write_camera(bpy.types.Operator):
+    """Write the scene camera of every frame to an exrfog camera file"""
+    bl_idname = "exrfog.write_camera"
+    bl_label = "Write camera file"
+
+    def execute(self, context):
+        scene = context.scene
+        keep = scene.frame_current
+        frames = {}
+        try:
+            for f in range(scene.frame_start, scene.frame_end + 1, scene.frame_step):
+                scene.frame_set(f)
+                frames[str(f)] = camera_entry(scene, scene.camera)
+        finally:
+            scene.frame_set(keep)
+        path = bpy.path.abspath(scene.exrfog.camera_file)
+        with open(path, "w") as fh:
+            json.dump({"convention": "blender", "frames": frames}, fh, indent=1)
+        self.report({'INFO'}, "exrfog: %d cameras written to %s" % (len(frames), path))
+        return {'FINISHED'}
+
+
+class EXRFOG_OT_fog_file(bpy.types.Operator):
+    """Fog a multilayer EXR of this scene with the current frame's camera"""
+    bl_idname = "exrfog.fog_file"
+    bl_label = "Fog EXR"
+    filepath: bpy.props.StringProperty(subtype='FILE_PATH')
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {'RUNNING_MODAL'}
+
+    def execute(self, context):
+        scene = context.scene
+        out = fog_output_path(scene, scene.frame_current)
+        try:
+            run_exrfog(exrfog_command(scene, self.filepath, out))
+        except (RuntimeError, ValueError, OSError) as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        self.report({'INFO'}, "exrfog: wrote " + out)
+        return {'FINISHED'}
+
+
+class EXRFOG_PT_panel(bpy.types.Panel):
+    bl_label = "exrfog"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "output"
+
+    def draw(self, context):
+        s = context.scene.exrfog
+        col = self.layout.column()
+        col.prop(s, "enabled")
+        col.prop(s, "fog")
+        col.prop(s, "fog_color")
+        col.prop(s, "output")
+        col.prop(s, "extra")
+        col.prop(s, "program")
+        col.operator(EXRFOG_OT_fog_file.bl_idname)
+        col.prop(s, "camera_file")
+        col.operator(EXRFOG_OT_write_camera.bl_idname)
+
+
+@persistent
+def fog_written_frame(scene, *args):
+    """render_write: fog the frame Blender just wrote, when asked to."""
+    s = scene.exrfog
+    if not s.enabled:
+        return
+    if scene.render.image_settings.file_format != 'OPEN_EXR_MULTILAYER':
+        print("exrfog: skipped: the render output is not a multilayer EXR")
+        return
+    path = bpy.path.abspath(scene.render.frame_path(frame=scene.frame_current))
+    out = fog_output_path(scene, scene.frame_current)
+    try:
+        run_exrfog(exrfog_command(scene, path, out))
+        print("exrfog: fogged %s -> %s" % (path, out))
+    except (RuntimeError, ValueError, OSError) as e:
+        print("exrfog: error: %s" % e)
+
+
+classes = (ExrfogSettings, EXRFOG_OT_write_camera, EXRFOG_OT_fog_file, EXRFOG_PT_panel)
+
+
+def register():
+    for c in classes:
+        bpy.utils.register_class(c)
+    bpy.types.Scene.exrfog = bpy.props.PointerProperty(type=ExrfogSettings)
+    bpy.app.handlers.render_write.append(fog_written_frame)
+
+
+def unregister():
+    if fog_written_frame in bpy.app.handlers.render_write:
+        bpy.app.handlers.render_write.remove(fog_written_frame)
+    del bpy.types.Scene.exrfog
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)

@@ -1,0 +1,67 @@
+"""ctest blender_addon: renders a tiny Cycles frame in headless Blender with
+the exrfog add-on (tests/blender_check.py), then checks the add-on's
+fogged frame against exrfog run on the raw render with the same camera
+given by flags, and against a run through the camera file it wrote.
+Exits 77 (skipped) when Blender is not installed."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+exrfog = os.environ["EXRFOG_BIN"]
+src = os.environ["EXRFOG_SOURCE_DIR"]
+blender = shutil.which("blender")
+if not blender:
+    print("blender_addon: Blender is not installed (skipped)")
+    sys.exit(77)
+
+
+def run(args):
+    r = subprocess.run(args, capture_output=True, text=True)
+    if r.returncode:
+        print(r.stdout[-3000:], r.stderr[-3000:], file=sys.stderr)
+        raise SystemExit("blender_addon: FAILED: " + " ".join(args[:3]))
+    return r
+
+
+def same_pixels(a, b):
+    r = subprocess.run(["oiiotool", "--diff", a, b], capture_output=True, text=True)
+    return r.returncode == 0 and "PASS" in r.stdout
+
+
+with tempfile.TemporaryDirectory() as d:
+    env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                        os.path.join(src, "tests", "blender_check.py"), "--", d, exrfog,
+                        os.path.join(src, "integrations", "blender")],
+                       capture_output=True, text=True, env=env)
+    if r.returncode or "blender_check: rendered and fogged" not in r.stdout:
+        print(r.stdout[-4000:], r.stderr[-4000:], file=sys.stderr)
+        raise SystemExit("blender_addon: FAILED: Blender run")
+    render, fogged = d + "/render_0001.exr", d + "/fog_0001.exr"
+    for f in (render, fogged, d + "/cams.json"):
+        if not os.path.exists(f):
+            raise SystemExit("blender_addon: FAILED: %s was not written" % f)
+    flags = json.load(open(d + "/flags.json"))
+    common = ["--layer", flags["layer"] + ".Combined", "--depth-channel",
+              flags["layer"] + ".Depth.Z", "--up-axis", "z", "--units-per-meter", "1.0",
+              "--fog", "exp:density=0.1",
+              "--fog-color", ",".join(repr(c) for c in flags["fog_color"])]
+    by_flags = d + "/flags.exr"
+    run([exrfog, render, "-o", by_flags, "--camera-convention", "blender", "--camera-to-world",
+         ",".join(repr(v) for v in flags["camera_to_world"]), "--fov", repr(flags["fov"]),
+         "--near", repr(flags["near"]), "--far", repr(flags["far"])] + common)
+    if not same_pixels(fogged, by_flags):
+        raise SystemExit("blender_addon: FAILED: the add-on's frame differs from the flags run")
+    by_file = d + "/cf_0001.exr"
+    run([exrfog, d + "/render_#.exr", "--frames", "1", "-o", d + "/cf_#.exr", "--camera-file",
+         d + "/cams.json"] + common)
+    if not same_pixels(fogged, by_file):
+        raise SystemExit("blender_addon: FAILED: the camera file run differs")
+    # the fog really did something
+    r = subprocess.run(["oiiotool", "--diff", render, fogged], capture_output=True, text=True)
+    if "PASS" in r.stdout:
+        raise SystemExit("blender_addon: FAILED: the fogged frame equals the render")
+print("blender_addon: the add-on's fog equals exrfog's with the camera by flags and by file")
