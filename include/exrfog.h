@@ -8,8 +8,9 @@
  * Thread safety: a context is used by one thread at a time (its error text
  * is per context); make one per thread. Scenes and cameras are read-only
  * once made: any number of threads may pass the same ones to
- * exrfog_fog_pixels at once, each with its own context. exrfog_run may run
- * in several threads at once, each with its own context.
+ * exrfog_fog_pixels at once, each with its own context. exrfog_run and
+ * exrfog_explain are not reentrant: one of them at a time per process (a
+ * run uses all cores by itself; run processes to go wider).
  *
  * ABI: the library's soname carries EXRFOG_VERSION_MAJOR; within a major
  * version functions are only added, structs passed by pointer only grow at
@@ -57,9 +58,11 @@ EXRFOG_API void exrfog_context_destroy(exrfog_context *ctx);
  * "" after a success. Valid until the next call with ctx. */
 EXRFOG_API const char *exrfog_error(const exrfog_context *ctx);
 
-/* Progress of exrfog_run: called from worker threads (serialised by the
- * library) with the fraction done (0..1) of the whole run; returning
- * non-zero cancels the run (EXRFOG_CANCELLED, no output written). */
+/* Progress of exrfog_run: called from worker threads (one at a time, at
+ * most every 0.2 s) with the fraction done (0..1) of the whole run;
+ * returning non-zero cancels it: the fog work stops at once, the frame's
+ * remaining chunks are still read and discarded, and the run returns
+ * EXRFOG_CANCELLED with no output written. */
 typedef int (*exrfog_progress_fn)(void *user, double fraction);
 EXRFOG_API void exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user);
 
