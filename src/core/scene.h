@@ -60,6 +60,15 @@ void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
 void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
                         ef_fog_sample *inf, ef_tau_info *info);
 
+/* The far segment of r's pixel: to infinity, or with --sky distance=D to
+ * D (or r's own end when farther). Returns 1 when it is r itself. */
+int ef_scene_far_ray(const ef_fog_scene *s, const ef_ray *r, ef_ray *far);
+
+/* out[j] = the fog along r[j] for j < n, the same bits as ef_scene_eval
+ * gives for one segment (inf NULL), evaluated component by component over
+ * all n rays. */
+void ef_scene_eval_rays(const ef_fog_scene *s, const ef_ray *r, int n, ef_fog_sample *out);
+
 /* Premultiplied compositing of one pixel in place:
  *   rgb   = T rgb + (1 - T) a F + (1 - a)(1 - Tinf) Finf
  *   alpha = a + (1 - a)(1 - Tinf)
