@@ -38,31 +38,26 @@ typedef struct span {
     double a[EF_RECON_SPAN];             /* alpha as fogged (1 for a damaged one) */
     unsigned char bad_alpha[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
-    /* Batched evaluation: the segments q[0..nq), the results res[], and
-     * per pixel the index of its surface and far segment in them. */
-    ef_ray q[2 * EF_RECON_SPAN];
-    ef_fog_sample res[2 * EF_RECON_SPAN];
-    int at_surf[EF_RECON_SPAN], at_inf[EF_RECON_SPAN];
+    /* Batched evaluation: surf[j] is the fog along r[j]; the far segments
+     * that differ from r[j] are q[0..nq), their fog far[], and inf[j] points
+     * at pixel j's far fog (surf[j] itself when there is none or it is r[j]). */
+    ef_fog_sample surf[EF_RECON_SPAN];
+    ef_ray q[EF_RECON_SPAN];
+    ef_fog_sample far[EF_RECON_SPAN];
+    const ef_fog_sample *inf[EF_RECON_SPAN];
     int nq;
 } span;
 
-/* Queues pixel i's segments for ef_scene_eval_rays: the far one first, as
- * ef_scene_eval_info evaluates them, and one segment when they coincide. */
-static void queue_segments(const ef_fog_scene *s, span *sp, int i)
+/* Queues pixel j's far segment when it is another segment than r[j]. */
+static void queue_far(const ef_fog_scene *s, span *sp, int j)
 {
-    if (!sp->need_inf[i]) {
-        sp->q[sp->nq] = sp->r[i];
-        sp->at_surf[i] = sp->at_inf[i] = sp->nq++;
+    sp->inf[j] = &sp->surf[j];
+    if (!sp->need_inf[j])
         return;
-    }
-    const int same = ef_scene_far_ray(s, &sp->r[i], &sp->q[sp->nq]);
-    sp->at_inf[i] = sp->nq++;
-    if (same) {
-        sp->at_surf[i] = sp->at_inf[i];
+    ef_ray *far = &sp->q[sp->nq];
+    if (ef_scene_far_ray(s, &sp->r[j], far) && far->planar == sp->r[j].planar)
         return;
-    }
-    sp->q[sp->nq] = sp->r[i];
-    sp->at_surf[i] = sp->nq++;
+    sp->inf[j] = &sp->far[sp->nq++];
 }
 
 void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, float *const rgb[3],
@@ -115,10 +110,14 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 /* The fog behind only reaches the uncovered part (1 - a) of a pixel. */
                 sp->need_inf[j] = fog_uncovered && !(sp->a[j] == 1.0 && isfinite(r->dist));
                 if (batch)
-                    queue_segments(s, sp, j);
+                    queue_far(s, sp, j);
             }
-            if (batch)
-                ef_scene_eval_rays(s, sp->q, sp->nq, sp->res);
+            if (batch) {
+                /* Pixels kept as they are (--sky keep) cost one wasted
+                 * segment each here, no branch per pixel. */
+                ef_scene_eval_rays(s, sp->r, n, sp->surf);
+                ef_scene_eval_rays(s, sp->q, sp->nq, sp->far);
+            }
             for (int j = 0; j < n; ++j) {
                 const size_t i = i0 + (size_t) j;
                 if (sp->sky[j] && s->sky == EF_SKY_KEEP) {
@@ -130,21 +129,19 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                         aov->err[k][i] = 0.0f;
                     continue;
                 }
-                ef_fog_sample surf, inf;
-                if (batch) {
-                    surf = sp->res[sp->at_surf[j]];
-                    inf = sp->res[sp->at_inf[j]];
-                } else {
-                    ef_scene_eval_info(s, &sp->r[j], &surf, sp->need_inf[j] ? &inf : NULL,
+                ef_fog_sample one, other;
+                const ef_fog_sample *surf = &sp->surf[j], *inf = sp->inf[j];
+                if (!batch) {
+                    ef_scene_eval_info(s, &sp->r[j], &one, sp->need_inf[j] ? &other : NULL,
                                        want_info ? info : NULL);
-                    if (!sp->need_inf[j])
-                        inf = surf;
+                    surf = &one;
+                    inf = sp->need_inf[j] ? &other : &one;
                 }
                 double c[3], in[3], a = sp->a[j];
                 const double a_in = a;
                 for (int k = 0; k < 3; ++k)
                     in[k] = c[k] = rgb[k][i];
-                ef_composite(&surf, &inf, fog_uncovered, c, alpha ? &a : NULL);
+                ef_composite(surf, inf, fog_uncovered, c, alpha ? &a : NULL);
                 for (int k = 0; k < 3; ++k)
                     rgb[k][i] = to_float(c[k]);
                 if (alpha && !sp->bad_alpha[j])
@@ -152,19 +149,19 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 if (mask & EF_AOV_FOG) {
                     for (int k = 0; k < 3; ++k)
                         aov->fog[k][i] =
-                            to_float(c[k] - (surf.T[k] > 0.0 ? surf.T[k] * in[k] : 0.0));
+                            to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
                     aov->fog[3][i] = alpha ? to_float(a - a_in) : 0.0f;
                 }
                 if (mask & EF_AOV_T)
                     for (int k = 0; k < 3; ++k)
-                        aov->T[k][i] = to_float(surf.T[k]);
+                        aov->T[k][i] = to_float(surf->T[k]);
                 if (mask & EF_AOV_ERROR) {
                     double e[3] = { 0, 0, 0 };
                     for (int nn = 0; want_info && nn < s->ncomp; ++nn)
                         for (int k = 0; k < 3; ++k)
                             e[k] += info[nn].err[k];
                     for (int k = 0; k < 3; ++k)
-                        aov->err[k][i] = to_float(aov_err(surf.T[k], e[k]));
+                        aov->err[k][i] = to_float(aov_err(surf->T[k], e[k]));
                 }
                 if (stats && want_info)
                     for (int nn = 0; nn < s->ncomp; ++nn)

@@ -216,21 +216,3 @@ void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *s
     sum_tau(s, r, surf, info);
     transmit(surf->T);
 }
-
-void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
-                  double rgb[3], double *alpha)
-{
-    const double a = alpha ? *alpha : 1.0;
-    const double *T = surf->T, *Tinf = inf->T;
-    for (int k = 0; k < 3; ++k) {
-        /* T = 0 hides the surface entirely, even an infinite or NaN one. */
-        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * surf->F[k];
-        if (fog_uncovered)
-            rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * inf->F[k];
-    }
-    if (alpha && fog_uncovered) {
-        /* One alpha for three channels: the mean coverage of the fog behind. */
-        const double cover = (3.0 - Tinf[0] - Tinf[1] - Tinf[2]) / 3.0;
-        *alpha = a + (1.0 - a) * cover;
-    }
-}
