@@ -233,6 +233,10 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double D = c->p[P_DENS + i], S = c->p[P_SHARP + i], lam = c->p[P_LAMBDA + i];
+        if (i > 0 && D == c->p[P_DENS + i - 1] && S == c->p[P_SHARP + i - 1]) {
+            tau[i] = tau[i - 1];              /* grey fog: the same sum, once */
+            continue;
+        }
         if (k == IN_NONE || !(D > 0 && S > 0)) {
             tau[i] = 0.0;
             continue;
