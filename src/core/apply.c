@@ -31,6 +31,35 @@ static double aov_err(double T, double e)
     return b < 1.0 ? b : 1.0;   /* also when b is NaN (T = 0, e = inf) */
 }
 
+/* One span of a row: its rays, and where each pixel's fog is found. */
+typedef struct span {
+    ef_ray r[EF_RECON_SPAN];
+    unsigned char sky[EF_RECON_SPAN];
+    double a[EF_RECON_SPAN];             /* alpha as fogged (1 for a damaged one) */
+    unsigned char bad_alpha[EF_RECON_SPAN];
+    unsigned char need_inf[EF_RECON_SPAN];
+    /* Batched evaluation: surf[j] is the fog along r[j]; the far segments
+     * that differ from r[j] are q[0..nq), their fog far[], and inf[j] points
+     * at pixel j's far fog (surf[j] itself when there is none or it is r[j]). */
+    ef_fog_sample surf[EF_RECON_SPAN];
+    ef_ray q[EF_RECON_SPAN];
+    ef_fog_sample far[EF_RECON_SPAN];
+    const ef_fog_sample *inf[EF_RECON_SPAN];
+    int nq;
+} span;
+
+/* Queues pixel j's far segment when it is another segment than r[j]. */
+static void queue_far(const ef_fog_scene *s, span *sp, int j)
+{
+    sp->inf[j] = &sp->surf[j];
+    if (!sp->need_inf[j])
+        return;
+    ef_ray *far = &sp->q[sp->nq];
+    if (ef_scene_far_ray(s, &sp->r[j], far) && far->planar == sp->r[j].planar)
+        return;
+    sp->inf[j] = &sp->far[sp->nq++];
+}
+
 void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, float *const rgb[3],
                       float *alpha, const float *depth, const ef_aov_out *aov,
                       ef_tau_stats *stats)
@@ -41,76 +70,104 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     static const double zero3[3] = { 0, 0, 0 };
     const double *origin = aov ? aov->origin : zero3;
     /* Only the numerical components have info to give. */
-    int any_info = 0;
-    for (int c = 0; c < s->ncomp; ++c)
+    int any_info = 0, depth_only = 1;
+    for (int c = 0; c < s->ncomp; ++c) {
         any_info |= s->comp[c].model->tau_info != NULL;
+        depth_only &= s->comp[c].model->depth_only;
+    }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
+    /* Without info, every segment of a span is evaluated in one batch. */
+    const int batch = !want_info;
+    const int need_dir = !depth_only || (mask & EF_AOV_P);
     ef_tau_info info[EF_FOG_MAX_COMPONENTS];
+    span *sp = &(span) { .nq = 0 };
     for (int yy = 0; yy < h; ++yy) {
         const int y = y0 + yy;
-        for (int xx = 0; xx < w; ++xx) {
-            const int x = x0 + xx;
-            const size_t i = (size_t) yy * (size_t) w + (size_t) xx;
-            ef_ray r;
-            const int sky = ef_reconstruct(pass->cam, pass->conv, x, y, depth[i], &r);
-            if (mask & EF_AOV_P)
-                for (int k = 0; k < 3; ++k)
-                    aov->P[k][i] = to_float(aov_p(&r, origin, k));
-            if (mask & EF_AOV_DISTANCE)
-                aov->dist[i] = to_float(r.dist);
-            if (sky && s->sky == EF_SKY_KEEP) {
-                for (int k = 0; k < 4 && (mask & EF_AOV_FOG); ++k)
-                    aov->fog[k][i] = 0.0f;
-                for (int k = 0; k < 3 && (mask & EF_AOV_T); ++k)
-                    aov->T[k][i] = 1.0f;
-                for (int k = 0; k < 3 && (mask & EF_AOV_ERROR); ++k)
-                    aov->err[k][i] = 0.0f;
-                continue;
-            }
-            if (sky && s->sky == EF_SKY_DISTANCE_MODE)
-                ef_ray_at_distance(pass->cam, x, y, s->sky_distance, &r);
-            ef_fog_sample surf, inf;
-            double c[3], in[3], a = alpha ? alpha[i] : 1.0;
-            /* A NaN or infinite alpha is damaged data: the pixel is fogged
-             * as opaque and its alpha written back as it was, so no NaN or
-             * inf appears that the input did not have. */
-            const int bad_alpha = !isfinite(a);
-            if (bad_alpha)
-                a = 1.0;
-            const double a_in = a;
-            /* The fog behind only reaches the uncovered part (1 - a) of a pixel. */
-            const int need_inf = fog_uncovered && !(a == 1.0 && isfinite(r.dist));
-            ef_scene_eval_info(s, &r, &surf, need_inf ? &inf : NULL, want_info ? info : NULL);
-            if (!need_inf)
-                inf = surf;
-            for (int k = 0; k < 3; ++k)
-                in[k] = c[k] = rgb[k][i];
-            ef_composite(&surf, &inf, fog_uncovered, c, alpha ? &a : NULL);
-            for (int k = 0; k < 3; ++k)
-                rgb[k][i] = to_float(c[k]);
-            if (alpha && !bad_alpha)
-                alpha[i] = to_float(a);
-            if (mask & EF_AOV_FOG) {
-                for (int k = 0; k < 3; ++k)
-                    aov->fog[k][i] =
-                        to_float(c[k] - (surf.T[k] > 0.0 ? surf.T[k] * in[k] : 0.0));
-                aov->fog[3][i] = alpha ? to_float(a - a_in) : 0.0f;
-            }
-            if (mask & EF_AOV_T)
-                for (int k = 0; k < 3; ++k)
-                    aov->T[k][i] = to_float(surf.T[k]);
-            if (mask & EF_AOV_ERROR) {
-                double e[3] = { 0, 0, 0 };
-                for (int n = 0; want_info && n < s->ncomp; ++n)
+        for (int xs = 0; xs < w; xs += EF_RECON_SPAN) {
+            const int n = w - xs < EF_RECON_SPAN ? w - xs : EF_RECON_SPAN;
+            const size_t i0 = (size_t) yy * (size_t) w + (size_t) xs;
+            ef_reconstruct_span(pass->cam, pass->conv, x0 + xs, y, n, depth + i0, need_dir, sp->r,
+                                sp->sky);
+            sp->nq = 0;
+            for (int j = 0; j < n; ++j) {
+                const size_t i = i0 + (size_t) j;
+                ef_ray *r = &sp->r[j];
+                if (mask & EF_AOV_P)
                     for (int k = 0; k < 3; ++k)
-                        e[k] += info[n].err[k];
-                for (int k = 0; k < 3; ++k)
-                    aov->err[k][i] = to_float(aov_err(surf.T[k], e[k]));
+                        aov->P[k][i] = to_float(aov_p(r, origin, k));
+                if (mask & EF_AOV_DISTANCE)
+                    aov->dist[i] = to_float(r->dist);
+                if (sp->sky[j] && s->sky == EF_SKY_KEEP)
+                    continue;
+                if (sp->sky[j] && s->sky == EF_SKY_DISTANCE_MODE)
+                    ef_ray_at_distance(pass->cam, x0 + xs + j, y, s->sky_distance, r);
+                const double a = alpha ? alpha[i] : 1.0;
+                /* A NaN or infinite alpha is damaged data: the pixel is
+                 * fogged as opaque and its alpha written back as it was,
+                 * so no NaN or inf appears that the input did not have. */
+                sp->bad_alpha[j] = !isfinite(a);
+                sp->a[j] = sp->bad_alpha[j] ? 1.0 : a;
+                /* The fog behind only reaches the uncovered part (1 - a) of a pixel. */
+                sp->need_inf[j] = fog_uncovered && !(sp->a[j] == 1.0 && isfinite(r->dist));
+                if (batch)
+                    queue_far(s, sp, j);
             }
-            if (stats && want_info)
-                for (int n = 0; n < s->ncomp; ++n)
-                    if (s->comp[n].model->tau_info)
-                        ef_tau_stats_add(&stats[n], &info[n]);
+            if (batch) {
+                /* Pixels kept as they are (--sky keep) cost one wasted
+                 * segment each here, no branch per pixel. */
+                ef_scene_eval_rays(s, sp->r, n, sp->surf);
+                ef_scene_eval_rays(s, sp->q, sp->nq, sp->far);
+            }
+            for (int j = 0; j < n; ++j) {
+                const size_t i = i0 + (size_t) j;
+                if (sp->sky[j] && s->sky == EF_SKY_KEEP) {
+                    for (int k = 0; k < 4 && (mask & EF_AOV_FOG); ++k)
+                        aov->fog[k][i] = 0.0f;
+                    for (int k = 0; k < 3 && (mask & EF_AOV_T); ++k)
+                        aov->T[k][i] = 1.0f;
+                    for (int k = 0; k < 3 && (mask & EF_AOV_ERROR); ++k)
+                        aov->err[k][i] = 0.0f;
+                    continue;
+                }
+                ef_fog_sample one, other;
+                const ef_fog_sample *surf = &sp->surf[j], *inf = sp->inf[j];
+                if (!batch) {
+                    ef_scene_eval_info(s, &sp->r[j], &one, sp->need_inf[j] ? &other : NULL,
+                                       want_info ? info : NULL);
+                    surf = &one;
+                    inf = sp->need_inf[j] ? &other : &one;
+                }
+                double c[3], in[3], a = sp->a[j];
+                const double a_in = a;
+                for (int k = 0; k < 3; ++k)
+                    in[k] = c[k] = rgb[k][i];
+                ef_composite(surf, inf, fog_uncovered, c, alpha ? &a : NULL);
+                for (int k = 0; k < 3; ++k)
+                    rgb[k][i] = to_float(c[k]);
+                if (alpha && !sp->bad_alpha[j])
+                    alpha[i] = to_float(a);
+                if (mask & EF_AOV_FOG) {
+                    for (int k = 0; k < 3; ++k)
+                        aov->fog[k][i] =
+                            to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
+                    aov->fog[3][i] = alpha ? to_float(a - a_in) : 0.0f;
+                }
+                if (mask & EF_AOV_T)
+                    for (int k = 0; k < 3; ++k)
+                        aov->T[k][i] = to_float(surf->T[k]);
+                if (mask & EF_AOV_ERROR) {
+                    double e[3] = { 0, 0, 0 };
+                    for (int nn = 0; want_info && nn < s->ncomp; ++nn)
+                        for (int k = 0; k < 3; ++k)
+                            e[k] += info[nn].err[k];
+                    for (int k = 0; k < 3; ++k)
+                        aov->err[k][i] = to_float(aov_err(surf->T[k], e[k]));
+                }
+                if (stats && want_info)
+                    for (int nn = 0; nn < s->ncomp; ++nn)
+                        if (s->comp[nn].model->tau_info)
+                            ef_tau_stats_add(&stats[nn], &info[nn]);
+            }
         }
     }
 }

@@ -92,7 +92,7 @@ int ef_depth_conv_init(ef_depth_conv *conv, ef_depth_mode mode,
 
 /* The branch per sample is cheap next to the fog integral; the far-plane
  * tests are on the stored value, before rounding can move it. */
-int ef_depth_linearize(const ef_depth_conv *conv, double v, double *dist)
+static inline int linearize(const ef_depth_conv *conv, double v, double *dist)
 {
     const double n = conv->near_, f = conv->far_;
     double d;
@@ -151,4 +151,16 @@ int ef_depth_linearize(const ef_depth_conv *conv, double v, double *dist)
         return 1;
     *dist = d;
     return 0;
+}
+
+int ef_depth_linearize(const ef_depth_conv *conv, double v, double *dist)
+{
+    return linearize(conv, v, dist);
+}
+
+void ef_depth_linearize_span(const ef_depth_conv *conv, const float *v, int n, double *dist,
+                             unsigned char *sky)
+{
+    for (int i = 0; i < n; ++i)
+        sky[i] = (unsigned char) linearize(conv, v[i], &dist[i]);
 }

@@ -45,6 +45,10 @@ int ef_depth_conv_init(ef_depth_conv *conv, ef_depth_mode mode,
  * the far plane for the buffer modes), 0 otherwise. */
 int ef_depth_linearize(const ef_depth_conv *conv, double v, double *dist);
 
+/* ef_depth_linearize on n stored values: dist[i] and sky[i] (1 for sky). */
+void ef_depth_linearize_span(const ef_depth_conv *conv, const float *v, int n, double *dist,
+                             unsigned char *sky);
+
 /* The sky threshold on linear distance. */
 #define EF_SKY_DISTANCE 1e9
 

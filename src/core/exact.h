@@ -9,6 +9,18 @@
 
 #include "fog.h"
 
+/* Marks a per-pixel function for runtime dispatch: GCC on x86-64 Linux
+ * builds it twice, for the baseline ISA and for x86-64-v3 (AVX2, FMA), and
+ * the loader picks one per CPU. The results are the same bits: fma() is
+ * correctly rounded in libm and in hardware, and strict C11 contracts no
+ * other a*b+c (no -ffp-contract=fast). What buys is fma() without a libm
+ * call and wider vectors. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define EF_MULTIVERSION __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define EF_MULTIVERSION
+#endif
+
 /* An unevaluated sum hi + lo, |lo| <= ulp(hi)/2. */
 typedef struct ef_dd {
     double hi, lo;

@@ -50,6 +50,20 @@ void ef_fog_tau(const ef_fog_component *c, const ef_ray *r, double tau[3], ef_ta
     }
 }
 
+void ef_fog_tau_add(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3])
+{
+    if (c->model->tau_add) {
+        c->model->tau_add(c, r, n, acc);
+        return;
+    }
+    for (int j = 0; j < n; ++j) {
+        double t[3];
+        c->model->tau(c, &r[j], t);
+        for (int k = 0; k < 3; ++k)
+            acc[j][k] += t[k];
+    }
+}
+
 double ef_fog_per_unit(const ef_fog_context *ctx, double per_meter)
 {
     return per_meter / ctx->units_per_meter;

@@ -112,6 +112,10 @@ typedef struct ef_fog_model {
     /* Periodic seams for the reference integrator (NULL: none), like
      * functionals(): fills up to cap, returns how many there are. */
     int (*lattices)(const ef_fog_component *c, ef_fog_lattice *out, int cap);
+    /* Optional: adds tau along r[j] to acc[j] for j < n, the same bits as
+     * tau() added per ray (NULL: ef_fog_tau_add loops over tau()). */
+    void (*tau_add)(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3]);
+    int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */
 } ef_fog_model;
@@ -143,6 +147,10 @@ void ef_fog_free(ef_fog_component *c);
 /* c's optical depth along r, and into info (which may be NULL) its error
  * and cost: zero for the closed forms. */
 void ef_fog_tau(const ef_fog_component *c, const ef_ray *r, double tau[3], ef_tau_info *info);
+
+/* acc[j][k] += c's tau along r[j] in channel k, for j < n: one dispatch
+ * for n rays, the same sums as adding ef_fog_tau's per ray. */
+void ef_fog_tau_add(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3]);
 
 /* The registered model with this name, or NULL. */
 const ef_fog_model *ef_fog_model_find(const char *name);

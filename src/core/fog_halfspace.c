@@ -121,7 +121,7 @@ enum { IN_NONE = 0, IN_FINITE, IN_INFINITE };
  * IN_INFINITE: a sky ray that stays in the fog forever, at a depth that
  * grows or stays constant and > 0 (every density here is then > 0 far
  * enough along). One ef_line_of decides the common fog-free case. */
-static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
+EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
 {
     const double L = r->dist;
     if (!(L > 0))
@@ -157,7 +157,7 @@ static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
     return IN_FINITE;
 }
 
-static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     inside in;
     const int k = inside_part(c, r, &in);
@@ -172,7 +172,7 @@ static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau
 
 /* The density at the mean depth times l: Lengyel's both-inside
  * a L (x0 + x1)/2 and his crossing a h_in^2/(2|s|) = a l |h_in|/2 in one. */
-static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     inside in;
     const int k = inside_part(c, r, &in);
@@ -227,12 +227,16 @@ static double psi_over_b(double b)
  * so S -> 0 gives S l (xmin + dx/2) (the linear model) even when S/D
  * underflows; at and above 1, S -> inf (S/D may overflow) gives D l less
  * the transition layer. Each term is at most D: no spurious overflow. */
-static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     inside in;
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double D = c->p[P_DENS + i], S = c->p[P_SHARP + i], lam = c->p[P_LAMBDA + i];
+        if (i > 0 && D == c->p[P_DENS + i - 1] && S == c->p[P_SHARP + i - 1]) {
+            tau[i] = tau[i - 1];              /* grey fog: the same sum, once */
+            continue;
+        }
         if (k == IN_NONE || !(D > 0 && S > 0)) {
             tau[i] = 0.0;
             continue;

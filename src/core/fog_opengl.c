@@ -49,6 +49,17 @@ static void tau_exp(const ef_fog_component *c, const ef_ray *r, double tau[3])
         tau[i] = scaled(c->p[i], z);
 }
 
+/* tau_exp over n rays, added to acc: a loop the compiler vectorises. */
+static void tau_add_exp(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3])
+{
+    const int planar = c->distance == EF_DIST_PLANAR;
+    for (int j = 0; j < n; ++j) {
+        const double z = planar ? r[j].planar : r[j].dist;
+        for (int i = 0; i < 3; ++i)
+            acc[j][i] += scaled(c->p[i], z);
+    }
+}
+
 static void tau_exp2(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const double z = ef_fog_distance(c, r);
@@ -95,9 +106,10 @@ static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3]
 
 const ef_fog_model ef_fog_linear = { .name = "linear", .keys = linear_keys, .set = set_linear,
                                      .finish = finish_linear, .tau = tau_linear,
-                                     .uses_distance = 1 };
+                                     .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp = { .name = "exp", .keys = density_keys, .set = set_density,
-                                  .finish = finish_density, .tau = tau_exp, .uses_distance = 1 };
+                                  .finish = finish_density, .tau = tau_exp,
+                                  .tau_add = tau_add_exp, .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp2 = { .name = "exp2", .keys = density_keys, .set = set_density,
                                    .finish = finish_density, .tau = tau_exp2,
-                                   .uses_distance = 1 };
+                                   .depth_only = 1, .uses_distance = 1 };

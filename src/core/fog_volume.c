@@ -302,7 +302,7 @@ static inline void crossing_of(const double *p, const double org[3], const doubl
 /* The inside length once the binding entering plane in (or -1: entry at 0)
  * and leaving plane out (or -1: exit at len) are known, with their
  * crossings xi, xo (xi->h1 needed when out < 0 and len is finite). */
-static double bound_length(const double *pl, int in, const crossing *xi, int out,
+EF_MULTIVERSION static double bound_length(const double *pl, int in, const crossing *xi, int out,
                            const crossing *xo, double len)
 {
     if (out < 0) {
@@ -327,7 +327,7 @@ static double bound_length(const double *pl, int in, const crossing *xi, int out
 }
 
 /* The exact pass: every plane in double-double. */
-static double inside_length_exact(const double *pl, int np, const double org[3],
+EF_MULTIVERSION static double inside_length_exact(const double *pl, int np, const double org[3],
                                   const double dir[3], double len)
 {
     const int sky = isinf(len);
@@ -385,7 +385,7 @@ enum { CLIP_EMPTY, CLIP_BOUND, CLIP_UNSURE };
 /* The plain-double pass. CLIP_EMPTY: the segment certainly misses the
  * volume. CLIP_BOUND: *in, *out are certainly the binding planes (-1: none)
  * and entry < exit. CLIP_UNSURE: a sign or a choice is within rounding. */
-static int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
+EF_MULTIVERSION static int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
                      double len, int *in_, int *out_)
 {
     const int sky = isinf(len);
@@ -475,7 +475,7 @@ static int clip_fast(const double *pl, int np, const double org[3], const double
 /* The length of the part of [0, len] (len may be INFINITY) of the ray
  * org + t dir where every plane's value is < 0: 0 when none, INFINITY when
  * the ray stays inside forever. */
-static double inside_length(const double *pl, int np, const double org[3], const double dir[3],
+EF_MULTIVERSION static double inside_length(const double *pl, int np, const double org[3], const double dir[3],
                             double len)
 {
     int in, out;
@@ -495,7 +495,7 @@ static double inside_length(const double *pl, int np, const double org[3], const
     return bound_length(pl, in, &xi, out, &xo, len);
 }
 
-static void tau_volume(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_MULTIVERSION static void tau_volume(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const double *rho = &c->p[P_RHO];
     tau[0] = tau[1] = tau[2] = 0.0;

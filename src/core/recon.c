@@ -2,13 +2,21 @@
 
 #include <math.h>
 
+/* The world vector w = (dx, dy, 1) . rot of a camera-space direction, and
+ * its length: the one formula every ray of this file is built from. */
+static inline double world_vec(const ef_camera *cam, double dx, double dy, double w[3])
+{
+    const double dc[3] = { dx, dy, 1.0 };
+    ef_camera_to_world_dir(cam, dc, w);
+    return sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+}
+
 /* Shared tail: the camera-space point is t * (dx, dy, 1); its world offset
  * is t * w with w = dir . rot, so distances stay relative to the camera. */
 static void ray_from_cam(const ef_camera *cam, const double dc[3], double t, ef_ray *r)
 {
     double w[3];
-    ef_camera_to_world_dir(cam, dc, w);
-    const double len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double len = world_vec(cam, dc[0], dc[1], w);
     r->dir[0] = w[0] / len;
     r->dir[1] = w[1] / len;
     r->dir[2] = w[2] / len;
@@ -17,6 +25,12 @@ static void ray_from_cam(const ef_camera *cam, const double dc[3], double t, ef_
     r->org[0] = cam->pos[0];
     r->org[1] = cam->pos[1];
     r->org[2] = cam->pos[2];
+}
+
+/* Radial depth is measured along the ray: scale by 1/|dc| to reach dc.z = t. */
+static inline double radial_to_planar(double d, double dx, double dy)
+{
+    return d / sqrt(dx * dx + dy * dy + 1.0);
 }
 
 int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
@@ -28,11 +42,52 @@ int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
         ray_from_cam(cam, dc, INFINITY, r);
         return 1;
     }
-    /* Radial depth is measured along the ray: scale by 1/|dc| to reach dc.z = t. */
     if (conv->mode == EF_DEPTH_RADIAL)
-        d /= sqrt(dc[0] * dc[0] + dc[1] * dc[1] + 1.0);
+        d = radial_to_planar(d, dc[0], dc[1]);
     ray_from_cam(cam, dc, d, r);
     return 0;
+}
+
+void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
+                         const float *depth, int need_dir, ef_ray *r, unsigned char *sky)
+{
+    /* ef_camera_ray's sums in its order, with the row's terms hoisted:
+     * h = (px ray[0..2] + py ray[3..5]) + ray[6..8]. Branch-free loops over
+     * arrays, so the compiler vectorises them. */
+    const double *ray = cam->ray, py = y + 0.5, unit = cam->unit;
+    const double ry[3] = { py * ray[3], py * ray[4], py * ray[5] };
+    double dx[EF_RECON_SPAN], dy[EF_RECON_SPAN], len[EF_RECON_SPAN], d[EF_RECON_SPAN];
+    double w[3][EF_RECON_SPAN];
+    if (n > EF_RECON_SPAN)
+        n = EF_RECON_SPAN;
+    for (int i = 0; i < n; ++i) {
+        const double px = (double) (x0 + i) + 0.5;
+        const double hx = (px * ray[0] + ry[0]) + ray[6];
+        const double hy = (px * ray[1] + ry[1]) + ray[7];
+        const double hz = (px * ray[2] + ry[2]) + ray[8];
+        dx[i] = hx / hz;
+        dy[i] = hy / hz;
+    }
+    for (int i = 0; i < n; ++i) {
+        double v[3];
+        len[i] = world_vec(cam, dx[i], dy[i], v);
+        w[0][i] = v[0];
+        w[1][i] = v[1];
+        w[2][i] = v[2];
+    }
+    ef_depth_linearize_span(conv, depth, n, d, sky);
+    if (conv->mode == EF_DEPTH_RADIAL)
+        for (int i = 0; i < n; ++i)
+            d[i] = radial_to_planar(d[i], dx[i], dy[i]);
+    for (int i = 0; i < n; ++i) {
+        const double t = sky[i] ? INFINITY : d[i];
+        r[i].planar = t * unit;
+        r[i].dist = t * (len[i] * unit);
+        for (int k = 0; k < 3; ++k) {
+            r[i].org[k] = cam->pos[k];
+            r[i].dir[k] = need_dir ? w[k][i] / len[i] : 0.0;
+        }
+    }
 }
 
 void ef_ray_at_distance(const ef_camera *cam, int x, int y, double dist, ef_ray *r)

@@ -20,6 +20,16 @@ typedef struct ef_ray {
 int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
                    int x, int y, double v, ef_ray *r);
 
+/* The most pixels ef_reconstruct_span builds in one call. */
+#define EF_RECON_SPAN 64
+
+/* ef_reconstruct for the n <= EF_RECON_SPAN pixels (x0 + i, y) of one row
+ * with stored depths depth[i], into r[i] and sky[i] (1 for a sky pixel):
+ * the same bits as n calls of ef_reconstruct, for a fraction of the cost.
+ * With need_dir == 0, r[i].dir is left 0 (for users of dist/planar only). */
+void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
+                         const float *depth, int need_dir, ef_ray *r, unsigned char *sky);
+
 /* The ray of pixel (x, y) ending at radial distance dist (INFINITY allowed). */
 void ef_ray_at_distance(const ef_camera *cam, int x, int y, double dist, ef_ray *r);
 

@@ -155,6 +155,47 @@ void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf, 
     ef_scene_eval_info(s, r, surf, inf, NULL);
 }
 
+int ef_scene_far_ray(const ef_fog_scene *s, const ef_ray *r, ef_ray *far)
+{
+    *far = *r;
+    if (s->sky == EF_SKY_DISTANCE_MODE && isfinite(r->dist) && r->dist > 0) {
+        /* The background is a shell at sky_distance: "infinity" ends there. */
+        const double d = fmax(s->sky_distance, r->dist);
+        far->planar = r->planar * (d / r->dist);
+        far->dist = d;
+    } else {
+        far->dist = far->planar = INFINITY;
+    }
+    return far->dist == r->dist;
+}
+
+void ef_scene_eval_rays(const ef_fog_scene *s, const ef_ray *r, int n, ef_fog_sample *out)
+{
+    if (s->any_color) {
+        for (int j = 0; j < n; ++j) {
+            sum_tau(s, &r[j], &out[j], NULL);
+            transmit(out[j].T);
+        }
+        return;
+    }
+    /* Component-major, 128 rays at a time: one dispatch per component per
+     * chunk; each ray's sum is still 0 + tau_0 + tau_1 + ... as in sum_tau. */
+    for (int j0 = 0; j0 < n; j0 += 128) {
+        const int m = n - j0 < 128 ? n - j0 : 128;
+        double acc[128][3] = { { 0 } };
+        for (int i = 0; i < s->ncomp; ++i)
+            ef_fog_tau_add(&s->comp[i], r + j0, m, acc);
+        for (int j = 0; j < m; ++j) {
+            ef_fog_sample *o = &out[j0 + j];
+            for (int k = 0; k < 3; ++k) {
+                o->T[k] = acc[j][k];
+                o->F[k] = s->color[k];
+            }
+            transmit(o->T);
+        }
+    }
+}
+
 void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
                         ef_fog_sample *inf, ef_tau_info *info)
 {
@@ -163,17 +204,9 @@ void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *s
         transmit(surf->T);
         return;
     }
-    ef_ray far = *r;
-    if (s->sky == EF_SKY_DISTANCE_MODE && isfinite(r->dist) && r->dist > 0) {
-        /* The background is a shell at sky_distance: "infinity" ends there. */
-        const double d = fmax(s->sky_distance, r->dist);
-        far.planar = r->planar * (d / r->dist);
-        far.dist = d;
-    } else {
-        far.dist = far.planar = INFINITY;
-    }
+    ef_ray far;
     /* The surface segment's info: the far one when they are the same. */
-    const int same = far.dist == r->dist;
+    const int same = ef_scene_far_ray(s, r, &far);
     sum_tau(s, &far, inf, same ? info : NULL);
     transmit(inf->T);
     if (same) {
@@ -182,22 +215,4 @@ void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *s
     }
     sum_tau(s, r, surf, info);
     transmit(surf->T);
-}
-
-void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
-                  double rgb[3], double *alpha)
-{
-    const double a = alpha ? *alpha : 1.0;
-    const double *T = surf->T, *Tinf = inf->T;
-    for (int k = 0; k < 3; ++k) {
-        /* T = 0 hides the surface entirely, even an infinite or NaN one. */
-        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * surf->F[k];
-        if (fog_uncovered)
-            rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * inf->F[k];
-    }
-    if (alpha && fog_uncovered) {
-        /* One alpha for three channels: the mean coverage of the fog behind. */
-        const double cover = (3.0 - Tinf[0] - Tinf[1] - Tinf[2]) / 3.0;
-        *alpha = a + (1.0 - a) * cover;
-    }
 }

@@ -5,6 +5,8 @@
 
 #include "fog.h"
 
+#include <math.h>
+
 typedef enum ef_sky_mode { EF_SKY_FOG = 0, EF_SKY_KEEP, EF_SKY_DISTANCE_MODE } ef_sky_mode;
 
 typedef struct ef_fog_scene {
@@ -60,12 +62,36 @@ void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
 void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf,
                         ef_fog_sample *inf, ef_tau_info *info);
 
+/* The far segment of r's pixel: to infinity, or with --sky distance=D to
+ * D (or r's own end when farther). Returns 1 when it is r itself. */
+int ef_scene_far_ray(const ef_fog_scene *s, const ef_ray *r, ef_ray *far);
+
+/* out[j] = the fog along r[j] for j < n, the same bits as ef_scene_eval
+ * gives for one segment (inf NULL), evaluated component by component over
+ * all n rays. */
+void ef_scene_eval_rays(const ef_fog_scene *s, const ef_ray *r, int n, ef_fog_sample *out);
+
 /* Premultiplied compositing of one pixel in place:
  *   rgb   = T rgb + (1 - T) a F + (1 - a)(1 - Tinf) Finf
  *   alpha = a + (1 - a)(1 - Tinf)
  * fog_uncovered == 0 drops the last term and leaves alpha alone (--sky keep).
  * alpha may be NULL (a = 1). */
-void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
-                  double rgb[3], double *alpha);
+static inline void ef_composite(const ef_fog_sample *surf, const ef_fog_sample *inf, int fog_uncovered,
+                                double rgb[3], double *alpha)
+{
+    const double a = alpha ? *alpha : 1.0;
+    const double *T = surf->T, *Tinf = inf->T;
+    for (int k = 0; k < 3; ++k) {
+        /* T = 0 hides the surface entirely, even an infinite or NaN one. */
+        rgb[k] = (T[k] > 0.0 ? T[k] * rgb[k] : 0.0) + (1.0 - T[k]) * a * surf->F[k];
+        if (fog_uncovered)
+            rgb[k] += (1.0 - a) * (1.0 - Tinf[k]) * inf->F[k];
+    }
+    if (alpha && fog_uncovered) {
+        /* One alpha for three channels: the mean coverage of the fog behind. */
+        const double cover = (3.0 - Tinf[0] - Tinf[1] - Tinf[2]) / 3.0;
+        *alpha = a + (1.0 - a) * cover;
+    }
+}
 
 #endif
