@@ -374,7 +374,7 @@ static void test_origin_far_from_zero(void **state)
     /* Relative to the origin the positions keep float precision (an
      * origin subtracted after the float cast would be off by ~1/16). */
     check_aovs(&f, in, out, &e);
-    double v[3];
+    double v[3] = { 0, 0, 0 };
     assert_int_equal(read_v3d(out, "exrfog/aovOrigin", v), 0);
     assert_true(v[0] == 1000000.0 && v[1] == 0.0 && v[2] == -2000000.0);
     char params[2048];

@@ -438,7 +438,7 @@ extern "C" int ef_ocio_space_from_chromaticities(const ef_ocio *o, const float c
             if (!linear_matrix(cfg->getProcessor(name, ref.c_str())->getDefaultCPUProcessor(), m))
                 continue;
             mul3(base, m, x); // candidate RGB -> XYZ (chrom's white)
-            double got[8], err = 0;
+            double got[8] = { 0 }, err = 0;
             for (int c = 0; c < 4; ++c) {
                 double X, Y, Z;
                 if (c < 3) {
