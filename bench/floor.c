@@ -231,6 +231,16 @@ static int define_part(exr_const_context_t in, exr_context_t out, int p, int com
         (level > 0 && exr_set_zip_compression_level(out, op, level)) ||
         exr_copy_unset_attributes(out, op, in, p))
         return -1;
+    /* Chunk for chunk: the output must chunk scanlines as the input does. */
+    static const int lines[] = { 1, 1, 1, 16, 32, 16, 32, 32, 32, 256 };
+    const int oc = comp >= 0 ? comp : (int) c;
+    int32_t li = 1;
+    if (st == EXR_STORAGE_SCANLINE &&
+        (exr_get_scanlines_per_chunk(in, p, &li) || oc < 0 || oc > 9 || li != lines[oc])) {
+        fprintf(stderr, "floor: part %d: --compression must keep the input's %d scanlines per "
+                        "chunk\n", p, li);
+        return -1;
+    }
     return 0;
 }
 
