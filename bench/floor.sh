@@ -90,8 +90,10 @@ for size in $sizes; do
             oii=$(median <<<"${walls[$(( zipish ? 2 : 1 ))]}")
             for (( i = 0; i < n; ++i )); do
                 m=$(median <<<"${walls[$i]}")
-                rows+=("$(awk -v s="$size" -v c="$comp" -v t="$nt" -v name="${names[$i]}" -v m="$m" -v f="$ref" -v o="$oii" \
-                    'BEGIN { printf "| %s | %s | %s | %s | %.3f | %.2f× | %.2f× |", s, c, t, name, m, m / f, m / o }')")
+                row="$(awk -v s="$size" -v c="$comp" -v t="$nt" -v name="${names[$i]}" -v m="$m" -v f="$ref" -v o="$oii" \
+                    'BEGIN { printf "| %s | %s | %s | %s | %.3f | %.2f× | %.2f× |", s, c, t, name, m, m / f, m / o }')"
+                rows+=("$row")
+                echo "$row" >&2   # progress: an interrupted run still has its rows
             done
             unset walls
         done
