@@ -19,15 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
-}
 
 typedef struct floor_part {
     exr_const_context_t in;
@@ -92,16 +84,9 @@ static void bind_planes(exr_coding_channel_info_t *chs, int n, uint8_t *buf, int
 static int write_chunk(void *arg, int u, const ef_unit_buf *b)
 {
     floor_part *j = arg;
-    for (int i = 0; i < b->n; ++i) {
-        const exr_result_t rv =
-            j->tiled ? exr_write_tile_chunk(j->out, j->part, b->y[i], b->ty[i], 0, 0,
-                                            b->data + b->off[i], b->size[i])
-                     : exr_write_scanline_chunk(j->out, j->part, b->y[i], b->data + b->off[i],
-                                                b->size[i]);
-        if (rv) {
-            part_fail(j, "cannot write", u);
-            return -1;
-        }
+    if (ef_unit_write(j->out, j->part, j->tiled, b)) {
+        part_fail(j, "cannot write", u);
+        return -1;
     }
     return 0;
 }
@@ -322,7 +307,7 @@ int main(int argc, char **argv)
         usage(stderr);
         return 2;
     }
-    const double t0 = now();
+    const double t0 = ef_now();
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     exr_context_t in = NULL, out = NULL;
     int nparts = 0, rc = 0;
@@ -355,7 +340,7 @@ int main(int argc, char **argv)
     if (rc)
         unlink(argv[a + 1]);
     else if (stats)
-        fprintf(stderr, "floor: wall %.3f s, %d threads, ring wait %.3f s\n", now() - t0, threads,
+        fprintf(stderr, "floor: wall %.3f s, %d threads, ring wait %.3f s\n", ef_now() - t0, threads,
                 wait);
     return rc;
 }

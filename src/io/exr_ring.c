@@ -5,11 +5,24 @@
 #include <string.h>
 #include <time.h>
 
-static double ring_now(void)
+double ef_now(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
+}
+
+int ef_unit_write(exr_context_t out, int part, int tiled, const ef_unit_buf *b)
+{
+    for (int i = 0; i < b->n; ++i) {
+        const exr_result_t rv =
+            tiled ? exr_write_tile_chunk(out, part, b->y[i], b->ty[i], 0, 0, b->data + b->off[i],
+                                         b->size[i])
+                  : exr_write_scanline_chunk(out, part, b->y[i], b->data + b->off[i], b->size[i]);
+        if (rv)
+            return i + 1;
+    }
+    return 0;
 }
 
 int ef_unit_append(ef_unit_buf *o, const void *p, size_t n, int y, int ty)
@@ -81,9 +94,9 @@ int ef_ring_claim(ef_ring *r)
     int u = -1;
     pthread_mutex_lock(&r->lock);
     while (!r->failed && r->next < r->nunits && r->next >= r->written + r->nslots) {
-        const double t0 = ring_now();
+        const double t0 = ef_now();
         pthread_cond_wait(&r->space, &r->lock);
-        r->wait_s += ring_now() - t0;
+        r->wait_s += ef_now() - t0;
     }
     if (!r->failed && r->next < r->nunits)
         u = r->next++;

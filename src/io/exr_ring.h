@@ -11,10 +11,11 @@
  * still being encoded while nslots - 1 later units are done; that time is
  * counted in wait_s.
  *
- * Depends only on pthreads (bench/floor links it too). */
+ * Depends only on pthreads and OpenEXRCore (bench/floor links it too). */
 #ifndef EF_EXR_RING_H
 #define EF_EXR_RING_H
 
+#include <openexr.h>
 #include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -29,6 +30,13 @@ typedef struct ef_unit_buf {
     int ty[EF_UNIT_MAX_CHUNKS];   /* tile y */
     size_t off[EF_UNIT_MAX_CHUNKS], size[EF_UNIT_MAX_CHUNKS];
 } ef_unit_buf;
+
+/* Monotonic seconds. */
+double ef_now(void);
+
+/* Writes b's chunks to part `part` of out (scanline or one-level tiles).
+ * Returns 0, or the failing chunk's index + 1. */
+int ef_unit_write(exr_context_t out, int part, int tiled, const ef_unit_buf *b);
 
 /* Appends one chunk's bytes (keyed by y, ty). Returns 0 or -1. */
 int ef_unit_append(ef_unit_buf *o, const void *p, size_t n, int y, int ty);

@@ -15,16 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <time.h>
 #include <unistd.h>
 
 
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
-}
 
 /* Geometry of one part as the stream walks it. */
 typedef struct part_geom {
@@ -313,22 +306,15 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
 static int write_unit(void *arg, int u, const ef_unit_buf *b)
 {
     part_job *j = arg;
-    const double t0 = now();
-    for (int i = 0; i < b->n; ++i) {
-        exr_result_t rv =
-            j->g.tiled ? exr_write_tile_chunk(j->out, j->part, b->y[i], b->ty[i], 0, 0,
-                                              b->data + b->off[i], b->size[i])
-                       : exr_write_scanline_chunk(j->out, j->part, b->y[i], b->data + b->off[i],
-                                                  b->size[i]);
-        if (rv) {
-            int x0, y0, w, h;
-            unit_rect(&j->g, u, &x0, &y0, &w, &h);
-            job_fail(j, j->out_path, "cannot write the output chunk at scanline %d", y0,
-                     ef_exr_last_core_message());
-            return -1;
-        }
+    const double t0 = ef_now();
+    if (ef_unit_write(j->out, j->part, j->g.tiled, b)) {
+        int x0, y0, w, h;
+        unit_rect(&j->g, u, &x0, &y0, &w, &h);
+        job_fail(j, j->out_path, "cannot write the output chunk at scanline %d", y0,
+                 ef_exr_last_core_message());
+        return -1;
     }
-    j->t_write += now() - t0;
+    j->t_write += ef_now() - t0;
     return 0;
 }
 
@@ -378,7 +364,7 @@ static void *worker(void *arg)
             break;
         int x0, y0, w, h;
         unit_rect(&j->g, u, &x0, &y0, &w, &h);
-        double t0 = now();
+        double t0 = ef_now();
         /* decode */
         for (int y = y0; y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
             exr_chunk_info_t ci;
@@ -402,7 +388,7 @@ static void *worker(void *arg)
                          y0, ef_exr_last_core_message());
                 goto out;
             }
-        double t1 = now();
+        double t1 = ef_now();
         td += t1 - t0;
         for (int t = 0; t < j->ntarget; ++t) {
             const ef_channel_plan *pl = j->t[t].pl;
@@ -424,7 +410,7 @@ static void *worker(void *arg)
             ck.depth = j->t[t].depth_local >= 0 ? planes[j->t[t].depth_local] : depth[t];
             j->fn(j->user, &ck);
         }
-        double t2 = now();
+        double t2 = ef_now();
         tf += t2 - t1;
         /* encode */
         ob.n = 0;
@@ -446,7 +432,7 @@ static void *worker(void *arg)
                 goto out;
             }
         }
-        double t3 = now();
+        double t3 = ef_now();
         te += t3 - t2;
         /* park; the ring writes it in unit order */
         if (ef_ring_put(&j->ring, u, &ob))
@@ -820,7 +806,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
 {
     exr_context_initializer_t init;
     exr_context_t out = NULL;
-    double t0 = now();
+    double t0 = ef_now();
     memset(stats, 0, sizeof *stats);
     const int nplans = o->nplans > 0 ? o->nplans : 1;
     if (nplans > EF_MAX_VIEWS)
@@ -907,7 +893,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     }
     if (rc && (sink.errnum || !err->file))
         err->file = out_path;
-    stats->wall_s = now() - t0;
+    stats->wall_s = ef_now() - t0;
     return rc;
 }
 
