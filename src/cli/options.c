@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "aov.h"
+#include "exr_deflate.h"
 #include "exr_io.h"
 #include "colour.h"
 #include "ocio_shim.h"
@@ -22,7 +23,7 @@ enum {
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE,
-    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON
+    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC
 };
 
 static const struct option long_opts[] = {
@@ -57,6 +58,7 @@ static const struct option long_opts[] = {
     { "near", required_argument, NULL, OPT_NEAR },
     { "far", required_argument, NULL, OPT_FAR },
     { "compression", required_argument, NULL, OPT_COMPRESSION },
+    { "codec", required_argument, NULL, OPT_CODEC },
     { "data-type", required_argument, NULL, 'd' },
     { "threads", required_argument, NULL, OPT_THREADS },
     { "preview", required_argument, NULL, OPT_PREVIEW },
@@ -129,6 +131,7 @@ void ef_options_usage(FILE *out)
             "      --compression C      none|rle|zips|zip|piz|pxr24|b44|b44a|dwaa|dwab (default:\n"
             "                           the input's); zip:LEVEL, zips:LEVEL with zlib level\n"
             "                           1-9; dwaa:LEVEL, dwab:LEVEL (default 45)\n"
+            "      --codec C            libdeflate (default) or zlib: the DEFLATE of zip/zips\n"
             "  -d, --data-type T        half|float output for half/float channels (depth,\n"
             "                           P and ids stay float), or CHANNEL=half|float\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
@@ -498,6 +501,11 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         case OPT_COMPRESSION:
             if (ef_compression_parse(a, &o->compression, &o->zip_level, &o->dwa_level, err))
                 return EF_PARSE_USAGE;
+            break;
+        case OPT_CODEC:
+            if (strcmp(a, "libdeflate") && strcmp(a, "zlib"))
+                return ef_fail(err, "--codec '%s' is not libdeflate or zlib", a), EF_PARSE_USAGE;
+            o->codec = strcmp(a, "zlib") ? EF_CODEC_LIBDEFLATE : EF_CODEC_ZLIB;
             break;
         case 'd': {
             /* TYPE for every half/float channel, or CHANNEL=TYPE for one */

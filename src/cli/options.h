@@ -20,6 +20,7 @@ typedef struct ef_options {
     ef_cam_flags cam;
     int compression;          /* -1: keep the input's */
     int zip_level;            /* -1: OpenEXRCore's default */
+    int codec;                /* --codec: EF_CODEC_LIBDEFLATE (0, default) or EF_CODEC_ZLIB */
     float dwa_level;          /* --compression dwaa:LEVEL, or -1 */
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
     /* -d CHANNEL=TYPE, as oiiotool: per-channel types over pixel_type */

@@ -1323,6 +1323,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     ef_stream_opts so = { .threads = o->threads && o->threads < cpus ? o->threads : cpus,
                           .compression = o->compression,
                           .zip_level = o->zip_level,
+                          .codec = o->codec,
                           .pixel_type = o->pixel_type,
                           .chan_type_name = o->chan_type_name,
                           .chan_type = o->chan_type,
@@ -1434,8 +1435,8 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
         getrusage(RUSAGE_SELF, &ru);
         fprintf(msg_out(),
                 "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode %.3f s, "
-                "write %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
-                st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.units, so.threads,
+                "write %.3f s, wait %.3f s; %ld units on %d threads; peak memory %.1f MB\n",
+                st.wall_s, st.decode_s, st.fog_s, st.encode_s, st.write_s, st.wait_s, st.units, so.threads,
                 (double) ru.ru_maxrss / 1024.0);
         print_tau_stats(&o->scene, job.stats);
     }

@@ -108,6 +108,7 @@ typedef void (*ef_chunk_fn)(void *user, const ef_chunk *chunk);
 
 typedef struct ef_stream_stats {
     double decode_s, fog_s, encode_s, write_s;  /* summed over threads */
+    double wait_s;            /* summed over threads: blocked on a full write ring (exr_ring.h) */
     double wall_s;
     long units;
 } ef_stream_stats;
@@ -117,6 +118,8 @@ typedef struct ef_stream_opts {
     int nplans;               /* plans (views) in the plan array; 0 means 1 */
     int compression;          /* exr_compression_t, or -1 to keep each part's */
     int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */
+    int codec;                /* ZIP/ZIPS through EF_CODEC_LIBDEFLATE (0, the default) or
+                                 EF_CODEC_ZLIB (1, OpenEXRCore's own); exr_deflate.h */
     int pixel_type;           /* EXR_PIXEL_HALF / _FLOAT for half/float channels, or -1 to keep;
                                  HALF never demotes ef_data_channel()s nor the depth read */
     const char *depth_name;   /* the depth channel exrfog reads in INPUT, or NULL */

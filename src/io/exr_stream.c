@@ -4,26 +4,20 @@
  * written in chunk order. Memory is a few units per thread, whatever the
  * image size. */
 #include "exr_io.h"
+#include "exr_deflate.h"
+#include "exr_ring.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
 #include <pthread.h>
-#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <time.h>
 #include <unistd.h>
 
 
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double) ts.tv_sec + 1e-9 * (double) ts.tv_nsec;
-}
 
 /* Geometry of one part as the stream walks it. */
 typedef struct part_geom {
@@ -94,7 +88,7 @@ static exr_pixel_type_t plane_type(exr_pixel_type_t file_type, uint8_t as_float)
  * gets a destination: Core 3.1.5 crashes on NULL ones. */
 static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *ci, int cx,
                         int cy, exr_decode_pipeline_t *dec, int *ready, void **planes, int stride,
-                        int ox, int oy, const uint8_t *as_float)
+                        int ox, int oy, const uint8_t *as_float, int codec)
 {
     const int first = !*ready;
     exr_result_t rv = first ? exr_decoding_initialize(ctx, p, ci, dec)
@@ -119,7 +113,8 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
     }
-    if (first && exr_decoding_choose_default_routines(ctx, p, dec))
+    if (first && (exr_decoding_choose_default_routines(ctx, p, dec) ||
+                  (codec == EF_CODEC_LIBDEFLATE && ef_deflate_decoding_setup(ctx, p, dec))))
         return -1;
     return exr_decoding_run(ctx, p, dec) ? -1 : 0;
 }
@@ -148,6 +143,7 @@ static int chunk_at(exr_const_context_t ctx, int p, const part_geom *g, int x, i
 typedef struct depth_reader {
     exr_const_context_t ctx;
     int part, chan, nch;
+    int codec;                /* EF_CODEC_* */
     part_geom g;
     exr_decode_pipeline_t dec;
     int ready;
@@ -179,7 +175,7 @@ static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
                 }
                 r->cached = 0;
                 if (decode_chunk(r->ctx, r->part, &ci, cx, cy, &r->dec, &r->ready, r->planes,
-                                 ci.width, cx, cy, r->as_float))
+                                 ci.width, cx, cy, r->as_float, r->codec))
                     return -1;
                 r->cached = 1;
                 r->cx = cx;
@@ -205,7 +201,7 @@ static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
 static void depth_reader_free(depth_reader *r)
 {
     if (r->ready)
-        exr_decoding_destroy(r->ctx, &r->dec);
+        ef_deflate_decoding_destroy(r->ctx, &r->dec);
     for (int k = 0; r->planes && k < r->nch; ++k)
         free(r->planes[k]);
     free(r->planes);
@@ -237,13 +233,13 @@ typedef struct part_job {
     } t[EF_MAX_VIEWS];
     ef_chunk_fn fn;
     void *user;
-    atomic_int next_unit;
+    int codec;                /* EF_CODEC_* */
+    ef_ring ring;             /* pending encoded units, written in order */
     pthread_mutex_t lock;
-    pthread_cond_t turn;
-    int written;              /* units written so far (guarded by lock) */
     int failed;               /* guarded by lock */
     ef_err err;
-    double t_decode, t_fog, t_encode, t_write;
+    double t_decode, t_fog, t_encode;
+    double t_write;           /* only the ring's writer touches it */
 } part_job;
 
 /* Records the first failure; file is the file it is about. */
@@ -257,46 +253,14 @@ static void job_fail(part_job *j, const char *file, const char *fmt, int a, cons
         j->err.file = file;
         j->failed = 1;
     }
-    pthread_cond_broadcast(&j->turn);
     pthread_mutex_unlock(&j->lock);
-}
-
-/* Compressed chunks of one unit, kept until it is this unit's turn. */
-typedef struct out_buf {
-    uint8_t *data;
-    size_t len, cap;
-    int n;
-    int y[64];                /* scanline start or tile index x */
-    int ty[64];
-    size_t off[64], size[64];
-} out_buf;
-
-static int out_append(out_buf *o, const void *p, size_t n, int y, int ty)
-{
-    if (o->n >= (int) (sizeof o->y / sizeof o->y[0]))
-        return -1;
-    if (o->len + n > o->cap) {
-        size_t cap = (o->len + n) * 2;
-        uint8_t *d = realloc(o->data, cap);
-        if (!d)
-            return -1;
-        o->data = d;
-        o->cap = cap;
-    }
-    memcpy(o->data + o->len, p, n);
-    o->y[o->n] = y;
-    o->ty[o->n] = ty;
-    o->off[o->n] = o->len;
-    o->size[o->n] = n;
-    o->n++;
-    o->len += n;
-    return 0;
+    ef_ring_fail(&j->ring);
 }
 
 /* Packs and compresses one output chunk, copying the bytes into o. */
 static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
                         const exr_chunk_info_t *ci, int cy, void **planes, int stride, int oy,
-                        out_buf *o, int key_y, int key_ty)
+                        ef_unit_buf *o, int key_y, int key_ty)
 {
     exr_result_t rv = *ready ? exr_encoding_update(j->out, j->part, ci, enc)
                              : exr_encoding_initialize(j->out, j->part, ci, enc);
@@ -320,7 +284,8 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         ch->user_line_stride = 4 * stride;
     }
     if (!*ready) {
-        if (exr_encoding_choose_default_routines(j->out, j->part, enc))
+        if (exr_encoding_choose_default_routines(j->out, j->part, enc) ||
+            (j->codec == EF_CODEC_LIBDEFLATE && ef_deflate_encoding_setup(j->out, j->part, enc)))
             return -1;
         /* Only pack and compress here; the ordered writer stores the bytes. */
         enc->write_fn = NULL;
@@ -333,8 +298,24 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
     exr_get_compression(j->out, j->part, &comp);
     if (comp == EXR_COMPRESSION_NONE || !enc->compressed_buffer ||
         enc->compressed_bytes >= enc->packed_bytes)
-        return out_append(o, enc->packed_buffer, enc->packed_bytes, key_y, key_ty);
-    return out_append(o, enc->compressed_buffer, enc->compressed_bytes, key_y, key_ty);
+        return ef_unit_append(o, enc->packed_buffer, enc->packed_bytes, key_y, key_ty);
+    return ef_unit_append(o, enc->compressed_buffer, enc->compressed_bytes, key_y, key_ty);
+}
+
+/* The ring's writer: stores unit u's chunks (in unit order). */
+static int write_unit(void *arg, int u, const ef_unit_buf *b)
+{
+    part_job *j = arg;
+    const double t0 = ef_now();
+    if (ef_unit_write(j->out, j->part, j->g.tiled, b)) {
+        int x0, y0, w, h;
+        unit_rect(&j->g, u, &x0, &y0, &w, &h);
+        job_fail(j, j->out_path, "cannot write the output chunk at scanline %d", y0,
+                 ef_exr_last_core_message());
+        return -1;
+    }
+    j->t_write += ef_now() - t0;
+    return 0;
 }
 
 static void *worker(void *arg)
@@ -345,7 +326,7 @@ static void *worker(void *arg)
     int dec_ready = 0, enc_ready = 0;
     depth_reader dr[EF_MAX_VIEWS];
     memset(dr, 0, sizeof dr);
-    out_buf ob = { 0 };
+    ef_unit_buf ob = { 0 };
     float *depth[EF_MAX_VIEWS] = { NULL };
     /* A unit never exceeds the data window, whatever the tile size claims. */
     size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
@@ -364,6 +345,7 @@ static void *worker(void *arg)
         r->ctx = j->t[t].depth_ctx;
         r->part = j->t[t].depth_part;
         r->chan = j->t[t].pl->depth.index;
+        r->codec = j->codec;
         ok = !exr_get_channels(r->ctx, r->part, &dcl) && !geom_init(r->ctx, r->part, 1, &r->g);
         r->nch = ok ? dcl->num_channels : 0;
         ok = ok && (r->planes = calloc((size_t) r->nch, sizeof *r->planes)) != NULL &&
@@ -375,26 +357,21 @@ static void *worker(void *arg)
     if (!ok)
         job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
 
-    double td = 0, tf = 0, te = 0, tw = 0;
+    double td = 0, tf = 0, te = 0;
     for (;;) {
-        int u = atomic_fetch_add(&j->next_unit, 1);
-        if (u >= j->g.nunits || !ok)
-            break;
-        pthread_mutex_lock(&j->lock);
-        int stop = j->failed;
-        pthread_mutex_unlock(&j->lock);
-        if (stop)
+        const int u = ok ? ef_ring_claim(&j->ring) : -1;
+        if (u < 0)
             break;
         int x0, y0, w, h;
         unit_rect(&j->g, u, &x0, &y0, &w, &h);
-        double t0 = now();
+        double t0 = ef_now();
         /* decode */
         for (int y = y0; y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
             exr_chunk_info_t ci;
             int cx, cy;
             if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
                 decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0,
-                             j->as_float)) {
+                             j->as_float, j->codec)) {
                 job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is truncated or "
                             "corrupt", y, ef_exr_last_core_message());
                 goto out;
@@ -411,7 +388,7 @@ static void *worker(void *arg)
                          y0, ef_exr_last_core_message());
                 goto out;
             }
-        double t1 = now();
+        double t1 = ef_now();
         td += t1 - t0;
         for (int t = 0; t < j->ntarget; ++t) {
             const ef_channel_plan *pl = j->t[t].pl;
@@ -433,7 +410,7 @@ static void *worker(void *arg)
             ck.depth = j->t[t].depth_local >= 0 ? planes[j->t[t].depth_local] : depth[t];
             j->fn(j->user, &ck);
         }
-        double t2 = now();
+        double t2 = ef_now();
         tf += t2 - t1;
         /* encode */
         ob.n = 0;
@@ -455,51 +432,27 @@ static void *worker(void *arg)
                 goto out;
             }
         }
-        double t3 = now();
+        double t3 = ef_now();
         te += t3 - t2;
-        /* write, in unit order */
-        pthread_mutex_lock(&j->lock);
-        while (j->written != u && !j->failed)
-            pthread_cond_wait(&j->turn, &j->lock);
-        int failed = j->failed;
-        pthread_mutex_unlock(&j->lock);
-        if (failed)
+        /* park; the ring writes it in unit order */
+        if (ef_ring_put(&j->ring, u, &ob))
             goto out;
-        double t4 = now();
-        for (int i = 0; i < ob.n; ++i) {
-            exr_result_t rv =
-                j->g.tiled ? exr_write_tile_chunk(j->out, j->part, ob.y[i], ob.ty[i], 0, 0,
-                                                  ob.data + ob.off[i], ob.size[i])
-                           : exr_write_scanline_chunk(j->out, j->part, ob.y[i],
-                                                      ob.data + ob.off[i], ob.size[i]);
-            if (rv) {
-                job_fail(j, j->out_path, "cannot write the output chunk at scanline %d", y0,
-                         ef_exr_last_core_message());
-                goto out;
-            }
-        }
-        tw += now() - t4;
-        pthread_mutex_lock(&j->lock);
-        j->written++;
-        pthread_cond_broadcast(&j->turn);
-        pthread_mutex_unlock(&j->lock);
     }
 out:
     pthread_mutex_lock(&j->lock);
     j->t_decode += td;
     j->t_fog += tf;
     j->t_encode += te;
-    j->t_write += tw;
     pthread_mutex_unlock(&j->lock);
     if (dec_ready)
-        exr_decoding_destroy(j->in, &dec);
+        ef_deflate_decoding_destroy(j->in, &dec);
     if (enc_ready)
-        exr_encoding_destroy(j->out, &enc);
+        ef_deflate_encoding_destroy(j->out, &enc);
     for (int t = 0; t < j->ntarget; ++t) {
         depth_reader_free(&dr[t]);
         free(depth[t]);
     }
-    free(ob.data);
+    ef_unit_free(&ob);
     for (int k = 0; planes && k < nplanes; ++k)
         free(planes[k]);
     free(planes);
@@ -713,6 +666,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.part = p;
     j.fn = fn;
     j.user = user;
+    j.codec = o->codec;
     for (int k = 0; k < nplans; ++k)
         if (plans[k].rgb[0].part == p) {
             j.t[j.ntarget].plan = k;
@@ -746,21 +700,27 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
             j.t[t].depth_part = plan->depth.part;
         }
     }
-    atomic_init(&j.next_unit, 0);
     pthread_mutex_init(&j.lock, NULL);
-    pthread_cond_init(&j.turn, NULL);
     int nt = o->threads < 1 ? 1 : o->threads;
     if (nt > j.g.nunits)
         nt = j.g.nunits;
     {
-        /* Memory per worker: a unit of every plane, decoded and packed. */
+        /* Memory per worker: a unit of every plane, decoded and packed,
+         * and its share of the ring: ef_ring_slots(1) + 1 encoded units,
+         * each at most the unit's raw size. */
         const uint64_t px = j.g.tiled ? (uint64_t) (j.g.tw < j.g.width ? j.g.tw : j.g.width) *
                                             (uint64_t) (j.g.th < j.g.height ? j.g.th : j.g.height)
                                       : (uint64_t) j.g.width * (uint64_t) j.g.unit_rows;
-        const uint64_t per = px * ((uint64_t) j.nch + (uint64_t) j.nextra + 1) * 4 * 2;
+        const uint64_t per = px * ((uint64_t) j.nch + (uint64_t) j.nextra + 1) * 4 *
+                             (2 + (uint64_t) ef_ring_slots(1) + 1);
         const uint64_t fit = per ? EF_STREAM_BYTES / per : (uint64_t) nt;
         if ((uint64_t) nt > fit)
             nt = fit < 1 ? 1 : (int) fit;
+    }
+    if (ef_ring_init(&j.ring, ef_ring_slots(nt), j.g.nunits, write_unit, &j)) {
+        pthread_mutex_destroy(&j.lock);
+        free(j.as_float);
+        return ef_fail(err, "out of memory");
     }
     pthread_t *th = calloc((size_t) nt, sizeof *th);
     int started = 0;
@@ -772,8 +732,9 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     for (int i = 0; i < started; ++i)
         pthread_join(th[i], NULL);
     free(th);
+    stats->wait_s += j.ring.wait_s;
+    ef_ring_destroy(&j.ring);
     pthread_mutex_destroy(&j.lock);
-    pthread_cond_destroy(&j.turn);
     free(j.as_float);
     stats->decode_s += j.t_decode;
     stats->fog_s += j.t_fog;
@@ -845,7 +806,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
 {
     exr_context_initializer_t init;
     exr_context_t out = NULL;
-    double t0 = now();
+    double t0 = ef_now();
     memset(stats, 0, sizeof *stats);
     const int nplans = o->nplans > 0 ? o->nplans : 1;
     if (nplans > EF_MAX_VIEWS)
@@ -932,7 +893,7 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     }
     if (rc && (sink.errnum || !err->file))
         err->file = out_path;
-    stats->wall_s = now() - t0;
+    stats->wall_s = ef_now() - t0;
     return rc;
 }
 
