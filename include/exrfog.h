@@ -60,9 +60,8 @@ EXRFOG_API const char *exrfog_error(const exrfog_context *ctx);
 
 /* Progress of exrfog_run: called from worker threads (one at a time, at
  * most every 0.2 s) with the fraction done (0..1) of the whole run;
- * returning non-zero cancels it: the fog work stops at once, the frame's
- * remaining chunks are still read and discarded, and the run returns
- * EXRFOG_CANCELLED with no output written. */
+ * returning non-zero cancels it: the run stops at the next chunk and
+ * returns EXRFOG_CANCELLED with no output written. */
 typedef int (*exrfog_progress_fn)(void *user, double fraction);
 EXRFOG_API void exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user);
 

@@ -1344,6 +1344,7 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
                 so.threads > 1 ? "s" : "");
     }
     so.nplans = nplans;
+    so.cancel = fr->pg ? &fr->pg->cancel : NULL;
     /* DWA output (asked for, or kept from a DWA input): the pass writes a
      * lossless temporary EXR that the C++ library encodes at the end. */
     int dwa_out = -1;
@@ -1371,7 +1372,8 @@ static int run_frame(ef_options *o, const frame_ctx *fr)
     }
     if (ef_exr_stream(&in, df, plans, o->output, foreign || dwa_out >= 0 ? mid.fd : out.fd, &so,
                       fog_chunk, &job, &st, &err)) {
-        report(o->output, &err, 1);
+        report(o->output, &err, fr->pg && fr->pg->cancel ? 3 : 1);
+        status = fr->pg && fr->pg->cancel ? 3 : 1;
         goto done;
     }
     if (fr->pg && fr->pg->cancel) {

@@ -233,6 +233,7 @@ typedef struct part_job {
     } t[EF_MAX_VIEWS];
     ef_chunk_fn fn;
     void *user;
+    const volatile int *cancel;   /* opts->cancel: stop at the next unit */
     int codec;                /* EF_CODEC_* */
     ef_ring ring;             /* pending encoded units, written in order */
     pthread_mutex_t lock;
@@ -362,6 +363,10 @@ static void *worker(void *arg)
         const int u = ok ? ef_ring_claim(&j->ring) : -1;
         if (u < 0)
             break;
+        if (j->cancel && *j->cancel) {
+            job_fail(j, j->out_path, "cancelled at unit %d; nothing was written", u, NULL);
+            break;
+        }
         int x0, y0, w, h;
         unit_rect(&j->g, u, &x0, &y0, &w, &h);
         double t0 = ef_now();
@@ -666,6 +671,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.part = p;
     j.fn = fn;
     j.user = user;
+    j.cancel = o->cancel;
     j.codec = o->codec;
     for (int k = 0; k < nplans; ++k)
         if (plans[k].rgb[0].part == p) {
