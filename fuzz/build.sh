@@ -32,7 +32,7 @@ $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -I /usr/include/OpenEXR \
     -o "$exe" \
     "$here/fuzz_exr.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c \
-    -lOpenEXRCore-3_1 -lm -lpthread -ldl
+    -lOpenEXRCore-3_1 -ldeflate -lm -lpthread -ldl
 echo "built $exe"
 # fuzz_cli: the option parser, SPECs, scene files and profiles (no OIIO/OCIO).
 if [ $cov = 1 ]; then
@@ -40,13 +40,35 @@ if [ $cov = 1 ]; then
 else
     exe="$out/fuzz_cli"
 fi
+# colour.c needs the OCIO shim (C++): compiled apart, linked with clang++.
+CXX=${CXX:-clang++}
+# shellcheck disable=SC2086
+$CXX -std=c++17 -g -O1 -fno-omit-frame-pointer $(echo $flags | sed 's/-fsanitize=fuzzer,/-fsanitize=fuzzer-no-link,/; s/-fsanitize=fuzzer /-fsanitize=fuzzer-no-link /') \
+    -I "$root/src/io" $(pkg-config --cflags OpenColorIO) -c "$root/src/io/ocio_shim.cpp" \
+    -o "$out/ocio_shim.o"
 # shellcheck disable=SC2086
 $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -Wall -Wextra \
     -I "$root/src/core" -I "$root/src/io" -I "$root/src/cli" -I "$out/generated" \
-    -I /usr/include/OpenEXR \
-    -o "$exe" \
-    "$here/fuzz_cli.c" "$root/src/cli/options.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c \
-    "$root/src/io/scene_file.c" \
-    -lOpenEXRCore-3_1 -ljansson -lm -lpthread -ldl
+    -I /usr/include/OpenEXR -c "$here/fuzz_cli.c" "$root/src/cli/options.c" \
+    "$root/src/cli/colour.c"
+mv fuzz_cli.o options.o colour.o "$out/"
+# shellcheck disable=SC2086
+$CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
+    -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -I /usr/include/OpenEXR \
+    -c "$root"/src/core/*.c "$root"/src/io/exr_*.c "$root/src/io/scene_file.c" \
+    "$root/src/io/camera_file.c"
+mkdir -p "$out/obj" && mv ./*.o "$out/obj/"
+# shellcheck disable=SC2086
+$CXX $flags -o "$exe" "$out/fuzz_cli.o" "$out/options.o" "$out/colour.o" "$out/ocio_shim.o" \
+    $(ls "$out"/obj/*.o | grep -v camera_file) \
+    -lOpenEXRCore-3_1 -ldeflate -ljansson $(pkg-config --libs OpenColorIO) -lm -lpthread -ldl
+echo "built $exe"
+# fuzz_camfile: camera files (JSON and Nuke .chan).
+[ $cov = 1 ] && exe="$out/fuzz_camfile_cov" || exe="$out/fuzz_camfile"
+# shellcheck disable=SC2086
+$CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
+    -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -o "$exe" \
+    "$here/fuzz_camfile.c" "$root"/src/core/*.c "$root/src/io/camera_file.c" \
+    "$root/src/io/scene_file.c" -ljansson -lm
 echo "built $exe"

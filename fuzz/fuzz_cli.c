@@ -26,13 +26,6 @@
 #include "options.h"
 #include "scene.h"
 
-/* options.c prints the OpenColorIO version for --version; the fuzzer does
- * not link OpenColorIO. */
-const char *ef_ocio_version(void)
-{
-    return "fuzz";
-}
-
 #define MAX_ARGS 40
 
 static int file_fd = -1;
