@@ -29,10 +29,7 @@ static const char *const CAMERA =
 static uint32_t rng = 88172645u;
 static uint32_t next_rand(void)
 {
-    rng ^= rng << 13;
-    rng ^= rng >> 17;
-    rng ^= rng << 5;
-    return rng;
+    return tu_xorshift32(&rng);
 }
 
 /* A scratch path unique to this process. */

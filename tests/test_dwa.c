@@ -46,15 +46,12 @@ static uint32_t rng_state = 2463534242u;
 
 static uint32_t rnd_u32(void)
 {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 17;
-    rng_state ^= rng_state << 5;
-    return rng_state;
+    return tu_xorshift32(&rng_state);
 }
 
 static double rnd01(void)
 {
-    return (double) (rnd_u32() >> 8) * (1.0 / 16777216.0);
+    return tu_rand01(&rng_state);
 }
 
 /* Whether DWA's default channel rules send a channel through the lossy

@@ -38,7 +38,7 @@ with tempfile.TemporaryDirectory() as d:
     exrfog.fog(SAMPLE, c, fog="exp:density=0.02", fog_color=(0.6, 0.65, 0.7), aov="T")
     r = cli([SAMPLE, "-o", a, "--fog", "exp:density=0.02", "--fog-color", "0.6,0.65,0.7",
              "--aov", "T"])
-    check(open(a, "rb").read()[:64] == open(c, "rb").read()[:64], "numbers as R,G,B")
+    check(open(a, "rb").read() == open(c, "rb").read(), "numbers as R,G,B: the CLI's bytes")
 
     # errors: the CLI's message and status
     missing = os.path.join(d, "missing.exr")

@@ -776,3 +776,17 @@ void tu_fog_check_init(tu_fog_check *fc, const char *in, const char *out, const 
     fc->F[1] = 0.5;
     fc->F[2] = 0.75;
 }
+
+uint32_t tu_xorshift32(uint32_t *state)
+{
+    uint32_t x = *state;
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    return *state = x;
+}
+
+double tu_rand01(uint32_t *state)
+{
+    return (double) (tu_xorshift32(state) >> 8) * (1.0 / 16777216.0);
+}

@@ -130,6 +130,12 @@ int tu_exists(const char *path);
 /* Directory of ../shared/real-exr, or NULL when absent. */
 const char *tu_real_exr_dir(void);
 
+/* Marsaglia's xorshift32 step on *state (never 0): the tests' seeded
+ * random numbers, the same sequence on every machine. */
+uint32_t tu_xorshift32(uint32_t *state);
+/* A uniform double in [0, 1) with 24 random bits, from tu_xorshift32. */
+double tu_rand01(uint32_t *state);
+
 /* Copies a file; returns 0 on success. */
 int tu_copy(const char *from, const char *to);
 

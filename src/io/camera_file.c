@@ -3,6 +3,7 @@
  * docs/camera-file.md. */
 #include "camera_file.h"
 
+#include "json_util.h"
 #include "scene_file.h"   /* ef_read_text_file */
 
 #include <ctype.h>
@@ -278,29 +279,6 @@ static int read_chan(ef_camera_file *cf, char *text, ef_err *err)
 
 /* ------------------------------------------------------------ JSON */
 
-static const char *type_name(const json_t *v)
-{
-    switch (json_typeof(v)) {
-    case JSON_OBJECT: return "an object";
-    case JSON_ARRAY: return "an array";
-    case JSON_STRING: return "a string";
-    case JSON_INTEGER:
-    case JSON_REAL: return "a number";
-    case JSON_TRUE: return "true";
-    case JSON_FALSE: return "false";
-    case JSON_NULL: return "null";
-    }
-    return "a value";
-}
-
-static int expected(ef_err *err, const char *path, const char *what, const json_t *v)
-{
-    if (json_is_array(v))
-        return ef_fail(err, "%s: expected %s, got an array of %zu", path, what,
-                       json_array_size(v));
-    return ef_fail(err, "%s: expected %s, got %s", path, what, type_name(v));
-}
-
 /* The lens and clip keys a frame or the file level may hold. */
 typedef struct lens {
     ef_opt_num fov, vfov, focal, aperture, near_, far_;
@@ -317,7 +295,7 @@ static int num_key(const json_t *v, const char *path, const char *key, ef_opt_nu
 {
     const int angle = !strcmp(key, "fov") || !strcmp(key, "vfov");
     if (!json_is_number(v))
-        return expected(err, path, angle ? "a number (degrees)" : "a number", v);
+        return ef_json_expected(err, path, angle ? "a number (degrees)" : "a number", v);
     const double x = json_number_value(v);
     if (!isfinite(x))
         return ef_fail(err, "%s: is not a finite number", path);
@@ -362,14 +340,14 @@ static int read_matrix(const json_t *v, const char *path, ef_mat4 *m, ef_err *er
 {
     static const char what[] = "a matrix: 16 numbers or 4 rows of 4 numbers";
     if (!json_is_array(v))
-        return expected(err, path, what, v);
+        return ef_json_expected(err, path, what, v);
     const size_t n = json_array_size(v);
     if (n == 16) {
         for (size_t i = 0; i < 16; ++i) {
             const json_t *e = json_array_get(v, i);
             if (!json_is_number(e))
                 return ef_fail(err, "%s[%zu]: expected a number, got %s", path, i,
-                               type_name(e));
+                               ef_json_type_name(e));
             m->m[i] = json_number_value(e);
         }
     } else if (n == 4) {
@@ -378,18 +356,18 @@ static int read_matrix(const json_t *v, const char *path, ef_mat4 *m, ef_err *er
             if (!json_is_array(row) || json_array_size(row) != 4) {
                 char p[256];
                 snprintf(p, sizeof p, "%s[%zu]", path, i);
-                return expected(err, p, "a row of 4 numbers", row);
+                return ef_json_expected(err, p, "a row of 4 numbers", row);
             }
             for (size_t j = 0; j < 4; ++j) {
                 const json_t *e = json_array_get(row, j);
                 if (!json_is_number(e))
                     return ef_fail(err, "%s[%zu][%zu]: expected a number, got %s", path, i, j,
-                                   type_name(e));
+                                   ef_json_type_name(e));
                 m->m[4 * i + j] = json_number_value(e);
             }
         }
     } else {
-        return expected(err, path, what, v);
+        return ef_json_expected(err, path, what, v);
     }
     for (int i = 0; i < 16; ++i)
         if (!isfinite(m->m[i]))
@@ -403,7 +381,7 @@ static int read_frame(ef_camera_file *cf, const json_t *obj, const char *path, i
                       double frame, const lens *top, int *used_aperture, ef_err *err)
 {
     if (!json_is_object(obj))
-        return expected(err, path, "a frame object (keys: camera_to_world or "
+        return ef_json_expected(err, path, "a frame object (keys: camera_to_world or "
                                    "world_to_camera, fov, vfov, focal_length, aperture, near, "
                                    "far)", obj);
     cf_frame *f = add_frame(cf, err);
@@ -431,7 +409,7 @@ static int read_frame(ef_camera_file *cf, const json_t *obj, const char *path, i
         }
         if (frame_key && !strcmp(key, "frame")) {
             if (!json_is_number(v))
-                return expected(err, p, "the frame number", v);
+                return ef_json_expected(err, p, "the frame number", v);
             f->frame = json_number_value(v);
             if (!isfinite(f->frame))
                 return ef_fail(err, "%s: is not a finite number", p);
@@ -506,7 +484,7 @@ static int read_frames(ef_camera_file *cf, const json_t *v, const char *path, co
         return 0;
     }
     if (!json_is_object(v))
-        return expected(err, path, "an object of frames (\"1001\": {...}) or a list of "
+        return ef_json_expected(err, path, "an object of frames (\"1001\": {...}) or a list of "
                                    "frames ([{\"frame\": 1001, ...}])", v);
     const char *key;
     json_t *fv;
@@ -535,7 +513,7 @@ static int read_json(ef_camera_file *cf, const char *text, ef_err *err)
         rc = read_frames(cf, root, "", &top, &used_aperture, err);
     } else if (!json_is_object(root)) {
         rc = ef_fail(err, "expected a JSON object (keys: %s) or a list of frames at the top "
-                          "level, got %s", top_keys, type_name(root));
+                          "level, got %s", top_keys, ef_json_type_name(root));
     } else {
         const char *key;
         json_t *v;
@@ -549,7 +527,7 @@ static int read_json(ef_camera_file *cf, const char *text, ef_err *err)
                     rc = json_is_string(v)
                        ? ef_fail(err, "convention: '%s' is not one of exr, blender, nuke, "
                                       "maya, houdini, usd", json_string_value(v))
-                       : expected(err, "convention", "a convention name (exr, blender, "
+                       : ef_json_expected(err, "convention", "a convention name (exr, blender, "
                                                      "nuke, maya, houdini, usd)", v);
                     break;
                 }

@@ -806,6 +806,21 @@ static int64_t sink_write(exr_const_context_t ctx, void *user, const void *buf, 
     return (int64_t) sz;
 }
 
+/* The extra channels of part p: those of every plan whose colour is
+ * there, in plan order (run_part finds target t's at t * nextra).
+ * Returns how many. */
+static int part_extras(const ef_channel_plan *plan, int nplans, int p,
+                       const char *xname[][EF_MAX_EXTRA_CHANNELS], int nextra,
+                       const char **out)
+{
+    int n = 0;
+    for (int k = 0; k < nplans; ++k)
+        if (plan[k].rgb[0].part == p)
+            for (int c = 0; c < nextra; ++c)
+                out[n++] = xname[k][c];
+    return n;
+}
+
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
                   const char *out_path, int out_fd, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err)
@@ -859,8 +874,6 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
         err->file = out_path;
         return -1;
     }
-    /* Per part, the extra channels of the plans whose colour is there, in
-     * plan order (run_part finds target t's at t * nextra). */
     const char **part_extra = calloc((size_t) nplans * (size_t) (o->nextra + 1), sizeof *part_extra);
     if (!part_extra) {
         exr_finish(&out);
@@ -868,21 +881,13 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     }
     int rc = 0;
     for (int p = 0; p < in->nparts && !rc; ++p) {
-        int n = 0;
-        for (int k = 0; k < nplans; ++k)
-            if (plan[k].rgb[0].part == p)
-                for (int c = 0; c < o->nextra; ++c)
-                    part_extra[n++] = xname[k][c];
+        const int n = part_extras(plan, nplans, p, xname, o->nextra, part_extra);
         rc = define_part(in, out, p, part_extra, n, plan, nplans, df, o, err);
     }
     if (!rc && exr_write_header(out))
         rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
     for (int p = 0; p < in->nparts && !rc; ++p) {
-        int n = 0;
-        for (int k = 0; k < nplans; ++k)
-            if (plan[k].rgb[0].part == p)
-                for (int c = 0; c < o->nextra; ++c)
-                    part_extra[n++] = xname[k][c];
+        part_extras(plan, nplans, p, xname, o->nextra, part_extra);
         rc = run_part(in, df, out, out_path, p, plan, nplans, part_extra, o->nextra, o, fn, user,
                       stats, err);
     }

@@ -3,6 +3,7 @@
  * for shape here (so a wrong type is reported at its path in the file); their
  * meaning is left to the models, which parse the SPEC as they parse --fog. */
 #include "scene_file.h"
+#include "json_util.h"
 
 #include "aov.h"
 
@@ -96,7 +97,7 @@ int ef_read_text_file(const char *path, char **text, ef_err *err)
 
 /* ------------------------------------------------------------ helpers */
 
-static const char *type_name(const json_t *v)
+const char *ef_json_type_name(const json_t *v)
 {
     switch (json_typeof(v)) {
     case JSON_OBJECT: return "an object";
@@ -111,12 +112,11 @@ static const char *type_name(const json_t *v)
     return "a value";
 }
 
-/* "expected WHAT, got TYPE" at path. */
-static int expected(ef_err *err, const char *path, const char *what, const json_t *v)
+int ef_json_expected(ef_err *err, const char *path, const char *what, const json_t *v)
 {
     if (json_is_array(v))
         return ef_fail(err, "%s: expected %s, got an array of %zu", path, what, json_array_size(v));
-    return ef_fail(err, "%s: expected %s, got %s", path, what, type_name(v));
+    return ef_fail(err, "%s: expected %s, got %s", path, what, ef_json_type_name(v));
 }
 
 /* The shortest decimal that reads back as v: lossless like %.17g, but 0.1
@@ -162,11 +162,11 @@ static int put_numbers(spec_buf *b, const json_t *a, size_t n, char sep, const c
 {
     const size_t len = json_array_size(a);
     if (!json_is_array(a) || (n ? len != n : len == 0))
-        return expected(err, path, what, a);
+        return ef_json_expected(err, path, what, a);
     for (size_t i = 0; i < len; ++i) {
         const json_t *e = json_array_get(a, i);
         if (!json_is_number(e))
-            return ef_fail(err, "%s[%zu]: expected a number, got %s", path, i, type_name(e));
+            return ef_fail(err, "%s[%zu]: expected a number, got %s", path, i, ef_json_type_name(e));
         if (i) {
             const char s[2] = { sep, '\0' };
             put(b, s);
@@ -252,11 +252,11 @@ static int put_value(spec_buf *b, const char *scene_path, const char *key, const
         if (json_is_number(v))
             return put_num(b, json_number_value(v)), 0;
         if (!json_is_array(v))
-            return expected(err, path, "a number or [R,G,B]", v);
+            return ef_json_expected(err, path, "a number or [R,G,B]", v);
         return put_numbers(b, v, 3, ',', path, "a number or [R,G,B]", err);
     case K_NUM:
         if (!json_is_number(v))
-            return expected(err, path, "a number", v);
+            return ef_json_expected(err, path, "a number", v);
         return put_num(b, json_number_value(v)), 0;
     case K_VEC3:
         return put_numbers(b, v, 3, ',', path, "[X,Y,Z]", err);
@@ -272,7 +272,7 @@ static int put_value(spec_buf *b, const char *scene_path, const char *key, const
         const char *what = planes ? "[[A,B,C,D], ...] or a flat array of numbers"
                                   : "an array of numbers or [R,G,B]";
         if (!json_is_array(v) || json_array_size(v) == 0)
-            return expected(err, path, what, v);
+            return ef_json_expected(err, path, what, v);
         for (size_t i = 0; i < json_array_size(v); ++i) {
             const json_t *e = json_array_get(v, i);
             char sub[200];
@@ -282,7 +282,7 @@ static int put_value(spec_buf *b, const char *scene_path, const char *key, const
             if (json_is_number(e))
                 put_num(b, json_number_value(e));
             else if (!json_is_array(e))
-                return expected(err, sub, planes ? "a number or [A,B,C,D]" : "a number or [R,G,B]",
+                return ef_json_expected(err, sub, planes ? "a number or [A,B,C,D]" : "a number or [R,G,B]",
                                 e);
             else if (put_numbers(b, e, planes ? 4 : 3, planes ? ',' : '/', sub,
                                  planes ? "[A,B,C,D]" : "[R,G,B]", err))
@@ -297,12 +297,12 @@ static int put_value(spec_buf *b, const char *scene_path, const char *key, const
         return put_numbers(b, v, 3, ',', path, "\"y\", \"z\", \"-y\", \"-z\" or [X,Y,Z]", err);
     case K_WORD:
         if (!json_is_string(v))
-            return expected(err, path, "a string", v);
+            return ef_json_expected(err, path, "a string", v);
         return check_word(path, json_string_value(v), err) ? -1
                                                           : (put(b, json_string_value(v)), 0);
     case K_FILE:
         if (!json_is_string(v))
-            return expected(err, path, "a file path (a string)", v);
+            return ef_json_expected(err, path, "a file path (a string)", v);
         return put_file(b, scene_path, json_string_value(v), path, err);
     case K_ANY:
         if (json_is_number(v))
@@ -341,7 +341,7 @@ static int object_spec(const json_t *o, const char *scene_path, const char *wher
                        where);
     snprintf(path, sizeof path, "%s.model", where);
     if (!json_is_string(model))
-        return expected(err, path, "a model name (a string)", model);
+        return ef_json_expected(err, path, "a model name (a string)", model);
     if (check_word(path, json_string_value(model), err))
         return -1;
     put(&b, json_string_value(model));
@@ -401,7 +401,7 @@ static int string_spec(const char *s, const char *scene_path, const char *where,
 static int read_units(const json_t *v, ef_scene_file *out, ef_err *err)
 {
     if (!json_is_number(v))
-        return expected(err, "units", "a number (units per metre)", v);
+        return ef_json_expected(err, "units", "a number (units per metre)", v);
     const double u = json_number_value(v);
     if (!(u > 0)) {
         char t[32];
@@ -438,11 +438,11 @@ static int read_color(const json_t *v, ef_scene_file *out, ef_err *err)
         out->color[0] = out->color[1] = out->color[2] = json_number_value(v);
     } else {
         if (!json_is_array(v) || json_array_size(v) != 3)
-            return expected(err, "color", "[R,G,B]", v);
+            return ef_json_expected(err, "color", "[R,G,B]", v);
         for (size_t i = 0; i < 3; ++i) {
             const json_t *e = json_array_get(v, i);
             if (!json_is_number(e))
-                return ef_fail(err, "color[%zu]: expected a number, got %s", i, type_name(e));
+                return ef_fail(err, "color[%zu]: expected a number, got %s", i, ef_json_type_name(e));
             out->color[i] = json_number_value(e);
         }
     }
@@ -474,14 +474,14 @@ static int read_sky(const json_t *v, ef_scene_file *out, ef_err *err)
         if (!d)
             return ef_fail(err, "sky: missing \"distance\" (write {\"distance\": D})");
         if (!json_is_number(d))
-            return expected(err, "sky.distance", "a number", d);
+            return ef_json_expected(err, "sky.distance", "a number", d);
         char t[32];
         fmt_num(json_number_value(d), t);
         if (!(json_number_value(d) > 0))
             return ef_fail(err, "sky.distance: must be > 0, got %s", t);
         snprintf(out->sky, sizeof out->sky, "distance=%s", t);
     } else {
-        return expected(err, "sky", what, v);
+        return ef_json_expected(err, "sky", what, v);
     }
     out->has_sky = 1;
     return 0;
@@ -490,7 +490,7 @@ static int read_sky(const json_t *v, ef_scene_file *out, ef_err *err)
 static int read_time(const json_t *v, ef_scene_file *out, ef_err *err)
 {
     if (!json_is_number(v))
-        return expected(err, "time", "a number (seconds)", v);
+        return ef_json_expected(err, "time", "a number (seconds)", v);
     out->time = json_number_value(v);
     out->has_time = 1;
     return 0;
@@ -503,14 +503,14 @@ static int read_aov(const json_t *v, ef_scene_file *out, ef_err *err)
     if (json_is_string(v))
         return ef_aov_parse(json_string_value(v), &out->aov, "aov:", err);
     if (!json_is_array(v) || json_array_size(v) == 0)
-        return expected(err, "aov", what, v);
+        return ef_json_expected(err, "aov", what, v);
     for (size_t i = 0; i < json_array_size(v); ++i) {
         const json_t *e = json_array_get(v, i);
         char where[32];
         snprintf(where, sizeof where, "aov[%zu]:", i);
         if (!json_is_string(e))
             return ef_fail(err, "aov[%zu]: expected an AOV name (a string), got %s", i,
-                           type_name(e));
+                           ef_json_type_name(e));
         if (ef_aov_parse(json_string_value(e), &out->aov, where, err))
             return -1;
     }
@@ -520,7 +520,7 @@ static int read_aov(const json_t *v, ef_scene_file *out, ef_err *err)
 static int read_fog(const json_t *v, const char *path, ef_scene_file *out, ef_err *err)
 {
     if (!json_is_array(v))
-        return expected(err, "fog", "an array of components", v);
+        return ef_json_expected(err, "fog", "an array of components", v);
     if (json_array_size(v) > EF_FOG_MAX_COMPONENTS)
         return ef_fail(err, "fog: has %zu components, at most %d are allowed",
                        json_array_size(v), EF_FOG_MAX_COMPONENTS);
@@ -536,7 +536,7 @@ static int read_fog(const json_t *v, const char *path, ef_scene_file *out, ef_er
             if (string_spec(json_string_value(c), path, where, spec, err))
                 return -1;
         } else {
-            return expected(err, where, "a component object or a SPEC string", c);
+            return ef_json_expected(err, where, "a component object or a SPEC string", c);
         }
         out->nspec++;
     }
@@ -547,7 +547,7 @@ static int read_root(const json_t *root, const char *path, ef_scene_file *out, e
 {
     if (!json_is_object(root))
         return ef_fail(err, "expected a JSON object at the top level (keys: %s), got %s",
-                       top_keys, type_name(root));
+                       top_keys, ef_json_type_name(root));
     const char *key;
     json_t *v;
     json_object_foreach((json_t *) root, key, v) {

@@ -53,6 +53,17 @@ ef_oiio_can_write(const char *path, char *err, size_t errlen)
     }
 }
 
+// The data window's origin and the full (display) window of `from`.
+static void copy_window(OIIO::ImageSpec &to, const OIIO::ImageSpec &from)
+{
+    to.x = from.x;
+    to.y = from.y;
+    to.full_x = from.full_x;
+    to.full_y = from.full_y;
+    to.full_width = from.full_width;
+    to.full_height = from.full_height;
+}
+
 extern "C" __attribute__((visibility("default"))) const char *ef_oiio_version(void)
 {
     return OIIO_VERSION_STRING;
@@ -107,14 +118,8 @@ ef_oiio_convert(const char *src, int part, const char *const *names, int n, cons
         for (int k = 0; k < n; ++k)
             os.channelnames.push_back(rgba[k < 4 ? k : 3]);
         os.alpha_channel = n == 4 ? 3 : -1;
-        if (out->supports("origin")) {
-            os.x = is.x;
-            os.y = is.y;
-            os.full_x = is.full_x;
-            os.full_y = is.full_y;
-            os.full_width = is.full_width;
-            os.full_height = is.full_height;
-        }
+        if (out->supports("origin"))
+            copy_window(os, is);
         if (!out->open(dst, os) || !out->write_image(OIIO::TypeDesc::FLOAT, sel.data()) ||
             !out->close()) {
             std::snprintf(err, errlen, "cannot write it: %s", out->geterror().c_str());
@@ -150,12 +155,7 @@ ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
             return -1;
         }
         OIIO::ImageSpec os(is.width, is.height, is.nchannels, OIIO::TypeDesc::FLOAT);
-        os.x = is.x;
-        os.y = is.y;
-        os.full_x = is.full_x;
-        os.full_y = is.full_y;
-        os.full_width = is.full_width;
-        os.full_height = is.full_height;
+        copy_window(os, is);
         os.channelnames = is.channelnames;
         if (is.nchannels == 1)
             os.channelnames[0] = "Z";
