@@ -530,8 +530,16 @@ static void test_preintegrated(void **state)
                 want += 0.07 * (L / K) * env * factor_mean_ref(params, 'x', &rp) *
                         factor_mean_ref(params, 'z', &rp);
             }
-            double tau[3];
+            double tau[3], unbound[3];
+            /* Bound to this ray's origin (the per-frame cache hit, as the
+             * CLI's camera rays see it) and to a point elsewhere (a miss):
+             * the same bits. */
+            const double far[3] = { 1e3, -7, 2e3 };
+            ef_fog_bind(&c, o);
             ef_fog_tau(&c, &r, tau, NULL);
+            ef_fog_bind(&c, far);
+            ef_fog_tau(&c, &r, unbound, NULL);
+            assert_memory_equal(tau, unbound, sizeof tau);
             if (!(fabs(tau[0] - want) <= 1e-9 * want)) {
                 print_error("K=%d: tau %.17g, product of means %.17g\n", K, tau[0], want);
                 fail();

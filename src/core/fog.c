@@ -366,6 +366,8 @@ void ef_fog_bind(ef_fog_component *c, const double org[3])
 {
     ef_fog_functional f;
     c->bound = 0;
+    if (c->model->bind)
+        c->model->bind(c, org);
     if (!c->model->functionals || c->model->functionals(c, &f, 1) < 1)
         return;
     /* ef_dd_dot3 adds d last, so n.org + d later is the same bits as in one go. */

@@ -115,6 +115,9 @@ typedef struct ef_fog_model {
     /* Optional: adds tau along r[j] to acc[j] for j < n, the same bits as
      * tau() added per ray (NULL: ef_fog_tau_add loops over tau()). */
     void (*tau_add)(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3]);
+    /* Optional: caches what every ray from the camera at org repeats
+     * (ef_fog_bind calls it); tau must give the same bits with or without. */
+    void (*bind)(ef_fog_component *c, const double org[3]);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

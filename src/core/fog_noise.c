@@ -93,6 +93,12 @@ typedef struct nstate {
     int m_off[3];                    /* index in arr of axis a's table */
     double mtotal[3];                /* the fbm part's integral over one period */
     double inv_scale, shift[3], seedq[3];   /* merged: q = (p - shift) inv_scale + seedq */
+    double sky_need;                 /* preintegrated sky rays: log(bound / 1e-6) */
+    /* The camera bound by bind_noise (merged tables): its q and where
+     * that falls per axis, its envelope height and e^(-k h) there. */
+    int cam;
+    double cam_s[3], cam_h, cam_eh;
+    struct mpoint { double k, y, I; int p; } cam_pt[3];
 } nstate;
 
 /* A merged table's layout from m_off: mp starts, mp + 1 prefixes, 7 mp
@@ -320,6 +326,7 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
             return ef_fail(err, "fog spec '%s': velocity times --time leaves the range of doubles",
                            c->spec);
     s.inv_scale = 1 / s.scale;
+    s.sky_need = log(s.bound / 1e-6);
     for (int a = 0; a < 3; ++a) {
         s.shift[a] = s.offset[a] + s.velocity[a] * s.time;
         s.seedq[a] = s.seed * ef_noise_seed_dir[a];
@@ -1320,10 +1327,11 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
  * holds its coefficients (of y^1..y^7), so no division per lookup. */
 static double piece_int(const double *ic, double y)
 {
-    double v = ic[6];
-    for (int k = 5; k >= 0; --k)
-        v = v * y + ic[k];
-    return v * y;
+    /* Estrin's scheme: a third of Horner's dependent chain, and this is the
+     * per-pixel latency of the preintegrated method. */
+    const double y2 = y * y, y4 = y2 * y2;
+    const double a = ic[0] + ic[1] * y, b = ic[2] + ic[3] * y, c = ic[4] + ic[5] * y;
+    return ((a + b * y2) + (c + ic[6] * y2) * y4) * y;
 }
 
 /* The piece's value at y, the antiderivative's derivative. */
@@ -1343,6 +1351,10 @@ static inline int piece_of(const nstate *s, const double *tab, double r, double 
     int b = (int) (r * (2 * P) / 256.0);
     b = b < 0 ? 0 : b >= 2 * P ? 2 * P - 1 : b;
     int p = (int) hint[b];
+    /* A bin holds at most one piece start on average: two branch-free
+     * steps, then the rare rest. */
+    p += p + 1 < P && start[p + 1] <= r;
+    p += p + 1 < P && start[p + 1] <= r;
     while (p + 1 < P && start[p + 1] <= r)
         ++p;
     while (p > 0 && start[p] > r)
@@ -1373,36 +1385,55 @@ static double period_split(double v, double *r)
     return k;
 }
 
+/* Where q_a = s falls in axis a's merged table: the period, the piece, the
+ * offset into it and the piece's antiderivative there. */
+typedef struct mpoint mpoint;
+
+static mpoint merged_point(const ef_fog_component *c, int a, double s)
+{
+    const nstate *st = state(c);
+    if (st->cam && s == st->cam_s[a])
+        return st->cam_pt[a];   /* the camera's point, looked up once per frame */
+    const double *tab = c->arr + st->m_off[a];
+    mpoint m;
+    double r;
+    m.k = period_split(s, &r);
+    m.p = piece_of(st, tab, r, &m.y);
+    m.I = piece_int(tab + 2 * st->mp + 1 + 7 * m.p, m.y);
+    return m;
+}
+
 /* Factor a's fbm part over q_a from s0 to s0 + *ds: its integral over
  * |*ds| (and *ds made |*ds|); or, when the extent is too small for that,
- * its value at the middle with *ds set to 0. */
+ * its value at the middle with *ds set to 0. Both ends are looked up as
+ * given, so the camera's end hits the per-frame cache whichever way the
+ * ray runs. */
 static double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
 {
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mp;
     const double *prefix = tab + P, *coef = tab + 2 * P + 1;
-    double ds = *pds;
-    if (ds < 0) {
-        s0 += ds;
-        ds = -ds;
-    }
+    const double ds = fabs(*pds), slo = *pds < 0 ? s0 + *pds : s0, shi = *pds < 0 ? s0 : s0 + *pds;
     *pds = ds;
-    double r0, y0, y1, r1;
-    const double k0 = period_split(s0, &r0);
-    const int p0 = piece_of(s, tab, r0, &y0);
+    const mpoint lo = merged_point(c, a, slo);
     if (ds < 1e-6) {  /* no extent: the value at the middle */
         *pds = 0;
-        return piece_val(coef + 7 * p0, y0 + ds / 2);
+        return piece_val(coef + 7 * lo.p, lo.y + ds / 2);
     }
     const double *start = tab;
-    const double pend = p0 + 1 < P ? start[p0 + 1] - start[p0] : 256 - start[p0];
-    if (y0 + ds <= pend)   /* one piece: the antiderivative's difference */
-        return piece_int(coef + 7 * p0, y0 + ds) - piece_int(coef + 7 * p0, y0);
-    const double k1 = period_split(s0 + ds, &r1);
-    const int p1 = piece_of(s, tab, r1, &y1);
-    return (k1 - k0) * s->mtotal[a] + (prefix[p1] - prefix[p0]) +
-           (piece_int(coef + 7 * p1, y1) - piece_int(coef + 7 * p0, y0));
+    const double pend = lo.p + 1 < P ? start[lo.p + 1] - start[lo.p] : 256 - start[lo.p];
+    if (lo.y + ds <= pend)   /* one piece: the antiderivative's difference */
+        return piece_int(coef + 7 * lo.p, lo.y + ds) - lo.I;
+    const mpoint hi = merged_point(c, a, shi);
+    return (hi.k - lo.k) * s->mtotal[a] + (prefix[hi.p] - prefix[lo.p]) + (hi.I - lo.I);
+}
+
+/* e^(-k h) for the envelope, from the per-frame cache at the camera's
+ * height. */
+static double env_exp(const nstate *s, double h)
+{
+    return s->cam && h == s->cam_h ? s->cam_eh : exp(-s->k * h);
 }
 
 /* tau / rho of K equal pieces of [t0, t1] from the merged tables. */
@@ -1423,17 +1454,24 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
          * one division per piece, not one per factor */
         double num = L, den = 1;
         if (s->k > 0 && hs != 0) {
-            /* mean envelope: e^(-k h_low) (1 - e^-b) / b, b = k |hs| L */
-            const double b = s->k * fabs(hs) * L, hl = h0 + hs * (hs > 0 ? ta : tb);
-            num *= exp(-s->k * hl);
-            if (b > 1e-12) {
-                num *= -expm1(-b);
+            /* mean envelope e^(-k h(ta)) (1 - e^(-b)) / b with b = k hs L,
+             * signed: from the near end, whose e^(-k h) is the camera's
+             * (cached) on the first piece, while expm1(|b|) stays finite and
+             * that end's exponential normal; else from the low end,
+             * e^(-k h_low) (1 - e^-|b|) / |b|, which cannot overflow. */
+            const double b = s->k * hs * L, ha = h0 + hs * ta;
+            const double ea = fabs(b) <= 700 ? env_exp(s, ha) : 0;
+            if (fabs(b) <= 1e-12) {
+                num *= env_exp(s, hs > 0 ? ha : h0 + hs * tb) * (1 - fabs(b) / 2);
+            } else if (ea >= DBL_MIN) {
+                num *= ea * -expm1(-b);
                 den = b;
             } else {
-                num *= 1 - b / 2;
+                num *= env_exp(s, hs > 0 ? ha : h0 + hs * tb) * -expm1(-fabs(b));
+                den = fabs(b);
             }
         } else if (s->k > 0) {
-            num *= exp(-s->k * h0);
+            num *= env_exp(s, h0);
         }
         for (int k = 0; k < s->naxes; ++k) {
             const int a = s->axis[k];
@@ -1449,6 +1487,28 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
         kadd(&acc, num / den);
     }
     return kval(&acc);
+}
+
+/* Looks up everything about the camera at org that every ray of the frame
+ * repeats: its point in each merged table and its envelope height's
+ * exponential. Rays from elsewhere miss the cache and compute their own,
+ * and hits return the bits a lookup would. */
+static void bind_noise(ef_fog_component *c, const double org[3])
+{
+    nstate *s = (nstate *) (void *) c->arr;
+    s->cam = 0;
+    if (!s->merged)
+        return;
+    nstate t = *s;
+    for (int k = 0; k < t.naxes; ++k) {
+        const int a = t.axis[k];
+        t.cam_s[a] = (org[a] - t.shift[a]) * t.inv_scale + t.seedq[a];
+        t.cam_pt[a] = merged_point(c, a, t.cam_s[a]);
+    }
+    t.cam_h = t.up[0] * org[0] + t.up[1] * org[1] + t.up[2] * org[2] - t.base;
+    t.cam_eh = exp(-t.k * t.cam_h);
+    t.cam = 1;
+    *s = t;
 }
 
 /* tau / rho of K equal pieces of [t0, t1]: per piece the mean envelope
@@ -1619,8 +1679,9 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
             return;
         }
         const double a = s->k * hs;
-        t1 = t0 + log(B / 1e-6) / a;
-        tail = B * exp(-s->k * (h0 + hs * t1)) / a;
+        t1 = t0 + s->sky_need / a;
+        if (info)
+            tail = B * exp(-s->k * (h0 + hs * t1)) / a;
     }
     if (env_overflows(s, h0, hs, t0, t1)) {
         for (int k = 0; k < 3; ++k)
@@ -1960,12 +2021,12 @@ const ef_fog_model ef_fog_noise = {
     .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .uses_up = 1
+    .bind = bind_noise, .uses_up = 1
 };
 
 const ef_fog_model ef_fog_noise_separable = {
     .name = "noise-separable", .keys = separable_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .uses_up = 1
+    .bind = bind_noise, .uses_up = 1
 };
