@@ -594,6 +594,56 @@ static void test_preintegrated(void **state)
     ef_fog_free(&ex);
 }
 
+/* The span entry (ef_fog_tau_add, what the fog pass calls) adds exactly
+ * the bits ef_fog_tau gives ray by ray: camera rays of every kind (ground,
+ * sky up and down, zero length, inside and outside a box), bound to the
+ * camera and not, for the staged pieces=1 path and the others. */
+static void test_span_same_bits(void **state)
+{
+    (void) state;
+    static const char *const specs[] = {
+        "noise-separable:density=0.05,0.04,0:scale=4:axes=xz:falloff=0.1:base=1:method=preintegrated",
+        "noise-separable:density=0.05:scale=4:axes=xyz:falloff=0.3:method=preintegrated:min=-20,-1,-30:"
+        "max=20,6,5",
+        "noise-separable:density=0.05:scale=4:axes=y:method=preintegrated:pieces=3",
+        "noise-separable:density=0.05:scale=4:falloff=2e3:base=-1:method=preintegrated",
+        "noise:density=0.05:scale=4:octaves=2:tol=1e-3",
+    };
+    rng g = { 29 };
+    enum { N = 203 };
+    for (size_t si = 0; si < sizeof specs / sizeof *specs; ++si) {
+        ef_fog_component c;
+        parse(specs[si], &c);
+        const double cam[3] = { uni(&g, -5, 5), uni(&g, 0, 3), uni(&g, -5, 5) };
+        ef_ray r[N];
+        for (int j = 0; j < N; ++j) {
+            double d[3];
+            sphere(&g, d);
+            const double L = j % 7 == 0 ? INFINITY : j % 11 == 0 ? 0 : uni(&g, 0.1, 120);
+            r[j] = ray(j % 13 == 0 ? (double[3]) { 1, 2, 3 } : cam, d, L);
+        }
+        for (int bound = 0; bound < 2; ++bound) {
+            if (bound)
+                ef_fog_bind(&c, cam);
+            double acc[N][3];
+            for (int j = 0; j < N; ++j)
+                acc[j][0] = acc[j][1] = acc[j][2] = 0.25;
+            ef_fog_tau_add(&c, r, N, acc);
+            for (int j = 0; j < N; ++j) {
+                double t[3];
+                ef_fog_tau(&c, &r[j], t, NULL);
+                for (int k = 0; k < 3; ++k)
+                    if (memcmp(&(double) { 0.25 + t[k] }, &acc[j][k], sizeof(double))) {
+                        print_error("%s ray %d channel %d: span %.17g, single %.17g\n", specs[si],
+                                    j, k, acc[j][k], 0.25 + t[k]);
+                        fail();
+                    }
+            }
+        }
+        ef_fog_free(&c);
+    }
+}
+
 /* ---- the field's definition ---- */
 
 static double tau_exact(const char *spec, const double o[3], const double d[3], double L)
@@ -843,6 +893,7 @@ int main(void)
         cmocka_unit_test(test_continuity),
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),
         cmocka_unit_test(test_preintegrated),
+        cmocka_unit_test(test_span_same_bits),
         cmocka_unit_test(test_adaptive),
         cmocka_unit_test(test_hostile_scales),
         cmocka_unit_test(test_exact_against_reference),
