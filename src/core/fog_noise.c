@@ -102,9 +102,11 @@ typedef struct nstate {
 } nstate;
 
 /* A merged table's layout from m_off: mp starts, mp + 1 prefixes, 7 mp
- * coefficients (of each piece's antiderivative), 2 mp bin hints (as
- * doubles). */
-#define MERGED_SIZE(P) ((size_t) (P) * 11 + 1)
+ * coefficients (of each piece's antiderivative), then 4 mp lookup bins of
+ * two doubles: the piece holding the bin's start and where the next piece
+ * starts (so a lookup is one load and one comparison). */
+#define MERGED_SIZE(P) ((size_t) (P) * 17 + 1)
+#define MERGED_BINS 4    /* lookup bins per piece */
 #define MERGED_MAX 65536
 
 static const nstate *state(const ef_fog_component *c)
@@ -1312,12 +1314,14 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     }
     prefix[P] = (double) acc;
     *total = (double) acc;
-    /* Bin hints: the piece holding each bin's start (2 P bins). */
-    for (int b = 0, p = 0; b < 2 * P; ++b) {
-        const double at = 256.0 * b / (2 * P);
+    /* Lookup bins: the piece holding each bin's start, and the next
+     * piece's start (256 past the last). */
+    for (int b = 0, p = 0; b < MERGED_BINS * P; ++b) {
+        const double at = 256.0 * b / (MERGED_BINS * P);
         while (p + 1 < P && start[p + 1] <= at)
             ++p;
-        hint[b] = p;
+        hint[2 * b] = p;
+        hint[2 * b + 1] = p + 1 < P ? start[p + 1] : 256;
     }
     free(br);
     return P;
@@ -1355,7 +1359,8 @@ static inline mview mview_of(const ef_fog_component *c, int a)
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mpa[a];
-    return (mview) { tab, tab + P, tab + 2 * P + 1, tab + 9 * P + 1, P, 2.0 * P / 256 };
+    return (mview) { tab, tab + P, tab + 2 * P + 1, tab + 9 * P + 1, P,
+                     (double) MERGED_BINS * P / 256 };
 }
 
 /* The piece holding r in [0, 256), and r's offset into it. */
@@ -1364,12 +1369,10 @@ static inline int piece_of(const mview *m, double r, double *y)
     const int P = m->P;
     const double *start = m->start;
     int b = (int) (r * m->bins);
-    b = b < 0 ? 0 : b >= 2 * P ? 2 * P - 1 : b;
-    int p = (int) m->hint[b];
-    /* A bin holds at most one piece start on average: two branch-free
-     * steps, then the rare rest. */
-    p += p + 1 < P && start[p + 1] <= r;
-    p += p + 1 < P && start[p + 1] <= r;
+    b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
+    /* A bin rarely holds two piece starts: one step from its pair, then
+     * the rare rest (and rounding at the bin's edge). */
+    int p = (int) m->hint[2 * b] + (m->hint[2 * b + 1] <= r);
     while (p + 1 < P && start[p + 1] <= r)
         ++p;
     while (p > 0 && start[p] > r)
@@ -1419,10 +1422,9 @@ static inline void merged_point(const nstate *st, const mview *m, int a, double 
  * its value at the middle with *ds set to 0. Both ends are looked up as
  * given, so the camera's end hits the per-frame cache whichever way the
  * ray runs. */
-static inline double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
+static inline double merged_int_in(const nstate *s, const mview *mv, int a, double s0, double *pds)
 {
-    const nstate *s = state(c);
-    const mview m = mview_of(c, a);
+    const mview m = *mv;
     const double ds = fabs(*pds), slo = *pds < 0 ? s0 + *pds : s0, shi = *pds < 0 ? s0 : s0 + *pds;
     *pds = ds;
     mpoint lo, hi;
@@ -1436,6 +1438,12 @@ static inline double merged_int(const ef_fog_component *c, int a, double s0, dou
         return piece_int(m.coef + 7 * lo.p, lo.y + ds) - lo.I;
     merged_point(s, &m, a, shi, &hi);
     return (hi.k - lo.k) * s->mtotal[a] + (m.prefix[hi.p] - m.prefix[lo.p]) + (hi.I - lo.I);
+}
+
+static inline double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
+{
+    const mview m = mview_of(c, a);
+    return merged_int_in(state(c), &m, a, s0, pds);
 }
 
 /* e^(-k h) for the envelope, from the per-frame cache at the camera's
@@ -1522,10 +1530,10 @@ static inline void one_setup(const nstate *s, const ef_ray *r, double h0, double
     }
 }
 
-static inline void one_axis(const ef_fog_component *c, const nstate *s, int k, one_ray *o)
+static inline void one_axis(const nstate *s, const mview *m, int k, one_ray *o)
 {
     double ds = o->ds[k];
-    o->G[k] = merged_int(c, s->axis[k], o->s0[k], &ds);
+    o->G[k] = merged_int_in(s, m, s->axis[k], o->s0[k], &ds);
     o->w[k] = ds;
 }
 
@@ -1552,8 +1560,10 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
     if (K == 1) {
         one_ray o;
         one_setup(s, r, h0, hs, t0, t1, &o);
-        for (int k = 0; k < s->naxes; ++k)
-            one_axis(c, s, k, &o);
+        for (int k = 0; k < s->naxes; ++k) {
+            const mview m = mview_of(c, s->axis[k]);
+            one_axis(s, &m, k, &o);
+        }
         return one_value(s, &o);
     }
     double q0[3], dq[3];
@@ -1762,11 +1772,18 @@ static int env_overflows(const nstate *s, double h0, double hs, double t0, doubl
 static inline int preint_prepare(const nstate *s, const ef_ray *r, double *h0, double *hs,
                                  double *t0, double *t1, double *tail)
 {
-    long double lt0, lt1;
-    if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &lt0, &lt1))
+    if (!(s->rho_max > 0) || !(r->dist > 0))
         return 0;
-    *t0 = (double) lt0;
-    *t1 = (double) lt1;
+    if (s->has_box) {
+        long double lt0, lt1;
+        if (!clip_box(s, r, &lt0, &lt1))
+            return 0;
+        *t0 = (double) lt0;
+        *t1 = (double) lt1;
+    } else {
+        *t0 = 0;
+        *t1 = r->dist;
+    }
     *h0 = s->up[0] * r->org[0] + s->up[1] * r->org[1] + s->up[2] * r->org[2] - s->base;
     *hs = s->up[0] * r->dir[0] + s->up[1] * r->dir[1] + s->up[2] * r->dir[2];
     if (isinf(*t1)) {
@@ -1824,9 +1841,11 @@ static void preint_span(const ef_fog_component *c, const nstate *s, const ef_ray
             ++m;
         }
     }
-    for (int k = 0; k < s->naxes; ++k)
+    for (int k = 0; k < s->naxes; ++k) {
+        const mview mv = mview_of(c, s->axis[k]);
         for (int i = 0; i < m; ++i)
-            one_axis(c, s, k, &o[i]);
+            one_axis(s, &mv, k, &o[i]);
+    }
     for (int j = 0, i = 0; j < n; ++j) {
         double unit = 0;
         if (what[j] == 2) {
