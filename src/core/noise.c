@@ -6,9 +6,8 @@
 
 #include <math.h>
 
-/* Perlin's permutation. His reference replicates it to 512 entries so that
- * p[A + 1] needs no mask; indexing with & 255 reads the same values. */
-static const unsigned char perm[256] = {
+/* Perlin's permutation (noise.h). */
+const unsigned char ef_noise_perm[256] = {
     151, 160, 137, 91, 90, 15, 131, 13, 201, 95, 96, 53, 194, 233, 7, 225, 140, 36, 103, 30,
     69, 142, 8, 99, 37, 240, 21, 10, 23, 190, 6, 148, 247, 120, 234, 75, 0, 26, 197, 62, 94,
     252, 219, 203, 117, 35, 11, 32, 57, 177, 33, 88, 237, 149, 56, 87, 174, 20, 125, 136, 171,
@@ -37,21 +36,6 @@ void ef_noise_split(double v, int64_t *cell, double *frac)
         *cell = (int64_t) f & 255;
     else
         *cell = 0;
-}
-
-void ef_noise_cell_at(int64_t X, int64_t Y, int64_t Z, ef_noise_cell *c)
-{
-    const int x = (int) (X & 255), y = (int) (Y & 255), z = (int) (Z & 255);
-    const int A = perm[x] + y, AA = perm[A & 255] + z, AB = perm[(A + 1) & 255] + z;
-    const int B = perm[(x + 1) & 255] + y, BA = perm[B & 255] + z, BB = perm[(B + 1) & 255] + z;
-    c->h[0] = perm[AA & 255];
-    c->h[1] = perm[BA & 255];
-    c->h[2] = perm[AB & 255];
-    c->h[3] = perm[BB & 255];
-    c->h[4] = perm[(AA + 1) & 255];
-    c->h[5] = perm[(BA + 1) & 255];
-    c->h[6] = perm[(AB + 1) & 255];
-    c->h[7] = perm[(BB + 1) & 255];
 }
 
 double ef_noise3(double x, double y, double z)

@@ -20,8 +20,27 @@ typedef struct ef_noise_cell {
     unsigned char h[8];    /* AA, BA, AB, BB, AA+1, BA+1, AB+1, BB+1 */
 } ef_noise_cell;
 
-/* The corners of the cell whose lower corner is (X, Y, Z) & 255. */
-void ef_noise_cell_at(int64_t X, int64_t Y, int64_t Z, ef_noise_cell *c);
+/* Perlin's permutation (his reference replicates it to 512 entries so that
+ * p[A + 1] needs no mask; indexing with & 255 reads the same values). */
+extern const unsigned char ef_noise_perm[256];
+
+/* The corners of the cell whose lower corner is (X, Y, Z) & 255. Inline:
+ * the integrators hash every lattice cell they walk. */
+static inline void ef_noise_cell_at(int64_t X, int64_t Y, int64_t Z, ef_noise_cell *c)
+{
+    const unsigned char *p = ef_noise_perm;
+    const int x = (int) (X & 255), y = (int) (Y & 255), z = (int) (Z & 255);
+    const int A = p[x] + y, AA = p[A & 255] + z, AB = p[(A + 1) & 255] + z;
+    const int B = p[(x + 1) & 255] + y, BA = p[B & 255] + z, BB = p[(B + 1) & 255] + z;
+    c->h[0] = p[AA & 255];
+    c->h[1] = p[BA & 255];
+    c->h[2] = p[AB & 255];
+    c->h[3] = p[BB & 255];
+    c->h[4] = p[(AA + 1) & 255];
+    c->h[5] = p[(BA + 1) & 255];
+    c->h[6] = p[(AB + 1) & 255];
+    c->h[7] = p[(BB + 1) & 255];
+}
 
 /* Noise inside cell c at fractions (x, y, z) in [0, 1]: the same operations
  * as ef_noise3 after its floor, so ef_noise3 equals it bit for bit (in files
