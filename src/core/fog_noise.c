@@ -853,11 +853,18 @@ static double cell_gauss(const nstate *s, const ef_noise_cell *nc, const double 
 typedef struct cell_batch {
     double f[3][CELL_BATCH];         /* fractions at each cell's entry */
     double hh[CELL_BATCH];           /* half the chord, in t */
-    double g[3][8][CELL_BATCH];      /* the corners' gradients, by component */
+    int g[8][CELL_BATCH];            /* the corners' gradients, packed (grad_pack) */
     double A[8][CELL_BATCH], B[8][CELL_BATCH];   /* the corners' gradient terms */
     double sum[CELL_BATCH];
 } cell_batch;
 
+
+/* grad_vec[h] with each component plus one in two bits (x low), so a
+ * batch stores one int per corner and unpacks it in vector lanes. */
+static const int grad_pack[16] = {
+    0x1a, 0x18, 0x12, 0x10, 0x26, 0x24, 0x06, 0x04,
+    0x29, 0x21, 0x09, 0x01, 0x1a, 0x21, 0x18, 0x01
+};
 
 /* Gauss with n nodes on each of the m cells in b: the arithmetic of
  * cell_gauss_b cell by cell (so the same bits), vectorised across cells. */
@@ -868,9 +875,10 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
     for (int k = 0; k < 8; ++k) {
         const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
         for (int c = 0; c < m; ++c) {
-            b->A[k][c] = b->g[0][k][c] * (b->f[0][c] - ox) + b->g[1][k][c] * (b->f[1][c] - oy) +
-                         b->g[2][k][c] * (b->f[2][c] - oz);
-            b->B[k][c] = b->g[0][k][c] * d0[0] + b->g[1][k][c] * d0[1] + b->g[2][k][c] * d0[2];
+            const int p = b->g[k][c];
+            const double gx = (p & 3) - 1, gy = ((p >> 2) & 3) - 1, gz = ((p >> 4) & 3) - 1;
+            b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
+            b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
         }
     }
     for (int c = 0; c < m; ++c)
@@ -934,12 +942,8 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
             if (h > 0) {
                 ef_noise_cell nc;
                 ef_noise_cell_at(ic[0], ic[1], ic[2], &nc);
-                for (int k = 0; k < 8; ++k) {
-                    const double *g = grad_vec[nc.h[k] & 15];
-                    b.g[0][k][m] = g[0];
-                    b.g[1][k][m] = g[1];
-                    b.g[2][k][m] = g[2];
-                }
+                for (int k = 0; k < 8; ++k)
+                    b.g[k][m] = grad_pack[nc.h[k] & 15];
                 for (int a = 0; a < 3; ++a)
                     b.f[a][m] = fr[a];
                 b.hh[m++] = h / 2;
