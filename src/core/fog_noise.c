@@ -876,7 +876,8 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
         const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
         for (int c = 0; c < m; ++c) {
             const int p = b->g[k][c];
-            const double gx = (p & 3) - 1, gy = ((p >> 2) & 3) - 1, gz = ((p >> 4) & 3) - 1;
+            const double gx = (double) (p & 3) - 1, gy = (double) ((p >> 2) & 3) - 1,
+                         gz = (double) ((p >> 4) & 3) - 1;
             b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
             b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
         }
