@@ -853,6 +853,7 @@ static double cell_gauss(const nstate *s, const ef_noise_cell *nc, const double 
 typedef struct cell_batch {
     double f[3][CELL_BATCH];         /* fractions at each cell's entry */
     double hh[CELL_BATCH];           /* half the chord, in t */
+    int ic[3][CELL_BATCH];           /* each cell's lattice index (mod 256) */
     int g[8][CELL_BATCH];            /* the corners' gradients, packed (grad_pack) */
     double A[8][CELL_BATCH], B[8][CELL_BATCH];   /* the corners' gradient terms */
     double sum[CELL_BATCH];
@@ -927,6 +928,12 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
         step[a] = d[a] == 0 ? INFINITY : fabs(1 / d[a]);
         next[a] = d[a] > 0 ? t0 + (1 - fr[a]) * step[a] : d[a] < 0 ? t0 + fr[a] * step[a] : INFINITY;
     }
+    int inc[3];
+    double reset[3];
+    for (int a = 0; a < 3; ++a) {
+        inc[a] = d[a] > 0 ? 1 : 255;
+        reset[a] = d[a] > 0 ? 0 : 1;
+    }
     ksum acc = { 0, 0 };
     double t = t0;
     long cells = 0;
@@ -935,18 +942,14 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
     while (more) {
         int m = 0;
         while (m < CELL_BATCH) {
-            int a0 = 0;
-            for (int a = 1; a < 3; ++a)
-                if (next[a] < next[a0])
-                    a0 = a;
-            const double tb = next[a0] < t1 ? next[a0] : t1, h = tb - t;
+            const double n01 = next[1] < next[0] ? next[1] : next[0];
+            const double nm = next[2] < n01 ? next[2] : n01;
+            const double tb = nm < t1 ? nm : t1, h = tb - t;
             if (h > 0) {
-                ef_noise_cell nc;
-                ef_noise_cell_at(ic[0], ic[1], ic[2], &nc);
-                for (int k = 0; k < 8; ++k)
-                    b.g[k][m] = grad_pack[nc.h[k] & 15];
-                for (int a = 0; a < 3; ++a)
+                for (int a = 0; a < 3; ++a) {
+                    b.ic[a][m] = ic[a];
                     b.f[a][m] = fr[a];
+                }
                 b.hh[m++] = h / 2;
                 for (int a = 0; a < 3; ++a)
                     fr[a] += h * d[a];
@@ -955,18 +958,26 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
                 more = 0;
                 break;
             }
-            /* Cross every axis whose face is here. */
-            for (int a = 0; a < 3; ++a)
-                if (next[a] <= tb) {
-                    ic[a] = (ic[a] + (d[a] > 0 ? 1 : 255)) & 255;
-                    fr[a] = d[a] > 0 ? 0 : 1;
-                    next[a] += step[a];
-                }
+            /* Cross every axis whose face is here, without branches: which
+             * axis comes next is what a processor cannot predict. */
+            for (int a = 0; a < 3; ++a) {
+                const int cross = next[a] <= tb;
+                ic[a] = cross ? (ic[a] + inc[a]) & 255 : ic[a];
+                fr[a] = cross ? reset[a] : fr[a];
+                next[a] = cross ? next[a] + step[a] : next[a];
+            }
             t = tb;
             if (!(t < t1)) {
                 more = 0;
                 break;
             }
+        }
+        /* The corners' hashes, cell by cell with no branch in between. */
+        for (int c = 0; c < m; ++c) {
+            ef_noise_cell nc;
+            ef_noise_cell_at(b.ic[0][c], b.ic[1][c], b.ic[2][c], &nc);
+            for (int k = 0; k < 8; ++k)
+                b.g[k][c] = grad_pack[nc.h[k] & 15];
         }
         batch_gauss(s, d, n, m, &b);
         for (int c = 0; c < m; ++c)
