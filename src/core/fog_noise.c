@@ -398,9 +398,22 @@ typedef struct lin {
     double bd, dd;                   /* the same rounded, for per-node work */
 } lin;
 
+/* floorl(x), without the x87 rounding-mode switches floorl costs: adding
+ * and removing 1.5 2^63 rounds to an integer where long double's ulp is 1
+ * (|x| < 2^62), then one step down if that went up. Zero keeps its sign
+ * through floorl itself. */
+static inline long double floor_ld(long double x)
+{
+    if (x != 0 && fabsl(x) < 0x1p62L) {
+        const long double t = (x + 0x1.8p63L) - 0x1.8p63L;
+        return t > x ? t - 1 : t;
+    }
+    return floorl(x);
+}
+
 static long double mod256(long double u)
 {
-    return u - 256 * floorl(u * (1.0L / 256));
+    return u - 256 * floor_ld(u * (1.0L / 256));
 }
 
 /* q_a at the ray's origin and its rate per unit t, in long double. */
@@ -466,7 +479,7 @@ static void walk_init(walk *w, const lin *u, int m, long double t0, long double 
     w->t1 = t1;
     for (int j = 0; j < m; ++j) {
         const long double v = u[j].b + t0 * u[j].d;
-        long double c = floorl(v);
+        long double c = floor_ld(v);
         if (u[j].d < 0 && c == v)
             c -= 1;   /* on a face, moving down: the cell below */
         w->cell[j] = c;
