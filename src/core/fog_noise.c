@@ -867,18 +867,17 @@ typedef struct cell_batch {
     double f[3][CELL_BATCH];         /* fractions at each cell's entry */
     double hh[CELL_BATCH];           /* half the chord, in t */
     int ic[3][CELL_BATCH];           /* each cell's lattice index (mod 256) */
-    int g[8][CELL_BATCH];            /* the corners' gradients, packed (grad_pack) */
+    unsigned g[8][CELL_BATCH];       /* the corners' hashes (gradient number: & 15) */
     double A[8][CELL_BATCH], B[8][CELL_BATCH];   /* the corners' gradient terms */
     double sum[CELL_BATCH];
 } cell_batch;
 
 
-/* grad_vec[h] with each component plus one in two bits (x low), so a
- * batch stores one int per corner and unpacks it in vector lanes. */
-static const int grad_pack[16] = {
-    0x1a, 0x18, 0x12, 0x10, 0x26, 0x24, 0x06, 0x04,
-    0x29, 0x21, 0x09, 0x01, 0x1a, 0x21, 0x18, 0x01
-};
+/* grad_vec's components plus one, two bits per gradient number h (h = 0
+ * lowest): a component is (G >> 2h & 3) - 1, a shift vector lanes do. */
+#define GRAD_X1 0x46552222u
+#define GRAD_Y1 0x2222550au
+#define GRAD_Z1 0x190a0a55u
 
 /* Gauss with n nodes on each of the m cells in b: the arithmetic of
  * cell_gauss_b cell by cell (so the same bits), vectorised across cells. */
@@ -889,9 +888,10 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
     for (int k = 0; k < 8; ++k) {
         const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
         for (int c = 0; c < m; ++c) {
-            const int p = b->g[k][c];
-            const double gx = (double) (p & 3) - 1, gy = (double) ((p >> 2) & 3) - 1,
-                         gz = (double) ((p >> 4) & 3) - 1;
+            const unsigned sh = 2 * (b->g[k][c] & 15);
+            const double gx = (double) (int) ((GRAD_X1 >> sh) & 3) - 1,
+                         gy = (double) (int) ((GRAD_Y1 >> sh) & 3) - 1,
+                         gz = (double) (int) ((GRAD_Z1 >> sh) & 3) - 1;
             b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
             b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
         }
@@ -990,7 +990,7 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
             ef_noise_cell nc;
             ef_noise_cell_at(b.ic[0][c], b.ic[1][c], b.ic[2][c], &nc);
             for (int k = 0; k < 8; ++k)
-                b.g[k][c] = grad_pack[nc.h[k] & 15];
+                b.g[k][c] = nc.h[k];
         }
         batch_gauss(s, d, n, m, &b);
         for (int c = 0; c < m; ++c)
