@@ -96,8 +96,12 @@ typedef struct nstate {
     double sky_need;                 /* preintegrated sky rays: log(bound / 1e-6) */
     /* The camera bound by bind_noise (merged tables): its q and where
      * that falls per axis, its envelope height and e^(-k h) there. */
-    int cam;
+    int cam, cam_lines;
     double cam_s[3], cam_h, cam_eh;
+    /* The noise model's lattice lines start where the camera is: each
+     * octave's reduced coordinate there, per axis (rays from cam_org). */
+    double cam_org[3];
+    long double cam_b[3][EF_FBM_MAX_OCTAVES];
     struct mpoint { double k, y, I; int p; } cam_pt[3];
 } nstate;
 
@@ -632,11 +636,24 @@ static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     if (s->merged)
         return;   /* the merged tables need no lattice lines */
     const int N = s->fbm.octaves;
+    const int hit = s->cam_lines && r->org[0] == s->cam_org[0] && r->org[1] == s->cam_org[1] &&
+                    r->org[2] == s->cam_org[2];
     for (int a = 0; a < 3; ++a) {
-        long double q0, dq;
-        q_line(s, r->org, r->dir, a, &q0, &dq);
+        long double q0 = 0, dq;
+        if (hit)
+            dq = (long double) r->dir[a] / s->scale;   /* as q_line */
+        else
+            q_line(s, r->org, r->dir, a, &q0, &dq);
         for (int i = 0; i < N; ++i) {
-            const lin l = octave_line(s, i, q0, dq, a);
+            lin l;
+            if (hit) {   /* octave_line with the camera's reduced start */
+                l.b = s->cam_b[a][i];
+                l.d = (long double) s->fbm.freq[i] * dq;
+                l.bd = (double) l.b;
+                l.dd = (double) l.d;
+            } else {
+                l = octave_line(s, i, q0, dq, a);
+            }
             if (s->separable)
                 R->u[a * N + i] = l;
             else
@@ -1730,9 +1747,18 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
 static void bind_noise(ef_fog_component *c, const double org[3])
 {
     nstate *s = (nstate *) (void *) c->arr;
-    s->cam = 0;
-    if (!s->merged)
+    s->cam = s->cam_lines = 0;
+    if (!s->merged) {
+        for (int a = 0; a < 3; ++a) {
+            long double q0, dq;
+            q_line(s, org, (const double[3]) { 0, 0, 0 }, a, &q0, &dq);
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                s->cam_b[a][i] = octave_line(s, i, q0, dq, a).b;
+            s->cam_org[a] = org[a];
+        }
+        s->cam_lines = 1;
         return;
+    }
     nstate t = *s;
     for (int k = 0; k < t.naxes; ++k) {
         const int a = t.axis[k];
