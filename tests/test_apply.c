@@ -218,10 +218,87 @@ static void test_block_matches_pixels(void **state)
                 }
 }
 
+/* A random unit direction; every 4th one along or across an axis (the
+ * planes' grazing and parallel cases), some with zero components. */
+static void random_dir(double d[3], int i)
+{
+    for (int k = 0; k < 3; ++k)
+        d[k] = 2.0 * rand() / RAND_MAX - 1.0;
+    if (i % 4 == 1)
+        d[rand() % 3] = 0.0;
+    if (i % 8 == 3) {
+        const int a = rand() % 3;
+        d[a] = 0.0;
+        d[(a + 1) % 3] = 0.0;
+    }
+    if (i % 16 == 5)
+        d[rand() % 3] = 1e-17;
+    const double n = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (int k = 0; k < 3; ++k)
+        d[k] = n > 0 ? d[k] / n : k == 2;
+}
+
+/* Every model's tau through a bound component (ef_fog_bind, its per-camera
+ * cache) and through tau_add (ef_fog_tau_add) is the same bits as tau on
+ * an unbound copy, for rays from the bound camera and from elsewhere:
+ * cameras on a face's plane, inside a volume, on a layer's knot, far away. */
+static void test_bound_tau_same_bits(void **state)
+{
+    (void) state;
+    static const double cams[][3] = {
+        { 1.25, 1.7, 3.5 }, { 0, 0, 0 },     { -3, 1, -8 },      { 3, 2.5, -4 },
+        { 0, 2, 0 },        { 5, 3, -22 },   { 1e7, -3e6, 2e7 }, { -3, 0, -12 },
+        { 0.5, 6, -11 },    { 0, -1, 0 },
+    };
+    for (size_t m = 0; m < sizeof specs / sizeof specs[0]; ++m)
+        for (int c = 0; c < 3 && specs[m][c]; ++c)
+            for (size_t q = 0; q < sizeof cams / sizeof cams[0]; ++q) {
+                ef_fog_component bound, plain;
+                ef_err err;
+                assert_int_equal(ef_fog_parse(specs[m][c], NULL, &plain, &err), 0);
+                assert_int_equal(ef_fog_copy(&bound, &plain), 0);
+                ef_fog_bind(&bound, cams[q]);
+                srand(11u + (unsigned) q);
+                enum { N = 2000 };
+                static ef_ray r[N];
+                static double acc[N][3];
+                for (int i = 0; i < N; ++i) {
+                    const int own = i % 7 != 6;
+                    for (int k = 0; k < 3; ++k)
+                        r[i].org[k] = own ? cams[q][k] : cams[q][k] + (k == 1 ? 1e-9 : 0.0);
+                    random_dir(r[i].dir, i);
+                    const int kind = i % 5;
+                    r[i].dist = kind == 0 ? INFINITY : kind == 1 ? 1e-3 * rand() / RAND_MAX
+                              : kind == 2 ? 0.0 : 60.0 * rand() / RAND_MAX;
+                    r[i].planar = r[i].dist * 0.75;
+                    acc[i][0] = acc[i][1] = acc[i][2] = (double) (i % 3);
+                }
+                ef_fog_tau_add(&bound, r, N, acc);
+                for (int i = 0; i < N; ++i) {
+                    double want[3], got[3];
+                    plain.model->tau(&plain, &r[i], want);
+                    bound.model->tau(&bound, &r[i], got);
+                    for (int k = 0; k < 3; ++k) {
+                        const double sum = (double) (i % 3) + want[k];
+                        if (memcmp(&got[k], &want[k], sizeof got[k]) ||
+                            memcmp(&acc[i][k], &sum, sizeof sum))
+                            fail_msg("%s, camera %zu, ray %d (dir %.17g,%.17g,%.17g dist %.17g) "
+                                     "channel %d: bound %.17g, tau_add %.17g, expected %.17g",
+                                     specs[m][c], q, i, r[i].dir[0], r[i].dir[1], r[i].dir[2],
+                                     r[i].dist, k, got[k], acc[i][k] - (double) (i % 3),
+                                     want[k]);
+                    }
+                }
+                ef_fog_free(&bound);
+                ef_fog_free(&plain);
+            }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_block_matches_pixels),
+        cmocka_unit_test(test_bound_tau_same_bits),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
