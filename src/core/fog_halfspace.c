@@ -128,7 +128,7 @@ EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *
         return IN_NONE;
     const ef_fog_functional f = { { c->p[0], c->p[1], c->p[2] }, c->p[3] };
     ef_line ln;
-    ef_line_from(&f, ef_fog_dot_org(c, f.n, r->org, f.d), r->dir, L, &ln);
+    ef_line_from_rate(ef_cam_h0(c, f.n, f.d, r->org), ef_cam_rate(c, f.n, r->dir), L, &ln);
     const double h0 = ln.h0, h1 = ln.h1, s = ln.s;
     /* Outside, or lying in the plane (h0 = h1 = 0): the density is 0 there. */
     if (h0 >= 0 && h1 >= 0)
@@ -256,6 +256,28 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
     }
 }
 
+/* tau_add over tau: one call per batch, the same sums. */
+#define TAU_ADD(name, tau)                                                                   \
+    EF_MULTIVERSION static void name(const ef_fog_component *c, const ef_ray *r, int n,      \
+                                     double (*acc)[3])                                       \
+    {                                                                                        \
+        for (int j = 0; j < n; ++j) {                                                        \
+            double t[3];                                                                     \
+            tau(c, &r[j], t);                                                                \
+            for (int k = 0; k < 3; ++k)                                                      \
+                acc[j][k] += t[k];                                                           \
+        }                                                                                    \
+    }
+TAU_ADD(tau_add_halfspace, tau_halfspace)
+TAU_ADD(tau_add_linear, tau_linear)
+TAU_ADD(tau_add_smooth, tau_smooth)
+
+/* The plane's value at the camera, cached for its rays (exact.h). */
+static void bind_plane(ef_fog_component *c, const double org[3])
+{
+    ef_cam_bind(c, c->p + P_PLANE, c->p[P_PLANE + 3], org);
+}
+
 static int one_plane(const ef_fog_component *c, ef_fog_functional *out, int cap)
 {
     if (cap >= 1) {
@@ -331,15 +353,18 @@ static void density_smooth(const ef_fog_component *c, const long double *v, long
 const ef_fog_model ef_fog_halfspace = {
     .name = "halfspace", .keys = halfspace_keys, .set = set_halfspace,
     .finish = finish_halfspace, .tau = tau_halfspace, .functionals = one_plane,
+    .tau_add = tau_add_halfspace, .bind = bind_plane,
     .features = kink_at_plane, .density = density_halfspace,
 };
 const ef_fog_model ef_fog_halfspace_linear = {
     .name = "halfspace-linear", .keys = linear_keys, .set = set_linear,
     .finish = finish_linear, .tau = tau_linear, .functionals = one_plane,
+    .tau_add = tau_add_linear, .bind = bind_plane,
     .features = kink_at_plane, .density = density_linear,
 };
 const ef_fog_model ef_fog_halfspace_smooth = {
     .name = "halfspace-smooth", .keys = smooth_keys, .set = set_halfspace,
     .finish = finish_smooth, .tau = tau_smooth, .functionals = one_plane,
+    .tau_add = tau_add_smooth, .bind = bind_plane,
     .features = smooth_features, .density = density_smooth,
 };

@@ -505,7 +505,7 @@ EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray 
     }
     /* Heights kept as double-doubles so the pieces' spans next to a knot
      * do not cancel, far from the origin included. */
-    const ef_dd u0 = ef_fog_dot_org(c, c->up, r->org, 0.0), sd = ef_dd_dot3(c->up, r->dir, 0.0);
+    const ef_dd u0 = ef_cam_h0(c, c->up, 0.0, r->org), sd = ef_cam_rate(c, c->up, r->dir);
     const double s = sd.hi + sd.lo;
     if (s == 0) {
         const where at = locate(&p, first_above(p.h, p.n, u0), u0);
@@ -536,6 +536,23 @@ EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray 
         integrate(&p, u0, u1, as, L, tau);
     else
         integrate(&p, u1, u0, as, L, tau);
+}
+
+EF_MULTIVERSION static void tau_add_layered(const ef_fog_component *c, const ef_ray *r, int n,
+                                            double (*acc)[3])
+{
+    for (int j = 0; j < n; ++j) {
+        double t[3];
+        tau_layered(c, &r[j], t);
+        for (int k = 0; k < 3; ++k)
+            acc[j][k] += t[k];
+    }
+}
+
+/* The camera's height, cached for its rays (exact.h). */
+static void bind_layered(ef_fog_component *c, const double org[3])
+{
+    ef_cam_bind(c, c->up, 0.0, org);
 }
 
 /* The reference sees heights relative to the first knot, so that a profile
@@ -586,6 +603,7 @@ static void density_layered(const ef_fog_component *c, const long double *v, lon
 
 const ef_fog_model ef_fog_layered = { .name = "layered", .keys = layered_keys,
                                       .set = set_layered, .finish = finish_layered,
-                                      .tau = tau_layered, .functionals = functionals_layered,
+                                      .tau = tau_layered,
+                                      .tau_add = tau_add_layered, .bind = bind_layered, .functionals = functionals_layered,
                                       .features = features_layered,
                                       .density = density_layered, .uses_up = 1 };
