@@ -21,6 +21,15 @@
 #define EF_MULTIVERSION
 #endif
 
+/* A helper of a per-pixel function, inlined into it (and so compiled for
+ * each of its targets): a call from one multiversioned function to another
+ * goes through the dispatcher and is never inlined. */
+#if defined(__GNUC__)
+#define EF_INLINE static inline __attribute__((always_inline))
+#else
+#define EF_INLINE static inline
+#endif
+
 /* An unevaluated sum hi + lo, |lo| <= ulp(hi)/2. */
 typedef struct ef_dd {
     double hi, lo;

@@ -121,7 +121,7 @@ enum { IN_NONE = 0, IN_FINITE, IN_INFINITE };
  * IN_INFINITE: a sky ray that stays in the fog forever, at a depth that
  * grows or stays constant and > 0 (every density here is then > 0 far
  * enough along). One ef_line_of decides the common fog-free case. */
-EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
+EF_INLINE int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
 {
     const double L = r->dist;
     if (!(L > 0))
@@ -157,9 +157,9 @@ EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *
     return IN_FINITE;
 }
 
-EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_halfspace_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double rho = c->p[P_DENS + i];
@@ -170,11 +170,16 @@ EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ra
     }
 }
 
+EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_halfspace_one(c, r, tau);
+}
+
 /* The density at the mean depth times l: Lengyel's both-inside
  * a L (x0 + x1)/2 and his crossing a h_in^2/(2|s|) = a l |h_in|/2 in one. */
-EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_linear_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double a = c->p[P_DENS + i];
@@ -183,6 +188,11 @@ EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *
         else
             tau[i] = k == IN_INFINITE ? INFINITY : a * (0.5 * (in.xmin + in.xmax)) * in.l;
     }
+}
+
+EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_linear_one(c, r, tau);
 }
 
 /* psi(b)/b for 0 <= b < 1, where psi(b) = 1 - (1 - e^-b)/b: the direct
@@ -227,9 +237,9 @@ static double psi_over_b(double b)
  * so S -> 0 gives S l (xmin + dx/2) (the linear model) even when S/D
  * underflows; at and above 1, S -> inf (S/D may overflow) gives D l less
  * the transition layer. Each term is at most D: no spurious overflow. */
-EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_smooth_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double D = c->p[P_DENS + i], S = c->p[P_SHARP + i], lam = c->p[P_LAMBDA + i];
@@ -256,6 +266,11 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
     }
 }
 
+EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_smooth_one(c, r, tau);
+}
+
 /* tau_add over tau: one call per batch, the same sums. */
 #define TAU_ADD(name, tau)                                                                   \
     EF_MULTIVERSION static void name(const ef_fog_component *c, const ef_ray *r, int n,      \
@@ -263,7 +278,7 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
     {                                                                                        \
         for (int j = 0; j < n; ++j) {                                                        \
             double t[3];                                                                     \
-            tau(c, &r[j], t);                                                                \
+            tau##_one(c, &r[j], t);                                                          \
             for (int k = 0; k < 3; ++k)                                                      \
                 acc[j][k] += t[k];                                                           \
         }                                                                                    \

@@ -316,7 +316,7 @@ static inline void crossing_of(const double *p, const double org[3], const doubl
 /* The inside length once the binding entering plane in (or -1: entry at 0)
  * and leaving plane out (or -1: exit at len) are known, with their
  * crossings xi, xo (xi->h1 needed when out < 0 and len is finite). */
-EF_MULTIVERSION static double bound_length(const double *pl, int in, const crossing *xi, int out,
+EF_INLINE double bound_length(const double *pl, int in, const crossing *xi, int out,
                            const crossing *xo, double len)
 {
     if (out < 0) {
@@ -399,7 +399,7 @@ enum { CLIP_EMPTY, CLIP_BOUND, CLIP_UNSURE };
 /* The plain-double pass. CLIP_EMPTY: the segment certainly misses the
  * volume. CLIP_BOUND: *in, *out are certainly the binding planes (-1: none)
  * and entry < exit. CLIP_UNSURE: a sign or a choice is within rounding. */
-EF_MULTIVERSION static int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
+EF_INLINE int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
                      double len, int *in_, int *out_)
 {
     const int sky = isinf(len);
@@ -492,7 +492,7 @@ EF_MULTIVERSION static int clip_fast(const double *pl, int np, const double org[
  * and es = |s| EPS_DOT + EPS_TINY, the same values as the three-term sums
  * (adding zeros is exact; a zero s is decided before its sign matters).
  * dir must be finite (then those zero products are zeros). */
-EF_MULTIVERSION static int clip_fast_cam(const double *pl, const double *cache, int np,
+EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np,
                                          const double dir[3], double len, int *in_, int *out_)
 {
     const int sky = isinf(len);
@@ -603,7 +603,7 @@ static inline void crossing_cam(const double *p, const double *ca, const double 
 /* The length of the part of [0, len] (len may be INFINITY) of the ray
  * org + t dir where every plane's value is < 0: 0 when none, INFINITY when
  * the ray stays inside forever. */
-EF_MULTIVERSION static double inside_length(const double *pl, int np, const double org[3], const double dir[3],
+EF_INLINE double inside_length(const double *pl, int np, const double org[3], const double dir[3],
                             double len)
 {
     int in, out;
@@ -624,7 +624,7 @@ EF_MULTIVERSION static double inside_length(const double *pl, int np, const doub
 }
 
 /* inside_length for a ray from the bound camera. */
-EF_MULTIVERSION static double inside_length_cam(const ef_fog_component *c, const double dir[3],
+EF_INLINE double inside_length_cam(const ef_fog_component *c, const double dir[3],
                                                 double len)
 {
     const int np = nplanes(c);
@@ -646,7 +646,7 @@ EF_MULTIVERSION static double inside_length_cam(const ef_fog_component *c, const
     return bound_length(pl, in, &xi, out, &xo, len);
 }
 
-static inline void tau_volume_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_volume_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const double *rho = &c->p[P_RHO];
     tau[0] = tau[1] = tau[2] = 0.0;
