@@ -1,5 +1,7 @@
 #include "apply.h"
 
+#include "exact.h"
+
 #include <float.h>
 #include <math.h>
 
@@ -60,11 +62,218 @@ static void queue_far(const ef_fog_scene *s, span *sp, int j)
     sp->inf[j] = &sp->far[sp->nq++];
 }
 
+/* The common case, a span at a time with no per-pixel dispatch: no AOV,
+ * no error info, one scene colour. Rays as ef_reconstruct_span builds them,
+ * every component's tau added over the span (ef_fog_tau_add), T = e^-tau,
+ * and compositing in branch-free loops over arrays that the compiler
+ * vectorises. The same operations in the same order as ef_scene_eval_rays,
+ * ef_scene_far_ray and ef_composite per pixel: the same bits. */
+typedef struct fast_span {
+    ef_ray r[EF_RECON_SPAN];
+    ef_ray q[EF_RECON_SPAN];             /* far segments that differ from r[j] */
+    double acc[EF_RECON_SPAN][3];        /* tau along r[j], then along q[m] */
+    double T[3][EF_RECON_SPAN], Ti[3][EF_RECON_SPAN];
+    double a[EF_RECON_SPAN], c[3][EF_RECON_SPAN];
+    int qj[EF_RECON_SPAN];               /* pixel of q[m] */
+    unsigned char sky[EF_RECON_SPAN], bad[EF_RECON_SPAN];
+    unsigned char need_inf[EF_RECON_SPAN];
+    int keep_sky;                        /* --sky keep */
+} fast_span;
+
+/* Sums the components' taus along r[0..n) into acc (from 0, in component
+ * order as sum_tau does). */
+static void fast_tau(const ef_fog_scene *s, const ef_ray *r, int n, double (*acc)[3])
+{
+    for (int j = 0; j < n; ++j)
+        acc[j][0] = acc[j][1] = acc[j][2] = 0.0;
+    for (int i = 0; i < s->ncomp; ++i)
+        ef_fog_tau_add(&s->comp[i], r, n, acc);
+}
+
+/* transmit() of scene.c into the planes T[k][j]. */
+static void fast_transmit(const double (*acc)[3], int n, double T[3][EF_RECON_SPAN])
+{
+    for (int j = 0; j < n; ++j) {
+        const double t0 = acc[j][0], t1 = acc[j][1], t2 = acc[j][2];
+        const double e0 = exp(-t0);
+        const double e1 = t1 == t0 ? e0 : exp(-t1);
+        T[0][j] = e0;
+        T[1][j] = e1;
+        T[2][j] = t2 == t0 ? e0 : t2 == t1 ? e1 : exp(-t2);
+    }
+}
+
+EF_MULTIVERSION static void fast_composite(fast_span *sp, int n, const double F[3],
+                                           int fog_uncovered, int has_alpha)
+{
+    for (int k = 0; k < 3; ++k) {
+        const double *T = sp->T[k], *Ti = sp->Ti[k];
+        double *c = sp->c[k];
+        const double f = F[k];
+        if (fog_uncovered)
+            for (int j = 0; j < n; ++j) {
+                const double a = sp->a[j];
+                const double tc = T[j] * c[j];   /* unconditional: the select vectorises */
+                c[j] = ((T[j] > 0.0 ? tc : 0.0) + (1.0 - T[j]) * a * f) +
+                       (1.0 - a) * (1.0 - Ti[j]) * f;
+            }
+        else
+            for (int j = 0; j < n; ++j) {
+                const double tc = T[j] * c[j];
+                c[j] = (T[j] > 0.0 ? tc : 0.0) + (1.0 - T[j]) * sp->a[j] * f;
+            }
+    }
+    if (has_alpha && fog_uncovered)
+        for (int j = 0; j < n; ++j) {
+            const double a = sp->a[j];
+            const double cover = (3.0 - sp->Ti[0][j] - sp->Ti[1][j] - sp->Ti[2][j]) / 3.0;
+            sp->a[j] = a + (1.0 - a) * cover;
+        }
+}
+
+/* to_float as selects, so that a loop of it vectorises: the same value. */
+static inline float to_float_sel(double v)
+{
+    double m = v > FLT_MAX ? FLT_MAX : v;
+    m = m < -FLT_MAX ? -FLT_MAX : m;           /* in range (or NaN): the cast is defined */
+    const float f = (float) m;
+    return v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : f;
+}
+
+/* Writes the span back: kept pixels (--sky keep) and damaged alphas as they were. */
+EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, float *pg,
+                                       float *pb, float *pa, int any_kept)
+{
+    float *const out[3] = { pr, pg, pb };
+    float kept[4][EF_RECON_SPAN];
+    /* Sky pixels with --sky keep, and damaged alphas: put back as they were. */
+    unsigned char keep[EF_RECON_SPAN], keep_a[EF_RECON_SPAN];
+    if (any_kept)
+        for (int j = 0; j < n; ++j) {
+            keep[j] = sp->sky[j] && sp->keep_sky;
+            keep_a[j] = keep[j] || (pa && sp->bad[j]);
+            for (int k = 0; k < 3; ++k)
+                kept[k][j] = out[k][j];
+            kept[3][j] = pa ? pa[j] : 0.0f;
+        }
+    for (int k = 0; k < 3; ++k) {
+        float *o = out[k];
+        const double *c = sp->c[k];
+        for (int j = 0; j < n; ++j)
+            o[j] = to_float_sel(c[j]);
+    }
+    if (pa)
+        for (int j = 0; j < n; ++j)
+            pa[j] = to_float_sel(sp->a[j]);
+    if (any_kept)
+        for (int j = 0; j < n; ++j) {
+            if (keep[j])
+                for (int k = 0; k < 3; ++k)
+                    out[k][j] = kept[k][j];
+            if (pa && keep_a[j])
+                pa[j] = kept[3][j];
+        }
+}
+
+EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
+                                       float *const rgb[3], float *alpha, const float *depth,
+                                       fast_span *sp)
+{
+    const ef_fog_scene *s = pass->scene;
+    const int fog_uncovered = s->sky != EF_SKY_KEEP, keep_sky = s->sky == EF_SKY_KEEP;
+    int depth_only = 1;
+    for (int c = 0; c < s->ncomp; ++c)
+        depth_only &= s->comp[c].model->depth_only;
+    sp->keep_sky = keep_sky;
+    for (int yy = 0; yy < h; ++yy) {
+        const int y = y0 + yy;
+        for (int xs = 0; xs < w; xs += EF_RECON_SPAN) {
+            const int n = w - xs < EF_RECON_SPAN ? w - xs : EF_RECON_SPAN;
+            const size_t i0 = (size_t) yy * (size_t) w + (size_t) xs;
+            float *const pr = rgb[0] + i0, *const pg = rgb[1] + i0, *const pb = rgb[2] + i0;
+            float *const pa = alpha ? alpha + i0 : NULL;
+            ef_reconstruct_span(pass->cam, pass->conv, x0 + xs, y, n, depth + i0, !depth_only,
+                                sp->r, sp->sky);
+            int nsky = 0;
+            for (int j = 0; j < n; ++j)
+                nsky += sp->sky[j];
+            if (nsky && s->sky == EF_SKY_DISTANCE_MODE)
+                for (int j = 0; j < n; ++j)
+                    if (sp->sky[j])
+                        ef_ray_at_distance(pass->cam, x0 + xs + j, y, s->sky_distance, &sp->r[j]);
+            /* A NaN or infinite alpha is fogged as opaque and written back as it was. */
+            int nbad = 0, ninf = 0;
+            if (pa)
+                for (int j = 0; j < n; ++j) {
+                    const double a = pa[j];
+                    const int bad = !isfinite(a);
+                    sp->bad[j] = (unsigned char) bad;
+                    sp->a[j] = bad ? 1.0 : a;
+                    nbad += bad;
+                }
+            else
+                for (int j = 0; j < n; ++j)
+                    sp->a[j] = 1.0;
+            if (fog_uncovered)
+                for (int j = 0; j < n; ++j) {
+                    const int need = !(sp->a[j] == 1.0 && isfinite(sp->r[j].dist));
+                    sp->need_inf[j] = (unsigned char) need;
+                    ninf += need;
+                }
+            for (int j = 0; j < n; ++j)
+                sp->c[0][j] = pr[j];
+            for (int j = 0; j < n; ++j)
+                sp->c[1][j] = pg[j];
+            for (int j = 0; j < n; ++j)
+                sp->c[2][j] = pb[j];
+            fast_tau(s, sp->r, n, sp->acc);
+            fast_transmit((const double (*)[3]) sp->acc, n, sp->T);
+            for (int k = 0; k < 3; ++k)
+                for (int j = 0; j < n; ++j)
+                    sp->Ti[k][j] = sp->T[k][j];
+            if (ninf) {
+                int nq = 0;
+                for (int j = 0; j < n; ++j) {
+                    if (!sp->need_inf[j])
+                        continue;
+                    ef_ray *far = &sp->q[nq];
+                    if (ef_scene_far_ray(s, &sp->r[j], far) && far->planar == sp->r[j].planar)
+                        continue;
+                    sp->qj[nq++] = j;
+                }
+                if (nq) {
+                    double T[3][EF_RECON_SPAN];
+                    fast_tau(s, sp->q, nq, sp->acc);
+                    fast_transmit((const double (*)[3]) sp->acc, nq, T);
+                    for (int m = 0; m < nq; ++m)
+                        for (int k = 0; k < 3; ++k)
+                            sp->Ti[k][sp->qj[m]] = T[k][m];
+                }
+            }
+            fast_composite(sp, n, s->color, fog_uncovered, alpha != NULL);
+            /* Pixels kept as they are (--sky keep) were evaluated too, and
+             * are not written back. */
+            fast_store(sp, n, pr, pg, pb, pa, (keep_sky && nsky) || nbad);
+        }
+    }
+}
+
 void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, float *const rgb[3],
                       float *alpha, const float *depth, const ef_aov_out *aov,
                       ef_tau_stats *stats)
 {
     const ef_fog_scene *s = pass->scene;
+    if ((!aov || !aov->mask) && !s->any_color) {
+        int any_info = 0;
+        for (int c = 0; c < s->ncomp; ++c)
+            any_info |= s->comp[c].model->tau_info != NULL;
+        if (!(any_info && stats)) {
+            fast_span sp_;
+            fast_span *sp = &sp_;
+            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, sp);
+            return;
+        }
+    }
     const int fog_uncovered = s->sky != EF_SKY_KEEP;
     const unsigned mask = aov ? aov->mask : 0;
     static const double zero3[3] = { 0, 0, 0 };

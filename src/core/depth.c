@@ -1,5 +1,7 @@
 #include "depth.h"
 
+#include "exact.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -158,9 +160,19 @@ int ef_depth_linearize(const ef_depth_conv *conv, double v, double *dist)
     return linearize(conv, v, dist);
 }
 
-void ef_depth_linearize_span(const ef_depth_conv *conv, const float *v, int n, double *dist,
+EF_MULTIVERSION void ef_depth_linearize_span(const ef_depth_conv *conv, const float *v, int n, double *dist,
                              unsigned char *sky)
 {
+    if (conv->mode == EF_DEPTH_PLANAR || conv->mode == EF_DEPTH_RADIAL) {
+        /* linearize()'s planar case as selects, so the loop vectorises. */
+        for (int i = 0; i < n; ++i) {
+            const double d = v[i];
+            const int s = !(isfinite(d) && d > 0.0 && d < EF_SKY_DISTANCE);
+            dist[i] = s ? INFINITY : d;
+            sky[i] = (unsigned char) s;
+        }
+        return;
+    }
     for (int i = 0; i < n; ++i)
         sky[i] = (unsigned char) linearize(conv, v[i], &dist[i]);
 }

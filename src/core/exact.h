@@ -21,6 +21,15 @@
 #define EF_MULTIVERSION
 #endif
 
+/* A helper of a per-pixel function, inlined into it (and so compiled for
+ * each of its targets): a call from one multiversioned function to another
+ * goes through the dispatcher and is never inlined. */
+#if defined(__GNUC__)
+#define EF_INLINE static inline __attribute__((always_inline))
+#else
+#define EF_INLINE static inline
+#endif
+
 /* An unevaluated sum hi + lo, |lo| <= ulp(hi)/2. */
 typedef struct ef_dd {
     double hi, lo;
@@ -80,11 +89,55 @@ static inline ef_dd ef_fog_dot_org(const ef_fog_component *c, const double n[3],
     return ef_dd_dot3(n, org, d);
 }
 
-/* ef_line_of with the start value h0 = f.org + d already known. */
-static inline void ef_line_from(const ef_fog_functional *f, ef_dd h0, const double dir[3],
-                                double len, ef_line *l)
+/* A per-camera cache of one functional n.x + d, for models with a bind
+ * hook, in c->p[EF_CAM_SLOT ..]: a flag, the camera, n.org + d as
+ * ef_dd_dot3 gives it (the same bits as ef_fog_dot_org) and n's axis when n
+ * is a signed unit axis (else -1). */
+#define EF_CAM_SLOT 24
+enum { EF_CAM_FLAG = EF_CAM_SLOT, EF_CAM_ORG, EF_CAM_HI = EF_CAM_ORG + 3, EF_CAM_LO, EF_CAM_AXIS };
+
+static inline void ef_cam_bind(ef_fog_component *c, const double n[3], double d,
+                               const double org[3])
 {
-    const ef_dd s = ef_dd_dot3(f->n, dir, 0.0);
+    const ef_dd h = ef_dd_dot3(n, org, d);
+    int a = -1;
+    for (int k = 0; k < 3; ++k)
+        if (fabs(n[k]) == 1.0 && n[(k + 1) % 3] == 0.0 && n[(k + 2) % 3] == 0.0)
+            a = k;
+    for (int k = 0; k < 3; ++k)
+        c->p[EF_CAM_ORG + k] = org[k];
+    c->p[EF_CAM_HI] = h.hi;
+    c->p[EF_CAM_LO] = h.lo;
+    c->p[EF_CAM_AXIS] = a;
+    c->p[EF_CAM_FLAG] = 1.0;
+}
+
+/* n.org + d: from the cache when org is the bound camera. */
+static inline ef_dd ef_cam_h0(const ef_fog_component *c, const double n[3], double d,
+                              const double org[3])
+{
+    if (c->p[EF_CAM_FLAG] != 0.0 && org[0] == c->p[EF_CAM_ORG] &&
+        org[1] == c->p[EF_CAM_ORG + 1] && org[2] == c->p[EF_CAM_ORG + 2])
+        return (ef_dd) { c->p[EF_CAM_HI], c->p[EF_CAM_LO] };
+    return ef_fog_dot_org(c, n, org, d);
+}
+
+/* n.dir as ef_dd_dot3(n, dir, 0) gives it: for a unit axis n and a finite
+ * dir with dir[axis] != 0 that is (n[axis] dir[axis], +0) exactly (the
+ * zero products and their fma residues sum to +0), found without the sums. */
+static inline ef_dd ef_cam_rate(const ef_fog_component *c, const double n[3],
+                                const double dir[3])
+{
+    const int a = (int) c->p[EF_CAM_AXIS];
+    if (c->p[EF_CAM_FLAG] != 0.0 && a >= 0 && dir[a] != 0.0 && isfinite(dir[0]) &&
+        isfinite(dir[1]) && isfinite(dir[2]))
+        return (ef_dd) { n[a] * dir[a], 0.0 };
+    return ef_dd_dot3(n, dir, 0.0);
+}
+
+/* ef_line_of with the start value h0 = f.org + d already known. */
+static inline void ef_line_from_rate(ef_dd h0, ef_dd s, double len, ef_line *l)
+{
     l->h0 = h0.hi + h0.lo;
     l->s = s.hi + s.lo;
     if (isinf(len))
@@ -93,6 +146,12 @@ static inline void ef_line_from(const ef_fog_functional *f, ef_dd h0, const doub
         const ef_dd h1 = ef_dd_affine(h0, s, len);
         l->h1 = h1.hi + h1.lo;
     }
+}
+
+static inline void ef_line_from(const ef_fog_functional *f, ef_dd h0, const double dir[3],
+                                double len, ef_line *l)
+{
+    ef_line_from_rate(h0, ef_dd_dot3(f->n, dir, 0.0), len, l);
 }
 
 static inline void ef_line_of(const ef_fog_functional *f, const double org[3],

@@ -121,14 +121,14 @@ enum { IN_NONE = 0, IN_FINITE, IN_INFINITE };
  * IN_INFINITE: a sky ray that stays in the fog forever, at a depth that
  * grows or stays constant and > 0 (every density here is then > 0 far
  * enough along). One ef_line_of decides the common fog-free case. */
-EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
+EF_INLINE int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in)
 {
     const double L = r->dist;
     if (!(L > 0))
         return IN_NONE;
     const ef_fog_functional f = { { c->p[0], c->p[1], c->p[2] }, c->p[3] };
     ef_line ln;
-    ef_line_from(&f, ef_fog_dot_org(c, f.n, r->org, f.d), r->dir, L, &ln);
+    ef_line_from_rate(ef_cam_h0(c, f.n, f.d, r->org), ef_cam_rate(c, f.n, r->dir), L, &ln);
     const double h0 = ln.h0, h1 = ln.h1, s = ln.s;
     /* Outside, or lying in the plane (h0 = h1 = 0): the density is 0 there. */
     if (h0 >= 0 && h1 >= 0)
@@ -157,9 +157,9 @@ EF_MULTIVERSION static int inside_part(const ef_fog_component *c, const ef_ray *
     return IN_FINITE;
 }
 
-EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_halfspace_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double rho = c->p[P_DENS + i];
@@ -170,11 +170,16 @@ EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ra
     }
 }
 
+EF_MULTIVERSION static void tau_halfspace(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_halfspace_one(c, r, tau);
+}
+
 /* The density at the mean depth times l: Lengyel's both-inside
  * a L (x0 + x1)/2 and his crossing a h_in^2/(2|s|) = a l |h_in|/2 in one. */
-EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_linear_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double a = c->p[P_DENS + i];
@@ -183,6 +188,11 @@ EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *
         else
             tau[i] = k == IN_INFINITE ? INFINITY : a * (0.5 * (in.xmin + in.xmax)) * in.l;
     }
+}
+
+EF_MULTIVERSION static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_linear_one(c, r, tau);
 }
 
 /* psi(b)/b for 0 <= b < 1, where psi(b) = 1 - (1 - e^-b)/b: the direct
@@ -227,9 +237,9 @@ static double psi_over_b(double b)
  * so S -> 0 gives S l (xmin + dx/2) (the linear model) even when S/D
  * underflows; at and above 1, S -> inf (S/D may overflow) gives D l less
  * the transition layer. Each term is at most D: no spurious overflow. */
-EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_smooth_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
-    inside in;
+    inside in = { 0.0, 0.0, 0.0, 0.0 };
     const int k = inside_part(c, r, &in);
     for (int i = 0; i < 3; ++i) {
         const double D = c->p[P_DENS + i], S = c->p[P_SHARP + i], lam = c->p[P_LAMBDA + i];
@@ -254,6 +264,33 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
                                               : S * in.dx * psi_over_b(b));
         tau[i] = (t1 + t2) * in.l;
     }
+}
+
+EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_smooth_one(c, r, tau);
+}
+
+/* tau_add over tau: one call per batch, the same sums. */
+#define TAU_ADD(name, tau)                                                                   \
+    EF_MULTIVERSION static void name(const ef_fog_component *c, const ef_ray *r, int n,      \
+                                     double (*acc)[3])                                       \
+    {                                                                                        \
+        for (int j = 0; j < n; ++j) {                                                        \
+            double t[3];                                                                     \
+            tau##_one(c, &r[j], t);                                                          \
+            for (int k = 0; k < 3; ++k)                                                      \
+                acc[j][k] += t[k];                                                           \
+        }                                                                                    \
+    }
+TAU_ADD(tau_add_halfspace, tau_halfspace)
+TAU_ADD(tau_add_linear, tau_linear)
+TAU_ADD(tau_add_smooth, tau_smooth)
+
+/* The plane's value at the camera, cached for its rays (exact.h). */
+static void bind_plane(ef_fog_component *c, const double org[3])
+{
+    ef_cam_bind(c, c->p + P_PLANE, c->p[P_PLANE + 3], org);
 }
 
 static int one_plane(const ef_fog_component *c, ef_fog_functional *out, int cap)
@@ -331,15 +368,18 @@ static void density_smooth(const ef_fog_component *c, const long double *v, long
 const ef_fog_model ef_fog_halfspace = {
     .name = "halfspace", .keys = halfspace_keys, .set = set_halfspace,
     .finish = finish_halfspace, .tau = tau_halfspace, .functionals = one_plane,
+    .tau_add = tau_add_halfspace, .bind = bind_plane,
     .features = kink_at_plane, .density = density_halfspace,
 };
 const ef_fog_model ef_fog_halfspace_linear = {
     .name = "halfspace-linear", .keys = linear_keys, .set = set_linear,
     .finish = finish_linear, .tau = tau_linear, .functionals = one_plane,
+    .tau_add = tau_add_linear, .bind = bind_plane,
     .features = kink_at_plane, .density = density_linear,
 };
 const ef_fog_model ef_fog_halfspace_smooth = {
     .name = "halfspace-smooth", .keys = smooth_keys, .set = set_halfspace,
     .finish = finish_smooth, .tau = tau_smooth, .functionals = one_plane,
+    .tau_add = tau_add_smooth, .bind = bind_plane,
     .features = smooth_features, .density = density_smooth,
 };

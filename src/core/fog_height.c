@@ -59,7 +59,7 @@ static ef_fog_functional height_functional(const ef_fog_component *c)
 
 /* e^(-k u) for a double-double height u, with x = -k u: the product is kept
  * exact, so a large exponent (k u ~ 700) does not cost its ~|k u| ulp. */
-EF_MULTIVERSION static double exp_neg(double k, ef_dd u, double *x)
+EF_INLINE double exp_neg(double k, ef_dd u, double *x)
 {
     ef_dd p = ef_two_prod(k, u.hi);
     *x = -p.hi;
@@ -72,7 +72,7 @@ EF_MULTIVERSION static double exp_neg(double k, ef_dd u, double *x)
 /* rho * m * e for rho, m > 0 and e = e^x (x possibly +-INFINITY). When the
  * direct product leaves the normal range, logarithms give INFINITY or 0
  * instead of inf * 0 (keeping ~|x| ulp there). */
-EF_MULTIVERSION static double scaled_exp(double rho, double m, double e, double x)
+EF_INLINE double scaled_exp(double rho, double m, double e, double x)
 {
     if (e >= DBL_MIN && e <= DBL_MAX) {
         const double t = rho * m * e;
@@ -92,11 +92,11 @@ EF_MULTIVERSION static double scaled_exp(double rho, double m, double e, double 
  * Sky: only an up-going ray with k > 0 leaves the fog; its limit is
  * rho e^(-k u0)/(k s). Heights are the functional's double-double values
  * (ef_line_of's before rounding). */
-EF_MULTIVERSION static void tau_height(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_height_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const ef_fog_functional f = height_functional(c);
     const double k = c->p[3], L = r->dist;
-    const ef_dd u0 = ef_fog_dot_org(c, f.n, r->org, f.d), sd = ef_dd_dot3(f.n, r->dir, 0.0);
+    const ef_dd u0 = ef_cam_h0(c, f.n, f.d, r->org), sd = ef_cam_rate(c, f.n, r->dir);
     const double s = sd.hi + sd.lo;
     double x = 0.0;
     if (isinf(L)) {
@@ -130,6 +130,29 @@ EF_MULTIVERSION static void tau_height(const ef_fog_component *c, const ef_ray *
     const double e = exp_neg(k, s >= 0 ? u0 : ef_dd_affine(u0, sd, L), &x);
     for (int i = 0; i < 3; ++i)
         tau[i] = c->p[i] == 0 ? 0 : scaled_exp(c->p[i], m, e, x);
+}
+
+EF_MULTIVERSION static void tau_height(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_height_one(c, r, tau);
+}
+
+EF_MULTIVERSION static void tau_add_height(const ef_fog_component *c, const ef_ray *r, int n,
+                                           double (*acc)[3])
+{
+    for (int j = 0; j < n; ++j) {
+        double t[3];
+        tau_height_one(c, &r[j], t);
+        for (int k = 0; k < 3; ++k)
+            acc[j][k] += t[k];
+    }
+}
+
+/* The camera's height, cached for its rays (exact.h). */
+static void bind_height(ef_fog_component *c, const double org[3])
+{
+    const ef_fog_functional f = height_functional(c);
+    ef_cam_bind(c, f.n, f.d, org);
 }
 
 static int functionals_height(const ef_fog_component *c, ef_fog_functional *out, int cap)
@@ -168,6 +191,7 @@ static void density_height(const ef_fog_component *c, const long double *v, long
 
 const ef_fog_model ef_fog_height = { .name = "height", .keys = height_keys, .set = set_height,
                                      .finish = finish_height, .tau = tau_height,
+                                     .tau_add = tau_add_height, .bind = bind_height,
                                      .functionals = functionals_height,
                                      .features = features_height, .density = density_height,
                                      .uses_up = 1 };

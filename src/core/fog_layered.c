@@ -399,7 +399,7 @@ static profile profile_of(const ef_fog_component *c)
 /* Index of the first knot above the double-double u (n if none); the low
  * part decides when u.hi is a knot, so a height a hair off a knot is put on
  * its side. */
-EF_MULTIVERSION static int first_above(const double *h, int n, ef_dd u)
+EF_INLINE int first_above(const double *h, int n, ef_dd u)
 {
     int lo = 0, hi = n;
     while (lo < hi) {
@@ -413,7 +413,7 @@ EF_MULTIVERSION static int first_above(const double *h, int n, ef_dd u)
 }
 
 /* Index of the first knot at or above u (n if none). */
-EF_MULTIVERSION static int first_not_below(const double *h, int n, ef_dd u)
+EF_INLINE int first_not_below(const double *h, int n, ef_dd u)
 {
     int lo = 0, hi = n;
     while (lo < hi) {
@@ -435,7 +435,7 @@ typedef struct where {
     double wl, wr;
 } where;
 
-EF_MULTIVERSION static where locate(const profile *p, int j, ef_dd u)
+EF_INLINE where locate(const profile *p, int j, ef_dd u)
 {
     where at = { j, 0.0, 0.0 };
     if (j > 0 && j < p->n) {
@@ -446,7 +446,7 @@ EF_MULTIVERSION static where locate(const profile *p, int j, ef_dd u)
     return at;
 }
 
-EF_MULTIVERSION static double sigma_at(const profile *p, int ch, where at)
+EF_INLINE double sigma_at(const profile *p, int ch, where at)
 {
     const double *d = p->d[ch];
     if (at.j == 0)
@@ -468,7 +468,7 @@ static double mul0(double a, double b)
  * knot lies strictly between a and b, so s -> 0 stays exact); L < 0: not
  * known (the sky's finite part). Pieces cut by knots are trapezoids of
  * their height span; runs of whole pieces come from the prefix table. */
-EF_MULTIVERSION static void integrate(const profile *p, ef_dd a, ef_dd b, double as, double L, double tau[3])
+EF_INLINE void integrate(const profile *p, ef_dd a, ef_dd b, double as, double L, double tau[3])
 {
     const int ia = first_above(p->h, p->n, a), ib = first_not_below(p->h, p->n, b) - 1;
     const where wa = locate(p, ia, a), wb = locate(p, ib + 1, b);
@@ -489,7 +489,7 @@ EF_MULTIVERSION static void integrate(const profile *p, ef_dd a, ef_dd b, double
     }
 }
 
-EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray *r, double tau[3])
+EF_INLINE void tau_layered_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const profile p = profile_of(c);
     const double L = r->dist;
@@ -505,7 +505,7 @@ EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray 
     }
     /* Heights kept as double-doubles so the pieces' spans next to a knot
      * do not cancel, far from the origin included. */
-    const ef_dd u0 = ef_fog_dot_org(c, c->up, r->org, 0.0), sd = ef_dd_dot3(c->up, r->dir, 0.0);
+    const ef_dd u0 = ef_cam_h0(c, c->up, 0.0, r->org), sd = ef_cam_rate(c, c->up, r->dir);
     const double s = sd.hi + sd.lo;
     if (s == 0) {
         const where at = locate(&p, first_above(p.h, p.n, u0), u0);
@@ -536,6 +536,28 @@ EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray 
         integrate(&p, u0, u1, as, L, tau);
     else
         integrate(&p, u1, u0, as, L, tau);
+}
+
+EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_layered_one(c, r, tau);
+}
+
+EF_MULTIVERSION static void tau_add_layered(const ef_fog_component *c, const ef_ray *r, int n,
+                                            double (*acc)[3])
+{
+    for (int j = 0; j < n; ++j) {
+        double t[3];
+        tau_layered_one(c, &r[j], t);
+        for (int k = 0; k < 3; ++k)
+            acc[j][k] += t[k];
+    }
+}
+
+/* The camera's height, cached for its rays (exact.h). */
+static void bind_layered(ef_fog_component *c, const double org[3])
+{
+    ef_cam_bind(c, c->up, 0.0, org);
 }
 
 /* The reference sees heights relative to the first knot, so that a profile
@@ -586,6 +608,7 @@ static void density_layered(const ef_fog_component *c, const long double *v, lon
 
 const ef_fog_model ef_fog_layered = { .name = "layered", .keys = layered_keys,
                                       .set = set_layered, .finish = finish_layered,
-                                      .tau = tau_layered, .functionals = functionals_layered,
+                                      .tau = tau_layered,
+                                      .tau_add = tau_add_layered, .bind = bind_layered, .functionals = functionals_layered,
                                       .features = features_layered,
                                       .density = density_layered, .uses_up = 1 };

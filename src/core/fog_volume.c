@@ -31,7 +31,19 @@
 
 /* p[] layout: p[0..2] = density per channel (per metre until finish, then per
  * scene unit); box only: p[3..5] = min, p[6..8] = max (scene units). */
-enum { P_RHO = 0, P_MIN = 3, P_MAX = 6 };
+enum { P_RHO = 0, P_MIN = 3, P_MAX = 6, P_NP = 9, P_CAM = 10, P_ORG = 11 };
+
+/* p[P_NP] = the number of planes (c->arr starts with them, A,B,C,D each).
+ * Once bound to a camera (bind_volume), p[P_CAM] = 1, p[P_ORG..] is the
+ * camera and c->arr continues with CACHE doubles per plane: what
+ * clip_fast and crossing_of compute from the plane and the ray's origin
+ * alone, for rays from that camera (the same operations, done once). */
+enum { C_H0 = 0, C_EH, C_HI, C_LO, C_AXIS, C_ZAX, CACHE = 8 };
+
+static int nplanes(const ef_fog_component *c)
+{
+    return (int) c->p[P_NP];
+}
 
 static const char *const box_keys[] = { "min", "max", "density", "visibility", NULL };
 enum { BOX_MIN, BOX_MAX, BOX_DENSITY, BOX_VISIBILITY };
@@ -220,6 +232,7 @@ static int finish_box(ef_fog_component *c, const ef_fog_context *ctx, ef_err *er
     free(c->arr);
     c->arr = pl;
     c->narr = 24;
+    c->p[P_NP] = 6;
     return 0;
 }
 
@@ -228,6 +241,7 @@ static int finish_convex(ef_fog_component *c, const ef_fog_context *ctx, ef_err 
     if (!(c->seen & (1u << CVX_PLANES)) || c->narr < 4)
         return ef_fail(err, "fog spec '%s': missing planes (write convex:planes=A,B,C,D,...:"
                        "density=D; fog is where every A*x+B*y+C*z+D < 0)", c->spec);
+    c->p[P_NP] = c->narr / 4;
     return finish_density(c, ctx, CVX_DENSITY, "convex:planes=A,B,C,D,...", err);
 }
 
@@ -302,7 +316,7 @@ static inline void crossing_of(const double *p, const double org[3], const doubl
 /* The inside length once the binding entering plane in (or -1: entry at 0)
  * and leaving plane out (or -1: exit at len) are known, with their
  * crossings xi, xo (xi->h1 needed when out < 0 and len is finite). */
-EF_MULTIVERSION static double bound_length(const double *pl, int in, const crossing *xi, int out,
+EF_INLINE double bound_length(const double *pl, int in, const crossing *xi, int out,
                            const crossing *xo, double len)
 {
     if (out < 0) {
@@ -385,7 +399,7 @@ enum { CLIP_EMPTY, CLIP_BOUND, CLIP_UNSURE };
 /* The plain-double pass. CLIP_EMPTY: the segment certainly misses the
  * volume. CLIP_BOUND: *in, *out are certainly the binding planes (-1: none)
  * and entry < exit. CLIP_UNSURE: a sign or a choice is within rounding. */
-EF_MULTIVERSION static int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
+EF_INLINE int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
                      double len, int *in_, int *out_)
 {
     const int sky = isinf(len);
@@ -472,10 +486,124 @@ EF_MULTIVERSION static int clip_fast(const double *pl, int np, const double org[
     return CLIP_BOUND;
 }
 
+/* clip_fast for a ray from the bound camera: the plane values at the
+ * origin (h0 and its bound eh) come from the cache, and a plane whose
+ * normal has two zero components (every box plane) has s = its one product
+ * and es = |s| EPS_DOT + EPS_TINY, the same values as the three-term sums
+ * (adding zeros is exact; a zero s is decided before its sign matters).
+ * dir must be finite (then those zero products are zeros). */
+EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np,
+                                         const double dir[3], double len, int *in_, int *out_)
+{
+    const int sky = isinf(len);
+    int in = -1, out = -1;
+    double t_in = 0, e_in = 0, other_in = -INFINITY;
+    double t_out = 0, e_out = 0, other_out = INFINITY;
+    for (int k = 0; k < np; ++k) {
+        const double *p = pl + 4 * k, *ca = cache + CACHE * k;
+        const double h0 = ca[C_H0], eh = ca[C_EH];
+        if (!(fabs(h0) > eh))
+            return CLIP_UNSURE;
+        const int ax = (int) ca[C_ZAX];
+        double s, es;
+        if (ax >= 0) {
+            s = p[ax] * dir[ax];
+            if (s == 0.0) {
+                if (h0 > 0.0)
+                    return CLIP_EMPTY;
+                continue;
+            }
+            es = fabs(s) * EPS_DOT + EPS_TINY;
+        } else {
+            const double b0 = p[0] * dir[0], b1 = p[1] * dir[1], b2 = p[2] * dir[2];
+            if (b0 == 0.0 && b1 == 0.0 && b2 == 0.0) {
+                if (h0 > 0.0)
+                    return CLIP_EMPTY;
+                continue;
+            }
+            s = b0 + b1 + b2;
+            es = (fabs(b0) + fabs(b1) + fabs(b2)) * EPS_DOT + EPS_TINY;
+        }
+        if (!(fabs(s) > es))
+            return CLIP_UNSURE;
+        if (s > 0.0 && h0 > 0.0)
+            return CLIP_EMPTY;
+        if (!sky) {
+            const double h1 = h0 + s * len;
+            const double eh1 = (eh + es * len + (fabs(h0) + fabs(s) * len) * 0x1p-51) * MARGIN;
+            if (!(fabs(h1) > eh1))
+                return CLIP_UNSURE;
+            if (s < 0.0 && h1 > 0.0)
+                return CLIP_EMPTY;
+            if (s > 0.0 && h1 < 0.0)
+                continue;
+        }
+        if (s < 0.0 && h0 < 0.0)
+            continue;
+        const double inv = 1.0 / s, t = -h0 * inv;
+        if (!(es * fabs(inv) <= 0x1p-20))
+            return CLIP_UNSURE;
+        const double et = ((eh + fabs(t) * es) * fabs(inv) * (1.0 + 0x1p-19) +
+                           fabs(t) * 0x1p-51) * MARGIN;
+        if (!isfinite(t) || !isfinite(et))
+            return CLIP_UNSURE;
+        if (s > 0.0) {
+            if (out < 0 || t < t_out) {
+                if (out >= 0)
+                    other_out = fmin(other_out, t_out - e_out);
+                out = k;
+                t_out = t;
+                e_out = et;
+            } else
+                other_out = fmin(other_out, t - et);
+        } else {
+            if (in < 0 || t > t_in) {
+                if (in >= 0)
+                    other_in = fmax(other_in, t_in + e_in);
+                in = k;
+                t_in = t;
+                e_in = et;
+            } else
+                other_in = fmax(other_in, t + et);
+        }
+    }
+    if (in >= 0 && !(other_in < t_in - e_in))
+        return CLIP_UNSURE;
+    if (out >= 0 && !(other_out > t_out + e_out))
+        return CLIP_UNSURE;
+    if (in >= 0 && out >= 0) {
+        if (t_in - e_in > t_out + e_out)
+            return CLIP_EMPTY;
+        if (!(t_in + e_in < t_out - e_out))
+            return CLIP_UNSURE;
+    }
+    *in_ = in;
+    *out_ = out;
+    return CLIP_BOUND;
+}
+
+/* crossing_of with h0 from the cache (the same double-double). */
+static inline void crossing_cam(const double *p, const double *ca, const double dir[3],
+                                double len, int want_h1, crossing *x)
+{
+    const int a = (int) ca[C_AXIS];
+    x->h0 = (ef_dd) { ca[C_HI], ca[C_LO] };
+    if (a >= 0)
+        x->s = (ef_dd) { p[a] * dir[a], 0.0 };
+    else
+        x->s = ef_dd_dot3(p, dir, 0.0);
+    x->h1 = (ef_dd) { 0.0, 0.0 };
+    if (want_h1) {
+        x->h1 = ef_dd_affine(x->h0, x->s, len);
+        if (!isfinite(x->h1.hi))
+            x->h1 = (ef_dd) { x->h0.hi + x->s.hi * len, 0.0 };
+    }
+}
+
 /* The length of the part of [0, len] (len may be INFINITY) of the ray
  * org + t dir where every plane's value is < 0: 0 when none, INFINITY when
  * the ray stays inside forever. */
-EF_MULTIVERSION static double inside_length(const double *pl, int np, const double org[3], const double dir[3],
+EF_INLINE double inside_length(const double *pl, int np, const double org[3], const double dir[3],
                             double len)
 {
     int in, out;
@@ -495,24 +623,106 @@ EF_MULTIVERSION static double inside_length(const double *pl, int np, const doub
     return bound_length(pl, in, &xi, out, &xo, len);
 }
 
-EF_MULTIVERSION static void tau_volume(const ef_fog_component *c, const ef_ray *r, double tau[3])
+/* inside_length for a ray from the bound camera. */
+EF_INLINE double inside_length_cam(const ef_fog_component *c, const double dir[3],
+                                                double len)
+{
+    const int np = nplanes(c);
+    const double *pl = c->arr, *cache = c->arr + 4 * np;
+    int in, out;
+    switch (clip_fast_cam(pl, cache, np, dir, len, &in, &out)) {
+    case CLIP_EMPTY:
+        return 0.0;
+    case CLIP_UNSURE:
+        return inside_length_exact(pl, np, c->p + P_ORG, dir, len);
+    default:
+        break;
+    }
+    crossing xi = { { 0, 0 }, { 0, 0 }, { 0, 0 } }, xo = xi;
+    if (in >= 0)
+        crossing_cam(pl + 4 * in, cache + CACHE * in, dir, len, out < 0 && !isinf(len), &xi);
+    if (out >= 0)
+        crossing_cam(pl + 4 * out, cache + CACHE * out, dir, len, 0, &xo);
+    return bound_length(pl, in, &xi, out, &xo, len);
+}
+
+EF_INLINE void tau_volume_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const double *rho = &c->p[P_RHO];
     tau[0] = tau[1] = tau[2] = 0.0;
     if (rho[0] == 0.0 && rho[1] == 0.0 && rho[2] == 0.0)
         return;
-    const double l = inside_length(c->arr, c->narr / 4, r->org, r->dir, r->dist);
+    const double *o = c->p + P_ORG;
+    const double l = c->p[P_CAM] != 0.0 && r->org[0] == o[0] && r->org[1] == o[1] &&
+                     r->org[2] == o[2] && isfinite(r->dir[0]) && isfinite(r->dir[1]) &&
+                     isfinite(r->dir[2])
+                   ? inside_length_cam(c, r->dir, r->dist)
+                   : inside_length(c->arr, nplanes(c), r->org, r->dir, r->dist);
     if (l == 0.0)
         return;
     for (int i = 0; i < 3; ++i)
         tau[i] = rho[i] == 0.0 ? 0.0 : rho[i] * l;  /* 0 * inf stays 0 */
 }
 
+EF_MULTIVERSION static void tau_volume(const ef_fog_component *c, const ef_ray *r, double tau[3])
+{
+    tau_volume_one(c, r, tau);
+}
+
+EF_MULTIVERSION static void tau_add_volume(const ef_fog_component *c, const ef_ray *r, int n,
+                                           double (*acc)[3])
+{
+    for (int j = 0; j < n; ++j) {
+        double t[3];
+        tau_volume_one(c, &r[j], t);
+        for (int k = 0; k < 3; ++k)
+            acc[j][k] += t[k];
+    }
+}
+
+/* The camera's part of every plane, as clip_fast and crossing_of compute it. */
+static void bind_volume(ef_fog_component *c, const double org[3])
+{
+    const int np = nplanes(c);
+    c->p[P_CAM] = 0.0;
+    if (c->narr < (4 + CACHE) * np) {
+        double *a = realloc(c->arr, (size_t) (4 + CACHE) * (size_t) np * sizeof *a);
+        if (!a)
+            return;                           /* unbound: still exact, just slower */
+        c->arr = a;
+        c->narr = (4 + CACHE) * np;
+    }
+    for (int k = 0; k < np; ++k) {
+        const double *p = c->arr + 4 * k;
+        double *ca = c->arr + 4 * np + CACHE * k;
+        const double a0 = p[0] * org[0], a1 = p[1] * org[1], a2 = p[2] * org[2];
+        ca[C_H0] = a0 + a1 + a2 + p[3];
+        ca[C_EH] = (fabs(a0) + fabs(a1) + fabs(a2) + fabs(p[3])) * EPS_DOT + EPS_TINY;
+        crossing x;
+        crossing_of(p, org, org, 0.0, 0, &x);
+        ca[C_HI] = x.h0.hi;
+        ca[C_LO] = x.h0.lo;
+        int a = -1;
+        if (p[1] == 0.0 && p[2] == 0.0)
+            a = 0;
+        else if (p[0] == 0.0 && p[2] == 0.0)
+            a = 1;
+        else if (p[0] == 0.0 && p[1] == 0.0)
+            a = 2;
+        ca[C_ZAX] = a;
+        ca[C_AXIS] = a >= 0 && fabs(p[a]) == 1.0 ? a : -1;
+        for (int i = C_ZAX + 1; i < CACHE; ++i)
+            ca[i] = 0.0;
+    }
+    memcpy(c->p + P_ORG, org, 3 * sizeof *org);
+    c->p[P_CAM] = 1.0;
+}
+
 /* ---- for the reference integrator ---- */
 
 static int functionals_volume(const ef_fog_component *c, ef_fog_functional *out, int cap)
 {
-    const int n = c->narr / 4;
+    const int n = nplanes(c);
     for (int i = 0; i < n && i < cap; ++i) {
         const double *p = c->arr + 4 * i;
         out[i] = (ef_fog_functional) { { p[0], p[1], p[2] }, p[3] };
@@ -523,7 +733,7 @@ static int functionals_volume(const ef_fog_component *c, ef_fog_functional *out,
 /* The density jumps on every plane. */
 static int features_volume(const ef_fog_component *c, ef_fog_feature *out, int cap)
 {
-    const int n = c->narr / 4;
+    const int n = nplanes(c);
     for (int i = 0; i < n && i < cap; ++i)
         out[i] = (ef_fog_feature) { i, 0.0, 0.0 };
     return n;
@@ -533,7 +743,7 @@ static int features_volume(const ef_fog_component *c, ef_fog_feature *out, int c
 static void density_volume(const ef_fog_component *c, const long double *v, long double out[3])
 {
     int inside = 1;
-    for (int i = 0; i < c->narr / 4; ++i)
+    for (int i = 0; i < nplanes(c); ++i)
         inside &= v[i] < 0.0L;
     for (int k = 0; k < 3; ++k)
         out[k] = inside ? (long double) c->p[P_RHO + k] : 0.0L;
@@ -541,9 +751,11 @@ static void density_volume(const ef_fog_component *c, const long double *v, long
 
 const ef_fog_model ef_fog_box = { .name = "box", .keys = box_keys, .set = set_box,
                                   .finish = finish_box, .tau = tau_volume,
+                                  .tau_add = tau_add_volume, .bind = bind_volume,
                                   .functionals = functionals_volume,
                                   .features = features_volume, .density = density_volume };
 const ef_fog_model ef_fog_convex = { .name = "convex", .keys = convex_keys, .set = set_convex,
                                      .finish = finish_convex, .tau = tau_volume,
+                                     .tau_add = tau_add_volume, .bind = bind_volume,
                                      .functionals = functionals_volume,
                                      .features = features_volume, .density = density_volume };

@@ -1,5 +1,7 @@
 #include "recon.h"
 
+#include "exact.h"
+
 #include <math.h>
 
 /* The world vector w = (dx, dy, 1) . rot of a camera-space direction, and
@@ -48,7 +50,7 @@ int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
     return 0;
 }
 
-void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
+EF_MULTIVERSION void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
                          const float *depth, int need_dir, ef_ray *r, unsigned char *sky)
 {
     /* ef_camera_ray's sums in its order, with the row's terms hoisted:
@@ -60,20 +62,23 @@ void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0
     double w[3][EF_RECON_SPAN];
     if (n > EF_RECON_SPAN)
         n = EF_RECON_SPAN;
+    const double *rot = cam->rot;
     for (int i = 0; i < n; ++i) {
         const double px = (double) (x0 + i) + 0.5;
         const double hx = (px * ray[0] + ry[0]) + ray[6];
         const double hy = (px * ray[1] + ry[1]) + ray[7];
         const double hz = (px * ray[2] + ry[2]) + ray[8];
-        dx[i] = hx / hz;
-        dy[i] = hy / hz;
-    }
-    for (int i = 0; i < n; ++i) {
-        double v[3];
-        len[i] = world_vec(cam, dx[i], dy[i], v);
-        w[0][i] = v[0];
-        w[1][i] = v[1];
-        w[2][i] = v[2];
+        const double x = hx / hz, yv = hy / hz;
+        dx[i] = x;
+        dy[i] = yv;
+        /* world_vec: (dx, dy, 1) . rot, the last product exactly rot[6..8] */
+        const double w0 = (x * rot[0] + yv * rot[3]) + rot[6];
+        const double w1 = (x * rot[1] + yv * rot[4]) + rot[7];
+        const double w2 = (x * rot[2] + yv * rot[5]) + rot[8];
+        w[0][i] = w0;
+        w[1][i] = w1;
+        w[2][i] = w2;
+        len[i] = sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     }
     ef_depth_linearize_span(conv, depth, n, d, sky);
     if (conv->mode == EF_DEPTH_RADIAL)
@@ -83,11 +88,17 @@ void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0
         const double t = sky[i] ? INFINITY : d[i];
         r[i].planar = t * unit;
         r[i].dist = t * (len[i] * unit);
-        for (int k = 0; k < 3; ++k) {
+        for (int k = 0; k < 3; ++k)
             r[i].org[k] = cam->pos[k];
-            r[i].dir[k] = need_dir ? w[k][i] / len[i] : 0.0;
-        }
     }
+    if (need_dir)
+        for (int i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k)
+                r[i].dir[k] = w[k][i] / len[i];
+    else
+        for (int i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k)
+                r[i].dir[k] = 0.0;
 }
 
 void ef_ray_at_distance(const ef_camera *cam, int x, int y, double dist, ef_ray *r)
