@@ -356,7 +356,6 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
         gauss_legendre(n, s.glx[n], s.glw[n]);
 
     const size_t head = (sizeof s + sizeof(double) - 1) / sizeof(double);
-    const size_t ntab = sep ? (size_t) 3 * (size_t) octaves * TAB : 0;
     /* One merged table per axis when every octave repeats within 256. */
     long mp = 0;
     if (sep && method == M_PREINT && lac == floor(lac)) {
@@ -366,6 +365,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
         if (mp > MERGED_MAX)
             mp = 0;
     }
+    /* Else per-octave prefix tables (only the preintegrated method reads them). */
+    const size_t ntab = sep && method == M_PREINT && !mp ? (size_t) 3 * (size_t) octaves * TAB : 0;
     const size_t nmerged = mp ? (size_t) s.naxes * MERGED_SIZE(mp) : 0;
     double *arr = calloc(head + ntab + nmerged, sizeof *arr);
     if (!arr)
@@ -1301,11 +1302,11 @@ static void build_tables(nstate *s, double *tab)
 static double octave_span(const ef_fog_component *c, int a, int i, long double u0, long double u1)
 {
     const nstate *s = state(c);
-    const long double c0 = floorl(u0), c1 = floorl(u1);
+    const long double c0 = floor_ld(u0), c1 = floor_ld(u1);
     if (c0 == c1)
         return cell_part(s, a, i, u0, u1);
     const double *t = table(c, a, i);
-    const long double k0 = floorl(c0 / 256), k1 = floorl(c1 / 256);
+    const long double k0 = floor_ld(c0 / 256), k1 = floor_ld(c1 / 256);
     const int m0 = (int) (c0 - 256 * k0), m1 = (int) (c1 - 256 * k1);
     const double whole = (double) (k1 - k0) * t[256] + (t[m1] - t[m0]);
     return whole + cell_part(s, a, i, c1, u1) - cell_part(s, a, i, c0, u0);
@@ -1423,23 +1424,39 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
             br[P++] = br[k];
     br[P] = 256;
     double *start = tab, *prefix = tab + P, *coef = tab + 2 * P + 1, *hint = tab + 9 * P + 1;
+    /* C(j, k) (the recurrence C(j, k) (j + 1) / (j + 1 - k) is exact in
+     * long double for these, so a table is the same values, without a
+     * division per term), and each octave's last cell polynomial: the
+     * pieces of one cell follow each other. */
+    long double C[7][7];
+    for (int k = 0; k < 7; ++k) {
+        long double binom = 1;
+        for (int j = k; j < 7; ++j) {
+            C[j][k] = binom;
+            binom = binom * (j + 1) / (j + 1 - k);
+        }
+    }
+    long last[EF_FBM_MAX_OCTAVES];
+    long double qs[EF_FBM_MAX_OCTAVES][7];
     long double acc = 0;
     for (int p = 0; p < P; ++p) {
         const long double s0 = br[p], L = br[p + 1] - br[p], mid = s0 + L / 2;
         long double c[7] = { 0, 0, 0, 0, 0, 0, 0 };
         for (int i = 0; i < N; ++i) {
             const long double f = s->fbm.freq[i], o = (long double) i * ef_fbm_offset[a];
-            const long m = (long) floorl(f * mid + o);
+            const long m = (long) floor_ld(f * mid + o);
             const long double xp = f * s0 + o - m;
-            long double q[7];
-            cell_poly(s, a, i, m, q);
+            long double *q = qs[i];
+            if (p == 0 || m != last[i]) {
+                cell_poly(s, a, i, m, q);
+                last[i] = m;
+            }
             /* q(xp + f y) = sum_k y^k f^k sum_{j >= k} C(j, k) q_j xp^(j - k) */
             long double fk = 1;
             for (int k = 0; k < 7; ++k) {
-                long double sum = 0, binom = 1, xpow = 1;
+                long double sum = 0, xpow = 1;
                 for (int j = k; j < 7; ++j) {
-                    sum += binom * q[j] * xpow;
-                    binom = binom * (j + 1) / (j + 1 - k);
+                    sum += C[j][k] * q[j] * xpow;
                     xpow *= xp;
                 }
                 c[k] += s->fbm.weight[i] * sum * fk;
