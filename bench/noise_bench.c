@@ -320,6 +320,7 @@ static int compute_yard(const frame *f, grid *g, int which, int threads)
 
 typedef struct accuracy {
     double evals_per_px, max_dT, p999_dT, covered;
+    double max_dtau;                 /* max |tau - tau_ref|, the quantity tol= bounds */
     long surface, sky;
 } accuracy;
 
@@ -358,6 +359,9 @@ static int check_accuracy(const grid *g, const ef_fog_component *c, int which, i
             const long double d = fabsl(expl(-(long double) tau[k]) - expl(-yard));
             const double T = exp(-tau[k]);
             const double bound = T > 0 ? T * expm1(info.err[k]) : 0;   /* as the error AOV */
+            const long double dtau = isinf(tau[k]) && isinf(yard) ? 0 : fabsl(tau[k] - yard);
+            if ((double) dtau > acc->max_dtau)
+                acc->max_dtau = (double) dtau;
             cov &= !((double) d > bound);
             if ((double) d > dT)
                 dT = (double) d;
@@ -503,10 +507,10 @@ int main(int argc, char **argv)
             printf("%s\t%s\t%s\t%d\t%d\t%d\t%s\t%s\t%s\t%s", E->family, E->name, E->spec,
                    E->timed, tm.k, tm.runs, best, med, frame_s, evals);
             if (have)
-                printf("\t%.3e\t%.3e\t%.6f\t%ld\t%ld\n", acc.max_dT, acc.p999_dT,
-                       acc.covered, acc.surface, acc.sky);
+                printf("\t%.3e\t%.3e\t%.6f\t%ld\t%ld\t%.3e\n", acc.max_dT, acc.p999_dT,
+                       acc.covered, acc.surface, acc.sky, acc.max_dtau);
             else
-                printf("\t-\t-\t-\t-\t-\n");
+                printf("\t-\t-\t-\t-\t-\t-\n");
         } else {
             printf("| %s | `%s` | %s / %s | %s | %s | %s | ", E->family, E->spec, best, med,
                    frame_s, pass, evals);
