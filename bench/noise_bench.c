@@ -9,7 +9,7 @@
  * it
  *   - times the fog pass, ef_fog_block (src/core/apply.h), on one thread:
  *     the median and best of up to N runs (default 5) on fresh copies of the
- *     decoded planes. When N runs of the whole frame fit the budget (default
+ *     decoded planes, interleaved: one run of every entry per round. When N runs of the whole frame fit the budget (default
  *     10 s per entry, estimated from a probe on 1 in 64 pixels) the whole
  *     frame is one block; else 1 in K pixels (--sample K; default: the
  *     smallest power of two that fits): in every row one span of w/K
@@ -156,21 +156,14 @@ typedef struct timing {
     double best, median;   /* seconds per run */
 } timing;
 
-/* Times the pass within about budget seconds (see the header). */
-static int time_pass(const frame *f, const ef_fog_scene *s, int max_runs, double budget,
-                     int force_k, timing *tm)
+/* Chooses 1 in k pixels and the number of runs that fit about budget
+ * seconds (see the header), from a probe on 1 in 64 pixels. */
+static void plan_pass(const frame *f, const ef_fog_pass *pass, planes *p, int max_runs,
+                      double budget, int force_k, timing *tm)
 {
     const size_t n = (size_t) f->w * (size_t) f->h;
-    planes p = { { malloc(n * sizeof(float)), malloc(n * sizeof(float)),
-                   malloc(n * sizeof(float)) }, f->alpha ? malloc(n * sizeof(float)) : NULL };
-    double *t = malloc((size_t) max_runs * sizeof *t);
-    int rc = -1;
-    if (!p.rgb[0] || !p.rgb[1] || !p.rgb[2] || (f->alpha && !p.alpha) || !t)
-        goto out;
-    const ef_fog_pass pass = { &f->cam, &f->conv, s };
-    /* A probe on 1 in 64 pixels estimates the whole frame's time. */
     long px;
-    const double probe = pass_pixels(f, &pass, &p, 64, &px);
+    const double probe = pass_pixels(f, pass, p, 64, &px);
     const double frame_est = probe * (double) n / (double) px;
     int k = 1;
     if (frame_est * max_runs > budget) {
@@ -183,21 +176,16 @@ static int time_pass(const frame *f, const ef_fog_scene *s, int max_runs, double
     int runs = max_runs;
     while (runs > 1 && frame_est / k * runs > budget)
         --runs;
-    for (int r = 0; r < runs; ++r)
-        t[r] = pass_pixels(f, &pass, &p, k, &px);
-    qsort(t, (size_t) runs, sizeof *t, bench_cmp_double);
     tm->k = k;
     tm->runs = runs;
-    tm->px = px;
+}
+
+/* Best and median of the n run times in t (sorted in place). */
+static void summarise(double *t, int n, timing *tm)
+{
+    qsort(t, (size_t) n, sizeof *t, bench_cmp_double);
     tm->best = t[0];
-    tm->median = runs % 2 ? t[runs / 2] : 0.5 * (t[runs / 2 - 1] + t[runs / 2]);
-    rc = 0;
-out:
-    for (int c = 0; c < 3; ++c)
-        free(p.rgb[c]);
-    free(p.alpha);
-    free(t);
-    return rc;
+    tm->median = n % 2 ? t[n / 2] : 0.5 * (t[n / 2 - 1] + t[n / 2]);
 }
 
 /* ------------------------------------------------------------ the pixel grid */
@@ -458,34 +446,73 @@ int main(int argc, char **argv)
                "| error output covers |\n");
         printf("|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
     }
+    /* Every selected entry's scene, sampling plan and accuracy first; then
+     * the timed runs interleaved, one run of each entry per round (entries
+     * with fewer runs drop out of the later rounds), so a change in the
+     * machine's load falls on every entry alike. */
     int status = 0;
+    const size_t npx = (size_t) f.w * (size_t) f.h;
+    planes pl = { { malloc(npx * sizeof(float)), malloc(npx * sizeof(float)),
+                    malloc(npx * sizeof(float)) }, f.alpha ? malloc(npx * sizeof(float)) : NULL };
+    ef_fog_scene *scene = calloc(NENTRIES, sizeof *scene);
+    timing *tmv = calloc(NENTRIES, sizeof *tmv);
+    accuracy *accv = calloc(NENTRIES, sizeof *accv);
+    double *times = calloc((size_t) NENTRIES * (size_t) runs, sizeof *times);
+    int *sel = calloc(NENTRIES, sizeof *sel);
+    double *acc_s = calloc(NENTRIES, sizeof *acc_s);
+    if (!pl.rgb[0] || !pl.rgb[1] || !pl.rgb[2] || (f.alpha && !pl.alpha) || !scene || !tmv ||
+        !accv || !times || !sel || !acc_s) {
+        fprintf(stderr, PROG ": out of memory\n");
+        return 1;
+    }
     for (int e = 0; e < NENTRIES; ++e) {
         const entry *E = &entries[e];
         if (only && (exact ? strcmp(E->name, only) != 0 : !strstr(E->name, only)))
             continue;
-        ef_fog_scene s;
         ef_err err;
-        ef_scene_init(&s);
-        if (ef_scene_add(&s, E->spec, &err)) {
+        ef_scene_init(&scene[e]);
+        if (ef_scene_add(&scene[e], E->spec, &err)) {
             fprintf(stderr, PROG ": %s\n", err.msg);
+            ef_scene_free(&scene[e]);
             status = 1;
             continue;
         }
-        ef_scene_bind(&s, f.cam.pos);   /* as the CLI does, once per frame */
-        timing tm = { 0, 0, 0, 0, 0 };
+        ef_scene_bind(&scene[e], f.cam.pos);   /* as the CLI does, once per frame */
+        sel[e] = 1;
+        if (E->timed) {
+            const ef_fog_pass pass = { &f.cam, &f.conv, &scene[e] };
+            plan_pass(&f, &pass, &pl, runs, budget, force_k, &tmv[e]);
+        }
         const double a = bench_now();
-        if (E->timed && time_pass(&f, &s, runs, budget, force_k, &tm)) {
+        if (E->yard != Y_NONE && check_accuracy(&g, &scene[e].comp[0], E->yard, E->timed, &accv[e])) {
             fprintf(stderr, PROG ": out of memory\n");
             return 1;
         }
-        const double b = bench_now();
-        accuracy acc = { 0 };
+        acc_s[e] = bench_now() - a;
+    }
+    for (int r = 0; r < runs; ++r)
+        for (int e = 0; e < NENTRIES; ++e) {
+            if (!sel[e] || !entries[e].timed || r >= tmv[e].runs)
+                continue;
+            const ef_fog_pass pass = { &f.cam, &f.conv, &scene[e] };
+            times[(size_t) e * (size_t) runs + (size_t) r] =
+                pass_pixels(&f, &pass, &pl, tmv[e].k, &tmv[e].px);
+        }
+    for (int e = 0; e < NENTRIES; ++e) {
+        if (!sel[e])
+            continue;
+        const entry *E = &entries[e];
+        timing tm = tmv[e];
+        double tsum = 0;
+        if (E->timed) {
+            double *t = times + (size_t) e * (size_t) runs;
+            for (int r = 0; r < tm.runs; ++r)
+                tsum += t[r];
+            summarise(t, tm.runs, &tm);
+        }
+        const accuracy acc = accv[e];
         const int have = E->yard != Y_NONE;
-        if (have && check_accuracy(&g, &s.comp[0], E->yard, E->timed, &acc)) {
-            fprintf(stderr, PROG ": out of memory\n");
-            return 1;
-        }
-        ef_scene_free(&s);
+        ef_scene_free(&scene[e]);
         const double px = (double) tm.px / 1e6;
         char pass[64] = "-", best[32] = "-", med[32] = "-", frame_s[32] = "-", evals[32] = "-";
         if (E->timed) {
@@ -498,10 +525,10 @@ int main(int argc, char **argv)
         if (have && E->timed)
             snprintf(evals, sizeof evals, "%.4g", acc.evals_per_px);
         fprintf(stderr, PROG ": %-34s %s Mpixel/s median (%s; %.1f s), %s evals/px",
-                E->name, med, pass, b - a, evals);
+                E->name, med, pass, tsum, evals);
         if (have)
             fprintf(stderr, ", max |dT| %.3g, 99.9th %.3g, covered %.4f on %ld pixels (%.1f s)",
-                    acc.max_dT, acc.p999_dT, acc.covered, acc.surface, bench_now() - b);
+                    acc.max_dT, acc.p999_dT, acc.covered, acc.surface, acc_s[e]);
         fprintf(stderr, "\n");
         if (tsv) {
             printf("%s\t%s\t%s\t%d\t%d\t%d\t%s\t%s\t%s\t%s", E->family, E->name, E->spec,
@@ -521,6 +548,15 @@ int main(int argc, char **argv)
         }
         fflush(stdout);
     }
+    for (int c = 0; c < 3; ++c)
+        free(pl.rgb[c]);
+    free(pl.alpha);
+    free(scene);
+    free(tmv);
+    free(accv);
+    free(times);
+    free(sel);
+    free(acc_s);
     free_grid(&g);
     bench_free_frame(&f);
     return status;
