@@ -416,7 +416,7 @@ mins() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f min", (b - a) / 60 }'; }
     echo "|---|---:|---:|---:|---:|"
     for row in "${rev_rows[@]}"; do echo "$row"; done
     echo
-    echo "At equal max |Δτ| instead (the error tol= bounds on every ray; informative, the target is on |ΔT|): steps' largest τ errors sit on long rays, where T is small and |ΔT| hides them, while adaptive holds τ on every ray."
+    echo "At equal max |Δτ| instead (the error tol= bounds on every ray, compared where the reference τ < 60, short of the opaque cut; informative, the target is on |ΔT|): steps' largest τ errors sit on long rays, where T is small and |ΔT| hides them, while adaptive holds τ on every ray."
     echo
     echo "| steps | max \\|Δτ\\| | steps s/frame | adaptive s/frame at that error | adaptive speed-up |"
     echo "|---|---:|---:|---:|---:|"
