@@ -30,6 +30,20 @@
 #define EF_INLINE static inline
 #endif
 
+/* A model's tau_add over its inlined one-ray body tau##_one: one call per
+ * batch into a multiversioned loop, the same sums as tau per ray. */
+#define EF_TAU_ADD(name, tau)                                                               \
+    EF_MULTIVERSION static void name(const ef_fog_component *c, const ef_ray *r, int n,     \
+                                     double (*acc)[3])                                      \
+    {                                                                                       \
+        for (int j = 0; j < n; ++j) {                                                       \
+            double t[3];                                                                    \
+            tau##_one(c, &r[j], t);                                                         \
+            for (int k = 0; k < 3; ++k)                                                     \
+                acc[j][k] += t[k];                                                          \
+        }                                                                                   \
+    }
+
 /* An unevaluated sum hi + lo, |lo| <= ulp(hi)/2. */
 typedef struct ef_dd {
     double hi, lo;

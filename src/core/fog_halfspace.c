@@ -271,21 +271,9 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
     tau_smooth_one(c, r, tau);
 }
 
-/* tau_add over tau: one call per batch, the same sums. */
-#define TAU_ADD(name, tau)                                                                   \
-    EF_MULTIVERSION static void name(const ef_fog_component *c, const ef_ray *r, int n,      \
-                                     double (*acc)[3])                                       \
-    {                                                                                        \
-        for (int j = 0; j < n; ++j) {                                                        \
-            double t[3];                                                                     \
-            tau##_one(c, &r[j], t);                                                          \
-            for (int k = 0; k < 3; ++k)                                                      \
-                acc[j][k] += t[k];                                                           \
-        }                                                                                    \
-    }
-TAU_ADD(tau_add_halfspace, tau_halfspace)
-TAU_ADD(tau_add_linear, tau_linear)
-TAU_ADD(tau_add_smooth, tau_smooth)
+EF_TAU_ADD(tau_add_halfspace, tau_halfspace)
+EF_TAU_ADD(tau_add_linear, tau_linear)
+EF_TAU_ADD(tau_add_smooth, tau_smooth)
 
 /* The plane's value at the camera, cached for its rays (exact.h). */
 static void bind_plane(ef_fog_component *c, const double org[3])

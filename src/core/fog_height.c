@@ -137,16 +137,7 @@ EF_MULTIVERSION static void tau_height(const ef_fog_component *c, const ef_ray *
     tau_height_one(c, r, tau);
 }
 
-EF_MULTIVERSION static void tau_add_height(const ef_fog_component *c, const ef_ray *r, int n,
-                                           double (*acc)[3])
-{
-    for (int j = 0; j < n; ++j) {
-        double t[3];
-        tau_height_one(c, &r[j], t);
-        for (int k = 0; k < 3; ++k)
-            acc[j][k] += t[k];
-    }
-}
+EF_TAU_ADD(tau_add_height, tau_height)
 
 /* The camera's height, cached for its rays (exact.h). */
 static void bind_height(ef_fog_component *c, const double org[3])

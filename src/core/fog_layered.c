@@ -543,16 +543,7 @@ EF_MULTIVERSION static void tau_layered(const ef_fog_component *c, const ef_ray 
     tau_layered_one(c, r, tau);
 }
 
-EF_MULTIVERSION static void tau_add_layered(const ef_fog_component *c, const ef_ray *r, int n,
-                                            double (*acc)[3])
-{
-    for (int j = 0; j < n; ++j) {
-        double t[3];
-        tau_layered_one(c, &r[j], t);
-        for (int k = 0; k < 3; ++k)
-            acc[j][k] += t[k];
-    }
-}
+EF_TAU_ADD(tau_add_layered, tau_layered)
 
 /* The camera's height, cached for its rays (exact.h). */
 static void bind_layered(ef_fog_component *c, const double org[3])

@@ -816,70 +816,8 @@ static double cell_env_noise(rayc *R, const void *ctx, long double t)
     return R->s->k == 0 ? n : (double) env_at(R, t) * n;
 }
 
-/* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
- * n == 0 the certified pair (9 and 13 nodes, bisected to tol relative to
- * the cell's envelope bound). *err collects the certified pair's residue. */
-/* n Gauss nodes of a cell whose fractions at the entry are f0, moving at
- * d0 per unit t, over a chord of length h (corner hashes nc); Bg[h] is
- * gradient h's rate g.d0, the same for every cell of the ray's octave.
- * The nodes are evaluated side by side (vectorised, and wider where the
- * CPU has AVX2) and summed in order: the same bits either way. */
-EF_MULTIVERSION static double cell_gauss_b(const nstate *s, const ef_noise_cell *nc,
-                                           const double f0[3], const double d0[3],
-                                           const double Bg[16], double h, int n)
-{
-    /* Each corner's gradient term is linear along the chord: its value at
-     * the entry and its rate, once per cell. */
-    double A[8], B[8];
-    for (int k = 0; k < 8; ++k) {
-        const double *g = grad_vec[nc->h[k] & 15];
-        A[k] = g[0] * (f0[0] - (k & 1)) + g[1] * (f0[1] - ((k >> 1) & 1)) +
-               g[2] * (f0[2] - (k >> 2));
-        B[k] = Bg[nc->h[k] & 15];
-    }
-    const double hh = h / 2;
-    const double *x = s->glx[n], *wt = s->glw[n];
-    double val[GL_MAX];
-    for (int j = 0; j < n; ++j) {
-        const double o = hh * (1 + x[j]);
-        const double u = ef_noise_fade_(f0[0] + o * d0[0]);
-        const double v = ef_noise_fade_(f0[1] + o * d0[1]);
-        const double w = ef_noise_fade_(f0[2] + o * d0[2]);
-        const double g0 = A[0] + o * B[0], g1 = A[1] + o * B[1], g2 = A[2] + o * B[2],
-                     g3 = A[3] + o * B[3], g4 = A[4] + o * B[4], g5 = A[5] + o * B[5],
-                     g6 = A[6] + o * B[6], g7 = A[7] + o * B[7];
-        const double x0 = ef_noise_lerp_(v, ef_noise_lerp_(u, g0, g1), ef_noise_lerp_(u, g2, g3));
-        const double x1 = ef_noise_lerp_(v, ef_noise_lerp_(u, g4, g5), ef_noise_lerp_(u, g6, g7));
-        val[j] = wt[j] * ef_noise_lerp_(w, x0, x1);
-    }
-    double sum = 0;
-    for (int j = 0; j < n; ++j)
-        sum += val[j];
-    return hh * sum;
-}
-
-/* Gradient h's rate along d0, for cell_gauss_b. */
-static void grad_rates(const double d0[3], double Bg[16])
-{
-    for (int k = 0; k < 16; ++k)
-        Bg[k] = grad_vec[k][0] * d0[0] + grad_vec[k][1] * d0[1] + grad_vec[k][2] * d0[2];
-}
-
-/* cell_gauss_b for one cell of its own. */
-static double cell_gauss(const nstate *s, const ef_noise_cell *nc, const double f0[3],
-                         const double d0[3], double h, int n)
-{
-    double Bg[16];
-    grad_rates(d0, Bg);
-    return cell_gauss_b(s, nc, f0, d0, Bg, h, n);
-}
-
-/* integral of noise_i over [t0, t1] with n nodes per cell, walking the cells
- * in double with fractions carried from cell to cell (each axis restarts
- * at 0 or 1 where it crosses): the adaptive method's fast path, whose
- * rounding (~1e-16 per cell) is far below any tolerance it takes. */
-/* The cells of one batch of octave_integral_fast, laid out so the nodes
- * run across cells (one cell per vector lane). */
+/* A batch of cells of one octave (octave_integral and its fast path), laid
+ * out so the nodes run across cells (one cell per vector lane). */
 #define CELL_BATCH 32
 typedef struct cell_batch {
     double f[3][CELL_BATCH];         /* fractions at each cell's entry */
@@ -897,8 +835,9 @@ typedef struct cell_batch {
 #define GRAD_Y1 0x2222550au
 #define GRAD_Z1 0x190a0a55u
 
-/* Gauss with n nodes on each of the m cells in b: the arithmetic of
- * cell_gauss_b cell by cell (so the same bits), vectorised across cells. */
+/* Gauss with n nodes on each of the m cells in b, vectorised across cells:
+ * per cell the corners' gradient terms are linear along the chord (value
+ * at the entry A, rate B), and the nodes are summed in order. */
 EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int n, int m,
                                         cell_batch *b)
 {
@@ -934,6 +873,15 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
             b->sum[c] += wj * ef_noise_lerp_(w, x0, x1);
         }
     }
+}
+
+/* Integrates the m cells of b and adds them to acc in walk order. */
+static void batch_flush(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
+                        ksum *acc)
+{
+    batch_gauss(s, d0, n, m, b);
+    for (int c = 0; c < m; ++c)
+        kadd(acc, b->hh[c] * b->sum[c]);
 }
 
 /* integral of noise_i over [t0, t1] with n nodes per cell, walking the cells
@@ -1010,9 +958,7 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
             for (int k = 0; k < 8; ++k)
                 b.g[k][c] = nc.h[k];
         }
-        batch_gauss(s, d, n, m, &b);
-        for (int c = 0; c < m; ++c)
-            kadd(&acc, b.hh[c] * b.sum[c]);
+        batch_flush(s, d, n, m, &b, &acc);
         cells += m;
     }
     R->cells += cells;
@@ -1020,6 +966,12 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
     return kval(&acc);
 }
 
+/* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
+ * n == 0 the certified pair (9 and 13 nodes, bisected to tol relative to
+ * the cell's envelope bound). *err collects the certified pair's residue.
+ * The walk is in long double (exact needs each cell's fractions to full
+ * precision wherever the camera is); without an envelope the cells go
+ * through the adaptive path's batches, from fractions formed here. */
 static double octave_integral(rayc *R, int i, int n, long double t0, long double t1,
                               double *err)
 {
@@ -1031,19 +983,24 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
     ksum acc = { 0, 0 };
     long double ta, tb;
     cell_ctx cc = { &w, 0, { { 0 } } };
+    cell_batch b;
+    int m = 0;
+    const double d0[3] = { w.u[0].dd, w.u[1].dd, w.u[2].dd };
     while (walk_next(&w, &ta, &tb)) {
         if (tb > ta) {
             walk_hash(&w, 0, &cc.nc);
             R->cells += 1;
             if (n > 0 && s->k == 0) {
-                /* Per node in double: the fractions at the cell's entry and their rates. */
-                double f0[3], d0[3];
-                for (int a = 0; a < 3; ++a) {
-                    f0[a] = (double) ((w.u[a].b - w.cell[a]) + ta * w.u[a].d);
-                    d0[a] = w.u[a].dd;
-                }
+                for (int a = 0; a < 3; ++a)
+                    b.f[a][m] = (double) ((w.u[a].b - w.cell[a]) + ta * w.u[a].d);
+                for (int k = 0; k < 8; ++k)
+                    b.g[k][m] = cc.nc.h[k];
+                b.hh[m++] = (double) (tb - ta) / 2;
                 R->evals += n;
-                kadd(&acc, cell_gauss(s, &cc.nc, f0, d0, (double) (tb - ta), n));
+                if (m == CELL_BATCH) {
+                    batch_flush(s, d0, n, m, &b, &acc);
+                    m = 0;
+                }
             } else if (n > 0) {
                 kadd(&acc, gauss(R, cell_env_noise, &cc, n, ta, tb));
             } else if (s->k * fabsl(R->hs) * (tb - ta) <= 0.05L) {
@@ -1059,6 +1016,8 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
         }
         walk_advance(&w, tb);
     }
+    if (m > 0)
+        batch_flush(s, d0, n, m, &b, &acc);
     return kval(&acc);
 }
 

@@ -396,18 +396,96 @@ EF_MULTIVERSION static double inside_length_exact(const double *pl, int np, cons
 
 enum { CLIP_EMPTY, CLIP_BOUND, CLIP_UNSURE };
 
+/* The planes bound so far in the plain-double pass: the best entry
+ * (largest t) and exit (smallest t) with their error bounds, and the most
+ * competitive bound among the other planes. */
+typedef struct clip_state {
+    int in, out;
+    double t_in, e_in, other_in, t_out, e_out, other_out;
+} clip_state;
+
+/* Adds plane k, whose value at the origin is h0 (within eh) and whose rate
+ * along the ray is s (within es, s not exactly 0), to st. Returns
+ * CLIP_EMPTY or CLIP_UNSURE as clip_fast does, else CLIP_BOUND (go on). */
+EF_INLINE int clip_plane(clip_state *st, int k, double h0, double eh, double s, double es,
+                         double len)
+{
+    if (!(fabs(s) > es))
+        return CLIP_UNSURE;
+    if (s > 0.0 && h0 > 0.0)
+        return CLIP_EMPTY;                    /* starts outside and goes further out */
+    if (!isinf(len)) {
+        const double h1 = h0 + s * len;
+        const double eh1 = (eh + es * len + (fabs(h0) + fabs(s) * len) * 0x1p-51) * MARGIN;
+        if (!(fabs(h1) > eh1))
+            return CLIP_UNSURE;
+        if (s < 0.0 && h1 > 0.0)
+            return CLIP_EMPTY;                /* ends outside, came from further out */
+        if (s > 0.0 && h1 < 0.0)
+            return CLIP_BOUND;                /* ends inside: no exit before len */
+    }
+    if (s < 0.0 && h0 < 0.0)
+        return CLIP_BOUND;                    /* starts inside: no entry after 0 */
+    /* The exact t = -h0x/sx, where |h0x - h0| <= eh and |sx - s| <= es: it
+     * differs from -h0/s by at most (eh + |t| es)/(|s| - es), which is below
+     * (eh + |t| es)/|s| * (1 + 2^-19) when es/|s| <= 2^-20 (else too
+     * grazing to decide here); t itself has two roundings. */
+    const double inv = 1.0 / s, t = -h0 * inv;
+    if (!(es * fabs(inv) <= 0x1p-20))
+        return CLIP_UNSURE;
+    const double et = ((eh + fabs(t) * es) * fabs(inv) * (1.0 + 0x1p-19) +
+                       fabs(t) * 0x1p-51) * MARGIN;
+    if (!isfinite(t) || !isfinite(et))
+        return CLIP_UNSURE;
+    if (s > 0.0) {
+        if (st->out < 0 || t < st->t_out) {
+            if (st->out >= 0)
+                st->other_out = fmin(st->other_out, st->t_out - st->e_out);
+            st->out = k;
+            st->t_out = t;
+            st->e_out = et;
+        } else
+            st->other_out = fmin(st->other_out, t - et);
+    } else {
+        if (st->in < 0 || t > st->t_in) {
+            if (st->in >= 0)
+                st->other_in = fmax(st->other_in, st->t_in + st->e_in);
+            st->in = k;
+            st->t_in = t;
+            st->e_in = et;
+        } else
+            st->other_in = fmax(st->other_in, t + et);
+    }
+    return CLIP_BOUND;
+}
+
+/* The verdict once every plane is in st (see clip_fast). */
+EF_INLINE int clip_verdict(const clip_state *st, int *in_, int *out_)
+{
+    if (st->in >= 0 && !(st->other_in < st->t_in - st->e_in))
+        return CLIP_UNSURE;                   /* two entries tie within rounding */
+    if (st->out >= 0 && !(st->other_out > st->t_out + st->e_out))
+        return CLIP_UNSURE;
+    if (st->in >= 0 && st->out >= 0) {
+        if (st->t_in - st->e_in > st->t_out + st->e_out)
+            return CLIP_EMPTY;
+        if (!(st->t_in + st->e_in < st->t_out - st->e_out))
+            return CLIP_UNSURE;
+    }
+    *in_ = st->in;
+    *out_ = st->out;
+    return CLIP_BOUND;
+}
+
+#define CLIP_START { -1, -1, 0, 0, -INFINITY, 0, 0, INFINITY }
+
 /* The plain-double pass. CLIP_EMPTY: the segment certainly misses the
  * volume. CLIP_BOUND: *in, *out are certainly the binding planes (-1: none)
  * and entry < exit. CLIP_UNSURE: a sign or a choice is within rounding. */
 EF_INLINE int clip_fast(const double *pl, int np, const double org[3], const double dir[3],
-                     double len, int *in_, int *out_)
+                        double len, int *in_, int *out_)
 {
-    const int sky = isinf(len);
-    int in = -1, out = -1;
-    /* The best entry (largest t) and exit (smallest t) with their error
-     * bounds, and the most competitive bound among the other planes. */
-    double t_in = 0, e_in = 0, other_in = -INFINITY;
-    double t_out = 0, e_out = 0, other_out = INFINITY;
+    clip_state st = CLIP_START;
     for (int k = 0; k < np; ++k) {
         const double *p = pl + 4 * k;
         const double a0 = p[0] * org[0], a1 = p[1] * org[1], a2 = p[2] * org[2];
@@ -424,66 +502,11 @@ EF_INLINE int clip_fast(const double *pl, int np, const double org[3], const dou
         }
         const double s = b0 + b1 + b2;
         const double es = (fabs(b0) + fabs(b1) + fabs(b2)) * EPS_DOT + EPS_TINY;
-        if (!(fabs(s) > es))
-            return CLIP_UNSURE;
-        if (s > 0.0 && h0 > 0.0)
-            return CLIP_EMPTY;                /* starts outside and goes further out */
-        if (!sky) {
-            const double h1 = h0 + s * len;
-            const double eh1 = (eh + es * len + (fabs(h0) + fabs(s) * len) * 0x1p-51) * MARGIN;
-            if (!(fabs(h1) > eh1))
-                return CLIP_UNSURE;
-            if (s < 0.0 && h1 > 0.0)
-                return CLIP_EMPTY;            /* ends outside, came from further out */
-            if (s > 0.0 && h1 < 0.0)
-                continue;                     /* ends inside: no exit before len */
-        }
-        if (s < 0.0 && h0 < 0.0)
-            continue;                         /* starts inside: no entry after 0 */
-        /* The exact t = -h0x/sx, where |h0x - h0| <= eh and |sx - s| <= es: it
-         * differs from -h0/s by at most (eh + |t| es)/(|s| - es), which is below
-         * (eh + |t| es)/|s| * (1 + 2^-19) when es/|s| <= 2^-20 (else too
-         * grazing to decide here); t itself has two roundings. */
-        const double inv = 1.0 / s, t = -h0 * inv;
-        if (!(es * fabs(inv) <= 0x1p-20))
-            return CLIP_UNSURE;
-        const double et = ((eh + fabs(t) * es) * fabs(inv) * (1.0 + 0x1p-19) +
-                           fabs(t) * 0x1p-51) * MARGIN;
-        if (!isfinite(t) || !isfinite(et))
-            return CLIP_UNSURE;
-        if (s > 0.0) {
-            if (out < 0 || t < t_out) {
-                if (out >= 0)
-                    other_out = fmin(other_out, t_out - e_out);
-                out = k;
-                t_out = t;
-                e_out = et;
-            } else
-                other_out = fmin(other_out, t - et);
-        } else {
-            if (in < 0 || t > t_in) {
-                if (in >= 0)
-                    other_in = fmax(other_in, t_in + e_in);
-                in = k;
-                t_in = t;
-                e_in = et;
-            } else
-                other_in = fmax(other_in, t + et);
-        }
+        const int v = clip_plane(&st, k, h0, eh, s, es, len);
+        if (v != CLIP_BOUND)
+            return v;
     }
-    if (in >= 0 && !(other_in < t_in - e_in))
-        return CLIP_UNSURE;                   /* two entries tie within rounding */
-    if (out >= 0 && !(other_out > t_out + e_out))
-        return CLIP_UNSURE;
-    if (in >= 0 && out >= 0) {
-        if (t_in - e_in > t_out + e_out)
-            return CLIP_EMPTY;
-        if (!(t_in + e_in < t_out - e_out))
-            return CLIP_UNSURE;
-    }
-    *in_ = in;
-    *out_ = out;
-    return CLIP_BOUND;
+    return clip_verdict(&st, in_, out_);
 }
 
 /* clip_fast for a ray from the bound camera: the plane values at the
@@ -492,13 +515,10 @@ EF_INLINE int clip_fast(const double *pl, int np, const double org[3], const dou
  * and es = |s| EPS_DOT + EPS_TINY, the same values as the three-term sums
  * (adding zeros is exact; a zero s is decided before its sign matters).
  * dir must be finite (then those zero products are zeros). */
-EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np,
-                                         const double dir[3], double len, int *in_, int *out_)
+EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np, const double dir[3],
+                            double len, int *in_, int *out_)
 {
-    const int sky = isinf(len);
-    int in = -1, out = -1;
-    double t_in = 0, e_in = 0, other_in = -INFINITY;
-    double t_out = 0, e_out = 0, other_out = INFINITY;
+    clip_state st = CLIP_START;
     for (int k = 0; k < np; ++k) {
         const double *p = pl + 4 * k, *ca = cache + CACHE * k;
         const double h0 = ca[C_H0], eh = ca[C_EH];
@@ -524,62 +544,11 @@ EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np,
             s = b0 + b1 + b2;
             es = (fabs(b0) + fabs(b1) + fabs(b2)) * EPS_DOT + EPS_TINY;
         }
-        if (!(fabs(s) > es))
-            return CLIP_UNSURE;
-        if (s > 0.0 && h0 > 0.0)
-            return CLIP_EMPTY;
-        if (!sky) {
-            const double h1 = h0 + s * len;
-            const double eh1 = (eh + es * len + (fabs(h0) + fabs(s) * len) * 0x1p-51) * MARGIN;
-            if (!(fabs(h1) > eh1))
-                return CLIP_UNSURE;
-            if (s < 0.0 && h1 > 0.0)
-                return CLIP_EMPTY;
-            if (s > 0.0 && h1 < 0.0)
-                continue;
-        }
-        if (s < 0.0 && h0 < 0.0)
-            continue;
-        const double inv = 1.0 / s, t = -h0 * inv;
-        if (!(es * fabs(inv) <= 0x1p-20))
-            return CLIP_UNSURE;
-        const double et = ((eh + fabs(t) * es) * fabs(inv) * (1.0 + 0x1p-19) +
-                           fabs(t) * 0x1p-51) * MARGIN;
-        if (!isfinite(t) || !isfinite(et))
-            return CLIP_UNSURE;
-        if (s > 0.0) {
-            if (out < 0 || t < t_out) {
-                if (out >= 0)
-                    other_out = fmin(other_out, t_out - e_out);
-                out = k;
-                t_out = t;
-                e_out = et;
-            } else
-                other_out = fmin(other_out, t - et);
-        } else {
-            if (in < 0 || t > t_in) {
-                if (in >= 0)
-                    other_in = fmax(other_in, t_in + e_in);
-                in = k;
-                t_in = t;
-                e_in = et;
-            } else
-                other_in = fmax(other_in, t + et);
-        }
+        const int v = clip_plane(&st, k, h0, eh, s, es, len);
+        if (v != CLIP_BOUND)
+            return v;
     }
-    if (in >= 0 && !(other_in < t_in - e_in))
-        return CLIP_UNSURE;
-    if (out >= 0 && !(other_out > t_out + e_out))
-        return CLIP_UNSURE;
-    if (in >= 0 && out >= 0) {
-        if (t_in - e_in > t_out + e_out)
-            return CLIP_EMPTY;
-        if (!(t_in + e_in < t_out - e_out))
-            return CLIP_UNSURE;
-    }
-    *in_ = in;
-    *out_ = out;
-    return CLIP_BOUND;
+    return clip_verdict(&st, in_, out_);
 }
 
 /* crossing_of with h0 from the cache (the same double-double). */
@@ -669,16 +638,7 @@ EF_MULTIVERSION static void tau_volume(const ef_fog_component *c, const ef_ray *
     tau_volume_one(c, r, tau);
 }
 
-EF_MULTIVERSION static void tau_add_volume(const ef_fog_component *c, const ef_ray *r, int n,
-                                           double (*acc)[3])
-{
-    for (int j = 0; j < n; ++j) {
-        double t[3];
-        tau_volume_one(c, &r[j], t);
-        for (int k = 0; k < 3; ++k)
-            acc[j][k] += t[k];
-    }
-}
+EF_TAU_ADD(tau_add_volume, tau_volume)
 
 /* The camera's part of every plane, as clip_fast and crossing_of compute it. */
 static void bind_volume(ef_fog_component *c, const double org[3])
