@@ -520,30 +520,28 @@ static void write_big(const char *path)
 
 /* Peak resident set (VmHWM) in kB, after resetting it when the kernel
  * allows (/proc/self/clear_refs 5). */
-static long vm_hwm_kb(void)
+static long status_kb(const char *key)
 {
     FILE *fp = fopen("/proc/self/status", "r");
     char line[256];
     long kb = -1;
+    const size_t n = strlen(key);
     while (fp && fgets(line, sizeof line, fp))
-        if (!strncmp(line, "VmHWM:", 6))
-            kb = strtol(line + 6, NULL, 10);
+        if (!strncmp(line, key, n))
+            kb = strtol(line + n, NULL, 10);
     if (fp)
         fclose(fp);
     return kb;
 }
 
+static long vm_hwm_kb(void)
+{
+    return status_kb("VmHWM:");
+}
+
 static long vm_rss_kb(void)
 {
-    FILE *fp = fopen("/proc/self/status", "r");
-    char line[256];
-    long kb = -1;
-    while (fp && fgets(line, sizeof line, fp))
-        if (!strncmp(line, "VmRSS:", 6))
-            kb = strtol(line + 6, NULL, 10);
-    if (fp)
-        fclose(fp);
-    return kb;
+    return status_kb("VmRSS:");
 }
 
 static int reset_hwm(void)
