@@ -340,6 +340,55 @@ static void test_opaque(void **state)
     }
 }
 
+/* Adaptive on segments that turn opaque: the coarsest octave walks ahead
+ * alone, and where it, less the 4-sigma estimate of the other octaves,
+ * passes tau = 60 the ray is cut with that lower value. So a cut tau is at
+ * least 60 and not above the reference (the lower value), the error output
+ * is T itself, and the finer octaves' cells are never walked: the walk
+ * costs a fraction of the cells a full walk to the cut would cross. */
+static void test_opaque_probe(void **state)
+{
+    (void) state;
+    ef_fog_component c;
+    parse("noise:density=0.5:scale=4:tol=1e-3", &c);
+    rng g = { 4242 };
+    const long n = scaled(60);
+    long cuts = 0;
+    for (long k = 0; k < n; ++k) {
+        double o[3], d[3], nd = 0;
+        for (int a = 0; a < 3; ++a) {
+            o[a] = uni(&g, -50, 50);
+            d[a] = uni(&g, -1, 1);
+            nd += d[a] * d[a];
+        }
+        for (int a = 0; a < 3; ++a)
+            d[a] /= sqrt(nd);
+        const ef_ray r = ray(o, d, uni(&g, 150, 600));   /* tau ~ 75 to 300 */
+        long double ref[3];
+        assert_int_equal(ef_ref_tau(&c, &r, ref, NULL), 0);
+        double tau[3];
+        ef_tau_info info;
+        ef_fog_tau(&c, &r, tau, &info);
+        if (!(info.err[0] == log(2.0))) {
+            /* Not cut: integrated to the end, within the tolerance. */
+            assert_true(fabs(tau[0] - (double) ref[0]) <= 2e-3);
+            continue;
+        }
+        cuts++;
+        if (!(tau[0] >= 60 && tau[0] <= (double) ref[0])) {
+            print_error("tau %.17g ref %.17Lg\n", tau[0], ref[0]);
+            fail();
+        }
+        /* A full walk of 4 octaves (frequencies 1, 2, 4, 8 per 4 units) to
+         * where the mean fog reaches 60 (120 units at density 0.5). */
+        const double l1 = fabs(d[0]) + fabs(d[1]) + fabs(d[2]);
+        const double full = 120 * l1 * (1 + 2 + 4 + 8) / 4.0;
+        assert_true(info.cells < 0.3 * full);
+    }
+    assert_true(cuts >= n * 9 / 10);
+    ef_fog_free(&c);
+}
+
 /* ---- adaptive: the tolerance holds and the error output covers ---- */
 
 static void test_adaptive(void **state)
@@ -889,6 +938,7 @@ int main(void)
         cmocka_unit_test(test_copy),
         cmocka_unit_test(test_sky),
         cmocka_unit_test(test_opaque),
+        cmocka_unit_test(test_opaque_probe),
         cmocka_unit_test(test_steps),
         cmocka_unit_test(test_continuity),
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),

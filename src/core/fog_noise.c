@@ -838,10 +838,32 @@ typedef struct cell_batch {
 /* Gauss with n nodes on each of the m cells in b, vectorised across cells:
  * per cell the corners' gradient terms are linear along the chord (value
  * at the entry A, rate B), and the nodes are summed in order. */
-EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int n, int m,
-                                        cell_batch *b)
+EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, cell_batch *b)
 {
     const double *x = s->glx[n], *wt = s->glw[n];
+    if (m < 8) {
+        /* A few cells (a short ray's octave): too few for vector lanes,
+         * whose scalar remainder would unpack the gradients bit by bit;
+         * the table is what a scalar loop reads fastest. */
+        for (int c = 0; c < m; ++c) {
+            const double f0 = b->f[0][c], f1 = b->f[1][c], f2 = b->f[2][c];
+#define EF_CORNER(k, fx, fy, fz)                                                              \
+    do {                                                                                      \
+        const double *g = grad_vec[b->g[k][c] & 15];                                          \
+        b->A[k][c] = g[0] * (fx) + g[1] * (fy) + g[2] * (fz);                                 \
+        b->B[k][c] = g[0] * d0[0] + g[1] * d0[1] + g[2] * d0[2];                              \
+    } while (0)
+            EF_CORNER(0, f0, f1, f2);
+            EF_CORNER(1, f0 - 1, f1, f2);
+            EF_CORNER(2, f0, f1 - 1, f2);
+            EF_CORNER(3, f0 - 1, f1 - 1, f2);
+            EF_CORNER(4, f0, f1, f2 - 1);
+            EF_CORNER(5, f0 - 1, f1, f2 - 1);
+            EF_CORNER(6, f0, f1 - 1, f2 - 1);
+            EF_CORNER(7, f0 - 1, f1 - 1, f2 - 1);
+#undef EF_CORNER
+        }
+    } else {
     for (int k = 0; k < 8; ++k) {
         const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
         for (int c = 0; c < m; ++c) {
@@ -852,6 +874,7 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
             b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
             b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
         }
+    }
     }
     for (int c = 0; c < m; ++c)
         b->sum[c] = 0;
@@ -876,12 +899,19 @@ EF_MULTIVERSION static void batch_gauss(const nstate *s, const double d0[3], int
 }
 
 /* Integrates the m cells of b and adds them to acc in walk order. */
-static void batch_flush(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
-                        ksum *acc)
+EF_INLINE void batch_add(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
+                         ksum *acc)
 {
     batch_gauss(s, d0, n, m, b);
     for (int c = 0; c < m; ++c)
         kadd(acc, b->hh[c] * b->sum[c]);
+}
+
+/* batch_add for the long-double walk (exact), with its own vector clone. */
+EF_MULTIVERSION static void batch_flush(const nstate *s, const double d0[3], int n, int m,
+                                        cell_batch *b, ksum *acc)
+{
+    batch_add(s, d0, n, m, b, acc);
 }
 
 /* integral of noise_i over [t0, t1] with n nodes per cell, walking the cells
@@ -890,7 +920,7 @@ static void batch_flush(const nstate *s, const double d0[3], int n, int m, cell_
  * rounding (~1e-16 per cell) is far below any tolerance it takes. The walk
  * collects CELL_BATCH cells at a time and integrates them side by side;
  * the cells are summed in order. */
-static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
+EF_MULTIVERSION static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
 {
     const nstate *s = R->s;
     double fr[3], d[3], next[3], step[3];
@@ -958,7 +988,7 @@ static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
             for (int k = 0; k < 8; ++k)
                 b.g[k][c] = nc.h[k];
         }
-        batch_flush(s, d, n, m, &b, &acc);
+        batch_add(s, d, n, m, &b, &acc);
         cells += m;
     }
     R->cells += cells;
@@ -1216,6 +1246,20 @@ static void plan_octaves(const rayc *R, double L, double envmax, plan *P)
                           quad_est_s(Ai[best], L, S[best], q + 2)) / ncell[best];
     }
     P->est = drop + (quad > 0 ? quad : 0);
+}
+
+/* The estimate, per unit of |contrast| times the envelope, of what every
+ * octave but `only` adds to tau over a stretch of length L: each one's
+ * hard bound or four standard deviations of its line integral, whichever
+ * is smaller (the drop rule's estimate, with quad_est_s's 4 sigma). */
+static double rest_estimate(const nstate *s, int only, double L)
+{
+    double r = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i)
+        if (i != only)
+            r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * L,
+                                         4 * LINE_RMS * sqrt(L * (s->scale / s->fbm.freq[i])));
+    return r;
 }
 
 /* ---- the seed's preintegrated evaluation (noise-separable) ---- */
@@ -2091,18 +2135,31 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         }
         const long double per = OPAQUE_TAU / 2 / (s->rho_max * shape_bound(s));
         const int chunked = (double) env_integral(s, R.h0, R.hs, t0, tend) > (double) per * 2;
+        /* A ray that may turn opaque, under adaptive: the coarsest kept
+         * octave goes first, alone, chunk by chunk (in quarter chunks: it
+         * is cheap), and where it, less the estimate of every other
+         * octave's share over the stretch so far (rest_estimate: the drop
+         * rule's, at 4 sigma), passes OPAQUE_TAU, the ray is cut with that
+         * lower value as tau: the finer octaves, most of the cells, are
+         * never walked there. If it does not pass, they follow over the
+         * whole stretch. */
+        int probe = -1;
+        if (chunked && linear && s->method == M_ADAPTIVE)
+            for (int i = 0; i < s->fbm.octaves && probe < 0; ++i)
+                if (!(over >> i & 1) && P.q[i])
+                    probe = i;
         ksum noise = { 0, 0 };
-        double e = 0;
+        double e = 0, rest = 0;
         long double ca = t0;
         int cut = 0;
         while (ca < tend) {
-            long double cb = chunked ? env_reach(&R, ca, per) : tend;
+            long double cb = chunked ? env_reach(&R, ca, probe >= 0 ? per / 4 : per) : tend;
             if (!(cb < tend) || !(cb > ca))
                 cb = tend;
             if (linear) {
                 for (int i = 0; i < s->fbm.octaves; ++i) {
                     const int q = s->method == M_EXACT ? (s->k == 0 ? 9 : 0) : P.q[i];
-                    if (over >> i & 1)
+                    if (over >> i & 1 || (probe >= 0 && i != probe))
                         continue;
                     if (q || s->method == M_EXACT)
                         kadd(&noise, s->fbm.weight[i] * octave_integral(&R, i, q, ca, cb, &e));
@@ -2114,17 +2171,23 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
                                  : full_integral(&R, 3, 6, ca, cb, s->tol / 2 / L / s->rho_max, &e));
             }
             ca = cb;
+            if (probe >= 0)
+                rest = fabs(s->contrast) * envmax * rest_estimate(s, probe, (double) (ca - t0));
             const double sofar = linear ? (double) env_integral(s, R.h0, R.hs, t0, ca) +
-                                              s->contrast * kval(&noise)
+                                              s->contrast * kval(&noise) - rest
                                         : kval(&noise);
             if (ca < t1 && chunked && sofar * rho_min(s) >= OPAQUE_TAU) {
                 cut = 1;
                 break;
             }
         }
+        if (probe >= 0 && !cut)
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                if (i != probe && !(over >> i & 1) && P.q[i])
+                    kadd(&noise, s->fbm.weight[i] * octave_integral(&R, i, P.q[i], t0, tend, &e));
         if (cut) {
             tend = ca;
-            mean = linear ? (double) env_integral(s, R.h0, R.hs, t0, ca) : 0;
+            mean = linear ? (double) env_integral(s, R.h0, R.hs, t0, ca) - rest : 0;
         }
         unit = linear ? mean + s->contrast * kval(&noise) : kval(&noise);
         if (s->method == M_EXACT)
