@@ -456,6 +456,93 @@ static void test_adaptive(void **state)
     }
 }
 
+/* ttol=eps bounds |dT| = |e^-tau - e^-tau_ref| instead of |dtau|: at least
+ * 99.9 % of segments within eps, all within 2 eps, the error output
+ * (T expm1(err), as the error AOV) covering at least 99.9 %, per channel;
+ * and on dense segments, where T is small, it costs fewer evaluations than
+ * tol=eps (the point of it). Segments reach tau ~ 15, the second spec has
+ * one channel thinner than the others. */
+static void test_adaptive_ttol(void **state)
+{
+    (void) state;
+    static const char *const base[] = {
+        "noise:density=0.2:scale=4",
+        "noise:density=0.3,0.3,0.05:scale=2:octaves=6:falloff=0.1",
+        "noise:density=0.2:scale=5:contrast=1.5",
+        "noise-separable:density=0.2:scale=4:axes=xyz",
+    };
+    static const double tols[] = { 1e-2, 1e-3, 1e-4 };
+    enum { NT = 3 };
+    rng g = { 91 };
+    for (int b = 0; b < 4; ++b) {
+        ef_fog_component c[NT], ct[NT];
+        long n = 0, within[NT] = { 0 }, within2[NT] = { 0 }, covered[NT] = { 0 };
+        double worst[NT] = { 0 }, ev[NT] = { 0 }, evt[NT] = { 0 };
+        for (int ti = 0; ti < NT; ++ti) {
+            char spec[256];
+            snprintf(spec, sizeof spec, "%s:ttol=%g", base[b], tols[ti]);
+            parse(spec, &c[ti]);
+            snprintf(spec, sizeof spec, "%s:tol=%g", base[b], tols[ti]);
+            parse(spec, &ct[ti]);
+        }
+        const long per = scaled(b < 2 ? 1000 : 250);
+        for (long k = 0; k < per; ++k) {
+            ef_ray r = random_segment(&g, 4, NULL, NULL, 0);
+            r.dist = r.planar = isinf(r.dist) ? 70 * uni(&g, 0, 1) : 3 * r.dist;
+            long double ref[3];
+            assert_int_equal(ef_ref_tau(&c[0], &r, ref, NULL), 0);
+            n++;
+            for (int ti = 0; ti < NT; ++ti) {
+                double tau[3], taut[3];
+                ef_tau_info info, it;
+                ef_fog_tau(&c[ti], &r, tau, &info);
+                ef_fog_tau(&ct[ti], &r, taut, &it);
+                ev[ti] += info.evals;
+                evt[ti] += it.evals;
+                double e = 0;
+                int cov = 1;
+                for (int ch = 0; ch < 3; ++ch) {
+                    const double T = exp(-tau[ch]);
+                    const double dT = (double) fabsl(expl(-(long double) tau[ch]) - expl(-ref[ch]));
+                    cov &= dT <= (T > 0 ? T * expm1(info.err[ch]) : 0);
+                    if (dT > e)
+                        e = dT;
+                }
+                within[ti] += e <= tols[ti];
+                within2[ti] += e <= 2 * tols[ti];
+                covered[ti] += cov;
+                if (e > worst[ti])
+                    worst[ti] = e;
+            }
+        }
+        for (int ti = 0; ti < NT; ++ti) {
+            printf("  %-58s %ld segs: |dT| within ttol %.2f%%, within 2 ttol %.2f%%, error output "
+                   "covers %.2f%%, worst %.2g, %.0f evals/seg (tol=%g: %.0f)\n", c[ti].spec, n,
+                   100.0 * within[ti] / n, 100.0 * within2[ti] / n, 100.0 * covered[ti] / n,
+                   worst[ti], ev[ti] / n, tols[ti], evt[ti] / n);
+            assert_true(within[ti] >= 0.999 * n);
+            assert_int_equal(within2[ti], n);
+            assert_true(covered[ti] >= 0.999 * n);
+            if (b < 2)   /* the noise model's budget grows with tau's lower value */
+                assert_true(ev[ti] < 0.8 * evt[ti]);
+            else   /* no lower value where the clamp can bind: log1p(eps), just below eps */
+                assert_true(ev[ti] <= 1.02 * evt[ti]);
+            ef_fog_free(&c[ti]);
+            ef_fog_free(&ct[ti]);
+        }
+    }
+    /* The key's grammar. */
+    ef_fog_component x;
+    ef_err err;
+    ef_fog_context ctx;
+    ef_fog_context_init(&ctx);
+    assert_int_not_equal(ef_fog_parse("noise:density=1:scale=1:ttol=1e-3:tol=1e-3", &ctx, &x, &err), 0);
+    assert_non_null(strstr(err.msg, "not both"));
+    assert_int_not_equal(ef_fog_parse("noise:density=1:scale=1:ttol=1", &ctx, &x, &err), 0);
+    assert_int_not_equal(ef_fog_parse("noise:density=1:scale=1:ttol=0", &ctx, &x, &err), 0);
+    assert_int_not_equal(ef_fog_parse("noise:density=1:scale=1:method=exact:ttol=1e-3", &ctx, &x, &err), 0);
+}
+
 /* Coarser tolerances must cost fewer evaluations (the trade is real). */
 static void test_adaptive_cost_falls_with_tol(void **state)
 {
@@ -939,6 +1026,7 @@ int main(void)
         cmocka_unit_test(test_sky),
         cmocka_unit_test(test_opaque),
         cmocka_unit_test(test_opaque_probe),
+        cmocka_unit_test(test_adaptive_ttol),
         cmocka_unit_test(test_steps),
         cmocka_unit_test(test_continuity),
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),

@@ -44,17 +44,20 @@
 
 enum {
     K_DENSITY, K_VISIBILITY, K_SCALE, K_OCTAVES, K_LACUNARITY, K_GAIN, K_CONTRAST, K_OFFSET,
-    K_VELOCITY, K_SEED, K_FALLOFF, K_BASE, K_MIN, K_MAX, K_METHOD, K_TOL, K_STEPS, K_AXES,
+    K_VELOCITY, K_SEED, K_FALLOFF, K_BASE, K_MIN, K_MAX, K_METHOD, K_TOL, K_TTOL, K_STEPS,
+    K_AXES,
     K_PIECES
 };
 
 static const char *const noise_keys[] = {
     "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
-    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "steps", NULL
+    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "ttol", "steps",
+    NULL
 };
 static const char *const separable_keys[] = {
     "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
-    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "steps", "axes",
+    "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "ttol", "steps",
+    "axes",
     "pieces", NULL
 };
 
@@ -62,7 +65,7 @@ static const char *const separable_keys[] = {
 enum {
     P_RHO = 0, P_SCALE = 3, P_OCTAVES, P_LACUNARITY, P_GAIN, P_CONTRAST, P_OFFSET = 8,
     P_VELOCITY = 11, P_SEED = 14, P_FALLOFF, P_BASE, P_MIN = 17, P_MAX = 20, P_METHOD = 23,
-    P_TOL, P_STEPS, P_AXES, P_PIECES
+    P_TOL, P_STEPS, P_AXES, P_PIECES, P_TTOL
 };
 
 enum { M_ADAPTIVE = 0, M_EXACT, M_STEPS, M_PREINT };
@@ -81,6 +84,7 @@ typedef struct nstate {
     int separable, method, steps, pieces, naxes, axis[3], has_box, clamp;
     double rho[3], rho_max;          /* per scene unit */
     double scale, contrast, seed, k, base, tol, time;
+    double ttol;                     /* adaptive: |dT| allowed per channel (0: tol on tau) */
     double offset[3], velocity[3], bmin[3], bmax[3], up[3];
     double bound;                    /* the shape's bound: (1 + |c| noise bound)^m */
     double fixed[3][EF_FBM_MAX_OCTAVES][2];   /* separable: the two constant noise coordinates */
@@ -141,6 +145,7 @@ static int nonneg(double v) { return v >= 0; }
 static int above_one(double v) { return v > 1; }
 /* Beyond 100 the density is a step function of the noise's sign: nothing
  * more to see, and the clamp's splitting only costs. */
+static int unit_open(double v) { return v > 0 && v < 1; }
 static int contrast_ok(double v) { return fabs(v) <= 100; }
 
 static int set_noise(ef_fog_component *c, int k, const char *val, ef_err *err)
@@ -201,6 +206,9 @@ static int set_noise(ef_fog_component *c, int k, const char *val, ef_err *err)
     case K_TOL:
         return set_real(c, "tol", val, p + P_TOL, "must be a number > 0 (the absolute error "
                         "allowed in tau, which is the relative error of T)", positive, err);
+    case K_TTOL:
+        return set_real(c, "ttol", val, p + P_TTOL, "must be a number from 0 to 1, 0 excluded "
+                        "(the absolute error allowed in T, each channel)", unit_open, err);
     case K_STEPS:
     case K_PIECES: {
         char *end;
@@ -282,6 +290,11 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
         return ef_fail(err, "fog spec '%s': steps= only applies to method=steps", c->spec);
     if ((c->seen & (1u << K_TOL)) && method != M_ADAPTIVE)
         return ef_fail(err, "fog spec '%s': tol= only applies to method=adaptive", c->spec);
+    if ((c->seen & (1u << K_TTOL)) && method != M_ADAPTIVE)
+        return ef_fail(err, "fog spec '%s': ttol= only applies to method=adaptive", c->spec);
+    if ((c->seen & (1u << K_TTOL)) && (c->seen & (1u << K_TOL)))
+        return ef_fail(err, "fog spec '%s': give tol= (the error of tau: relative in T) or "
+                       "ttol= (the absolute error of T), not both", c->spec);
     if (sep && (c->seen & (1u << K_PIECES)) && method != M_PREINT)
         return ef_fail(err, "fog spec '%s': pieces= only applies to method=preintegrated", c->spec);
 
@@ -291,7 +304,9 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     s.method = method;
     s.steps = (c->seen & (1u << K_STEPS)) ? (int) c->p[P_STEPS] : DEFAULT_STEPS;
     s.pieces = (c->seen & (1u << K_PIECES)) ? (int) c->p[P_PIECES] : 1;
-    s.tol = (c->seen & (1u << K_TOL)) ? c->p[P_TOL] : DEFAULT_TOL;
+    s.ttol = (c->seen & (1u << K_TTOL)) ? c->p[P_TTOL] : 0;
+    /* Under ttol, tol is what the per-ray budget starts from (T <= 1). */
+    s.tol = (c->seen & (1u << K_TOL)) ? c->p[P_TOL] : s.ttol > 0 ? log1p(s.ttol) : DEFAULT_TOL;
     const int axes = sep ? ((c->seen & (1u << K_AXES)) ? (int) c->p[P_AXES] : 5) : 7;
     for (int a = 0; a < 3; ++a)
         if (axes & (1 << a))
@@ -1198,11 +1213,11 @@ typedef struct plan {
  * bound, if smaller) sum to at most tol/4; then nodes are added where they
  * buy the most error per evaluation until the quadrature estimates
  * (quad_est_s: 4 sigma) sum to tol/2. */
-static void plan_octaves(const rayc *R, double L, double envmax, plan *P)
+static void plan_octaves(const rayc *R, double L, double envmax, double tol, plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves;
-    const double A = s->rho_max * fabs(s->contrast) * envmax, tol = s->tol;
+    const double A = s->rho_max * fabs(s->contrast) * envmax;
     double drop = 0, quad = 0, ncell[EF_FBM_MAX_OCTAVES];
     int kept = N;
     P->dropped = 0;
@@ -1260,6 +1275,41 @@ static double rest_estimate(const nstate *s, int only, double L)
             r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * L,
                                          4 * LINE_RMS * sqrt(L * (s->scale / s->fbm.freq[i])));
     return r;
+}
+
+/* Under ttol=eps, the error of tau (densest channel) this ray may have:
+ * |dT| <= T expm1(dtau) and T <= e^-lo, so dtau = log1p(eps e^lo) per
+ * channel keeps |dT| <= eps, lo being a lower value of the channel's tau
+ * over [t0, t1]: the mean part less the noise part's estimate
+ * (rest_estimate over every octave: 4 sigma or the hard bound) for the
+ * noise model, (1 - |c| bound)^m times the envelope's integral for the
+ * clamped and separable densities (0 where the clamp can bind). Dense
+ * fog earns a large budget: where T is small, tau's error hardly shows. */
+static double ttol_budget(const rayc *R, long double t0, long double t1, double L, double envmax,
+                          int linear)
+{
+    const nstate *s = R->s;
+    const double m = (double) env_integral(s, R->h0, R->hs, t0, t1);
+    double lo;
+    if (linear) {
+        lo = m - fabs(s->contrast) * envmax * rest_estimate(s, -1, L);
+    } else {
+        const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
+        lo = lo1 > 0 ? pow(lo1, s->separable ? s->naxes : 1) * m : 0;
+    }
+    if (!(lo > 0))
+        lo = 0;
+    double tol = INFINITY;
+    for (int k = 0; k < 3; ++k) {
+        if (!(s->rho[k] > 0))
+            continue;
+        /* log1p(eps e^x) as softplus(log eps + x): no overflow. */
+        const double x = log(s->ttol) + s->rho[k] * lo;
+        const double dk = (x > 36 ? x : log1p(exp(x))) * (s->rho_max / s->rho[k]);
+        if (dk < tol)
+            tol = dk;
+    }
+    return tol;
 }
 
 /* ---- the seed's preintegrated evaluation (noise-separable) ---- */
@@ -2084,6 +2134,8 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     double mean = 0;
     if (linear)
         mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
+    const double tol = s->ttol > 0 && s->method == M_ADAPTIVE
+                           ? ttol_budget(&R, t0, tend, L, envmax, linear) : s->tol;
     switch (s->method) {
     case M_EXACT:
     case M_ADAPTIVE: {
@@ -2092,7 +2144,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
          * rest cannot show. */
         plan P = { { 0 }, 0, 0 };
         if (linear && s->method == M_ADAPTIVE) {
-            plan_octaves(&R, L, envmax, &P);
+            plan_octaves(&R, L, envmax, tol, &P);
             info->dropped = P.dropped;
         }
         /* The work bound: an octave whose cells along this ray number more
@@ -2168,7 +2220,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
                 kadd(&noise, s->method == M_EXACT
                                  ? full_integral(&R, s->separable ? 10 : 9, s->separable ? 14 : 13,
                                                  ca, cb, 0, &e)
-                                 : full_integral(&R, 3, 6, ca, cb, s->tol / 2 / L / s->rho_max, &e));
+                                 : full_integral(&R, 3, 6, ca, cb, tol / 2 / L / s->rho_max, &e));
             }
             ca = cb;
             if (probe >= 0)
