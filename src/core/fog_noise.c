@@ -1477,18 +1477,8 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
             br[P++] = br[k];
     br[P] = 256;
     double *start = tab, *prefix = tab + P, *coef = tab + 2 * P + 1, *hint = tab + 9 * P + 1;
-    /* C(j, k) (the recurrence C(j, k) (j + 1) / (j + 1 - k) is exact in
-     * long double for these, so a table is the same values, without a
-     * division per term), and each octave's last cell polynomial: the
-     * pieces of one cell follow each other. */
-    long double C[7][7];
-    for (int k = 0; k < 7; ++k) {
-        long double binom = 1;
-        for (int j = k; j < 7; ++j) {
-            C[j][k] = binom;
-            binom = binom * (j + 1) / (j + 1 - k);
-        }
-    }
+    /* Each octave's last cell polynomial: the pieces of one cell follow
+     * each other. */
     long last[EF_FBM_MAX_OCTAVES];
     long double qs[EF_FBM_MAX_OCTAVES][7];
     long double acc = 0;
@@ -1504,15 +1494,17 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
                 cell_poly(s, a, i, m, q);
                 last[i] = m;
             }
-            /* q(xp + f y) = sum_k y^k f^k sum_{j >= k} C(j, k) q_j xp^(j - k) */
-            long double fk = 1;
+            /* q(xp + f y) = sum_k t_k (f y)^k: the Taylor shift by xp, by
+             * repeated synthetic division (21 multiply-adds, no binomials). */
+            long double t[7];
+            for (int k = 0; k < 7; ++k)
+                t[k] = q[k];
+            for (int a0 = 0; a0 < 6; ++a0)
+                for (int j = 5; j >= a0; --j)
+                    t[j] += xp * t[j + 1];
+            long double fk = s->fbm.weight[i];
             for (int k = 0; k < 7; ++k) {
-                long double sum = 0, xpow = 1;
-                for (int j = k; j < 7; ++j) {
-                    sum += C[j][k] * q[j] * xpow;
-                    xpow *= xp;
-                }
-                c[k] += s->fbm.weight[i] * sum * fk;
+                c[k] += t[k] * fk;
                 fk *= f;
             }
         }
@@ -2048,10 +2040,56 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
     }
 }
 
+#define ONE_SPAN 32
+
+/* one_axis over rays o[0..m) of a span, the same bits, in stages over
+ * the span where a ray starts at the bound camera (its near end is the
+ * cached point): each ray's far end is looked up in short loops of
+ * independent iterations (the period and bin, then the piece and its
+ * antiderivative), so the processor overlaps the lookups' chains of
+ * dependent loads across rays; then each ray's integral is formed as
+ * merged_int_in forms it, the rare cases (no extent, one piece) included. */
+EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, int m)
+{
+    const int a = s->axis[k];
+    double r[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pk[ONE_SPAN];
+    int p[ONE_SPAN], near[ONE_SPAN];
+    for (int i = 0; i < m; ++i) {
+        near[i] = s->cam && o[i].s0[k] == s->cam_s[a];
+        pk[i] = period_split(o[i].s0[k] + o[i].ds[k], &r[i]);
+    }
+    for (int i = 0; i < m; ++i)
+        p[i] = piece_of(mv, r[i], &y[i]);
+    for (int i = 0; i < m; ++i)
+        I[i] = piece_int(mv->coef + 7 * p[i], y[i]);
+    const mpoint cam = s->cam ? s->cam_pt[a] : (mpoint) { 0, 0, 0, 0 };
+    for (int i = 0; i < m; ++i) {
+        if (!near[i]) {
+            one_axis(s, mv, k, &o[i]);
+            continue;
+        }
+        const double sd = o[i].ds[k], ds = fabs(sd);
+        const mpoint far = { pk[i], y[i], I[i], p[i] };
+        const mpoint lo = sd < 0 ? far : cam, hi = sd < 0 ? cam : far;
+        o[i].w[k] = ds;
+        if (ds < 1e-6) {
+            o[i].w[k] = 0;
+            o[i].G[k] = piece_val(mv->coef + 7 * lo.p, lo.y + ds / 2);
+            continue;
+        }
+        const double pend = (lo.p + 1 < mv->P ? mv->start[lo.p + 1] : 256) - mv->start[lo.p];
+        if (lo.y + ds <= pend) {
+            o[i].G[k] = piece_int(mv->coef + 7 * lo.p, lo.y + ds) - lo.I;
+            continue;
+        }
+        o[i].G[k] = (hi.k - lo.k) * s->mtotal[a] + (mv->prefix[hi.p] - mv->prefix[lo.p]) +
+                    (hi.I - lo.I);
+    }
+}
+
 /* preint_fast with pieces=1 over up to ONE_SPAN rays, stage by stage (see
  * one_ray), tau added to acc: the same bits. */
-#define ONE_SPAN 32
-static void preint_span(const ef_fog_component *c, const nstate *s, const ef_ray *r, int n,
+EF_MULTIVERSION static void preint_span(const ef_fog_component *c, const nstate *s, const ef_ray *r, int n,
                         double (*acc)[3])
 {
     one_ray o[ONE_SPAN];
@@ -2066,8 +2104,7 @@ static void preint_span(const ef_fog_component *c, const nstate *s, const ef_ray
     }
     for (int k = 0; k < s->naxes; ++k) {
         const mview mv = mview_of(c, s->axis[k]);
-        for (int i = 0; i < m; ++i)
-            one_axis(s, &mv, k, &o[i]);
+        axis_span(s, &mv, k, o, m);
     }
     for (int j = 0, i = 0; j < n; ++j) {
         double unit = 0;
