@@ -2054,14 +2054,37 @@ EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, in
     const int a = s->axis[k];
     double r[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pk[ONE_SPAN];
     int p[ONE_SPAN], near[ONE_SPAN];
-    for (int i = 0; i < m; ++i) {
+    int fix = 0;
+    for (int i = 0; i < m; ++i)
         near[i] = s->cam && o[i].s0[k] == s->cam_s[a];
-        pk[i] = period_split(o[i].s0[k] + o[i].ds[k], &r[i]);
+    /* period_split, branch-free (floor is exact where its truncation is) */
+    for (int i = 0; i < m; ++i) {
+        const double v = o[i].s0[k] + o[i].ds[k];
+        const double kk = floor(v * (1.0 / 256)), rr = v - 256 * kk;
+        const int over = rr >= 256;
+        r[i] = over ? rr - 256 : rr;
+        pk[i] = over ? kk + 1 : kk;
     }
-    for (int i = 0; i < m; ++i)
-        p[i] = piece_of(mv, r[i], &y[i]);
-    for (int i = 0; i < m; ++i)
-        I[i] = piece_int(mv->coef + 7 * p[i], y[i]);
+    /* piece_of: the bin's piece, one step on; the rare rest below */
+    const int P = mv->P;
+    for (int i = 0; i < m; ++i) {
+        int b = (int) (r[i] * mv->bins);
+        b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
+        const int q = (int) mv->hint[2 * b] + (mv->hint[2 * b + 1] <= r[i]);
+        p[i] = q;
+        const double st = mv->start[q];
+        y[i] = r[i] - st;
+        fix |= (q + 1 < P && mv->start[q + 1] <= r[i]) | (q > 0 && st > r[i]);
+    }
+    if (fix)
+        for (int i = 0; i < m; ++i)
+            p[i] = piece_of(mv, r[i], &y[i]);
+    for (int i = 0; i < m; ++i) {
+        const double *ic = mv->coef + 7 * p[i];
+        const double yy = y[i], y2 = yy * yy, y4 = y2 * y2;
+        const double a0 = ic[0] + ic[1] * yy, b0 = ic[2] + ic[3] * yy, c0 = ic[4] + ic[5] * yy;
+        I[i] = ((a0 + b0 * y2) + (c0 + ic[6] * y2) * y4) * yy;   /* piece_int */
+    }
     const mpoint cam = s->cam ? s->cam_pt[a] : (mpoint) { 0, 0, 0, 0 };
     for (int i = 0; i < m; ++i) {
         if (!near[i]) {
