@@ -37,6 +37,7 @@
 #include "noise.h"
 
 #include <float.h>
+#include <stdint.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -109,11 +110,12 @@ typedef struct nstate {
     struct mpoint { double k, y, I; int p; } cam_pt[3];
 } nstate;
 
-/* A merged table's layout from m_off: mp starts, mp + 1 prefixes, 7 mp
- * coefficients (of each piece's antiderivative), then 4 mp lookup bins of
- * two doubles: the piece holding the bin's start and where the next piece
- * starts (so a lookup is one load and one comparison). */
-#define MERGED_SIZE(P) ((size_t) (P) * 17 + 1)
+/* A merged table's layout from m_off (64-byte aligned where built): per
+ * piece one record of 8 doubles, its start and the 7 coefficients of its
+ * antiderivative (one cache line per lookup), then a sentinel record whose
+ * start is 256; mp + 1 prefixes; then 4 mp lookup bins of one int32 each,
+ * the piece holding the bin's start. Plus 8 doubles of alignment slack. */
+#define MERGED_SIZE(P) ((size_t) (P) * 11 + 17)
 #define MERGED_BINS 4    /* lookup bins per piece */
 #define MERGED_MAX 65536
 
@@ -394,6 +396,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
         s.merged = 1;
         for (int k = 0; k < s.naxes; ++k) {
             const int a = s.axis[k];
+            while ((uintptr_t) (arr + at) % 64)   /* each record on one cache line */
+                ++at;
             s.m_off[a] = (int) at;
             s.mpa[a] = build_merged(&s, a, arr + at, (int) mp, &s.mtotal[a]);
             if (!s.mpa[a]) {
@@ -1476,7 +1480,8 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
         if (P == 0 || br[k] - br[P - 1] > 1e-12L)
             br[P++] = br[k];
     br[P] = 256;
-    double *start = tab, *prefix = tab + P, *coef = tab + 2 * P + 1, *hint = tab + 9 * P + 1;
+    double *rec = tab, *prefix = tab + 8 * ((size_t) P + 1);
+    int32_t *hint = (int32_t *) (prefix + P + 1);
     /* Each octave's last cell polynomial: the pieces of one cell follow
      * each other. */
     long last[EF_FBM_MAX_OCTAVES];
@@ -1508,11 +1513,11 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
                 fk *= f;
             }
         }
-        start[p] = (double) s0;
+        rec[8 * p] = (double) s0;
         prefix[p] = (double) acc;
         long double integral = 0, Lp = L;
         for (int k = 0; k < 7; ++k) {
-            coef[7 * p + k] = (double) (c[k] / (k + 1));
+            rec[8 * p + 1 + k] = (double) (c[k] / (k + 1));
             integral += c[k] * Lp / (k + 1);
             Lp *= L;
         }
@@ -1520,14 +1525,13 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     }
     prefix[P] = (double) acc;
     *total = (double) acc;
-    /* Lookup bins: the piece holding each bin's start, and the next
-     * piece's start (256 past the last). */
+    rec[8 * P] = 256;   /* the sentinel: the start past the last piece */
+    /* Lookup bins: the piece holding each bin's start. */
     for (int b = 0, p = 0; b < MERGED_BINS * P; ++b) {
         const double at = 256.0 * b / (MERGED_BINS * P);
-        while (p + 1 < P && start[p + 1] <= at)
+        while (p + 1 < P && rec[8 * (p + 1)] <= at)
             ++p;
-        hint[2 * b] = p;
-        hint[2 * b + 1] = p + 1 < P ? start[p + 1] : 256;
+        hint[b] = p;
     }
     free(br);
     return P;
@@ -1555,17 +1559,23 @@ static double piece_val(const double *ic, double y)
 
 /* Axis a's merged table, as offsets into arr resolved for one ray. */
 typedef struct mview {
-    const double *start, *prefix, *coef, *hint;
+    const double *rec;               /* per piece: its start, its 7 coefficients */
+    const double *prefix;
+    const int32_t *hint;
     int P;
     double bins;                     /* hint bins per unit of r */
 } mview;
+
+#define M_START(m, p) ((m)->rec[8 * (p)])
+#define M_COEF(m, p) ((m)->rec + 8 * (p) + 1)
 
 static inline mview mview_of(const ef_fog_component *c, int a)
 {
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mpa[a];
-    return (mview) { tab, tab + P, tab + 2 * P + 1, tab + 9 * P + 1, P,
+    const double *prefix = tab + 8 * ((size_t) P + 1);
+    return (mview) { tab, prefix, (const int32_t *) (prefix + P + 1), P,
                      (double) MERGED_BINS * P / 256 };
 }
 
@@ -1573,17 +1583,18 @@ static inline mview mview_of(const ef_fog_component *c, int a)
 static inline int piece_of(const mview *m, double r, double *y)
 {
     const int P = m->P;
-    const double *start = m->start;
     int b = (int) (r * m->bins);
     b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-    /* A bin rarely holds two piece starts: one step from its pair, then
-     * the rare rest (and rounding at the bin's edge). */
-    int p = (int) m->hint[2 * b] + (m->hint[2 * b + 1] <= r);
-    while (p + 1 < P && start[p + 1] <= r)
+    /* A bin rarely holds two piece starts: one step (the next record's
+     * start, the sentinel 256 after the last), then the rare rest (and
+     * rounding at the bin's edge). */
+    int p = m->hint[b];
+    p += M_START(m, p + 1) <= r;
+    while (p + 1 < P && M_START(m, p + 1) <= r)
         ++p;
-    while (p > 0 && start[p] > r)
+    while (p > 0 && M_START(m, p) > r)
         --p;
-    *y = r - start[p];
+    *y = r - M_START(m, p);
     return p;
 }
 
@@ -1620,7 +1631,7 @@ static inline void merged_point(const nstate *st, const mview *m, int a, double 
     double r;
     out->k = period_split(s, &r);
     out->p = piece_of(m, r, &out->y);
-    out->I = piece_int(m->coef + 7 * out->p, out->y);
+    out->I = piece_int(M_COEF(m, out->p), out->y);
 }
 
 /* Factor a's fbm part over q_a from s0 to s0 + *ds: its integral over
@@ -1637,11 +1648,11 @@ static inline double merged_int_in(const nstate *s, const mview *mv, int a, doub
     merged_point(s, &m, a, slo, &lo);
     if (ds < 1e-6) {  /* no extent: the value at the middle */
         *pds = 0;
-        return piece_val(m.coef + 7 * lo.p, lo.y + ds / 2);
+        return piece_val(M_COEF(&m, lo.p), lo.y + ds / 2);
     }
-    const double pend = (lo.p + 1 < m.P ? m.start[lo.p + 1] : 256) - m.start[lo.p];
+    const double pend = M_START(&m, lo.p + 1) - M_START(&m, lo.p);
     if (lo.y + ds <= pend)   /* one piece: the antiderivative's difference */
-        return piece_int(m.coef + 7 * lo.p, lo.y + ds) - lo.I;
+        return piece_int(M_COEF(&m, lo.p), lo.y + ds) - lo.I;
     merged_point(s, &m, a, shi, &hi);
     return (hi.k - lo.k) * s->mtotal[a] + (m.prefix[hi.p] - m.prefix[lo.p]) + (hi.I - lo.I);
 }
@@ -2070,17 +2081,18 @@ EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, in
     for (int i = 0; i < m; ++i) {
         int b = (int) (r[i] * mv->bins);
         b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-        const int q = (int) mv->hint[2 * b] + (mv->hint[2 * b + 1] <= r[i]);
+        const int h = mv->hint[b];
+        const int q = h + (M_START(mv, h + 1) <= r[i]);
         p[i] = q;
-        const double st = mv->start[q];
+        const double st = M_START(mv, q);
         y[i] = r[i] - st;
-        fix |= (q + 1 < P && mv->start[q + 1] <= r[i]) | (q > 0 && st > r[i]);
+        fix |= (q + 1 < P && M_START(mv, q + 1) <= r[i]) | (q > 0 && st > r[i]);
     }
     if (fix)
         for (int i = 0; i < m; ++i)
             p[i] = piece_of(mv, r[i], &y[i]);
     for (int i = 0; i < m; ++i) {
-        const double *ic = mv->coef + 7 * p[i];
+        const double *ic = M_COEF(mv, p[i]);
         const double yy = y[i], y2 = yy * yy, y4 = y2 * y2;
         const double a0 = ic[0] + ic[1] * yy, b0 = ic[2] + ic[3] * yy, c0 = ic[4] + ic[5] * yy;
         I[i] = ((a0 + b0 * y2) + (c0 + ic[6] * y2) * y4) * yy;   /* piece_int */
@@ -2097,12 +2109,12 @@ EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, in
         o[i].w[k] = ds;
         if (ds < 1e-6) {
             o[i].w[k] = 0;
-            o[i].G[k] = piece_val(mv->coef + 7 * lo.p, lo.y + ds / 2);
+            o[i].G[k] = piece_val(M_COEF(mv, lo.p), lo.y + ds / 2);
             continue;
         }
-        const double pend = (lo.p + 1 < mv->P ? mv->start[lo.p + 1] : 256) - mv->start[lo.p];
+        const double pend = M_START(mv, lo.p + 1) - M_START(mv, lo.p);
         if (lo.y + ds <= pend) {
-            o[i].G[k] = piece_int(mv->coef + 7 * lo.p, lo.y + ds) - lo.I;
+            o[i].G[k] = piece_int(M_COEF(mv, lo.p), lo.y + ds) - lo.I;
             continue;
         }
         o[i].G[k] = (hi.k - lo.k) * s->mtotal[a] + (mv->prefix[hi.p] - mv->prefix[lo.p]) +
