@@ -1,9 +1,11 @@
 #include "apply.h"
 
 #include "exact.h"
+#include "expneg.h"
 
 #include <float.h>
 #include <math.h>
+#include <string.h>
 
 /* double -> float without the undefined behaviour of an out-of-range cast. */
 static float to_float(double v)
@@ -90,16 +92,25 @@ static void fast_tau(const ef_fog_scene *s, const ef_ray *r, int n, double (*acc
         ef_fog_tau_add(&s->comp[i], r, n, acc);
 }
 
-/* transmit() of scene.c into the planes T[k][j]. */
-static void fast_transmit(const double (*acc)[3], int n, double T[3][EF_RECON_SPAN])
+/* transmit() of scene.c into the planes T[k][j]: ef_exp_neg is a function
+ * of tau alone, so computing every channel and selecting gives its bits,
+ * in loops the compiler vectorises; a grey span copies the first. */
+EF_MULTIVERSION static void fast_transmit(const double (*acc)[3], int n,
+                                          double T[3][EF_RECON_SPAN])
 {
+    int colour = 0;
+    for (int j = 0; j < n; ++j)
+        colour |= (acc[j][1] != acc[j][0]) | (acc[j][2] != acc[j][0]);
+    for (int j = 0; j < n; ++j)
+        T[0][j] = ef_exp_neg(acc[j][0]);
+    if (!colour) {
+        memcpy(T[1], T[0], (size_t) n * sizeof T[0][0]);
+        memcpy(T[2], T[0], (size_t) n * sizeof T[0][0]);
+        return;
+    }
     for (int j = 0; j < n; ++j) {
-        const double t0 = acc[j][0], t1 = acc[j][1], t2 = acc[j][2];
-        const double e0 = exp(-t0);
-        const double e1 = t1 == t0 ? e0 : exp(-t1);
-        T[0][j] = e0;
-        T[1][j] = e1;
-        T[2][j] = t2 == t0 ? e0 : t2 == t1 ? e1 : exp(-t2);
+        T[1][j] = ef_exp_neg(acc[j][1]);
+        T[2][j] = ef_exp_neg(acc[j][2]);
     }
 }
 

@@ -1,5 +1,7 @@
 #include "scene.h"
 
+#include "expneg.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -141,13 +143,14 @@ static void sum_tau(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *out,
     }
 }
 
-/* exp(-tau) per channel in place; grey fog (equal taus) needs one exp, not three. */
+/* e^-tau per channel in place (ef_exp_neg, as apply.c's span-wise path
+ * computes it); grey fog (equal taus) needs one, not three. */
 static void transmit(double T[3])
 {
     const double t0 = T[0], t1 = T[1], t2 = T[2];
-    T[0] = exp(-t0);
-    T[1] = t1 == t0 ? T[0] : exp(-t1);
-    T[2] = t2 == t0 ? T[0] : t2 == t1 ? T[1] : exp(-t2);
+    T[0] = ef_exp_neg(t0);
+    T[1] = t1 == t0 ? T[0] : ef_exp_neg(t1);
+    T[2] = t2 == t0 ? T[0] : t2 == t1 ? T[1] : ef_exp_neg(t2);
 }
 
 void ef_scene_eval(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *surf, ef_fog_sample *inf)
