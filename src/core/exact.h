@@ -30,6 +30,19 @@
 #define EF_INLINE static inline
 #endif
 
+/* fmax and fmin as glibc computes them on x86-64 (the first argument on a
+ * tie, so -0 against +0 too; the other one where one is NaN), inline: the
+ * library calls cost more than the per-pixel work around them. */
+EF_INLINE double ef_fmax(double a, double b)
+{
+    return (a >= b || b != b) ? a : b;
+}
+
+EF_INLINE double ef_fmin(double a, double b)
+{
+    return (a <= b || b != b) ? a : b;
+}
+
 /* A model's tau_add over its inlined one-ray body tau##_one: one call per
  * batch into a multiversioned loop, the same sums as tau per ray. */
 #define EF_TAU_ADD(name, tau)                                                               \

@@ -138,8 +138,8 @@ EF_INLINE int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in
         if (isinf(L))
             return IN_INFINITE;
         in->l = L;
-        in->xmin = -fmax(h0, h1);
-        in->xmax = -fmin(h0, h1);
+        in->xmin = -ef_fmax(h0, h1);
+        in->xmax = -ef_fmin(h0, h1);
         in->dx = fabs(s) * L;
         return IN_FINITE;
     }
@@ -147,7 +147,7 @@ EF_INLINE int inside_part(const ef_fog_component *c, const ef_ray *r, inside *in
      * is exact, instead of L minus the crossing distance. fmin absorbs a
      * last-bit excess over L (and an s that underflowed to 0). */
     const double hin = h0 < 0 ? h0 : h1;
-    const double l = fmin(L, fabs(hin) / fabs(s));
+    const double l = ef_fmin(L, fabs(hin) / fabs(s));
     if (isinf(l))
         return IN_INFINITE;
     in->l = l;

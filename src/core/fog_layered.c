@@ -440,8 +440,8 @@ EF_INLINE where locate(const profile *p, int j, ef_dd u)
     where at = { j, 0.0, 0.0 };
     if (j > 0 && j < p->n) {
         const double h0 = p->h[j - 1], h1 = p->h[j], width = h1 - h0;
-        at.wl = fmax(0.0, ((h1 - u.hi) - u.lo) / width);
-        at.wr = fmax(0.0, ((u.hi - h0) + u.lo) / width);
+        at.wl = ef_fmax(0.0, ((h1 - u.hi) - u.lo) / width);
+        at.wr = ef_fmax(0.0, ((u.hi - h0) + u.lo) / width);
     }
     return at;
 }
@@ -478,8 +478,8 @@ EF_INLINE void integrate(const profile *p, ef_dd a, ef_dd b, double as, double L
             tau[ch] = mul0(len, 0.5 * (sigma_at(p, ch, wa) + sigma_at(p, ch, wb)));
         return;
     }
-    const double ha = fmax(0.0, (p->h[ia] - a.hi) - a.lo);
-    const double hb = fmax(0.0, (b.hi - p->h[ib]) + b.lo);
+    const double ha = ef_fmax(0.0, (p->h[ia] - a.hi) - a.lo);
+    const double hb = ef_fmax(0.0, (b.hi - p->h[ib]) + b.lo);
     for (int ch = 0; ch < 3; ++ch) {
         const double *d = p->d[ch];
         const double first = mul0(ha, 0.5 * (sigma_at(p, ch, wa) + d[ia]));

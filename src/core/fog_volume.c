@@ -446,21 +446,21 @@ EF_INLINE int clip_plane(clip_state *st, int k, double h0, double eh, double s, 
     if (s > 0.0) {
         if (st->out < 0 || t < st->t_out) {
             if (st->out >= 0)
-                st->other_out = fmin(st->other_out, st->t_out - st->e_out);
+                st->other_out = ef_fmin(st->other_out, st->t_out - st->e_out);
             st->out = k;
             st->t_out = t;
             st->e_out = et;
         } else
-            st->other_out = fmin(st->other_out, t - et);
+            st->other_out = ef_fmin(st->other_out, t - et);
     } else {
         if (st->in < 0 || t > st->t_in) {
             if (st->in >= 0)
-                st->other_in = fmax(st->other_in, st->t_in + st->e_in);
+                st->other_in = ef_fmax(st->other_in, st->t_in + st->e_in);
             st->in = k;
             st->t_in = t;
             st->e_in = et;
         } else
-            st->other_in = fmax(st->other_in, t + et);
+            st->other_in = ef_fmax(st->other_in, t + et);
     }
     return CLIP_BOUND;
 }
