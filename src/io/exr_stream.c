@@ -6,6 +6,7 @@
 #include "exr_io.h"
 #include "exr_deflate.h"
 #include "exr_ring.h"
+#include "half_conv.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -83,12 +84,44 @@ static exr_pixel_type_t plane_type(exr_pixel_type_t file_type, uint8_t as_float)
     return file_type == EXR_PIXEL_UINT && !as_float ? EXR_PIXEL_UINT : EXR_PIXEL_FLOAT;
 }
 
+/* A worker's buffer for half channels on their way to or from float
+ * planes (half_conv.h): a chunk's worth of each. */
+#define EF_MAX_CHANNELS_SCRATCH 64   /* channels past it keep Core's conversion */
+
+typedef struct half_scratch {
+    uint16_t *buf;
+    size_t cap;
+    int fast;                 /* ef_half_fast(), once per worker */
+} half_scratch;
+
+static uint16_t *scratch_for(half_scratch *hs, size_t n)
+{
+    if (n > hs->cap) {
+        uint16_t *b = realloc(hs->buf, n * sizeof *b);
+        if (!b)
+            return NULL;
+        hs->buf = b;
+        hs->cap = n;
+    }
+    return hs->buf;
+}
+
+/* Whether coding channel ch, half in the file and float in the planes,
+ * goes through the scratch (full resolution only: sampled channels keep
+ * Core's own unpack and pack). */
+static int via_scratch(const half_scratch *hs, const exr_coding_channel_info_t *ch)
+{
+    return hs->fast && ch->data_type == EXR_PIXEL_HALF && ch->user_data_type == EXR_PIXEL_FLOAT &&
+           ch->x_samples == 1 && ch->y_samples == 1;
+}
+
 /* Decodes one input chunk into planes (one 32-bit plane per channel,
  * row stride `stride` pixels, origin at absolute (ox, oy)). Every channel
- * gets a destination: Core 3.1.5 crashes on NULL ones. */
+ * gets a destination: Core 3.1.5 crashes on NULL ones. Half channels are
+ * decoded as half into hs and converted here (via_scratch). */
 static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *ci, int cx,
                         int cy, exr_decode_pipeline_t *dec, int *ready, void **planes, int stride,
-                        int ox, int oy, const uint8_t *as_float, int codec)
+                        int ox, int oy, const uint8_t *as_float, int codec, half_scratch *hs)
 {
     const int first = !*ready;
     exr_result_t rv = first ? exr_decoding_initialize(ctx, p, ci, dec)
@@ -113,10 +146,41 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
     }
+    /* The half channels' scratch, one chunk-sized region each. */
+    const size_t area = (size_t) ci->width * (size_t) ci->height;
+    size_t nh = 0;
+    for (int c = 0; c < dec->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c)
+        nh += via_scratch(hs, &dec->channels[c]);
+    uint16_t *sc = nh ? scratch_for(hs, nh * area) : NULL;
+    if (nh && !sc)
+        return -1;
+    uint8_t *dest[EF_MAX_CHANNELS_SCRATCH];
+    for (int c = 0, i = 0; c < dec->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        dest[c] = NULL;
+        if (!via_scratch(hs, ch))
+            continue;
+        dest[c] = ch->decode_to_ptr;
+        ch->decode_to_ptr = (uint8_t *) (sc + (size_t) i++ * area);
+        ch->user_data_type = EXR_PIXEL_HALF;
+        ch->user_bytes_per_element = 2;
+        ch->user_pixel_stride = 2;
+        ch->user_line_stride = 2 * ci->width;
+    }
     if (first && (exr_decoding_choose_default_routines(ctx, p, dec) ||
                   (codec == EF_CODEC_LIBDEFLATE && ef_deflate_decoding_setup(ctx, p, dec))))
         return -1;
-    return exr_decoding_run(ctx, p, dec) ? -1 : 0;
+    if (exr_decoding_run(ctx, p, dec))
+        return -1;
+    for (int c = 0; c < dec->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {
+        if (!dest[c])
+            continue;
+        const uint16_t *h = (const uint16_t *) dec->channels[c].decode_to_ptr;
+        for (int r = 0; r < ci->height; ++r)
+            ef_half_to_float(h + (size_t) r * (size_t) ci->width,
+                             (float *) dest[c] + (size_t) r * (size_t) stride, (size_t) ci->width);
+    }
+    return 0;
 }
 
 /* Chunk info for the chunk that holds absolute pixel (x, y), and the
@@ -151,6 +215,7 @@ typedef struct depth_reader {
     uint8_t *as_float;        /* only the depth channel */
     size_t plane_cap;
     int cached, cx, cy, cw, ch;
+    half_scratch hs;
 } depth_reader;
 
 static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
@@ -175,7 +240,7 @@ static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
                 }
                 r->cached = 0;
                 if (decode_chunk(r->ctx, r->part, &ci, cx, cy, &r->dec, &r->ready, r->planes,
-                                 ci.width, cx, cy, r->as_float, r->codec))
+                                 ci.width, cx, cy, r->as_float, r->codec, &r->hs))
                     return -1;
                 r->cached = 1;
                 r->cx = cx;
@@ -206,6 +271,7 @@ static void depth_reader_free(depth_reader *r)
         free(r->planes[k]);
     free(r->planes);
     free(r->as_float);
+    free(r->hs.buf);
 }
 
 /* Shared state of one part's parallel pass. */
@@ -261,7 +327,7 @@ static void job_fail(part_job *j, const char *file, const char *fmt, int a, cons
 /* Packs and compresses one output chunk, copying the bytes into o. */
 static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
                         const exr_chunk_info_t *ci, int cy, void **planes, int stride, int oy,
-                        ef_unit_buf *o, int key_y, int key_ty)
+                        ef_unit_buf *o, int key_y, int key_ty, half_scratch *hs)
 {
     exr_result_t rv = *ready ? exr_encoding_update(j->out, j->part, ci, enc)
                              : exr_encoding_initialize(j->out, j->part, ci, enc);
@@ -283,6 +349,28 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
+    }
+    /* Half channels: converted here into hs, packed by Core as half. */
+    const size_t area = (size_t) ci->width * (size_t) ci->height;
+    size_t nh = 0;
+    for (int c = 0; c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c)
+        nh += via_scratch(hs, &enc->channels[c]);
+    uint16_t *sc = nh ? scratch_for(hs, nh * area) : NULL;
+    if (nh && !sc)
+        return -1;
+    for (int c = 0, i = 0; c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {
+        exr_coding_channel_info_t *ch = &enc->channels[c];
+        if (!via_scratch(hs, ch))
+            continue;
+        uint16_t *h = sc + (size_t) i++ * area;
+        for (int r = 0; r < ci->height; ++r)
+            ef_float_to_half((const float *) ch->encode_from_ptr + (size_t) r * (size_t) stride,
+                             h + (size_t) r * (size_t) ci->width, (size_t) ci->width);
+        ch->encode_from_ptr = (const uint8_t *) h;
+        ch->user_data_type = EXR_PIXEL_HALF;
+        ch->user_bytes_per_element = 2;
+        ch->user_pixel_stride = 2;
+        ch->user_line_stride = 2 * ci->width;
     }
     if (!*ready) {
         if (exr_encoding_choose_default_routines(j->out, j->part, enc) ||
@@ -328,6 +416,7 @@ static void *worker(void *arg)
     depth_reader dr[EF_MAX_VIEWS];
     memset(dr, 0, sizeof dr);
     ef_unit_buf ob = { 0 };
+    half_scratch hs = { NULL, 0, ef_half_fast() };
     float *depth[EF_MAX_VIEWS] = { NULL };
     /* A unit never exceeds the data window, whatever the tile size claims. */
     size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
@@ -354,6 +443,7 @@ static void *worker(void *arg)
              (depth[t] = malloc(cap * sizeof *depth[t])) != NULL;
         if (ok)
             r->as_float[r->chan] = 1;
+        r->hs.fast = ef_half_fast();
     }
     if (!ok)
         job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
@@ -376,7 +466,7 @@ static void *worker(void *arg)
             int cx, cy;
             if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
                 decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0,
-                             j->as_float, j->codec)) {
+                             j->as_float, j->codec, &hs)) {
                 job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is truncated or "
                             "corrupt", y, ef_exr_last_core_message());
                 goto out;
@@ -431,7 +521,7 @@ static void *worker(void *arg)
             else
                 rv = exr_write_scanline_chunk_info(j->out, j->part, y, &ci);
             if (rv || encode_chunk(j, &enc, &enc_ready, &ci, y, planes, w, y0, &ob,
-                                   j->g.tiled ? tx : y, ty)) {
+                                   j->g.tiled ? tx : y, ty, &hs)) {
                 job_fail(j, j->out_path, "cannot encode the output chunk at scanline %d", y,
                          ef_exr_last_core_message());
                 goto out;
@@ -458,6 +548,7 @@ out:
         free(depth[t]);
     }
     ef_unit_free(&ob);
+    free(hs.buf);
     for (int k = 0; planes && k < nplanes; ++k)
         free(planes[k]);
     free(planes);
