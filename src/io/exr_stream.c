@@ -115,6 +115,18 @@ static int via_scratch(const half_scratch *hs, const exr_coding_channel_info_t *
            ch->x_samples == 1 && ch->y_samples == 1;
 }
 
+/* hs's buffer, sized for a chunk of `area` pixels in each of the first
+ * channels of chs (up to EF_MAX_CHANNELS_SCRATCH) that go via_scratch;
+ * *nh of them. NULL when none does, or when out of memory (*nh > 0). */
+static uint16_t *scratch_chunk(half_scratch *hs, const exr_coding_channel_info_t *chs, int n,
+                               size_t area, size_t *nh)
+{
+    *nh = 0;
+    for (int c = 0; c < n && c < EF_MAX_CHANNELS_SCRATCH; ++c)
+        *nh += via_scratch(hs, &chs[c]);
+    return *nh ? scratch_for(hs, *nh * area) : NULL;
+}
+
 /* Decodes one input chunk into planes (one 32-bit plane per channel,
  * row stride `stride` pixels, origin at absolute (ox, oy)). Every channel
  * gets a destination: Core 3.1.5 crashes on NULL ones. Half channels are
@@ -148,10 +160,8 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
     }
     /* The half channels' scratch, one chunk-sized region each. */
     const size_t area = (size_t) ci->width * (size_t) ci->height;
-    size_t nh = 0;
-    for (int c = 0; c < dec->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c)
-        nh += via_scratch(hs, &dec->channels[c]);
-    uint16_t *sc = nh ? scratch_for(hs, nh * area) : NULL;
+    size_t nh;
+    uint16_t *sc = scratch_chunk(hs, dec->channels, dec->channel_count, area, &nh);
     if (nh && !sc)
         return -1;
     uint8_t *dest[EF_MAX_CHANNELS_SCRATCH];
@@ -352,10 +362,8 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
     }
     /* Half channels: converted here into hs, packed by Core as half. */
     const size_t area = (size_t) ci->width * (size_t) ci->height;
-    size_t nh = 0;
-    for (int c = 0; c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c)
-        nh += via_scratch(hs, &enc->channels[c]);
-    uint16_t *sc = nh ? scratch_for(hs, nh * area) : NULL;
+    size_t nh;
+    uint16_t *sc = scratch_chunk(hs, enc->channels, enc->channel_count, area, &nh);
     if (nh && !sc)
         return -1;
     for (int c = 0, i = 0; c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {

@@ -104,36 +104,38 @@ __attribute__((target("avx,f16c"))) static void f2h_f16c(const float *f, uint16_
 }
 #endif
 
-int ef_half_fast(void)
+/* Whether this processor runs the F16C paths. */
+static int f16c_ok(void)
 {
 #ifdef EF_HAVE_F16C
-    const char *e = getenv("EXRFOG_F16C");
-    if (e && !strcmp(e, "0"))
-        return 0;
     return __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
 #else
     return 0;
 #endif
 }
 
+int ef_half_fast(void)
+{
+    const char *e = getenv("EXRFOG_F16C");
+    return !(e && !strcmp(e, "0")) && f16c_ok();
+}
+
 void ef_half_to_float(const uint16_t *h, float *f, size_t n)
 {
 #ifdef EF_HAVE_F16C
-    if (__builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c")) {
+    if (f16c_ok())
         h2f_f16c(h, f, n);
-        return;
-    }
+    else
 #endif
-    h2f_scalar(h, f, n);
+        h2f_scalar(h, f, n);
 }
 
 void ef_float_to_half(const float *f, uint16_t *h, size_t n)
 {
 #ifdef EF_HAVE_F16C
-    if (__builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c")) {
+    if (f16c_ok())
         f2h_f16c(f, h, n);
-        return;
-    }
+    else
 #endif
-    f2h_scalar(f, h, n);
+        f2h_scalar(f, h, n);
 }
