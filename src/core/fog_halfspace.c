@@ -10,6 +10,7 @@
  * (-h0/s or h1/s), depth spans from |s| l, and Walker's divided difference
  * is replaced by an expm1 form with a series where that form would cancel. */
 #include "exact.h"
+#include "expneg.h"
 #include "fog.h"
 
 #include <math.h>
@@ -258,10 +259,13 @@ EF_INLINE void tau_smooth_one(const ef_fog_component *c, const ef_ray *r, double
         /* The guards keep an overflowed lambda from 0 * inf. */
         const double a = in.xmin > 0 ? lam * in.xmin : 0.0;
         const double b = in.dx > 0 ? lam * in.dx : 0.0;
-        const double t1 = a >= 1.0 ? -D * expm1(-a)
+        /* e^-a and, from 1 on, 1 - e^-x as 1 - ef_exp_neg(x): no cancellation
+         * there (e^-x <= 1/e), within about an ulp, without libm's calls */
+        const double ea = ef_exp_neg(a);
+        const double t1 = a >= 1.0 ? D * (1.0 - ea)
                                    : S * in.xmin * (a > 0 ? -expm1(-a) / a : 1.0);
-        const double t2 = exp(-a) * (b >= 1.0 ? D * (1.0 + expm1(-b) / b)
-                                              : S * in.dx * psi_over_b(b));
+        const double t2 = ea * (b >= 1.0 ? D * (1.0 - (1.0 - ef_exp_neg(b)) / b)
+                                         : S * in.dx * psi_over_b(b));
         tau[i] = (t1 + t2) * in.l;
     }
 }
@@ -273,7 +277,58 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
 
 EF_TAU_ADD(tau_add_halfspace, tau_halfspace)
 EF_TAU_ADD(tau_add_linear, tau_linear)
-EF_TAU_ADD(tau_add_smooth, tau_smooth)
+/* tau_add for halfspace-smooth: grey fog (one density and sharpness) a
+ * span at a time, so that the exponentials of a span's rays run in vector
+ * lanes (ef_exp_neg of every a and b, used where tau_smooth_one uses
+ * them); the same operations per ray, so the same bits. Coloured fog
+ * goes ray by ray. */
+#define SMOOTH_SPAN 32
+EF_MULTIVERSION static void tau_add_smooth(const ef_fog_component *c, const ef_ray *r, int n,
+                                           double (*acc)[3])
+{
+    const double D = c->p[P_DENS], S = c->p[P_SHARP], lam = c->p[P_LAMBDA];
+    const int grey = D == c->p[P_DENS + 1] && S == c->p[P_SHARP + 1] &&
+                     D == c->p[P_DENS + 2] && S == c->p[P_SHARP + 2];
+    if (!grey || !(D > 0 && S > 0)) {
+        for (int j = 0; j < n; ++j) {
+            double t[3];
+            tau_smooth_one(c, &r[j], t);
+            for (int k = 0; k < 3; ++k)
+                acc[j][k] += t[k];
+        }
+        return;
+    }
+    for (int j0 = 0; j0 < n; j0 += SMOOTH_SPAN) {
+        const int m = n - j0 < SMOOTH_SPAN ? n - j0 : SMOOTH_SPAN;
+        inside in[SMOOTH_SPAN];
+        int kind[SMOOTH_SPAN];
+        double a[SMOOTH_SPAN], b[SMOOTH_SPAN], ea[SMOOTH_SPAN], eb[SMOOTH_SPAN];
+        for (int i = 0; i < m; ++i) {
+            in[i] = (inside) { 0.0, 0.0, 0.0, 0.0 };
+            kind[i] = inside_part(c, &r[j0 + i], &in[i]);
+            a[i] = in[i].xmin > 0 ? lam * in[i].xmin : 0.0;
+            b[i] = in[i].dx > 0 ? lam * in[i].dx : 0.0;
+        }
+        for (int i = 0; i < m; ++i) {
+            ea[i] = ef_exp_neg(a[i]);
+            eb[i] = ef_exp_neg(b[i]);
+        }
+        for (int i = 0; i < m; ++i) {
+            double tau = 0.0;
+            if (kind[i] == IN_INFINITE) {
+                tau = INFINITY;
+            } else if (kind[i] != IN_NONE) {
+                const double t1 = a[i] >= 1.0 ? D * (1.0 - ea[i])
+                                              : S * in[i].xmin * (a[i] > 0 ? -expm1(-a[i]) / a[i] : 1.0);
+                const double t2 = ea[i] * (b[i] >= 1.0 ? D * (1.0 - (1.0 - eb[i]) / b[i])
+                                                       : S * in[i].dx * psi_over_b(b[i]));
+                tau = (t1 + t2) * in[i].l;
+            }
+            for (int k = 0; k < 3; ++k)
+                acc[j0 + i][k] += tau;
+        }
+    }
+}
 
 /* The plane's value at the camera, cached for its rays (exact.h). */
 static void bind_plane(ef_fog_component *c, const double org[3])
