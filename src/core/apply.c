@@ -79,7 +79,6 @@ typedef struct fast_span {
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
     unsigned char sky[EF_RECON_SPAN], bad[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
-    int keep_sky;                        /* --sky keep */
 } fast_span;
 
 /* Sums the components' taus along r[0..n) into acc (from 0, in component
@@ -151,9 +150,10 @@ static inline float to_float_sel(double v)
     return v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : f;
 }
 
-/* Writes the span back: kept pixels (--sky keep) and damaged alphas as they were. */
+/* Writes the span back: kept pixels (sky pixels under --sky keep) and
+ * damaged alphas as they were. */
 EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, float *pg,
-                                       float *pb, float *pa, int any_kept)
+                                       float *pb, float *pa, int keep_sky, int any_kept)
 {
     float *const out[3] = { pr, pg, pb };
     float kept[4][EF_RECON_SPAN];
@@ -161,7 +161,7 @@ EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, fl
     unsigned char keep[EF_RECON_SPAN], keep_a[EF_RECON_SPAN];
     if (any_kept)
         for (int j = 0; j < n; ++j) {
-            keep[j] = sp->sky[j] && sp->keep_sky;
+            keep[j] = sp->sky[j] && keep_sky;
             keep_a[j] = keep[j] || (pa && sp->bad[j]);
             for (int k = 0; k < 3; ++k)
                 kept[k][j] = out[k][j];
@@ -188,14 +188,10 @@ EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, fl
 
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
                                        float *const rgb[3], float *alpha, const float *depth,
-                                       fast_span *sp)
+                                       int depth_only, fast_span *sp)
 {
     const ef_fog_scene *s = pass->scene;
     const int fog_uncovered = s->sky != EF_SKY_KEEP, keep_sky = s->sky == EF_SKY_KEEP;
-    int depth_only = 1;
-    for (int c = 0; c < s->ncomp; ++c)
-        depth_only &= s->comp[c].model->depth_only;
-    sp->keep_sky = keep_sky;
     for (int yy = 0; yy < h; ++yy) {
         const int y = y0 + yy;
         for (int xs = 0; xs < w; xs += EF_RECON_SPAN) {
@@ -264,7 +260,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             fast_composite(sp, n, s->color, fog_uncovered, alpha != NULL);
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
-            fast_store(sp, n, pr, pg, pb, pa, (keep_sky && nsky) || nbad);
+            fast_store(sp, n, pr, pg, pb, pa, keep_sky, (keep_sky && nsky) || nbad);
         }
     }
 }
@@ -274,21 +270,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                       ef_tau_stats *stats)
 {
     const ef_fog_scene *s = pass->scene;
-    if ((!aov || !aov->mask) && !s->any_color) {
-        int any_info = 0;
-        for (int c = 0; c < s->ncomp; ++c)
-            any_info |= s->comp[c].model->tau_info != NULL;
-        if (!(any_info && stats)) {
-            fast_span sp_;
-            fast_span *sp = &sp_;
-            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, sp);
-            return;
-        }
-    }
-    const int fog_uncovered = s->sky != EF_SKY_KEEP;
     const unsigned mask = aov ? aov->mask : 0;
-    static const double zero3[3] = { 0, 0, 0 };
-    const double *origin = aov ? aov->origin : zero3;
     /* Only the numerical components have info to give. */
     int any_info = 0, depth_only = 1;
     for (int c = 0; c < s->ncomp; ++c) {
@@ -296,6 +278,14 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
         depth_only &= s->comp[c].model->depth_only;
     }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
+    if (!mask && !s->any_color && !want_info) {
+        fast_span sp;
+        fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only, &sp);
+        return;
+    }
+    const int fog_uncovered = s->sky != EF_SKY_KEEP;
+    static const double zero3[3] = { 0, 0, 0 };
+    const double *origin = aov ? aov->origin : zero3;
     /* Without info, every segment of a span is evaluated in one batch. */
     const int batch = !want_info;
     const int need_dir = !depth_only || (mask & EF_AOV_P);

@@ -123,14 +123,30 @@ static inline ef_dd ef_fog_dot_org(const ef_fog_component *c, const double n[3],
 #define EF_CAM_SLOT 24
 enum { EF_CAM_FLAG = EF_CAM_SLOT, EF_CAM_ORG, EF_CAM_HI = EF_CAM_ORG + 3, EF_CAM_LO, EF_CAM_AXIS };
 
+/* The axis a normal lies on (its other two components are 0), or -1. */
+static inline int ef_normal_axis(const double n[3])
+{
+    if (n[1] == 0.0 && n[2] == 0.0)
+        return 0;
+    if (n[0] == 0.0 && n[2] == 0.0)
+        return 1;
+    if (n[0] == 0.0 && n[1] == 0.0)
+        return 2;
+    return -1;
+}
+
+/* ef_normal_axis when n is a signed unit axis (n.x then needs no sums), else -1. */
+static inline int ef_unit_axis(const double n[3])
+{
+    const int a = ef_normal_axis(n);
+    return a >= 0 && fabs(n[a]) == 1.0 ? a : -1;
+}
+
 static inline void ef_cam_bind(ef_fog_component *c, const double n[3], double d,
                                const double org[3])
 {
     const ef_dd h = ef_dd_dot3(n, org, d);
-    int a = -1;
-    for (int k = 0; k < 3; ++k)
-        if (fabs(n[k]) == 1.0 && n[(k + 1) % 3] == 0.0 && n[(k + 2) % 3] == 0.0)
-            a = k;
+    const int a = ef_unit_axis(n);
     for (int k = 0; k < 3; ++k)
         c->p[EF_CAM_ORG + k] = org[k];
     c->p[EF_CAM_HI] = h.hi;

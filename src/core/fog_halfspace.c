@@ -237,7 +237,22 @@ static double psi_over_b(double b)
  *   D (1 - e^-a) = S xmin (1 - e^-a)/a,   D psi(b) = S dx psi(b)/b,
  * so S -> 0 gives S l (xmin + dx/2) (the linear model) even when S/D
  * underflows; at and above 1, S -> inf (S/D may overflow) gives D l less
- * the transition layer. Each term is at most D: no spurious overflow. */
+ * the transition layer. Each term is at most D: no spurious overflow.
+ * One channel of density D and sharpness S, given a, b and their
+ * exponentials ea = e^-a, eb = e^-b (eb only read when b >= 1). */
+EF_INLINE double smooth_sum(double D, double S, const inside *in, double a, double b, double ea,
+                            double eb)
+{
+    /* From 1 on, 1 - e^-x as 1 - ef_exp_neg(x): no cancellation there
+     * (e^-x <= 1/e), within about an ulp, without libm's calls. */
+    const double t1 = a >= 1.0 ? D * (1.0 - ea)
+                               : S * in->xmin * (a > 0 ? -expm1(-a) / a : 1.0);
+    const double t2 = ea * (b >= 1.0 ? D * (1.0 - (1.0 - eb) / b)
+                                     : S * in->dx * psi_over_b(b));
+    return (t1 + t2) * in->l;
+}
+
+/* smooth_sum per channel along r (grey fog summed once). */
 EF_INLINE void tau_smooth_one(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     inside in = { 0.0, 0.0, 0.0, 0.0 };
@@ -259,14 +274,7 @@ EF_INLINE void tau_smooth_one(const ef_fog_component *c, const ef_ray *r, double
         /* The guards keep an overflowed lambda from 0 * inf. */
         const double a = in.xmin > 0 ? lam * in.xmin : 0.0;
         const double b = in.dx > 0 ? lam * in.dx : 0.0;
-        /* e^-a and, from 1 on, 1 - e^-x as 1 - ef_exp_neg(x): no cancellation
-         * there (e^-x <= 1/e), within about an ulp, without libm's calls */
-        const double ea = ef_exp_neg(a);
-        const double t1 = a >= 1.0 ? D * (1.0 - ea)
-                                   : S * in.xmin * (a > 0 ? -expm1(-a) / a : 1.0);
-        const double t2 = ea * (b >= 1.0 ? D * (1.0 - (1.0 - ef_exp_neg(b)) / b)
-                                         : S * in.dx * psi_over_b(b));
-        tau[i] = (t1 + t2) * in.l;
+        tau[i] = smooth_sum(D, S, &in, a, b, ef_exp_neg(a), b >= 1.0 ? ef_exp_neg(b) : 0.0);
     }
 }
 
@@ -277,6 +285,7 @@ EF_MULTIVERSION static void tau_smooth(const ef_fog_component *c, const ef_ray *
 
 EF_TAU_ADD(tau_add_halfspace, tau_halfspace)
 EF_TAU_ADD(tau_add_linear, tau_linear)
+EF_TAU_ADD(tau_add_smooth_each, tau_smooth)
 /* tau_add for halfspace-smooth: grey fog (one density and sharpness) a
  * span at a time, so that the exponentials of a span's rays run in vector
  * lanes (ef_exp_neg of every a and b, used where tau_smooth_one uses
@@ -290,12 +299,7 @@ EF_MULTIVERSION static void tau_add_smooth(const ef_fog_component *c, const ef_r
     const int grey = D == c->p[P_DENS + 1] && S == c->p[P_SHARP + 1] &&
                      D == c->p[P_DENS + 2] && S == c->p[P_SHARP + 2];
     if (!grey || !(D > 0 && S > 0)) {
-        for (int j = 0; j < n; ++j) {
-            double t[3];
-            tau_smooth_one(c, &r[j], t);
-            for (int k = 0; k < 3; ++k)
-                acc[j][k] += t[k];
-        }
+        tau_add_smooth_each(c, r, n, acc);
         return;
     }
     for (int j0 = 0; j0 < n; j0 += SMOOTH_SPAN) {
@@ -318,11 +322,7 @@ EF_MULTIVERSION static void tau_add_smooth(const ef_fog_component *c, const ef_r
             if (kind[i] == IN_INFINITE) {
                 tau = INFINITY;
             } else if (kind[i] != IN_NONE) {
-                const double t1 = a[i] >= 1.0 ? D * (1.0 - ea[i])
-                                              : S * in[i].xmin * (a[i] > 0 ? -expm1(-a[i]) / a[i] : 1.0);
-                const double t2 = ea[i] * (b[i] >= 1.0 ? D * (1.0 - (1.0 - eb[i]) / b[i])
-                                                       : S * in[i].dx * psi_over_b(b[i]));
-                tau = (t1 + t2) * in[i].l;
+                tau = smooth_sum(D, S, &in[i], a[i], b[i], ea[i], eb[i]);
             }
             for (int k = 0; k < 3; ++k)
                 acc[j0 + i][k] += tau;

@@ -116,6 +116,8 @@ typedef struct nstate {
  * start is 256; mp + 1 prefixes; then 4 mp lookup bins of one int32 each,
  * the piece holding the bin's start. Plus 8 doubles of alignment slack. */
 #define MERGED_SIZE(P) ((size_t) (P) * 11 + 17)
+#define MERGED_PREFIX(P) (8 * ((size_t) (P) + 1))          /* offsets in a table */
+#define MERGED_HINT(P) (MERGED_PREFIX(P) + (size_t) (P) + 1)
 #define MERGED_BINS 4    /* lookup bins per piece */
 #define MERGED_MAX 65536
 
@@ -145,9 +147,9 @@ static int set_real(ef_fog_component *c, const char *key, const char *val, doubl
 static int positive(double v) { return v > 0; }
 static int nonneg(double v) { return v >= 0; }
 static int above_one(double v) { return v > 1; }
+static int unit_open(double v) { return v > 0 && v < 1; }
 /* Beyond 100 the density is a step function of the noise's sign: nothing
  * more to see, and the clamp's splitting only costs. */
-static int unit_open(double v) { return v > 0 && v < 1; }
 static int contrast_ok(double v) { return fabs(v) <= 100; }
 
 static int set_noise(ef_fog_component *c, int k, const char *val, ef_err *err)
@@ -883,17 +885,17 @@ EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, ce
 #undef EF_CORNER
         }
     } else {
-    for (int k = 0; k < 8; ++k) {
-        const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
-        for (int c = 0; c < m; ++c) {
-            const unsigned sh = 2 * (b->g[k][c] & 15);
-            const double gx = (double) (int) ((GRAD_X1 >> sh) & 3) - 1,
-                         gy = (double) (int) ((GRAD_Y1 >> sh) & 3) - 1,
-                         gz = (double) (int) ((GRAD_Z1 >> sh) & 3) - 1;
-            b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
-            b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
+        for (int k = 0; k < 8; ++k) {
+            const double ox = k & 1, oy = (k >> 1) & 1, oz = k >> 2;
+            for (int c = 0; c < m; ++c) {
+                const unsigned sh = 2 * (b->g[k][c] & 15);
+                const double gx = (double) (int) ((GRAD_X1 >> sh) & 3) - 1,
+                             gy = (double) (int) ((GRAD_Y1 >> sh) & 3) - 1,
+                             gz = (double) (int) ((GRAD_Z1 >> sh) & 3) - 1;
+                b->A[k][c] = gx * (b->f[0][c] - ox) + gy * (b->f[1][c] - oy) + gz * (b->f[2][c] - oz);
+                b->B[k][c] = gx * d0[0] + gy * d0[1] + gz * d0[2];
+            }
         }
-    }
     }
     for (int c = 0; c < m; ++c)
         b->sum[c] = 0;
@@ -1181,6 +1183,14 @@ static const double e_rms[9] = { 0, 0.149, 0.034, 6.0e-3, 7.2e-4, 6.8e-5, 5.0e-6
  * sqrt(l): 0.235-0.245 measured by the same program (noise-anchors.md has
  * 0.23). */
 #define LINE_RMS 0.25
+
+/* What octave i can add to the integral of the noise (before its weight)
+ * over a stretch of length L: the hard bound, or `sigmas` standard
+ * deviations of its line integral, whichever is smaller (an estimate). */
+static inline double line_est(const nstate *s, int i, double L, double sigmas)
+{
+    return fmin(EF_NOISE_BOUND * L, sigmas * LINE_RMS * sqrt(L * (s->scale / s->fbm.freq[i])));
+}
 /* Cells of one octave that exact and adaptive walk along one ray, at most
  * (documented: a scale far below the ray's length is integrated
  * statistically beyond it, so the work per pixel stays bounded). */
@@ -1226,9 +1236,7 @@ static void plan_octaves(const rayc *R, double L, double envmax, double tol, pla
     int kept = N;
     P->dropped = 0;
     for (int i = N - 1; i >= 1; --i) {
-        const double lambda = s->scale / s->fbm.freq[i];
-        const double D = A * s->fbm.weight[i] *
-                         fmin(EF_NOISE_BOUND * L, 3 * LINE_RMS * sqrt(L * lambda));
+        const double D = A * s->fbm.weight[i] * line_est(s, i, L, 3);
         if (drop + D > tol / 4)
             break;
         drop += D;
@@ -1276,8 +1284,7 @@ static double rest_estimate(const nstate *s, int only, double L)
     double r = 0;
     for (int i = 0; i < s->fbm.octaves; ++i)
         if (i != only)
-            r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * L,
-                                         4 * LINE_RMS * sqrt(L * (s->scale / s->fbm.freq[i])));
+            r += s->fbm.weight[i] * line_est(s, i, L, 4);
     return r;
 }
 
@@ -1480,8 +1487,8 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
         if (P == 0 || br[k] - br[P - 1] > 1e-12L)
             br[P++] = br[k];
     br[P] = 256;
-    double *rec = tab, *prefix = tab + 8 * ((size_t) P + 1);
-    int32_t *hint = (int32_t *) (prefix + P + 1);
+    double *rec = tab, *prefix = tab + MERGED_PREFIX(P);
+    int32_t *hint = (int32_t *) (tab + MERGED_HINT(P));
     /* Each octave's last cell polynomial: the pieces of one cell follow
      * each other. */
     long last[EF_FBM_MAX_OCTAVES];
@@ -1539,7 +1546,7 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
 
 /* The antiderivative of a merged piece from its start to y: the table
  * holds its coefficients (of y^1..y^7), so no division per lookup. */
-static double piece_int(const double *ic, double y)
+static inline double piece_int(const double *ic, double y)
 {
     /* Estrin's scheme: a third of Horner's dependent chain, and this is the
      * per-pixel latency of the preintegrated method. */
@@ -1574,48 +1581,53 @@ static inline mview mview_of(const ef_fog_component *c, int a)
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mpa[a];
-    const double *prefix = tab + 8 * ((size_t) P + 1);
-    return (mview) { tab, prefix, (const int32_t *) (prefix + P + 1), P,
+    return (mview) { tab, tab + MERGED_PREFIX(P), (const int32_t *) (tab + MERGED_HINT(P)), P,
                      (double) MERGED_BINS * P / 256 };
 }
 
 /* The piece holding r in [0, 256), and r's offset into it. */
-static inline int piece_of(const mview *m, double r, double *y)
+/* The bin's piece for r, one step on (the next record's start, the
+ * sentinel 256 after the last): the piece holding r unless *unsure (a bin
+ * with two starts, or rounding at its edge: rare). */
+static inline int piece_guess(const mview *m, double r, int *unsure)
 {
     const int P = m->P;
     int b = (int) (r * m->bins);
     b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-    /* A bin rarely holds two piece starts: one step (the next record's
-     * start, the sentinel 256 after the last), then the rare rest (and
-     * rounding at the bin's edge). */
-    int p = m->hint[b];
-    p += M_START(m, p + 1) <= r;
-    while (p + 1 < P && M_START(m, p + 1) <= r)
+    const int h = m->hint[b];
+    const int q = h + (M_START(m, h + 1) <= r);
+    *unsure = (q + 1 < P && M_START(m, q + 1) <= r) | (q > 0 && M_START(m, q) > r);
+    return q;
+}
+
+static inline int piece_of(const mview *m, double r, double *y)
+{
+    const int P = m->P;
+    int unsure;
+    int p = piece_guess(m, r, &unsure);
+    while (unsure && p + 1 < P && M_START(m, p + 1) <= r)
         ++p;
-    while (p > 0 && M_START(m, p) > r)
+    while (unsure && p > 0 && M_START(m, p) > r)
         --p;
     *y = r - M_START(m, p);
     return p;
 }
 
-/* floor(v / 256) and v modulo 256 (a truncating conversion where
- * |v| < 2^62, as every table coordinate of a finite scene is). */
+/* floor(v / 256) and v modulo 256, without floor's libm call or a branch
+ * (so a loop of it runs straight): a truncating conversion where
+ * |v / 256| < 2^62, and beyond that v / 256 is an integer already. */
 static inline double period_split(double v, double *r)
 {
     const double x = v * (1.0 / 256);
-    double k;
-    if (fabs(x) < 0x1p62) {
-        k = (double) (long long) x;
-        k -= k > x;
-    } else {
-        k = floor(x);
-    }
-    *r = v - 256 * k;
-    if (*r >= 256) {      /* rounding */
-        *r -= 256;
-        return k + 1;
-    }
-    return k;
+    const int small = fabs(x) < 0x1p62;
+    const double xc = small ? x : 0.0;
+    double k = (double) (long long) xc;
+    k -= k > xc;
+    k = small ? k : x;
+    const double rr = v - 256 * k;
+    const int over = rr >= 256;   /* rounding */
+    *r = over ? rr - 256 : rr;
+    return over ? k + 1 : k;
 }
 
 /* Where q_a = s falls in axis a's merged table: the period, the piece, the
@@ -1641,20 +1653,19 @@ static inline void merged_point(const nstate *st, const mview *m, int a, double 
  * ray runs. */
 static inline double merged_int_in(const nstate *s, const mview *mv, int a, double s0, double *pds)
 {
-    const mview m = *mv;
     const double ds = fabs(*pds), slo = *pds < 0 ? s0 + *pds : s0, shi = *pds < 0 ? s0 : s0 + *pds;
     *pds = ds;
     mpoint lo, hi;
-    merged_point(s, &m, a, slo, &lo);
+    merged_point(s, mv, a, slo, &lo);
     if (ds < 1e-6) {  /* no extent: the value at the middle */
         *pds = 0;
-        return piece_val(M_COEF(&m, lo.p), lo.y + ds / 2);
+        return piece_val(M_COEF(mv, lo.p), lo.y + ds / 2);
     }
-    const double pend = M_START(&m, lo.p + 1) - M_START(&m, lo.p);
+    const double pend = M_START(mv, lo.p + 1) - M_START(mv, lo.p);
     if (lo.y + ds <= pend)   /* one piece: the antiderivative's difference */
-        return piece_int(M_COEF(&m, lo.p), lo.y + ds) - lo.I;
-    merged_point(s, &m, a, shi, &hi);
-    return (hi.k - lo.k) * s->mtotal[a] + (m.prefix[hi.p] - m.prefix[lo.p]) + (hi.I - lo.I);
+        return piece_int(M_COEF(mv, lo.p), lo.y + ds) - lo.I;
+    merged_point(s, mv, a, shi, &hi);
+    return (hi.k - lo.k) * s->mtotal[a] + (mv->prefix[hi.p] - mv->prefix[lo.p]) + (hi.I - lo.I);
 }
 
 static inline double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
@@ -2068,35 +2079,19 @@ EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, in
     int fix = 0;
     for (int i = 0; i < m; ++i)
         near[i] = s->cam && o[i].s0[k] == s->cam_s[a];
-    /* period_split, branch-free (floor is exact where its truncation is) */
+    for (int i = 0; i < m; ++i)
+        pk[i] = period_split(o[i].s0[k] + o[i].ds[k], &r[i]);
     for (int i = 0; i < m; ++i) {
-        const double v = o[i].s0[k] + o[i].ds[k];
-        const double kk = floor(v * (1.0 / 256)), rr = v - 256 * kk;
-        const int over = rr >= 256;
-        r[i] = over ? rr - 256 : rr;
-        pk[i] = over ? kk + 1 : kk;
+        int unsure;
+        p[i] = piece_guess(mv, r[i], &unsure);
+        y[i] = r[i] - M_START(mv, p[i]);
+        fix |= unsure;
     }
-    /* piece_of: the bin's piece, one step on; the rare rest below */
-    const int P = mv->P;
-    for (int i = 0; i < m; ++i) {
-        int b = (int) (r[i] * mv->bins);
-        b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-        const int h = mv->hint[b];
-        const int q = h + (M_START(mv, h + 1) <= r[i]);
-        p[i] = q;
-        const double st = M_START(mv, q);
-        y[i] = r[i] - st;
-        fix |= (q + 1 < P && M_START(mv, q + 1) <= r[i]) | (q > 0 && st > r[i]);
-    }
-    if (fix)
+    if (fix)   /* piece_of's rare rest, for the whole span */
         for (int i = 0; i < m; ++i)
             p[i] = piece_of(mv, r[i], &y[i]);
-    for (int i = 0; i < m; ++i) {
-        const double *ic = M_COEF(mv, p[i]);
-        const double yy = y[i], y2 = yy * yy, y4 = y2 * y2;
-        const double a0 = ic[0] + ic[1] * yy, b0 = ic[2] + ic[3] * yy, c0 = ic[4] + ic[5] * yy;
-        I[i] = ((a0 + b0 * y2) + (c0 + ic[6] * y2) * y4) * yy;   /* piece_int */
-    }
+    for (int i = 0; i < m; ++i)
+        I[i] = piece_int(M_COEF(mv, p[i]), y[i]);
     const mpoint cam = s->cam ? s->cam_pt[a] : (mpoint) { 0, 0, 0, 0 };
     for (int i = 0; i < m; ++i) {
         if (!near[i]) {
@@ -2236,8 +2231,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
             const double lambda = s->scale / s->fbm.freq[i];
             if (!(L * cross / lambda <= budget)) {
                 over |= 1u << i;
-                over_err += fabs(s->contrast) * envmax * s->fbm.weight[i] *
-                            fmin(EF_NOISE_BOUND * L, 3 * LINE_RMS * sqrt(L * lambda));
+                over_err += fabs(s->contrast) * envmax * s->fbm.weight[i] * line_est(s, i, L, 3);
             }
         }
         if (over && !linear) {

@@ -288,23 +288,11 @@ static inline ef_dd dd_div(ef_dd a, ef_dd b)
 /* As ef_line_of, keeping the double-double parts; h1 only when asked for
  * (len finite). An axis-aligned unit normal (every box plane) needs one
  * two_sum: +-org[a] and +-dir[a] are exact. */
-/* The axis a plane's normal lies on (its other two components are 0), or -1. */
-static inline int normal_axis(const double *p)
-{
-    if (p[1] == 0.0 && p[2] == 0.0)
-        return 0;
-    if (p[0] == 0.0 && p[2] == 0.0)
-        return 1;
-    if (p[0] == 0.0 && p[1] == 0.0)
-        return 2;
-    return -1;
-}
-
 static inline void crossing_of(const double *p, const double org[3], const double dir[3],
                                double len, int want_h1, crossing *x)
 {
-    const int a = normal_axis(p);
-    if (a >= 0 && fabs(p[a]) == 1.0) {
+    const int a = ef_unit_axis(p);
+    if (a >= 0) {
         x->h0 = ef_two_sum(p[a] * org[a], p[3]);
         x->s = (ef_dd) { p[a] * dir[a], 0.0 };
     } else {
@@ -668,9 +656,8 @@ static void bind_volume(ef_fog_component *c, const double org[3])
         crossing_of(p, org, org, 0.0, 0, &x);
         ca[C_HI] = x.h0.hi;
         ca[C_LO] = x.h0.lo;
-        const int a = normal_axis(p);
-        ca[C_ZAX] = a;
-        ca[C_AXIS] = a >= 0 && fabs(p[a]) == 1.0 ? a : -1;
+        ca[C_ZAX] = ef_normal_axis(p);
+        ca[C_AXIS] = ef_unit_axis(p);
         for (int i = C_ZAX + 1; i < CACHE; ++i)
             ca[i] = 0.0;
     }
