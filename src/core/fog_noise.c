@@ -33,6 +33,7 @@
  * reduced modulo the noise period 256, so a fraction inside a cell keeps
  * its absolute precision wherever the camera and the offset are. */
 #include "exact.h"
+#include "expneg.h"
 #include "fog.h"
 #include "noise.h"
 
@@ -1492,39 +1493,46 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     /* Each octave's last cell polynomial: the pieces of one cell follow
      * each other. */
     long last[EF_FBM_MAX_OCTAVES];
-    long double qs[EF_FBM_MAX_OCTAVES][7];
+    double qs[EF_FBM_MAX_OCTAVES][7];
     long double acc = 0;
     for (int p = 0; p < P; ++p) {
         const long double s0 = br[p], L = br[p + 1] - br[p], mid = s0 + L / 2;
-        long double c[7] = { 0, 0, 0, 0, 0, 0, 0 };
+        /* The shifts in double (x87 long double would cost most of the
+         * build): each coefficient within a few ulps, the pieces' values
+         * within about 1e-15 of their size, far inside the table's 1e-10. */
+        double c[7] = { 0, 0, 0, 0, 0, 0, 0 };
         for (int i = 0; i < N; ++i) {
             const long double f = s->fbm.freq[i], o = (long double) i * ef_fbm_offset[a];
             const long m = (long) floor_ld(f * mid + o);
-            const long double xp = f * s0 + o - m;
-            long double *q = qs[i];
+            const double xp = (double) (f * s0 + o - m);
+            double *q = qs[i];
             if (p == 0 || m != last[i]) {
-                cell_poly(s, a, i, m, q);
+                long double ql[7];
+                cell_poly(s, a, i, m, ql);
+                for (int k = 0; k < 7; ++k)
+                    q[k] = (double) ql[k];
                 last[i] = m;
             }
             /* q(xp + f y) = sum_k t_k (f y)^k: the Taylor shift by xp, by
              * repeated synthetic division (21 multiply-adds, no binomials). */
-            long double t[7];
+            double t[7];
             for (int k = 0; k < 7; ++k)
                 t[k] = q[k];
             for (int a0 = 0; a0 < 6; ++a0)
                 for (int j = 5; j >= a0; --j)
                     t[j] += xp * t[j + 1];
-            long double fk = s->fbm.weight[i];
+            double fk = s->fbm.weight[i];
+            const double fd = (double) f;
             for (int k = 0; k < 7; ++k) {
                 c[k] += t[k] * fk;
-                fk *= f;
+                fk *= fd;
             }
         }
         rec[8 * p] = (double) s0;
         prefix[p] = (double) acc;
         long double integral = 0, Lp = L;
         for (int k = 0; k < 7; ++k) {
-            rec[8 * p + 1 + k] = (double) (c[k] / (k + 1));
+            rec[8 * p + 1 + k] = c[k] / (k + 1);
             integral += c[k] * Lp / (k + 1);
             Lp *= L;
         }
@@ -1533,12 +1541,17 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     prefix[P] = (double) acc;
     *total = (double) acc;
     rec[8 * P] = 256;   /* the sentinel: the start past the last piece */
-    /* Lookup bins: the piece holding each bin's start. */
+    /* Lookup bins: the piece holding each bin's start, widened by a margin
+     * past the rounding of r times the bins (which can put r a few ulps
+     * outside its bin); -1 - p where the widened bin holds two starts or
+     * more, for which one comparison cannot find the piece. */
+    const double margin = 1e-9;
     for (int b = 0, p = 0; b < MERGED_BINS * P; ++b) {
-        const double at = 256.0 * b / (MERGED_BINS * P);
-        while (p + 1 < P && rec[8 * (p + 1)] <= at)
+        const double lo = 256.0 * b / (MERGED_BINS * P) - margin,
+                     hi = 256.0 * (b + 1) / (MERGED_BINS * P) + margin;
+        while (p + 1 < P && rec[8 * (p + 1)] <= lo)
             ++p;
-        hint[b] = p;
+        hint[b] = p + 2 <= P && rec[8 * (p + 2)] <= hi ? -1 - p : p;
     }
     free(br);
     return P;
@@ -1585,21 +1598,21 @@ static inline mview mview_of(const ef_fog_component *c, int a)
                      (double) MERGED_BINS * P / 256 };
 }
 
-/* The piece holding r in [0, 256), and r's offset into it. */
-/* The bin's piece for r, one step on (the next record's start, the
- * sentinel 256 after the last): the piece holding r unless *unsure (a bin
- * with two starts, or rounding at its edge: rare). */
+/* The bin's piece for r in [0, 256): the bin's first piece, or the next
+ * if that starts at or before r; right unless *unsure (a bin holding two
+ * starts: rare). */
 static inline int piece_guess(const mview *m, double r, int *unsure)
 {
     const int P = m->P;
     int b = (int) (r * m->bins);
     b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-    const int h = m->hint[b];
-    const int q = h + (M_START(m, h + 1) <= r);
-    *unsure = (q + 1 < P && M_START(m, q + 1) <= r) | (q > 0 && M_START(m, q) > r);
-    return q;
+    const int32_t h = m->hint[b];
+    const int hp = h < 0 ? -1 - h : h;
+    *unsure = h < 0;
+    return hp + (M_START(m, hp + 1) <= r);
 }
 
+/* The piece holding r in [0, 256), and r's offset into it. */
 static inline int piece_of(const mview *m, double r, double *y)
 {
     const int P = m->P;
@@ -1683,12 +1696,11 @@ static double env_exp(const nstate *s, double h)
 
 /* 1 - e^(-b), to a few ulps, at a fraction of expm1's cost (the envelope's
  * mean takes one per ray): the series of (1 - e^-b) / b to b^15 where
- * |b| < 1/2 (the remainder is below 1e-19 relative there), else the
- * exponential, whose cancellation costs at most 2.6 ulps beyond it. */
+ * |b| < 1/2 (the remainder is below 1e-19 relative there), else
+ * 1 - ef_exp_neg(b), whose cancellation costs at most 2.6 ulps beyond its
+ * 1. Both are formed and one is picked, so a loop of it vectorises. */
 static inline double one_minus_exp_neg(double b)
 {
-    if (!(fabs(b) < 0.5))
-        return 1 - exp(-b);
     /* c_n = (-1)^n / (n + 1)!, summed by Estrin's scheme */
     static const double c[16] = {
         1.0, -1.0 / 2, 1.0 / 6, -1.0 / 24, 1.0 / 120, -1.0 / 720, 1.0 / 5040, -1.0 / 40320,
@@ -1701,7 +1713,9 @@ static inline double one_minus_exp_neg(double b)
         p[i] = c[2 * i] + c[2 * i + 1] * b;
     const double q0 = p[0] + p[1] * b2, q1 = p[2] + p[3] * b2, q2 = p[4] + p[5] * b2,
                  q3 = p[6] + p[7] * b2;
-    return b * ((q0 + q1 * b4) + (q2 + q3 * b4) * b8);
+    const double series = b * ((q0 + q1 * b4) + (q2 + q3 * b4) * b8);
+    const double direct = 1 - ef_exp_neg(b);
+    return fabs(b) < 0.5 ? series : direct;
 }
 
 /* The mean envelope over [ta, tb] times its length, as num / den (see
@@ -2034,6 +2048,216 @@ static inline int preint_prepare(const nstate *s, const ef_ray *r, double *h0, d
     return env_overflows(s, *h0, *hs, *t0, *t1) ? 1 : 2;
 }
 
+#define ONE_SPAN 32
+
+typedef double v4d __attribute__((vector_size(32)));
+typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
+
+/* Four records of 8 doubles (at p[0..3]) as 8 vectors of four lanes: the
+ * i-th double of record j in lane j of col[i]. Whole-line loads and
+ * shuffles instead of 32 scalar loads. */
+EF_INLINE void transpose4x8(const double *const p[4], v4d col[8])
+{
+    for (int h = 0; h < 2; ++h) {
+        v4d A[4];
+        for (int i = 0; i < 4; ++i)
+            A[i] = ((const v4du *) (const void *) p[i])[h];
+        const v4d t0 = __builtin_shufflevector(A[0], A[1], 0, 4, 2, 6);
+        const v4d t1 = __builtin_shufflevector(A[0], A[1], 1, 5, 3, 7);
+        const v4d t2 = __builtin_shufflevector(A[2], A[3], 0, 4, 2, 6);
+        const v4d t3 = __builtin_shufflevector(A[2], A[3], 1, 5, 3, 7);
+        col[4 * h + 0] = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
+        col[4 * h + 1] = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
+        col[4 * h + 2] = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+        col[4 * h + 3] = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+    }
+}
+
+/* piece_int for four rays, their records transposed into lanes, then
+ * piece_int's operations lane by lane (the same bits as four calls). */
+EF_INLINE void piece_int4(const mview *m, const int *q, const double *r, double *y, double *I)
+{
+    const double *const p[4] = { m->rec + 8 * (size_t) q[0], m->rec + 8 * (size_t) q[1],
+                                 m->rec + 8 * (size_t) q[2], m->rec + 8 * (size_t) q[3] };
+    v4d col[8];
+    transpose4x8(p, col);
+    const v4d yv = *(const v4du *) (const void *) r - col[0];
+    const v4d *ic = col + 1;
+    const v4d y2 = yv * yv, y4 = y2 * y2;
+    const v4d a = ic[0] + ic[1] * yv, b = ic[2] + ic[3] * yv, c = ic[4] + ic[5] * yv;
+    const v4d Iv = ((a + b * y2) + (c + ic[6] * y2) * y4) * yv;
+    *(v4du *) (void *) y = yv;
+    *(v4du *) (void *) I = Iv;
+}
+
+/* The rays' fields as arrays (F[field][j], fields in ef_ray's order:
+ * dir[3], dist, planar, org[3]), so that loops over them vectorise. */
+EF_INLINE void rays_soa(const ef_ray *r, int n, double F[8][ONE_SPAN])
+{
+    _Static_assert(sizeof(ef_ray) == 8 * sizeof(double), "ef_ray is 8 doubles");
+    int j = 0;
+    for (; j + 4 <= n; j += 4) {
+        const double *const p[4] = { r[j].dir, r[j + 1].dir, r[j + 2].dir, r[j + 3].dir };
+        v4d col[8];
+        transpose4x8(p, col);
+        for (int i = 0; i < 8; ++i)
+            *(v4du *) (void *) &F[i][j] = col[i];
+    }
+    for (; j < n; ++j) {
+        const double f[8] = { r[j].dir[0], r[j].dir[1], r[j].dir[2], r[j].dist, r[j].planar,
+                              r[j].org[0], r[j].org[1], r[j].org[2] };
+        for (int i = 0; i < 8; ++i)
+            F[i][j] = f[i];
+    }
+}
+
+/* What preint1_units does with a ray. */
+enum { P1_NONE = 0, P1_OPAQUE, P1_LANE, P1_SCALAR };
+
+/* pieces=1's tau / rho for rays r[0..n) (n <= ONE_SPAN) into unit[], and
+ * what[] per ray: P1_NONE no fog (unit 0), P1_OPAQUE every channel with
+ * density opaque, else unit holds the value. Most rays of a frame start at
+ * the bound camera, end unclipped (no box) and have a normal envelope:
+ * those are worked in loops over the span that the compiler vectorises,
+ * the table lookups in short scalar loops between them, each ray's far end
+ * the only point looked up (the camera's is cached) and the cam's own
+ * piece, whose polynomial is at hand, serving rays that end inside it. The
+ * others (a box, a bin holding two piece starts, an extent below 1e-6, an
+ * envelope past its normal range) take preint_prepare and one_*, as before.
+ * Which way a ray goes depends on the ray alone, and the lanes do the same
+ * operations as one ray would, so tau is the same bits whatever the span
+ * and whichever clone runs. */
+EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstate *s,
+                                          const ef_ray *r, int n, double *unit, int *what)
+{
+    double L[ONE_SPAN], num[ONE_SPAN], den[ONE_SPAN], F[8][ONE_SPAN];
+    const double *const D[3] = { F[0], F[1], F[2] }, *const O[3] = { F[5], F[6], F[7] };
+    int ok[ONE_SPAN];
+    rays_soa(r, n, F);
+    const int lanes = s->cam && !s->has_box;
+    const double k = s->k, ce = s->cam_eh, cam_h = s->cam_h, rho_max = s->rho_max;
+    const double up0 = s->up[0], up1 = s->up[1], up2 = s->up[2], base = s->base;
+    const double sky_need = s->sky_need;
+    /* Classification, as preint_prepare decides, and the envelope. */
+    for (int j = 0; j < n; ++j) {
+        const double d = F[3][j];
+        const double h0 = up0 * O[0][j] + up1 * O[1][j] + up2 * O[2][j] - base;
+        const double hs = up0 * D[0][j] + up1 * D[1][j] + up2 * D[2][j];
+        const int sky = !(d < INFINITY);
+        const double a = k * hs;
+        const double t1 = sky ? 0 + sky_need / a : d;
+        const int out = (!sky) | ((k > 0) & (hs > 0));
+        const double hlow = hs < 0 ? h0 + hs * t1 : h0;
+        const int over = (k > 0) & !(-k * hlow < 690);
+        const int w = (!(rho_max > 0)) | (!(d > 0)) ? P1_NONE : (!out) | over ? P1_OPAQUE : P1_LANE;
+        const double b = k * hs * t1;
+        /* the envelope as env_piece forms it from the camera's end */
+        const int varies = (k > 0) & (hs != 0);
+        const int normal = (!varies) | ((fabs(b) > 1e-12) & (fabs(b) <= 700) & (ce >= DBL_MIN));
+        const double e = varies ? ce * one_minus_exp_neg(b) : k > 0 ? ce : 1;
+        L[j] = t1;
+        num[j] = t1 * e;
+        den[j] = varies ? b : 1;
+        ok[j] = lanes & (h0 == cam_h) & ((w != P1_LANE) | normal);
+        what[j] = w;
+    }
+    for (int x = 0; x < s->naxes; ++x) {
+        const int a = s->axis[x];
+        const mview mv = mview_of(c, a);
+        const mpoint cp = s->cam_pt[a];
+        const double *cc = M_COEF(&mv, cp.p);
+        const double cend = M_START(&mv, cp.p + 1) - M_START(&mv, cp.p), cs = s->cam_s[a];
+        const double inv = s->inv_scale, shift = s->shift[a], seedq = s->seedq[a], bins = mv.bins;
+        const int nb = MERGED_BINS * mv.P;
+        double ds[ONE_SPAN], rr[ONE_SPAN], pk[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pre[ONE_SPAN];
+        int bin[ONE_SPAN], q[ONE_SPAN];
+        for (int j = 0; j < n; ++j) {
+            const double dq = D[a][j] * inv;
+            const double s0 = ((O[a][j] - shift) * inv + seedq) + 0 * dq;
+            const double dsj = L[j] * dq;
+            ds[j] = dsj;
+            /* period_split by floor, which vectorises where the processor
+             * rounds in vector lanes (x86-64-v3) */
+            const double v = s0 + dsj, kk = floor(v * (1.0 / 256)), r0 = v - 256 * kk;
+            const int wrap = r0 >= 256;
+            rr[j] = wrap ? r0 - 256 : r0;
+            pk[j] = wrap ? kk + 1 : kk;
+            int bb = (int) ((wrap ? r0 - 256 : r0) * bins);
+            bb = bb < 0 ? 0 : bb >= nb ? nb - 1 : bb;
+            bin[j] = bb;
+            ok[j] &= (what[j] != P1_LANE) | ((s0 == cs) & (fabs(dsj) >= 1e-6));
+        }
+        for (int j = 0; j < n; ++j) {
+            const int32_t h = mv.hint[bin[j]];
+            ok[j] &= (what[j] != P1_LANE) | (h >= 0);
+            const int hp = h < 0 ? 0 : h;
+            q[j] = hp + (M_START(&mv, hp + 1) <= rr[j]);
+        }
+        int j0 = 0;
+        for (; j0 + 4 <= n; j0 += 4)
+            piece_int4(&mv, q + j0, rr + j0, y + j0, I + j0);
+        for (int j = j0; j < n; ++j) {
+            y[j] = rr[j] - M_START(&mv, q[j]);
+            I[j] = piece_int(M_COEF(&mv, q[j]), y[j]);
+        }
+        for (int j = 0; j < n; ++j)
+            pre[j] = mv.prefix[q[j]];
+        const double cpre = mv.prefix[cp.p];
+        for (int j = 0; j < n; ++j) {
+            /* far end in the camera's piece: its polynomial between the
+             * two (no rounding of the far end's period position) */
+            const double yc = cp.y + ds[j];
+            const double g1 = piece_int(cc, yc) - cp.I;
+            const double gg = (pk[j] - cp.k) * s->mtotal[a] + (pre[j] - cpre) + (I[j] - cp.I);
+            const double g = yc >= 0 && yc <= cend ? g1 : gg;
+            const double G = ds[j] < 0 ? -g : g, w = fabs(ds[j]);
+            num[j] *= w + s->contrast * G;
+            den[j] *= w;
+        }
+    }
+    for (int j = 0; j < n; ++j) {
+        const double u = num[j] / den[j];
+        unit[j] = what[j] == P1_LANE && u > 0 ? u : 0;
+    }
+    for (int j = 0; j < n; ++j) {
+        if (ok[j])
+            continue;
+        /* the general way */
+        double h0, hs, t0, t1;
+        what[j] = preint_prepare(s, &r[j], &h0, &hs, &t0, &t1, NULL);
+        unit[j] = 0;
+        if (what[j] == 2) {
+            one_ray o;
+            one_setup(s, &r[j], h0, hs, t0, t1, &o);
+            for (int x = 0; x < s->naxes; ++x) {
+                const mview mv = mview_of(c, s->axis[x]);
+                one_axis(s, &mv, x, &o);
+            }
+            const double u = one_value(s, &o);
+            unit[j] = u > 0 ? u : 0;
+            what[j] = P1_SCALAR;
+        }
+    }
+}
+
+/* preint1_units over a span, tau added to acc. */
+EF_MULTIVERSION static void preint_span(const ef_fog_component *c, const nstate *s,
+                                        const ef_ray *r, int n, double (*acc)[3])
+{
+    double unit[ONE_SPAN];
+    int what[ONE_SPAN];
+    preint1_units(c, s, r, n, unit, what);
+    const double r0 = s->rho[0], r1 = s->rho[1], r2 = s->rho[2];
+    const double i0 = r0 > 0 ? INFINITY : 0, i1 = r1 > 0 ? INFINITY : 0, i2 = r2 > 0 ? INFINITY : 0;
+    for (int j = 0; j < n; ++j) {
+        const int op = what[j] == P1_OPAQUE;
+        const double u = unit[j];
+        acc[j][0] += op ? i0 : r0 * u;
+        acc[j][1] += op ? i1 : r1 * u;
+        acc[j][2] += op ? i2 : r2 * u;
+    }
+}
+
 /* The seed's evaluation from the merged tables, in plain double: per pixel
  * the cost of a few table lookups (the shared path's long double set-up
  * would cost more than the evaluation). The dropped sky tail's bound and,
@@ -2048,7 +2272,13 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
             tau[k] = what && s->rho[k] > 0 ? INFINITY : 0;
         return;
     }
-    const double unit = preintegrated_merged(c, s, r, h0, hs, t0, t1, s->pieces);
+    double unit;
+    if (s->pieces == 1) {   /* the span's way, for the same bits */
+        int w;
+        preint1_units(c, s, r, 1, &unit, &w);
+    } else {
+        unit = preintegrated_merged(c, s, r, h0, hs, t0, t1, s->pieces);
+    }
     double err = tail;
     if (info) {
         err += fabs(preintegrated_merged(c, s, r, h0, hs, t0, t1, 2 * s->pieces) - unit);
@@ -2059,91 +2289,6 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
         tau[k] = s->rho[k] * (unit > 0 ? unit : 0);
         if (info)
             info->err[k] = s->rho[k] * err;
-    }
-}
-
-#define ONE_SPAN 32
-
-/* one_axis over rays o[0..m) of a span, the same bits, in stages over
- * the span where a ray starts at the bound camera (its near end is the
- * cached point): each ray's far end is looked up in short loops of
- * independent iterations (the period and bin, then the piece and its
- * antiderivative), so the processor overlaps the lookups' chains of
- * dependent loads across rays; then each ray's integral is formed as
- * merged_int_in forms it, the rare cases (no extent, one piece) included. */
-EF_INLINE void axis_span(const nstate *s, const mview *mv, int k, one_ray *o, int m)
-{
-    const int a = s->axis[k];
-    double r[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pk[ONE_SPAN];
-    int p[ONE_SPAN], near[ONE_SPAN];
-    int fix = 0;
-    for (int i = 0; i < m; ++i)
-        near[i] = s->cam && o[i].s0[k] == s->cam_s[a];
-    for (int i = 0; i < m; ++i)
-        pk[i] = period_split(o[i].s0[k] + o[i].ds[k], &r[i]);
-    for (int i = 0; i < m; ++i) {
-        int unsure;
-        p[i] = piece_guess(mv, r[i], &unsure);
-        y[i] = r[i] - M_START(mv, p[i]);
-        fix |= unsure;
-    }
-    if (fix)   /* piece_of's rare rest, for the whole span */
-        for (int i = 0; i < m; ++i)
-            p[i] = piece_of(mv, r[i], &y[i]);
-    for (int i = 0; i < m; ++i)
-        I[i] = piece_int(M_COEF(mv, p[i]), y[i]);
-    const mpoint cam = s->cam ? s->cam_pt[a] : (mpoint) { 0, 0, 0, 0 };
-    for (int i = 0; i < m; ++i) {
-        if (!near[i]) {
-            one_axis(s, mv, k, &o[i]);
-            continue;
-        }
-        const double sd = o[i].ds[k], ds = fabs(sd);
-        const mpoint far = { pk[i], y[i], I[i], p[i] };
-        const mpoint lo = sd < 0 ? far : cam, hi = sd < 0 ? cam : far;
-        o[i].w[k] = ds;
-        if (ds < 1e-6) {
-            o[i].w[k] = 0;
-            o[i].G[k] = piece_val(M_COEF(mv, lo.p), lo.y + ds / 2);
-            continue;
-        }
-        const double pend = M_START(mv, lo.p + 1) - M_START(mv, lo.p);
-        if (lo.y + ds <= pend) {
-            o[i].G[k] = piece_int(M_COEF(mv, lo.p), lo.y + ds) - lo.I;
-            continue;
-        }
-        o[i].G[k] = (hi.k - lo.k) * s->mtotal[a] + (mv->prefix[hi.p] - mv->prefix[lo.p]) +
-                    (hi.I - lo.I);
-    }
-}
-
-/* preint_fast with pieces=1 over up to ONE_SPAN rays, stage by stage (see
- * one_ray), tau added to acc: the same bits. */
-EF_MULTIVERSION static void preint_span(const ef_fog_component *c, const nstate *s, const ef_ray *r, int n,
-                        double (*acc)[3])
-{
-    one_ray o[ONE_SPAN];
-    int what[ONE_SPAN], m = 0;
-    for (int j = 0; j < n; ++j) {
-        double h0, hs, t0, t1;
-        what[j] = preint_prepare(s, &r[j], &h0, &hs, &t0, &t1, NULL);
-        if (what[j] == 2) {
-            one_setup(s, &r[j], h0, hs, t0, t1, &o[m]);
-            ++m;
-        }
-    }
-    for (int k = 0; k < s->naxes; ++k) {
-        const mview mv = mview_of(c, s->axis[k]);
-        axis_span(s, &mv, k, o, m);
-    }
-    for (int j = 0, i = 0; j < n; ++j) {
-        double unit = 0;
-        if (what[j] == 2) {
-            unit = one_value(s, &o[i++]);
-            unit = unit > 0 ? unit : 0;
-        }
-        for (int k = 0; k < 3; ++k)
-            acc[j][k] += what[j] == 1 ? (s->rho[k] > 0 ? INFINITY : 0) : s->rho[k] * unit;
     }
 }
 
