@@ -34,6 +34,7 @@
  * its absolute precision wherever the camera and the offset are. */
 #include "exact.h"
 #include "expneg.h"
+#include "span.h"
 #include "fog.h"
 #include "noise.h"
 
@@ -2048,30 +2049,7 @@ static inline int preint_prepare(const nstate *s, const ef_ray *r, double *h0, d
     return env_overflows(s, *h0, *hs, *t0, *t1) ? 1 : 2;
 }
 
-#define ONE_SPAN 32
-
-typedef double v4d __attribute__((vector_size(32)));
-typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
-
-/* Four records of 8 doubles (at p[0..3]) as 8 vectors of four lanes: the
- * i-th double of record j in lane j of col[i]. Whole-line loads and
- * shuffles instead of 32 scalar loads. */
-EF_INLINE void transpose4x8(const double *const p[4], v4d col[8])
-{
-    for (int h = 0; h < 2; ++h) {
-        v4d A[4];
-        for (int i = 0; i < 4; ++i)
-            A[i] = ((const v4du *) (const void *) p[i])[h];
-        const v4d t0 = __builtin_shufflevector(A[0], A[1], 0, 4, 2, 6);
-        const v4d t1 = __builtin_shufflevector(A[0], A[1], 1, 5, 3, 7);
-        const v4d t2 = __builtin_shufflevector(A[2], A[3], 0, 4, 2, 6);
-        const v4d t3 = __builtin_shufflevector(A[2], A[3], 1, 5, 3, 7);
-        col[4 * h + 0] = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
-        col[4 * h + 1] = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
-        col[4 * h + 2] = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
-        col[4 * h + 3] = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
-    }
-}
+#define ONE_SPAN EF_SPAN
 
 /* piece_int for four rays, their records transposed into lanes, then
  * piece_int's operations lane by lane (the same bits as four calls). */
@@ -2088,27 +2066,6 @@ EF_INLINE void piece_int4(const mview *m, const int *q, const double *r, double 
     const v4d Iv = ((a + b * y2) + (c + ic[6] * y2) * y4) * yv;
     *(v4du *) (void *) y = yv;
     *(v4du *) (void *) I = Iv;
-}
-
-/* The rays' fields as arrays (F[field][j], fields in ef_ray's order:
- * dir[3], dist, planar, org[3]), so that loops over them vectorise. */
-EF_INLINE void rays_soa(const ef_ray *r, int n, double F[8][ONE_SPAN])
-{
-    _Static_assert(sizeof(ef_ray) == 8 * sizeof(double), "ef_ray is 8 doubles");
-    int j = 0;
-    for (; j + 4 <= n; j += 4) {
-        const double *const p[4] = { r[j].dir, r[j + 1].dir, r[j + 2].dir, r[j + 3].dir };
-        v4d col[8];
-        transpose4x8(p, col);
-        for (int i = 0; i < 8; ++i)
-            *(v4du *) (void *) &F[i][j] = col[i];
-    }
-    for (; j < n; ++j) {
-        const double f[8] = { r[j].dir[0], r[j].dir[1], r[j].dir[2], r[j].dist, r[j].planar,
-                              r[j].org[0], r[j].org[1], r[j].org[2] };
-        for (int i = 0; i < 8; ++i)
-            F[i][j] = f[i];
-    }
 }
 
 /* What preint1_units does with a ray. */
@@ -2131,7 +2088,8 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
                                           const ef_ray *r, int n, double *unit, int *what)
 {
     double L[ONE_SPAN], num[ONE_SPAN], den[ONE_SPAN], F[8][ONE_SPAN];
-    const double *const D[3] = { F[0], F[1], F[2] }, *const O[3] = { F[5], F[6], F[7] };
+    const double *const D[3] = { F[EF_F_DIR], F[EF_F_DIR + 1], F[EF_F_DIR + 2] },
+                 *const O[3] = { F[EF_F_ORG], F[EF_F_ORG + 1], F[EF_F_ORG + 2] };
     int ok[ONE_SPAN];
     rays_soa(r, n, F);
     const int lanes = s->cam && !s->has_box;
@@ -2140,7 +2098,7 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
     const double sky_need = s->sky_need;
     /* Classification, as preint_prepare decides, and the envelope. */
     for (int j = 0; j < n; ++j) {
-        const double d = F[3][j];
+        const double d = F[EF_F_DIST][j];
         const double h0 = up0 * O[0][j] + up1 * O[1][j] + up2 * O[2][j] - base;
         const double hs = up0 * D[0][j] + up1 * D[1][j] + up2 * D[2][j];
         const int sky = !(d < INFINITY);
