@@ -113,13 +113,14 @@ typedef struct nstate {
 } nstate;
 
 /* A merged table's layout from m_off (64-byte aligned where built): per
- * piece one record of 8 doubles, its start and the 7 coefficients of its
- * antiderivative (one cache line per lookup), then a sentinel record whose
- * start is 256; mp + 1 prefixes; then 4 mp lookup bins of one int32 each,
- * the piece holding the bin's start. Plus 8 doubles of alignment slack. */
+ * piece one record of 8 doubles, the 7 coefficients of its antiderivative
+ * and the prefix integral at its start (one cache line per lookup); then
+ * the mp starts and a sentinel 256 (a small array, which the choice
+ * between a bin's two pieces reads); then 4 mp lookup bins of one int32
+ * each (see build_merged). Plus 8 doubles of alignment slack. */
 #define MERGED_SIZE(P) ((size_t) (P) * 11 + 17)
-#define MERGED_PREFIX(P) (8 * ((size_t) (P) + 1))          /* offsets in a table */
-#define MERGED_HINT(P) (MERGED_PREFIX(P) + (size_t) (P) + 1)
+#define MERGED_STARTS(P) (8 * (size_t) (P))                /* offsets in a table */
+#define MERGED_HINT(P) (MERGED_STARTS(P) + (size_t) (P) + 1)
 #define MERGED_BINS 4    /* lookup bins per piece */
 #define MERGED_MAX 65536
 
@@ -1489,7 +1490,7 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
         if (P == 0 || br[k] - br[P - 1] > 1e-12L)
             br[P++] = br[k];
     br[P] = 256;
-    double *rec = tab, *prefix = tab + MERGED_PREFIX(P);
+    double *rec = tab, *start = tab + MERGED_STARTS(P);
     int32_t *hint = (int32_t *) (tab + MERGED_HINT(P));
     /* Each octave's last cell polynomial: the pieces of one cell follow
      * each other. */
@@ -1529,19 +1530,18 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
                 fk *= fd;
             }
         }
-        rec[8 * p] = (double) s0;
-        prefix[p] = (double) acc;
+        start[p] = (double) s0;
+        rec[8 * p + 7] = (double) acc;
         long double integral = 0, Lp = L;
         for (int k = 0; k < 7; ++k) {
-            rec[8 * p + 1 + k] = c[k] / (k + 1);
+            rec[8 * p + k] = c[k] / (k + 1);
             integral += c[k] * Lp / (k + 1);
             Lp *= L;
         }
         acc += integral;
     }
-    prefix[P] = (double) acc;
     *total = (double) acc;
-    rec[8 * P] = 256;   /* the sentinel: the start past the last piece */
+    start[P] = 256;   /* the sentinel: the start past the last piece */
     /* Lookup bins: the piece holding each bin's start, widened by a margin
      * past the rounding of r times the bins (which can put r a few ulps
      * outside its bin); -1 - p where the widened bin holds two starts or
@@ -1550,9 +1550,9 @@ static int build_merged(const nstate *s, int a, double *tab, int cap, double *to
     for (int b = 0, p = 0; b < MERGED_BINS * P; ++b) {
         const double lo = 256.0 * b / (MERGED_BINS * P) - margin,
                      hi = 256.0 * (b + 1) / (MERGED_BINS * P) + margin;
-        while (p + 1 < P && rec[8 * (p + 1)] <= lo)
+        while (p + 1 < P && start[p + 1] <= lo)
             ++p;
-        hint[b] = p + 2 <= P && rec[8 * (p + 2)] <= hi ? -1 - p : p;
+        hint[b] = p + 2 <= P && start[p + 2] <= hi ? -1 - p : p;
     }
     free(br);
     return P;
@@ -1580,22 +1580,23 @@ static double piece_val(const double *ic, double y)
 
 /* Axis a's merged table, as offsets into arr resolved for one ray. */
 typedef struct mview {
-    const double *rec;               /* per piece: its start, its 7 coefficients */
-    const double *prefix;
+    const double *rec;               /* per piece: its 7 coefficients, its prefix */
+    const double *start;             /* per piece, and the sentinel 256 */
     const int32_t *hint;
     int P;
     double bins;                     /* hint bins per unit of r */
 } mview;
 
-#define M_START(m, p) ((m)->rec[8 * (p)])
-#define M_COEF(m, p) ((m)->rec + 8 * (p) + 1)
+#define M_START(m, p) ((m)->start[p])
+#define M_COEF(m, p) ((m)->rec + 8 * (p))
+#define M_PREFIX(m, p) ((m)->rec[8 * (p) + 7])
 
 static inline mview mview_of(const ef_fog_component *c, int a)
 {
     const nstate *s = state(c);
     const double *tab = c->arr + s->m_off[a];
     const int P = s->mpa[a];
-    return (mview) { tab, tab + MERGED_PREFIX(P), (const int32_t *) (tab + MERGED_HINT(P)), P,
+    return (mview) { tab, tab + MERGED_STARTS(P), (const int32_t *) (tab + MERGED_HINT(P)), P,
                      (double) MERGED_BINS * P / 256 };
 }
 
@@ -1679,7 +1680,7 @@ static inline double merged_int_in(const nstate *s, const mview *mv, int a, doub
     if (lo.y + ds <= pend)   /* one piece: the antiderivative's difference */
         return piece_int(M_COEF(mv, lo.p), lo.y + ds) - lo.I;
     merged_point(s, mv, a, shi, &hi);
-    return (hi.k - lo.k) * s->mtotal[a] + (mv->prefix[hi.p] - mv->prefix[lo.p]) + (hi.I - lo.I);
+    return (hi.k - lo.k) * s->mtotal[a] + (M_PREFIX(mv, hi.p) - M_PREFIX(mv, lo.p)) + (hi.I - lo.I);
 }
 
 static inline double merged_int(const ef_fog_component *c, int a, double s0, double *pds)
@@ -2051,21 +2052,21 @@ static inline int preint_prepare(const nstate *s, const ef_ray *r, double *h0, d
 
 #define ONE_SPAN EF_SPAN
 
-/* piece_int for four rays, their records transposed into lanes, then
- * piece_int's operations lane by lane (the same bits as four calls). */
-EF_INLINE void piece_int4(const mview *m, const int *q, const double *r, double *y, double *I)
+/* piece_int at y for four rays, and their prefixes: their records
+ * transposed into lanes, then piece_int's operations lane by lane (the
+ * same bits as four calls). */
+EF_INLINE void piece_int4(const mview *m, const int *q, const double *y, double *I, double *pre)
 {
-    const double *const p[4] = { m->rec + 8 * (size_t) q[0], m->rec + 8 * (size_t) q[1],
-                                 m->rec + 8 * (size_t) q[2], m->rec + 8 * (size_t) q[3] };
-    v4d col[8];
-    transpose4x8(p, col);
-    const v4d yv = *(const v4du *) (const void *) r - col[0];
-    const v4d *ic = col + 1;
+    const double *const p[4] = { M_COEF(m, q[0]), M_COEF(m, q[1]), M_COEF(m, q[2]),
+                                 M_COEF(m, q[3]) };
+    v4d ic[8];
+    transpose4x8(p, ic);
+    const v4d yv = *(const v4du *) (const void *) y;
     const v4d y2 = yv * yv, y4 = y2 * y2;
     const v4d a = ic[0] + ic[1] * yv, b = ic[2] + ic[3] * yv, c = ic[4] + ic[5] * yv;
     const v4d Iv = ((a + b * y2) + (c + ic[6] * y2) * y4) * yv;
-    *(v4du *) (void *) y = yv;
     *(v4du *) (void *) I = Iv;
+    *(v4du *) (void *) pre = ic[7];
 }
 
 /* What preint1_units does with a ray. */
@@ -2151,16 +2152,16 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
             const int hp = h < 0 ? 0 : h;
             q[j] = hp + (M_START(&mv, hp + 1) <= rr[j]);
         }
+        for (int j = 0; j < n; ++j)
+            y[j] = rr[j] - M_START(&mv, q[j]);
         int j0 = 0;
         for (; j0 + 4 <= n; j0 += 4)
-            piece_int4(&mv, q + j0, rr + j0, y + j0, I + j0);
+            piece_int4(&mv, q + j0, y + j0, I + j0, pre + j0);
         for (int j = j0; j < n; ++j) {
-            y[j] = rr[j] - M_START(&mv, q[j]);
             I[j] = piece_int(M_COEF(&mv, q[j]), y[j]);
+            pre[j] = M_PREFIX(&mv, q[j]);
         }
-        for (int j = 0; j < n; ++j)
-            pre[j] = mv.prefix[q[j]];
-        const double cpre = mv.prefix[cp.p];
+        const double cpre = M_PREFIX(&mv, cp.p);
         for (int j = 0; j < n; ++j) {
             /* far end in the camera's piece: its polynomial between the
              * two (no rounding of the far end's period position) */
