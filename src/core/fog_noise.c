@@ -1696,14 +1696,11 @@ static double env_exp(const nstate *s, double h)
     return s->cam && h == s->cam_h ? s->cam_eh : exp(-s->k * h);
 }
 
-/* 1 - e^(-b), to a few ulps, at a fraction of expm1's cost (the envelope's
- * mean takes one per ray): the series of (1 - e^-b) / b to b^15 where
- * |b| < 1/2 (the remainder is below 1e-19 relative there), else
- * 1 - ef_exp_neg(b), whose cancellation costs at most 2.6 ulps beyond its
- * 1. Both are formed and one is picked, so a loop of it vectorises. */
-static inline double one_minus_exp_neg(double b)
+/* 1 - e^(-b) for |b| < 1/2: the series of (1 - e^-b) / b to b^15 (the
+ * remainder is below 1e-19 relative there), by Estrin's scheme. */
+static inline double ome_series(double b)
 {
-    /* c_n = (-1)^n / (n + 1)!, summed by Estrin's scheme */
+    /* c_n = (-1)^n / (n + 1)! */
     static const double c[16] = {
         1.0, -1.0 / 2, 1.0 / 6, -1.0 / 24, 1.0 / 120, -1.0 / 720, 1.0 / 5040, -1.0 / 40320,
         1.0 / 362880, -1.0 / 3628800, 1.0 / 39916800, -1.0 / 479001600, 1.0 / 6227020800.0,
@@ -1715,8 +1712,16 @@ static inline double one_minus_exp_neg(double b)
         p[i] = c[2 * i] + c[2 * i + 1] * b;
     const double q0 = p[0] + p[1] * b2, q1 = p[2] + p[3] * b2, q2 = p[4] + p[5] * b2,
                  q3 = p[6] + p[7] * b2;
-    const double series = b * ((q0 + q1 * b4) + (q2 + q3 * b4) * b8);
-    const double direct = 1 - ef_exp_neg(b);
+    return b * ((q0 + q1 * b4) + (q2 + q3 * b4) * b8);
+}
+
+/* 1 - e^(-b), to a few ulps, at a fraction of expm1's cost (the envelope's
+ * mean takes one per ray): ome_series where |b| < 1/2, else
+ * 1 - ef_exp_neg(b), whose cancellation costs at most 2.6 ulps beyond its
+ * 1. Both are formed and one is picked, so a loop of it vectorises. */
+static inline double one_minus_exp_neg(double b)
+{
+    const double series = ome_series(b), direct = 1 - ef_exp_neg(b);
     return fabs(b) < 0.5 ? series : direct;
 }
 
@@ -2098,6 +2103,8 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
     const double up0 = s->up[0], up1 = s->up[1], up2 = s->up[2], base = s->base;
     const double sky_need = s->sky_need;
     /* Classification, as preint_prepare decides, and the envelope. */
+    double bv[ONE_SPAN];
+    int var[ONE_SPAN], nser = 0, ndir = 0;
     for (int j = 0; j < n; ++j) {
         const double d = F[EF_F_DIST][j];
         const double h0 = up0 * O[0][j] + up1 * O[1][j] + up2 * O[2][j] - base;
@@ -2113,13 +2120,28 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
         /* the envelope as env_piece forms it from the camera's end */
         const int varies = (k > 0) & (hs != 0);
         const int normal = (!varies) | ((fabs(b) > 1e-12) & (fabs(b) <= 700) & (ce >= DBL_MIN));
-        const double e = varies ? ce * one_minus_exp_neg(b) : k > 0 ? ce : 1;
+        bv[j] = b;
+        var[j] = varies;
+        nser += varies & (fabs(b) < 0.5);
+        ndir += varies & !(fabs(b) < 0.5);
         L[j] = t1;
-        num[j] = t1 * e;
+        num[j] = varies ? t1 : k > 0 ? t1 * ce : t1;
         den[j] = varies ? b : 1;
         ok[j] = lanes & (h0 == cam_h) & ((w != P1_LANE) | normal);
         what[j] = w;
     }
+    /* t1 (ce (1 - e^-b)) where the envelope varies: one_minus_exp_neg's
+     * value, the series or the exponential only where the span needs no
+     * other. */
+    if (nser && ndir)
+        for (int j = 0; j < n; ++j)
+            num[j] *= var[j] ? ce * one_minus_exp_neg(bv[j]) : 1;
+    else if (ndir)
+        for (int j = 0; j < n; ++j)
+            num[j] *= var[j] ? ce * (1 - ef_exp_neg(bv[j])) : 1;
+    else if (nser)
+        for (int j = 0; j < n; ++j)
+            num[j] *= var[j] ? ce * ome_series(bv[j]) : 1;
     for (int x = 0; x < s->naxes; ++x) {
         const int a = s->axis[x];
         const mview mv = mview_of(c, a);
@@ -2162,14 +2184,23 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
             pre[j] = M_PREFIX(&mv, q[j]);
         }
         const double cpre = M_PREFIX(&mv, cp.p);
+        double g[ONE_SPAN];
+        int incam = 0;
         for (int j = 0; j < n; ++j) {
-            /* far end in the camera's piece: its polynomial between the
-             * two (no rounding of the far end's period position) */
             const double yc = cp.y + ds[j];
-            const double g1 = piece_int(cc, yc) - cp.I;
-            const double gg = (pk[j] - cp.k) * s->mtotal[a] + (pre[j] - cpre) + (I[j] - cp.I);
-            const double g = yc >= 0 && yc <= cend ? g1 : gg;
-            const double G = ds[j] < 0 ? -g : g, w = fabs(ds[j]);
+            incam |= (yc >= 0) & (yc <= cend);
+            g[j] = (pk[j] - cp.k) * s->mtotal[a] + (pre[j] - cpre) + (I[j] - cp.I);
+        }
+        if (incam)
+            for (int j = 0; j < n; ++j) {
+                /* far end in the camera's piece: its polynomial between
+                 * the two (no rounding of the far end's period position) */
+                const double yc = cp.y + ds[j];
+                const double g1 = piece_int(cc, yc) - cp.I;
+                g[j] = (yc >= 0) & (yc <= cend) ? g1 : g[j];
+            }
+        for (int j = 0; j < n; ++j) {
+            const double G = ds[j] < 0 ? -g[j] : g[j], w = fabs(ds[j]);
             num[j] *= w + s->contrast * G;
             den[j] *= w;
         }
