@@ -1872,6 +1872,7 @@ static void bind_noise(ef_fog_component *c, const double org[3])
         merged_point(&t, &m, a, t.cam_s[a], &t.cam_pt[a]);
     }
     t.cam_h = t.up[0] * org[0] + t.up[1] * org[1] + t.up[2] * org[2] - t.base;
+    memcpy(t.cam_org, org, sizeof t.cam_org);
     t.cam_eh = exp(-t.k * t.cam_h);
     t.cam = 1;
     *s = t;
@@ -2100,14 +2101,18 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
     rays_soa(r, n, F);
     const int lanes = s->cam && !s->has_box;
     const double k = s->k, ce = s->cam_eh, cam_h = s->cam_h, rho_max = s->rho_max;
-    const double up0 = s->up[0], up1 = s->up[1], up2 = s->up[2], base = s->base;
+    const double up0 = s->up[0], up1 = s->up[1], up2 = s->up[2];
     const double sky_need = s->sky_need;
-    /* Classification, as preint_prepare decides, and the envelope. */
+    const double co0 = s->cam_org[0], co1 = s->cam_org[1], co2 = s->cam_org[2];
+    /* Classification, as preint_prepare decides, and the envelope. A ray
+     * from the camera has the camera's height h0 = cam_h (and q = cam_s:
+     * the same operations on the same numbers); others go the general way. */
     double bv[ONE_SPAN];
     int var[ONE_SPAN], nser = 0, ndir = 0;
     for (int j = 0; j < n; ++j) {
         const double d = F[EF_F_DIST][j];
-        const double h0 = up0 * O[0][j] + up1 * O[1][j] + up2 * O[2][j] - base;
+        const int atcam = (O[0][j] == co0) & (O[1][j] == co1) & (O[2][j] == co2);
+        const double h0 = cam_h;
         const double hs = up0 * D[0][j] + up1 * D[1][j] + up2 * D[2][j];
         const int sky = !(d < INFINITY);
         const double a = k * hs;
@@ -2127,7 +2132,7 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
         L[j] = t1;
         num[j] = varies ? t1 : k > 0 ? t1 * ce : t1;
         den[j] = varies ? b : 1;
-        ok[j] = lanes & (h0 == cam_h) & ((w != P1_LANE) | normal);
+        ok[j] = lanes & atcam & ((w != P1_LANE) | normal);
         what[j] = w;
     }
     /* t1 (ce (1 - e^-b)) where the envelope varies: one_minus_exp_neg's
@@ -2148,25 +2153,23 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
         const mpoint cp = s->cam_pt[a];
         const double *cc = M_COEF(&mv, cp.p);
         const double cend = M_START(&mv, cp.p + 1) - M_START(&mv, cp.p), cs = s->cam_s[a];
-        const double inv = s->inv_scale, shift = s->shift[a], seedq = s->seedq[a], bins = mv.bins;
+        const double inv = s->inv_scale, bins = mv.bins;
         const int nb = MERGED_BINS * mv.P;
         double ds[ONE_SPAN], rr[ONE_SPAN], pk[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pre[ONE_SPAN];
         int bin[ONE_SPAN], q[ONE_SPAN];
         for (int j = 0; j < n; ++j) {
-            const double dq = D[a][j] * inv;
-            const double s0 = ((O[a][j] - shift) * inv + seedq) + 0 * dq;
-            const double dsj = L[j] * dq;
+            const double dsj = L[j] * (D[a][j] * inv);
             ds[j] = dsj;
             /* period_split by floor, which vectorises where the processor
              * rounds in vector lanes (x86-64-v3) */
-            const double v = s0 + dsj, kk = floor(v * (1.0 / 256)), r0 = v - 256 * kk;
+            const double v = cs + dsj, kk = floor(v * (1.0 / 256)), r0 = v - 256 * kk;
             const int wrap = r0 >= 256;
             rr[j] = wrap ? r0 - 256 : r0;
             pk[j] = wrap ? kk + 1 : kk;
             int bb = (int) ((wrap ? r0 - 256 : r0) * bins);
             bb = bb < 0 ? 0 : bb >= nb ? nb - 1 : bb;
             bin[j] = bb;
-            ok[j] &= (what[j] != P1_LANE) | ((s0 == cs) & (fabs(dsj) >= 1e-6));
+            ok[j] &= (what[j] != P1_LANE) | (fabs(dsj) >= 1e-6);
         }
         for (int j = 0; j < n; ++j) {
             const int32_t h = mv.hint[bin[j]];
