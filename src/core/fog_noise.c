@@ -1847,8 +1847,10 @@ static double preintegrated_merged(const ef_fog_component *c, const nstate *s, c
 
 /* Looks up everything about the camera at org that every ray of the frame
  * repeats: its point in each merged table and its envelope height's
- * exponential. Rays from elsewhere miss the cache and compute their own,
- * and hits return the bits a lookup would. */
+ * exponential. Rays from elsewhere miss the cache and compute their own;
+ * a hit returns the values a lookup would (the span's lanes, serving a far
+ * end inside the camera's own piece from that piece's polynomial, may
+ * round the last bit differently from the general path there). */
 static void bind_noise(ef_fog_component *c, const double org[3])
 {
     nstate *s = (nstate *) (void *) c->arr;
