@@ -1456,12 +1456,6 @@ static void cell_poly(const nstate *s, int a, int i, long m, long double p[7])
     p[6] = 6 * de;
 }
 
-static int by_value(const void *x, const void *y)
-{
-    const long double a = *(const long double *) x, b = *(const long double *) y;
-    return a < b ? -1 : a > b;
-}
-
 /* Builds factor a's merged table over s in [0, 256): pieces between every
  * octave's cell faces, each with the polynomial (in s - start) of
  * sum_i w_i noise_i and the prefix integral at its start. Returns the
@@ -1469,26 +1463,40 @@ static int by_value(const void *x, const void *y)
 static int build_merged(const nstate *s, int a, double *tab, int cap, double *total)
 {
     const int N = s->fbm.octaves;
-    long double *br = malloc(((size_t) cap + 2) * sizeof *br);
-    int n = 0;
+    long double *br = malloc(2 * ((size_t) cap + 2) * sizeof *br), *all = br + cap + 2;
+    int n = 0, run[EF_FBM_MAX_OCTAVES + 1];
     if (!br)
         return 0;
-    br[n++] = 0;
+    /* Each octave's faces in increasing order, one run per octave ... */
     for (int i = 0; i < N; ++i) {
+        run[i] = n;
         const long double f = s->fbm.freq[i], o = (long double) i * ef_fbm_offset[a];
         for (long m = (long) ceill(o); n < cap; ++m) {
             const long double b = (m - o) / f;
             if (b >= 256)
                 break;
             if (b > 0)
-                br[n++] = b;
+                all[n++] = b;
         }
     }
-    qsort(br, (size_t) n, sizeof *br, by_value);
-    int P = 0;
-    for (int k = 0; k < n; ++k)
-        if (P == 0 || br[k] - br[P - 1] > 1e-12L)
-            br[P++] = br[k];
+    run[N] = n;
+    /* ... merged (faster than sorting them), 0 first and near-coincident
+     * faces (within 1e-12) once. */
+    int head[EF_FBM_MAX_OCTAVES], P = 0;
+    for (int i = 0; i < N; ++i)
+        head[i] = run[i];
+    br[P++] = 0;
+    for (;;) {
+        int best = -1;
+        for (int i = 0; i < N; ++i)
+            if (head[i] < run[i + 1] && (best < 0 || all[head[i]] < all[head[best]]))
+                best = i;
+        if (best < 0)
+            break;
+        const long double b = all[head[best]++];
+        if (b - br[P - 1] > 1e-12L)
+            br[P++] = b;
+    }
     br[P] = 256;
     double *rec = tab, *start = tab + MERGED_STARTS(P);
     int32_t *hint = (int32_t *) (tab + MERGED_HINT(P));
