@@ -8,7 +8,7 @@
 #include "recon.h"
 
 /* The most rays a span-wise tau_add works on at once. */
-#define EF_SPAN 32
+#define EF_SPAN 64
 
 typedef double v4d __attribute__((vector_size(32)));
 typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
