@@ -730,6 +730,56 @@ static void test_preintegrated(void **state)
     ef_fog_free(&ex);
 }
 
+/* pieces=1 over spans of camera rays (ef_fog_tau_add, the vector lanes):
+ * against the product of means computed on their own (the reference
+ * integrator per factor, the envelope's mean by hand) for short rays that
+ * end inside the camera's table piece either way, medium ones, long ones,
+ * and rays into the table's next or previous period. */
+static void test_preintegrated_span(void **state)
+{
+    (void) state;
+    /* The camera 0.05 (in q) below the table's period end on x, 0.81 above
+     * its start on z: rays cross from one period into the next. */
+    const char *params = "scale=4:octaves=4:contrast=0.8:offset=-1021.3,0,0";
+    char spec[512];
+    snprintf(spec, sizeof spec, "noise-separable:density=0.07:%s:axes=xz:falloff=0.1:base=1:"
+             "method=preintegrated", params);
+    ef_fog_component c;
+    parse(spec, &c);
+    rng g = { 41 };
+    enum { N = 160 };
+    const double cam[3] = { 2.5, 1.7, -3.25 };
+    ef_fog_bind(&c, cam);
+    ef_ray r[N];
+    for (int j = 0; j < N; ++j) {
+        double d[3];
+        sphere(&g, d);
+        const double L = j % 4 == 0 ? uni(&g, 1e-3, 0.3) : j % 10 == 1 ? uni(&g, 50, 1500)
+                                                                        : uni(&g, 0.5, 50);
+        r[j] = ray(cam, d, L);
+    }
+    double acc[N][3];
+    memset(acc, 0, sizeof acc);
+    ef_fog_tau_add(&c, r, N, acc);
+    int short_in = 0;
+    for (int j = 0; j < N; ++j) {
+        const double L = r[j].dist, y0 = cam[1], y1 = cam[1] + r[j].dir[1] * L;
+        const double env = fabs(y1 - y0) < 1e-9 ? exp(-0.1 * (y0 - 1))
+                                                : (exp(-0.1 * (y0 - 1)) - exp(-0.1 * (y1 - 1))) /
+                                                      (0.1 * (y1 - y0));
+        const double want = 0.07 * L * env * factor_mean_ref(params, 'x', &r[j]) *
+                            factor_mean_ref(params, 'z', &r[j]);
+        short_in += L < 0.3;
+        if (!(fabs(acc[j][0] - want) <= 1e-9 * want)) {
+            print_error("ray %d (length %.6g): tau %.17g, product of means %.17g\n", j, L,
+                        acc[j][0], want);
+            fail();
+        }
+    }
+    assert_true(short_in >= N / 4);
+    ef_fog_free(&c);
+}
+
 /* The span entry (ef_fog_tau_add, what the fog pass calls) adds exactly
  * the bits ef_fog_tau gives ray by ray: camera rays of every kind (ground,
  * sky up and down, zero length, inside and outside a box), bound to the
@@ -1031,6 +1081,7 @@ int main(void)
         cmocka_unit_test(test_continuity),
         cmocka_unit_test(test_adaptive_cost_falls_with_tol),
         cmocka_unit_test(test_preintegrated),
+        cmocka_unit_test(test_preintegrated_span),
         cmocka_unit_test(test_span_same_bits),
         cmocka_unit_test(test_adaptive),
         cmocka_unit_test(test_hostile_scales),
