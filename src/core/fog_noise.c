@@ -1608,15 +1608,19 @@ static inline mview mview_of(const ef_fog_component *c, int a)
                      (double) MERGED_BINS * P / 256 };
 }
 
+/* The lookup bin of r in [0, 256) (clamped: rounding may reach the ends). */
+static inline int bin_of(const mview *m, double r)
+{
+    const int nb = MERGED_BINS * m->P, b = (int) (r * m->bins);
+    return b < 0 ? 0 : b >= nb ? nb - 1 : b;
+}
+
 /* The bin's piece for r in [0, 256): the bin's first piece, or the next
  * if that starts at or before r; right unless *unsure (a bin holding two
  * starts: rare). */
 static inline int piece_guess(const mview *m, double r, int *unsure)
 {
-    const int P = m->P;
-    int b = (int) (r * m->bins);
-    b = b < 0 ? 0 : b >= MERGED_BINS * P ? MERGED_BINS * P - 1 : b;
-    const int32_t h = m->hint[b];
+    const int32_t h = m->hint[bin_of(m, r)];
     const int hp = h < 0 ? -1 - h : h;
     *unsure = h < 0;
     return hp + (M_START(m, hp + 1) <= r);
@@ -2163,22 +2167,20 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
         const mpoint cp = s->cam_pt[a];
         const double *cc = M_COEF(&mv, cp.p);
         const double cend = M_START(&mv, cp.p + 1) - M_START(&mv, cp.p), cs = s->cam_s[a];
-        const double inv = s->inv_scale, bins = mv.bins;
-        const int nb = MERGED_BINS * mv.P;
+        const double inv = s->inv_scale;
         double ds[ONE_SPAN], rr[ONE_SPAN], pk[ONE_SPAN], y[ONE_SPAN], I[ONE_SPAN], pre[ONE_SPAN];
         int bin[ONE_SPAN], q[ONE_SPAN];
         for (int j = 0; j < n; ++j) {
             const double dsj = L[j] * (D[a][j] * inv);
             ds[j] = dsj;
-            /* period_split by floor, which vectorises where the processor
-             * rounds in vector lanes (x86-64-v3) */
+            /* period_split's values, by floor: it vectorises where the
+             * processor rounds in vector lanes (x86-64-v3), where
+             * period_split's 64-bit conversion does not */
             const double v = cs + dsj, kk = floor(v * (1.0 / 256)), r0 = v - 256 * kk;
             const int wrap = r0 >= 256;
             rr[j] = wrap ? r0 - 256 : r0;
             pk[j] = wrap ? kk + 1 : kk;
-            int bb = (int) ((wrap ? r0 - 256 : r0) * bins);
-            bb = bb < 0 ? 0 : bb >= nb ? nb - 1 : bb;
-            bin[j] = bb;
+            bin[j] = bin_of(&mv, rr[j]);
             ok[j] &= (what[j] != P1_LANE) | (fabs(dsj) >= 1e-6);
         }
         for (int j = 0; j < n; ++j) {

@@ -115,6 +115,16 @@ static int via_scratch(const half_scratch *hs, const exr_coding_channel_info_t *
            ch->x_samples == 1 && ch->y_samples == 1;
 }
 
+/* Points coding channel ch at a half region of the scratch, `width`
+ * pixels per row, for Core to unpack into or pack from. */
+static void to_scratch(exr_coding_channel_info_t *ch, int width)
+{
+    ch->user_data_type = EXR_PIXEL_HALF;
+    ch->user_bytes_per_element = 2;
+    ch->user_pixel_stride = 2;
+    ch->user_line_stride = 2 * width;
+}
+
 /* hs's buffer, sized for a chunk of `area` pixels in each of the first
  * channels of chs (up to EF_MAX_CHANNELS_SCRATCH) that go via_scratch;
  * *nh of them. NULL when none does, or when out of memory (*nh > 0). */
@@ -172,10 +182,7 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
             continue;
         dest[c] = ch->decode_to_ptr;
         ch->decode_to_ptr = (uint8_t *) (sc + (size_t) i++ * area);
-        ch->user_data_type = EXR_PIXEL_HALF;
-        ch->user_bytes_per_element = 2;
-        ch->user_pixel_stride = 2;
-        ch->user_line_stride = 2 * ci->width;
+        to_scratch(ch, ci->width);
     }
     if (first && (exr_decoding_choose_default_routines(ctx, p, dec) ||
                   (codec == EF_CODEC_LIBDEFLATE && ef_deflate_decoding_setup(ctx, p, dec))))
@@ -375,10 +382,7 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
             ef_float_to_half((const float *) ch->encode_from_ptr + (size_t) r * (size_t) stride,
                              h + (size_t) r * (size_t) ci->width, (size_t) ci->width);
         ch->encode_from_ptr = (const uint8_t *) h;
-        ch->user_data_type = EXR_PIXEL_HALF;
-        ch->user_bytes_per_element = 2;
-        ch->user_pixel_stride = 2;
-        ch->user_line_stride = 2 * ci->width;
+        to_scratch(ch, ci->width);
     }
     if (!*ready) {
         if (exr_encoding_choose_default_routines(j->out, j->part, enc) ||
