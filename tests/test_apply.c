@@ -172,6 +172,9 @@ static const char *const specs[][3] = {
     { "exp:density=0.02" },
     { "exp:density=0.01,0.02,0.03:distance=planar" },
     { "exp2:density=0.03" },
+    /* the distance path with two components, a channel of no fog, both distances */
+    { "exp:density=0.02,0,0.01", "exp2:density=0.01,0,0.03:distance=planar" },
+    { "exp:density=0,0,0", "exp:density=1e300" },
     { "linear:start=2:end=60" },
     { "halfspace:plane=0,1,0,-1.2:density=0.15" },
     { "halfspace:plane=0.1,1,0.2,-1.7:density=0.15,0,0.3" },

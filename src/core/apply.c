@@ -74,6 +74,8 @@ typedef struct fast_span {
     ef_ray r[EF_RECON_SPAN];
     ef_ray q[EF_RECON_SPAN];             /* far segments that differ from r[j] */
     double acc[EF_RECON_SPAN][3];        /* tau along r[j], then along q[m] */
+    double planar[EF_RECON_SPAN], dist[EF_RECON_SPAN];   /* the distance path's rays */
+    double tau[3][EF_RECON_SPAN];
     double T[3][EF_RECON_SPAN], Ti[3][EF_RECON_SPAN];
     double a[EF_RECON_SPAN], c[3][EF_RECON_SPAN];
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
@@ -91,26 +93,55 @@ static void fast_tau(const ef_fog_scene *s, const ef_ray *r, int n, double (*acc
         ef_fog_tau_add(&s->comp[i], r, n, acc);
 }
 
-/* transmit() of scene.c into the planes T[k][j]: ef_exp_neg is a function
- * of tau alone, so computing every channel and selecting gives its bits,
- * in loops the compiler vectorises; a grey span copies the first. */
-EF_MULTIVERSION static void fast_transmit(const double (*acc)[3], int n,
-                                          double T[3][EF_RECON_SPAN])
+/* transmit() of scene.c into the planes T[k][j] from tau planes: ef_exp_neg
+ * is a function of tau alone, so computing every channel and selecting
+ * gives its bits, in loops the compiler vectorises. A grey span (returns 0)
+ * has T[0] only, copied to the others when copy_grey. */
+EF_MULTIVERSION static int fast_transmit(double (*tau)[EF_RECON_SPAN], int n,
+                                         double (*T)[EF_RECON_SPAN], int copy_grey)
 {
     int colour = 0;
     for (int j = 0; j < n; ++j)
-        colour |= (acc[j][1] != acc[j][0]) | (acc[j][2] != acc[j][0]);
+        colour |= (tau[1][j] != tau[0][j]) | (tau[2][j] != tau[0][j]);
     for (int j = 0; j < n; ++j)
-        T[0][j] = ef_exp_neg(acc[j][0]);
+        T[0][j] = ef_exp_neg(tau[0][j]);
     if (!colour) {
-        memcpy(T[1], T[0], (size_t) n * sizeof T[0][0]);
-        memcpy(T[2], T[0], (size_t) n * sizeof T[0][0]);
-        return;
+        if (copy_grey) {
+            memcpy(T[1], T[0], (size_t) n * sizeof T[0][0]);
+            memcpy(T[2], T[0], (size_t) n * sizeof T[0][0]);
+        }
+        return 0;
     }
     for (int j = 0; j < n; ++j) {
-        T[1][j] = ef_exp_neg(acc[j][1]);
-        T[2][j] = ef_exp_neg(acc[j][2]);
+        T[1][j] = ef_exp_neg(tau[1][j]);
+        T[2][j] = ef_exp_neg(tau[2][j]);
     }
+    return 1;
+}
+
+/* fast_tau's sums as planes, and their transmittance. */
+static void fast_tau_transmit(const ef_fog_scene *s, const ef_ray *r, int n, fast_span *sp,
+                              double (*T)[EF_RECON_SPAN])
+{
+    fast_tau(s, r, n, sp->acc);
+    for (int k = 0; k < 3; ++k)
+        for (int j = 0; j < n; ++j)
+            sp->tau[k][j] = sp->acc[j][k];
+    fast_transmit(sp->tau, n, T, 1);
+}
+
+/* The distance path's tau: every component's tau_dist over the planes, in
+ * component order from 0, as sum_tau adds them (the first writes, so the
+ * planes need no clearing). */
+static void dist_tau(const ef_fog_scene *s, const double *planar, const double *dist, int n,
+                     double (*tau)[EF_RECON_SPAN])
+{
+    double *const t[3] = { tau[0], tau[1], tau[2] };
+    if (s->ncomp == 0)
+        for (int k = 0; k < 3; ++k)
+            memset(tau[k], 0, (size_t) n * sizeof tau[k][0]);
+    for (int i = 0; i < s->ncomp; ++i)
+        s->comp[i].model->tau_dist(&s->comp[i], planar, dist, n, i == 0, t);
 }
 
 EF_MULTIVERSION static void fast_composite(fast_span *sp, int n, const double F[3],
@@ -141,13 +172,12 @@ EF_MULTIVERSION static void fast_composite(fast_span *sp, int n, const double F[
         }
 }
 
-/* to_float as selects, so that a loop of it vectorises: the same value. */
+/* to_float as selects in double, then one conversion: the same value (an
+ * infinity converts exactly), in a loop that vectorises without mixing
+ * double and float masks. */
 static inline float to_float_sel(double v)
 {
-    double m = v > FLT_MAX ? FLT_MAX : v;
-    m = m < -FLT_MAX ? -FLT_MAX : m;           /* in range (or NaN): the cast is defined */
-    const float f = (float) m;
-    return v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : f;
+    return (float) (v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : v);
 }
 
 /* Writes the span back: kept pixels (sky pixels under --sky keep) and
@@ -184,6 +214,25 @@ EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, fl
             if (pa && keep_a[j])
                 pa[j] = kept[3][j];
         }
+}
+
+/* Whether the scene takes the distance path: every component reads the
+ * distances alone (tau_dist), and the background is not a shell at a
+ * distance (whose far segments differ per pixel). Then the far segment of
+ * every pixel is the ray to infinity, one value per frame, and no ray is
+ * built. Also whether a component needs the true distance (not only the
+ * planar one). */
+static int dist_path(const ef_fog_scene *s, int *need_dist)
+{
+    *need_dist = 0;
+    if (s->sky == EF_SKY_DISTANCE_MODE)
+        return 0;
+    for (int c = 0; c < s->ncomp; ++c) {
+        if (!s->comp[c].model->tau_dist)
+            return 0;
+        *need_dist |= s->comp[c].distance != EF_DIST_PLANAR;
+    }
+    return 1;
 }
 
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
@@ -233,8 +282,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 sp->c[1][j] = pg[j];
             for (int j = 0; j < n; ++j)
                 sp->c[2][j] = pb[j];
-            fast_tau(s, sp->r, n, sp->acc);
-            fast_transmit((const double (*)[3]) sp->acc, n, sp->T);
+            fast_tau_transmit(s, sp->r, n, sp, sp->T);
             for (int k = 0; k < 3; ++k)
                 for (int j = 0; j < n; ++j)
                     sp->Ti[k][j] = sp->T[k][j];
@@ -250,8 +298,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 }
                 if (nq) {
                     double T[3][EF_RECON_SPAN];
-                    fast_tau(s, sp->q, nq, sp->acc);
-                    fast_transmit((const double (*)[3]) sp->acc, nq, T);
+                    fast_tau_transmit(s, sp->q, nq, sp, T);
                     for (int m = 0; m < nq; ++m)
                         for (int k = 0; k < 3; ++k)
                             sp->Ti[k][sp->qj[m]] = T[k][m];
@@ -261,6 +308,100 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
             fast_store(sp, n, pr, pg, pb, pa, keep_sky, (keep_sky && nsky) || nbad);
+        }
+    }
+}
+
+/* One channel of a pixel of dist_composite: fast_composite's value, or the
+ * input where the pixel is kept. */
+static inline float dist_channel(double c, double t, double a, double omTi, double f, int keep,
+                                 int keep_sky)
+{
+    const double tc = t * c;   /* unconditional: the select vectorises */
+    double v = (t > 0.0 ? tc : 0.0) + (1.0 - t) * a * f;
+    if (!keep_sky)
+        v = v + (1.0 - a) * omTi * f;
+    return to_float_sel(keep ? c : v);
+}
+
+/* dist_composite's loop for constant flags, so that each instance is one
+ * branch-free loop the compiler vectorises. */
+static inline void dist_composite_loop(const double *restrict T0, const double *restrict T1,
+                                       const double *restrict T2, const double omTi[3],
+                                       double cover, const double F[3], int n,
+                                       float *restrict pr, float *restrict pg,
+                                       float *restrict pb, float *restrict pa,
+                                       const unsigned char *restrict sky, int has_alpha,
+                                       int keep_sky)
+{
+    const double o0 = omTi[0], o1 = omTi[1], o2 = omTi[2], f0 = F[0], f1 = F[1], f2 = F[2];
+    for (int j = 0; j < n; ++j) {
+        const double ain = has_alpha ? pa[j] : 1.0;
+        const int bad = !isfinite(ain);
+        const double a = bad ? 1.0 : ain;
+        const int keep = keep_sky && sky[j];
+        pr[j] = dist_channel(pr[j], T0[j], a, o0, f0, keep, keep_sky);
+        pg[j] = dist_channel(pg[j], T1[j], a, o1, f1, keep, keep_sky);
+        pb[j] = dist_channel(pb[j], T2[j], a, o2, f2, keep, keep_sky);
+        if (has_alpha) {
+            const double av = keep_sky ? a : a + (1.0 - a) * cover;
+            pa[j] = to_float_sel(keep || bad ? ain : av);
+        }
+    }
+}
+
+/* fast_composite and fast_store of one span of the distance path in one
+ * loop, from the floats to the floats: T[k] per pixel, Ti constant (see
+ * dist_block), so (1 - Ti) and the alpha's cover are constants. The same
+ * operations in the same order: the same bits. */
+EF_MULTIVERSION static void dist_composite(const double *const T[3], const double omTi[3],
+                                           double cover, const double F[3], int n, float *pr,
+                                           float *pg, float *pb, float *pa,
+                                           const unsigned char *sky, int keep_sky)
+{
+    if (pa && keep_sky)
+        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 1, 1);
+    else if (pa)
+        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 1, 0);
+    else if (keep_sky)
+        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 0, 1);
+    else
+        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 0, 0);
+}
+
+/* The distance path (dist_path): per span the distances
+ * (ef_reconstruct_dist), the tau planes, T, and dist_composite. Where a
+ * pixel's far segment is another than its own ray, it is the ray to
+ * infinity (ef_scene_far_ray), of one T per frame, Tinf. Where it is not,
+ * either the ray is that ray, or the pixel's alpha is 1 and its term
+ * (1 - a)(1 - Ti) f is +-0 whatever Ti in [0, 1]: Tinf for every pixel
+ * gives fast_block's bits. */
+EF_MULTIVERSION static void dist_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
+                                       float *const rgb[3], float *alpha, const float *depth,
+                                       int need_dist, fast_span *sp)
+{
+    const ef_fog_scene *s = pass->scene;
+    const int keep_sky = s->sky == EF_SKY_KEEP;
+    const double inf = INFINITY;
+    double Ti[3], omTi[3];
+    dist_tau(s, &inf, &inf, 1, sp->tau);
+    for (int k = 0; k < 3; ++k) {
+        Ti[k] = ef_exp_neg(sp->tau[k][0]);
+        omTi[k] = 1.0 - Ti[k];
+    }
+    const double cover = (3.0 - Ti[0] - Ti[1] - Ti[2]) / 3.0;
+    for (int yy = 0; yy < h; ++yy) {
+        const int y = y0 + yy;
+        for (int xs = 0; xs < w; xs += EF_RECON_SPAN) {
+            const int n = w - xs < EF_RECON_SPAN ? w - xs : EF_RECON_SPAN;
+            const size_t i0 = (size_t) yy * (size_t) w + (size_t) xs;
+            ef_reconstruct_dist(pass->cam, pass->conv, x0 + xs, y, n, depth + i0, need_dist,
+                                sp->planar, sp->dist, sp->sky);
+            dist_tau(s, sp->planar, sp->dist, n, sp->tau);
+            const int colour = fast_transmit(sp->tau, n, sp->T, 0);
+            const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
+            dist_composite(T, omTi, cover, s->color, n, rgb[0] + i0, rgb[1] + i0, rgb[2] + i0,
+                           alpha ? alpha + i0 : NULL, sp->sky, keep_sky);
         }
     }
 }
@@ -280,7 +421,11 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
     if (!mask && !s->any_color && !want_info) {
         fast_span sp;
-        fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only, &sp);
+        int need_dist;
+        if (dist_path(s, &need_dist))
+            dist_block(pass, x0, y0, w, h, rgb, alpha, depth, need_dist, &sp);
+        else
+            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only, &sp);
         return;
     }
     const int fog_uncovered = s->sky != EF_SKY_KEEP;

@@ -118,6 +118,13 @@ typedef struct ef_fog_model {
     /* Optional: caches what every ray from the camera at org repeats
      * (ef_fog_bind calls it); tau must give the same bits with or without. */
     void (*bind)(ef_fog_component *c, const double org[3]);
+    /* Optional, depth-only models: adds tau in channel k to tau[k][j], j < n
+     * (to 0 when first: the planes are then only written), for the ray of
+     * planar distance planar[j] and distance dist[j], the same bits as
+     * tau() of such a ray added. The fog pass then builds no rays. dist is
+     * only read for distance=radial. */
+    void (*tau_dist)(const ef_fog_component *c, const double *planar, const double *dist, int n,
+                     int first, double *const tau[3]);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

@@ -4,6 +4,8 @@
  * no density for the reference integrator; their tests use glFog's formulas. */
 #include "fog.h"
 
+#include "exact.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -37,7 +39,7 @@ static int finish_density(ef_fog_component *c, const ef_fog_context *ctx, ef_err
 }
 
 /* rho * z with the exact limit at infinity (0 * inf is 0: no fog stays no fog). */
-static double scaled(double rho, double z)
+static inline double scaled(double rho, double z)
 {
     return rho == 0.0 ? 0.0 : rho * z;
 }
@@ -60,12 +62,47 @@ static void tau_add_exp(const ef_fog_component *c, const ef_ray *r, int n, doubl
     }
 }
 
+/* tau_exp from the distances alone, into planes: tau[k][j] += rho_k z_j
+ * (from 0 when first). */
+EF_MULTIVERSION static void tau_dist_exp(const ef_fog_component *c, const double *planar,
+                                         const double *dist, int n, int first,
+                                         double *const tau[3])
+{
+    const double *z = c->distance == EF_DIST_PLANAR ? planar : dist;
+    for (int i = 0; i < 3; ++i) {
+        const double rho = c->p[i];
+        double *t = tau[i];
+        if (first)
+            for (int j = 0; j < n; ++j)
+                t[j] = 0.0 + scaled(rho, z[j]);
+        else
+            for (int j = 0; j < n; ++j)
+                t[j] += scaled(rho, z[j]);
+    }
+}
+
 static void tau_exp2(const ef_fog_component *c, const ef_ray *r, double tau[3])
 {
     const double z = ef_fog_distance(c, r);
     for (int i = 0; i < 3; ++i) {
         const double t = scaled(c->p[i], z);
         tau[i] = t * t;
+    }
+}
+
+/* tau_exp2 from the distances alone: scaled() squared, as tau_dist_exp adds. */
+EF_MULTIVERSION static void tau_dist_exp2(const ef_fog_component *c, const double *planar,
+                                          const double *dist, int n, int first,
+                                          double *const tau[3])
+{
+    const double *z = c->distance == EF_DIST_PLANAR ? planar : dist;
+    for (int i = 0; i < 3; ++i) {
+        const double rho = c->p[i];
+        double *t = tau[i];
+        for (int j = 0; j < n; ++j) {
+            const double v = scaled(rho, z[j]);
+            t[j] = (first ? 0.0 : t[j]) + v * v;
+        }
     }
 }
 
@@ -109,7 +146,8 @@ const ef_fog_model ef_fog_linear = { .name = "linear", .keys = linear_keys, .set
                                      .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp = { .name = "exp", .keys = density_keys, .set = set_density,
                                   .finish = finish_density, .tau = tau_exp,
-                                  .tau_add = tau_add_exp, .depth_only = 1, .uses_distance = 1 };
+                                  .tau_add = tau_add_exp, .tau_dist = tau_dist_exp, .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp2 = { .name = "exp2", .keys = density_keys, .set = set_density,
                                    .finish = finish_density, .tau = tau_exp2,
+                                   .tau_dist = tau_dist_exp2,
                                    .depth_only = 1, .uses_distance = 1 };

@@ -30,6 +30,13 @@ int ef_reconstruct(const ef_camera *cam, const ef_depth_conv *conv,
 void ef_reconstruct_span(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
                          const float *depth, int need_dir, ef_ray *r, unsigned char *sky);
 
+/* ef_reconstruct_span for users of the distances alone: planar[i] and,
+ * when need_dist, dist[i] (else left as they were), the same bits as
+ * r[i].planar and r[i].dist, without building rays. */
+void ef_reconstruct_dist(const ef_camera *cam, const ef_depth_conv *conv, int x0, int y, int n,
+                         const float *depth, int need_dist, double *planar, double *dist,
+                         unsigned char *sky);
+
 /* The ray of pixel (x, y) ending at radial distance dist (INFINITY allowed). */
 void ef_ray_at_distance(const ef_camera *cam, int x, int y, double dist, ef_ray *r);
 
