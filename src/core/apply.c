@@ -77,9 +77,8 @@ typedef struct fast_span {
     double planar[EF_RECON_SPAN], dist[EF_RECON_SPAN];   /* the distance path's rays */
     double tau[3][EF_RECON_SPAN];
     double T[3][EF_RECON_SPAN], Ti[3][EF_RECON_SPAN];
-    double a[EF_RECON_SPAN], c[3][EF_RECON_SPAN];
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
-    unsigned char sky[EF_RECON_SPAN], bad[EF_RECON_SPAN];
+    unsigned char sky[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
 } fast_span;
 
@@ -144,76 +143,12 @@ static void dist_tau(const ef_fog_scene *s, const double *planar, const double *
         s->comp[i].model->tau_dist(&s->comp[i], planar, dist, n, i == 0, t);
 }
 
-EF_MULTIVERSION static void fast_composite(fast_span *sp, int n, const double F[3],
-                                           int fog_uncovered, int has_alpha)
-{
-    for (int k = 0; k < 3; ++k) {
-        const double *T = sp->T[k], *Ti = sp->Ti[k];
-        double *c = sp->c[k];
-        const double f = F[k];
-        if (fog_uncovered)
-            for (int j = 0; j < n; ++j) {
-                const double a = sp->a[j];
-                const double tc = T[j] * c[j];   /* unconditional: the select vectorises */
-                c[j] = ((T[j] > 0.0 ? tc : 0.0) + (1.0 - T[j]) * a * f) +
-                       (1.0 - a) * (1.0 - Ti[j]) * f;
-            }
-        else
-            for (int j = 0; j < n; ++j) {
-                const double tc = T[j] * c[j];
-                c[j] = (T[j] > 0.0 ? tc : 0.0) + (1.0 - T[j]) * sp->a[j] * f;
-            }
-    }
-    if (has_alpha && fog_uncovered)
-        for (int j = 0; j < n; ++j) {
-            const double a = sp->a[j];
-            const double cover = (3.0 - sp->Ti[0][j] - sp->Ti[1][j] - sp->Ti[2][j]) / 3.0;
-            sp->a[j] = a + (1.0 - a) * cover;
-        }
-}
-
 /* to_float as selects in double, then one conversion: the same value (an
  * infinity converts exactly), in a loop that vectorises without mixing
  * double and float masks. */
 static inline float to_float_sel(double v)
 {
     return (float) (v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : v);
-}
-
-/* Writes the span back: kept pixels (sky pixels under --sky keep) and
- * damaged alphas as they were. */
-EF_MULTIVERSION static void fast_store(const fast_span *sp, int n, float *pr, float *pg,
-                                       float *pb, float *pa, int keep_sky, int any_kept)
-{
-    float *const out[3] = { pr, pg, pb };
-    float kept[4][EF_RECON_SPAN];
-    /* Sky pixels with --sky keep, and damaged alphas: put back as they were. */
-    unsigned char keep[EF_RECON_SPAN], keep_a[EF_RECON_SPAN];
-    if (any_kept)
-        for (int j = 0; j < n; ++j) {
-            keep[j] = sp->sky[j] && keep_sky;
-            keep_a[j] = keep[j] || (pa && sp->bad[j]);
-            for (int k = 0; k < 3; ++k)
-                kept[k][j] = out[k][j];
-            kept[3][j] = pa ? pa[j] : 0.0f;
-        }
-    for (int k = 0; k < 3; ++k) {
-        float *o = out[k];
-        const double *c = sp->c[k];
-        for (int j = 0; j < n; ++j)
-            o[j] = to_float_sel(c[j]);
-    }
-    if (pa)
-        for (int j = 0; j < n; ++j)
-            pa[j] = to_float_sel(sp->a[j]);
-    if (any_kept)
-        for (int j = 0; j < n; ++j) {
-            if (keep[j])
-                for (int k = 0; k < 3; ++k)
-                    out[k][j] = kept[k][j];
-            if (pa && keep_a[j])
-                pa[j] = kept[3][j];
-        }
 }
 
 /* Whether the scene takes the distance path: every component reads the
@@ -233,6 +168,78 @@ static int dist_path(const ef_fog_scene *s, int *need_dist)
         *need_dist |= s->comp[c].distance != EF_DIST_PLANAR;
     }
     return 1;
+}
+
+/* One channel of a pixel: ef_composite's value, or the input where the
+ * pixel is kept. omTi = 1 - Ti, the far segment's. */
+static inline float span_channel(double c, double t, double a, double omTi, double f, int keep,
+                                 int keep_sky)
+{
+    const double tc = t * c;   /* unconditional: the select vectorises */
+    double v = (t > 0.0 ? tc : 0.0) + (1.0 - t) * a * f;
+    if (!keep_sky)
+        v = v + (1.0 - a) * omTi * f;
+    return to_float_sel(keep ? c : v);
+}
+
+/* span_composite's loop for constant flags, so that each instance is one
+ * branch-free loop the compiler vectorises. With const_ti, the far
+ * segment's T is the same for every pixel (omTi and cover given), else
+ * Ti[k][j] per pixel. */
+static inline void span_composite_loop(const double *restrict T0, const double *restrict T1,
+                                       const double *restrict T2, const double *restrict Ti0,
+                                       const double *restrict Ti1, const double *restrict Ti2,
+                                       const double omTi[3], double cover_c, const double F[3],
+                                       int n, float *restrict pr, float *restrict pg,
+                                       float *restrict pb, float *restrict pa,
+                                       const unsigned char *restrict sky, int has_alpha,
+                                       int keep_sky, int const_ti)
+{
+    const double f0 = F[0], f1 = F[1], f2 = F[2];
+    for (int j = 0; j < n; ++j) {
+        const double ain = has_alpha ? pa[j] : 1.0;
+        const int bad = !isfinite(ain);
+        const double a = bad ? 1.0 : ain;
+        const int keep = keep_sky && sky[j];
+        const double o0 = const_ti ? omTi[0] : 1.0 - Ti0[j];
+        const double o1 = const_ti ? omTi[1] : 1.0 - Ti1[j];
+        const double o2 = const_ti ? omTi[2] : 1.0 - Ti2[j];
+        pr[j] = span_channel(pr[j], T0[j], a, o0, f0, keep, keep_sky);
+        pg[j] = span_channel(pg[j], T1[j], a, o1, f1, keep, keep_sky);
+        pb[j] = span_channel(pb[j], T2[j], a, o2, f2, keep, keep_sky);
+        if (has_alpha) {
+            const double cover =
+                const_ti ? cover_c : (3.0 - Ti0[j] - Ti1[j] - Ti2[j]) / 3.0;
+            const double av = keep_sky ? a : a + (1.0 - a) * cover;
+            pa[j] = to_float_sel(keep || bad ? ain : av);
+        }
+    }
+}
+
+/* Composites one span in place, from the floats to the floats: ef_composite
+ * per pixel (T[k] to the surface, the far segment's Ti[k] or, when Ti is
+ * NULL, one far T per frame given as omTi = 1 - Ti and the alpha's cover),
+ * then pixels kept (sky with --sky keep) and damaged alphas written back as
+ * they were. The same operations in the same order: the same bits. */
+EF_MULTIVERSION static void span_composite(const double *const T[3], const double *const Ti[3],
+                                           const double omTi[3], double cover, const double F[3],
+                                           int n, float *pr, float *pg, float *pb, float *pa,
+                                           const unsigned char *sky, int keep_sky)
+{
+#define SPAN_COMPOSITE(has_alpha, keep, const_ti)                                            \
+    span_composite_loop(T[0], T[1], T[2], Ti ? Ti[0] : NULL, Ti ? Ti[1] : NULL,             \
+                        Ti ? Ti[2] : NULL, omTi, cover, F, n, pr, pg, pb, pa, sky, has_alpha, \
+                        keep, const_ti)
+    const int ct = Ti == NULL;
+    if (pa && keep_sky)
+        ct ? SPAN_COMPOSITE(1, 1, 1) : SPAN_COMPOSITE(1, 1, 0);
+    else if (pa)
+        ct ? SPAN_COMPOSITE(1, 0, 1) : SPAN_COMPOSITE(1, 0, 0);
+    else if (keep_sky)
+        ct ? SPAN_COMPOSITE(0, 1, 1) : SPAN_COMPOSITE(0, 1, 0);
+    else
+        ct ? SPAN_COMPOSITE(0, 0, 1) : SPAN_COMPOSITE(0, 0, 0);
+#undef SPAN_COMPOSITE
 }
 
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
@@ -257,31 +264,17 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 for (int j = 0; j < n; ++j)
                     if (sp->sky[j])
                         ef_ray_at_distance(pass->cam, x0 + xs + j, y, s->sky_distance, &sp->r[j]);
-            /* A NaN or infinite alpha is fogged as opaque and written back as it was. */
-            int nbad = 0, ninf = 0;
-            if (pa)
-                for (int j = 0; j < n; ++j) {
-                    const double a = pa[j];
-                    const int bad = !isfinite(a);
-                    sp->bad[j] = (unsigned char) bad;
-                    sp->a[j] = bad ? 1.0 : a;
-                    nbad += bad;
-                }
-            else
-                for (int j = 0; j < n; ++j)
-                    sp->a[j] = 1.0;
+            /* The far segment is needed where the pixel is not opaque (a
+             * NaN or infinite alpha is fogged as opaque) or its ray is
+             * infinite. */
+            int ninf = 0;
             if (fog_uncovered)
                 for (int j = 0; j < n; ++j) {
-                    const int need = !(sp->a[j] == 1.0 && isfinite(sp->r[j].dist));
+                    const double a = pa ? pa[j] : 1.0;
+                    const int need = !((a == 1.0 || !isfinite(a)) && isfinite(sp->r[j].dist));
                     sp->need_inf[j] = (unsigned char) need;
                     ninf += need;
                 }
-            for (int j = 0; j < n; ++j)
-                sp->c[0][j] = pr[j];
-            for (int j = 0; j < n; ++j)
-                sp->c[1][j] = pg[j];
-            for (int j = 0; j < n; ++j)
-                sp->c[2][j] = pb[j];
             fast_tau_transmit(s, sp->r, n, sp, sp->T);
             for (int k = 0; k < 3; ++k)
                 for (int j = 0; j < n; ++j)
@@ -304,73 +297,17 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                             sp->Ti[k][sp->qj[m]] = T[k][m];
                 }
             }
-            fast_composite(sp, n, s->color, fog_uncovered, alpha != NULL);
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
-            fast_store(sp, n, pr, pg, pb, pa, keep_sky, (keep_sky && nsky) || nbad);
+            const double *const T[3] = { sp->T[0], sp->T[1], sp->T[2] };
+            const double *const Ti[3] = { sp->Ti[0], sp->Ti[1], sp->Ti[2] };
+            span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky);
         }
     }
-}
-
-/* One channel of a pixel of dist_composite: fast_composite's value, or the
- * input where the pixel is kept. */
-static inline float dist_channel(double c, double t, double a, double omTi, double f, int keep,
-                                 int keep_sky)
-{
-    const double tc = t * c;   /* unconditional: the select vectorises */
-    double v = (t > 0.0 ? tc : 0.0) + (1.0 - t) * a * f;
-    if (!keep_sky)
-        v = v + (1.0 - a) * omTi * f;
-    return to_float_sel(keep ? c : v);
-}
-
-/* dist_composite's loop for constant flags, so that each instance is one
- * branch-free loop the compiler vectorises. */
-static inline void dist_composite_loop(const double *restrict T0, const double *restrict T1,
-                                       const double *restrict T2, const double omTi[3],
-                                       double cover, const double F[3], int n,
-                                       float *restrict pr, float *restrict pg,
-                                       float *restrict pb, float *restrict pa,
-                                       const unsigned char *restrict sky, int has_alpha,
-                                       int keep_sky)
-{
-    const double o0 = omTi[0], o1 = omTi[1], o2 = omTi[2], f0 = F[0], f1 = F[1], f2 = F[2];
-    for (int j = 0; j < n; ++j) {
-        const double ain = has_alpha ? pa[j] : 1.0;
-        const int bad = !isfinite(ain);
-        const double a = bad ? 1.0 : ain;
-        const int keep = keep_sky && sky[j];
-        pr[j] = dist_channel(pr[j], T0[j], a, o0, f0, keep, keep_sky);
-        pg[j] = dist_channel(pg[j], T1[j], a, o1, f1, keep, keep_sky);
-        pb[j] = dist_channel(pb[j], T2[j], a, o2, f2, keep, keep_sky);
-        if (has_alpha) {
-            const double av = keep_sky ? a : a + (1.0 - a) * cover;
-            pa[j] = to_float_sel(keep || bad ? ain : av);
-        }
-    }
-}
-
-/* fast_composite and fast_store of one span of the distance path in one
- * loop, from the floats to the floats: T[k] per pixel, Ti constant (see
- * dist_block), so (1 - Ti) and the alpha's cover are constants. The same
- * operations in the same order: the same bits. */
-EF_MULTIVERSION static void dist_composite(const double *const T[3], const double omTi[3],
-                                           double cover, const double F[3], int n, float *pr,
-                                           float *pg, float *pb, float *pa,
-                                           const unsigned char *sky, int keep_sky)
-{
-    if (pa && keep_sky)
-        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 1, 1);
-    else if (pa)
-        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 1, 0);
-    else if (keep_sky)
-        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 0, 1);
-    else
-        dist_composite_loop(T[0], T[1], T[2], omTi, cover, F, n, pr, pg, pb, pa, sky, 0, 0);
 }
 
 /* The distance path (dist_path): per span the distances
- * (ef_reconstruct_dist), the tau planes, T, and dist_composite. Where a
+ * (ef_reconstruct_dist), the tau planes, T, and span_composite. Where a
  * pixel's far segment is another than its own ray, it is the ray to
  * infinity (ef_scene_far_ray), of one T per frame, Tinf. Where it is not,
  * either the ray is that ray, or the pixel's alpha is 1 and its term
@@ -400,8 +337,8 @@ EF_MULTIVERSION static void dist_block(const ef_fog_pass *pass, int x0, int y0, 
             dist_tau(s, sp->planar, sp->dist, n, sp->tau);
             const int colour = fast_transmit(sp->tau, n, sp->T, 0);
             const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
-            dist_composite(T, omTi, cover, s->color, n, rgb[0] + i0, rgb[1] + i0, rgb[2] + i0,
-                           alpha ? alpha + i0 : NULL, sp->sky, keep_sky);
+            span_composite(T, NULL, omTi, cover, s->color, n, rgb[0] + i0, rgb[1] + i0,
+                           rgb[2] + i0, alpha ? alpha + i0 : NULL, sp->sky, keep_sky);
         }
     }
 }
