@@ -70,8 +70,11 @@ static void fill(float *rgb[3], float *alpha, float *depth, unsigned seed)
 }
 
 /* The pass, one pixel at a time, from the documented parts. */
-static void reference(const ef_fog_pass *pass, float *rgb[3], float *alpha, const float *depth)
+/* Returns how many composited values lie just above FLT_MAX, where a plain
+ * conversion would round down to FLT_MAX and to_float gives infinity. */
+static int reference(const ef_fog_pass *pass, float *rgb[3], float *alpha, const float *depth)
 {
+    int sliver = 0;
     const ef_fog_scene *s = pass->scene;
     const int fog_uncovered = s->sky != EF_SKY_KEEP;
     for (int y = 0; y < H; ++y)
@@ -94,11 +97,14 @@ static void reference(const ef_fog_pass *pass, float *rgb[3], float *alpha, cons
             for (int k = 0; k < 3; ++k)
                 c[k] = rgb[k][i];
             ef_composite(&surf, need_inf ? &inf : &surf, fog_uncovered, c, alpha ? &a : NULL);
-            for (int k = 0; k < 3; ++k)
+            for (int k = 0; k < 3; ++k) {
+                sliver += fabs(c[k]) > 3.4028234663852886e38 && fabs(c[k]) < 0x1.ffffffp127;
                 rgb[k][i] = to_float(c[k]);
+            }
             if (alpha && !bad)
                 alpha[i] = to_float(a);
         }
+    return sliver;
 }
 
 static void check_scene(ef_fog_scene *s, const ef_camera *cam, ef_depth_mode mode)
@@ -221,6 +227,49 @@ static void test_block_matches_pixels(void **state)
                 }
 }
 
+/* Composited values just above FLT_MAX become infinities in the block pass
+ * as per pixel (its conversion relies on IEC 60559 overflow): opaque-ish
+ * huge alphas times the largest fog colour, seen through T > 0.5. */
+static void test_float_overflow(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    ef_err err;
+    ef_scene_init(&s);
+    assert_int_equal(ef_scene_add(&s, "exp:density=0.05", &err), 0);
+    assert_int_equal(ef_scene_parse_sky(&s, "keep", &err), 0);
+    for (int k = 0; k < 3; ++k)
+        s.color[k] = 65504.0;
+    ef_camera cam;
+    make_camera(&cam, 0);
+    ef_depth_conv conv;
+    assert_int_equal(ef_depth_conv_init(&conv, EF_DEPTH_PLANAR, &cam, &err), 0);
+    ef_scene_bind(&s, cam.pos);
+    const ef_fog_pass pass = { &cam, &conv, &s };
+    static float ref[4][W * H], got[4][W * H], depth[W * H];
+    float a = (float) (3.4028234663852886e38 / 65504.0);
+    while ((double) a * 65504.0 <= 3.4028234663852886e38)
+        a = nextafterf(a, INFINITY);
+    for (int i = 0; i < W * H; ++i) {
+        depth[i] = 0.25f + 12.0f * (float) i / (W * H);
+        for (int k = 0; k < 3; ++k)
+            ref[k][i] = got[k][i] = k == 1 ? 3.4028234663852886e38f : 1e38f * (float) k;
+        ref[3][i] = got[3][i] = i % 5 ? a : a * 0.999f;
+    }
+    float *r[3] = { ref[0], ref[1], ref[2] }, *g[3] = { got[0], got[1], got[2] };
+    const int sliver = reference(&pass, r, ref[3], depth);
+    ef_fog_block(&pass, 0, 0, W, H, g, got[3], depth);
+    assert_true(sliver > 10);
+    int infs = 0;
+    for (int k = 0; k < 4; ++k)
+        for (int i = 0; i < W * H; ++i) {
+            assert_memory_equal(&got[k][i], &ref[k][i], sizeof(float));
+            infs += isinf(got[k][i]);
+        }
+    assert_true(infs >= sliver);
+    ef_scene_free(&s);
+}
+
 /* A random unit direction; every 4th one along or across an axis (the
  * planes' grazing and parallel cases), some with zero components. */
 static void random_dir(double d[3], int i)
@@ -301,6 +350,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_block_matches_pixels),
+        cmocka_unit_test(test_float_overflow),
         cmocka_unit_test(test_bound_tau_same_bits),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

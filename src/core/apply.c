@@ -143,12 +143,18 @@ static void dist_tau(const ef_fog_scene *s, const double *planar, const double *
         s->comp[i].model->tau_dist(&s->comp[i], planar, dist, n, i == 0, t);
 }
 
-/* to_float as selects in double, then one conversion: the same value (an
- * infinity converts exactly), in a loop that vectorises without mixing
- * double and float masks. */
+/* to_float without branches: under IEC 60559 (Annex F) a double at least
+ * half an ulp beyond FLT_MAX converts to an infinity, and one just above
+ * FLT_MAX would round down to it, so |v| > FLT_MAX is doubled first. The
+ * same value as to_float for every v (NaN included); the factor is a select
+ * of constants, so the loops vectorise without narrowing masks to floats. */
+#if !defined(__STDC_IEC_559__) && !defined(__GCC_IEC_559)
+#error "to_float_sel needs IEC 60559 floating point (C11 Annex F)"
+#endif
 static inline float to_float_sel(double v)
 {
-    return (float) (v > FLT_MAX ? INFINITY : v < -FLT_MAX ? -INFINITY : v);
+    const double k = fabs(v) > FLT_MAX ? 2.0 : 1.0;
+    return (float) (v * k);
 }
 
 /* Whether the scene takes the distance path: every component reads the
