@@ -277,7 +277,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             if (fog_uncovered)
                 for (int j = 0; j < n; ++j) {
                     const double a = pa ? pa[j] : 1.0;
-                    const int need = !((a == 1.0 || !isfinite(a)) && isfinite(sp->r[j].dist));
+                    const int need = !(((a == 1.0) | !isfinite(a)) & isfinite(sp->r[j].dist));
                     sp->need_inf[j] = (unsigned char) need;
                     ninf += need;
                 }
