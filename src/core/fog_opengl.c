@@ -62,23 +62,29 @@ static void tau_add_exp(const ef_fog_component *c, const ef_ray *r, int n, doubl
     }
 }
 
-/* tau_exp from the distances alone, into planes: tau[k][j] += rho_k z_j
- * (from 0 when first). */
-EF_MULTIVERSION static void tau_dist_exp(const ef_fog_component *c, const double *planar,
-                                         const double *dist, int n, int first,
-                                         double *const tau[3])
+/* tau_exp (square = 0) or tau_exp2 (square = 1) from the distances alone,
+ * into planes: tau[k][j] += scaled(rho_k, z_j), squared for exp2 (from 0
+ * when first). */
+static inline void tau_dist_pow(const ef_fog_component *c, const double *planar,
+                                const double *dist, int n, int first, double *const tau[3],
+                                int square)
 {
     const double *z = c->distance == EF_DIST_PLANAR ? planar : dist;
     for (int i = 0; i < 3; ++i) {
         const double rho = c->p[i];
         double *t = tau[i];
-        if (first)
-            for (int j = 0; j < n; ++j)
-                t[j] = 0.0 + scaled(rho, z[j]);
-        else
-            for (int j = 0; j < n; ++j)
-                t[j] += scaled(rho, z[j]);
+        for (int j = 0; j < n; ++j) {
+            const double v = scaled(rho, z[j]);
+            t[j] = (first ? 0.0 : t[j]) + (square ? v * v : v);
+        }
     }
+}
+
+EF_MULTIVERSION static void tau_dist_exp(const ef_fog_component *c, const double *planar,
+                                         const double *dist, int n, int first,
+                                         double *const tau[3])
+{
+    tau_dist_pow(c, planar, dist, n, first, tau, 0);
 }
 
 static void tau_exp2(const ef_fog_component *c, const ef_ray *r, double tau[3])
@@ -90,20 +96,11 @@ static void tau_exp2(const ef_fog_component *c, const ef_ray *r, double tau[3])
     }
 }
 
-/* tau_exp2 from the distances alone: scaled() squared, as tau_dist_exp adds. */
 EF_MULTIVERSION static void tau_dist_exp2(const ef_fog_component *c, const double *planar,
                                           const double *dist, int n, int first,
                                           double *const tau[3])
 {
-    const double *z = c->distance == EF_DIST_PLANAR ? planar : dist;
-    for (int i = 0; i < 3; ++i) {
-        const double rho = c->p[i];
-        double *t = tau[i];
-        for (int j = 0; j < n; ++j) {
-            const double v = scaled(rho, z[j]);
-            t[j] = (first ? 0.0 : t[j]) + v * v;
-        }
-    }
+    tau_dist_pow(c, planar, dist, n, first, tau, 1);
 }
 
 /* p[0] = start, p[1] = end, in scene units (they are distances in the scene). */
