@@ -118,15 +118,16 @@ EF_MULTIVERSION static int fast_transmit(double (*tau)[EF_RECON_SPAN], int n,
     return 1;
 }
 
-/* fast_tau's sums as planes, and their transmittance. */
-static void fast_tau_transmit(const ef_fog_scene *s, const ef_ray *r, int n, fast_span *sp,
-                              double (*T)[EF_RECON_SPAN])
+/* fast_tau's sums as planes, and their transmittance (fast_transmit: 0 for
+ * a grey span, whose T[0] alone is set unless copy_grey). */
+static int fast_tau_transmit(const ef_fog_scene *s, const ef_ray *r, int n, fast_span *sp,
+                             double (*T)[EF_RECON_SPAN], int copy_grey)
 {
     fast_tau(s, r, n, sp->acc);
     for (int k = 0; k < 3; ++k)
         for (int j = 0; j < n; ++j)
             sp->tau[k][j] = sp->acc[j][k];
-    fast_transmit(sp->tau, n, T, 1);
+    return fast_transmit(sp->tau, n, T, copy_grey);
 }
 
 /* The distance path's tau: every component's tau_dist over the planes, in
@@ -272,41 +273,43 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                         ef_ray_at_distance(pass->cam, x0 + xs + j, y, s->sky_distance, &sp->r[j]);
             /* The far segment is needed where the pixel is not opaque (a
              * NaN or infinite alpha is fogged as opaque) or its ray is
-             * infinite. */
+             * infinite, and it is looked for only where it may be another
+             * segment than the pixel's own: a ray to infinity both ways is
+             * its own far segment (ef_scene_far_ray, whatever the sky). */
             int ninf = 0;
             if (fog_uncovered)
                 for (int j = 0; j < n; ++j) {
-                    const double a = pa ? pa[j] : 1.0;
-                    const int need = !(((a == 1.0) | !isfinite(a)) & isfinite(sp->r[j].dist));
+                    const double a = pa ? pa[j] : 1.0, d = sp->r[j].dist, p = sp->r[j].planar;
+                    const int need = !(((a == 1.0) | !isfinite(a)) & isfinite(d)) &
+                                     !((d == INFINITY) & (p == INFINITY));
                     sp->need_inf[j] = (unsigned char) need;
                     ninf += need;
                 }
-            fast_tau_transmit(s, sp->r, n, sp, sp->T);
-            for (int k = 0; k < 3; ++k)
-                for (int j = 0; j < n; ++j)
-                    sp->Ti[k][j] = sp->T[k][j];
-            if (ninf) {
-                int nq = 0;
-                for (int j = 0; j < n; ++j) {
-                    if (!sp->need_inf[j])
-                        continue;
-                    ef_ray *far = &sp->q[nq];
-                    if (ef_scene_far_ray(s, &sp->r[j], far) && far->planar == sp->r[j].planar)
-                        continue;
-                    sp->qj[nq++] = j;
-                }
-                if (nq) {
-                    double T[3][EF_RECON_SPAN];
-                    fast_tau_transmit(s, sp->q, nq, sp, T);
+            const int colour = fast_tau_transmit(s, sp->r, n, sp, sp->T, 0);
+            const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
+            const double *Ti[3] = { T[0], T[1], T[2] };
+            int nq = 0;
+            for (int j = 0; ninf && j < n; ++j) {
+                if (!sp->need_inf[j])
+                    continue;
+                ef_ray *far = &sp->q[nq];
+                if (ef_scene_far_ray(s, &sp->r[j], far) && far->planar == sp->r[j].planar)
+                    continue;
+                sp->qj[nq++] = j;
+            }
+            if (nq) {
+                /* Ti: T, then the far segments' T where they differ. */
+                double Tq[3][EF_RECON_SPAN];
+                fast_tau_transmit(s, sp->q, nq, sp, Tq, 1);
+                for (int k = 0; k < 3; ++k) {
+                    memcpy(sp->Ti[k], T[k], (size_t) n * sizeof sp->Ti[k][0]);
                     for (int m = 0; m < nq; ++m)
-                        for (int k = 0; k < 3; ++k)
-                            sp->Ti[k][sp->qj[m]] = T[k][m];
+                        sp->Ti[k][sp->qj[m]] = Tq[k][m];
+                    Ti[k] = sp->Ti[k];
                 }
             }
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
-            const double *const T[3] = { sp->T[0], sp->T[1], sp->T[2] };
-            const double *const Ti[3] = { sp->Ti[0], sp->Ti[1], sp->Ti[2] };
             span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky);
         }
     }
