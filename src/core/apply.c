@@ -264,10 +264,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             float *const pa = alpha ? alpha + i0 : NULL;
             ef_reconstruct_span(pass->cam, pass->conv, x0 + xs, y, n, depth + i0, !depth_only,
                                 sp->r, sp->sky);
-            int nsky = 0;
-            for (int j = 0; j < n; ++j)
-                nsky += sp->sky[j];
-            if (nsky && s->sky == EF_SKY_DISTANCE_MODE)
+            if (s->sky == EF_SKY_DISTANCE_MODE)
                 for (int j = 0; j < n; ++j)
                     if (sp->sky[j])
                         ef_ray_at_distance(pass->cam, x0 + xs + j, y, s->sky_distance, &sp->r[j]);

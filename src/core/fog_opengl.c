@@ -143,7 +143,8 @@ const ef_fog_model ef_fog_linear = { .name = "linear", .keys = linear_keys, .set
                                      .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp = { .name = "exp", .keys = density_keys, .set = set_density,
                                   .finish = finish_density, .tau = tau_exp,
-                                  .tau_add = tau_add_exp, .tau_dist = tau_dist_exp, .depth_only = 1, .uses_distance = 1 };
+                                  .tau_add = tau_add_exp, .tau_dist = tau_dist_exp,
+                                  .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp2 = { .name = "exp2", .keys = density_keys, .set = set_density,
                                    .finish = finish_density, .tau = tau_exp2,
                                    .tau_dist = tau_dist_exp2,

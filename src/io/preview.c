@@ -1,15 +1,10 @@
 /* Loads the OpenImageIO module on demand (see oiio/oiio_module.cpp). */
-#define _GNU_SOURCE 1
 #include "preview.h"
 
 #include "module.h"
 
 #include <dlfcn.h>
-#include <limits.h>
 #include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <unistd.h>
 
 #define MODULE_NAME "libexrfog_oiio.so"
 
