@@ -32,11 +32,24 @@ static void parse(const char *spec, ef_fog_component *c)
     parse_ctx(spec, NULL, c);
 }
 
+/* tau of one ray, twice: as given, and from a copy bound to the ray's
+ * origin (a frame's camera: the box's slab clipper and the cached plane
+ * values), which must agree to the bit. */
 static void tau_of(const ef_fog_component *c, double ox, double oy, double oz, double dx,
                    double dy, double dz, double len, double tau[3])
 {
     const ef_ray r = { { dx, dy, dz }, len, len, { ox, oy, oz } };
     c->model->tau(c, &r, tau);
+    ef_fog_component b;
+    assert_int_equal(ef_fog_copy(&b, c), 0);
+    ef_fog_bind(&b, r.org);
+    double tb[3];
+    b.model->tau(&b, &r, tb);
+    ef_fog_free(&b);
+    for (int k = 0; k < 3; ++k)
+        if (memcmp(&tau[k], &tb[k], sizeof tb[k]))
+            fail_msg("tau from (%.17g,%.17g,%.17g) along (%g,%g,%g) over %g: %.17g unbound, "
+                     "%.17g from the bound camera", ox, oy, oz, dx, dy, dz, len, tau[k], tb[k]);
 }
 
 /* Channel 0 of tau equals want: exactly for 0 and INFINITY, else to rel. */
@@ -200,6 +213,38 @@ static void test_box_far(void **state)
     const double d = sqrt(0.5), K = ldexp(1, 20), e = ldexp(1, -20);
     expect_rel(&c, 1e7 - 1 - K, 1e7 + 1 + e + K, 0.5, d, -d, 0, INFINITY, e / d, 1e-12);
     ef_fog_free(&c);
+}
+
+/* Two faces crossed within a rounding of each other, 1.2e7-1.5e7 away: a
+ * double quotient cannot tell which binds (here both round to the same t,
+ * and the binding one comes second), and picking the wrong one is off by
+ * e / d, e = 2^-29. Entries alone: x = 0 at t = H/d, y = 0 at (H + e)/d
+ * (binding); x = 1 left at (H + 1)/d (binding), y = 1.5 at (H + 1.5 + e)/d.
+ * Then exits alone: y = 0 entered at (G - 0.5)/d, x = 0 at G/d (binding),
+ * x = 1 + e left at (G + 1 + e)/d, y = 1.5 at (G + 1)/d (binding). */
+static void test_box_near_ties(void **state)
+{
+    (void) state;
+    ef_fog_component c;
+    const double d = sqrt(0.5), e = ldexp(1, -29), H = 1.5e7, G = 1.2e7;
+    /* dz = 0 and a z crossing far beyond (the bound camera's slab clipper
+     * hands a zero rate to the general one). */
+    for (int k = 0; k < 2; ++k) {
+        const double dz = k ? 1e-9 : 0.0;
+        parse("box:min=0,0,0:max=1,1.5,1:density=1", &c);
+        expect(&c, -H, -(H + e), 0.5, d, d, dz, INFINITY, (1 - e) / d);
+        expect(&c, -H, -(H + e), 0.5, d, d, dz, 1e8, (1 - e) / d);
+        /* A pixel one ulp before x = 0 (t = H/d = 21213203.435596424...,
+         * between the doubles 0x1.43b0136f833f4p+24 and ...f5p+24): no fog,
+         * though the rounded crossing is that pixel's distance. */
+        expect(&c, -H, 0.5, 0.5, d, dz, dz, 0x1.43b0136f833f4p+24, 0.0);
+        expect(&c, H + 1, H + 1.5 + e, 0.5, -d, -d, dz, INFINITY, (1 - e) / d);
+        ef_fog_free(&c);
+        parse("box:min=0,0,0:max=1.0000000018626451,1.5,1:density=1", &c);
+        expect(&c, -G, -G + 0.5, 0.5, d, d, dz, INFINITY, 1 / d);
+        expect(&c, -G, -G + 0.5, 0.5, d, d, dz, 1e8, 1 / d);
+        ef_fog_free(&c);
+    }
 }
 
 /* One plane: a half-space. y < 2 (normal (0,2,0) not unit). */
@@ -500,6 +545,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_box_through_middle),
         cmocka_unit_test(test_box_diagonals),
+        cmocka_unit_test(test_box_near_ties),
         cmocka_unit_test(test_box_camera_inside),
         cmocka_unit_test(test_box_camera_on_face),
         cmocka_unit_test(test_box_grazing),

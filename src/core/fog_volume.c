@@ -31,13 +31,15 @@
 
 /* p[] layout: p[0..2] = density per channel (per metre until finish, then per
  * scene unit); box only: p[3..5] = min, p[6..8] = max (scene units). */
-enum { P_RHO = 0, P_MIN = 3, P_MAX = 6, P_NP = 9, P_CAM = 10, P_ORG = 11 };
+enum { P_RHO = 0, P_MIN = 3, P_MAX = 6, P_NP = 9, P_CAM = 10, P_ORG = 11, P_SLAB = 14 };
 
 /* p[P_NP] = the number of planes (c->arr starts with them, A,B,C,D each).
  * Once bound to a camera (bind_volume), p[P_CAM] = 1, p[P_ORG..] is the
  * camera and c->arr continues with CACHE doubles per plane: what
  * clip_fast and crossing_of compute from the plane and the ray's origin
- * alone, for rays from that camera (the same operations, done once). */
+ * alone, for rays from that camera (the same operations, done once).
+ * p[P_SLAB] = 1 when the planes are three slabs +e_a, -e_a in axis order
+ * (every box) and the camera is certainly off each plane: clip_slabs. */
 enum { C_H0 = 0, C_EH, C_HI, C_LO, C_AXIS, C_ZAX, CACHE = 8 };
 
 static int nplanes(const ef_fog_component *c)
@@ -545,6 +547,62 @@ EF_INLINE int clip_fast_cam(const double *pl, const double *cache, int np, const
     return clip_verdict(&st, in_, out_);
 }
 
+/* clip_fast_cam for three axis slabs (p[P_SLAB]): plane 2a is +e_a, plane
+ * 2a+1 is -e_a, so their rates are dir[a] and -dir[a] exactly (es = 0) and
+ * one division serves both. Branch-light: every plane's crossing
+ * t = -h0/s is a candidate, the entering ones (s < 0) against an entry at
+ * 0 and the leaving ones (s > 0) against an exit at len. A plane the ray
+ * starts inside has an entry t < 0, one it starts outside of and leaves
+ * has an exit t < 0, one it ends inside has an exit t > len: each loses to
+ * 0 or len or empties the segment, as clip_plane's sign tests decide them.
+ * The binding entry and exit must win by their error bounds (as
+ * clip_verdict); |t - t_exact| <= (eh |1/s| (1 + 2^-19) + |t| 2^-51) with
+ * MARGIN for the bound's own rounding, and a 2^-1070 floor for a
+ * subnormal t. Any infinite bound (a zero or subnormal rate) is
+ * CLIP_UNSURE: clip_fast_cam decides those. */
+EF_INLINE int clip_slabs(const double *cache, const double dir[3], double len, int *in_,
+                         int *out_)
+{
+    double t_in = 0.0, e_in = 0.0, other_in = -INFINITY;
+    double t_out = len, e_out = 0.0, other_out = INFINITY, e_sum = 0.0;
+    int in = -1, out = -1;
+    for (int a = 0; a < 3; ++a) {
+        const double *ch = cache + CACHE * 2 * a, *cl = ch + CACHE;
+        const double d = dir[a], inv = 1.0 / d, ainv = fabs(inv) * (1.0 + 0x1p-19);
+        const double th = -ch[C_H0] * inv, tl = cl[C_H0] * inv;
+        const double eh = (ch[C_EH] * ainv + fabs(th) * 0x1p-51 + 0x1p-1070) * MARGIN;
+        const double el = (cl[C_EH] * ainv + fabs(tl) * 0x1p-51 + 0x1p-1070) * MARGIN;
+        const int pos = d > 0.0;              /* leaving +e_a's face, entering -e_a's */
+        const double te = pos ? tl : th, ee = pos ? el : eh;
+        const double tx = pos ? th : tl, ex = pos ? eh : el;
+        e_sum += eh + el;
+        if (te > t_in) {
+            other_in = ef_fmax(other_in, t_in + e_in);
+            t_in = te;
+            e_in = ee;
+            in = 2 * a + pos;
+        } else
+            other_in = ef_fmax(other_in, te + ee);
+        if (tx < t_out) {
+            other_out = ef_fmin(other_out, t_out - e_out);
+            t_out = tx;
+            e_out = ex;
+            out = 2 * a + !pos;
+        } else
+            other_out = ef_fmin(other_out, tx - ex);
+    }
+    if (!(e_sum < INFINITY))
+        return CLIP_UNSURE;
+    if (t_in - e_in > t_out + e_out)
+        return CLIP_EMPTY;
+    if (!(other_in < t_in - e_in) || !(other_out > t_out + e_out) ||
+        !(t_in + e_in < t_out - e_out))
+        return CLIP_UNSURE;
+    *in_ = in;
+    *out_ = out;
+    return CLIP_BOUND;
+}
+
 /* crossing_of with h0 from the cache (the same double-double). */
 static inline void crossing_cam(const double *p, const double *ca, const double dir[3],
                                 double len, int want_h1, crossing *x)
@@ -593,7 +651,10 @@ EF_INLINE double inside_length_cam(const ef_fog_component *c, const double dir[3
     const int np = nplanes(c);
     const double *pl = c->arr, *cache = c->arr + 4 * np;
     int in, out;
-    switch (clip_fast_cam(pl, cache, np, dir, len, &in, &out)) {
+    int v = c->p[P_SLAB] != 0.0 ? clip_slabs(cache, dir, len, &in, &out) : CLIP_UNSURE;
+    if (v == CLIP_UNSURE)
+        v = clip_fast_cam(pl, cache, np, dir, len, &in, &out);
+    switch (v) {
     case CLIP_EMPTY:
         return 0.0;
     case CLIP_UNSURE:
@@ -663,6 +724,14 @@ static void bind_volume(ef_fog_component *c, const double org[3])
     }
     memcpy(c->p + P_ORG, org, 3 * sizeof *org);
     c->p[P_CAM] = 1.0;
+    c->p[P_SLAB] = 0.0;
+    int slabs = np == 6;
+    for (int k = 0; k < np && slabs; ++k) {
+        const double *p = c->arr + 4 * k, *ca = c->arr + 4 * np + CACHE * k;
+        slabs = ca[C_AXIS] == k / 2 && p[k / 2] == (k % 2 ? -1.0 : 1.0) &&
+                fabs(ca[C_H0]) > ca[C_EH];
+    }
+    c->p[P_SLAB] = slabs;
 }
 
 /* ---- for the reference integrator ---- */
