@@ -143,7 +143,11 @@ static float nasty(uint32_t *g, long i)
     }
 }
 
-/* exrfog with and without its own conversion: the same output bytes. */
+/* exrfog with and without its own conversion: the same output bytes. With
+ * it, the stream also unpacks and packs the chunk layout itself (half,
+ * float and uint channels, every row segment), so the Core path compared
+ * against covers that too: as written (half out), -d half, -d float (half
+ * channels written as float) and AOV channels added among the others. */
 static void test_same_files(void **state)
 {
     (void) state;
@@ -152,7 +156,11 @@ static void test_same_files(void **state)
     const int w = 67, hgt = 45;
     const long n = (long) w * hgt;
     float *pl[6];
+    uint32_t *ids = malloc((size_t) n * sizeof *ids);
+    assert_non_null(ids);
     uint32_t g = 12345;
+    for (long i = 0; i < n; ++i)
+        ids[i] = tu_xorshift32(&g);
     for (int c = 0; c < 6; ++c) {
         pl[c] = malloc((size_t) n * sizeof(float));
         assert_non_null(pl[c]);
@@ -170,14 +178,17 @@ static void test_same_files(void **state)
         tu_part_add(&p, "A", EXR_PIXEL_HALF, pl[3]);
         tu_part_add(&p, "extra.X", EXR_PIXEL_HALF, pl[4]);
         tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, pl[5]);
+        tu_part_add_uint(&p, "id", ids);
         char name[64], o1[64], o2[64];
         snprintf(name, sizeof name, "half_in%d.exr", k);
         snprintf(o1, sizeof o1, "half_own%d.exr", k);
         snprintf(o2, sizeof o2, "half_core%d.exr", k);
         char *in = tu_path(name), *a = tu_path(o1), *b = tu_path(o2);
         assert_int_equal(tu_write_exr(in, &p, 1), 0);
-        for (int d = 0; d < 2; ++d) {
-            const char *flags = d ? "-d half" : "";
+        for (int d = 0; d < 4; ++d) {
+            static const char *const variants[] = { "", "-d half", "-d float",
+                                                    "--aov fog,T,distance" };
+            const char *flags = variants[d];
             assert_run(0, "--world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --fov 40 "
                           "--fog exp:density=0.05 %s '%s' -o '%s'", flags, in, a);
             assert_int_equal(setenv("EXRFOG_F16C", "0", 1), 0);
@@ -197,6 +208,7 @@ static void test_same_files(void **state)
     }
     for (int c = 0; c < 6; ++c)
         free(pl[c]);
+    free(ids);
 }
 
 int main(void)

@@ -130,13 +130,11 @@ int ef_deflate_level(int zip_level)
     return zip_level > 9 ? 9 : zip_level;
 }
 
-typedef void *(*alloc_fn_t)(exr_transcoding_pipeline_buffer_id_t, size_t);
-typedef void (*free_fn_t)(exr_transcoding_pipeline_buffer_id_t, void *);
-
 /* Grows one of a pipeline's buffers as Core does: through the pipeline's
  * allocator when it has one, else malloc/free (the default context's). */
-static exr_result_t reserve(alloc_fn_t af, free_fn_t ff, exr_transcoding_pipeline_buffer_id_t id,
-                            void **buf, size_t *cap, uint64_t need)
+exr_result_t ef_pipeline_reserve(ef_alloc_fn af, ef_free_fn ff,
+                                 exr_transcoding_pipeline_buffer_id_t id, void **buf, size_t *cap,
+                                 uint64_t need)
 {
     if (*buf && *cap >= need)
         return EXR_ERR_SUCCESS;
@@ -177,11 +175,11 @@ static exr_result_t ld_decompress(exr_decode_pipeline_t *d)
     }
     if (unpacked == 0 || !d->packed_buffer)
         return EXR_ERR_CORRUPT_CHUNK;
-    rv = reserve(d->alloc_fn, d->free_fn, EXR_TRANSCODE_BUFFER_UNPACKED, &d->unpacked_buffer,
-                 &d->unpacked_alloc_size, unpacked);
+    rv = ef_pipeline_reserve(d->alloc_fn, d->free_fn, EXR_TRANSCODE_BUFFER_UNPACKED,
+                             &d->unpacked_buffer, &d->unpacked_alloc_size, unpacked);
     if (!rv)
-        rv = reserve(d->alloc_fn, d->free_fn, EXR_TRANSCODE_BUFFER_SCRATCH1, &d->scratch_buffer_1,
-                     &d->scratch_alloc_size_1, unpacked);
+        rv = ef_pipeline_reserve(d->alloc_fn, d->free_fn, EXR_TRANSCODE_BUFFER_SCRATCH1,
+                                 &d->scratch_buffer_1, &d->scratch_alloc_size_1, unpacked);
     if (rv)
         return rv;
     /* Exactly unpacked_size bytes, checksum verified, or the chunk is bad. */
@@ -199,11 +197,11 @@ static exr_result_t ld_compress(exr_encode_pipeline_t *e)
     exr_result_t rv;
     if (e->compressed_buffer == e->packed_buffer && e->compressed_alloc_size == 0)
         e->compressed_buffer = NULL;
-    rv = reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_COMPRESSED, &e->compressed_buffer,
-                 &e->compressed_alloc_size, n);
+    rv = ef_pipeline_reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_COMPRESSED,
+                             &e->compressed_buffer, &e->compressed_alloc_size, n);
     if (!rv)
-        rv = reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_SCRATCH1, &e->scratch_buffer_1,
-                     &e->scratch_alloc_size_1, n);
+        rv = ef_pipeline_reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_SCRATCH1,
+                                 &e->scratch_buffer_1, &e->scratch_alloc_size_1, n);
     if (rv)
         return rv;
     ef_zip_deconstruct(e->scratch_buffer_1, e->packed_buffer, n);

@@ -34,6 +34,15 @@ exr_result_t ef_deflate_encoding_setup(exr_const_context_t ctx, int part, exr_en
 exr_result_t ef_deflate_decoding_destroy(exr_const_context_t ctx, exr_decode_pipeline_t *dec);
 exr_result_t ef_deflate_encoding_destroy(exr_const_context_t ctx, exr_encode_pipeline_t *enc);
 
+/* Grows a pipeline buffer (*buf, *cap bytes) to at least need bytes the
+ * way Core does, through the pipeline's allocator af/ff when it has one
+ * (else malloc/free, the default context's), so that Core reuses or frees
+ * it later. Returns 0 or EXR_ERR_OUT_OF_MEMORY. */
+typedef void *(*ef_alloc_fn)(exr_transcoding_pipeline_buffer_id_t, size_t);
+typedef void (*ef_free_fn)(exr_transcoding_pipeline_buffer_id_t, void *);
+exr_result_t ef_pipeline_reserve(ef_alloc_fn af, ef_free_fn ff,
+                                 exr_transcoding_pipeline_buffer_id_t id, void **buf, size_t *cap,
+                                 uint64_t need);
 /* The byte transforms of OpenEXR's ZIP, exposed for the tests:
  * deconstruct: src (n bytes) -> dst, split and predicted (encoder side);
  * reconstruct: buf (n bytes, split and predicted) is un-predicted in place,

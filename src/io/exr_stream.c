@@ -137,6 +137,116 @@ static uint16_t *scratch_chunk(half_scratch *hs, const exr_coding_channel_info_t
     return *nh ? scratch_for(hs, *nh * area) : NULL;
 }
 
+/* ---- planes straight from and to the chunk layout ----
+ *
+ * A chunk's uncompressed bytes are its rows in order, each row every
+ * channel's samples in channel order, little-endian. When every channel is
+ * full resolution and either half (as float planes) or 32-bit (as planes of
+ * its own type), exrfog unpacks and packs that layout itself: each row
+ * segment is converted (half_conv.h, the same bits as Core's) or copied
+ * straight between the chunk and the planes. This replaces Core's generic
+ * interleaving loops and the half scratch's extra pass, reads an
+ * uncompressed chunk with one read instead of one per channel and row
+ * (Core's "direct" read), and packs outside the output context's write
+ * lock (Core 3.1.5 runs its own packing under it): Core is left the read,
+ * the compression and nothing per pixel. Only with F16C (ef_half_fast), so
+ * that EXRFOG_F16C=0 keeps Core's whole path to compare against. */
+
+/* Whether coding channels chs can take the straight path (above). */
+static int straight_ok(const half_scratch *hs, const exr_coding_channel_info_t *chs, int n)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    if (!hs->fast)
+        return 0;
+    for (int c = 0; c < n; ++c) {
+        const exr_coding_channel_info_t *ch = &chs[c];
+        const int same32 = ch->data_type != EXR_PIXEL_HALF && ch->user_data_type == ch->data_type;
+        const int half = ch->data_type == EXR_PIXEL_HALF && ch->user_data_type == EXR_PIXEL_FLOAT;
+        if (ch->x_samples != 1 || ch->y_samples != 1 || !(same32 || half) ||
+            ch->user_bytes_per_element != 4 || ch->user_pixel_stride != 4)
+            return 0;
+    }
+    return n > 0;
+#else
+    (void) hs;
+    (void) chs;
+    (void) n;
+    return 0;
+#endif
+}
+
+/* The bytes of one row of the chunk, every channel. */
+static uint64_t row_bytes(const exr_coding_channel_info_t *chs, int n)
+{
+    uint64_t b = 0;
+    for (int c = 0; c < n; ++c)
+        b += (uint64_t) chs[c].width * (uint64_t) chs[c].bytes_per_element;
+    return b;
+}
+
+/* read_fn for an uncompressed part: the whole chunk in one read. */
+static exr_result_t read_whole(exr_decode_pipeline_t *d)
+{
+    if (d->unpacked_buffer == d->packed_buffer && d->unpacked_alloc_size == 0)
+        d->unpacked_buffer = NULL;           /* was aliased to the packed buffer */
+    exr_result_t rv = ef_pipeline_reserve(d->alloc_fn, d->free_fn, EXR_TRANSCODE_BUFFER_PACKED,
+                                          &d->packed_buffer, &d->packed_alloc_size,
+                                          d->chunk.packed_size);
+    return rv ? rv : exr_read_chunk(d->context, d->part_index, &d->chunk, d->packed_buffer);
+}
+
+/* unpack_and_convert_fn: the chunk's rows into the channels' planes. A
+ * size that does not match the channels' rows (or an uncompressed chunk
+ * whose stored size is not its pixels') is a corrupt chunk. */
+static exr_result_t unpack_straight(exr_decode_pipeline_t *d)
+{
+    const uint64_t row = row_bytes(d->channels, d->channel_count);
+    if (!d->unpacked_buffer || row * (uint64_t) d->chunk.height != d->chunk.unpacked_size ||
+        (!d->decompress_fn && d->chunk.packed_size != d->chunk.unpacked_size))
+        return EXR_ERR_CORRUPT_CHUNK;
+    const uint8_t *s = d->unpacked_buffer;
+    for (int y = 0; y < d->chunk.height; ++y)
+        for (int c = 0; c < d->channel_count; ++c) {
+            const exr_coding_channel_info_t *ch = &d->channels[c];
+            uint8_t *dst = ch->decode_to_ptr + (size_t) y * (size_t) ch->user_line_stride;
+            if (ch->data_type == EXR_PIXEL_HALF)
+                ef_half_to_float((const uint16_t *) s, (float *) dst, (size_t) ch->width);
+            else
+                memcpy(dst, s, 4 * (size_t) ch->width);
+            s += (size_t) ch->width * (size_t) ch->bytes_per_element;
+        }
+    return EXR_ERR_SUCCESS;
+}
+
+/* Packs the planes of enc's channels into its packed buffer, outside Core. */
+static int pack_straight(exr_encode_pipeline_t *e)
+{
+    const uint64_t n = row_bytes(e->channels, e->channel_count) * (uint64_t) e->chunk.height;
+    if (ef_pipeline_reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_PACKED,
+                            &e->packed_buffer, &e->packed_alloc_size, n))
+        return -1;
+    uint8_t *o = e->packed_buffer;
+    for (int y = 0; y < e->chunk.height; ++y)
+        for (int c = 0; c < e->channel_count; ++c) {
+            const exr_coding_channel_info_t *ch = &e->channels[c];
+            const uint8_t *src = ch->encode_from_ptr + (size_t) y * (size_t) ch->user_line_stride;
+            if (ch->data_type == EXR_PIXEL_HALF)
+                ef_float_to_half((const float *) src, (uint16_t *) o, (size_t) ch->width);
+            else
+                memcpy(o, src, 4 * (size_t) ch->width);
+            o += (size_t) ch->width * (size_t) ch->bytes_per_element;
+        }
+    return 0;
+}
+
+/* convert_and_pack_fn once pack_straight has filled the packed buffer (Core
+ * allocated nothing: the buffer already had the size). */
+static exr_result_t packed_already(exr_encode_pipeline_t *e)
+{
+    e->packed_bytes = row_bytes(e->channels, e->channel_count) * (uint64_t) e->chunk.height;
+    return EXR_ERR_SUCCESS;
+}
+
 /* Decodes one input chunk into planes (one 32-bit plane per channel,
  * row stride `stride` pixels, origin at absolute (ox, oy)). Every channel
  * gets a destination: Core 3.1.5 crashes on NULL ones. Half channels are
@@ -167,6 +277,15 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
+    }
+    if (straight_ok(hs, dec->channels, dec->channel_count)) {
+        if (first && (exr_decoding_choose_default_routines(ctx, p, dec) ||
+                      (codec == EF_CODEC_LIBDEFLATE && ef_deflate_decoding_setup(ctx, p, dec))))
+            return -1;
+        if (!dec->decompress_fn)
+            dec->read_fn = read_whole;      /* uncompressed: not one read per channel and row */
+        dec->unpack_and_convert_fn = unpack_straight;
+        return exr_decoding_run(ctx, p, dec) ? -1 : 0;
     }
     /* The half channels' scratch, one chunk-sized region each. */
     const size_t area = (size_t) ci->width * (size_t) ci->height;
@@ -367,13 +486,16 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
     }
-    /* Half channels: converted here into hs, packed by Core as half. */
+    const int straight = straight_ok(hs, enc->channels, enc->channel_count);
+    if (straight && pack_straight(enc))
+        return -1;
+    /* Otherwise half channels are converted here into hs, packed by Core. */
     const size_t area = (size_t) ci->width * (size_t) ci->height;
-    size_t nh;
-    uint16_t *sc = scratch_chunk(hs, enc->channels, enc->channel_count, area, &nh);
+    size_t nh = 0;
+    uint16_t *sc = straight ? NULL : scratch_chunk(hs, enc->channels, enc->channel_count, area, &nh);
     if (nh && !sc)
         return -1;
-    for (int c = 0, i = 0; c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {
+    for (int c = 0, i = 0; nh && c < enc->channel_count && c < EF_MAX_CHANNELS_SCRATCH; ++c) {
         exr_coding_channel_info_t *ch = &enc->channels[c];
         if (!via_scratch(hs, ch))
             continue;
@@ -393,6 +515,8 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         enc->yield_until_ready_fn = NULL;
         *ready = 1;
     }
+    if (straight)
+        enc->convert_and_pack_fn = packed_already;
     if (exr_encoding_run(j->out, j->part, enc))
         return -1;
     exr_compression_t comp;
