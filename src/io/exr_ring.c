@@ -25,25 +25,34 @@ int ef_unit_write(exr_context_t out, int part, int tiled, const ef_unit_buf *b)
     return 0;
 }
 
-int ef_unit_append(ef_unit_buf *o, const void *p, size_t n, int y, int ty)
+uint8_t *ef_unit_reserve(ef_unit_buf *o, size_t n, int y, int ty)
 {
     if (o->n >= EF_UNIT_MAX_CHUNKS)
-        return -1;
-    if (o->len + n > o->cap) {
-        size_t cap = (o->len + n) * 2;
+        return NULL;
+    if (o->len + n > o->cap || !o->data) {
+        size_t cap = (o->len + n) * 2 + 64;
         uint8_t *d = realloc(o->data, cap);
         if (!d)
-            return -1;
+            return NULL;
         o->data = d;
         o->cap = cap;
     }
-    memcpy(o->data + o->len, p, n);
+    uint8_t *at = o->data + o->len;
     o->y[o->n] = y;
     o->ty[o->n] = ty;
     o->off[o->n] = o->len;
     o->size[o->n] = n;
     o->n++;
     o->len += n;
+    return at;
+}
+
+int ef_unit_append(ef_unit_buf *o, const void *p, size_t n, int y, int ty)
+{
+    uint8_t *at = ef_unit_reserve(o, n, y, ty);
+    if (!at)
+        return -1;
+    memcpy(at, p, n);
     return 0;
 }
 

@@ -40,6 +40,9 @@ int ef_unit_write(exr_context_t out, int part, int tiled, const ef_unit_buf *b);
 
 /* Appends one chunk's bytes (keyed by y, ty). Returns 0 or -1. */
 int ef_unit_append(ef_unit_buf *o, const void *p, size_t n, int y, int ty);
+/* Appends one chunk of n bytes for the caller to fill, valid until the next
+ * append: returns where they go, or NULL (out of memory or chunks). */
+uint8_t *ef_unit_reserve(ef_unit_buf *o, size_t n, int y, int ty);
 void ef_unit_free(ef_unit_buf *o);
 
 /* Writes unit u's chunks; called in unit order, one call at a time, with

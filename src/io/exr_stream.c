@@ -218,14 +218,15 @@ static exr_result_t unpack_straight(exr_decode_pipeline_t *d)
     return EXR_ERR_SUCCESS;
 }
 
-/* Packs the planes of enc's channels into its packed buffer, outside Core. */
-static int pack_straight(exr_encode_pipeline_t *e)
+/* The packed size of enc's chunk. */
+static uint64_t packed_size(const exr_encode_pipeline_t *e)
 {
-    const uint64_t n = row_bytes(e->channels, e->channel_count) * (uint64_t) e->chunk.height;
-    if (ef_pipeline_reserve(e->alloc_fn, e->free_fn, EXR_TRANSCODE_BUFFER_PACKED,
-                            &e->packed_buffer, &e->packed_alloc_size, n))
-        return -1;
-    uint8_t *o = e->packed_buffer;
+    return row_bytes(e->channels, e->channel_count) * (uint64_t) e->chunk.height;
+}
+
+/* Packs the planes of enc's channels into o (packed_size bytes). */
+static void pack_straight(const exr_encode_pipeline_t *e, uint8_t *o)
+{
     for (int y = 0; y < e->chunk.height; ++y)
         for (int c = 0; c < e->channel_count; ++c) {
             const exr_coding_channel_info_t *ch = &e->channels[c];
@@ -236,14 +237,13 @@ static int pack_straight(exr_encode_pipeline_t *e)
                 memcpy(o, src, 4 * (size_t) ch->width);
             o += (size_t) ch->width * (size_t) ch->bytes_per_element;
         }
-    return 0;
 }
 
 /* convert_and_pack_fn once pack_straight has filled the packed buffer (Core
  * allocated nothing: the buffer already had the size). */
 static exr_result_t packed_already(exr_encode_pipeline_t *e)
 {
-    e->packed_bytes = row_bytes(e->channels, e->channel_count) * (uint64_t) e->chunk.height;
+    e->packed_bytes = packed_size(e);
     return EXR_ERR_SUCCESS;
 }
 
@@ -467,6 +467,7 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
 {
     exr_result_t rv = *ready ? exr_encoding_update(j->out, j->part, ci, enc)
                              : exr_encoding_initialize(j->out, j->part, ci, enc);
+    *ready = 1;                               /* to destroy, even after a failure */
     if (rv)
         return -1;
     for (int c = 0; c < enc->channel_count; ++c) {
@@ -486,9 +487,23 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         ch->user_pixel_stride = 4;
         ch->user_line_stride = 4 * stride;
     }
+    exr_compression_t comp;
+    exr_get_compression(j->out, j->part, &comp);
     const int straight = straight_ok(hs, enc->channels, enc->channel_count);
-    if (straight && pack_straight(enc))
-        return -1;
+    if (straight) {
+        /* Uncompressed: the packed bytes are the chunk, packed in place. */
+        const uint64_t n = packed_size(enc);
+        uint8_t *at = comp == EXR_COMPRESSION_NONE ? ef_unit_reserve(o, n, key_y, key_ty) : NULL;
+        if (at) {
+            pack_straight(enc, at);
+            return 0;
+        }
+        if (comp == EXR_COMPRESSION_NONE ||
+            ef_pipeline_reserve(enc->alloc_fn, enc->free_fn, EXR_TRANSCODE_BUFFER_PACKED,
+                                &enc->packed_buffer, &enc->packed_alloc_size, n))
+            return -1;
+        pack_straight(enc, enc->packed_buffer);
+    }
     /* Otherwise half channels are converted here into hs, packed by Core. */
     const size_t area = (size_t) ci->width * (size_t) ci->height;
     size_t nh = 0;
@@ -506,21 +521,18 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
         ch->encode_from_ptr = (const uint8_t *) h;
         to_scratch(ch, ci->width);
     }
-    if (!*ready) {
+    if (!enc->convert_and_pack_fn) {          /* the first chunk Core encodes */
         if (exr_encoding_choose_default_routines(j->out, j->part, enc) ||
             (j->codec == EF_CODEC_LIBDEFLATE && ef_deflate_encoding_setup(j->out, j->part, enc)))
             return -1;
         /* Only pack and compress here; the ordered writer stores the bytes. */
         enc->write_fn = NULL;
         enc->yield_until_ready_fn = NULL;
-        *ready = 1;
     }
     if (straight)
         enc->convert_and_pack_fn = packed_already;
     if (exr_encoding_run(j->out, j->part, enc))
         return -1;
-    exr_compression_t comp;
-    exr_get_compression(j->out, j->part, &comp);
     if (comp == EXR_COMPRESSION_NONE || !enc->compressed_buffer ||
         enc->compressed_bytes >= enc->packed_bytes)
         return ef_unit_append(o, enc->packed_buffer, enc->packed_bytes, key_y, key_ty);
