@@ -14,9 +14,12 @@
 #      tau error of the closed forms against the reference integrator on every
 #      8th pixel each way (surface segments and rays to infinity);
 #   2. times end to end, in BENCH_RUNS interleaved rounds (tool order rotated each
-#      round, medians), `oiiotool IN -o OUT` and `exrfog --fog SPEC IN -o OUT` for
+#      round, medians), `oiiotool IN -o OUT`, the transcode floor (BUILD_DIR/floor
+#      --codec zlib: OpenEXRCore alone decoding and re-encoding every chunk on the
+#      same threads, see bench/floor.sh) and `exrfog --fog SPEC IN -o OUT` for
 #      every model;
-# and prints a Markdown table, also written to bench/models.md. Nothing asserts on time.
+# and prints a Markdown table, also written to bench/models.md (whose sections
+# after the table, from its first "### " heading on, are kept). Nothing asserts on time.
 #
 # Environment:
 #   BENCH_RUNS=7          timed end-to-end rounds
@@ -45,8 +48,9 @@ size="${BENCH_SIZE:-1920x1080}"
 
 exrfog="$build/exrfog"
 model_bench="$build/model_bench"
+floor="$build/floor"
 make_sample="${MAKE_SAMPLE:-$build/make_sample}"
-for b in "$exrfog" "$model_bench" "$make_sample"; do
+for b in "$exrfog" "$model_bench" "$floor" "$make_sample"; do
     [[ -x "$b" ]] || die "$b not built (cmake --build $build)"
 done
 command -v oiiotool >/dev/null 2>&1 || die "oiiotool not found (apt-get install -y openimageio-tools)"
@@ -70,6 +74,9 @@ names=() specs=() cmds=()
 names+=("oiiotool (copy)"); specs+=(""); cmds+=('oiiotool "$IN" -o "$OUT"')
 threads=()
 [[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
+names+=("floor (stock zlib)"); specs+=("")
+cmds+=('"$floor" "${threads[@]}" --codec zlib "$IN" "$OUT"')
+first_model=${#names[@]}
 while IFS=$'\t' read -r name spec _; do
     names+=("$name"); specs+=("$spec")
     c='"$exrfog" "${threads[@]}"'
@@ -125,26 +132,29 @@ cpu="$(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: *//')"
     echo "- build: ${build_type:-unknown} ($build)"
     echo "- input: ${size} RGBA half + Z float, ZIP, made by make_sample ($(awk -v b="$in_bytes" 'BEGIN { printf "%.1f MB", b / 1e6 }'))"
     echo "- fog pass: \`ef_fog_block\` over the whole frame on 1 thread, best / median of ${mb_runs} runs (bench/model_bench.c)"
-    echo "- end to end: \`exrfog --fog SPEC IN -o OUT\` with $tdesc and \`oiiotool IN -o OUT\`, ${runs} timed rounds (+${warmup} warm-up), interleaved, order rotated each round; medians of wall time"
+    echo "- end to end: \`exrfog --fog SPEC IN -o OUT\` with $tdesc, \`oiiotool IN -o OUT\` and the transcode floor (\`bench/floor --codec zlib IN OUT\`, the same threads), ${runs} timed rounds (+${warmup} warm-up), interleaved, order rotated each round; medians of wall time"
     echo "- accuracy: closed-form tau (summed over components) against the reference integrator (\`ef_ref_tau\`; for exp, the same integrator on its constant density) on every 8th pixel each way, surface segment and ray to infinity; T = exp(-tau) per channel"
     echo "- oiiotool $(oiiotool --version 2>/dev/null)"
     echo
-    echo "| model | SPEC | fog pass Mpixel/s (1 thread, best / median) | end-to-end s | / oiiotool | max \\|dT\\| | max rel tau error |"
-    echo "|---|---|---:|---:|---:|---:|---:|"
-    o="${med[0]}"
-    if [[ -n "$o" ]]; then
-        echo "| oiiotool (copy) | | | $(awk -v a="$o" 'BEGIN { printf "%.3f", a }') | 1.00× | | |"
-    else
-        echo "| oiiotool (copy) | | | failed | | | |"
-    fi
-    for (( i = 1; i < ntools; ++i )); do
+    echo "| model | SPEC | fog pass Mpixel/s (1 thread, best / median) | end-to-end s | / oiiotool | / floor | max \\|dT\\| | max rel tau error |"
+    echo "|---|---|---:|---:|---:|---:|---:|---:|"
+    o="${med[0]}" f="${med[1]}"
+    over() { [[ -n "$2" ]] && awk -v a="$1" -v b="$2" 'BEGIN { printf "%.2f×", a / b }' || echo "n/a"; }
+    for (( i = 0; i < first_model; ++i )); do
+        if [[ -n "${med[i]}" ]]; then
+            echo "| ${names[i]} | | | $(awk -v a="${med[i]}" 'BEGIN { printf "%.3f", a }') | $(over "${med[i]}" "$o") | $(over "${med[i]}" "$f") | | |"
+        else
+            echo "| ${names[i]} | | | failed | | | | |"
+        fi
+    done
+    for (( i = first_model; i < ntools; ++i )); do
         line="$(awk -F'\t' -v n="${names[i]}" '$1 == n' "$tmp/mb.tsv")"
         IFS=$'\t' read -r _ _ best medp dT rel _ <<<"$line"
         if [[ -n "${med[i]}" ]]; then
             e2e=$(awk -v a="${med[i]}" 'BEGIN { printf "%.3f", a }')
-            ratio=$([[ -n "$o" ]] && awk -v a="${med[i]}" -v b="$o" 'BEGIN { printf "%.2f×", a / b }' || echo "n/a")
+            ratio="$(over "${med[i]}" "$o") | $(over "${med[i]}" "$f")"
         else
-            e2e="failed"; ratio=""
+            e2e="failed"; ratio=" | "
         fi
         if [[ -n "$line" ]]; then
             pass=$(awk -v a="$best" -v b="$medp" 'BEGIN { printf "%.1f / %.1f", a, b }')
@@ -156,5 +166,10 @@ cpu="$(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: *//')"
 } > "$tmp/table.md"
 
 cat "$tmp/table.md"
+# Keep the history sections of the previous file (from its first "### " on).
+if [[ -f "$here/models.md" ]]; then
+    awk '/^### / { keep = 1 } keep' "$here/models.md" > "$tmp/history.md"
+    if [[ -s "$tmp/history.md" ]]; then echo >> "$tmp/table.md"; cat "$tmp/history.md" >> "$tmp/table.md"; fi
+fi
 cp "$tmp/table.md" "$here/models.md" || die "could not write $here/models.md"
 echo "models: table written to $here/models.md" >&2

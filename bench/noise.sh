@@ -16,8 +16,9 @@
 #      its own method=exact tau) and the share of pixels whose error output covers
 #      the actual error;
 #   2. times end to end `exrfog --fog SPEC IN -o OUT` (default threads) for every
-#      timed entry and `oiiotool IN -o OUT`, interleaved, the order rotated each
-#      round, medians. Slow entries run fewer rounds (at most E2E_BUDGET seconds
+#      timed entry, `oiiotool IN -o OUT` and the transcode floor (bench/floor
+#      --codec zlib, same threads), interleaved, the order rotated each round,
+#      medians. Slow entries run fewer rounds (at most E2E_BUDGET seconds
 #      each, at least one run) and entries predicted above E2E_MAX seconds are not
 #      run: their row shows the prediction (exp's end-to-end time plus the fog
 #      pass over the threads), marked as such;
@@ -27,7 +28,7 @@
 # Nothing asserts on time; the targets are printed PASS or FAIL as measured.
 #
 # Environment:
-#   BENCH_RUNS=5            end-to-end rounds (oiiotool and exp run in every round)
+#   BENCH_RUNS=5            end-to-end rounds (oiiotool, the floor and exp run in every round)
 #   E2E_BUDGET=30           seconds of end-to-end runs per noise entry (>= 1 run)
 #   E2E_MAX=60              entries predicted slower than this are not run end to end
 #   NOISE_BENCH_RUNS=5      fog-pass runs per entry (fewer when over the budget)
@@ -59,8 +60,9 @@ done
 
 exrfog="$build/exrfog"
 noise_bench="$build/noise_bench"
+floor="$build/floor"
 make_sample="${MAKE_SAMPLE:-$build/make_sample}"
-for b in "$exrfog" "$noise_bench" "$make_sample"; do
+for b in "$exrfog" "$noise_bench" "$floor" "$make_sample"; do
     [[ -x "$b" ]] || die "$b not built (cmake --build $build)"
 done
 command -v oiiotool >/dev/null 2>&1 || die "oiiotool not found (apt-get install -y openimageio-tools)"
@@ -109,7 +111,8 @@ done <"$tmp/nb.tsv"
 threads=()
 nthreads=$(nproc)
 if [[ -n "${EXRFOG_THREADS:-}" ]]; then threads=(--threads "$EXRFOG_THREADS"); nthreads=$EXRFOG_THREADS; fi
-names=("oiiotool (copy)") cmds=('oiiotool "$IN" -o "$OUT"')
+names=("oiiotool (copy)" "floor (stock zlib)")
+cmds=('oiiotool "$IN" -o "$OUT"' '"$floor" "${threads[@]}" --codec zlib "$IN" "$OUT"')
 for name in "${order[@]}"; do
     (( F_timed[$name] )) || continue
     names+=("$name")
@@ -142,16 +145,17 @@ run_one() {   # $1 tool index, $2 1 = record; sets last (seconds) on success
     return 0
 }
 
-# Warm-up (page cache, lazy loading): oiiotool and exp once, untimed. exp's
-# time is the I/O part of the predictions.
+# Warm-up (page cache, lazy loading): oiiotool, the floor and exp once,
+# untimed. exp's time is the I/O part of the predictions.
 echo "noise: end to end: warm-up" >&2
 run_one 0 0
+run_one 1 0
 run_one "$exp_i" 0
 io_s="${last:-0.5}"
 nrun=() pred=()
 for (( i = 0; i < ntools; ++i )); do
     name="${names[i]}"
-    if (( i == 0 || i == exp_i )); then nrun[i]=$runs; pred[i]=""; continue; fi
+    if (( i <= 1 || i == exp_i )); then nrun[i]=$runs; pred[i]=""; continue; fi
     pred[i]="$(awk -v io="$io_s" -v f="${F_frame[$name]}" -v t="$nthreads" 'BEGIN { printf "%.3f", io + f / t }')"
     nrun[i]="$(awk -v p="${pred[i]}" -v b="$e2e_budget" -v m="$e2e_max" -v r="$runs" 'BEGIN {
         if (p > m) { print 0; exit } n = int(b / p); if (n < 1) n = 1; if (n > r) n = r; print n }')"
@@ -175,22 +179,23 @@ for (( i = 0; i < ntools; ++i )); do
     E_pred[${names[i]}]="${pred[i]}"
 done
 oiio="${E_med[oiiotool (copy)]}"
+flo="${E_med[floor (stock zlib)]}"
 expn="${names[exp_i]}"
 exp_med="${E_med[$expn]}"
-[[ -n "$oiio" && -n "$exp_med" ]] || die "oiiotool or exp failed end to end"
+[[ -n "$oiio" && -n "$flo" && -n "$exp_med" ]] || die "oiiotool, the floor or exp failed end to end"
 
 # --- formatting helpers ----------------------------------------------------------------
 fnum() { awk -v v="$1" -v f="$2" 'BEGIN { if (v == "" || v == "-") print "–"; else printf f, v }'; }
-e2e_cell() {   # name -> "s | / oiiotool | / exp"
+e2e_cell() {   # name -> "s | / oiiotool | / floor | / exp"
     local n="$1" m="${E_med[$1]:-}" p="${E_pred[$1]:-}"
     if [[ -n "$m" ]]; then
-        awk -v m="$m" -v o="$oiio" -v e="$exp_med" -v k="${E_n[$n]}" \
-            'BEGIN { printf "%.2f (%d) | %.2f× | %.2f×", m, k, m / o, m / e }'
+        awk -v m="$m" -v o="$oiio" -v f="$flo" -v e="$exp_med" -v k="${E_n[$n]}" \
+            'BEGIN { printf "%.2f (%d) | %.2f× | %.2f× | %.2f×", m, k, m / o, m / f, m / e }'
     elif [[ -n "$p" ]]; then
-        awk -v m="$p" -v o="$oiio" -v e="$exp_med" \
-            'BEGIN { printf "≈ %.0f (predicted, not run) | ≈ %.0f× | ≈ %.0f×", m, m / o, m / e }'
+        awk -v m="$p" -v o="$oiio" -v f="$flo" -v e="$exp_med" \
+            'BEGIN { printf "≈ %.0f (predicted, not run) | ≈ %.0f× | ≈ %.0f× | ≈ %.0f×", m, m / o, m / f, m / e }'
     else
-        echo "failed | | "
+        echo "failed | | | "
     fi
 }
 sci() { awk -v v="$1" 'BEGIN { if (v == "" || v == "-") print "–"; else if (v == 0) print "0"; else printf "%.1e", v }'; }
@@ -386,15 +391,16 @@ mins() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f min", (b - a) / 60 }'; }
     echo "- input: ${size} RGBA half + Z float, ZIP, made by make_sample ($(awk -v b="$in_bytes" 'BEGIN { printf "%.1f MB", b / 1e6 }')); y-up, camera at y = 1.7 looking down -z, objects from z = -5 to -180, ground plane to the horizon"
     echo "- fog pass: \`ef_fog_block\` on 1 thread (bench/noise_bench.c), median of up to ${nb_runs} runs within ${nb_budget} s per entry, the entries interleaved (one run of each per round); the whole frame when that fits, else 1 in ${nb_sample} pixels: in every row one span of 1/${nb_sample} of the width, shifted from row to row, so every row and every stretch of columns is represented (the runs and the sample are in the last column of the tables); s/frame = that rate over the 2,073,600 pixels"
     echo "- evals/px: noise evaluations (one octave at one point) per pixel, mean over the accuracy grid, sky included (as \`--stats\` counts them)"
-    echo "- end to end: \`exrfog --fog SPEC IN -o OUT\` with $tdesc and \`oiiotool IN -o OUT\` in the same run, interleaved, order rotated each round, ${runs} rounds after a warm-up of oiiotool and exp; noise entries run at most ${e2e_budget} s each (at least once; the count is in brackets) and entries predicted above ${e2e_max} s (exp's time plus the fog pass over the threads) are not run; medians of wall time"
+    echo "- end to end: \`exrfog --fog SPEC IN -o OUT\` with $tdesc, \`oiiotool IN -o OUT\` and the transcode floor (\`bench/floor --codec zlib IN OUT\`, OpenEXRCore alone decoding and re-encoding every chunk on the same threads) in the same run, interleaved, order rotated each round, ${runs} rounds after a warm-up of oiiotool, the floor and exp; noise entries run at most ${e2e_budget} s each (at least once; the count is in brackets) and entries predicted above ${e2e_max} s (exp's time plus the fog pass over the threads) are not run; medians of wall time"
     echo "- accuracy: every ${nb_step}th pixel each way, surface pixels only (${F_npx[${order[1]}]:-?} of them; sky pixels are tau = inf for every noise method and the reference, since the noise model here has no falloff); |ΔT| = |e^-τ − e^-τref| in long double, max over channels; τref from the reference integrator (\`ef_ref_tau\`, Gauss–Kronrod split at every octave's lattice crossings); \"covers\" = share of those pixels where T·expm1(info.err) (the \`--aov error\` value) ≥ the actual |ΔT|"
     echo "- oiiotool $(oiiotool --version 2>/dev/null); run time $(mins "$t_start" "$t_end") (noise_bench $(mins "$t_start" "$t_nb"), end to end $(mins "$t_nb" "$t_e2e"))"
     echo
     echo "### noise (\`noise:density=0.02:scale=10:octaves=4\`, contrast 0.9, no falloff)"
     echo
-    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
-    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
-    echo "| oiiotool (copy) | | | | $(awk -v m="$oiio" -v k="${E_n[oiiotool (copy)]}" -v e="$exp_med" 'BEGIN { printf "%.2f (%d) | 1.00× | %.2f×", m, k, m / e }') | | | | |"
+    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / floor | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
+    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    echo "| oiiotool (copy) | | | | $(e2e_cell "oiiotool (copy)") | | | | |"
+    echo "| floor (\`bench/floor --codec zlib\`, OpenEXRCore alone) | | | | $(e2e_cell "floor (stock zlib)") | | | | |"
     for name in "${order[@]}"; do
         case "${F_fam[$name]}" in baseline|exact|adaptive|adaptive-ttol|steps) ;; *) continue;; esac
         if [[ "${F_fam[$name]}" == baseline ]]; then
@@ -408,12 +414,12 @@ mins() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f min", (b - a) / 60 }'; }
     echo
     echo "Preintegrated against the same SPEC's \`method=exact\` τ (the seed's approximation error); exact against the reference integrator. Sky pixels are left out: on a sky ray the envelope lets the fog end only far away, and a few degrees above the horizon \`method=exact\` walks the cells of kilometres of ray (2.5 s for one pixel 0.05 rad up, over a minute 0.01 rad up), so exact is a yardstick here and not timed."
     echo
-    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
-    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    echo "| method | fog pass Mpixel/s (1 thread) | fog pass s/frame | evals/px | end-to-end s (runs) | / oiiotool | / floor | / exp | max \\|ΔT\\| | 99.9th \\|ΔT\\| | error output covers | fog pass timed on |"
+    echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
     for name in "${order[@]}"; do
         case "${F_fam[$name]}" in
             separable-exact)
-                echo "| exact (vs the reference) | not timed | | | | | | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | |";;
+                echo "| exact (vs the reference) | not timed | | | | | | | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | |";;
             preintegrated)
                 echo "| $(label "$name") | $(fnum "${F_mpix[$name]}" %.3f) | $(fnum "${F_frame[$name]}" %.1f) | $(fnum "${F_evals[$name]}" %.0f) | $(e2e_cell "$name") | $(sci "${F_max[$name]}") | $(sci "${F_p999[$name]}") | $(pct "${F_cov[$name]}") | $(timed_on "$name") |";;
         esac

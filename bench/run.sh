@@ -6,13 +6,15 @@
 #
 # Generates a 1920x1080 RGBA half + Z float ZIP frame with make_sample, then runs
 # BENCH_RUNS (default 7) interleaved rounds of
-#   (a) oiiotool IN -o OUT                                   the I/O floor
+#   (a) oiiotool IN -o OUT                                   the usual copy
+#   (a') bench/floor --codec zlib IN OUT                     the transcode floor
+#        (OpenEXRCore alone decoding and re-encoding every chunk; see bench/floor.sh)
 #   (b) exrfog --fog exp:density=0.02 IN -o OUT              the brief's workload
 #   (c) exrfog with per-channel exp2 plus linear fog (two components, three taus)
 #   (c') exrfog with the numpy peer's own half-space fog
 #   (d) python3 numpy_halfspace_fog.py IN OUT                the numpy/OIIO peer
 # and prints a Markdown table of medians (wall seconds, peak RSS) with ratios to
-# oiiotool; the same table goes to bench/results.md.  Nothing here asserts on time.
+# oiiotool and to the floor; the same table goes to bench/results.md.  Nothing here asserts on time.
 #
 # Environment:
 #   BENCH_RUNS=7        timed rounds (the order of the tools rotates every round)
@@ -81,6 +83,14 @@ add_tool "oiiotool (copy)" 'oiiotool "$IN" -o "$OUT"'
 exrfog="$build/exrfog"
 threads=()
 [[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
+floor_i=-1
+if [[ -x "$build/floor" ]]; then
+    floor_i=${#names[@]}
+    add_tool "floor (OpenEXRCore transcode, stock zlib)" \
+        '"$build/floor" "${threads[@]}" --codec zlib "$IN" "$OUT"'
+else
+    note "bench/floor not built ($build/floor): no floor row (cmake --build $build --target floor)"
+fi
 if [[ -x "$exrfog" ]]; then
     add_tool "exrfog exp:density=0.02" '"$exrfog" "${threads[@]}" --fog exp:density=0.02 "$IN" -o "$OUT"'
     add_tool "exrfog exp:density=0.02 zip:1" \
@@ -169,16 +179,17 @@ cpu="$(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: *//')"
     echo "- runs: ${runs} timed (+${warmup} warm-up), interleaved, tool order rotated each round; medians"
     echo "- oiiotool $(oiiotool --version 2>/dev/null)${python:+; peer interpreter $python}${EXRFOG_THREADS:+; exrfog --threads $EXRFOG_THREADS}"
     echo
-    echo "| tool | median wall s | wall / oiiotool | median peak RSS MB | RSS / oiiotool | ok runs |"
-    echo "|---|---:|---:|---:|---:|---:|"
+    echo "| tool | median wall s | wall / oiiotool | wall / floor | median peak RSS MB | RSS / oiiotool | ok runs |"
+    echo "|---|---:|---:|---:|---:|---:|---:|"
     for (( i = 0; i < ntools; ++i )); do
         if [[ -z "${med_wall[i]}" ]]; then
-            echo "| ${names[i]} | failed | | | | 0/$runs |"
+            echo "| ${names[i]} | failed | | | | | 0/$runs |"
             continue
         fi
         w=$(awk -v a="${med_wall[i]}" 'BEGIN { printf "%.3f", a }')
         if [[ -n "${med_rss[i]}" ]]; then m=$(awk -v a="${med_rss[i]}" 'BEGIN { printf "%.1f", a / 1024 }'); else m="n/a"; fi
-        echo "| ${names[i]} | $w | $(ratio "${med_wall[i]}" "${med_wall[0]}") | $m | $(ratio "${med_rss[i]}" "${med_rss[0]}") | ${nok[i]}/$runs |"
+        fl=""; (( floor_i >= 0 )) && fl="${med_wall[floor_i]}"
+        echo "| ${names[i]} | $w | $(ratio "${med_wall[i]}" "${med_wall[0]}") | $(ratio "${med_wall[i]}" "$fl") | $m | $(ratio "${med_rss[i]}" "${med_rss[0]}") | ${nok[i]}/$runs |"
     done
     if (( ${#notes[@]} )); then
         echo
