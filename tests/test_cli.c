@@ -952,13 +952,27 @@ static void test_truncated_in_pixel_data(void **state)
     }
 }
 
-/* Writes a corrupted copy of the sample: fn edits the bytes. */
-static void corrupt_case(const char *name, void (*fn)(unsigned char *, size_t, const layout_t *, int *),
-                         int threads)
+/* An uncompressed copy of the sample (written by exrfog, no fog), one
+ * scanline per chunk. */
+static const char *sample_none(void)
+{
+    static path_t p;
+    if (!p.s[0]) {
+        p = pth("in/sample-none.exr");
+        assert_status(run("'%s' -o '%s' --compression none --fog exp:density=0", sample(), p.s), 0);
+    }
+    return p.s;
+}
+
+/* Writes a corrupted copy of src (the sample when NULL): fn edits the bytes. */
+static void corrupt_case_in(const char *src, const char *name,
+                            void (*fn)(unsigned char *, size_t, const layout_t *, int *),
+                            int threads)
 {
     size_t len;
     layout_t L;
-    unsigned char *d = sample_bytes(&len);
+    unsigned char *d = src ? slurp(src, &len) : sample_bytes(&len);
+    assert_non_null(d);
     exr_layout(d, len, &L);
     int y = -1;
     fn(d, len, &L, &y);
@@ -975,6 +989,12 @@ static void corrupt_case(const char *name, void (*fn)(unsigned char *, size_t, c
         assert_err_has(where);
     }
     unlink(in.s);
+}
+
+static void corrupt_case(const char *name, void (*fn)(unsigned char *, size_t, const layout_t *, int *),
+                         int threads)
+{
+    corrupt_case_in(NULL, name, fn, threads);
 }
 
 static void garbage_in_chunk(unsigned char *d, size_t len, const layout_t *L, int *y)
@@ -1021,6 +1041,33 @@ static void wrong_chunk_y(unsigned char *d, size_t len, const layout_t *L, int *
     const size_t o = (size_t) L->off[L->nchunks / 2];
     *y = (int) rd32(d + o);
     wr32(d + o, 1000);
+}
+
+static void long_chunk_size(unsigned char *d, size_t len, const layout_t *L, int *y)
+{
+    (void) len;
+    const size_t o = (size_t) L->off[L->nchunks / 2];
+    wr32(d + o + 4, rd32(d + o + 4) + 8);
+    *y = (int) rd32(d + o);
+}
+
+/* The same damage to an uncompressed file, whose chunks exrfog reads whole:
+ * a stored size other than the chunk's pixels is a corrupt chunk, at its
+ * scanline (OpenEXRCore's own per-channel reads went by the geometry and
+ * took the neighbouring chunk's bytes as pixels). */
+static void test_corrupt_uncompressed_chunk(void **state)
+{
+    (void) state;
+    corrupt_case_in(sample_none(), "none-hugesize", huge_chunk_size, 1);
+    corrupt_case_in(sample_none(), "none-negsize", negative_chunk_size, 1);
+    corrupt_case_in(sample_none(), "none-shortsize", short_chunk_size, 1);
+    corrupt_case_in(sample_none(), "none-longsize", long_chunk_size, 1);
+    corrupt_case_in(sample_none(), "none-longsize2", long_chunk_size, 2);
+    corrupt_case_in(sample_none(), "none-wrongy", wrong_chunk_y, 1);
+    /* And through OpenEXRCore's own unpacking (no F16C path). */
+    assert_int_equal(setenv("EXRFOG_F16C", "0", 1), 0);
+    corrupt_case_in(sample_none(), "none-shortsize-core", short_chunk_size, 1);
+    unsetenv("EXRFOG_F16C");
 }
 
 static void test_corrupt_chunk(void **state)
@@ -2796,6 +2843,7 @@ int main(void)
         cmocka_unit_test(test_truncated_in_offset_table),
         cmocka_unit_test(test_truncated_in_pixel_data),
         cmocka_unit_test(test_corrupt_chunk),
+        cmocka_unit_test(test_corrupt_uncompressed_chunk),
         cmocka_unit_test(test_corrupt_offset_table),
         cmocka_unit_test(test_not_exr),
         cmocka_unit_test(test_zero_size),

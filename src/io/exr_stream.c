@@ -256,6 +256,13 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
                         int ox, int oy, const uint8_t *as_float, int codec, half_scratch *hs)
 {
     const int first = !*ready;
+    /* An uncompressed chunk must store exactly its pixels: Core's own
+     * per-channel reads go by the geometry and would take a neighbour's
+     * bytes for pixels. */
+    exr_compression_t comp;
+    if (exr_get_compression(ctx, p, &comp) ||
+        (comp == EXR_COMPRESSION_NONE && ci->packed_size != ci->unpacked_size))
+        return -1;
     exr_result_t rv = first ? exr_decoding_initialize(ctx, p, ci, dec)
                             : exr_decoding_update(ctx, p, ci, dec);
     /* Even a failed initialisation may hold allocations: destroy it later. */
