@@ -162,8 +162,9 @@ int ef_scene_far_ray(const ef_fog_scene *s, const ef_ray *r, ef_ray *far)
 {
     *far = *r;
     if (s->sky == EF_SKY_DISTANCE_MODE && isfinite(r->dist) && r->dist > 0) {
-        /* The background is a shell at sky_distance: "infinity" ends there. */
-        const double d = fmax(s->sky_distance, r->dist);
+        /* The background is a shell at sky_distance: "infinity" ends there.
+         * Both are finite and positive: fmax's value, without libm's call. */
+        const double d = s->sky_distance >= r->dist ? s->sky_distance : r->dist;
         far->planar = r->planar * (d / r->dist);
         far->dist = d;
     } else {
