@@ -724,7 +724,6 @@ static void bind_volume(ef_fog_component *c, const double org[3])
     }
     memcpy(c->p + P_ORG, org, 3 * sizeof *org);
     c->p[P_CAM] = 1.0;
-    c->p[P_SLAB] = 0.0;
     int slabs = np == 6;
     for (int k = 0; k < np && slabs; ++k) {
         const double *p = c->arr + 4 * k, *ca = c->arr + 4 * np + CACHE * k;

@@ -34,12 +34,13 @@ exr_result_t ef_deflate_encoding_setup(exr_const_context_t ctx, int part, exr_en
 exr_result_t ef_deflate_decoding_destroy(exr_const_context_t ctx, exr_decode_pipeline_t *dec);
 exr_result_t ef_deflate_encoding_destroy(exr_const_context_t ctx, exr_encode_pipeline_t *enc);
 
+/* A pipeline's allocator and its release (Core's alloc_fn / free_fn). */
+typedef void *(*ef_alloc_fn)(exr_transcoding_pipeline_buffer_id_t, size_t);
+typedef void (*ef_free_fn)(exr_transcoding_pipeline_buffer_id_t, void *);
 /* Grows a pipeline buffer (*buf, *cap bytes) to at least need bytes the
  * way Core does, through the pipeline's allocator af/ff when it has one
  * (else malloc/free, the default context's), so that Core reuses or frees
  * it later. Returns 0 or EXR_ERR_OUT_OF_MEMORY. */
-typedef void *(*ef_alloc_fn)(exr_transcoding_pipeline_buffer_id_t, size_t);
-typedef void (*ef_free_fn)(exr_transcoding_pipeline_buffer_id_t, void *);
 exr_result_t ef_pipeline_reserve(ef_alloc_fn af, ef_free_fn ff,
                                  exr_transcoding_pipeline_buffer_id_t id, void **buf, size_t *cap,
                                  uint64_t need);

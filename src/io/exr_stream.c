@@ -196,13 +196,12 @@ static exr_result_t read_whole(exr_decode_pipeline_t *d)
 }
 
 /* unpack_and_convert_fn: the chunk's rows into the channels' planes. A
- * size that does not match the channels' rows (or an uncompressed chunk
- * whose stored size is not its pixels') is a corrupt chunk. */
+ * size that does not match the channels' rows is a corrupt chunk (an
+ * uncompressed chunk's stored size is checked before, by decode_chunk). */
 static exr_result_t unpack_straight(exr_decode_pipeline_t *d)
 {
     const uint64_t row = row_bytes(d->channels, d->channel_count);
-    if (!d->unpacked_buffer || row * (uint64_t) d->chunk.height != d->chunk.unpacked_size ||
-        (!d->decompress_fn && d->chunk.packed_size != d->chunk.unpacked_size))
+    if (!d->unpacked_buffer || row * (uint64_t) d->chunk.height != d->chunk.unpacked_size)
         return EXR_ERR_CORRUPT_CHUNK;
     const uint8_t *s = d->unpacked_buffer;
     for (int y = 0; y < d->chunk.height; ++y)
@@ -289,8 +288,8 @@ static int decode_chunk(exr_const_context_t ctx, int p, const exr_chunk_info_t *
         if (first && (exr_decoding_choose_default_routines(ctx, p, dec) ||
                       (codec == EF_CODEC_LIBDEFLATE && ef_deflate_decoding_setup(ctx, p, dec))))
             return -1;
-        if (!dec->decompress_fn)
-            dec->read_fn = read_whole;      /* uncompressed: not one read per channel and row */
+        if (comp == EXR_COMPRESSION_NONE)
+            dec->read_fn = read_whole;      /* not one read per channel and row */
         dec->unpack_and_convert_fn = unpack_straight;
         return exr_decoding_run(ctx, p, dec) ? -1 : 0;
     }
