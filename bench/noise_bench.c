@@ -1,6 +1,6 @@
 /* noise_bench.c - the speed/accuracy trade of exrfog's noise fog methods.
  *
- *   noise_bench FRAME.exr [--tsv] [--runs N] [--budget S] [--sample K] [--step S]
+ *   noise_bench FRAME.exr [--tsv] [--runs N] [--budget S] [--sample K] [--step S] [--hstep H]
  *                         [--threads T] [--only NAME (exact, else a substring)]
  *   noise_bench --list
  *
@@ -40,6 +40,14 @@
  * needs gigabytes there. For that reason noise-separable exact is a
  * yardstick here, not a timed entry.
  *
+ * The horizon entries (issue 21) fog the same frame with ground fog that
+ * thins with height, unbounded (HORIZON below): its sky rays leave the fog
+ * after hundreds to thousands of units, and its far ground is kilometres
+ * away. Their yardstick is the reference run chunk by chunk along the whole
+ * ray (ef_ref_tau_long), sky pixels included, on every H-th pixel each way
+ * (--hstep, default 32: 2,040 pixels at 1080p), and their accuracy columns
+ * count sky pixels too.
+ *
  * FRAME is read the way the CLI reads it (ef_exr_open, ef_find_channels,
  * ef_exr_read_cam_meta, ef_camera_resolve, planar depth) and decoded once
  * through ef_exr_stream (bench/bench_frame.c; the encoded copy goes to /dev/null).
@@ -72,8 +80,14 @@
  * objects from z = -5 to -180 (and the ground to the horizon). */
 #define NOISE "noise:density=0.02:scale=10:octaves=4"
 #define SEP "noise-separable:density=0.02:scale=10:octaves=4:axes=xz:falloff=0.05:contrast=0.9"
+/* The horizon scene of issue 21: ground fog that thins with height, unbounded,
+ * so sky rays leave it after hundreds to thousands of units. */
+#define HORIZON "noise:density=0.05:scale=10:octaves=4:falloff=0.1:base=0"
+#define H_RHO 0.05
+#define H_K 0.1
+#define H_C 0.9
 
-enum { Y_NONE, Y_REF, Y_SEP_REF, Y_SEP_EXACT, NYARD };
+enum { Y_NONE, Y_REF, Y_SEP_REF, Y_SEP_EXACT, Y_HREF, NYARD };
 
 typedef struct entry {
     const char *family; /* exact, adaptive, steps, preintegrated, separable-exact, baseline */
@@ -88,7 +102,7 @@ static const entry entries[] = {
     { "exact", "noise exact", NOISE ":method=exact", Y_REF, 1 },
     { "adaptive", "noise adaptive tol=1e-2", NOISE ":method=adaptive:tol=1e-2", Y_REF, 1 },
     { "adaptive", "noise adaptive tol=1e-3", NOISE ":method=adaptive:tol=1e-3", Y_REF, 1 },
-    { "adaptive", "noise adaptive (default tol=2^-12)", NOISE, Y_REF, 1 },
+    { "adaptive", "noise adaptive (default, ttol=2^-12)", NOISE, Y_REF, 1 },
     { "adaptive", "noise adaptive tol=1e-4", NOISE ":method=adaptive:tol=1e-4", Y_REF, 1 },
     { "adaptive", "noise adaptive tol=1e-6", NOISE ":method=adaptive:tol=1e-6", Y_REF, 1 },
     { "adaptive-ttol", "noise adaptive ttol=1e-2", NOISE ":method=adaptive:ttol=1e-2", Y_REF, 1 },
@@ -107,6 +121,14 @@ static const entry entries[] = {
     { "preintegrated", "noise-separable pieces=16", SEP ":method=preintegrated:pieces=16", Y_SEP_EXACT, 1 },
     { "preintegrated", "noise-separable pieces=32", SEP ":method=preintegrated:pieces=32", Y_SEP_EXACT, 1 },
     { "preintegrated", "noise-separable pieces=64", SEP ":method=preintegrated:pieces=64", Y_SEP_EXACT, 1 },
+    { "horizon-baseline", "horizon: exp (baseline)", "exp:density=0.05", Y_NONE, 1 },
+    { "horizon-adaptive", "horizon: adaptive (default, ttol=2^-12)", HORIZON, Y_HREF, 1 },
+    { "horizon-ttol", "horizon: adaptive ttol=1e-3", HORIZON ":method=adaptive:ttol=1e-3", Y_HREF, 1 },
+    { "horizon-ttol", "horizon: adaptive ttol=1e-2", HORIZON ":method=adaptive:ttol=1e-2", Y_HREF, 1 },
+    { "horizon-tol", "horizon: adaptive tol=2^-12 (the old default)", HORIZON ":method=adaptive:tol=0.000244140625", Y_HREF, 1 },
+    { "horizon-exact", "horizon: exact", HORIZON ":method=exact", Y_HREF, 1 },
+    { "horizon-steps", "horizon: steps=64", HORIZON ":method=steps:steps=64", Y_HREF, 1 },
+    { "horizon-steps", "horizon: steps=256", HORIZON ":method=steps:steps=256", Y_HREF, 1 },
 };
 #define NENTRIES ((int) (sizeof entries / sizeof entries[0]))
 
@@ -203,7 +225,7 @@ typedef struct grid {
     long double (*yard[NYARD])[3];
 } grid;
 
-static const char *const yard_spec[NYARD] = { NULL, NOISE, SEP, SEP ":method=exact" };
+static const char *const yard_spec[NYARD] = { NULL, NOISE, SEP, SEP ":method=exact", HORIZON };
 
 static int make_grid(const frame *f, int step, grid *g)
 {
@@ -245,7 +267,21 @@ static void *yard_run(void *arg)
     grid *g = J->g;
     long double (*out)[3] = g->yard[J->which];
     for (int m = J->t; m < g->n; m += J->nt) {
-        if (J->which != Y_REF && g->sky[m]) {
+        if (J->which == Y_HREF) {
+            /* Long rays, sky included: chunk by chunk, to the hit or, for
+             * the sky, to where the fog ahead (rho B e^(-k h)/(k mu)) is
+             * below 1e-12, stopping once tau >= 36 in every channel. */
+            const ef_ray *r = &g->ray[m];
+            double len = r->dist;
+            if (!isfinite(len)) {
+                const double mu = r->dir[1], B = 1 + H_C * 1.0363538;
+                len = mu > 0 ? (log(H_RHO * B / (H_K * mu * 1e-12)) / H_K - r->org[1]) / mu : 1e5;
+                if (!(len > 0))
+                    len = 0;
+            }
+            if (ef_ref_tau_long(J->c, r, len, 100, 36, out[m], NULL, NULL))
+                J->failed++;
+        } else if (J->which != Y_REF && g->sky[m]) {
             /* noise-separable's sky rays (see the header): surface
              * segments only, as for the noise model. */
             out[m][0] = out[m][1] = out[m][2] = NAN;
@@ -338,10 +374,11 @@ static int check_accuracy(const grid *g, const ef_fog_component *c, int which, i
         ef_fog_tau(c, &g->ray[m], tau, &info);
         evals += info.evals;
         counted++;
-        if (g->sky[m]) {
+        if (g->sky[m] && which != Y_HREF) {
             acc->sky++;
             continue;
         }
+        acc->sky += g->sky[m];
         double dT = 0;
         int cov = 1;
         for (int k = 0; k < 3; ++k) {
@@ -349,8 +386,8 @@ static int check_accuracy(const grid *g, const ef_fog_component *c, int which, i
             /* The error tau causes, in long double (e^-inf = 0 on both
              * sides: an opaque pair differs by 0). */
             const long double d = fabsl(expl(-(long double) tau[k]) - expl(-yard));
-            const double T = exp(-tau[k]);
-            const double bound = T > 0 ? T * expm1(info.err[k]) : 0;   /* as the error AOV */
+            const long double T = expl(-(long double) tau[k]);
+            const double bound = (double) (T > 0 ? T * expm1l(info.err[k]) : 0);   /* as the error AOV */
             /* Where the reference T is below e^-60 the integrators stop
              * (nothing shows past it), so tau is compared short of that. */
             const long double dtau = yard < 60 ? fabsl(tau[k] - yard) : 0;
@@ -382,7 +419,7 @@ static int check_accuracy(const grid *g, const ef_fog_component *c, int which, i
 static int usage(void)
 {
     fprintf(stderr, "usage: " PROG " FRAME.exr [--tsv] [--runs N] [--budget SECONDS] "
-                    "[--sample K] [--step S] [--threads T] [--only NAME]\n"
+                    "[--sample K] [--step S] [--hstep H] [--threads T] [--only NAME]\n"
                     "       " PROG " --list\n");
     return 2;
 }
@@ -390,7 +427,7 @@ static int usage(void)
 int main(int argc, char **argv)
 {
     const char *path = NULL, *only = NULL;
-    int tsv = 0, runs = 5, step = 8, threads = 2, force_k = 0;
+    int tsv = 0, runs = 5, step = 8, hstep = 32, threads = 2, force_k = 0;
     double budget = 10;
     for (int i = 1; i < argc; ++i) {
         if (strcmp(argv[i], "--list") == 0) {
@@ -408,6 +445,8 @@ int main(int argc, char **argv)
             force_k = atoi(argv[++i]);
         } else if (strcmp(argv[i], "--step") == 0 && i + 1 < argc) {
             step = atoi(argv[++i]);
+        } else if (strcmp(argv[i], "--hstep") == 0 && i + 1 < argc) {
+            hstep = atoi(argv[++i]);
         } else if (strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
             threads = atoi(argv[++i]);
         } else if (strcmp(argv[i], "--only") == 0 && i + 1 < argc) {
@@ -418,7 +457,7 @@ int main(int argc, char **argv)
             path = argv[i];
         }
     }
-    if (!path || runs < 1 || step < 1 || !(budget > 0))
+    if (!path || runs < 1 || step < 1 || hstep < 1 || !(budget > 0))
         return usage();
 
     frame f;
@@ -427,8 +466,8 @@ int main(int argc, char **argv)
     fprintf(stderr, PROG ": %s: %dx%d; fog pass up to %d runs within %.0f s per entry; "
                     "accuracy on every %d-th pixel each way\n",
             path, f.w, f.h, runs, budget, step);
-    grid g;
-    if (make_grid(&f, step, &g)) {
+    grid g, gh;
+    if (make_grid(&f, step, &g) || make_grid(&f, hstep, &gh)) {
         fprintf(stderr, PROG ": out of memory\n");
         return 1;
     }
@@ -443,7 +482,7 @@ int main(int argc, char **argv)
         if (!only || (exact ? !strcmp(entries[e].name, only) : strstr(entries[e].name, only) != NULL))
             need[entries[e].yard] = 1;
     for (int y = 1; y < NYARD; ++y)
-        if (need[y] && compute_yard(&f, &g, y, threads))
+        if (need[y] && compute_yard(&f, y == Y_HREF ? &gh : &g, y, threads))
             return 1;
 
     if (!tsv) {
@@ -490,7 +529,8 @@ int main(int argc, char **argv)
             plan_pass(&f, &pass, &pl, runs, budget, force_k, &tmv[e]);
         }
         const double a = bench_now();
-        if (E->yard != Y_NONE && check_accuracy(&g, &scene[e].comp[0], E->yard, E->timed, &accv[e])) {
+        if (E->yard != Y_NONE && check_accuracy(E->yard == Y_HREF ? &gh : &g, &scene[e].comp[0],
+                                                E->yard, E->timed, &accv[e])) {
             fprintf(stderr, PROG ": out of memory\n");
             return 1;
         }
@@ -564,6 +604,7 @@ int main(int argc, char **argv)
     free(sel);
     free(acc_s);
     free_grid(&g);
+    free_grid(&gh);
     bench_free_frame(&f);
     return status;
 }

@@ -314,7 +314,7 @@ static void test_opaque(void **state)
     (void) state;
     static const char *const specs[] = {
         "noise:density=0.05:scale=4:falloff=0.2:base=1:method=exact",
-        "noise:density=0.05:scale=4:falloff=0.2:base=1",
+        "noise:density=0.05:scale=4:falloff=0.2:base=1:tol=0.000244140625",
         "noise:density=0.05,0,0.1:scale=4:method=steps",
         "noise-separable:density=0.05:scale=4:falloff=0.2:method=preintegrated",
     };
@@ -338,6 +338,23 @@ static void test_opaque(void **state)
         }
         ef_fog_free(&c);
     }
+    /* The default (ttol=2^-12) stops once T is below 2^-14 in every
+     * channel with density: the rest cannot move T by more. Its tau is
+     * then the mean fog's to infinity plus the noise walked so far, and
+     * the error output reaches from there to T's upper value at the stop
+     * (at least ln 2: T itself). */
+    ef_fog_component c;
+    parse("noise:density=0.05:scale=4:falloff=0.2:base=1", &c);
+    const double o[3] = { 0, 1.7, 0 }, d[3] = { 0.6, 1e-7, 0.8 };
+    const ef_ray r = ray(o, d, INFINITY);
+    double tau[3];
+    ef_tau_info info;
+    ef_fog_tau(&c, &r, tau, &info);
+    assert_true(tau[0] >= log(4 / 0x1p-12) - 1 && isfinite(tau[0]));
+    assert_true(info.err[0] >= log(2.0));
+    assert_true(exp(-tau[0]) * expm1(info.err[0]) >= exp(-log(4 / 0x1p-12) - 1));
+    assert_true(info.evals < 1e5);
+    ef_fog_free(&c);
 }
 
 /* Adaptive on segments that turn opaque: the coarsest octave walks ahead

@@ -109,18 +109,55 @@ static void add_comp(double *s, double *lo, double v)
     *s = t;
 }
 
-void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info)
+int ef_stats_bin(double v)
+{
+    if (!(v > 0))
+        return 0;
+    const double b = floor(8 * log2(v + 1));
+    return b >= EF_STATS_BINS - 1 ? EF_STATS_BINS - 1 : (int) b;
+}
+
+double ef_stats_quantile(const unsigned *hist, double n, double q)
+{
+    if (!(n > 0))
+        return 0;
+    double seen = 0;
+    for (int b = 0; b < EF_STATS_BINS; ++b) {
+        seen += hist[b];
+        if (seen >= q * n)
+            return exp2((b + 1) / 8.0) - 1;
+    }
+    return INFINITY;
+}
+
+void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T)
 {
     const double e = fmax(info->err[0], fmax(info->err[1], info->err[2]));
     s->pixels += 1.0;
     s->evals += info->evals;
     s->cells += info->cells;
     s->dropped += info->dropped;
+    s->over += info->over;
+    s->evals_hist[ef_stats_bin(info->evals)]++;
     if (info->evals > s->evals_max)
         s->evals_max = info->evals;
     if (e > s->err_max)
         s->err_max = e;
+    for (int k = 0; T && k < 3; ++k) {
+        const double d = info->err[k] > 0 ? fmin(1.0, T[k] * expm1(info->err[k])) : 0;
+        if (d > s->dT_max)
+            s->dT_max = d;
+    }
     add_comp(&s->err_sum, &s->err_sum_lo, e);
+}
+
+void ef_tau_stats_time(ef_tau_stats *s, double ns)
+{
+    s->timed += 1.0;
+    s->time_sum += ns;
+    if (ns > s->time_max)
+        s->time_max = ns;
+    s->time_hist[ef_stats_bin(ns)]++;
 }
 
 void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
@@ -129,8 +166,17 @@ void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
     a->evals += b->evals;
     a->cells += b->cells;
     a->dropped += b->dropped;
+    a->over += b->over;
     a->evals_max = fmax(a->evals_max, b->evals_max);
     a->err_max = fmax(a->err_max, b->err_max);
+    a->dT_max = fmax(a->dT_max, b->dT_max);
+    a->timed += b->timed;
+    a->time_sum += b->time_sum;
+    a->time_max = fmax(a->time_max, b->time_max);
+    for (int i = 0; i < EF_STATS_BINS; ++i) {
+        a->evals_hist[i] += b->evals_hist[i];
+        a->time_hist[i] += b->time_hist[i];
+    }
     add_comp(&a->err_sum, &a->err_sum_lo, b->err_sum);
     add_comp(&a->err_sum, &a->err_sum_lo, b->err_sum_lo);
 }

@@ -55,17 +55,37 @@ void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes);
 
 /* Cost and error of the numerical components over many pixels (the
  * surface segment of each fogged pixel), for --stats. */
+#define EF_STATS_BINS 256
 typedef struct ef_tau_stats {
     double pixels;            /* pixels whose fog was evaluated */
     double evals, cells, dropped;   /* sums over those pixels */
     double evals_max;
     double err_max;           /* max over pixels and channels of info.err (tau) */
     double err_sum, err_sum_lo;     /* sum of the per-pixel max over channels, compensated */
+    double over;              /* pixels where the work bound dropped octaves */
+    double dT_max;            /* max over pixels and channels of T expm1(err), the error AOV */
+    /* Log-binned counts (ef_stats_bin) of evaluations per pixel and, when
+     * clock_ns is set, of the fog's time per pixel in ns (all components
+     * of the pixel, kept in the first component's stats). */
+    unsigned evals_hist[EF_STATS_BINS], time_hist[EF_STATS_BINS];
+    double time_sum, time_max, timed;
+    /* The caller's monotonic clock in ns, or NULL: no timing (the core
+     * reads no clock of its own). */
+    double (*clock_ns)(void);
 } ef_tau_stats;
 
-/* Adds one pixel's info to s. */
-void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info);
+/* Adds one pixel's info to s; T is the pixel's transmittance per channel
+ * (for the error AOV's |dT|; NULL: not counted). */
+void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T);
+/* Adds one pixel's fog time (ns) to s. */
+void ef_tau_stats_time(ef_tau_stats *s, double ns);
 /* Adds the totals of b to a. */
 void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b);
+/* The bin of value v >= 0: 8 per power of two of v + 1 (a value is within
+ * 9 % of its bin's lower edge), the last bin open. */
+int ef_stats_bin(double v);
+/* The q-quantile (0..1) of a histogram of n values, as its bin's upper
+ * edge (so it is never below the true quantile); 0 when n is 0. */
+double ef_stats_quantile(const unsigned *hist, double n, double q);
 
 #endif

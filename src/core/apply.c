@@ -430,8 +430,12 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 ef_fog_sample one, other;
                 const ef_fog_sample *surf = &sp->surf[j], *inf = sp->inf[j];
                 if (!batch) {
+                    double (*clk)(void) = stats ? stats[0].clock_ns : NULL;
+                    const double c0 = clk ? clk() : 0;
                     ef_scene_eval_info(s, &sp->r[j], &one, sp->need_inf[j] ? &other : NULL,
                                        want_info ? info : NULL);
+                    if (clk)
+                        ef_tau_stats_time(&stats[0], clk() - c0);
                     surf = &one;
                     inf = sp->need_inf[j] ? &other : &one;
                 }
@@ -464,7 +468,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 if (stats && want_info)
                     for (int nn = 0; nn < s->ncomp; ++nn)
                         if (s->comp[nn].model->tau_info)
-                            ef_tau_stats_add(&stats[nn], &info[nn]);
+                            ef_tau_stats_add(&stats[nn], &info[nn], surf->T);
             }
         }
     }

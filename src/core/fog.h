@@ -83,6 +83,7 @@ typedef struct ef_tau_info {
     double evals;       /* noise evaluations (one octave at one point each) */
     double cells;       /* lattice cells walked, over all octaves */
     double dropped;     /* octaves left out by the tolerance rule */
+    int over;           /* the work bound dropped octaves beyond the tolerance */
 } ef_tau_info;
 
 typedef struct ef_fog_model {

@@ -76,6 +76,7 @@ enum { M_ADAPTIVE = 0, M_EXACT, M_STEPS, M_PREINT };
 /* The default tolerance: 2^-12 in tau keeps |dT| = T |dtau| below half an
  * ulp of a half float for every T, so half output cannot tell. */
 #define DEFAULT_TOL 0x1p-12
+#define DEFAULT_TTOL 0x1p-12
 #define DEFAULT_STEPS 64
 #define GL_MAX 16
 #define TAB 257          /* prefix entries per octave over one period of 256 cells */
@@ -311,7 +312,9 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     s.method = method;
     s.steps = (c->seen & (1u << K_STEPS)) ? (int) c->p[P_STEPS] : DEFAULT_STEPS;
     s.pieces = (c->seen & (1u << K_PIECES)) ? (int) c->p[P_PIECES] : 1;
-    s.ttol = (c->seen & (1u << K_TTOL)) ? c->p[P_TTOL] : 0;
+    /* The default: |dT| <= 2^-12 per channel, what the picture shows. */
+    s.ttol = (c->seen & (1u << K_TTOL)) ? c->p[P_TTOL]
+             : !(c->seen & (1u << K_TOL)) && method == M_ADAPTIVE ? DEFAULT_TTOL : 0;
     /* Under ttol, tol is what the per-ray budget starts from (T <= 1). */
     s.tol = (c->seen & (1u << K_TOL)) ? c->p[P_TOL] : s.ttol > 0 ? log1p(s.ttol) : DEFAULT_TOL;
     const int axes = sep ? ((c->seen & (1u << K_AXES)) ? (int) c->p[P_AXES] : 5) : 7;
@@ -613,6 +616,7 @@ typedef struct rayc {
     const nstate *s;
     long double t0, t1;              /* the stretch in fog (box-clipped; t1 may be finite for sky) */
     long double h0, hs;              /* envelope height at t = 0 and its rate */
+    double kh0, khs;                 /* k h0 and k hs: the envelope is e^-(kh0 + khs t) */
     lin u[MAXLIN];                   /* noise: octave i axis a at 3 i + a; separable: a * N + i */
     double evals, cells;
 } rayc;
@@ -658,6 +662,8 @@ static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     const ef_dd h0 = ef_dd_dot3(up.n, r->org, up.d), hs = ef_dd_dot3(up.n, r->dir, 0.0);
     R->h0 = (long double) h0.hi + h0.lo;
     R->hs = (long double) hs.hi + hs.lo;
+    R->kh0 = (double) (s->k * R->h0);
+    R->khs = (double) (s->k * R->hs);
     if (s->merged)
         return;   /* the merged tables need no lattice lines */
     const int N = s->fbm.octaves;
@@ -850,6 +856,7 @@ typedef struct cell_batch {
     unsigned g[8][CELL_BATCH];       /* the corners' hashes (gradient number: & 15) */
     double A[8][CELL_BATCH], B[8][CELL_BATCH];   /* the corners' gradient terms */
     double sum[CELL_BATCH];
+    double tc[CELL_BATCH];           /* each cell's entry t (with an envelope) */
 } cell_batch;
 
 
@@ -861,8 +868,11 @@ typedef struct cell_batch {
 
 /* Gauss with n nodes on each of the m cells in b, vectorised across cells:
  * per cell the corners' gradient terms are linear along the chord (value
- * at the entry A, rate B), and the nodes are summed in order. */
-EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, cell_batch *b)
+ * at the entry A, rate B), and the nodes are summed in order. With env,
+ * each node's value is weighted by the envelope e^-(kh0 + khs t) there
+ * (t = the cell's entry tc plus the node's offset). */
+EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
+                           int env, double kh0, double khs)
 {
     const double *x = s->glx[n], *wt = s->glw[n];
     if (m < 8) {
@@ -917,7 +927,8 @@ EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, ce
                                              ef_noise_lerp_(u, g2, g3));
             const double x1 = ef_noise_lerp_(v, ef_noise_lerp_(u, g4, g5),
                                              ef_noise_lerp_(u, g6, g7));
-            b->sum[c] += wj * ef_noise_lerp_(w, x0, x1);
+            const double val = ef_noise_lerp_(w, x0, x1);
+            b->sum[c] += env ? wj * ef_exp_neg(kh0 + khs * (b->tc[c] + o)) * val : wj * val;
         }
     }
 }
@@ -926,7 +937,7 @@ EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, ce
 EF_INLINE void batch_add(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
                          ksum *acc)
 {
-    batch_gauss(s, d0, n, m, b);
+    batch_gauss(s, d0, n, m, b, 0, 0, 0);
     for (int c = 0; c < m; ++c)
         kadd(acc, b->hh[c] * b->sum[c]);
 }
@@ -944,7 +955,7 @@ EF_MULTIVERSION static void batch_flush(const nstate *s, const double d0[3], int
  * rounding (~1e-16 per cell) is far below any tolerance it takes. The walk
  * collects CELL_BATCH cells at a time and integrates them side by side;
  * the cells are summed in order. */
-EF_MULTIVERSION static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
+EF_INLINE double octave_walk(rayc *R, int i, int n, double t0, double t1, int env)
 {
     const nstate *s = R->s;
     double fr[3], d[3], next[3], step[3];
@@ -983,6 +994,7 @@ EF_MULTIVERSION static double octave_integral_fast(rayc *R, int i, int n, double
                     b.ic[a][m] = ic[a];
                     b.f[a][m] = fr[a];
                 }
+                b.tc[m] = t;
                 b.hh[m++] = h / 2;
                 for (int a = 0; a < 3; ++a)
                     fr[a] += h * d[a];
@@ -1012,12 +1024,27 @@ EF_MULTIVERSION static double octave_integral_fast(rayc *R, int i, int n, double
             for (int k = 0; k < 8; ++k)
                 b.g[k][c] = nc.h[k];
         }
-        batch_add(s, d, n, m, &b, &acc);
+        batch_gauss(s, d, n, m, &b, env, R->kh0, R->khs);
+        for (int c = 0; c < m; ++c)
+            kadd(&acc, b.hh[c] * b.sum[c]);
         cells += m;
     }
     R->cells += cells;
     R->evals += (double) cells * n;
     return kval(&acc);
+}
+
+/* octave_walk without an envelope (falloff 0). */
+EF_MULTIVERSION static double octave_integral_fast(rayc *R, int i, int n, double t0, double t1)
+{
+    return octave_walk(R, i, n, t0, t1, 0);
+}
+
+/* integral of env * noise_i over [t0, t1] the same way, each node weighted
+ * by the envelope (the adaptive method's segments under a falloff). */
+EF_MULTIVERSION static double octave_integral_env(rayc *R, int i, int n, double t0, double t1)
+{
+    return octave_walk(R, i, n, t0, t1, 1);
 }
 
 /* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
@@ -1030,8 +1057,9 @@ static double octave_integral(rayc *R, int i, int n, long double t0, long double
                               double *err)
 {
     const nstate *s = R->s;
-    if (n > 0 && s->k == 0 && s->method == M_ADAPTIVE)
-        return octave_integral_fast(R, i, n, (double) t0, (double) t1);
+    if (n > 0 && s->method == M_ADAPTIVE)
+        return s->k == 0 ? octave_integral_fast(R, i, n, (double) t0, (double) t1)
+                         : octave_integral_env(R, i, n, (double) t0, (double) t1);
     walk w;
     walk_init(&w, &R->u[3 * i], 3, t0, t1);
     ksum acc = { 0, 0 };
@@ -1955,6 +1983,24 @@ static double curvature_bound(const rayc *R, double envmax)
     return envmax * (D2 + 2 * ks * D1 + ks * ks * B);
 }
 
+/* The error of march(R, t0, t1, n) = unit, bounded two ways, the smaller
+ * taken. The midpoint rule's: each step's error is h^3/24 |f''| somewhere
+ * in it, and |f''| <= env (D2 + 2 |a| D1 + a^2 B) (curvature_bound per unit
+ * of envelope), whose largest value on a step is at most e^(|a| h) times
+ * its mean there; so the sum is at most h^2/24 e^(|a| h) times that bound
+ * times the envelope's integral, its closed form. The trivial one: both
+ * unit and the true value lie in [0, B integral(env)]. Using the integral,
+ * not the envelope's largest value times the length, keeps the bound near
+ * tau on long rays through a thinning envelope. */
+static double march_bound(const rayc *R, long double t0, long double t1, int n, double unit)
+{
+    const nstate *s = R->s;
+    const double m = (double) env_integral(s, R->h0, R->hs, t0, t1);
+    const double h = (double) (t1 - t0) / n, a = fabs(s->k * (double) R->hs);
+    const double mid = h * h / 24 * exp(a * h) * curvature_bound(R, 1.0) * m;
+    return fmin(mid, fmax(unit, shape_bound(s) * m));
+}
+
 /* ---- the component's tau ---- */
 
 /* Where to stop on a ray whose envelope decays (k hs > 0): past T the
@@ -2297,6 +2343,186 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
     }
 }
 
+
+/* ---- adaptive, density linear in the noise: segment by segment ---- */
+
+/* Four standard deviations of the fbm's part, integral(env fbm), over
+ * [t0, t1] (m: the envelope's integral there), octave by octave: the line
+ * integral of octave i weighted by the envelope has a variance of about
+ * LINE_RMS^2 lambda_i integral(env^2) (cells far apart are independent),
+ * or its hard bound B m if smaller. Along a thinning envelope this is far
+ * below the largest envelope times the flat estimate over the length. */
+static double noise_sigma4(const rayc *R, long double t0, long double t1, double m)
+{
+    const nstate *s = R->s;
+    const long double a = fabsl(s->k * R->hs), L = t1 - t0;
+    const long double emax = fmaxl(env_at(R, t0), env_at(R, t1));
+    const long double b = 2 * a * L;
+    const long double w = a == 0 ? L : b < 1e-4L ? L * (1 - b / 2 + b * b / 6) : -expm1l(-b) / (2 * a);
+    const double i2 = (double) (emax * emax * w);
+    double r = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i)
+        r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * m,
+                                     4 * LINE_RMS * sqrt(s->scale / s->fbm.freq[i] * i2));
+    return r;
+}
+
+/* The adaptive method's work bound per ray, in node evaluations (cells
+ * times nodes over every octave): under a millisecond of one core. Past
+ * it, the finest octaves still kept are dropped with three standard
+ * deviations of their line integrals as the error, and the pixel is
+ * counted as over the budget (--stats). */
+#define EVAL_BUDGET 40000
+/* A segment's mean optical depth (densest channel), and its length in
+ * cells of the coarsest octave, at most. */
+#define SEG_TAU 1.0
+#define SEG_CELLS 16.0
+/* Segments per ray, at most (they then grow past SEG_CELLS). */
+#define MAX_SEGS 256
+
+/* The noise part's integral for the linear density (noise, |c| <= 0.9649)
+ * under ttol (the default) over [t0, tend], segment by segment, and
+ * tau / rho (the closed-form mean to t1 plus c times it). Each segment gets
+ * a share of the budget, 3/4 ttol in T: a segment whose
+ * error in tau is d moves T by at most W d, W = max over channels of rho_k
+ * T_k at its start (T_k from the lower value of tau so far), so where the
+ * fog ahead has made T small the segment may drop octaves and nodes.
+ * Segments share no cell, so their estimates (each a 3 or 4 sigma figure)
+ * add in variance: the share of the budget's square is the segment's part
+ * of the mean fog still to come that can show (up to where T falls below
+ * ttol/4), taken from what is left, so the squares never sum past it (the
+ * reported error is their root sum of squares). The ray stops where
+ * T_k is below ttol/4 in every channel: the rest can move T by no more.
+ * errk receives the error per channel in tau (the LN2 marker's meaning
+ * where it stopped: T_k itself may be the error). */
+static double adaptive_linear(rayc *R, long double t0, long double tend, long double t1,
+                              int opaque, double tail, ef_tau_info *info, double errk[3])
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    const double eps = s->ttol, rmin = rho_min(s);
+    const double tau_stop = log(4 / eps);
+    double cross[EF_FBM_MAX_OCTAVES];
+    for (int i = 0; i < N; ++i)
+        cross[i] = (double) (fabsl(R->u[3 * i].d) + fabsl(R->u[3 * i + 1].d) +
+                             fabsl(R->u[3 * i + 2].d));
+    /* An octave whose cells along the whole stretch number more than
+     * CELL_BUDGET (a scale far below the ray's length) is never walked:
+     * its integral counts as its mean, 0, with three standard deviations
+     * of it as the error, as in tau_noise_info's other paths. */
+    const double Ltot = (double) (tend - t0);
+    const double envmax_all = (double) fmaxl(env_at(R, t0), env_at(R, tend));
+    unsigned over = 0;
+    double over_err = 0;
+    int first = N;
+    for (int i = N - 1; i >= 0; --i) {
+        if (!(cross[i] * Ltot <= CELL_BUDGET)) {
+            over |= 1u << i;
+            over_err += fabs(s->contrast) * envmax_all * s->fbm.weight[i] * line_est(s, i, Ltot, 3);
+        } else {
+            first = i;
+        }
+    }
+    long double Lmax = first < N && cross[first] > 0 ? SEG_CELLS / cross[first] : Ltot;
+    if (Lmax < Ltot / MAX_SEGS)
+        Lmax = Ltot / MAX_SEGS;
+    ksum noise = { 0, 0 };
+    /* E2: the sum of the segments' squared estimates (independent errors
+     * of segments that share no cell add in variance); var: what is left
+     * of the budget's square, (3/4 eps)^2 (ttol/4 is the stop's). */
+    double E2 = 0, var = 0.5625 * eps * eps, evals = 0, mean_sofar = 0;
+    int stop = 0, dropped = 0;
+    long double t = t0;
+    while (t < tend) {
+        long double tb = t + Lmax;
+        const long double tr = env_reach(R, t, SEG_TAU / s->rho_max);
+        if (tr < tb)
+            tb = tr;
+        if (!(tb < tend) || !(tb > t))
+            tb = tend;
+        const double mj = (double) env_integral(s, R->h0, R->hs, t, tb);
+        const double rest = (double) env_integral(s, R->h0, R->hs, t, tend);
+        const double E = sqrt(E2);
+        const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
+        /* The whole ray's tau / rho is at least ulo plus the rest's lower
+         * value: its mean less four standard deviations of its noise (the
+         * drop rule's estimate, rest_estimate), or (1 - |c| B) times its
+         * mean, whichever is larger. The error of any segment moves the
+         * final T, which is at most e^-(rho_k lo), by that times rho_k. */
+        const double lo_rest = fmax(rest - fabs(s->contrast) * noise_sigma4(R, t, tend, rest),
+                                    (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest);
+        const double lo = ulo + (lo_rest > 0 ? lo_rest : 0);
+        int done = t > t0;
+        double W = 0;
+        for (int k = 0; k < 3; ++k) {
+            if (!(s->rho[k] > 0))
+                continue;
+            done &= exp(-s->rho[k] * (ulo > 0 ? ulo : 0)) <= eps / 4;
+            W = fmax(W, s->rho[k] * exp(-s->rho[k] * (lo > 0 ? lo : 0)));
+        }
+        if (done) {
+            stop = 1;
+            break;
+        }
+        const double togo = (tau_stop - rmin * ulo) / rmin;
+        const double vis = fmin(rest, 2 * fmax(togo, mj));
+        const double share = vis > mj ? mj / vis : 1;
+        const double quota = sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
+        const double L = (double) (tb - t);
+        const double envmax = (double) fmaxl(env_at(R, t), env_at(R, tb));
+        plan P;
+        plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+        for (int i = 0; i < N; ++i)
+            if (over >> i & 1)
+                P.q[i] = 0;
+        /* The work bound: the finest kept octaves go first. */
+        double need = 0;
+        for (int i = 0; i < N; ++i)
+            need += P.q[i] * (cross[i] * L + 1);
+        for (int i = N - 1; i > 0 && evals + need > EVAL_BUDGET; --i)
+            if (P.q[i]) {
+                need -= P.q[i] * (cross[i] * L + 1);
+                P.q[i] = 0;
+                P.est += s->rho_max * fabs(s->contrast) * envmax * s->fbm.weight[i] *
+                         line_est(s, i, L, 3);
+                info->over = 1;
+                P.dropped++;
+            }
+        if (P.dropped > dropped)
+            dropped = P.dropped;
+        for (int i = 0; i < N; ++i) {
+            if (!P.q[i])
+                continue;
+            const double before = R->evals;
+            const double v = s->k == 0 ? octave_integral_fast(R, i, P.q[i], (double) t, (double) tb)
+                                       : octave_integral_env(R, i, P.q[i], (double) t, (double) tb);
+            evals += R->evals - before;
+            kadd(&noise, s->fbm.weight[i] * v);
+        }
+        const double used = P.est / s->rho_max;
+        E2 += used * used;
+        var -= (W * used) * (W * used);
+        mean_sofar += mj;
+        t = tb;
+    }
+    info->dropped = dropped > __builtin_popcount(over) ? dropped : __builtin_popcount(over);
+    const double E = sqrt(E2) + over_err;
+    const double mean_to = (double) env_integral(s, R->h0, R->hs, t0, opaque ? t : t1);
+    const double unit = mean_to + s->contrast * kval(&noise);
+    if (stop) {
+        const double mrest = (double) env_integral(s, R->h0, R->hs, t, t1);
+        for (int k = 0; k < 3; ++k)
+            errk[k] = s->rho[k] > 0 ? fmax(LN2, s->rho[k] * (mrest + E)) : 0;
+    } else if (opaque) {
+        for (int k = 0; k < 3; ++k)
+            errk[k] = s->rho[k] > 0 ? LN2 : 0;
+    } else {
+        for (int k = 0; k < 3; ++k)
+            errk[k] = s->rho[k] * (E + tail);
+    }
+    return unit;
+}
+
 static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double tau[3],
                            ef_tau_info *info)
 {
@@ -2351,6 +2577,19 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     double mean = 0;
     if (linear)
         mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
+    if (linear && s->method == M_ADAPTIVE && s->ttol > 0) {
+        double errk[3];
+        unit = adaptive_linear(&R, t0, tend, t1, opaque, tail, info, errk);
+        if (unit < 0)
+            unit = 0;   /* rounding below an exactly zero density */
+        for (int k = 0; k < 3; ++k) {
+            tau[k] = s->rho[k] * unit;
+            info->err[k] = errk[k];
+        }
+        info->evals = R.evals;
+        info->cells = R.cells;
+        return;
+    }
     const double tol = s->ttol > 0 && s->method == M_ADAPTIVE
                            ? ttol_budget(&R, t0, tend, L, envmax, linear) : s->tol;
     switch (s->method) {
@@ -2381,14 +2620,17 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
             const double lambda = s->scale / s->fbm.freq[i];
             if (!(L * cross / lambda <= budget)) {
                 over |= 1u << i;
-                over_err += fabs(s->contrast) * envmax * s->fbm.weight[i] * line_est(s, i, L, 3);
+                /* exact stays certified: the octave's hard bound over the
+                 * envelope's integral; adaptive: the drop rule's estimate */
+                over_err += fabs(s->contrast) * s->fbm.weight[i] *
+                            (s->method == M_EXACT
+                                 ? EF_NOISE_BOUND * (double) env_integral(s, R.h0, R.hs, t0, tend)
+                                 : envmax * line_est(s, i, L, 3));
             }
         }
         if (over && !linear) {
             unit = march(&R, t0, tend, MARCH_FALLBACK);
-            const double h = L / MARCH_FALLBACK;
-            err = fmin(h * h * L / 24 * curvature_bound(&R, envmax),
-                       fmax(unit, shape_bound(s) * envmax * L)) + tail;
+            err = march_bound(&R, t0, tend, MARCH_FALLBACK, unit) + tail;
             info->dropped = __builtin_popcount(over);
             break;
         }
@@ -2470,9 +2712,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     }
     case M_STEPS: {
         unit = march(&R, t0, tend, s->steps);
-        const double h = L / s->steps;
-        err = fmin(h * h * L / 24 * curvature_bound(&R, envmax),
-                   fmax(unit, shape_bound(s) * envmax * L)) + tail;
+        err = march_bound(&R, t0, tend, s->steps, unit) + tail;
         break;
     }
     default: { /* M_PREINT */

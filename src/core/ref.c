@@ -597,12 +597,15 @@ static void comp_density(const void *ctx, const long double *v, long double out[
     c->model->density(c, v, out);
 }
 
-int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], ef_ref_stats *st)
+/* ef_ref_tau's density description of c: feat and lat are allocated
+ * (the caller frees both). Returns -1 for models without a density or
+ * when memory runs out. */
+static int comp_describe(const ef_fog_component *c, ef_fog_functional f[MAXF], comp_ctx *cc,
+                         ef_ref_density *d)
 {
     const ef_fog_model *m = c->model;
     if (!m->density || !m->functionals || !m->features)
         return -1;
-    ef_fog_functional f[MAXF];
     const int nf = m->functionals(c, f, MAXF);
     const int nfeat = m->features(c, NULL, 0);
     if (nf > MAXF || nf < 0 || nfeat < 0)
@@ -611,7 +614,7 @@ int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], e
     if (!feat)
         return -1;
     m->features(c, feat, nfeat);
-    comp_ctx cc = { c };
+    cc->c = c;
     int nlat = m->lattices ? m->lattices(c, NULL, 0) : 0;
     if (nlat < 0) {
         free(feat);
@@ -624,10 +627,62 @@ int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], e
     }
     if (nlat)
         m->lattices(c, lat, nlat);
-    ef_ref_density d = { .nf = nf, .f = f, .nfeat = nfeat, .feat = feat,
-                         .density = comp_density, .ctx = &cc, .nlat = nlat, .lat = lat };
+    *d = (ef_ref_density) { .nf = nf, .f = f, .nfeat = nfeat, .feat = feat,
+                            .density = comp_density, .ctx = cc, .nlat = nlat, .lat = lat };
+    return 0;
+}
+
+int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], ef_ref_stats *st)
+{
+    ef_fog_functional f[MAXF];
+    comp_ctx cc;
+    ef_ref_density d;
+    if (comp_describe(c, f, &cc, &d) < 0)
+        return -1;
     const int rc = ef_ref_integrate(&d, r->org, r->dir, r->dist, tau, st);
-    free(lat);
-    free(feat);
+    free((void *) d.lat);
+    free((void *) d.feat);
+    return rc;
+}
+
+int ef_ref_tau_long(const ef_fog_component *c, const ef_ray *r, double len, double chunk,
+                    double stop, long double tau[3], double *reached, ef_ref_stats *st)
+{
+    tau[0] = tau[1] = tau[2] = 0;
+    if (reached)
+        *reached = 0;
+    if (!(len >= 0) || !(chunk > 0) || isinf(len))
+        return -1;
+    ef_fog_functional f[MAXF];
+    comp_ctx cc;
+    ef_ref_density d;
+    if (comp_describe(c, f, &cc, &d) < 0)
+        return -1;
+    int rc = 0;
+    const long double steps = ceill(len / chunk);
+    for (long double j = 0; j < steps; ++j) {
+        const long double ta = j * chunk, tb = j + 1 >= steps ? len : (j + 1) * chunk;
+        double org[3];
+        for (int a = 0; a < 3; ++a)
+            org[a] = (double) (r->org[a] + ta * (long double) r->dir[a]);
+        long double part[3];
+        rc = ef_ref_integrate(&d, org, r->dir, (double) (tb - ta), part, st);
+        if (rc < 0)
+            break;
+        int done = 1, any = 0;
+        for (int k = 0; k < 3; ++k) {
+            tau[k] += part[k];
+            if (tau[k] > 0)
+                any = 1;
+            if (tau[k] > 0 && tau[k] < stop)
+                done = 0;
+        }
+        if (reached)
+            *reached = (double) tb;
+        if (any && done)
+            break;
+    }
+    free((void *) d.lat);
+    free((void *) d.feat);
     return rc;
 }

@@ -54,4 +54,15 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
  * (linear, exp2) or when memory runs out. */
 int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], ef_ref_stats *st);
 
+/* tau along r over [0, len] (len finite; r->dist is not used) for rays
+ * too long for one call: in chunks of at most chunk units, each integrated
+ * by ef_ref_integrate from its own start (org + t dir formed in long double
+ * and rounded to double, about 1e-16 of the distance: far below what the
+ * densities resolve), so memory stays that of one chunk. It stops after
+ * the chunk where every channel with density has reached tau >= stop
+ * (T < e^-stop: nothing after can show), and *reached (when not NULL)
+ * tells how far it integrated. Returns 0, or -1 as ef_ref_tau. */
+int ef_ref_tau_long(const ef_fog_component *c, const ef_ray *r, double len, double chunk,
+                    double stop, long double tau[3], double *reached, ef_ref_stats *st);
+
 #endif
