@@ -2369,20 +2369,57 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
 
 /* ---- adaptive, density linear in the noise: segment by segment ---- */
 
+/* The envelope e^-(kh0 + khs t) in double, for planning the segments (the
+ * closed-form mean part that enters tau stays env_integral's, in long
+ * double). Callers have checked that kh0 and khs are finite and that the
+ * exponent stays below 690 on the ray (env_overflows). */
+static inline double env_d(const rayc *R, double t)
+{
+    return R->s->k > 0 ? exp(-(R->kh0 + R->khs * t)) : 1;
+}
+
+/* integral of env_d over [t0, t1], t1 finite. */
+static double env_int_d(const rayc *R, double t0, double t1)
+{
+    const double L = t1 - t0, a = R->khs;
+    if (!(R->s->k > 0))
+        return L;
+    if (a == 0)
+        return L * env_d(R, t0);
+    const double b = fabs(a) * L, emax = a > 0 ? env_d(R, t0) : env_d(R, t1);
+    return emax * (b < 1e-8 ? L : -expm1(-b) / fabs(a));
+}
+
+/* env_reach in double: the t past t0 where env_int_d from t0 reaches need
+ * (INFINITY if it never does). */
+static double env_reach_d(const rayc *R, double t0, double need)
+{
+    const double e0 = env_d(R, t0), a = R->s->k > 0 ? R->khs : 0;
+    if (!(e0 > 0))
+        return INFINITY;
+    if (a == 0)
+        return t0 + need / e0;
+    if (a > 0) {
+        const double x = need * a / e0;
+        return x < 1 ? t0 - log1p(-x) / a : INFINITY;
+    }
+    return t0 + log1p(need * -a / e0) / -a;
+}
+
 /* Four standard deviations of the fbm's part, integral(env fbm), over
  * [t0, t1] (m: the envelope's integral there), octave by octave: the line
  * integral of octave i weighted by the envelope has a variance of about
  * LINE_RMS^2 lambda_i integral(env^2) (cells far apart are independent),
  * or its hard bound B m if smaller. Along a thinning envelope this is far
  * below the largest envelope times the flat estimate over the length. */
-static double noise_sigma4(const rayc *R, long double t0, long double t1, double m)
+static double noise_sigma4(const rayc *R, double t0, double t1, double m)
 {
     const nstate *s = R->s;
-    const long double a = fabsl(s->k * R->hs), L = t1 - t0;
-    const long double emax = fmaxl(env_at(R, t0), env_at(R, t1));
-    const long double b = 2 * a * L;
-    const long double w = a == 0 ? L : b < 1e-4L ? L * (1 - b / 2 + b * b / 6) : -expm1l(-b) / (2 * a);
-    const double i2 = (double) (emax * emax * w);
+    const double a = fabs(R->khs), L = t1 - t0;
+    const double emax = fmax(env_d(R, t0), env_d(R, t1));
+    const double b = 2 * a * L;
+    const double w = !(s->k > 0) || a == 0 ? L : b < 1e-8 ? L : -expm1(-b) / (2 * a);
+    const double i2 = emax * emax * w;
     double r = 0;
     for (int i = 0; i < s->fbm.octaves; ++i)
         r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * m,
@@ -2434,6 +2471,9 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
      * its integral counts as its mean, 0, with three standard deviations
      * of it as the error, as in tau_noise_info's other paths. */
     const double Ltot = (double) (tend - t0);
+    /* planning in double where the envelope's exponent is finite (else the
+     * long double forms, and no statistical lower value of the rest) */
+    const int dbl = s->k == 0 || (isfinite(R->kh0) && isfinite(R->khs));
     const double envmax_all = (double) fmaxl(env_at(R, t0), env_at(R, tend));
     unsigned over = 0;
     double over_err = 0;
@@ -2458,13 +2498,16 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     long double t = t0;
     while (t < tend) {
         long double tb = t + Lmax;
-        const long double tr = env_reach(R, t, SEG_TAU / s->rho_max);
+        const long double tr = dbl ? env_reach_d(R, (double) t, SEG_TAU / s->rho_max)
+                                   : env_reach(R, t, SEG_TAU / s->rho_max);
         if (tr < tb)
             tb = tr;
         if (!(tb < tend) || !(tb > t))
             tb = tend;
-        const double mj = (double) env_integral(s, R->h0, R->hs, t, tb);
-        const double rest = (double) env_integral(s, R->h0, R->hs, t, tend);
+        const double mj = dbl ? env_int_d(R, (double) t, (double) tb)
+                              : (double) env_integral(s, R->h0, R->hs, t, tb);
+        const double rest = dbl ? env_int_d(R, (double) t, (double) tend)
+                                : (double) env_integral(s, R->h0, R->hs, t, tend);
         const double E = sqrt(E2);
         const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
         /* The whole ray's tau / rho is at least ulo plus the rest's lower
@@ -2472,8 +2515,11 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
          * drop rule's estimate, rest_estimate), or (1 - |c| B) times its
          * mean, whichever is larger. The error of any segment moves the
          * final T, which is at most e^-(rho_k lo), by that times rho_k. */
-        const double lo_rest = fmax(rest - fabs(s->contrast) * noise_sigma4(R, t, tend, rest),
-                                    (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest);
+        const double hard = (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest;
+        const double lo_rest =
+            dbl ? fmax(rest - fabs(s->contrast) * noise_sigma4(R, (double) t, (double) tend, rest),
+                       hard)
+                : hard;
         const double lo = ulo + (lo_rest > 0 ? lo_rest : 0);
         int done = t > t0;
         double W = 0;
@@ -2492,7 +2538,8 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double share = vis > mj ? mj / vis : 1;
         const double quota = sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
         const double L = (double) (tb - t);
-        const double envmax = (double) fmaxl(env_at(R, t), env_at(R, tb));
+        const double envmax = dbl ? fmax(env_d(R, (double) t), env_d(R, (double) tb))
+                                  : (double) fmaxl(env_at(R, t), env_at(R, tb));
         plan P;
         plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
         for (int i = 0; i < N; ++i)
