@@ -174,7 +174,7 @@ stats_lines=()
 for name in "${order[@]}"; do
     case "${F_fam[$name]}" in horizon-adaptive) ;; adaptive) [[ "${F_spec[$name]}" == *method=* ]] && continue;; *) continue;; esac
     "$exrfog" "${threads[@]}" --stats --fog "${F_spec[$name]}" "$in" -o "$tmp/stats.exr" 2>"$tmp/stats.log" || continue
-    stats_lines+=("| \`${F_spec[$name]}\` | $(grep -o 'time per pixel.*' "$tmp/stats.log" | sed 's/time per pixel (every component, on its thread): //') | $(grep -o 'noise evaluations mean [^,]*' "$tmp/stats.log" | sed 's/noise evaluations //') | $(grep -o 'over the work bound [0-9]* pixels' "$tmp/stats.log" | sed 's/over the work bound //') | $(grep -o '(|dT|, as --aov error) max [0-9.e+-]*' "$tmp/stats.log" | sed 's/.* max //') |")
+    stats_lines+=("| \`${F_spec[$name]}\` | $(grep -o 'time per pixel.*' "$tmp/stats.log" | sed 's/time per pixel (every component, one core): //') | $(grep -o 'noise evaluations mean [^,]*' "$tmp/stats.log" | sed 's/noise evaluations //') | $(grep -o 'over the work bound [0-9]* pixels' "$tmp/stats.log" | sed 's/over the work bound //') | $(grep -o '(|dT|, as --aov error) max [0-9.e+-]*' "$tmp/stats.log" | sed 's/.* max //') |")
 done
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
 

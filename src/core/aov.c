@@ -151,12 +151,14 @@ void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T)
     add_comp(&s->err_sum, &s->err_sum_lo, e);
 }
 
-void ef_tau_stats_time(ef_tau_stats *s, double ns)
+void ef_tau_stats_time(ef_tau_stats *s, double ns, int clean)
 {
     s->timed += 1.0;
     s->time_sum += ns;
     if (ns > s->time_max)
         s->time_max = ns;
+    if (clean && ns > s->time_max_clean)
+        s->time_max_clean = ns;
     s->time_hist[ef_stats_bin(ns)]++;
 }
 
@@ -173,6 +175,7 @@ void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
     a->timed += b->timed;
     a->time_sum += b->time_sum;
     a->time_max = fmax(a->time_max, b->time_max);
+    a->time_max_clean = fmax(a->time_max_clean, b->time_max_clean);
     for (int i = 0; i < EF_STATS_BINS; ++i) {
         a->evals_hist[i] += b->evals_hist[i];
         a->time_hist[i] += b->time_hist[i];

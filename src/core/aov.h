@@ -69,16 +69,21 @@ typedef struct ef_tau_stats {
      * of the pixel, kept in the first component's stats). */
     unsigned evals_hist[EF_STATS_BINS], time_hist[EF_STATS_BINS];
     double time_sum, time_max, timed;
-    /* The caller's monotonic clock in ns, or NULL: no timing (the core
-     * reads no clock of its own). */
+    double time_max_clean;    /* the max over spans whose CPU time covers their wall time */
+    /* The caller's monotonic clock and its thread's CPU clock, in ns, or
+     * NULL: no timing (the core reads no clock of its own). A pixel's time
+     * is its wall time, capped by the CPU time of its span of pixels (so
+     * time the thread spent descheduled does not count). */
     double (*clock_ns)(void);
+    double (*cpu_ns)(void);
 } ef_tau_stats;
 
 /* Adds one pixel's info to s; T is the pixel's transmittance per channel
  * (for the error AOV's |dT|; NULL: not counted). */
 void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T);
-/* Adds one pixel's fog time (ns) to s. */
-void ef_tau_stats_time(ef_tau_stats *s, double ns);
+/* Adds one pixel's fog time (ns) to s; clean: its span was not
+ * descheduled (its wall time is CPU time). */
+void ef_tau_stats_time(ef_tau_stats *s, double ns, int clean);
 /* Adds the totals of b to a. */
 void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b);
 /* The bin of value v >= 0: 8 per power of two of v + 1 (a value is within

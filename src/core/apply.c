@@ -378,6 +378,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     const int batch = !want_info;
     const int need_dir = !depth_only || (mask & EF_AOV_P);
     ef_tau_info info[EF_FOG_MAX_COMPONENTS];
+    double wall[EF_RECON_SPAN];      /* --stats: each pixel's fog time, ns (-1: none) */
     span *sp = &(span) { .nq = 0 };
     for (int yy = 0; yy < h; ++yy) {
         const int y = y0 + yy;
@@ -416,6 +417,10 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 ef_scene_eval_rays(s, sp->r, n, sp->surf);
                 ef_scene_eval_rays(s, sp->q, sp->nq, sp->far);
             }
+            double (*cpu)(void) = stats && !batch && stats[0].clock_ns ? stats[0].cpu_ns : NULL;
+            const double cpu0 = cpu ? cpu() : 0;
+            for (int j = 0; j < n; ++j)
+                wall[j] = -1;
             for (int j = 0; j < n; ++j) {
                 const size_t i = i0 + (size_t) j;
                 if (sp->sky[j] && s->sky == EF_SKY_KEEP) {
@@ -435,7 +440,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                     ef_scene_eval_info(s, &sp->r[j], &one, sp->need_inf[j] ? &other : NULL,
                                        want_info ? info : NULL);
                     if (clk)
-                        ef_tau_stats_time(&stats[0], clk() - c0);
+                        wall[j] = clk() - c0;
                     surf = &one;
                     inf = sp->need_inf[j] ? &other : &one;
                 }
@@ -469,6 +474,19 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                     for (int nn = 0; nn < s->ncomp; ++nn)
                         if (s->comp[nn].model->tau_info)
                             ef_tau_stats_add(&stats[nn], &info[nn], surf->T);
+            }
+            if (stats && !batch && stats[0].clock_ns) {
+                /* no pixel of the span took more CPU than the whole span */
+                const double span_cpu = cpu ? cpu() - cpu0 : INFINITY;
+                double sum = 0;
+                for (int j = 0; j < n; ++j)
+                    sum += wall[j] >= 0 ? wall[j] : 0;
+                /* descheduled: the pixels' wall times exceed the span's CPU
+                 * time (by more than the clock reads' own cost) */
+                const int clean = cpu && sum <= span_cpu + 10000;
+                for (int j = 0; j < n; ++j)
+                    if (wall[j] >= 0)
+                        ef_tau_stats_time(&stats[0], wall[j] < span_cpu ? wall[j] : span_cpu, clean);
             }
         }
     }

@@ -2474,21 +2474,30 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     /* planning in double where the envelope's exponent is finite (else the
      * long double forms, and no statistical lower value of the rest) */
     const int dbl = s->k == 0 || (isfinite(R->kh0) && isfinite(R->khs));
-    const double envmax_all = (double) fmaxl(env_at(R, t0), env_at(R, tend));
+    /* The length that counts for the cell budget: up to where the mean fog
+     * alone reaches four times the stop's depth (the ray has all but
+     * certainly stopped by then; if not, the work bound takes over). A
+     * slowly climbing sky ray's tail is far longer than what it walks. */
+    double Lwalk = Ltot;
+    {
+        const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
+        const double need = 4 * tau_stop / (rmin * (lo1 > 0.25 ? lo1 : 0.25));
+        const double reach = dbl ? env_reach_d(R, (double) t0, need) - (double) t0
+                                 : (double) (env_reach(R, t0, need) - t0);
+        if (reach < Lwalk)
+            Lwalk = reach;
+    }
     unsigned over = 0;
-    double over_err = 0;
     int first = N;
     for (int i = N - 1; i >= 0; --i) {
-        if (!(cross[i] * Ltot <= CELL_BUDGET)) {
+        if (!(cross[i] * Lwalk <= CELL_BUDGET))
             over |= 1u << i;
-            over_err += fabs(s->contrast) * envmax_all * s->fbm.weight[i] * line_est(s, i, Ltot, 3);
-        } else {
+        else
             first = i;
-        }
     }
-    long double Lmax = first < N && cross[first] > 0 ? SEG_CELLS / cross[first] : Ltot;
-    if (Lmax < Ltot / MAX_SEGS)
-        Lmax = Ltot / MAX_SEGS;
+    long double Lmax = first < N && cross[first] > 0 ? SEG_CELLS / cross[first] : Lwalk;
+    if (Lmax < Lwalk / MAX_SEGS)
+        Lmax = Lwalk / MAX_SEGS;
     ksum noise = { 0, 0 };
     /* E2: the sum of the segments' squared estimates (independent errors
      * of segments that share no cell add in variance); var: what is left
@@ -2542,9 +2551,15 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
                                   : (double) fmaxl(env_at(R, t), env_at(R, tb));
         plan P;
         plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+        /* An octave over the cell budget is not walked: its estimate here
+         * is the drop rule's, segment by segment like any other. */
         for (int i = 0; i < N; ++i)
-            if (over >> i & 1)
+            if (over >> i & 1) {
+                P.est += P.q[i] ? s->rho_max * fabs(s->contrast) * envmax * s->fbm.weight[i] *
+                                      line_est(s, i, L, 3)
+                                : 0;
                 P.q[i] = 0;
+            }
         /* The work bound: the finest kept octaves go first. */
         double need = 0;
         for (int i = 0; i < N; ++i)
@@ -2576,13 +2591,20 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         t = tb;
     }
     info->dropped = dropped > __builtin_popcount(over) ? dropped : __builtin_popcount(over);
-    const double E = sqrt(E2) + over_err;
+    const double E = sqrt(E2);
     const double mean_to = (double) env_integral(s, R->h0, R->hs, t0, opaque ? t : t1);
-    const double unit = mean_to + s->contrast * kval(&noise);
+    double unit = mean_to + s->contrast * kval(&noise);
     if (stop) {
-        const double mrest = (double) env_integral(s, R->h0, R->hs, t, t1);
+        /* True T_k lies in [0, T_up] with T_up = e^-(rho_k ulo): the
+         * estimate (the mean fog to the end) is within it, and the error
+         * output reaches from it to T_up. Past 600 in tau above ulo, the
+         * estimate is held there: still within, and T expm1(err) stays
+         * finite in double (T would underflow, expm1 overflow). */
+        const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
+        if (s->rho_max * (unit - ulo) > 600)
+            unit = ulo + 600 / s->rho_max;
         for (int k = 0; k < 3; ++k)
-            errk[k] = s->rho[k] > 0 ? fmax(LN2, s->rho[k] * (mrest + E)) : 0;
+            errk[k] = s->rho[k] > 0 ? fmax(LN2, s->rho[k] * (unit - ulo)) : 0;
     } else if (opaque) {
         for (int k = 0; k < 3; ++k)
             errk[k] = s->rho[k] > 0 ? LN2 : 0;
