@@ -352,6 +352,13 @@ static void test_opaque(void **state)
     ef_tau_info info;
     ef_fog_tau(&c, &r, tau, &info);
     assert_true(tau[0] >= log(4 / 0x1p-12) && isfinite(tau[0]));
+    /* The true tau, by hand: the ray climbs at 1e-7, so its fog runs to
+     * rho e^(-k (1.7 - 1)) / (k 1e-7), about 2e6 (less the noise's
+     * c B share): T is 0 to double precision, and the error is T itself,
+     * which the error output (T expm1(err) >= T: err >= ln 2) covers. */
+    const double tau_hand = 0.05 * exp(-0.2 * 0.7) / (0.2 * 1e-7) * (1 - 0.9 * EF_NOISE_BOUND);
+    assert_true(tau_hand > 1e5);
+    assert_true(exp(-tau[0]) <= 0x1p-14);
     assert_true(info.err[0] >= log(2.0));
     /* T's upper value at the stop, T e^err, is below 2^-14 */
     assert_true(exp(-tau[0] + info.err[0]) <= 0x1p-14 * (1 + 1e-9));

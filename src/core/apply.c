@@ -378,7 +378,10 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     const int batch = !want_info;
     const int need_dir = !depth_only || (mask & EF_AOV_P);
     ef_tau_info info[EF_FOG_MAX_COMPONENTS];
-    double wall[EF_RECON_SPAN];      /* --stats: each pixel's fog time, ns (-1: none) */
+    /* --stats with the caller's clocks: each pixel's fog time, ns (-1: none) */
+    double wall[EF_RECON_SPAN];
+    double (*const clk)(void) = stats && !batch ? stats[0].clock_ns : NULL;
+    double (*const cpu)(void) = clk ? stats[0].cpu_ns : NULL;
     span *sp = &(span) { .nq = 0 };
     for (int yy = 0; yy < h; ++yy) {
         const int y = y0 + yy;
@@ -417,7 +420,6 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 ef_scene_eval_rays(s, sp->r, n, sp->surf);
                 ef_scene_eval_rays(s, sp->q, sp->nq, sp->far);
             }
-            double (*cpu)(void) = stats && !batch && stats[0].clock_ns ? stats[0].cpu_ns : NULL;
             const double cpu0 = cpu ? cpu() : 0;
             for (int j = 0; j < n; ++j)
                 wall[j] = -1;
@@ -435,7 +437,6 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 ef_fog_sample one, other;
                 const ef_fog_sample *surf = &sp->surf[j], *inf = sp->inf[j];
                 if (!batch) {
-                    double (*clk)(void) = stats ? stats[0].clock_ns : NULL;
                     const double c0 = clk ? clk() : 0;
                     ef_scene_eval_info(s, &sp->r[j], &one, sp->need_inf[j] ? &other : NULL,
                                        want_info ? info : NULL);
@@ -475,7 +476,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                         if (s->comp[nn].model->tau_info)
                             ef_tau_stats_add(&stats[nn], &info[nn], surf->T);
             }
-            if (stats && !batch && stats[0].clock_ns) {
+            if (clk) {
                 /* no pixel of the span took more CPU than the whole span */
                 const double span_cpu = cpu ? cpu() - cpu0 : INFINITY;
                 double sum = 0;

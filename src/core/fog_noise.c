@@ -933,11 +933,12 @@ EF_INLINE void batch_gauss(const nstate *s, const double d0[3], int n, int m, ce
     }
 }
 
-/* Integrates the m cells of b and adds them to acc in walk order. */
+/* Integrates the m cells of b (with env, weighted by the envelope) and
+ * adds them to acc in walk order. */
 EF_INLINE void batch_add(const nstate *s, const double d0[3], int n, int m, cell_batch *b,
-                         ksum *acc)
+                         ksum *acc, int env, double kh0, double khs)
 {
-    batch_gauss(s, d0, n, m, b, 0, 0, 0);
+    batch_gauss(s, d0, n, m, b, env, kh0, khs);
     for (int c = 0; c < m; ++c)
         kadd(acc, b->hh[c] * b->sum[c]);
 }
@@ -946,7 +947,7 @@ EF_INLINE void batch_add(const nstate *s, const double d0[3], int n, int m, cell
 EF_MULTIVERSION static void batch_flush(const nstate *s, const double d0[3], int n, int m,
                                         cell_batch *b, ksum *acc)
 {
-    batch_add(s, d0, n, m, b, acc);
+    batch_add(s, d0, n, m, b, acc, 0, 0, 0);
 }
 
 /* integral of noise_i over [t0, t1] with n nodes per cell, walking the cells
@@ -1024,9 +1025,7 @@ EF_INLINE double octave_walk(rayc *R, int i, int n, double t0, double t1, int en
             for (int k = 0; k < 8; ++k)
                 b.g[k][c] = nc.h[k];
         }
-        batch_gauss(s, d, n, m, &b, env, R->kh0, R->khs);
-        for (int c = 0; c < m; ++c)
-            kadd(&acc, b.hh[c] * b.sum[c]);
+        batch_add(s, d, n, m, &b, &acc, env, R->kh0, R->khs);
         cells += m;
     }
     R->cells += cells;
@@ -2312,6 +2311,14 @@ EF_MULTIVERSION static void preint_span(const ef_fog_component *c, const nstate 
     }
 }
 
+/* integral over [0, L] of e0 e^(-a t), a >= 0, L finite: e0 L where a L is
+ * too small for expm1 to matter. */
+static double decay_int(double e0, double a, double L)
+{
+    const double b = a * L;
+    return e0 * (b < 1e-8 ? L : -expm1(-b) / a);
+}
+
 /* The preintegrated method's error output, a bound: the method's value u
  * and the true tau / rho both lie in [0, B integral(env)] (the density is
  * at most rho B env), so |u - tau / rho| <= max(u, B integral(env)) over
@@ -2321,14 +2328,8 @@ EF_MULTIVERSION static void preint_span(const ef_fog_component *c, const nstate 
  * scenes other than the tests'). */
 static double preint_bound(const nstate *s, double h0, double hs, double t0, double t1, double u)
 {
-    const double L = t1 - t0, a = s->k * hs;
-    double m;
-    if (!(s->k > 0) || hs == 0) {
-        m = L * exp(-s->k * h0);
-    } else {
-        const double hl = hs > 0 ? h0 + hs * t0 : h0 + hs * t1, b = fabs(a) * L;
-        m = exp(-s->k * hl) * (b < 1e-8 ? L : -expm1(-b) / fabs(a));
-    }
+    const double hl = hs > 0 ? h0 + hs * t0 : h0 + hs * t1;   /* the densest end */
+    const double m = decay_int(exp(-s->k * hl), fabs(s->k * hs), t1 - t0);
     return fmax(u, shape_bound(s) * m);
 }
 
@@ -2371,8 +2372,8 @@ static void preint_fast(const ef_fog_component *c, const nstate *s, const ef_ray
 
 /* The envelope e^-(kh0 + khs t) in double, for planning the segments (the
  * closed-form mean part that enters tau stays env_integral's, in long
- * double). Callers have checked that kh0 and khs are finite and that the
- * exponent stays below 690 on the ray (env_overflows). */
+ * double). adaptive_linear runs only where kh0 and khs are finite, and
+ * the exponent stays below 690 on the ray (env_overflows). */
 static inline double env_d(const rayc *R, double t)
 {
     return R->s->k > 0 ? exp(-(R->kh0 + R->khs * t)) : 1;
@@ -2381,13 +2382,8 @@ static inline double env_d(const rayc *R, double t)
 /* integral of env_d over [t0, t1], t1 finite. */
 static double env_int_d(const rayc *R, double t0, double t1)
 {
-    const double L = t1 - t0, a = R->khs;
-    if (!(R->s->k > 0))
-        return L;
-    if (a == 0)
-        return L * env_d(R, t0);
-    const double b = fabs(a) * L, emax = a > 0 ? env_d(R, t0) : env_d(R, t1);
-    return emax * (b < 1e-8 ? L : -expm1(-b) / fabs(a));
+    const double a = R->s->k > 0 ? R->khs : 0;
+    return decay_int(a > 0 ? env_d(R, t0) : env_d(R, t1), fabs(a), t1 - t0);
 }
 
 /* env_reach in double: the t past t0 where env_int_d from t0 reaches need
@@ -2415,11 +2411,8 @@ static double env_reach_d(const rayc *R, double t0, double need)
 static double noise_sigma4(const rayc *R, double t0, double t1, double m)
 {
     const nstate *s = R->s;
-    const double a = fabs(R->khs), L = t1 - t0;
     const double emax = fmax(env_d(R, t0), env_d(R, t1));
-    const double b = 2 * a * L;
-    const double w = !(s->k > 0) || a == 0 ? L : b < 1e-8 ? L : -expm1(-b) / (2 * a);
-    const double i2 = emax * emax * w;
+    const double i2 = decay_int(emax * emax, s->k > 0 ? 2 * fabs(R->khs) : 0, t1 - t0);
     double r = 0;
     for (int i = 0; i < s->fbm.octaves; ++i)
         r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * m,
@@ -2443,10 +2436,11 @@ static double noise_sigma4(const rayc *R, double t0, double t1, double m)
 /* The noise part's integral for the linear density (noise, |c| <= 0.9649)
  * under ttol (the default) over [t0, tend], segment by segment, and
  * tau / rho (the closed-form mean to t1 plus c times it). Each segment gets
- * a share of the budget, 3/4 ttol in T: a segment whose
- * error in tau is d moves T by at most W d, W = max over channels of rho_k
- * T_k at its start (T_k from the lower value of tau so far), so where the
- * fog ahead has made T small the segment may drop octaves and nodes.
+ * a share of the budget, 3/4 ttol in T: an error d in tau anywhere on the
+ * ray moves the final T by T d, so by at most W d, W = max over channels
+ * of rho_k e^-(rho_k lo), lo a lower value of the whole ray's tau / rho;
+ * on a ray whose T ends small every segment, the first too, may drop
+ * octaves and nodes.
  * Segments share no cell, so their estimates (each a 3 or 4 sigma figure)
  * add in variance: the share of the budget's square is the segment's part
  * of the mean fog still to come that can show (up to where T falls below
@@ -2466,24 +2460,18 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     for (int i = 0; i < N; ++i)
         cross[i] = (double) (fabsl(R->u[3 * i].d) + fabsl(R->u[3 * i + 1].d) +
                              fabsl(R->u[3 * i + 2].d));
-    /* An octave whose cells along the whole stretch number more than
-     * CELL_BUDGET (a scale far below the ray's length) is never walked:
-     * its integral counts as its mean, 0, with three standard deviations
-     * of it as the error, as in tau_noise_info's other paths. */
-    const double Ltot = (double) (tend - t0);
-    /* planning in double where the envelope's exponent is finite (else the
-     * long double forms, and no statistical lower value of the rest) */
-    const int dbl = s->k == 0 || (isfinite(R->kh0) && isfinite(R->khs));
-    /* The length that counts for the cell budget: up to where the mean fog
-     * alone reaches four times the stop's depth (the ray has all but
-     * certainly stopped by then; if not, the work bound takes over). A
-     * slowly climbing sky ray's tail is far longer than what it walks. */
-    double Lwalk = Ltot;
+    /* An octave whose cells number more than CELL_BUDGET (a scale far
+     * below the ray's length) is never walked: each segment counts its
+     * integral as its mean, 0, with the drop rule's estimate. The length
+     * that counts: up to where the mean fog alone reaches four times the
+     * stop's depth (the ray has all but certainly stopped by then; if not,
+     * the work bound takes over), since a slowly climbing sky ray's tail
+     * is far longer than what it walks. */
+    double Lwalk = (double) (tend - t0);
     {
         const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
         const double need = 4 * tau_stop / (rmin * (lo1 > 0.25 ? lo1 : 0.25));
-        const double reach = dbl ? env_reach_d(R, (double) t0, need) - (double) t0
-                                 : (double) (env_reach(R, t0, need) - t0);
+        const double reach = env_reach_d(R, (double) t0, need) - (double) t0;
         if (reach < Lwalk)
             Lwalk = reach;
     }
@@ -2502,33 +2490,26 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     /* E2: the sum of the segments' squared estimates (independent errors
      * of segments that share no cell add in variance); var: what is left
      * of the budget's square, (3/4 eps)^2 (ttol/4 is the stop's). */
-    double E2 = 0, var = 0.5625 * eps * eps, evals = 0, mean_sofar = 0;
+    double E2 = 0, var = 0.5625 * eps * eps, mean_sofar = 0;
     int stop = 0, dropped = 0;
     long double t = t0;
     while (t < tend) {
         long double tb = t + Lmax;
-        const long double tr = dbl ? env_reach_d(R, (double) t, SEG_TAU / s->rho_max)
-                                   : env_reach(R, t, SEG_TAU / s->rho_max);
+        const long double tr = env_reach_d(R, (double) t, SEG_TAU / s->rho_max);
         if (tr < tb)
             tb = tr;
         if (!(tb < tend) || !(tb > t))
             tb = tend;
-        const double mj = dbl ? env_int_d(R, (double) t, (double) tb)
-                              : (double) env_integral(s, R->h0, R->hs, t, tb);
-        const double rest = dbl ? env_int_d(R, (double) t, (double) tend)
-                                : (double) env_integral(s, R->h0, R->hs, t, tend);
+        const double mj = env_int_d(R, (double) t, (double) tb);
+        const double rest = env_int_d(R, (double) t, (double) tend);
         const double E = sqrt(E2);
         const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
-        /* The whole ray's tau / rho is at least ulo plus the rest's lower
-         * value: its mean less four standard deviations of its noise (the
-         * drop rule's estimate, rest_estimate), or (1 - |c| B) times its
-         * mean, whichever is larger. The error of any segment moves the
-         * final T, which is at most e^-(rho_k lo), by that times rho_k. */
-        const double hard = (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest;
+        /* lo: ulo plus the rest's lower value, its mean less four standard
+         * deviations of its noise (noise_sigma4), or (1 - |c| B) times its
+         * mean, whichever is larger. */
         const double lo_rest =
-            dbl ? fmax(rest - fabs(s->contrast) * noise_sigma4(R, (double) t, (double) tend, rest),
-                       hard)
-                : hard;
+            fmax(rest - fabs(s->contrast) * noise_sigma4(R, (double) t, (double) tend, rest),
+                 (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest);
         const double lo = ulo + (lo_rest > 0 ? lo_rest : 0);
         int done = t > t0;
         double W = 0;
@@ -2547,8 +2528,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double share = vis > mj ? mj / vis : 1;
         const double quota = sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
         const double L = (double) (tb - t);
-        const double envmax = dbl ? fmax(env_d(R, (double) t), env_d(R, (double) tb))
-                                  : (double) fmaxl(env_at(R, t), env_at(R, tb));
+        const double envmax = fmax(env_d(R, (double) t), env_d(R, (double) tb));
         plan P;
         plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
         /* An octave over the cell budget is not walked: its estimate here
@@ -2564,7 +2544,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         double need = 0;
         for (int i = 0; i < N; ++i)
             need += P.q[i] * (cross[i] * L + 1);
-        for (int i = N - 1; i > 0 && evals + need > EVAL_BUDGET; --i)
+        for (int i = N - 1; i > 0 && R->evals + need > EVAL_BUDGET; --i)
             if (P.q[i]) {
                 need -= P.q[i] * (cross[i] * L + 1);
                 P.q[i] = 0;
@@ -2578,10 +2558,8 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         for (int i = 0; i < N; ++i) {
             if (!P.q[i])
                 continue;
-            const double before = R->evals;
-            double unused = 0;
-            const double v = octave_integral(R, i, P.q[i], t, tb, &unused);
-            evals += R->evals - before;
+            const double v = s->k > 0 ? octave_integral_env(R, i, P.q[i], (double) t, (double) tb)
+                                      : octave_integral_fast(R, i, P.q[i], (double) t, (double) tb);
             kadd(&noise, s->fbm.weight[i] * v);
         }
         const double used = P.est / s->rho_max;
@@ -2669,7 +2647,10 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     double mean = 0;
     if (linear)
         mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
-    if (linear && s->method == M_ADAPTIVE && s->ttol > 0) {
+    /* The segment walk plans in double: not where k h0 or k hs overflow (a
+     * falloff near DBL_MAX), which the general path below handles. */
+    if (linear && s->method == M_ADAPTIVE && s->ttol > 0 &&
+        (s->k == 0 || (isfinite(R.kh0) && isfinite(R.khs)))) {
         double errk[3];
         unit = adaptive_linear(&R, t0, tend, t1, opaque, tail, info, errk);
         if (unit < 0)
