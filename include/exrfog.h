@@ -3,14 +3,27 @@
  * The style is OpenEXRCore's: opaque objects made and released by the
  * caller, every call returns an exrfog_result, memory the caller passes
  * stays the caller's, and the text of the last failure is kept per context
- * (exrfog_error). The exrfog command line is one client of this API.
+ * (exrfog_error). The library and the exrfog program are two clients of
+ * one job layer; the library keeps nothing per process.
  *
- * Thread safety: a context is used by one thread at a time (its error text
- * is per context); make one per thread. Scenes and cameras are read-only
- * once made: any number of threads may pass the same ones to
- * exrfog_fog_pixels at once, each with its own context. exrfog_run and
- * exrfog_explain are not reentrant: one of them at a time per process (a
- * run uses all cores by itself; run processes to go wider).
+ * Thread safety: every call is reentrant. A context is used by one thread
+ * at a time (its error text is per context): make one per thread or per
+ * job. Any number of exrfog_run, exrfog_explain and exrfog_fog_pixels calls
+ * may run at once in one process, each with its own context, and each
+ * gives the bytes it gives alone. Scenes and cameras are immutable once
+ * made: any number of threads may pass the same ones at once.
+ * exrfog_cancel is the one call that may be made on a context another
+ * thread is using (and from a signal handler).
+ *
+ * The process is left alone: no signal handlers, no change to umask,
+ * locale, cwd, environment, getopt's state or stdio, and nothing written
+ * to stdout or stderr unless exrfog_set_print asked for it. A host that
+ * wants temporary files removed when it dies by a signal handles that
+ * signal itself and calls exrfog_cancel (the run removes them on the way
+ * out).
+ *
+ * Every call that takes pointers returns EXRFOG_USAGE when a required one
+ * is NULL (with a message in the context when there is one).
  *
  * ABI: the library's soname carries EXRFOG_VERSION_MAJOR; within a major
  * version functions are only added, structs passed by pointer only grow at
@@ -58,16 +71,33 @@ EXRFOG_API void exrfog_context_destroy(exrfog_context *ctx);
  * "" after a success. Valid until the next call with ctx. */
 EXRFOG_API const char *exrfog_error(const exrfog_context *ctx);
 
-/* Progress of exrfog_run: called from worker threads (one at a time, at
- * most every 0.2 s) with the fraction done (0..1) of the whole run;
- * returning non-zero cancels it: the run stops at the next chunk and
+/* Progress of exrfog_run: called from worker threads, one call at a time,
+ * after every chunk of pixels and every frame, with the fraction done
+ * (0..1) of the whole run: monotonic, and exactly 1.0 once on success.
+ * Returning non-zero cancels the run: it stops at the next chunk and
  * returns EXRFOG_CANCELLED with no output written. */
 typedef int (*exrfog_progress_fn)(void *user, double fraction);
-EXRFOG_API void exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user);
+EXRFOG_API exrfog_result exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn,
+                                             void *user);
 
-/* Whether messages (errors, warnings) also go to stderr as the command
- * line prints them (default 0: only exrfog_error keeps the failure). */
-EXRFOG_API void exrfog_set_print(exrfog_context *ctx, int print);
+/* Warnings of exrfog_run (a Nuke 1/z depth, a V-Ray Z-up camera, a view
+ * left unfogged...): file is the file it is about, text what the command
+ * line prints after "exrfog: FILE: warning: ". Called from the thread that
+ * runs the job. */
+typedef void (*exrfog_warning_fn)(void *user, const char *file, const char *text);
+EXRFOG_API exrfog_result exrfog_set_warning(exrfog_context *ctx, exrfog_warning_fn fn,
+                                            void *user);
+
+/* Whether messages (errors, warnings) also go to stderr, and --help,
+ * --version and --explain to stdout, as the command line prints them
+ * (default 0: only exrfog_error keeps the failure). */
+EXRFOG_API exrfog_result exrfog_set_print(exrfog_context *ctx, int print);
+
+/* Asks the exrfog_run or exrfog_explain in progress with ctx (from
+ * another thread or a signal handler) to stop: it stops at the next chunk
+ * of decode, fog or encode work, removes its temporary files, writes
+ * nothing and returns EXRFOG_CANCELLED. A later call on ctx starts afresh. */
+EXRFOG_API void exrfog_cancel(exrfog_context *ctx);
 
 /* ---------------------------------------------------------------- scenes */
 
@@ -102,7 +132,7 @@ EXRFOG_API exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx,
 EXRFOG_API exrfog_result exrfog_camera_from_file(exrfog_context *ctx, const char *path,
                                                  exrfog_camera **out);
 /* The camera's position in world space. */
-EXRFOG_API void exrfog_camera_position(const exrfog_camera *cam, double pos[3]);
+EXRFOG_API exrfog_result exrfog_camera_position(const exrfog_camera *cam, double pos[3]);
 EXRFOG_API void exrfog_camera_destroy(exrfog_camera *cam);
 
 /* ---------------------------------------------------------------- pixels */
@@ -113,7 +143,8 @@ EXRFOG_API void exrfog_camera_destroy(exrfog_camera *cam);
  * unless depth_mode says otherwise (the names of --depth-mode). The
  * optional AOV planes (NULL: not wanted) get the transmittance fog_T, its
  * error bound fog_error and the world position fog_P, as the command line
- * writes them. */
+ * writes them; a group may give some of its three planes only. The
+ * rectangle's pixel coordinates must stay within an int. */
 typedef struct exrfog_image {
     size_t size;                 /* sizeof(exrfog_image): the ABI check */
     int x0, y0, width, height;   /* absolute pixels, as in the display window */
@@ -127,8 +158,10 @@ typedef struct exrfog_image {
     float *P[3];
 } exrfog_image;
 
-/* Fogs img in place with scene seen from cam. Safe to call from several
- * threads at once on disjoint rectangles (one context each). */
+/* Fogs img in place with scene seen from cam. The scene is bound to the
+ * camera on a private copy: nothing is parsed and no file is read. Safe to
+ * call from several threads at once on disjoint rectangles (one context
+ * each). */
 EXRFOG_API exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
                                            const exrfog_camera *cam, exrfog_image *img);
 

@@ -11,7 +11,8 @@
 #include <cmocka.h>
 
 #include "tassert.h"
-#include "options.h"
+#include "args.h"
+#include "colour.h"
 #include "testutil.h"
 
 static long file_size(const char *path)
@@ -80,17 +81,20 @@ static void test_parse_twice(void **state)
     char *a1[] = { strdup("exrfog"), strdup("-vZq"), strdup("in.exr"), NULL };
     ef_options o;
     ef_err err = { 0 };
-    assert_int_equal(ef_options_parse(3, a1, &o, &err), EF_PARSE_USAGE);
+    ef_colour colour;
+    memset(&colour, 0, sizeof colour);
+    assert_int_equal(ef_options_parse(3, a1, &o, &colour, stdout, &err), EF_PARSE_USAGE);
     ef_options_free(&o);
     for (int i = 0; a1[i]; ++i)
         free(a1[i]);
     char *a2[] = { strdup("exrfog"), strdup("in.exr"), strdup("-o"), strdup("out.exr"),
                    strdup("--fog"), strdup("exp:density=0.1"), NULL };
-    assert_int_equal(ef_options_parse(6, a2, &o, &err), EF_PARSE_RUN);
+    assert_int_equal(ef_options_parse(6, a2, &o, &colour, stdout, &err), EF_PARSE_RUN);
     assert_string_equal(o.output, "out.exr");
     assert_int_equal(o.scene.ncomp, 1);
     assert_int_equal(o.verbose, 0);
     ef_options_free(&o);
+    ef_colour_close(&colour);
     for (int i = 0; a2[i]; ++i)
         free(a2[i]);
 }

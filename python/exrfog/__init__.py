@@ -12,7 +12,11 @@ Options are the command line's long options with '_' for '-'
 (fog_color=, depth_mode=, threads=, view=[...], preview=...); True turns a
 flag on, None or False leaves it out, a list of strings repeats the option
 and a list of numbers is written R,G,B style. Failures raise exrfog.Error
-with the command line's message. The library is found through
+with the command line's message; the run's warnings (a Nuke 1/z depth, a
+V-Ray Z-up camera, a view left unfogged) are issued through Python's
+warnings module as exrfog.Warning. Every call may run from any number of
+threads at once, and Ctrl-C during a call raises KeyboardInterrupt within a
+second, leaving no output and no temporary file. The library is found through
 $EXRFOG_LIBRARY, then beside the installed module, then the system's
 loader (libexrfog.so.0).
 """
@@ -21,8 +25,10 @@ import ctypes
 import ctypes.util
 import json
 import os
+import threading
+import warnings
 
-__all__ = ["Error", "fog", "explain", "fog_pixels", "version", "library_version"]
+__all__ = ["Error", "Warning", "fog", "explain", "fog_pixels", "version", "library_version"]
 
 version = "0.1.0"
 
@@ -34,6 +40,11 @@ class Error(Exception):
     def __init__(self, message, status=1):
         super().__init__(message)
         self.status = status
+
+
+class Warning(UserWarning):  # noqa: A001 (the name scripts filter on)
+    """A warning of an exrfog run, as the command line prints it after
+    "exrfog: FILE: warning: "."""
 
 
 def _load():
@@ -74,6 +85,10 @@ _lib.exrfog_explain.argtypes = [_ctx_p, ctypes.c_int, _argv_t, ctypes.POINTER(ct
 _lib.exrfog_free.argtypes = [ctypes.c_void_p]
 _PROGRESS = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double)
 _lib.exrfog_set_progress.argtypes = [_ctx_p, _PROGRESS, ctypes.c_void_p]
+_WARNING = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_char_p)
+_lib.exrfog_set_warning.argtypes = [_ctx_p, _WARNING, ctypes.c_void_p]
+_lib.exrfog_cancel.argtypes = [_ctx_p]
+_lib.exrfog_cancel.restype = None
 _lib.exrfog_scene_create.argtypes = [_ctx_p, _argv_t, ctypes.c_int, ctypes.c_char_p,
                                      ctypes.POINTER(ctypes.c_double), ctypes.POINTER(_ctx_p)]
 _lib.exrfog_scene_destroy.argtypes = [_ctx_p]
@@ -109,6 +124,10 @@ class _Context:
 
 def _argv(args):
     enc = [a.encode() if isinstance(a, str) else os.fsencode(a) for a in args]
+    for a in enc:
+        if b"\0" in a:
+            # as open() does: C would see a shorter name, another file
+            raise ValueError("embedded null byte")
     arr = (ctypes.c_char_p * (len(enc) + 1))(*enc, None)
     return len(enc), arr
 
@@ -142,31 +161,63 @@ def _fog_args(fog, scene):
     return args
 
 
+def _call(ctx, fn, *args):
+    """Runs fn(*args) (a job of ctx) on a thread of its own while this one
+    waits, so that Ctrl-C reaches Python at once: the job is then cancelled
+    (it removes its temporary files and writes nothing) and
+    KeyboardInterrupt raised. The job's warnings are issued here, on the
+    caller's thread. Returns fn's result."""
+    said = []
+
+    def on_warning(user, file, text):
+        said.append((file or b"").decode("utf-8", "replace") + ": " +
+                    (text or b"").decode("utf-8", "replace"))
+
+    cb = _WARNING(on_warning)
+    _lib.exrfog_set_warning(ctx.p, cb, None)
+    result = []
+    t = threading.Thread(target=lambda: result.append(fn(*args)), daemon=True)
+    t.start()
+    try:
+        while t.is_alive():
+            t.join(0.05)
+    except BaseException:
+        _lib.exrfog_cancel(ctx.p)
+        t.join()
+        raise
+    finally:
+        for w in said:
+            warnings.warn(w, Warning, stacklevel=3)
+    return result[0]
+
+
 def fog(input, output, fog=None, scene=None, progress=None, **options):
     """Fogs INPUT into OUTPUT as `exrfog INPUT -o OUTPUT ...` does: fog is a
     SPEC or a list of them, scene a scene file, options the command line's
-    (sequences, views, colour, formats included). progress(fraction) may
+    (sequences, views, colour, formats included). progress(fraction) hears
+    the fraction done after every chunk and frame (1.0 at the end) and may
     return True to cancel (Error with status 3, nothing written)."""
-    args = ["exrfog", os.fspath(input), "-o", os.fspath(output)] + _fog_args(fog, scene)
-    args += _options(options)
+    args = ["exrfog", "-o", os.fspath(output)] + _fog_args(fog, scene)
+    # INPUT after "--": a file named "-in.exr" or "--help" is a file
+    args += _options(options) + ["--", os.fspath(input)]
     n, argv = _argv(args)
     with _Context() as ctx:
         cb = None
         if progress is not None:
             cb = _PROGRESS(lambda user, f: 1 if progress(f) else 0)
             _lib.exrfog_set_progress(ctx.p, cb, None)
-        ctx.check(_lib.exrfog_run(ctx.p, n, argv))
+        ctx.check(_call(ctx, _lib.exrfog_run, ctx.p, n, argv))
 
 
 def explain(path, fog=None, scene=None, **options):
     """What exrfog reads in PATH and would do (`exrfog --explain --json`),
     as a dict: the camera of each view, the channels, the depth, the scene
     and the working colour space. Nothing is written."""
-    args = ["exrfog", os.fspath(path)] + _fog_args(fog, scene) + _options(options)
+    args = ["exrfog"] + _fog_args(fog, scene) + _options(options) + ["--", os.fspath(path)]
     n, argv = _argv(args)
     with _Context() as ctx:
         out = ctypes.c_void_p()
-        ctx.check(_lib.exrfog_explain(ctx.p, n, argv, ctypes.byref(out)))
+        ctx.check(_call(ctx, _lib.exrfog_explain, ctx.p, n, argv, ctypes.byref(out)))
         try:
             return json.loads(ctypes.string_at(out).decode("utf-8", "replace"))
         finally:
@@ -213,20 +264,31 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
         specs, scene_file, colour = scene.get("fog", []), scene.get("scene"), scene.get("color", color)
     else:
         specs, scene_file, colour = list(scene), None, color
+    if colour is not None and len(colour) != 3:
+        raise Error("fog_pixels: color must be 3 numbers (R, G, B), not %d" % len(colour), 2)
     with _Context() as ctx:
         sc, cam = _ctx_p(), _ctx_p()
         n, argv = _argv(specs)
         col = (ctypes.c_double * 3)(*colour) if colour is not None else None
+        if scene_file is not None and b"\0" in os.fsencode(scene_file):
+            raise ValueError("embedded null byte")
         ctx.check(_lib.exrfog_scene_create(ctx.p, argv, n,
                                            os.fsencode(scene_file) if scene_file else None,
                                            col, ctypes.byref(sc)))
         try:
             if isinstance(camera, (str, bytes, os.PathLike)):
+                if b"\0" in os.fsencode(camera):
+                    raise ValueError("embedded null byte")
                 ctx.check(_lib.exrfog_camera_from_file(ctx.p, os.fsencode(camera), ctypes.byref(cam)))
             else:
                 m = (ctypes.c_double * 16)(*camera["camera_to_world"])
                 win = camera.get("display_window", (origin[0], origin[1], origin[0] + w - 1,
                                                     origin[1] + h - 1))
+                if len(win) != 4:
+                    raise Error("fog_pixels: display_window must be 4 numbers (xmin, ymin, "
+                                "xmax, ymax), not %d" % len(win), 2)
+                if len(camera["camera_to_world"]) != 16:
+                    raise Error("fog_pixels: camera_to_world must be 16 numbers", 2)
                 ctx.check(_lib.exrfog_camera_from_matrix(
                     ctx.p, m, camera.get("convention", "exr").encode(), float(camera["fov"]),
                     (ctypes.c_int * 4)(*win), ctypes.byref(cam)))

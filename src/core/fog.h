@@ -51,6 +51,10 @@ typedef struct ef_fog_component {
      * double-double, so per-pixel work skips a per-frame constant. */
     int bound;
     double bound_org[3], bound_dot[2];
+    /* When not NULL and *cancel becomes non-zero, models whose optical
+     * depth may take long (noise) return 0 at once: the host is stopping
+     * and throws the result away. Never read otherwise. */
+    const volatile int *cancel;
     char spec[8192];                 /* the SPEC as written, for messages */
 } ef_fog_component;
 

@@ -2609,7 +2609,8 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         info = &dummy;
     memset(info, 0, sizeof *info);
     long double t0, t1;
-    if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1))
+    if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1) ||
+        (c->cancel && *c->cancel))
         return;
     rayc R;
     ray_setup(s, r, &R);

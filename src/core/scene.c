@@ -3,6 +3,8 @@
 #include "expneg.h"
 
 #include <math.h>
+#include <stddef.h>
+#include <stdlib.h>
 #include <string.h>
 
 void ef_scene_init(ef_fog_scene *s)
@@ -53,6 +55,50 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
 {
     for (int i = 0; i < s->ncomp; ++i)
         ef_fog_bind(&s->comp[i], org);
+}
+
+int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
+{
+    dst->ncomp = 0;
+    dst->any_color = src->any_color;
+    memcpy(dst->color, src->color, sizeof dst->color);
+    dst->ctx = src->ctx;
+    dst->sky = src->sky;
+    dst->sky_distance = src->sky_distance;
+    for (int i = 0; i < src->ncomp; ++i) {
+        ef_fog_component *d = &dst->comp[i];
+        const ef_fog_component *c = &src->comp[i];
+        int bad;
+        if (with_spec) {
+            bad = ef_fog_copy(d, c);
+        } else {
+            /* the SPEC text is 8 kB a component: a copy only evaluated
+             * needs none of it */
+            memcpy(d, c, offsetof(ef_fog_component, spec));
+            d->spec[0] = '\0';
+            d->arr = NULL;
+            d->path = NULL;
+            d->narr = 0;
+            bad = c->narr > 0 && !(d->arr = malloc((size_t) c->narr * sizeof *d->arr));
+            if (!bad && c->narr > 0) {
+                memcpy(d->arr, c->arr, (size_t) c->narr * sizeof *d->arr);
+                d->narr = c->narr;
+            }
+        }
+        if (bad) {
+            ef_fog_free(d);
+            ef_scene_free(dst);
+            return -1;
+        }
+        dst->ncomp = i + 1;
+    }
+    return 0;
+}
+
+void ef_scene_set_cancel(ef_fog_scene *s, const volatile int *cancel)
+{
+    for (int i = 0; i < s->ncomp; ++i)
+        s->comp[i].cancel = cancel;
 }
 
 void ef_scene_free(ef_fog_scene *s)

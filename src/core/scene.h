@@ -34,6 +34,16 @@ int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err);
  * frame, before the threads start. */
 void ef_scene_bind(ef_fog_scene *s, const double org[3]);
 
+/* Copies src's settings and components into dst without parsing or reading
+ * anything (component data is duplicated); with_spec 0 leaves the SPEC
+ * texts empty, for a copy that is only evaluated. Returns 0, or -1 when out
+ * of memory (dst is then empty). */
+int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec);
+
+/* Points every component at the host's stop flag (ef_fog_component.cancel;
+ * NULL: none). */
+void ef_scene_set_cancel(ef_fog_scene *s, const volatile int *cancel);
+
 /* Releases the components' data; the scene is empty afterwards. */
 void ef_scene_free(ef_fog_scene *s);
 

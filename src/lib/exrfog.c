@@ -1,7 +1,11 @@
-/* libexrfog: the public API (include/exrfog.h) over the core, the I/O
- * adapters and the command line's run. */
+/* libexrfog: the public API (include/exrfog.h), a thin ABI over the job
+ * layer (whole runs) and the core (pixels). It keeps nothing per process:
+ * every call's state is in its context, scene, camera or job. */
 #include "exrfog.h"
 
+#include <limits.h>
+#include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,19 +14,25 @@
 #include "camera.h"
 #include "depth.h"
 #include "exr_io.h"
-#include "run.h"
+#include "job.h"
 #include "scene.h"
-#include "scene_file.h"
+#include "scene_build.h"
 
 struct exrfog_context {
     char error[2048];
     exrfog_progress_fn progress;
     void *progress_user;
+    exrfog_warning_fn warning;
+    void *warning_user;
     int print;
+    volatile int cancel;      /* exrfog_cancel: read by the run in progress */
 };
 
+/* A built scene: immutable once made. The colour state is kept only
+ * because the scene's context points at it (nothing re-reads colours). */
 struct exrfog_scene {
     ef_fog_scene s;
+    ef_colour colour;
 };
 
 struct exrfog_camera {
@@ -46,18 +56,51 @@ void exrfog_context_destroy(exrfog_context *ctx)
 
 const char *exrfog_error(const exrfog_context *ctx)
 {
-    return ctx ? ctx->error : "no context";
+    return ctx ? ctx->error : "no context (exrfog_context_create returned NULL?)";
 }
 
-void exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user)
+/* Records a usage error of the API itself (a NULL argument...) in ctx when
+ * there is one, prints it when asked, and returns EXRFOG_USAGE. */
+static exrfog_result misuse(exrfog_context *ctx, const char *what)
 {
+    if (ctx) {
+        snprintf(ctx->error, sizeof ctx->error, "%s", what);
+        if (ctx->print)
+            fprintf(stderr, "exrfog: %s\n", ctx->error);
+    }
+    return EXRFOG_USAGE;
+}
+
+exrfog_result exrfog_set_progress(exrfog_context *ctx, exrfog_progress_fn fn, void *user)
+{
+    if (!ctx)
+        return misuse(ctx, "exrfog_set_progress: ctx is NULL");
     ctx->progress = fn;
     ctx->progress_user = user;
+    return EXRFOG_OK;
 }
 
-void exrfog_set_print(exrfog_context *ctx, int print)
+exrfog_result exrfog_set_warning(exrfog_context *ctx, exrfog_warning_fn fn, void *user)
 {
+    if (!ctx)
+        return misuse(ctx, "exrfog_set_warning: ctx is NULL");
+    ctx->warning = fn;
+    ctx->warning_user = user;
+    return EXRFOG_OK;
+}
+
+exrfog_result exrfog_set_print(exrfog_context *ctx, int print)
+{
+    if (!ctx)
+        return misuse(ctx, "exrfog_set_print: ctx is NULL");
     ctx->print = print;
+    return EXRFOG_OK;
+}
+
+void exrfog_cancel(exrfog_context *ctx)
+{
+    if (ctx)
+        ctx->cancel = 1;
 }
 
 /* Records err as the context's failure ("FILE: message" when it names a
@@ -78,43 +121,37 @@ static exrfog_result fail(exrfog_context *ctx, const ef_err *err, const char *fi
 exrfog_result exrfog_scene_create(exrfog_context *ctx, const char *const *specs, int nspecs,
                                   const char *scene_file, const double *color, exrfog_scene **out)
 {
-    ef_err err = { 0 };
-    *out = NULL;
+    if (out)
+        *out = NULL;
+    if (!ctx || !out || nspecs < 0 || (nspecs > 0 && !specs))
+        return misuse(ctx, "exrfog_scene_create: ctx and out must not be NULL, and specs must "
+                           "hold nspecs (>= 0) SPECs");
+    for (int i = 0; i < nspecs; ++i)
+        if (!specs[i])
+            return misuse(ctx, "exrfog_scene_create: a SPEC is NULL");
+    if (nspecs > EF_FOG_MAX_COMPONENTS)
+        return misuse(ctx, "exrfog_scene_create: too many SPECs (at most 32)");
     ctx->error[0] = '\0';
+    ef_err err = { 0 };
     exrfog_scene *sc = calloc(1, sizeof *sc);
     if (!sc)
         return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     ef_scene_init(&sc->s);
-    sc->s.ctx.read_file = ef_read_text_file;
-    if (scene_file) {
-        ef_scene_file sf;
-        memset(&sf, 0, sizeof sf);
-        if (ef_scene_file_read(scene_file, &sf, &err)) {
-            free(sc);
-            return fail(ctx, &err, scene_file, EXRFOG_ERROR);
-        }
-        if (sf.has_color)
-            memcpy(sc->s.color, sf.color, sizeof sc->s.color);
-        if (sf.has_up)
-            memcpy(sc->s.ctx.up, sf.up, sizeof sc->s.ctx.up);
-        if (sf.has_units)
-            sc->s.ctx.units_per_meter = sf.units;
-        if (sf.has_time)
-            sc->s.ctx.time = sf.time;
-        int bad = sf.has_sky && ef_scene_parse_sky(&sc->s, sf.sky, &err);
-        for (int i = 0; !bad && i < sf.nspec; ++i)
-            bad = ef_scene_add(&sc->s, sf.specs[i], &err) != 0;
-        ef_scene_file_free(&sf);
-        if (bad) {
-            exrfog_scene_destroy(sc);
-            return fail(ctx, &err, scene_file, EXRFOG_ERROR);
-        }
-    }
+    ef_colour_setup(&sc->colour, NULL, NULL);
+    ef_scene_desc d;
+    memset(&d, 0, sizeof d);
+    d.scene_file = scene_file;
     for (int i = 0; i < nspecs; ++i)
-        if (ef_scene_add(&sc->s, specs[i], &err)) {
-            exrfog_scene_destroy(sc);
-            return fail(ctx, &err, NULL, err.file ? EXRFOG_ERROR : EXRFOG_USAGE);
-        }
+        d.specs[d.nspec++] = specs[i];
+    ef_scene_found found;
+    const ef_parse_result r = ef_scene_build(&sc->s, &d, &sc->colour, &found, &err);
+    free(found.scene_text);
+    /* Colours are final: nothing reads them again, so the config goes. */
+    ef_colour_close(&sc->colour);
+    if (r != EF_PARSE_RUN) {
+        exrfog_scene_destroy(sc);
+        return fail(ctx, &err, NULL, r == EF_PARSE_USAGE ? EXRFOG_USAGE : EXRFOG_ERROR);
+    }
     if (sc->s.ncomp == 0) {
         exrfog_scene_destroy(sc);
         ef_fail(&err, "no fog given (a SPEC such as exp:density=0.02, or a scene file)");
@@ -139,17 +176,29 @@ void exrfog_scene_destroy(exrfog_scene *scene)
     if (!scene)
         return;
     ef_scene_free(&scene->s);
+    ef_colour_close(&scene->colour);
     free(scene);
+}
+
+/* Whether a display window is non-empty and its size fits an int. */
+static int window_ok(const int w[4])
+{
+    const int64_t dx = (int64_t) w[2] - w[0], dy = (int64_t) w[3] - w[1];
+    return dx >= 0 && dy >= 0 && dx < INT_MAX && dy < INT_MAX;
 }
 
 exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx, const double camera_to_world[16],
                                         const char *convention, double hfov_deg,
                                         const int display_window[4], exrfog_camera **out)
 {
+    if (out)
+        *out = NULL;
+    if (!ctx || !camera_to_world || !display_window || !out)
+        return misuse(ctx, "exrfog_camera_from_matrix: ctx, camera_to_world, display_window "
+                           "and out must not be NULL");
     ef_err err = { 0 };
     ef_cam_meta meta;
     ef_cam_flags flags;
-    *out = NULL;
     ctx->error[0] = '\0';
     memset(&flags, 0, sizeof flags);
     if (ef_cam_convention_parse(convention ? convention : "exr", &flags.convention)) {
@@ -157,9 +206,10 @@ exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx, const double camera
                 convention);
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
     }
-    if (display_window[2] < display_window[0] || display_window[3] < display_window[1]) {
-        ef_fail(&err, "the display window (%d,%d)-(%d,%d) is empty", display_window[0],
-                display_window[1], display_window[2], display_window[3]);
+    if (!window_ok(display_window)) {
+        ef_fail(&err, "the display window (%d,%d)-(%d,%d) is empty or wider than %d pixels",
+                display_window[0], display_window[1], display_window[2], display_window[3],
+                INT_MAX);
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
     }
     ef_cam_meta_init(&meta, display_window[0], display_window[1], display_window[2],
@@ -181,12 +231,15 @@ exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx, const double camera
 
 exrfog_result exrfog_camera_from_file(exrfog_context *ctx, const char *path, exrfog_camera **out)
 {
+    if (out)
+        *out = NULL;
+    if (!ctx || !path || !out)
+        return misuse(ctx, "exrfog_camera_from_file: ctx, path and out must not be NULL");
     ef_err err = { 0 };
     ef_exr_file f = { 0 };
     ef_channel_plan plan;
     ef_cam_meta meta;
     ef_cam_flags flags;
-    *out = NULL;
     ctx->error[0] = '\0';
     memset(&flags, 0, sizeof flags);
     exrfog_camera *c = calloc(1, sizeof *c);
@@ -204,9 +257,12 @@ exrfog_result exrfog_camera_from_file(exrfog_context *ctx, const char *path, exr
     return EXRFOG_OK;
 }
 
-void exrfog_camera_position(const exrfog_camera *cam, double pos[3])
+exrfog_result exrfog_camera_position(const exrfog_camera *cam, double pos[3])
 {
+    if (!cam || !pos)
+        return EXRFOG_USAGE;
     memcpy(pos, cam->cam.pos, 3 * sizeof *pos);
+    return EXRFOG_OK;
 }
 
 void exrfog_camera_destroy(exrfog_camera *cam)
@@ -214,9 +270,68 @@ void exrfog_camera_destroy(exrfog_camera *cam)
     free(cam);
 }
 
+/* An AOV group of three planes: all NULL (not wanted), or the missing ones
+ * pointed at scratch (a wanted group may leave channels out). */
+static int aov_group(float *const in[3], float *out[3], float *scratch)
+{
+    const int any = in[0] || in[1] || in[2];
+    for (int k = 0; k < 3; ++k)
+        out[k] = in[k] ? in[k] : any ? scratch : NULL;
+    return any;
+}
+
+/* Checks img's shape: planes given, sizes that fit, absolute pixels whose
+ * coordinates stay in an int. */
+static exrfog_result check_image(exrfog_context *ctx, const exrfog_image *img)
+{
+    ef_err err = { 0 };
+    if (img->width < 0 || img->height < 0 || img->stride < img->width || !img->rgb[0] ||
+        !img->rgb[1] || !img->rgb[2] || !img->depth) {
+        ef_fail(&err, "the image needs width, height >= 0, stride >= width, and R, G, B and depth "
+                      "planes");
+        return fail(ctx, &err, NULL, EXRFOG_USAGE);
+    }
+    if ((int64_t) img->x0 + img->width > INT_MAX || (int64_t) img->y0 + img->height > INT_MAX ||
+        img->x0 < -INT_MAX / 2 || img->y0 < -INT_MAX / 2) {
+        ef_fail(&err, "the rectangle at (%d,%d) of %dx%d pixels leaves the range of pixel "
+                      "coordinates", img->x0, img->y0, img->width, img->height);
+        return fail(ctx, &err, NULL, EXRFOG_USAGE);
+    }
+    return EXRFOG_OK;
+}
+
+/* Row by row: the core fogs contiguous rows; the caller's have a stride. */
+static void fog_rows(const ef_fog_pass *pass, exrfog_image *img, float *const T[3],
+                     float *const E[3], float *const P[3], unsigned mask)
+{
+    for (int y = 0; y < img->height; ++y) {
+        const ptrdiff_t o = (ptrdiff_t) y * img->stride;
+        float *const rgb[3] = { img->rgb[0] + o, img->rgb[1] + o, img->rgb[2] + o };
+        float *planes[EF_AOV_MAX_CHANNELS] = { NULL };
+        int n = 0;
+        /* a missing plane of a wanted group is scratch: one row, reused */
+        if (mask & EF_AOV_T)
+            for (int k = 0; k < 3; ++k)
+                planes[n++] = T[k] + (T[k] == img->T[k] ? o : 0);
+        if (mask & EF_AOV_ERROR)
+            for (int k = 0; k < 3; ++k)
+                planes[n++] = E[k] + (E[k] == img->error[k] ? o : 0);
+        if (mask & EF_AOV_P)
+            for (int k = 0; k < 3; ++k)
+                planes[n++] = P[k] + (P[k] == img->P[k] ? o : 0);
+        ef_aov_out aov;
+        ef_aov_bind(&aov, mask, planes);
+        ef_fog_block_aov(pass, img->x0, img->y0 + y, img->width, 1, rgb,
+                         img->alpha ? img->alpha + o : NULL, img->depth + o, mask ? &aov : NULL,
+                         NULL);
+    }
+}
+
 exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
                                 const exrfog_camera *cam, exrfog_image *img)
 {
+    if (!ctx || !scene || !cam)
+        return misuse(ctx, "exrfog_fog_pixels: ctx, scene and cam must not be NULL");
     ef_err err = { 0 };
     ctx->error[0] = '\0';
     if (!img || img->size < sizeof *img) {
@@ -224,12 +339,9 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
                       "exrfog.h", img ? img->size : (size_t) 0, sizeof *img);
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
     }
-    if (img->width < 0 || img->height < 0 || img->stride < img->width || !img->rgb[0] ||
-        !img->rgb[1] || !img->rgb[2] || !img->depth) {
-        ef_fail(&err, "the image needs width, height >= 0, stride >= width, and R, G, B and depth "
-                      "planes");
-        return fail(ctx, &err, NULL, EXRFOG_USAGE);
-    }
+    exrfog_result r = check_image(ctx, img);
+    if (r != EXRFOG_OK)
+        return r;
     ef_depth_mode mode = EF_DEPTH_PLANAR;
     if (img->depth_mode && ef_depth_mode_parse(img->depth_mode, &mode)) {
         ef_fail(&err, "depth mode '%s' is not one of planar, radial, inverse, normalized, gl-ndc, "
@@ -239,98 +351,113 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     ef_depth_conv conv;
     if (ef_depth_conv_init(&conv, mode, &cam->cam, &err))
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
-    /* The scene is bound to this camera on a private copy: the caller's
-     * stays read-only, so threads may share it. */
-    ef_fog_scene bound = scene->s;
-    bound.ncomp = 0;
-    for (int i = 0; i < scene->s.ncomp; ++i)
-        if (ef_scene_add(&bound, scene->s.comp[i].spec, &err)) {
-            ef_scene_free(&bound);
-            return fail(ctx, &err, NULL, EXRFOG_ERROR);
-        }
-    ef_scene_bind(&bound, cam->cam.pos);
-    const ef_fog_pass pass = { &cam->cam, &conv, &bound };
+    float *T[3], *E[3], *P[3];
+    float *scratch = NULL;
+    const int partial = (img->T[0] || img->T[1] || img->T[2]) + (img->error[0] || img->error[1] ||
+                        img->error[2]) + (img->P[0] || img->P[1] || img->P[2]);
+    if (partial && !(scratch = malloc(((size_t) img->width + 1) * sizeof *scratch)))
+        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     unsigned mask = 0;
-    mask |= img->T[0] ? EF_AOV_T : 0;
-    mask |= img->error[0] ? EF_AOV_ERROR : 0;
-    mask |= img->P[0] ? EF_AOV_P : 0;
-    /* Row by row: the core fogs contiguous rows; the caller's have a stride. */
-    for (int y = 0; y < img->height; ++y) {
-        const ptrdiff_t o = (ptrdiff_t) y * img->stride;
-        float *const rgb[3] = { img->rgb[0] + o, img->rgb[1] + o, img->rgb[2] + o };
-        float *planes[EF_AOV_MAX_CHANNELS] = { NULL };
-        int n = 0;
-        if (mask & EF_AOV_T)
-            for (int k = 0; k < 3; ++k)
-                planes[n++] = img->T[k] + o;
-        if (mask & EF_AOV_ERROR)
-            for (int k = 0; k < 3; ++k)
-                planes[n++] = img->error[k] + o;
-        if (mask & EF_AOV_P)
-            for (int k = 0; k < 3; ++k)
-                planes[n++] = img->P[k] + o;
-        ef_aov_out aov;
-        ef_aov_bind(&aov, mask, planes);
-        ef_fog_block_aov(&pass, img->x0, img->y0 + y, img->width, 1, rgb,
-                         img->alpha ? img->alpha + o : NULL, img->depth + o, mask ? &aov : NULL,
-                         NULL);
+    mask |= aov_group(img->T, T, scratch) ? EF_AOV_T : 0;
+    mask |= aov_group(img->error, E, scratch) ? EF_AOV_ERROR : 0;
+    mask |= aov_group(img->P, P, scratch) ? EF_AOV_P : 0;
+    /* The scene is bound to this camera on a private copy, made without
+     * parsing or reading anything: the caller's stays read-only, so threads
+     * may share it. */
+    ef_fog_scene *bound = malloc(sizeof *bound);
+    if (!bound || ef_scene_copy(bound, &scene->s, 0)) {
+        free(bound);
+        free(scratch);
+        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     }
-    ef_scene_free(&bound);
+    ef_scene_bind(bound, cam->cam.pos);
+    const ef_fog_pass pass = { &cam->cam, &conv, bound };
+    fog_rows(&pass, img, T, E, P, mask);
+    ef_scene_free(bound);
+    free(bound);
+    free(scratch);
     return EXRFOG_OK;
+}
+
+static int on_progress(void *user, double f)
+{
+    exrfog_context *ctx = user;
+    return ctx->progress(ctx->progress_user, f);
+}
+
+static void on_warning(void *user, const char *file, const char *text)
+{
+    exrfog_context *ctx = user;
+    ctx->warning(ctx->warning_user, file, text);
+}
+
+/* Runs the job with the context's hooks; out receives --explain. */
+static exrfog_result run_job(exrfog_context *ctx, int argc, const char *const *argv, FILE *out)
+{
+    const ef_job_hooks hooks = { .msg = ctx->print ? stderr : NULL,
+                                 .out = out ? out : ctx->print ? stdout : NULL,
+                                 .progress = ctx->progress ? on_progress : NULL,
+                                 .progress_user = ctx,
+                                 .warning = ctx->warning ? on_warning : NULL,
+                                 .warning_user = ctx,
+                                 .cancel = &ctx->cancel };
+    const int rc = ef_job_run(&hooks, argc, argv, ctx->error, sizeof ctx->error);
+    return rc == 0 ? EXRFOG_OK : rc == 2 ? EXRFOG_USAGE : rc == 3 ? EXRFOG_CANCELLED : EXRFOG_ERROR;
+}
+
+/* Whether argv holds argc strings. */
+static int argv_ok(int argc, const char *const *argv)
+{
+    if (argc < 1 || !argv)
+        return 0;
+    for (int i = 0; i < argc; ++i)
+        if (!argv[i])
+            return 0;
+    return 1;
 }
 
 exrfog_result exrfog_run(exrfog_context *ctx, int argc, const char *const *argv)
 {
+    if (!ctx || !argv_ok(argc, argv))
+        return misuse(ctx, "exrfog_run: ctx must not be NULL, and argv must hold argc >= 1 "
+                           "strings (argv[0] is the program's name)");
     ctx->error[0] = '\0';
-    /* getopt permutes its argv: work on a copy the caller never sees. */
-    char **args = calloc((size_t) argc + 1, sizeof *args);
-    if (!args) {
-        snprintf(ctx->error, sizeof ctx->error, "out of memory");
-        return EXRFOG_ERROR;
-    }
-    for (int i = 0; i < argc; ++i)
-        args[i] = (char *) argv[i];
-    FILE *sink = ctx->print ? NULL : fopen("/dev/null", "w");
-    const int rc = ef_run_lib(argc, args, ctx->print ? NULL : sink, NULL, ctx->progress,
-                              ctx->progress_user, ctx->error, sizeof ctx->error);
-    if (sink)
-        fclose(sink);
-    free(args);
-    return rc == 0 ? EXRFOG_OK : rc == 2 ? EXRFOG_USAGE : rc == 3 ? EXRFOG_CANCELLED : EXRFOG_ERROR;
+    ctx->cancel = 0;
+    return run_job(ctx, argc, argv, NULL);
 }
 
 exrfog_result exrfog_explain(exrfog_context *ctx, int argc, const char *const *argv, char **json)
 {
-    *json = NULL;
+    if (json)
+        *json = NULL;
+    if (!ctx || !json || !argv_ok(argc, argv))
+        return misuse(ctx, "exrfog_explain: ctx and json must not be NULL, and argv must hold "
+                           "argc >= 1 strings");
     ctx->error[0] = '\0';
-    char **args = calloc((size_t) argc + 3, sizeof *args);
+    ctx->cancel = 0;
+    const char **args = calloc((size_t) argc + 3, sizeof *args);
     char *buf = NULL;
     size_t len = 0;
-    FILE *mem = open_memstream(&buf, &len);
-    FILE *sink = ctx->print ? NULL : fopen("/dev/null", "w");
-    if (!args || !mem) {
+    FILE *mem = args ? open_memstream(&buf, &len) : NULL;
+    if (!mem) {
         free(args);
-        if (mem)
-            fclose(mem);
-        free(buf);
-        if (sink)
-            fclose(sink);
         snprintf(ctx->error, sizeof ctx->error, "out of memory");
         return EXRFOG_ERROR;
     }
-    for (int i = 0; i < argc; ++i)
-        args[i] = (char *) argv[i];
-    args[argc] = (char *) "--explain";
-    args[argc + 1] = (char *) "--json";
-    const int rc = ef_run_lib(argc + 2, args, ctx->print ? NULL : sink, mem, NULL, NULL,
-                              ctx->error, sizeof ctx->error);
-    fclose(mem);
-    if (sink)
-        fclose(sink);
+    /* right after the program's name: INPUT may follow a "--" */
+    args[0] = argv[0];
+    args[1] = "--explain";
+    args[2] = "--json";
+    for (int i = 1; i < argc; ++i)
+        args[i + 2] = argv[i];
+    const exrfog_result r = run_job(ctx, argc + 2, args, mem);
+    const int bad = fclose(mem) != 0;
     free(args);
-    if (rc) {
+    if (r != EXRFOG_OK || bad) {
         free(buf);
-        return rc == 2 ? EXRFOG_USAGE : EXRFOG_ERROR;
+        if (r == EXRFOG_OK)
+            snprintf(ctx->error, sizeof ctx->error, "out of memory");
+        return r != EXRFOG_OK ? r : EXRFOG_ERROR;
     }
     *json = buf;
     return EXRFOG_OK;

@@ -8,6 +8,7 @@
 #include <sys/types.h>
 
 #include "error.h"
+#include "job.h"
 
 typedef struct ef_output {
     const char *name;          /* as the user gave it: every message names it */
@@ -16,6 +17,7 @@ typedef struct ef_output {
     int fd;                    /* open on tmp, or -1 */
     int existed;               /* path held a regular file: its mode and owner are kept */
     dev_t dev;
+    const ef_temp_hooks *hooks;   /* told of the temporary file, or NULL */
     ino_t ino;
 } ef_output;
 
@@ -23,10 +25,11 @@ typedef struct ef_output {
  * followed to its target, which must exist), and creates the temporary
  * file .NAME.exrfog-PID-RANDOM.tmp[suffix] in the destination's directory
  * (O_EXCL, O_NOFOLLOW; the destination's permission bits and, when
- * allowed, owner). Registers it for removal on a fatal signal. Returns 0,
+ * allowed, owner). Tells hooks of it (for removal on a fatal signal). Returns 0,
  * 2 for a usage error (a directory, FIFO, device, socket, dangling link),
  * or 1 (the directory is missing or not writable...), with err set. */
-int ef_output_open(ef_output *o, const char *name, const char *suffix, ef_err *err);
+int ef_output_open(ef_output *o, const char *name, const char *suffix, const ef_temp_hooks *hooks,
+                   ef_err *err);
 
 /* Closes the temporary file (fd stays open when keep_fd) and renames it
  * over the destination. Returns 0, or 1 with err set (the temporary file
@@ -36,9 +39,6 @@ int ef_output_commit(ef_output *o, ef_err *err);
 /* Closes and removes the temporary file, if any. Safe to call twice. */
 void ef_output_abort(ef_output *o);
 
-/* Installs the handlers that remove every registered temporary file and
- * say which signal stopped the run, for every catchable fatal signal. */
-void ef_output_signals(void);
 
 /* Whether two paths name the same existing file. */
 int ef_output_same_file(const char *a, const char *b);

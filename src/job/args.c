@@ -1,19 +1,20 @@
 #include <stdio.h>
 
-#include "options.h"
+#include "args.h"
 
 #include <float.h>
-#include <getopt.h>
 #include <math.h>
 #include <openexr.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "aov.h"
+#include "argscan.h"
 #include "exr_deflate.h"
 #include "exr_io.h"
 #include "colour.h"
 #include "ocio_shim.h"
+#include "scene_build.h"
 #include "scene_file.h"
 #include "version.h"
 
@@ -211,102 +212,8 @@ void ef_options_free(ef_options *o)
     o->scene_text = NULL;
 }
 
-/* What the command line said about the scene, applied once every option is
- * read: a scene file first, then the flags over it, then the --fog specs. */
-typedef struct scene_flags {
-    const char *specs[EF_FOG_MAX_COMPONENTS];
-    int nspec;
-    int has_color, has_sky, has_up, has_units, has_time;
-    double up[3], units, time;
-    const char *color_text;
-    const char *sky;
-} scene_flags;
-
-static ef_parse_result build_scene(ef_options *o, const scene_flags *f, ef_err *err)
-{
-    ef_fog_scene *s = &o->scene;
-    ef_scene_file sf;
-    memset(&sf, 0, sizeof sf);
-    if (o->scene_file) {
-        if (ef_scene_file_read(o->scene_file, &sf, err)) {
-            err->file = o->scene_file;
-            return EF_PARSE_FAIL;
-        }
-        if (sf.has_color)
-            memcpy(s->color, sf.color, sizeof s->color);
-        if (sf.has_up)
-            memcpy(s->ctx.up, sf.up, sizeof s->ctx.up);
-        o->up_set |= sf.has_up;
-        if (sf.has_units)
-            s->ctx.units_per_meter = sf.units;
-        if (sf.has_time)
-            s->ctx.time = sf.time;
-        o->time_set |= sf.has_time;
-        o->aov |= sf.aov;
-        if (sf.has_sky && ef_scene_parse_sky(s, sf.sky, err)) {
-            char msg[sizeof err->msg];
-            snprintf(msg, sizeof msg, "%s", err->msg);
-            ef_fail(err, "sky: %s", msg);
-            err->file = o->scene_file;
-            ef_scene_file_free(&sf);
-            return EF_PARSE_FAIL;
-        }
-    }
-    if (f->has_color) {
-        const char *t = f->color_text;
-        if (ef_colour_parse(NULL, t, s->color, err)) {
-            char msg[sizeof err->msg];
-            snprintf(msg, sizeof msg, "%s", err->msg);
-            if (ef_out_of_range(t, 0))
-                ef_fail(err, "--fog-color '%s' is out of range (numbers are 0 or between 2.2e-308 "
-                             "and 1.8e308 in magnitude; colours at most 65504)", t);
-            else if (t[0] != '#' && !strchr(t, ':'))
-                ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers from 0 to %g), #RRGGBB "
-                             "or SPACE:R,G,B", t, EF_COLOR_MAX);
-            else
-                ef_fail(err, "--fog-color '%s': %s", t, msg);
-            ef_scene_file_free(&sf);
-            /* a config that cannot be opened is a runtime error */
-            return strstr(msg, "colour management:") ? EF_PARSE_FAIL : EF_PARSE_USAGE;
-        }
-    }
-    if (f->has_up)
-        memcpy(s->ctx.up, f->up, sizeof s->ctx.up);
-    o->up_set |= f->has_up;
-    if (f->has_units)
-        s->ctx.units_per_meter = f->units;
-    if (f->has_time)
-        s->ctx.time = f->time;
-    o->time_set |= f->has_time;
-    if (f->has_sky && ef_scene_parse_sky(s, f->sky, err))
-        return ef_scene_file_free(&sf), EF_PARSE_USAGE;
-    s->ctx.read_file = ef_read_text_file;
-    s->ctx.parse_color = ef_colour_parse;
-    for (int i = 0; i < sf.nspec; ++i)
-        if (ef_scene_add(s, sf.specs[i], err)) {
-            /* A profile the component names keeps its own name in the message. */
-            char msg[sizeof err->msg];
-            snprintf(msg, sizeof msg, "%s", err->msg);
-            if (err->file)
-                ef_fail(err, "%s: %s: %s", sf.where[i], err->file, msg);
-            else
-                ef_fail(err, "%s: %s", sf.where[i], msg);
-            err->file = o->scene_file;
-            ef_scene_file_free(&sf);
-            return EF_PARSE_FAIL;
-        }
-    o->scene_text = sf.text;   /* kept for exrfog/history: the file is read once */
-    sf.text = NULL;
-    ef_scene_file_free(&sf);
-    for (int i = 0; i < f->nspec; ++i)
-        if (ef_scene_add(s, f->specs[i], err))
-            /* A profile file that is missing or wrong is a runtime error. */
-            return err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
-    return EF_PARSE_RUN;
-}
-
-static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_err *err,
-                                     int *cur_opt, const char **cur_arg);
+static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_colour *colour,
+                                     FILE *out, ef_err *err, int *cur_opt, const char **cur_arg);
 
 /* The numeric options, for the "out of range" message (wide: matrices). */
 static const struct {
@@ -315,11 +222,12 @@ static const struct {
                      { OPT_AOV_ORIGIN, 0 }, { OPT_FOV, 0 }, { OPT_FOCAL, 0 }, { OPT_APERTURE, 0 }, { OPT_NEAR, 0 }, { OPT_FAR, 0 },
                      { OPT_W2C, 1 }, { OPT_C2W, 1 } };
 
-ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err)
+ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_colour *colour, FILE *out,
+                                 ef_err *err)
 {
     int opt = 0;
     const char *arg = NULL;
-    const ef_parse_result r = parse_options(argc, argv, o, err, &opt, &arg);
+    const ef_parse_result r = parse_options(argc, argv, o, colour, out, err, &opt, &arg);
     if (r != EF_PARSE_USAGE || !arg)
         return r;
     /* A number that underflows or overflows is out of range, not "not a number". */
@@ -341,10 +249,10 @@ ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *e
     return r;
 }
 
-static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_err *err,
-                                     int *cur_opt, const char **cur_arg)
+static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_colour *colour,
+                                     FILE *out, ef_err *err, int *cur_opt, const char **cur_arg)
 {
-    scene_flags f;
+    ef_scene_desc f;
     memset(&f, 0, sizeof f);
     memset(o, 0, sizeof *o);
     ef_scene_init(&o->scene);
@@ -354,15 +262,14 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     o->dwa_level = -1;
     o->pixel_type = -1;
     o->fps = 24;
-    /* 0, not 1: glibc then also forgets where it was inside a cluster of
-     * short options, so a second parse in one process (a library host, the
-     * fuzzer) never reads the previous argv. */
-    optind = 0;
-    opterr = 0;
+    /* The scanner's state is this parse's own: runs parse at once, and the
+     * host's getopt state is never touched. */
+    ef_argscan scan;
+    ef_argscan_init(&scan);
     int c;
     double focal = 0, aperture = 0;
-    while ((c = getopt_long(argc, argv, ":o:d:vqh", long_opts, NULL)) != -1) {
-        const char *a = optarg;
+    while ((c = ef_argscan_next(&scan, argc, argv, ":o:d:vqh", long_opts)) != -1) {
+        const char *a = scan.optarg;
         *cur_opt = c;
         *cur_arg = a;
         record_option(o, c, a);
@@ -545,20 +452,20 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
         case OPT_STATS: o->stats = 1; break;
         case 'v': o->verbose++; break;
         case 'q': o->quiet = 1; break;
-        case 'h': ef_options_usage(stdout); return EF_PARSE_EXIT;
+        case 'h': ef_options_usage(out); return EF_PARSE_EXIT;
         case OPT_VERSION:
         {
             int maj, min, pat;
             const char *extra;
             exr_get_library_version(&maj, &min, &pat, &extra);
-            printf("exrfog %s (OpenEXRCore %d.%d.%d, OpenColorIO %s, OpenImageIO loaded for --preview)\n",
+            fprintf(out, "exrfog %s (OpenEXRCore %d.%d.%d, OpenColorIO %s, OpenImageIO loaded for --preview)\n",
                    EXRFOG_VERSION, maj, min, pat, ef_ocio_version());
         }
             return EF_PARSE_EXIT;
         case ':':
-            return ef_fail(err, "option '%s' needs a value", argv[optind - 1]), EF_PARSE_USAGE;
+            return ef_fail(err, "option '%s' needs a value", argv[scan.optind - 1]), EF_PARSE_USAGE;
         default:
-            return ef_fail(err, "unknown option '%s' (see exrfog --help)", argv[optind - 1]),
+            return ef_fail(err, "unknown option '%s' (see exrfog --help)", argv[scan.optind - 1]),
                    EF_PARSE_USAGE;
         }
     }
@@ -582,10 +489,10 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
                                 "degrees, not between 0 and 180", focal, aperture, o->cam.fov.v),
                    EF_PARSE_USAGE;
     }
-    if (optind < argc)
-        o->input = argv[optind++];
-    if (optind < argc)
-        return ef_fail(err, "unexpected argument '%s' (one INPUT, and the output with -o)", argv[optind]),
+    if (scan.optind < argc)
+        o->input = argv[scan.optind++];
+    if (scan.optind < argc)
+        return ef_fail(err, "unexpected argument '%s' (one INPUT, and the output with -o)", argv[scan.optind]),
                EF_PARSE_USAGE;
     if (o->input)
         record(o, o->input);
@@ -601,8 +508,14 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_er
     if (o->preview && !o->preview[0])
         return ef_fail(err, "--preview: the file name is empty (give a name such as preview.png)"),
                EF_PARSE_USAGE;
-    ef_colour_setup(o->colorconfig, o->colorspace);
-    const ef_parse_result br = build_scene(o, &f, err);
+    ef_colour_setup(colour, o->colorconfig, o->colorspace);
+    f.scene_file = o->scene_file;
+    ef_scene_found found;
+    const ef_parse_result br = ef_scene_build(&o->scene, &f, colour, &found, err);
+    o->scene_text = found.scene_text;
+    o->up_set |= found.up_set;
+    o->time_set |= found.time_set;
+    o->aov |= found.aov;
     if (br != EF_PARSE_RUN)
         return br;
     if (!o->explain && o->scene.ncomp == 0)

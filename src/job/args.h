@@ -7,6 +7,10 @@
 #include "error.h"
 #include "scene.h"
 
+#include <stdio.h>
+
+struct ef_colour;
+
 #define EF_MAX_CHAN_TYPES 64
 
 typedef struct ef_options {
@@ -50,11 +54,12 @@ typedef enum ef_parse_result {
 } ef_parse_result;
 
 /* Parses argv. EF_PARSE_EXIT after --help/--version (already printed to
- * stdout); EF_PARSE_USAGE with err set, quoting the offending text;
+ * out); EF_PARSE_USAGE with err set, quoting the offending text;
  * EF_PARSE_FAIL when a file named by an option (--scene, a fog profile) is
  * unreadable or wrong, with err->file naming it. Release o with
  * ef_options_free whatever the result. */
-ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, ef_err *err);
+ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, struct ef_colour *colour,
+                                 FILE *out, ef_err *err);
 
 /* Releases what parsing allocated (the fog components' data). */
 void ef_options_free(ef_options *o);

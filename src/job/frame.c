@@ -1,0 +1,719 @@
+/* One frame of a run, as stages over an ef_frame on the heap: the
+ * destinations are checked and their temporary files made before a pixel
+ * is read; then the inputs, the views and their cameras, the pass, and the
+ * results put in place. Every stage returns 0 to go on, or the frame's
+ * exit status with its message printed (FRAME_DONE: finished early, 0). */
+#define _GNU_SOURCE 1
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/resource.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "apply.h"
+#include "exr_dwa.h"
+#include "job_impl.h"
+#include "output.h"
+#include "preview.h"
+#include "scene_build.h"
+
+#define FRAME_DONE (-1)
+
+/* What the workers share read-only during the pass, except the statistics,
+ * which each unit adds under the lock. */
+typedef struct fog_job {
+    ef_job *J;
+    ef_fog_pass pass[EF_MAX_VIEWS];   /* per view (ef_chunk.view) */
+    unsigned aov;             /* EF_AOV_* bits, in the stream's extra channels */
+    double aov_origin[3];
+    ef_tau_stats *stats;      /* per component, or NULL without --stats */
+    pthread_mutex_t lock;
+    const ef_ocio_display *disp;  /* the preview's display transform */
+    /* preview: every step-th pixel of the data window */
+    unsigned char *preview;
+    int pv_w, pv_h, pv_step, dw_x0, dw_y0;
+} fog_job;
+
+typedef struct ef_frame {
+    ef_job *J;
+    ef_options *o;
+    ef_err err;
+    ef_exr_file in, dep;
+    const ef_exr_file *df;
+    const char *ipath;        /* INPUT, or its DWA-decoded temporary copy */
+    ef_dwa_info dwa;
+    ef_channel_plan plans[EF_MAX_VIEWS];
+    ef_camera cams[EF_MAX_VIEWS];
+    ef_depth_conv convs[EF_MAX_VIEWS];
+    int convs_ok[EF_MAX_VIEWS];
+    ef_fog_scene *view_scene[EF_MAX_VIEWS];   /* views after the first: copies */
+    int nplans;
+    char camfile_src[600];
+    ef_ocio_display *disp;
+    fog_job job;
+    const char *aov_names[EF_AOV_MAX_CHANNELS];
+    int naov;
+    ef_output out, pv, mid, dconv, din;
+    const char *ext;          /* OUTPUT's extension when it is not .exr */
+    int foreign;
+    char *history;
+    exr_attr_box2i_t dw;
+    ef_stream_opts so;
+    ef_stream_stats st;
+    int dwa_out;
+    float dwa_level;
+} ef_frame;
+
+/* A display-referred value (0..1) to 8 bits. */
+static unsigned char display8(float v)
+{
+    if (!(v > 0))
+        return 0;
+    if (v >= 1)
+        return 255;
+    return (unsigned char) lrintf(v * 255.0f);
+}
+
+/* A monotonic clock in ns, for --stats's time per pixel (the vDSO's: tens
+ * of ns a call, so timing every pixel stays cheap). */
+static double mono_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
+}
+
+/* This thread's CPU time in ns (read once per span of pixels). */
+static double thread_cpu_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
+}
+
+/* The unit's preview pixels through the display transform, then 8 bits. */
+static void preview_unit(fog_job *j, const ef_chunk *ck)
+{
+    const int sx0 = ((ck->x0 - j->dw_x0) + j->pv_step - 1) / j->pv_step;
+    const int sx1 = (ck->x0 + ck->w - 1 - j->dw_x0) / j->pv_step;
+    if (sx1 < sx0)
+        return;
+    const int nx = sx1 - sx0 + 1;
+    float *row = malloc(sizeof(float) * 3 * (size_t) nx);
+    if (!row)
+        return;   /* the preview stays black there; memory is gone anyway */
+    for (int y = ck->y0; y < ck->y0 + ck->h; ++y) {
+        if ((y - j->dw_y0) % j->pv_step)
+            continue;
+        for (int k = 0; k < nx; ++k) {
+            const int x = j->dw_x0 + (sx0 + k) * j->pv_step;
+            const size_t i = (size_t) (y - ck->y0) * (size_t) ck->w + (size_t) (x - ck->x0);
+            for (int c = 0; c < 3; ++c)
+                row[3 * k + c] = ck->rgb[c][i];
+        }
+        ef_ocio_display_apply(j->disp, row, nx);
+        unsigned char *p = j->preview + 3 * ((size_t) ((y - j->dw_y0) / j->pv_step) * j->pv_w + (size_t) sx0);
+        for (int k = 0; k < 3 * nx; ++k)
+            p[k] = display8(row[k]);
+    }
+    free(row);
+}
+
+/* The stream's work on one unit: fog, statistics, progress, preview. */
+static void fog_chunk(void *user, const ef_chunk *ck)
+{
+    fog_job *j = user;
+    if (ef_job_cancelled(j->J))
+        return;   /* the output is thrown away: no work for it */
+    ef_aov_out aov;
+    ef_aov_bind(&aov, j->aov, ck->extra);
+    memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
+    /* Statistics per unit, merged once: no lock per pixel. */
+    ef_tau_stats st[EF_FOG_MAX_COMPONENTS];
+    const int ncomp = j->pass[0].scene->ncomp;
+    if (j->stats) {
+        memset(st, 0, sizeof st);
+        st[0].clock_ns = mono_ns;
+        st[0].cpu_ns = thread_cpu_ns;
+    }
+    ef_fog_block_aov(&j->pass[ck->view], ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth, &aov,
+                     j->stats ? st : NULL);
+    if (j->stats) {
+        pthread_mutex_lock(&j->lock);
+        for (int i = 0; i < ncomp; ++i)
+            ef_tau_stats_merge(&j->stats[i], &st[i]);
+        pthread_mutex_unlock(&j->lock);
+    }
+    ef_progress_add(j->J, (long) ck->w * ck->h);
+    if (j->preview && ck->view == 0)
+        preview_unit(j, ck);
+}
+
+/* Where temporary copies of inputs go: $TMPDIR, else /tmp. */
+static void temp_name(char *name, size_t len, const char *what)
+{
+    const char *tmpdir = getenv("TMPDIR");
+    snprintf(name, len, "%s/%s", tmpdir && tmpdir[0] ? tmpdir : "/tmp", what);
+}
+
+/* --preview: checked and its temporary file made before any work. */
+static int open_preview(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    char msg[512];
+    if (!strcmp(o->preview, o->output) || ef_output_same_file(o->preview, o->output) ||
+        ef_output_same_file(o->preview, o->input) ||
+        (o->depth_file && ef_output_same_file(o->preview, o->depth_file))) {
+        ef_fail(&F->err, "--preview names the same file as INPUT, --depth or -o; give the "
+                         "preview its own name");
+        return ef_job_report(J, o->preview, &F->err, 2);
+    }
+    if (ef_preview_check(o->preview, msg, sizeof msg)) {
+        ef_fail(&F->err, "--preview: %s", msg);
+        return ef_job_report(J, o->preview, &F->err, 2);
+    }
+    /* the display and view exist (the working space comes later) */
+    const ef_ocio *cfg = ef_colour_config(&J->colour, &F->err);
+    if (!cfg)
+        return ef_job_report(J, o->preview, &F->err, 1);
+    char used[300], vmsg[1200];
+    ef_ocio_display *d = ef_ocio_display_open(cfg, NULL, o->preview_view, used, sizeof used,
+                                              vmsg, sizeof vmsg);
+    if (!d) {
+        ef_fail(&F->err, "--preview-view: %s", vmsg);
+        return ef_job_report(J, o->preview, &F->err, 2);
+    }
+    ef_ocio_display_close(d);
+    const char *dot = strrchr(o->preview, '.'), *slash = strrchr(o->preview, '/');
+    const int rc = ef_output_open(&F->pv, o->preview, dot && (!slash || dot > slash) ? dot : NULL,
+                                  J->h.temps, &F->err);
+    return rc ? ef_job_report(J, o->preview, &F->err, rc) : 0;
+}
+
+/* Everything about the destinations is checked, and their temporary files
+ * made, before a pixel is read. OUTPUT's extension chooses the format:
+ * .exr (or none) is written here, anything else through OpenImageIO from
+ * an EXR beside it. */
+static int open_destinations(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    F->ext = o->output ? strrchr(o->output, '.') : NULL;
+    if (F->ext && strchr(F->ext, '/'))
+        F->ext = NULL;
+    F->foreign = F->ext && strcasecmp(F->ext, ".exr") != 0;
+    if (o->explain)
+        return 0;
+    int rc;
+    if (o->preview && (rc = open_preview(F)) != 0)
+        return rc;
+    if (F->foreign) {
+        char msg[512];
+        if (F->naov) {
+            ef_fail(&F->err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
+                             "colour and alpha only", F->ext);
+            return ef_job_report(J, o->output, &F->err, 2);
+        }
+        if (ef_preview_check(o->output, msg, sizeof msg)) {
+            ef_fail(&F->err, "no writer for '%s' files (exrfog writes .exr itself, and through "
+                             "OpenImageIO .tif, .png, .jpg, .dpx and the rest): %s", F->ext, msg);
+            return ef_job_report(J, o->output, &F->err, 2);
+        }
+    }
+    if ((rc = ef_output_open(&F->out, o->output, F->foreign ? F->ext : NULL, J->h.temps,
+                             &F->err)) != 0)
+        return ef_job_report(J, o->output, &F->err, rc);
+    if (F->foreign &&
+        (rc = ef_output_open(&F->mid, o->output, ".exr", J->h.temps, &F->err)) != 0)
+        return ef_job_report(J, o->output, &F->err, rc);
+    return 0;
+}
+
+/* The inputs: DWA parts (which OpenEXRCore 3.1.5 cannot decode) decoded by
+ * the OpenEXR C++ library into a temporary ZIP file first; a depth in
+ * another format (a 32-bit TIFF pass) read through OpenImageIO into a
+ * temporary float EXR. */
+static int open_inputs(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    F->ipath = o->input;
+    {
+        ef_err derr = { 0 };
+        if (!ef_regular_file(o->input) || ef_exr_dwa_info(o->input, &F->dwa, &derr))
+            F->dwa.ndwa = 0;   /* not an EXR: the reader below says what is wrong */
+    }
+    if (F->dwa.ndwa > 0) {
+        char name[PATH_MAX], msg[800];
+        temp_name(name, sizeof name, "exrfog-dwa");
+        if (ef_output_open(&F->din, name, ".exr", J->h.temps, &F->err))
+            return ef_job_report(J, o->input, &F->err, 1);
+        if (ef_dwa_transcode(o->input, F->din.fd, F->din.tmp, EXR_COMPRESSION_ZIP, -1, -1.0f,
+                             o->threads ? o->threads : ef_cpu_count(), msg, sizeof msg)) {
+            ef_fail(&F->err, "%s", msg);
+            return ef_job_report(J, o->input, &F->err, 1);
+        }
+        F->ipath = F->din.tmp;
+    }
+    if (ef_exr_open(F->ipath, &F->in, &F->err))
+        return ef_job_report(J, o->input, &F->err, 1);
+    F->in.path = o->input;   /* messages name the user's file */
+    F->df = &F->in;
+    if (!o->depth_file)
+        return 0;
+    const char *dpath = o->depth_file;
+    if (!ef_is_exr_file(o->depth_file)) {
+        char name[PATH_MAX], msg[600];
+        temp_name(name, sizeof name, "exrfog-depth");
+        if (ef_output_open(&F->dconv, name, ".exr", J->h.temps, &F->err))
+            return ef_job_report(J, o->depth_file, &F->err, 1);
+        if (ef_oiio_image_to_exr(o->depth_file, F->dconv.fd, msg, sizeof msg)) {
+            ef_fail(&F->err, "%s", msg);
+            return ef_job_report(J, o->depth_file, &F->err, 1);
+        }
+        dpath = F->dconv.tmp;
+    }
+    if (ef_exr_open(dpath, &F->dep, &F->err))
+        return ef_job_report(J, o->depth_file, &F->err, 1);
+    F->dep.path = o->depth_file;   /* messages name the user's file */
+    F->df = &F->dep;
+    return 0;
+}
+
+/* The views to fog (every view of a multi-view file, or those of --view),
+ * each with its channels; the working space, when colours or the preview
+ * need it (colours written as #RRGGBB or SPACE:R,G,B are then read again
+ * in it); and what the output format and the AOVs allow. */
+static int find_views(ef_frame *F)
+{
+    ef_job *J = F->J;
+    ef_options *o = F->o;
+    char views[EF_MAX_VIEWS][64];
+    const int nfile_views = ef_exr_views(&F->in, views, EF_MAX_VIEWS);
+    int status = ef_choose_views(J, &F->in, F->df, views, nfile_views, F->plans, &F->nplans,
+                                 &F->err);
+    if (status) {
+        if (o->explain && status == 1)
+            ef_explain(J, J->out, &F->in, NULL, NULL, NULL, 0);
+        return ef_job_report(J, o->input, &F->err, status);
+    }
+    if ((status = ef_colour_working(&J->colour, &F->in, F->plans[0].rgb[0].part,
+                                    ef_colour_converted(&J->colour) || o->preview || o->explain,
+                                    &F->err)) != 0)
+        return ef_job_report(J, o->input, &F->err, status);
+    if (ef_colour_converted(&J->colour)) {
+        if (ef_scene_rebuild(&o->scene, NULL, o->scene.ctx.time, &F->err) ||
+            (o->fog_color && ef_colour_parse(&J->colour, o->fog_color, o->scene.color, &F->err)))
+            return ef_job_report(J, o->input, &F->err, 1);
+    }
+    const char *clash = ef_exr_part_has_any(&F->in, F->plans[0].rgb[0].part, F->aov_names, F->naov);
+    if (clash && !F->plans[0].chan_view[0]) {
+        char list[64];
+        ef_aov_list(o->aov, list, sizeof list);
+        ef_fail(&F->err, "--aov %s: the colour part already has a channel '%s'; the AOV would "
+                         "overwrite it (leave that AOV out, or rename the channel)", list, clash);
+        return ef_job_report(J, o->input, &F->err, 2);
+    }
+    if (F->foreign && F->nplans > 1) {
+        ef_fail(&F->err, "%s holds one image and INPUT has %d views (%s, ...); choose one with "
+                         "--view NAME", strrchr(o->output, '.'), F->nplans, F->plans[0].view);
+        return ef_job_report(J, o->output, &F->err, 2);
+    }
+    return 0;
+}
+
+/* The camera metadata of view v: in a single-part multi-view file the
+ * header's camera is the default view's, and another view has none. */
+static int view_meta(ef_frame *F, const ef_channel_plan *pl, ef_cam_meta *meta)
+{
+    if (pl->view[0] && F->in.nparts == 1 && !pl->default_view) {
+        exr_attr_box2i_t disp;
+        exr_get_display_window(F->in.ctx, 0, &disp);
+        ef_cam_meta_init(meta, disp.min.x, disp.min.y, disp.max.x, disp.max.y);
+        float pa = 1;
+        if (exr_get_pixel_aspect_ratio(F->in.ctx, 0, &pa) == EXR_ERR_SUCCESS && pa > 0)
+            meta->pixel_aspect = pa;
+        return 0;
+    }
+    if (ef_exr_read_cam_meta(&F->in, pl->rgb[0].part, meta, &F->err))
+        return ef_job_report(F->J, F->o->input, &F->err, 1);
+    return 0;
+}
+
+/* A failed camera: --explain shows what was found, the message names the
+ * view. A bad --world-to-camera is a usage error; a bad header is not. */
+static int camera_failed(ef_frame *F, const ef_channel_plan *pl, const ef_camera *cam)
+{
+    ef_job *J = F->J;
+    if (F->o->explain)
+        ef_explain(J, J->out, &F->in, pl, NULL, NULL, 0);
+    if (pl->view[0]) {
+        char msg[sizeof F->err.msg];
+        snprintf(msg, sizeof msg, "%s", F->err.msg);
+        ef_fail(&F->err, "view '%s': %s%s", pl->view, msg,
+                F->in.nparts == 1 && !pl->default_view
+                    ? " (in a single-part multi-view file the header's camera is the "
+                      "default view's)"
+                    : "");
+    }
+    return ef_job_report(J, F->o->input, &F->err, cam->flag_error ? 2 : 1);
+}
+
+/* Each view binds the scene to its own camera: a copy per view after the
+ * first. */
+static int bind_view(ef_frame *F, int v)
+{
+    ef_options *o = F->o;
+    ef_fog_scene *sc = &o->scene;
+    if (v > 0) {
+        F->view_scene[v] = malloc(sizeof *F->view_scene[v]);
+        if (!F->view_scene[v] || ef_scene_copy(F->view_scene[v], &o->scene, 1)) {
+            free(F->view_scene[v]);
+            F->view_scene[v] = NULL;
+            ef_fail(&F->err, "out of memory for the scene of view %d", v);
+            return ef_job_report(F->J, o->input, &F->err, 1);
+        }
+        sc = F->view_scene[v];
+    }
+    ef_scene_bind(sc, F->cams[v].pos);
+    ef_scene_set_cancel(sc, F->J->stop);
+    F->job.pass[v] = (ef_fog_pass){ &F->cams[v], &F->convs[v], sc };
+    return 0;
+}
+
+/* View v's camera, resolved and explained (or warned about), its depth
+ * conversion, and its pass. */
+static int resolve_view(ef_frame *F, int v)
+{
+    ef_job *J = F->J;
+    ef_options *o = F->o;
+    const ef_channel_plan *const pl = &F->plans[v];
+    ef_camera *const cam = &F->cams[v];
+    ef_cam_flags flags = o->cam;
+    ef_cam_meta meta;
+    int status;
+    if ((status = ef_camera_flags(J, &flags, F->camfile_src, sizeof F->camfile_src, &F->err)) != 0)
+        return ef_job_report(J, o->camera_file, &F->err, status);
+    if ((status = view_meta(F, pl, &meta)) != 0)
+        return status;
+    if (ef_camera_resolve(&meta, &flags, cam, &F->err))
+        return camera_failed(F, pl, cam);
+    if (F->camfile_src[0])
+        cam->src_pose = F->camfile_src;
+    if (cam->warning[0] && !o->quiet && !o->explain)
+        ef_job_warn(J, o->input, cam->warning);
+    static const double z_up[3] = { 0, 0, 1 };
+    if (v == 0 && o->up_auto && ef_z_up_camera(&flags, cam) &&
+        ef_scene_rebuild(&o->scene, z_up, o->scene.ctx.time, &F->err))
+        return ef_job_report(J, o->input, &F->err, 1);
+    if (v == 0 && !o->quiet && !o->explain)
+        ef_warn_traps(J, &F->in, pl->rgb[0].part, cam);
+    const int conv_ok = ef_depth_conv_init(&F->convs[v], o->depth_mode, cam, &F->err) == 0;
+    F->convs_ok[v] = conv_ok;
+    if (o->explain && o->json)
+        return 0;
+    if (o->explain) {
+        if (pl->view[0])
+            fprintf(J->out, "%sview: %s%s\n", v ? "\n" : "", pl->view,
+                    pl->default_view ? " (default view)" : "");
+        ef_explain(J, J->out, &F->in, pl, cam, &F->convs[v], conv_ok);
+        if (!conv_ok)
+            fprintf(J->out, "depth conversion: %s\n", F->err.msg);
+        return 0;
+    }
+    if (!conv_ok)
+        return ef_job_report(J, o->input, &F->err, 1);
+    return bind_view(F, v);
+}
+
+static int resolve_views(ef_frame *F)
+{
+    for (int v = 0; v < F->nplans; ++v) {
+        const int status = resolve_view(F, v);
+        if (status)
+            return status;
+    }
+    if (F->o->explain) {
+        if (F->o->json)
+            ef_explain_json(F->J, F->J->out, &F->in, F->plans, F->cams, F->convs_ok, F->nplans);
+        return FRAME_DONE;
+    }
+    return 0;
+}
+
+/* --preview: every step-th pixel through the display transform. */
+static int setup_preview(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    fog_job *j = &F->job;
+    const int w = F->dw.max.x - F->dw.min.x + 1, h = F->dw.max.y - F->dw.min.y + 1;
+    j->pv_step = (w > h ? w : h) / 2048 + 1;
+    j->pv_w = (w + j->pv_step - 1) / j->pv_step;
+    j->pv_h = (h + j->pv_step - 1) / j->pv_step;
+    j->dw_x0 = F->dw.min.x;
+    j->dw_y0 = F->dw.min.y;
+    char used[300], msg[1200];
+    const ef_ocio *cfg = ef_colour_config(&J->colour, &F->err);
+    if (!cfg)
+        return ef_job_report(J, o->preview, &F->err, 1);
+    F->disp = ef_ocio_display_open(cfg, ef_colour_space(&J->colour), o->preview_view, used,
+                                   sizeof used, msg, sizeof msg);
+    if (!F->disp) {
+        ef_fail(&F->err, "--preview-view: %s", msg);
+        return ef_job_report(J, o->preview, &F->err, 2);
+    }
+    j->disp = F->disp;
+    j->preview = calloc((size_t) j->pv_w * (size_t) j->pv_h, 3);
+    if (!j->preview) {
+        ef_fail(&F->err, "out of memory for the preview");
+        return ef_job_report(J, o->preview, &F->err, 1);
+    }
+    return 0;
+}
+
+/* The pass's settings: statistics, progress, preview, history, threads. */
+static int prepare_pass(ef_frame *F)
+{
+    ef_job *J = F->J;
+    ef_options *o = F->o;
+    int status;
+    F->job.aov = o->aov;
+    memcpy(F->job.aov_origin, o->aov_origin, sizeof F->job.aov_origin);
+    if (o->stats) {
+        F->job.stats = calloc((size_t) o->scene.ncomp + 1, sizeof *F->job.stats);
+        if (!F->job.stats) {
+            ef_fail(&F->err, "out of memory for the statistics");
+            return ef_job_report(J, o->output, &F->err, 1);
+        }
+    }
+    exr_get_data_window(F->in.ctx, F->plans[0].rgb[0].part, &F->dw);
+    if (J->active_pg) {
+        pthread_mutex_lock(&J->pg.lock);
+        J->pg.frame_px = (double) (F->dw.max.x - F->dw.min.x + 1) *
+                         (double) (F->dw.max.y - F->dw.min.y + 1);
+        J->pg.px = 0;
+        pthread_mutex_unlock(&J->pg.lock);
+    }
+    if (o->preview && (status = setup_preview(F)) != 0)
+        return status;
+    for (int p = 0; p < F->in.nparts && !o->quiet; ++p)
+        if (ef_exr_part_is_multilevel(&F->in, p))
+            ef_job_note(J, "exrfog: %s: note: part %d is mip-mapped; level 0 is fogged and the "
+                           "output part is single-level\n", o->input, p);
+    F->history = ef_history_line(J->argc, J->typed, o->scene_file, o->scene_text);
+    if (!F->history) {
+        ef_fail(&F->err, "out of memory for the history attribute");
+        return ef_job_report(J, o->output, &F->err, 1);
+    }
+    /* More threads than CPUs cannot help a CPU-bound pass; they only cost memory. */
+    const int cpus = ef_cpu_count();
+    if (o->threads > cpus && o->verbose)
+        ef_job_note(J, "exrfog: note: --threads %d capped at the %d CPUs\n", o->threads, cpus);
+    F->so = (ef_stream_opts){ .threads = o->threads && o->threads < cpus ? o->threads : cpus,
+                              .compression = o->compression,
+                              .zip_level = o->zip_level,
+                              .codec = o->codec,
+                              .pixel_type = o->pixel_type,
+                              .chan_type_name = o->chan_type_name,
+                              .chan_type = o->chan_type,
+                              .nchan_type = o->nchan_type,
+                              .depth_name = NULL,
+                              .depth_part = -1,
+                              .param_attr = o->params,
+                              .history = F->history,
+                              .extra = F->aov_names,
+                              .nextra = F->naov,
+                              .has_origin_attr = o->has_aov_origin,
+                              .origin_attr = { o->aov_origin[0], o->aov_origin[1],
+                                               o->aov_origin[2] } };
+    if (o->verbose) {
+        ef_progress_clear(J->active_pg);
+        for (int v = 0; v < F->nplans; ++v)
+            ef_explain(J, J->msg, &F->in, &F->plans[v], &F->cams[v], &F->convs[v], 1);
+        fprintf(J->msg, "exrfog: %s -> %s with %d thread%s\n", o->input, o->output,
+                F->so.threads, F->so.threads > 1 ? "s" : "");
+    }
+    F->so.nplans = F->nplans;
+    F->so.cancel = J->stop;
+    return 0;
+}
+
+/* DWA output (asked for, or kept from a DWA input): the pass writes a
+ * lossless temporary EXR that the C++ library encodes at the end. */
+static int choose_dwa_output(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    F->dwa_out = -1;
+    F->dwa_level = o->dwa_level;
+    if (!F->foreign &&
+        (o->compression == EXR_COMPRESSION_DWAA || o->compression == EXR_COMPRESSION_DWAB)) {
+        F->dwa_out = o->compression;
+    } else if (!F->foreign && o->compression < 0 && F->dwa.ndwa > 0) {
+        if (F->dwa.ndwa == F->dwa.nparts && !F->dwa.mixed) {
+            F->dwa_out = F->dwa.compression;
+            F->dwa_level = F->dwa.level > 0 ? F->dwa.level : EF_DWA_DEFAULT_LEVEL;
+        } else if (!o->quiet) {
+            ef_job_warn(J, o->input, "some parts are DWA and others are not (or DWAA and DWAB "
+                                     "are mixed); the DWA parts are written ZIP-compressed "
+                                     "(--compression dwaa or dwab writes every part so)");
+        }
+    }
+    if (F->dwa_out < 0)
+        return 0;
+    F->so.compression = EXR_COMPRESSION_ZIP;
+    F->so.zip_level = 1;
+    const int rc = ef_output_open(&F->mid, o->output, ".exr", J->h.temps, &F->err);
+    if (rc) {
+        ef_job_report(J, o->output, &F->err, rc);
+        return 1;
+    }
+    return 0;
+}
+
+/* The pass itself: decode, fog, encode, into OUTPUT's temporary file (or
+ * the intermediate EXR of a DWA or foreign output). */
+static int run_pass(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    const int fd = F->foreign || F->dwa_out >= 0 ? F->mid.fd : F->out.fd;
+    if (ef_exr_stream(&F->in, F->df, F->plans, o->output, fd, &F->so, fog_chunk, &F->job, &F->st,
+                      &F->err))
+        return ef_job_report(J, o->output, &F->err, ef_job_cancelled(J) ? 3 : 1);
+    if (ef_job_cancelled(J)) {
+        ef_fail(&F->err, "cancelled; nothing was written");
+        return ef_job_report(J, o->output, &F->err, 3);
+    }
+    return 0;
+}
+
+/* The intermediate EXR into its final form: DWA through the C++ library,
+ * or a foreign format (colour and alpha of the fogged part) through
+ * OpenImageIO. */
+static int convert_output(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    if (F->dwa_out >= 0) {
+        char msg[800];
+        close(F->mid.fd);
+        F->mid.fd = -1;
+        if (ef_dwa_transcode(F->mid.tmp, F->out.fd, o->output, -1, F->dwa_out,
+                             F->dwa_level > 0 ? F->dwa_level : EF_DWA_DEFAULT_LEVEL,
+                             F->so.threads, msg, sizeof msg)) {
+            ef_fail(&F->err, "%s", msg);
+            return ef_job_report(J, o->output, &F->err, 1);
+        }
+        ef_output_abort(&F->mid);
+    }
+    if (F->foreign) {
+        const ef_channel_plan *pl = &F->plans[0];
+        const char *names[4] = { pl->rgb[0].name, pl->rgb[1].name, pl->rgb[2].name,
+                                 pl->alpha.part >= 0 ? pl->alpha.name : NULL };
+        char msg[512];
+        close(F->mid.fd);
+        F->mid.fd = -1;
+        close(F->out.fd);
+        F->out.fd = -1;
+        if (ef_oiio_convert_exr(F->mid.tmp, pl->rgb[0].part, names, names[3] ? 4 : 3, F->out.tmp,
+                                msg, sizeof msg)) {
+            ef_fail(&F->err, "%s", msg);
+            return ef_job_report(J, o->output, &F->err, 1);
+        }
+        ef_output_abort(&F->mid);
+    }
+    return 0;
+}
+
+/* The results in place: the preview first, so that when it fails OUTPUT
+ * (which may be the input) is left as it was and the run fails. */
+static int commit(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    if (F->job.preview) {
+        char msg[512];
+        close(F->pv.fd);
+        F->pv.fd = -1;
+        if (ef_preview_write(F->pv.tmp, F->job.pv_w, F->job.pv_h, F->job.preview, msg, sizeof msg)) {
+            ef_fail(&F->err, "%s; nothing was written", msg);
+            return ef_job_report(J, o->preview, &F->err, 1);
+        }
+        if (ef_output_commit(&F->pv, &F->err))
+            return ef_job_report(J, o->preview, &F->err, 1);
+    }
+    if (ef_output_commit(&F->out, &F->err))
+        return ef_job_report(J, o->output, &F->err, 1);
+    if (o->stats) {
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
+        const ef_stream_stats *st = &F->st;
+        ef_job_note(J,
+                    "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode "
+                    "%.3f s, write %.3f s, wait %.3f s; %ld units on %d threads; peak memory "
+                    "%.1f MB\n",
+                    st->wall_s, st->decode_s, st->fog_s, st->encode_s, st->write_s, st->wait_s,
+                    st->units, F->so.threads, (double) ru.ru_maxrss / 1024.0);
+        ef_print_tau_stats(J, &o->scene, F->job.stats);
+    }
+    return 0;
+}
+
+static void frame_free(ef_frame *F)
+{
+    free(F->history);
+    ef_output_abort(&F->mid);
+    ef_output_abort(&F->pv);
+    ef_output_abort(&F->out);
+    ef_output_abort(&F->dconv);
+    ef_output_abort(&F->din);
+    free(F->job.preview);
+    free(F->job.stats);
+    pthread_mutex_destroy(&F->job.lock);
+    for (int v = 1; v < EF_MAX_VIEWS; ++v)
+        if (F->view_scene[v]) {
+            ef_scene_free(F->view_scene[v]);
+            free(F->view_scene[v]);
+        }
+    ef_ocio_display_close(F->disp);
+    ef_exr_close(&F->dep);
+    ef_exr_close(&F->in);
+    free(F);
+}
+
+int ef_run_frame(ef_job *J)
+{
+    ef_options *o = &J->o;
+    ef_err err = { 0 };
+    /* A frame's time is frame / fps unless --time or the scene file says. */
+    if (J->has_frame && !o->time_set &&
+        ef_scene_rebuild(&o->scene, NULL, (double) J->frame / o->fps, &err))
+        return ef_job_report(J, o->input, &err, 1);
+    ef_frame *F = calloc(1, sizeof *F);
+    if (!F) {
+        ef_fail(&err, "out of memory");
+        return ef_job_report(J, o->input, &err, 1);
+    }
+    F->J = J;
+    F->o = o;
+    F->job.J = J;
+    F->job.pv_step = 1;
+    pthread_mutex_init(&F->job.lock, NULL);
+    F->naov = ef_aov_channels(o->aov, F->aov_names);
+    F->out.fd = F->pv.fd = F->mid.fd = F->dconv.fd = F->din.fd = -1;
+    F->dwa_out = -1;
+    int (*const stages[])(ef_frame *) = { open_destinations, open_inputs, find_views,
+                                          resolve_views, prepare_pass, choose_dwa_output,
+                                          run_pass, convert_output, commit };
+    int status = 0;
+    for (size_t i = 0; i < sizeof stages / sizeof stages[0] && !status; ++i)
+        status = stages[i](F);
+    frame_free(F);
+    return status == FRAME_DONE ? 0 : status;
+}

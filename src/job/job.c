@@ -1,0 +1,281 @@
+/* The run: one ef_job per ef_job_run call, on the heap, holding every piece
+ * of state the run needs; a single image is one frame, a pattern a
+ * sequence of frames, each an ef_frame of its own (frame.c). */
+#include <errno.h>
+#include <limits.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "job_impl.h"
+
+int ef_cpu_count(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n < 1 ? 1 : n > 256 ? 256 : (int) n;
+}
+
+/* Appends frame f to a comma list in b (at most len), ending in "..."
+ * once it is full. */
+static void list_frame(char *b, size_t len, long f)
+{
+    const size_t at = strlen(b);
+    if (at + 24 >= len) {
+        if (at + 4 < len && strcmp(b + at - 3, "..."))
+            snprintf(b + at, len - at, ", ...");
+        return;
+    }
+    snprintf(b + at, len - at, "%s%ld", at ? ", " : "", f);
+}
+
+/* Runs every frame of a sequence in order: the frames of --frames, or
+ * every frame on disk matching INPUT. Missing frames are found before any
+ * work; a failed frame stops the run unless --keep-going, which fogs the
+ * others and names every failure at the end. */
+static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
+{
+    ef_options *o = &J->o;
+    const char *pattern = o->input, *out_pat = o->output, *dep_pat = o->depth_file,
+               *pv_pat = o->preview;
+    ef_frame_pattern pout = { 0 }, pdep = { 0 }, ppv = { 0 };
+    ef_err err = { 0 };
+    if (out_pat && !ef_frame_pattern_find(out_pat, &pout)) {
+        return ef_job_say(J, 2, "INPUT is a sequence (%s) but -o %s has no frame pattern; every frame "
+                            "would overwrite it (write e.g. -o fog.#.exr)", pattern, out_pat);
+    }
+    if (pv_pat && !ef_frame_pattern_find(pv_pat, &ppv)) {
+        return ef_job_say(J, 2, "INPUT is a sequence (%s) but --preview %s has no frame pattern "
+                            "(write e.g. --preview fog.#.png)", pattern, pv_pat);
+    }
+    if (dep_pat)
+        ef_frame_pattern_find(dep_pat, &pdep);   /* one depth for every frame is allowed */
+    long *frames = NULL;
+    int n = 0;
+    if (o->frames ? ef_frames_parse(o->frames, &frames, &n, &err)
+                  : ef_frames_on_disk(pattern, pin, &frames, &n, &err)) {
+        if (o->frames) {
+            return ef_job_say(J, 2, "%s", err.msg);
+        }
+        return ef_job_report(J, pattern, &err, 1);
+    }
+    if (n == 0) {
+        if (pin->len > 1 && pattern[pin->at] == '#')
+            ef_fail(&err, "no file on disk matches this frame pattern; as in oiiotool, each # "
+                          "is four digits, so %d #s are %d digits (write shot.#.exr or "
+                          "shot.%%04d.exr for shot.0001.exr)", (int) pin->len, pin->width);
+        else
+            ef_fail(&err, "no file on disk matches this frame pattern (check the name and the "
+                          "padding: # is 4 digits, @ one digit, %%04d four)");
+        return ef_job_report(J, pattern, &err, 1);
+    }
+    char *paths = malloc(4 * 4096);
+    if (!paths) {
+        free(frames);
+        return ef_job_say(J, 1, "out of memory");
+    }
+    char *in_path = paths, *out_path = paths + 4096, *dep_path = paths + 2 * 4096,
+         *pv_path = paths + 3 * 4096;
+    char missing[400] = "";
+    int nmissing = 0;
+    unsigned char *skip = calloc((size_t) n, 1);
+    if (!skip) {
+        free(paths);
+        free(frames);
+        return ef_job_say(J, 1, "out of memory");
+    }
+    for (int i = 0; i < n; ++i) {
+        struct stat st;
+        const int bad = ef_frame_path(pattern, pin, frames[i], in_path, 4096) ||
+                        stat(in_path, &st) ||
+                        (dep_pat && (ef_frame_path(dep_pat, &pdep, frames[i], dep_path,
+                                                   4096) || stat(dep_path, &st)));
+        if (bad) {
+            skip[i] = 1;
+            ++nmissing;
+            list_frame(missing, sizeof missing, frames[i]);
+        }
+    }
+    int status = 0;
+    if (nmissing && !o->keep_going) {
+        ef_job_say(J, 1, "%s: %d of %d frame%s missing on disk%s: %s; nothing was written (render "
+                     "them, choose others with --frames, or pass --keep-going)", pattern,
+                  nmissing, n, n > 1 ? "s" : "", dep_pat && pdep.has ? " (colour or depth)" : "",
+                  missing);
+        free(paths);
+        free(skip);
+        free(frames);
+        return 1;
+    }
+    if (o->explain && !o->json)
+        fprintf(J->out, "sequence: %s, %d frame%s (%ld to %ld), time = frame / %g fps%s\n", pattern, n,
+               n > 1 ? "s" : "", frames[0], frames[n - 1], o->fps,
+               o->time_set ? " (overridden by --time or the scene file)" : "");
+    char failed[400] = "";
+    int nfailed = 0;
+    J->pg.nframes = n - nmissing;
+    for (int i = 0; i < n; ++i) {
+        if (skip[i]) {
+            ++nfailed;
+            list_frame(failed, sizeof failed, frames[i]);
+            continue;
+        }
+        if (ef_frame_path(pattern, pin, frames[i], in_path, 4096) ||
+            (out_pat && ef_frame_path(out_pat, &pout, frames[i], out_path, 4096)) ||
+            (dep_pat && ef_frame_path(dep_pat, &pdep, frames[i], dep_path, 4096)) ||
+            (pv_pat && ef_frame_path(pv_pat, &ppv, frames[i], pv_path, 4096))) {
+            status = ef_job_say(J, 1, "%s: the path of frame %ld is too long", pattern, frames[i]);
+            break;
+        }
+        o->input = in_path;
+        o->output = out_pat ? out_path : NULL;
+        o->depth_file = dep_pat ? dep_path : NULL;
+        o->preview = pv_pat ? pv_path : NULL;
+        J->has_frame = 1;
+        J->frame = frames[i];
+        pthread_mutex_lock(&J->pg.lock);
+        J->pg.has_frame = 1;
+        J->pg.frame = frames[i];
+        pthread_mutex_unlock(&J->pg.lock);
+        const int rc = ef_run_frame(J);
+        ef_progress_frame_done(J);
+        if (o->explain)
+            break;   /* the first frame tells what every frame is read as */
+        if (rc == 0)
+            continue;
+        /* A usage error is the same for every frame; a cancel stops all. */
+        if (rc == 2 || rc == 3 || !o->keep_going) {
+            status = rc;
+            if (rc == 1 && i + 1 < n)
+                ef_job_note(J, "exrfog: %s: stopped at frame %ld; frames before it are written, "
+                                "none after (--keep-going fogs the others)\n", pattern, frames[i]);
+            break;
+        }
+        ++nfailed;
+        list_frame(failed, sizeof failed, frames[i]);
+    }
+    if (status == 0 && nfailed) {
+        status = ef_job_say(J, 1, "%s: %d of %d frames failed: %s", pattern, nfailed, n, failed);
+    }
+    o->input = pattern;
+    o->output = out_pat;
+    o->depth_file = dep_pat;
+    o->preview = pv_pat;
+    free(paths);
+    free(skip);
+    free(frames);
+    return status;
+}
+
+
+/* The run once its options are read: one image, or a sequence. */
+static int run_parsed(ef_job *J)
+{
+    ef_options *o = &J->o;
+    ef_progress_init(&J->pg, J->msg);
+    J->pg.hook = J->h.progress;
+    J->pg.hook_user = J->h.progress_user;
+    J->pg.draw = J->h.bar && !o->quiet && !o->explain && J->msg == stderr &&
+                 isatty(STDERR_FILENO);
+    if (J->pg.draw || (J->h.progress && !o->explain))
+        J->active_pg = &J->pg;
+    int status = 0;
+    ef_frame_pattern pin;
+    if (!ef_frame_pattern_find(o->input, &pin)) {
+        if (o->frames) {
+            status = ef_job_say(J, 2, "--frames needs a frame pattern in INPUT (shot.#.exr, "
+                                      "shot.%%04d.exr or shot.@@@@.exr)");
+        } else {
+            J->pg.nframes = 1;
+            status = ef_run_frame(J);
+        }
+    } else {
+        status = run_sequence(J, &pin);
+    }
+    if (status == 0)
+        ef_progress_finish(J);
+    ef_progress_clear(J->active_pg);
+    J->active_pg = NULL;
+    pthread_mutex_destroy(&J->pg.lock);
+    return status;
+}
+
+/* The job's message and output streams: the host's, or /dev/null. */
+static int open_streams(ef_job *J)
+{
+    J->msg = J->h.msg;
+    J->out = J->h.out;
+    if (!J->msg && !(J->msg = J->own_msg = fopen("/dev/null", "w")))
+        return -1;
+    if (!J->out && !(J->out = J->own_out = fopen("/dev/null", "w")))
+        return -1;
+    return 0;
+}
+
+static int job_run(ef_job *J, int argc, const char *const *argv)
+{
+    ef_err err = { 0 };
+    /* The parser permutes its argv as getopt does: it works on a copy, and
+     * the history keeps the command line as typed. */
+    char **args = malloc(((size_t) argc + 1) * sizeof *args);
+    J->typed = malloc(((size_t) argc + 1) * sizeof *J->typed);
+    if (!args || !J->typed) {
+        free(args);
+        return ef_job_say(J, 1, "out of memory");
+    }
+    for (int i = 0; i < argc; ++i)
+        args[i] = J->typed[i] = (char *) argv[i];
+    args[argc] = J->typed[argc] = NULL;
+    J->argc = argc;
+    const ef_parse_result pr = ef_options_parse(argc, args, &J->o, &J->colour, J->out, &err);
+    int status;
+    if (pr == EF_PARSE_EXIT)
+        status = 0;
+    else if (pr == EF_PARSE_FAIL)
+        status = ef_job_report(J, err.file, &err, 1);
+    else if (pr != EF_PARSE_RUN)
+        status = ef_job_say(J, 2, "%s", err.msg);
+    else
+        status = run_parsed(J);
+    free(args);
+    return status;
+}
+
+int ef_job_run(const ef_job_hooks *hooks, int argc, const char *const *argv, char *err,
+               size_t errlen)
+{
+    static const ef_job_hooks none;
+    if (errlen)
+        err[0] = '\0';
+    ef_job *J = calloc(1, sizeof *J);
+    if (!J) {
+        snprintf(err, errlen, "out of memory");
+        return 1;
+    }
+    J->h = hooks ? *hooks : none;
+    J->stop = J->h.cancel ? J->h.cancel : &J->own_stop;
+    int status;
+    if (open_streams(J)) {
+        snprintf(J->last_error, sizeof J->last_error, "cannot open /dev/null: %s",
+                 strerror(errno));
+        status = 1;
+    } else {
+        status = job_run(J, argc, argv);
+    }
+    if (status && errlen)
+        snprintf(err, errlen, "%s", J->last_error);
+    ef_camera_file_free(J->camfile);
+    ef_colour_close(&J->colour);
+    ef_options_free(&J->o);
+    free(J->typed);
+    if (J->own_msg)
+        fclose(J->own_msg);
+    if (J->own_out)
+        fclose(J->own_out);
+    else if (J->out)
+        fflush(J->out);
+    free(J);
+    return status;
+}

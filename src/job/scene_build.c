@@ -1,0 +1,142 @@
+/* The one scene builder (see scene_build.h): the command line, the scene
+ * file and the library all build scenes here, so they accept exactly the
+ * same things. */
+#include "scene_build.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "scene_file.h"
+
+/* The scene file's settings under the flags: colour, up, units, time, aov
+ * and sky. */
+static ef_parse_result apply_file(ef_fog_scene *s, const ef_scene_desc *d, const ef_scene_file *sf,
+                                  ef_scene_found *found, ef_err *err)
+{
+    if (sf->has_color)
+        memcpy(s->color, sf->color, sizeof s->color);
+    if (sf->has_up)
+        memcpy(s->ctx.up, sf->up, sizeof s->ctx.up);
+    found->up_set |= sf->has_up;
+    if (sf->has_units)
+        s->ctx.units_per_meter = sf->units;
+    if (sf->has_time)
+        s->ctx.time = sf->time;
+    found->time_set |= sf->has_time;
+    found->aov |= sf->aov;
+    if (sf->has_sky && ef_scene_parse_sky(s, sf->sky, err)) {
+        char msg[sizeof err->msg];
+        snprintf(msg, sizeof msg, "%s", err->msg);
+        ef_fail(err, "sky: %s", msg);
+        err->file = d->scene_file;
+        return EF_PARSE_FAIL;
+    }
+    return EF_PARSE_RUN;
+}
+
+/* The fog colour as written, in the working space. */
+static ef_parse_result apply_color(ef_fog_scene *s, const char *t, ef_colour *colour, ef_err *err)
+{
+    if (!ef_colour_parse(colour, t, s->color, err))
+        return EF_PARSE_RUN;
+    char msg[sizeof err->msg];
+    snprintf(msg, sizeof msg, "%s", err->msg);
+    if (ef_out_of_range(t, 0))
+        ef_fail(err, "--fog-color '%s' is out of range (numbers are 0 or between 2.2e-308 "
+                     "and 1.8e308 in magnitude; colours at most 65504)", t);
+    else if (t[0] != '#' && !strchr(t, ':'))
+        ef_fail(err, "--fog-color '%s' is not R,G,B (three numbers from 0 to %g), #RRGGBB "
+                     "or SPACE:R,G,B", t, EF_COLOR_MAX);
+    else
+        ef_fail(err, "--fog-color '%s': %s", t, msg);
+    /* a config that cannot be opened is a runtime error */
+    return strstr(msg, "colour management:") ? EF_PARSE_FAIL : EF_PARSE_USAGE;
+}
+
+/* The scene file's components: a profile the component names keeps its
+ * own name in the message. */
+static ef_parse_result add_file_specs(ef_fog_scene *s, const ef_scene_desc *d,
+                                      const ef_scene_file *sf, ef_err *err)
+{
+    for (int i = 0; i < sf->nspec; ++i)
+        if (ef_scene_add(s, sf->specs[i], err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            if (err->file)
+                ef_fail(err, "%s: %s: %s", sf->where[i], err->file, msg);
+            else
+                ef_fail(err, "%s: %s", sf->where[i], msg);
+            err->file = d->scene_file;
+            return EF_PARSE_FAIL;
+        }
+    return EF_PARSE_RUN;
+}
+
+ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colour *colour,
+                               ef_scene_found *found, ef_err *err)
+{
+    ef_scene_file sf;
+    memset(&sf, 0, sizeof sf);
+    memset(found, 0, sizeof *found);
+    ef_parse_result r = EF_PARSE_RUN;
+    if (d->scene_file) {
+        if (ef_scene_file_read(d->scene_file, &sf, err)) {
+            err->file = d->scene_file;
+            return EF_PARSE_FAIL;
+        }
+        if ((r = apply_file(s, d, &sf, found, err)) != EF_PARSE_RUN)
+            goto out;
+    }
+    if (d->has_color && (r = apply_color(s, d->color_text, colour, err)) != EF_PARSE_RUN)
+        goto out;
+    if (d->has_up)
+        memcpy(s->ctx.up, d->up, sizeof s->ctx.up);
+    found->up_set |= d->has_up;
+    if (d->has_units)
+        s->ctx.units_per_meter = d->units;
+    if (d->has_time)
+        s->ctx.time = d->time;
+    found->time_set |= d->has_time;
+    if (d->has_sky && ef_scene_parse_sky(s, d->sky, err)) {
+        r = EF_PARSE_USAGE;
+        goto out;
+    }
+    s->ctx.read_file = ef_read_text_file;
+    s->ctx.parse_color = ef_colour_parse;
+    s->ctx.color_user = colour;
+    if ((r = add_file_specs(s, d, &sf, err)) != EF_PARSE_RUN)
+        goto out;
+    found->scene_text = sf.text;   /* kept for exrfog/history: the file is read once */
+    sf.text = NULL;
+    for (int i = 0; i < d->nspec; ++i)
+        if (ef_scene_add(s, d->specs[i], err)) {
+            /* A profile file that is missing or wrong is a runtime error. */
+            r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
+            break;
+        }
+out:
+    ef_scene_file_free(&sf);
+    return r;
+}
+
+int ef_scene_rebuild(ef_fog_scene *s, const double *up, double time, ef_err *err)
+{
+    ef_fog_scene *ns = malloc(sizeof *ns);
+    if (!ns)
+        return ef_fail(err, "out of memory for the scene");
+    *ns = *s;
+    ns->ncomp = 0;
+    if (up)
+        memcpy(ns->ctx.up, up, sizeof ns->ctx.up);
+    ns->ctx.time = time;
+    for (int i = 0; i < s->ncomp; ++i)
+        if (ef_scene_add(ns, s->comp[i].spec, err)) {
+            ef_scene_free(ns);
+            free(ns);
+            return -1;
+        }
+    ef_scene_free(s);
+    *s = *ns;
+    free(ns);
+    return 0;
+}
