@@ -84,12 +84,12 @@ static char *path_in(const char *name)
     return b;
 }
 
+/* samples/sample.exr, found once by setup before any thread starts. */
+static char g_sample[1200];
+
 static const char *sample(void)
 {
-    static char p[1200];
-    const char *src = getenv("EXRFOG_SOURCE_DIR");
-    snprintf(p, sizeof p, "%s/samples/sample.exr", src ? src : ".");
-    return p;
+    return g_sample;
 }
 
 /* The whole of a file, or NULL (len 0) when it cannot be read. */
@@ -182,6 +182,8 @@ static void write_stereo(const char *path)
 static int setup(void **state)
 {
     (void) state;
+    const char *src = getenv("EXRFOG_SOURCE_DIR");
+    snprintf(g_sample, sizeof g_sample, "%s/samples/sample.exr", src ? src : ".");
     char *d = tu_path("api");
     snprintf(g_dir, sizeof g_dir, "%s", d);
     free(d);
@@ -899,5 +901,21 @@ int main(void)
         cmocka_unit_test(test_bounds_and_partial_aovs),
         cmocka_unit_test(test_fault_injection),
     };
+    /* EF_API_TESTS=a,b: only those (the ThreadSanitizer build runs the
+     * reentrancy tests) */
+    const char *only = getenv("EF_API_TESTS");
+    if (only && only[0]) {
+        struct CMUnitTest some[sizeof tests / sizeof tests[0]];
+        size_t n = 0;
+        char list[512];
+        snprintf(list, sizeof list, ",%s,", only);
+        for (size_t i = 0; i < sizeof tests / sizeof tests[0]; ++i) {
+            char name[128];
+            snprintf(name, sizeof name, ",%s,", tests[i].name);
+            if (strstr(list, name))
+                some[n++] = tests[i];
+        }
+        return _cmocka_run_group_tests("test_api", some, n, setup, NULL);
+    }
     return cmocka_run_group_tests(tests, setup, NULL);
 }

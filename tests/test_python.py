@@ -66,6 +66,85 @@ with tempfile.TemporaryDirectory() as d:
     except exrfog.Error as e:
         check(e.status == 3 and not os.path.exists(out), "cancelled: status 3, nothing written")
 
+    # progress: monotonic, per chunk, exactly 1.0 once at the end
+    seen = []
+    exrfog.fog(SAMPLE, b, fog="exp:density=0.02", progress=lambda f: seen.append(f) and False)
+    check(len(seen) >= 3, "progress per chunk (%d calls)" % len(seen))
+    check(all(x < y for x, y in zip(seen, seen[1:])), "progress never goes back")
+    check(seen[-1] == 1.0 and all(f < 1.0 for f in seen[:-1]), "progress ends at exactly 1.0")
+
+    # threads: eight calls at once, each the bytes of the same call alone
+    import threading
+    jobs = [("exp:density=0.05", "T"), ("noise:density=0.2:scale=2:octaves=2", "T,error"),
+            ("height:density=0.1:falloff=0.2:base=0", "P"), ("exp2:density=0.02", "T")]
+    alone = []
+    for k, (spec, aov) in enumerate(jobs):
+        o = os.path.join(d, "alone%d.exr" % k)
+        exrfog.fog(SAMPLE, o, fog=spec, aov=aov)
+        alone.append(open(o, "rb").read())
+    errors = []
+
+    def one(i):
+        spec, aov = jobs[i % 4]
+        o = os.path.join(d, "thread%d.exr" % i)
+        try:
+            exrfog.fog(SAMPLE, o, fog=spec, aov=aov)
+            if open(o, "rb").read() != alone[i % 4]:
+                errors.append("thread %d differs" % i)
+            facts = exrfog.explain(SAMPLE, fog=spec)
+            if facts["fog"] != [spec]:
+                errors.append("thread %d explain" % i)
+        except Exception as e:  # noqa: BLE001 (collected, then checked)
+            errors.append("thread %d: %r" % (i, e))
+    ts = [threading.Thread(target=one, args=(i,)) for i in range(8)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    check(not errors, "eight threads at once give the bytes of each alone: %s" % errors)
+
+    # hostile names: "--help" and "-in.exr" are files; NUL is refused as open() refuses it
+    for name in ("--help", "-in.exr"):
+        src = os.path.join(d, name)
+        open(src, "wb").write(open(SAMPLE, "rb").read())
+        cwd = os.getcwd()
+        os.chdir(d)
+        try:
+            exrfog.fog(name, "out_" + name.lstrip("-"), fog="exp:density=0.02")
+            check(os.path.exists("out_" + name.lstrip("-")), "INPUT %r is a file" % name)
+        except exrfog.Error as e:
+            check(False, "INPUT %r: %s" % (name, e))
+        finally:
+            os.chdir(cwd)
+    for bad in (SAMPLE + "\0x", ):
+        try:
+            exrfog.fog(bad, b, fog="exp:density=0.02")
+            check(False, "a NUL in a path raises")
+        except ValueError as e:
+            check("null" in str(e), "ValueError as open() raises")
+    try:
+        exrfog.fog(SAMPLE, b + "\0.exr", fog="exp:density=0.02")
+        check(False, "a NUL in the output raises")
+    except ValueError:
+        pass
+
+    # warnings reach Python's warnings module as exrfog.Warning, with the
+    # text the command line prints (a non-rigid camera pose from the flags)
+    import warnings
+    shear = "2,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1"
+    r = cli([SAMPLE, "-o", a, "--fog", "exp:density=0.02", "--world-to-camera", shear,
+             "--fov", "50"])
+    cli_warn = [l for l in r.stderr.splitlines() if ": warning: " in l]
+    check(len(cli_warn) == 1, "the CLI warns once: %r" % r.stderr)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        exrfog.fog(SAMPLE, b, fog="exp:density=0.02", world_to_camera=shear, fov=50)
+    got = [w for w in got if issubclass(w.category, exrfog.Warning)]
+    check(len(got) == 1, "one exrfog.Warning: %r" % [str(w.message) for w in got])
+    if got and cli_warn:
+        check("exrfog: " + str(got[0].message).replace(": ", ": warning: ", 1) == cli_warn[0],
+              "the warning's text is the CLI's: %r vs %r" % (str(got[0].message), cli_warn[0]))
+
     # explain(): the same facts as --explain --json
     facts = exrfog.explain(SAMPLE, fog="exp:density=0.02")
     pos = facts["views"][0]["camera"]["position"]
@@ -103,6 +182,36 @@ if np is not None:
     res = exrfog.fog_pixels(np.full((1, 1, 3), 0.5), None, np.full((1, 1), 5.0), SAMPLE,
                             "exp:density=0.1", origin=(320, 180))
     check(0 < res["T"][0, 0, 0] < 1, "a camera from the sample's header")
+
+# Ctrl-C during a slow call raises KeyboardInterrupt within a second and
+# leaves no output and no temporary file (a child interpreter, SIGINT after
+# half a second of an exact noise frame).
+child = r"""
+import os, sys, time, exrfog
+out = sys.argv[2]
+t0 = time.monotonic()
+try:
+    exrfog.fog(sys.argv[1], out, threads=2,
+               fog="noise:density=0.05:scale=10:octaves=4:falloff=0.01:base=0:method=exact")
+    print("finished")
+except KeyboardInterrupt:
+    print("interrupted %.3f" % (time.monotonic() - t0))
+"""
+with tempfile.TemporaryDirectory() as d:
+    import signal
+    import time
+    out = os.path.join(d, "slow.exr")
+    p = subprocess.Popen([sys.executable, "-c", child, SAMPLE, out], stdout=subprocess.PIPE,
+                         text=True, env=os.environ)
+    time.sleep(1.5)   # the interpreter and the module loaded, the run started
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    so, _ = p.communicate(timeout=60)
+    took = time.monotonic() - t0
+    check(so.startswith("interrupted"), "Ctrl-C raises KeyboardInterrupt: %r" % so)
+    check(took < 1.0, "within a second (%.3f s)" % took)
+    check(not os.path.exists(out), "no output")
+    check(not [f for f in os.listdir(d) if "exrfog-" in f], "no temporary file")
 
 print("test_python: %d failure(s)" % len(failures))
 sys.exit(1 if failures else 0)

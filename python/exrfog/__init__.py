@@ -132,6 +132,17 @@ def _argv(args):
     return len(enc), arr
 
 
+def _operand(path):
+    """A file name as the command line's INPUT: one starting with '-'
+    ("-in.exr", "--help") is a file, not an option, so it goes in as
+    ./NAME (the same file; the command line reads it as the user typed
+    it otherwise, and the output's exrfog/history records it so)."""
+    p = os.fspath(path)
+    if isinstance(p, bytes):
+        return b"./" + p if p.startswith(b"-") else p
+    return "./" + p if p.startswith("-") else p
+
+
 def _options(options):
     """The command line's spelling of keyword options."""
     args = []
@@ -176,14 +187,24 @@ def _call(ctx, fn, *args):
     cb = _WARNING(on_warning)
     _lib.exrfog_set_warning(ctx.p, cb, None)
     result = []
-    t = threading.Thread(target=lambda: result.append(fn(*args)), daemon=True)
-    t.start()
+    done = threading.Event()
+
+    def work():
+        try:
+            result.append(fn(*args))
+        finally:
+            done.set()
+
+    # an Event, not Thread.join: a join interrupted by Ctrl-C can mark the
+    # thread finished while it still runs (CPython before 3.13)
+    threading.Thread(target=work, daemon=True).start()
     try:
-        while t.is_alive():
-            t.join(0.05)
+        while not done.wait(0.05):
+            pass
     except BaseException:
         _lib.exrfog_cancel(ctx.p)
-        t.join()
+        while not done.wait(0.05):
+            pass
         raise
     finally:
         for w in said:
@@ -197,9 +218,8 @@ def fog(input, output, fog=None, scene=None, progress=None, **options):
     (sequences, views, colour, formats included). progress(fraction) hears
     the fraction done after every chunk and frame (1.0 at the end) and may
     return True to cancel (Error with status 3, nothing written)."""
-    args = ["exrfog", "-o", os.fspath(output)] + _fog_args(fog, scene)
-    # INPUT after "--": a file named "-in.exr" or "--help" is a file
-    args += _options(options) + ["--", os.fspath(input)]
+    args = ["exrfog", _operand(input), "-o", os.fspath(output)] + _fog_args(fog, scene)
+    args += _options(options)
     n, argv = _argv(args)
     with _Context() as ctx:
         cb = None
@@ -213,7 +233,7 @@ def explain(path, fog=None, scene=None, **options):
     """What exrfog reads in PATH and would do (`exrfog --explain --json`),
     as a dict: the camera of each view, the channels, the depth, the scene
     and the working colour space. Nothing is written."""
-    args = ["exrfog"] + _fog_args(fog, scene) + _options(options) + ["--", os.fspath(path)]
+    args = ["exrfog", _operand(path)] + _fog_args(fog, scene) + _options(options)
     n, argv = _argv(args)
     with _Context() as ctx:
         out = ctypes.c_void_p()

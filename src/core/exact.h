@@ -15,7 +15,10 @@
  * correctly rounded in libm and in hardware, and strict C11 contracts no
  * other a*b+c (no -ffp-contract=fast). What buys is fma() without a libm
  * call and wider vectors. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+/* (Not under ThreadSanitizer: its instrumented ifunc resolvers would run
+ * before its runtime is up.) */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && \
+    !defined(__SANITIZE_THREAD__)
 #define EF_MULTIVERSION __attribute__((target_clones("arch=x86-64-v3", "default")))
 #else
 #define EF_MULTIVERSION

@@ -7,6 +7,7 @@
 #define EF_FOG_H
 
 #include <float.h>
+#include <stdatomic.h>
 
 #include "error.h"
 #include "recon.h"
@@ -54,7 +55,7 @@ typedef struct ef_fog_component {
     /* When not NULL and *cancel becomes non-zero, models whose optical
      * depth may take long (noise) return 0 at once: the host is stopping
      * and throws the result away. Never read otherwise. */
-    const volatile int *cancel;
+    const _Atomic int *cancel;
     char spec[8192];                 /* the SPEC as written, for messages */
 } ef_fog_component;
 

@@ -2610,7 +2610,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     memset(info, 0, sizeof *info);
     long double t0, t1;
     if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1) ||
-        (c->cancel && *c->cancel))
+        (c->cancel && atomic_load_explicit(c->cancel, memory_order_relaxed)))
         return;
     rayc R;
     ray_setup(s, r, &R);

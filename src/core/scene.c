@@ -95,7 +95,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     return 0;
 }
 
-void ef_scene_set_cancel(ef_fog_scene *s, const volatile int *cancel)
+void ef_scene_set_cancel(ef_fog_scene *s, const _Atomic int *cancel)
 {
     for (int i = 0; i < s->ncomp; ++i)
         s->comp[i].cancel = cancel;

@@ -42,7 +42,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec);
 
 /* Points every component at the host's stop flag (ef_fog_component.cancel;
  * NULL: none). */
-void ef_scene_set_cancel(ef_fog_scene *s, const volatile int *cancel);
+void ef_scene_set_cancel(ef_fog_scene *s, const _Atomic int *cancel);
 
 /* Releases the components' data; the scene is empty afterwards. */
 void ef_scene_free(ef_fog_scene *s);

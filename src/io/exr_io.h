@@ -5,6 +5,7 @@
 #define EF_EXR_IO_H
 
 #include <openexr.h>
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "camera.h"
@@ -117,7 +118,7 @@ typedef struct ef_stream_opts {
     int threads;              /* >= 1 */
     /* When not NULL and *cancel becomes non-zero, the stream stops at the
      * next unit and fails ("cancelled"). */
-    const volatile int *cancel;
+    const _Atomic int *cancel;
     int nplans;               /* plans (views) in the plan array; 0 means 1 */
     int compression;          /* exr_compression_t, or -1 to keep each part's */
     int zip_level;            /* zlib level 1..9 for zip/zips output, or -1 for Core's default */

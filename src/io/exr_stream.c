@@ -441,7 +441,7 @@ typedef struct part_job {
     } t[EF_MAX_VIEWS];
     ef_chunk_fn fn;
     void *user;
-    const volatile int *cancel;   /* opts->cancel: stop at the next unit */
+    const _Atomic int *cancel;    /* opts->cancel: stop at the next unit */
     int codec;                /* EF_CODEC_* */
     ef_ring ring;             /* pending encoded units, written in order */
     pthread_mutex_t lock;
@@ -607,7 +607,7 @@ static void *worker(void *arg)
         const int u = ok ? ef_ring_claim(&j->ring) : -1;
         if (u < 0)
             break;
-        if (j->cancel && *j->cancel) {
+        if (j->cancel && atomic_load_explicit(j->cancel, memory_order_relaxed)) {
             job_fail(j, j->out_path, "cancelled at unit %d; nothing was written", u, NULL);
             break;
         }

@@ -36,7 +36,7 @@ typedef struct ef_job_hooks {
      * (a signal handler, another thread) to stop the run at the next unit
      * of work or noise ray, status 3; the job sets it when the progress
      * hook answers non-zero. */
-    volatile int *cancel;
+    _Atomic int *cancel;
 } ef_job_hooks;
 
 /* Runs the command line argv[0..argc) (argv[0] is the program's name and

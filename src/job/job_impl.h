@@ -5,6 +5,7 @@
 #define EF_JOB_IMPL_H
 
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 
 #include "aov.h"
@@ -40,8 +41,8 @@ typedef struct ef_job {
     FILE *msg, *out;          /* never NULL: the hooks', or /dev/null */
     FILE *own_msg, *own_out;  /* opened here (/dev/null), closed at the end */
     char last_error[2048];
-    volatile int own_stop;    /* the stop flag when the host gives none */
-    volatile int *stop;       /* the host's (hooks.cancel) or own_stop: the progress
+    _Atomic int own_stop;    /* the stop flag when the host gives none */
+    _Atomic int *stop;        /* the host's (hooks.cancel) or own_stop: the progress
                                * hook's answer, the host's request */
     ef_options o;
     ef_colour colour;
@@ -58,7 +59,7 @@ typedef struct ef_job {
 /* Whether the run is to stop: the host's flag or the progress hook's. */
 static inline int ef_job_cancelled(const ef_job *J)
 {
-    return *J->stop != 0;
+    return atomic_load_explicit(J->stop, memory_order_relaxed) != 0;
 }
 
 /* messages.c: every line the user sees passes here. */

@@ -73,7 +73,7 @@ static void tell(ef_job *J, double f, int final)
         return;
     pg->reported = f;
     if (pg->hook(pg->hook_user, f))
-        *J->stop = 1;
+        atomic_store(J->stop, 1);
 }
 
 void ef_progress_add(ef_job *J, long px)

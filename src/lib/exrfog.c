@@ -25,7 +25,7 @@ struct exrfog_context {
     exrfog_warning_fn warning;
     void *warning_user;
     int print;
-    volatile int cancel;      /* exrfog_cancel: read by the run in progress */
+    _Atomic int cancel;       /* exrfog_cancel: read by the run in progress */
 };
 
 /* A built scene: immutable once made. The colour state is kept only
@@ -100,7 +100,7 @@ exrfog_result exrfog_set_print(exrfog_context *ctx, int print)
 void exrfog_cancel(exrfog_context *ctx)
 {
     if (ctx)
-        ctx->cancel = 1;
+        atomic_store(&ctx->cancel, 1);
 }
 
 /* Records err as the context's failure ("FILE: message" when it names a
@@ -422,7 +422,7 @@ exrfog_result exrfog_run(exrfog_context *ctx, int argc, const char *const *argv)
         return misuse(ctx, "exrfog_run: ctx must not be NULL, and argv must hold argc >= 1 "
                            "strings (argv[0] is the program's name)");
     ctx->error[0] = '\0';
-    ctx->cancel = 0;
+    atomic_store(&ctx->cancel, 0);
     return run_job(ctx, argc, argv, NULL);
 }
 
@@ -434,7 +434,7 @@ exrfog_result exrfog_explain(exrfog_context *ctx, int argc, const char *const *a
         return misuse(ctx, "exrfog_explain: ctx and json must not be NULL, and argv must hold "
                            "argc >= 1 strings");
     ctx->error[0] = '\0';
-    ctx->cancel = 0;
+    atomic_store(&ctx->cancel, 0);
     const char **args = calloc((size_t) argc + 3, sizeof *args);
     char *buf = NULL;
     size_t len = 0;
