@@ -49,10 +49,10 @@ $CXX -std=c++17 -g -O1 -fno-omit-frame-pointer $(echo $flags | sed 's/-fsanitize
 # shellcheck disable=SC2086
 $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -Wall -Wextra \
-    -I "$root/src/core" -I "$root/src/io" -I "$root/src/cli" -I "$out/generated" \
-    -I /usr/include/OpenEXR -c "$here/fuzz_cli.c" "$root/src/cli/options.c" \
-    "$root/src/cli/colour.c"
-mv fuzz_cli.o options.o colour.o "$out/"
+    -I "$root/src/core" -I "$root/src/io" -I "$root/src/job" -I "$out/generated" \
+    -I /usr/include/OpenEXR -c "$here/fuzz_cli.c" "$root/src/job/args.c" \
+    "$root/src/job/argscan.c" "$root/src/job/scene_build.c" "$root/src/job/colour.c"
+mv fuzz_cli.o args.o argscan.o scene_build.o colour.o "$out/"
 # shellcheck disable=SC2086
 $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
     -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -I /usr/include/OpenEXR \
@@ -60,7 +60,8 @@ $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wa
     "$root/src/io/camera_file.c"
 mkdir -p "$out/obj" && mv ./*.o "$out/obj/"
 # shellcheck disable=SC2086
-$CXX $flags -o "$exe" "$out/fuzz_cli.o" "$out/options.o" "$out/colour.o" "$out/ocio_shim.o" \
+$CXX $flags -o "$exe" "$out/fuzz_cli.o" "$out/args.o" "$out/argscan.o" "$out/scene_build.o" \
+    "$out/colour.o" "$out/ocio_shim.o" \
     $(ls "$out"/obj/*.o | grep -v camera_file) \
     -lOpenEXRCore-3_1 -ldeflate -ljansson $(pkg-config --libs OpenColorIO) -lm -lpthread -ldl
 echo "built $exe"

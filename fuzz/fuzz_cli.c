@@ -23,7 +23,8 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
-#include "options.h"
+#include "args.h"
+#include "colour.h"
 #include "scene.h"
 
 #define MAX_ARGS 40
@@ -136,11 +137,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             free(buf);
             return 0;
         }
-    optind = 0;     /* glibc: a full re-initialisation of getopt */
-    opterr = 0;
     ef_options o;
+    ef_colour colour;
+    memset(&colour, 0, sizeof colour);
     ef_err err = { 0 };
-    const ef_parse_result pr = ef_options_parse(argc, argv, &o, &err);
+    const ef_parse_result pr = ef_options_parse(argc, argv, &o, &colour, stdout, &err);
     if (getenv("FUZZ_CLI_VERBOSE"))
         fprintf(stderr, "fuzz_cli: %d %s\n", (int) pr, pr ? err.msg : "ok");
     if (pr == EF_PARSE_USAGE || pr == EF_PARSE_FAIL) {
@@ -156,6 +157,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (pr == EF_PARSE_RUN)
         check_scene(&o.scene);
     ef_options_free(&o);
+    ef_colour_close(&colour);
     free(buf);
     return 0;
 }

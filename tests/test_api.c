@@ -588,6 +588,43 @@ static void test_cancel(void **state)
     exrfog_context_destroy(ctx);
 }
 
+static int stop_at_once(void *user, double f)
+{
+    (void) f;
+    ++*(int *) user;
+    return 1;
+}
+
+/* Cancelling through the progress hook stops decode and encode, not only
+ * the fog work: a 12-frame sequence whose hook says stop at the first
+ * unit writes no frame, leaves no temporary file, and the hook hears at
+ * most one unit per thread after it said so. */
+static void test_cancel_stops_stream(void **state)
+{
+    (void) state;
+    for (int f = 1; f <= 12; ++f) {
+        char n[64];
+        snprintf(n, sizeof n, "long.%04d.exr", f);
+        copy_file(sample(), path_in(n));
+    }
+    char in[1300], out[1300];
+    snprintf(in, sizeof in, "%s/long.#.exr", g_dir);
+    snprintf(out, sizeof out, "%s/long_out.#.exr", g_dir);
+    const char *argv[] = { "exrfog", in, "-o", out, "--fog", "exp:density=0.05", "--threads", "2" };
+    exrfog_context *ctx = exrfog_context_create();
+    int calls = 0;
+    exrfog_set_progress(ctx, stop_at_once, &calls);
+    assert_int_equal(exrfog_run(ctx, 8, argv), EXRFOG_CANCELLED);
+    exrfog_context_destroy(ctx);
+    assert_true(calls >= 1 && calls <= 2);
+    for (int f = 1; f <= 12; ++f) {
+        char n[64];
+        snprintf(n, sizeof n, "long_out.%04d.exr", f);
+        assert_false(tu_exists(path_in(n)));
+    }
+    assert_int_equal(temporaries(), 0);
+}
+
 /* ------------------------------------------------ one scene builder */
 
 /* Every SPEC form of the man page's examples and the colour forms of
@@ -895,6 +932,7 @@ int main(void)
         cmocka_unit_test(test_progress),
         cmocka_unit_test(test_warnings),
         cmocka_unit_test(test_cancel),
+        cmocka_unit_test(test_cancel_stops_stream),
         cmocka_unit_test(test_one_builder),
         cmocka_unit_test(test_scene_immutable),
         cmocka_unit_test(test_null_arguments),

@@ -26,6 +26,12 @@ struct exrfog_context {
     void *warning_user;
     int print;
     _Atomic int cancel;       /* exrfog_cancel: read by the run in progress */
+    /* exrfog_fog_pixels's buffers, kept between calls (a context is one
+     * thread's): the scene bound to the call's camera, small rectangles
+     * gathered into contiguous planes, a row for unwanted AOV planes. */
+    ef_fog_scene *bound;
+    float *gather, *scratch;
+    size_t gather_cap, scratch_cap;
 };
 
 /* A built scene: immutable once made. The colour state is kept only
@@ -51,6 +57,11 @@ exrfog_context *exrfog_context_create(void)
 
 void exrfog_context_destroy(exrfog_context *ctx)
 {
+    if (!ctx)
+        return;
+    free(ctx->bound);
+    free(ctx->gather);
+    free(ctx->scratch);
     free(ctx);
 }
 
@@ -270,21 +281,12 @@ void exrfog_camera_destroy(exrfog_camera *cam)
     free(cam);
 }
 
-/* An AOV group of three planes: all NULL (not wanted), or the missing ones
- * pointed at scratch (a wanted group may leave channels out). */
-static int aov_group(float *const in[3], float *out[3], float *scratch)
-{
-    const int any = in[0] || in[1] || in[2];
-    for (int k = 0; k < 3; ++k)
-        out[k] = in[k] ? in[k] : any ? scratch : NULL;
-    return any;
-}
-
 /* Checks img's shape: planes given, sizes that fit, absolute pixels whose
  * coordinates stay in an int. */
 static exrfog_result check_image(exrfog_context *ctx, const exrfog_image *img)
 {
-    ef_err err = { 0 };
+    ef_err err;
+    err.file = NULL;
     if (img->width < 0 || img->height < 0 || img->stride < img->width || !img->rgb[0] ||
         !img->rgb[1] || !img->rgb[2] || !img->depth) {
         ef_fail(&err, "the image needs width, height >= 0, stride >= width, and R, G, B and depth "
@@ -300,31 +302,90 @@ static exrfog_result check_image(exrfog_context *ctx, const exrfog_image *img)
     return EXRFOG_OK;
 }
 
-/* Row by row: the core fogs contiguous rows; the caller's have a stride. */
-static void fog_rows(const ef_fog_pass *pass, exrfog_image *img, float *const T[3],
-                     float *const E[3], float *const P[3], unsigned mask)
+/* The core's view of the caller's planes: AOV planes in the order
+ * ef_aov_channels gives, a missing plane of a wanted group pointed at
+ * scratch (one row, reused). */
+typedef struct rect_planes {
+    float *rgb[3], *alpha;
+    const float *depth;
+    float *aov[9];
+    int naov;
+} rect_planes;
+
+static void copy_row(float *restrict dst, const float *restrict src, int n)
 {
-    for (int y = 0; y < img->height; ++y) {
-        const ptrdiff_t o = (ptrdiff_t) y * img->stride;
-        float *const rgb[3] = { img->rgb[0] + o, img->rgb[1] + o, img->rgb[2] + o };
-        float *planes[EF_AOV_MAX_CHANNELS] = { NULL };
-        int n = 0;
-        /* a missing plane of a wanted group is scratch: one row, reused */
-        if (mask & EF_AOV_T)
+    for (int i = 0; i < n; ++i)
+        dst[i] = src[i];
+}
+
+/* Fogs w x h contiguous pixels (rows w long) at (x0, y0). */
+static void fog_rect(const ef_fog_pass *pass, int x0, int y0, int w, int h, rect_planes *p,
+                     unsigned mask)
+{
+    ef_aov_out aov;
+    memset(&aov, 0, sizeof aov);   /* fog_P relative to the world's origin */
+    ef_aov_bind(&aov, mask, p->aov);
+    ef_fog_block_aov(pass, x0, y0, w, h, p->rgb, p->alpha, p->depth, mask ? &aov : NULL, NULL);
+}
+
+/* The caller's rectangle has a stride: a small one is gathered into
+ * contiguous planes (one call to the core instead of one per row, whose
+ * set-up would cost more than a small rectangle's pixels), a big one goes
+ * row by row. */
+static exrfog_result fog_rows(exrfog_context *ctx, const ef_fog_pass *pass, exrfog_image *img,
+                              float *const aov_in[9], const int aov_given[9], int naov,
+                              unsigned mask)
+{
+    const int w = img->width, h = img->height;
+    const size_t n = (size_t) w * (size_t) h;
+    if (h > 1 && img->stride != w && n <= 16384) {
+        const int nplanes = 5 + naov;
+        if (ctx->gather_cap < n * (size_t) nplanes) {
+            float *g = realloc(ctx->gather, n * (size_t) nplanes * sizeof *g);
+            if (!g)
+                return EXRFOG_ERROR;
+            ctx->gather = g;
+            ctx->gather_cap = n * (size_t) nplanes;
+        }
+        float *const g = ctx->gather;
+        rect_planes p = { { g, g + n, g + 2 * n }, img->alpha ? g + 3 * n : NULL, g + 4 * n,
+                          { NULL }, naov };
+        for (int k = 0; k < naov; ++k)
+            p.aov[k] = g + (size_t) (5 + k) * n;
+        /* short rows: plain loops, not a libc call per row */
+        for (int y = 0; y < h; ++y) {
+            const ptrdiff_t o = (ptrdiff_t) y * img->stride;
+            const size_t r = (size_t) y * (size_t) w;
             for (int k = 0; k < 3; ++k)
-                planes[n++] = T[k] + (T[k] == img->T[k] ? o : 0);
-        if (mask & EF_AOV_ERROR)
+                copy_row(p.rgb[k] + r, img->rgb[k] + o, w);
+            if (img->alpha)
+                copy_row(p.alpha + r, img->alpha + o, w);
+            copy_row(g + 4 * n + r, img->depth + o, w);
+        }
+        fog_rect(pass, img->x0, img->y0, w, h, &p, mask);
+        for (int y = 0; y < h; ++y) {
+            const ptrdiff_t o = (ptrdiff_t) y * img->stride;
+            const size_t r = (size_t) y * (size_t) w;
             for (int k = 0; k < 3; ++k)
-                planes[n++] = E[k] + (E[k] == img->error[k] ? o : 0);
-        if (mask & EF_AOV_P)
-            for (int k = 0; k < 3; ++k)
-                planes[n++] = P[k] + (P[k] == img->P[k] ? o : 0);
-        ef_aov_out aov;
-        ef_aov_bind(&aov, mask, planes);
-        ef_fog_block_aov(pass, img->x0, img->y0 + y, img->width, 1, rgb,
-                         img->alpha ? img->alpha + o : NULL, img->depth + o, mask ? &aov : NULL,
-                         NULL);
+                copy_row(img->rgb[k] + o, p.rgb[k] + r, w);
+            if (img->alpha)
+                copy_row(img->alpha + o, p.alpha + r, w);
+            for (int k = 0; k < naov; ++k)
+                if (aov_given[k])
+                    copy_row(aov_in[k] + o, p.aov[k] + r, w);
+        }
+        return EXRFOG_OK;
     }
+    const int rows = img->stride == w ? 1 : h;   /* contiguous: one call */
+    for (int y = 0; y < h; y += h / rows) {
+        const ptrdiff_t o = (ptrdiff_t) y * img->stride;
+        rect_planes p = { { img->rgb[0] + o, img->rgb[1] + o, img->rgb[2] + o },
+                          img->alpha ? img->alpha + o : NULL, img->depth + o, { NULL }, naov };
+        for (int k = 0; k < naov; ++k)
+            p.aov[k] = aov_in[k] + (aov_given[k] ? o : 0);
+        fog_rect(pass, img->x0, img->y0 + y, w, h / rows, &p, mask);
+    }
+    return EXRFOG_OK;
 }
 
 exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
@@ -332,7 +393,10 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
 {
     if (!ctx || !scene || !cam)
         return misuse(ctx, "exrfog_fog_pixels: ctx, scene and cam must not be NULL");
-    ef_err err = { 0 };
+    /* not zeroed whole: 5 kB a call, more than a small call's pixels cost */
+    ef_err err;
+    err.file = NULL;
+    err.msg[0] = '\0';
     ctx->error[0] = '\0';
     if (!img || img->size < sizeof *img) {
         ef_fail(&err, "exrfog_image.size is %zu, not %zu: the caller was built against another "
@@ -351,31 +415,49 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     ef_depth_conv conv;
     if (ef_depth_conv_init(&conv, mode, &cam->cam, &err))
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
-    float *T[3], *E[3], *P[3];
-    float *scratch = NULL;
-    const int partial = (img->T[0] || img->T[1] || img->T[2]) + (img->error[0] || img->error[1] ||
-                        img->error[2]) + (img->P[0] || img->P[1] || img->P[2]);
-    if (partial && !(scratch = malloc(((size_t) img->width + 1) * sizeof *scratch)))
-        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+    /* The AOV groups in the core's order (T, error, P): a missing plane of
+     * a wanted group writes to scratch, one row long. */
+    float *const *groups[3] = { img->T, img->error, img->P };
+    static const unsigned bits[3] = { EF_AOV_T, EF_AOV_ERROR, EF_AOV_P };
+    float *aov_in[9];
+    int aov_given[9], naov = 0;
     unsigned mask = 0;
-    mask |= aov_group(img->T, T, scratch) ? EF_AOV_T : 0;
-    mask |= aov_group(img->error, E, scratch) ? EF_AOV_ERROR : 0;
-    mask |= aov_group(img->P, P, scratch) ? EF_AOV_P : 0;
-    /* The scene is bound to this camera on a private copy, made without
-     * parsing or reading anything: the caller's stays read-only, so threads
-     * may share it. */
-    ef_fog_scene *bound = malloc(sizeof *bound);
-    if (!bound || ef_scene_copy(bound, &scene->s, 0)) {
-        free(bound);
-        free(scratch);
-        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+    for (int g = 0; g < 3; ++g) {
+        if (!groups[g][0] && !groups[g][1] && !groups[g][2])
+            continue;
+        mask |= bits[g];
+        for (int k = 0; k < 3; ++k) {
+            aov_given[naov] = groups[g][k] != NULL;
+            aov_in[naov++] = groups[g][k];
+        }
     }
-    ef_scene_bind(bound, cam->cam.pos);
-    const ef_fog_pass pass = { &cam->cam, &conv, bound };
-    fog_rows(&pass, img, T, E, P, mask);
-    ef_scene_free(bound);
-    free(bound);
-    free(scratch);
+    int need_scratch = 0;
+    for (int k = 0; k < naov; ++k)
+        need_scratch |= !aov_given[k];
+    if (need_scratch && ctx->scratch_cap < (size_t) img->width + 1) {
+        float *sc = realloc(ctx->scratch, ((size_t) img->width + 1) * sizeof *sc);
+        if (!sc)
+            return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+        ctx->scratch = sc;
+        ctx->scratch_cap = (size_t) img->width + 1;
+    }
+    for (int k = 0; k < naov; ++k)
+        if (!aov_given[k])
+            aov_in[k] = ctx->scratch;
+    /* The scene is bound to this camera on a private copy, made without
+     * parsing or reading anything, in the context's buffer (a context is
+     * one thread's): the caller's stays read-only, so threads may share
+     * it. */
+    if (!ctx->bound && !(ctx->bound = malloc(sizeof *ctx->bound)))
+        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+    if (ef_scene_copy(ctx->bound, &scene->s, 0))
+        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+    ef_scene_bind(ctx->bound, cam->cam.pos);
+    const ef_fog_pass pass = { &cam->cam, &conv, ctx->bound };
+    r = fog_rows(ctx, &pass, img, aov_in, aov_given, naov, mask);
+    ef_scene_free(ctx->bound);
+    if (r != EXRFOG_OK)
+        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     return EXRFOG_OK;
 }
 
