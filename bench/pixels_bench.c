@@ -115,7 +115,6 @@ int main(int argc, char **argv)
         { "convex", "convex:planes=0,1,0,-2,0,-1,0,0:density=0.1" },
         { "exp with color=", "exp:density=0.02:color=1,0.9,0.8" },
         { "noise (default)", "noise:density=0.05:scale=10:octaves=4" },
-        { "noise-separable (default)", "noise-separable:density=0.05:scale=10:falloff=0.05" },
         { "noise-separable preintegrated", "noise-separable:density=0.05:scale=10:method=preintegrated:pieces=1" },
     };
     const int nm = (int) (sizeof models / sizeof models[0]);

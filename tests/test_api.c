@@ -719,6 +719,64 @@ static void test_scene_immutable(void **state)
     exrfog_context_destroy(ctx);
 }
 
+/* fog_pixels on 8 pixels with scene sc and camera cam through ctx. */
+static void fog8(exrfog_context *ctx, exrfog_scene *sc, exrfog_camera *cam, float out[8])
+{
+    float R[8], G[8], B[8], Z[8];
+    for (int i = 0; i < 8; ++i) {
+        R[i] = G[i] = B[i] = 0.5f;
+        Z[i] = 2.0f * (float) (i + 1);
+    }
+    exrfog_image img = { .size = sizeof img, .x0 = 40, .y0 = 100, .width = 8, .height = 1,
+                         .stride = 8, .rgb = { R, G, B }, .depth = Z };
+    assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &img), EXRFOG_OK);
+    memcpy(out, R, sizeof R);
+}
+
+/* A context keeps the last call's bound scene: switching scenes and
+ * cameras on one context, or a scene made where a destroyed one was,
+ * gives what a fresh context gives. */
+static void test_context_cache(void **state)
+{
+    (void) state;
+    exrfog_context *ctx = exrfog_context_create();
+    const char *a = "exp:density=0.05", *b = "height:density=0.3:falloff=0.5:base=0";
+    const double m1[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 1, 0, 1 };
+    const double m2[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 3, 0, 1 };
+    const int win[4] = { 0, 0, 255, 255 };
+    exrfog_scene *sa, *sb;
+    exrfog_camera *c1, *c2;
+    assert_int_equal(exrfog_scene_create(ctx, &a, 1, NULL, NULL, &sa), EXRFOG_OK);
+    assert_int_equal(exrfog_scene_create(ctx, &b, 1, NULL, NULL, &sb), EXRFOG_OK);
+    assert_int_equal(exrfog_camera_from_matrix(ctx, m1, "exr", 60, win, &c1), EXRFOG_OK);
+    assert_int_equal(exrfog_camera_from_matrix(ctx, m2, "exr", 60, win, &c2), EXRFOG_OK);
+    float want[2][2][8], got[8];
+    exrfog_scene *sc[2] = { sa, sb };
+    exrfog_camera *cm[2] = { c1, c2 };
+    for (int i = 0; i < 2; ++i)
+        for (int k = 0; k < 2; ++k) {
+            exrfog_context *fresh = exrfog_context_create();
+            fog8(fresh, sc[i], cm[k], want[i][k]);
+            exrfog_context_destroy(fresh);
+        }
+    assert_memory_not_equal(want[1][0], want[1][1], sizeof want[1][0]);
+    static const int order[][2] = { { 0, 0 }, { 1, 0 }, { 1, 1 }, { 0, 1 }, { 0, 0 }, { 1, 1 } };
+    for (size_t t = 0; t < sizeof order / sizeof order[0]; ++t) {
+        fog8(ctx, sc[order[t][0]], cm[order[t][1]], got);
+        assert_memory_equal(got, want[order[t][0]][order[t][1]], sizeof got);
+    }
+    /* a new scene where the old one was */
+    exrfog_scene_destroy(sb);
+    assert_int_equal(exrfog_scene_create(ctx, &a, 1, NULL, NULL, &sb), EXRFOG_OK);
+    fog8(ctx, sb, c2, got);
+    assert_memory_equal(got, want[0][1], sizeof got);
+    exrfog_scene_destroy(sa);
+    exrfog_scene_destroy(sb);
+    exrfog_camera_destroy(c1);
+    exrfog_camera_destroy(c2);
+    exrfog_context_destroy(ctx);
+}
+
 /* ------------------------------------------------ hostile arguments */
 
 /* Every NULL the header does not allow is EXRFOG_USAGE with a message
@@ -935,6 +993,7 @@ int main(void)
         cmocka_unit_test(test_cancel_stops_stream),
         cmocka_unit_test(test_one_builder),
         cmocka_unit_test(test_scene_immutable),
+        cmocka_unit_test(test_context_cache),
         cmocka_unit_test(test_null_arguments),
         cmocka_unit_test(test_bounds_and_partial_aovs),
         cmocka_unit_test(test_fault_injection),

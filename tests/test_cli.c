@@ -1819,6 +1819,58 @@ static void kill_case(int sig, int preexisting)
     free(inb);
 }
 
+/* SIGINT during frame 3 of a sequence names frame 3's output (it named
+ * frame 1's, the first output the run ever made); frames 1 and 2 stay
+ * written, frame 3 is not. */
+static void test_killed_sequence_names_frame(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("killseq");
+    for (int f = 1; f <= 3; ++f) {
+        path_t in = pth("killseq/in.%04d.exr", f);
+        assert_int_equal(tu_copy(big_frame(), in.s), 0);
+    }
+    path_t in = pth("killseq/in.#.exr"), out = pth("killseq/out.#.exr");
+    path_t err = pth("killseq.stderr");
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        const int fd = open(err.s, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd < 0 || dup2(fd, 2) < 0)
+            _exit(126);
+        execl(bin(), bin(), "--threads", "1", "--compression", "piz", in.s, "-o", out.s, "--fog",
+              "exp:density=0.02", (char *) NULL);
+        _exit(127);
+    }
+    char tmp[2200] = "";
+    int seen = 0, status = 0;
+    for (int i = 0; i < 60000 && !seen; ++i) {
+        if (find_tmp(dir.s, "out.0003.exr", pid, tmp, sizeof tmp))
+            seen = 1;
+        else
+            sleep_ms(1);
+        if (waitpid(pid, &status, WNOHANG) == pid)
+            fail_msg("exrfog finished (status %d) before frame 3 could be interrupted", status);
+    }
+    assert_true(seen);
+    sleep_ms(20);
+    assert_int_equal(kill(pid, SIGINT), 0);
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    assert_true(WIFSIGNALED(status) && WTERMSIG(status) == SIGINT);
+    size_t n;
+    unsigned char *e = slurp(err.s, &n);
+    assert_non_null(e);
+    char text[4096];
+    snprintf(text, sizeof text, "%.*s", (int) (n < sizeof text ? n : sizeof text - 1), e);
+    free(e);
+    assert_non_null(strstr(text, "out.0003.exr: stopped by SIGINT"));
+    assert_null(strstr(text, "out.0001.exr"));
+    assert_true(tu_exists(pth("killseq/out.0001.exr").s));
+    assert_true(tu_exists(pth("killseq/out.0002.exr").s));
+    assert_false(tu_exists(pth("killseq/out.0003.exr").s));
+    assert_false(find_tmp(dir.s, "out.0003.exr", pid, tmp, sizeof tmp));
+}
+
 static void test_killed_run_sigterm(void **state)
 {
     (void) state;
@@ -2861,6 +2913,7 @@ int main(void)
         cmocka_unit_test(test_output_is_input),
         cmocka_unit_test(test_existing_output_untouched),
         cmocka_unit_test(test_killed_run_sigterm),
+        cmocka_unit_test(test_killed_sequence_names_frame),
         cmocka_unit_test(test_killed_run_sigint),
         cmocka_unit_test(test_killed_run_sigkill),
         cmocka_unit_test(test_threads_deterministic),

@@ -140,8 +140,16 @@ static void slot_drop(const char *tmp)
 static void temp_add(void *user, const char *tmp, const char *name)
 {
     (void) user;
-    if (!sig_prefix_len)
+    /* The first temporary file of a frame names the frame's output: a
+     * signal in frame 3 of a sequence names frame 3's. (A signal while the
+     * prefix is rewritten finds its length 0 and says nothing.) */
+    int live = 0;
+    for (int i = 0; i < SLOTS; ++i)
+        live |= slot_live[i] != 0;
+    if (!live) {
+        sig_prefix_len = 0;
         set_prefix(name);
+    }
     slot_add(tmp);
 }
 

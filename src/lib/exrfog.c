@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "apply.h"
 #include "camera.h"
@@ -30,19 +31,32 @@ struct exrfog_context {
      * thread's): the scene bound to the call's camera, small rectangles
      * gathered into contiguous planes, a row for unwanted AOV planes. */
     ef_fog_scene *bound;
+    uint64_t bound_scene, bound_cam;   /* the tags it was made from (0: none) */
     float *gather, *scratch;
     size_t gather_cap, scratch_cap;
 };
+
+/* An object's identity for the context's cache: its address and the time
+ * it was made, so a new object at a freed one's address differs. */
+static uint64_t new_tag(const void *p)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    const uint64_t t = (uint64_t) ts.tv_sec * 1000000000u + (uint64_t) ts.tv_nsec;
+    return (t * 0x9e3779b97f4a7c15u ^ (uint64_t) (uintptr_t) p) | 1u;
+}
 
 /* A built scene: immutable once made. The colour state is kept only
  * because the scene's context points at it (nothing re-reads colours). */
 struct exrfog_scene {
     ef_fog_scene s;
     ef_colour colour;
+    uint64_t tag;
 };
 
 struct exrfog_camera {
     ef_camera cam;
+    uint64_t tag;
 };
 
 const char *exrfog_version(void)
@@ -59,6 +73,8 @@ void exrfog_context_destroy(exrfog_context *ctx)
 {
     if (!ctx)
         return;
+    if (ctx->bound)
+        ef_scene_free(ctx->bound);
     free(ctx->bound);
     free(ctx->gather);
     free(ctx->scratch);
@@ -178,6 +194,7 @@ exrfog_result exrfog_scene_create(exrfog_context *ctx, const char *const *specs,
             }
         memcpy(sc->s.color, color, sizeof sc->s.color);
     }
+    sc->tag = new_tag(sc);
     *out = sc;
     return EXRFOG_OK;
 }
@@ -236,6 +253,7 @@ exrfog_result exrfog_camera_from_matrix(exrfog_context *ctx, const double camera
         free(c);
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
     }
+    c->tag = new_tag(c);
     *out = c;
     return EXRFOG_OK;
 }
@@ -264,6 +282,7 @@ exrfog_result exrfog_camera_from_file(exrfog_context *ctx, const char *path, exr
         return fail(ctx, &err, path, EXRFOG_ERROR);
     }
     ef_exr_close(&f);
+    c->tag = new_tag(c);
     *out = c;
     return EXRFOG_OK;
 }
@@ -448,14 +467,21 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
      * parsing or reading anything, in the context's buffer (a context is
      * one thread's): the caller's stays read-only, so threads may share
      * it. */
-    if (!ctx->bound && !(ctx->bound = malloc(sizeof *ctx->bound)))
+    if (!ctx->bound && !(ctx->bound = calloc(1, sizeof *ctx->bound)))
         return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
-    if (ef_scene_copy(ctx->bound, &scene->s, 0))
-        return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
-    ef_scene_bind(ctx->bound, cam->cam.pos);
+    /* The same scene and camera as the context's last call: its bound copy
+     * serves again (a tile loop binds once). */
+    if (ctx->bound_scene != scene->tag || ctx->bound_cam != cam->tag) {
+        ef_scene_free(ctx->bound);
+        ctx->bound_scene = ctx->bound_cam = 0;
+        if (ef_scene_copy(ctx->bound, &scene->s, 0))
+            return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
+        ef_scene_bind(ctx->bound, cam->cam.pos);
+        ctx->bound_scene = scene->tag;
+        ctx->bound_cam = cam->tag;
+    }
     const ef_fog_pass pass = { &cam->cam, &conv, ctx->bound };
     r = fog_rows(ctx, &pass, img, aov_in, aov_given, naov, mask);
-    ef_scene_free(ctx->bound);
     if (r != EXRFOG_OK)
         return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     return EXRFOG_OK;
