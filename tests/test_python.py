@@ -185,10 +185,11 @@ if np is not None:
 
 # Ctrl-C during a slow call raises KeyboardInterrupt within a second and
 # leaves no output and no temporary file (a child interpreter, SIGINT after
-# half a second of an exact noise frame).
+# half a second into an exact noise frame).
 child = r"""
 import os, sys, time, exrfog
 out = sys.argv[2]
+print("ready", flush=True)
 t0 = time.monotonic()
 try:
     exrfog.fog(sys.argv[1], out, threads=2,
@@ -203,7 +204,8 @@ with tempfile.TemporaryDirectory() as d:
     out = os.path.join(d, "slow.exr")
     p = subprocess.Popen([sys.executable, "-c", child, SAMPLE, out], stdout=subprocess.PIPE,
                          text=True, env=os.environ)
-    time.sleep(1.5)   # the interpreter and the module loaded, the run started
+    p.stdout.readline()   # the interpreter and the module are loaded
+    time.sleep(0.5)       # the run has started
     t0 = time.monotonic()
     p.send_signal(signal.SIGINT)
     so, _ = p.communicate(timeout=60)
