@@ -597,8 +597,8 @@ static int stop_at_once(void *user, double f)
 
 /* Cancelling through the progress hook stops decode and encode, not only
  * the fog work: a 12-frame sequence whose hook says stop at the first
- * unit writes no frame, leaves no temporary file, and the hook hears at
- * most one unit per thread after it said so. */
+ * unit writes no frame, leaves no temporary file, and the hook is not
+ * called again once it said so. */
 static void test_cancel_stops_stream(void **state)
 {
     (void) state;
@@ -616,7 +616,7 @@ static void test_cancel_stops_stream(void **state)
     exrfog_set_progress(ctx, stop_at_once, &calls);
     assert_int_equal(exrfog_run(ctx, 8, argv), EXRFOG_CANCELLED);
     exrfog_context_destroy(ctx);
-    assert_true(calls >= 1 && calls <= 2);
+    assert_int_equal(calls, 1);
     for (int f = 1; f <= 12; ++f) {
         char n[64];
         snprintf(n, sizeof n, "long_out.%04d.exr", f);

@@ -69,8 +69,8 @@ static void tell(ef_job *J, double f, int final)
     ef_progress *pg = &J->pg;
     if (!final && f >= 1.0)
         f = nextafter(1.0, 0.0);
-    if (!pg->hook || f <= pg->reported)
-        return;
+    if (!pg->hook || f <= pg->reported || ef_job_cancelled(J))
+        return;   /* a stopped run has nothing more to report */
     pg->reported = f;
     if (pg->hook(pg->hook_user, f))
         atomic_store(J->stop, 1);
