@@ -2437,6 +2437,16 @@ static void test_messages(void **state)
     assert_int_equal(mkfifo(fifo.s, 0644), 0);
     check_failure(1, NULL, dir.s, "'%s' -o '%s' --fog exp:density=0.1", fifo.s, out.s);
     assert_err_has("FIFO");
+    /* A FIFO as a camera file, scene file or profile: refused at once (open
+     * blocked for ever), while a shell's <(...) pipe still reads. */
+    check_failure(1, sample(), dir.s, "'%s' -o '%s' --fog exp:density=0.1 --camera-file '%s'",
+                  sample(), out.s, fifo.s);
+    assert_err_has("is a FIFO (named pipe) that nothing was written to");
+    check_failure(1, sample(), dir.s, "'%s' -o '%s' --scene '%s'", sample(), out.s, fifo.s);
+    assert_err_has("FIFO");
+    check_failure(1, sample(), dir.s, "'%s' -o '%s' --fog 'layered:file=%s'", sample(), out.s,
+                  fifo.s);
+    assert_err_has("FIFO");
     unlink(fifo.s);
     /* Invalid UTF-8 is escaped; valid UTF-8 passes. */
     check_failure(2, sample(), dir.s, "'%s' -o '%s' --fog 'exp:density=0.1:k\xff\xc3\xa9=1'",

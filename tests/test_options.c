@@ -66,6 +66,13 @@ static void test_zip_level_errors(void **state)
         assert_contains(tu_err, bad[i]);
         assert_false(tu_exists(out));
     }
+    /* a level of zip out of range says so (it said zip takes no level) */
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.02 --compression zip:12", in, out);
+    assert_contains(tu_err, "the zlib level 12 is out of range (1 fastest to 9 smallest");
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.02 --compression zips:x", in, out);
+    assert_contains(tu_err, "not a whole number");
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.02 --compression piz:3", in, out);
+    assert_contains(tu_err, "only zip and zips");
     free(in);
     free(out);
 }

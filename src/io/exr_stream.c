@@ -1217,12 +1217,19 @@ int ef_compression_parse(const char *text, int *compression, int *level, float *
             *dwa_level = (float) l;
         } else if (colon) {
             char *end;
+            errno = 0;
             long l = strtol(colon + 1, &end, 10);
-            if ((i != EXR_COMPRESSION_ZIP && i != EXR_COMPRESSION_ZIPS) || colon[1] == '\0' ||
-                *end || l < 1 || l > 9)
+            if (i != EXR_COMPRESSION_ZIP && i != EXR_COMPRESSION_ZIPS)
                 return ef_fail(err, "--compression '%s': only zip and zips (zlib level, from 1 "
                                     "(fastest) to 9 (smallest)) and dwaa and dwab (a positive "
                                     "quantisation level, 45 by default) take a level", text);
+            if (colon[1] == '\0' || *end)
+                return ef_fail(err, "--compression '%s': the zlib level is not a whole number "
+                                    "(1 fastest to 9 smallest, e.g. %s:6)", text, comp_names[i]);
+            if (errno || l < 1 || l > 9)
+                return ef_fail(err, "--compression '%s': the zlib level %s is out of range "
+                                    "(1 fastest to 9 smallest, e.g. %s:6)", text, colon + 1,
+                               comp_names[i]);
             *level = (int) l;
         }
         *compression = i;

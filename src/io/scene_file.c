@@ -8,12 +8,14 @@
 #include "aov.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <jansson.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 /* Scene and profile files are a few kilobytes; anything this big is the
  * wrong file, and reading it whole would only waste memory. */
@@ -30,11 +32,23 @@ int ef_read_text_file(const char *path, char **text, ef_err *err)
 {
     *text = NULL;
     ef_err_set_file(err, path);   /* path may belong to a fog component freed on failure */
-    FILE *fp = fopen(path, "rb");
-    if (!fp)
+    /* Opened without blocking: a named pipe nobody writes to would wait
+     * for ever in open(). Reads block again (a shell's <(...) pipe has its
+     * writer); a pipe with no writer reads as empty at once. */
+    const int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0)
         return ef_fail(err, "cannot open: %s", strerror(errno));
+    const int fl = fcntl(fd, F_GETFL);
+    FILE *fp = fl < 0 || fcntl(fd, F_SETFL, fl & ~O_NONBLOCK) < 0 ? NULL : fdopen(fd, "rb");
+    if (!fp) {
+        const int e = errno;
+        close(fd);
+        return ef_fail(err, "cannot open: %s", strerror(e));
+    }
     struct stat sb;
+    int fifo = 0;
     if (fstat(fileno(fp), &sb) == 0) {
+        fifo = S_ISFIFO(sb.st_mode);
         if (S_ISDIR(sb.st_mode))
             return fclose(fp), ef_fail(err, "is a directory, not a text file");
         /* A regular file announces its size: refuse before reading it. */
@@ -83,6 +97,11 @@ int ef_read_text_file(const char *path, char **text, ef_err *err)
         free(buf);
         return ef_fail(err, "is larger than the 64 MB a text file may have here (is it the right "
                             "file?)");
+    }
+    if (fifo && len == 0) {
+        free(buf);
+        return ef_fail(err, "is a FIFO (named pipe) that nothing was written to; give a regular "
+                            "file");
     }
     const char *nul = memchr(buf, '\0', len);
     if (nul) {
