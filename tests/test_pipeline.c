@@ -284,6 +284,74 @@ static void test_sequence_time(void **state)
 
 /* Missing frames are named before any work; a failed frame stops the run
  * unless --keep-going, which fogs the others and names every failure. */
+/* Sequences that would destroy data: an output pattern naming another
+ * frame's input (s.%d.exr -o s.%d0.exr: frame 1's output is frame 10's
+ * input) is refused before anything is written, and a frame --frames
+ * lists twice (1,1 or overlapping ranges) is fogged once, with a note:
+ * fogged in place twice, it would hold fog on fog. */
+static void test_sequence_repeats_and_overwrites(void **state)
+{
+    (void) state;
+    fresh("seqdanger");
+    for (int f = 1; f <= 10; f += 9) {
+        char *p = in_dir("s.%d.exr", f);
+        write_frame(p, 10.0 * f);
+        free(p);
+    }
+    char *s1 = in_dir("s.1.exr"), *s10 = in_dir("s.10.exr");
+    size_t n10;
+    unsigned char *before10 = NULL;
+    {
+        FILE *f = fopen(s10, "rb");
+        assert_non_null(f);
+        fseek(f, 0, SEEK_END);
+        n10 = (size_t) ftell(f);
+        fseek(f, 0, SEEK_SET);
+        before10 = malloc(n10);
+        assert_int_equal(fread(before10, 1, n10, f), n10);
+        fclose(f);
+    }
+    assert_run(2, "'%s/s.%%d.exr' -o '%s/s.%%d0.exr' --frames 1,10 --fog exp:density=0.05", g_dir,
+               g_dir);
+    assert_non_null(strstr(tu_err, "names frame 10's input"));
+    assert_non_null(strstr(tu_err, "nothing was written"));
+    {
+        FILE *f = fopen(s10, "rb");
+        assert_non_null(f);
+        unsigned char *now10 = malloc(n10 + 1);
+        assert_int_equal(fread(now10, 1, n10 + 1, f), n10);
+        fclose(f);
+        assert_memory_equal(now10, before10, n10);
+        free(now10);
+    }
+    char *o100 = in_dir("s.100.exr");
+    assert_false(tu_exists(o100));
+    /* in place, each frame onto itself, stays allowed */
+    char *c1 = in_dir("c.1.exr"), *c10 = in_dir("c.10.exr");
+    assert_int_equal(tu_copy(s1, c1), 0);
+    assert_int_equal(tu_copy(s10, c10), 0);
+    assert_run(0, "'%s/c.%%d.exr' -o '%s/c.%%d.exr' --frames 1,10 --fog exp:density=0.05", g_dir,
+               g_dir);
+    /* 1,1 and 1-10,10: each frame once; fogged once, in place, it equals
+     * a single fog of the original */
+    assert_int_equal(tu_copy(s1, c1), 0);
+    assert_int_equal(tu_copy(s10, c10), 0);
+    assert_run(0, "'%s/c.%%d.exr' -o '%s/c.%%d.exr' --frames 1,1,10,1,10 --fog exp:density=0.05",
+               g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "note: --frames lists frames 1, 10 more than once; each frame "
+                                   "is fogged once"));
+    char *once = in_dir("once.exr");
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05", s1, once);
+    assert_int_equal(tu_compare_files(c1, once, -1, NULL), 0);
+    free(once);
+    free(c1);
+    free(c10);
+    free(o100);
+    free(before10);
+    free(s1);
+    free(s10);
+}
+
 static void test_sequence_failures(void **state)
 {
     (void) state;
@@ -1024,6 +1092,7 @@ int main(void)
         cmocka_unit_test(test_sequence_cameras),
         cmocka_unit_test(test_sequence_time),
         cmocka_unit_test(test_sequence_failures),
+        cmocka_unit_test(test_sequence_repeats_and_overwrites),
         cmocka_unit_test(test_progress_bar),
         cmocka_unit_test(test_parallel_recipe),
         cmocka_unit_test(test_camera_file),

@@ -31,6 +31,99 @@ static void list_frame(char *b, size_t len, long f)
     snprintf(b + at, len - at, "%s%ld", at ? ", " : "", f);
 }
 
+/* A frame and where it stood in --frames, for finding repeats. */
+typedef struct frame_at {
+    long frame;
+    int at;
+} frame_at;
+
+static int cmp_frame_at(const void *a, const void *b)
+{
+    const frame_at *x = a, *y = b;
+    return x->frame != y->frame ? (x->frame < y->frame ? -1 : 1) : (x->at > y->at) - (x->at < y->at);
+}
+
+/* Drops the frames --frames lists again (1,1 or 1-10,5-15), keeping the
+ * first of each, with a note: fogging an in-place frame twice would fog
+ * it twice. Returns 0, or -1 when out of memory. */
+static int drop_repeats(ef_job *J, const char *pattern, long *frames, int *n)
+{
+    frame_at *s = malloc((size_t) *n * sizeof *s + 1);
+    unsigned char *again = calloc((size_t) *n + 1, 1);
+    if (!s || !again) {
+        free(s);
+        free(again);
+        return -1;
+    }
+    for (int i = 0; i < *n; ++i)
+        s[i] = (frame_at){ frames[i], i };
+    qsort(s, (size_t) *n, sizeof *s, cmp_frame_at);
+    char list[400] = "";
+    int repeats = 0;
+    for (int i = 1; i < *n; ++i)
+        if (s[i].frame == s[i - 1].frame) {
+            again[s[i].at] = 1;
+            ++repeats;
+            if (i < 2 || s[i - 2].frame != s[i].frame)   /* named once however often */
+                list_frame(list, sizeof list, s[i].frame);
+        }
+    int k = 0;
+    for (int i = 0; i < *n; ++i)
+        if (!again[i])
+            frames[k++] = frames[i];
+    free(s);
+    free(again);
+    if (repeats)
+        ef_job_note(J, "exrfog: %s: note: --frames lists frame%s %s more than once; each frame is "
+                       "fogged once\n", pattern, strchr(list, ',') ? "s" : "", list);
+    *n = k;
+    return 0;
+}
+
+/* Refuses a sequence whose output pattern names another frame's input
+ * (s.%d.exr -o s.%d0.exr: frame 1's output is frame 10's input, which
+ * would be overwritten before it is read). Every name is known up front.
+ * Returns 0, or 2 with the message printed. */
+static int check_overwrites(ef_job *J, const char *pattern, const ef_frame_pattern *pin,
+                            const char *out_pat, const ef_frame_pattern *pout,
+                            const long *frames, int n)
+{
+    struct id {
+        dev_t dev;
+        ino_t ino;
+    } *in = malloc((size_t) n * sizeof *in + 1);
+    if (!in)
+        return ef_job_say(J, 1, "out of memory");
+    char a[4096], b[4096];
+    for (int i = 0; i < n; ++i) {
+        struct stat st;
+        in[i].dev = 0;
+        in[i].ino = 0;
+        if (!ef_frame_path(pattern, pin, frames[i], a, sizeof a) && stat(a, &st) == 0) {
+            in[i].dev = st.st_dev;
+            in[i].ino = st.st_ino;
+        }
+    }
+    int status = 0;
+    for (int i = 0; i < n && !status; ++i) {
+        struct stat st;
+        if (ef_frame_path(out_pat, pout, frames[i], b, sizeof b) || stat(b, &st) != 0)
+            continue;
+        for (int j = 0; j < n; ++j)
+            if (j != i && in[j].ino == st.st_ino && in[j].dev == st.st_dev && in[j].ino) {
+                ef_frame_path(pattern, pin, frames[j], a, sizeof a);
+                status = ef_job_say(J, 2, "%s: -o %s names frame %ld's input (%s) as frame "
+                                          "%ld's output: it would be overwritten before it is "
+                                          "read; nothing was written (choose an output pattern "
+                                          "that no other frame's input matches)",
+                                    pattern, out_pat, frames[j], a, frames[i]);
+                break;
+            }
+    }
+    free(in);
+    return status;
+}
+
 /* Runs every frame of a sequence in order: the frames of --frames, or
  * every frame on disk matching INPUT. Missing frames are found before any
  * work; a failed frame stops the run unless --keep-going, which fogs the
@@ -70,6 +163,16 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
             ef_fail(&err, "no file on disk matches this frame pattern (check the name and the "
                           "padding: # is 4 digits, @ one digit, %%04d four)");
         return ef_job_report(J, pattern, &err, 1);
+    }
+    if (o->frames && drop_repeats(J, pattern, frames, &n)) {
+        free(frames);
+        return ef_job_say(J, 1, "out of memory");
+    }
+    int ow;
+    if (out_pat && !o->explain &&
+        (ow = check_overwrites(J, pattern, pin, out_pat, &pout, frames, n)) != 0) {
+        free(frames);
+        return ow;
     }
     char *paths = malloc(4 * 4096);
     if (!paths) {
