@@ -394,6 +394,10 @@ static void test_origin_far_from_zero(void **state)
     assert_run(2, "'%s' -o '%s' --fog exp:density=1 --aov P --aov-origin 1,2", in, out);
     assert_contains(tu_err, "--aov-origin '1,2'");
     assert_run(2, "'%s' -o '%s' --fog exp:density=1 --aov P --aov-origin 1,nan,2", in, out);
+    /* one that would overflow fog_P to -inf (it wrote -inf with exit 0) */
+    assert_run(2, "'%s' -o '%s' --fog exp:density=1 --aov P --aov-origin 1e308,0,0", in, out);
+    assert_contains(tu_err, "more than 1e30 from the world's origin");
+    assert_run(0, "'%s' -o '%s' --fog exp:density=1 --aov P --aov-origin 0,-1e30,0", in, out);
     free(in);
     free(out);
 }

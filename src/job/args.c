@@ -369,6 +369,13 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             if (ef_parse_numbers(a, o->aov_origin, 3))
                 return ef_fail(err, "--aov-origin '%s' is not X,Y,Z (three finite numbers)", a),
                        EF_PARSE_USAGE;
+            /* beyond any scene exrfog takes (LIMITS): fog_P - origin would
+             * overflow the float channels to infinity */
+            if (fabs(o->aov_origin[0]) > 1e30 || fabs(o->aov_origin[1]) > 1e30 ||
+                fabs(o->aov_origin[2]) > 1e30)
+                return ef_fail(err, "--aov-origin '%s' is more than 1e30 from the world's origin "
+                                    "(fog_P minus it would overflow float; give a point of the "
+                                    "scene, e.g. the camera's position)", a), EF_PARSE_USAGE;
             o->has_aov_origin = 1;
             break;
         case OPT_CONVENTION:
