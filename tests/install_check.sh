@@ -14,7 +14,9 @@ libdir=$(dirname "$(find "$d/prefix" -name libexrfog.so | head -1)")
 export LD_LIBRARY_PATH="$libdir"
 # the installed program finds its library through its RPATH
 env -u LD_LIBRARY_PATH "$d/prefix/bin/exrfog" --version
-# pkg-config
+# pkg-config: a dynamic build needs no other package's .pc (the public
+# header needs none of them; the .deb's runtime dependencies suffice)
+PKG_CONFIG_LIBDIR="$libdir/pkgconfig" pkg-config --cflags --libs exrfog >/dev/null
 mkdir "$d/pc"
 PKG_CONFIG_PATH="$libdir/pkgconfig" cc $flags "$src/tests/external/use_exrfog.c" \
   $(PKG_CONFIG_PATH="$libdir/pkgconfig" pkg-config --cflags --libs exrfog) -lm -o "$d/pc/use"
