@@ -636,6 +636,45 @@ static void test_views_multipart(void **state)
 /* Single-part multi-view (multiView = right, left): the default view's
  * channels are unprefixed and the header camera is its; left.* is the
  * other eye, whose AOVs are named fog_P.left.X as OpenEXR names views. */
+/* A file with more views than a run fogs (8) is refused with the limit
+ * named: the ninth and later were copied unfogged with exit 0. Eight are
+ * fogged. */
+static void test_views_over_limit(void **state)
+{
+    (void) state;
+    fresh("nineviews");
+    planes_init();
+    tu_part p[9];
+    static char names[9][2][16];
+    for (int k = 0; k < 9; ++k) {
+        tu_part_init(&p[k], W, H);
+        snprintf(names[k][0], 16, "rgba.v%d", k);
+        snprintf(names[k][1], 16, "v%d", k);
+        p[k].name = names[k][0];
+        p[k].str_name = "view";
+        p[k].str_value = names[k][1];
+        add_rgbaz(&p[k], "", g_c);
+        set_camera(&p[k], (double) k);
+    }
+    char *in = in_dir("nine.exr"), *out = in_dir("out.exr");
+    assert_int_equal(tu_write_exr(in, p, 9), 0);
+    assert_run(1, "'%s' -o '%s' --fog exp:density=0.05", in, out);
+    assert_non_null(strstr(tu_err, "more than 8 views (v0, v1, ...)"));
+    assert_false(tu_exists(out));
+    assert_int_equal(tu_write_exr(in, p, 8), 0);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05", in, out);
+    for (int k = 0; k < 8; ++k) {
+        tu_image a, b;
+        assert_int_equal(tu_read_image(in, k, &a), 0);
+        assert_int_equal(tu_read_image(out, k, &b), 0);
+        assert_true(tu_compare_channel(&a, &b, "R", 0, 0) > 0);   /* fogged */
+        tu_image_free(&a);
+        tu_image_free(&b);
+    }
+    free(in);
+    free(out);
+}
+
 static void test_views_singlepart(void **state)
 {
     (void) state;
@@ -1102,6 +1141,7 @@ int main(void)
         cmocka_unit_test(test_preview_view),
         cmocka_unit_test(test_views_multipart),
         cmocka_unit_test(test_views_singlepart),
+        cmocka_unit_test(test_views_over_limit),
         cmocka_unit_test(test_beachball_left),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -295,10 +295,12 @@ static int multiview_names(const ef_exr_file *f, int p, char names[][64], int ma
         a->type != EXR_ATTR_STRING_VECTOR || !a->stringvector)
         return 0;
     int n = 0;
-    for (int i = 0; i < a->stringvector->n_strings && n < max; ++i) {
+    for (int i = 0; i < a->stringvector->n_strings; ++i) {
         const exr_attr_string_t *sv = &a->stringvector->strings[i];
         if (sv->length <= 0 || sv->length >= 64)
             continue;
+        if (n == max)
+            return max + 1;   /* more than the caller can take */
         snprintf(names[n], 64, "%.*s", (int) sv->length, sv->str);
         ++n;
     }
@@ -310,7 +312,7 @@ int ef_exr_views(const ef_exr_file *f, char names[][64], int max)
     if (f->nparts == 1)
         return multiview_names(f, 0, names, max);
     int n = 0;
-    for (int p = 0; p < f->nparts && n < max; ++p) {
+    for (int p = 0; p < f->nparts; ++p) {
         const char *v = NULL;
         int32_t vl = 0;
         if (exr_attr_get_string(f->ctx, p, "view", &vl, &v) != EXR_ERR_SUCCESS || !v || vl <= 0 ||
@@ -319,8 +321,11 @@ int ef_exr_views(const ef_exr_file *f, char names[][64], int max)
         int seen = 0;
         for (int k = 0; k < n; ++k)
             seen |= (int) strlen(names[k]) == vl && !strncmp(names[k], v, (size_t) vl);
-        if (!seen)
-            snprintf(names[n++], 64, "%.*s", (int) vl, v);
+        if (seen)
+            continue;
+        if (n == max)
+            return max + 1;   /* more than the caller can take */
+        snprintf(names[n++], 64, "%.*s", (int) vl, v);
     }
     return n;
 }

@@ -73,7 +73,8 @@ int ef_find_channels(const ef_exr_file *f, const ef_exr_file *depth_file, const 
 /* The views of f: the multiView attribute of a single-part file (the
  * first is the default view), or the distinct "view" attributes of a
  * multi-part file's parts, in part order. Returns the count (0: no views),
- * at most max. */
+ * or max + 1 when the file has more than max (the first max are in
+ * names). */
 int ef_exr_views(const ef_exr_file *f, char names[][64], int max);
 
 /* Finds the colour and depth of view `view` of f, as ef_find_channels does

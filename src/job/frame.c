@@ -294,6 +294,14 @@ static int find_views(ef_frame *F)
     ef_options *o = F->o;
     char views[EF_MAX_VIEWS][64];
     const int nfile_views = ef_exr_views(&F->in, views, EF_MAX_VIEWS);
+    if (nfile_views > EF_MAX_VIEWS) {
+        /* fogging the first eight and copying the rest was silent */
+        ef_fail(&F->err, "INPUT has more than %d views (%s, %s, ...); exrfog fogs at most %d "
+                         "views of a file in one run and copies none unfogged without saying so "
+                         "(split the views into files of at most %d, e.g. with oiiotool)",
+                EF_MAX_VIEWS, views[0], views[1], EF_MAX_VIEWS, EF_MAX_VIEWS);
+        return ef_job_report(J, o->input, &F->err, 1);
+    }
     int status = ef_choose_views(J, &F->in, F->df, views, nfile_views, F->plans, &F->nplans,
                                  &F->err);
     if (status) {
