@@ -502,7 +502,10 @@ int main(void)
 {
     real_dir = tu_real_exr_dir();
     if (!real_dir) {
-        printf("test_realexr: ../shared/real-exr is absent; skipped\n");
+        const char *shared = getenv("EXRFOG_SHARED_DIR");
+        printf("test_realexr: %s/real-exr is absent; skipped (configure with "
+               "-DEXRFOG_SHARED_DIR=PATH, or set EXRFOG_SHARED_DIR, to run it)\n",
+               shared ? shared : "../shared");
         return 77;
     }
     const struct CMUnitTest tests[] = {
