@@ -1585,6 +1585,21 @@ static void test_usage_errors(void **state)
             fail_msg("`%s`: stderr does not quote \"%s\":\n%s", cases[i].args, cases[i].needle, g_err);
     }
     /* No -o. */
+    /* A name longer than any (--layer, --view, --preview-view, --colorspace,
+     * --depth-channel) is refused abbreviated, its reason kept: 100 kB
+     * filled the message and cut the reason off. */
+    {
+        static char big[2001];
+        memset(big, 'x', sizeof big - 1);
+        static const char *const opts[] = { "--layer", "--view", "--preview-view", "--colorspace",
+                                            "--depth-channel" };
+        for (size_t k = 0; k < sizeof opts / sizeof opts[0]; ++k) {
+            check_failure(2, in, dir.s, "'%s' -o '%s' --fog exp:density=0.1 %s %s", in, out.s,
+                          opts[k], big);
+            assert_err_has("...(2000 bytes)' is longer than any name exrfog reads");
+            assert_true(strlen(g_err) < 400);
+        }
+    }
     check_failure(2, in, dir.s, "'%s' --fog exp:density=0.1", in);
     assert_err_has("-o");
     /* -o without its value. */

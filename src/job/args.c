@@ -478,6 +478,22 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
         }
     }
     *cur_arg = NULL;   /* later errors are not about one option's number */
+    /* A name no file can hold would fill every later message, pushing out
+     * its reason: refused here, its value abbreviated. */
+    const struct {
+        const char *opt, *v;
+    } names[] = { { "layer", o->layer }, { "depth-channel", o->depth_channel },
+                  { "colorspace", o->colorspace }, { "preview-view", o->preview_view },
+                  { "view", o->nviews > 0 ? o->views[0] : NULL },
+                  { "view", o->nviews > 1 ? o->views[1] : NULL } };
+    for (size_t k = 0; k < sizeof names / sizeof names[0]; ++k)
+        if (names[k].v && strlen(names[k].v) > 1024)
+            return ef_fail(err, "--%s '%s' is longer than any name exrfog reads (1024 bytes at "
+                                "most)", names[k].opt, names[k].v), EF_PARSE_USAGE;
+    for (int k = 2; k < o->nviews; ++k)
+        if (strlen(o->views[k]) > 1024)
+            return ef_fail(err, "--view '%s' is longer than any name exrfog reads (1024 bytes at "
+                                "most)", o->views[k]), EF_PARSE_USAGE;
     if (o->camera_file && (o->cam.w2c.set || o->cam.c2w.set))
         return ef_fail(err, "--camera-file and --%s both give the camera's pose; give one",
                        o->cam.w2c.set ? "world-to-camera" : "camera-to-world"), EF_PARSE_USAGE;
