@@ -1776,6 +1776,22 @@ static int find_tmp(const char *dir, const char *name, long pid, char *buf, size
     return found;
 }
 
+/* Waits up to ms milliseconds for exrfog (pid) to create its temporary
+ * file for name in dir (its path into tmp); fails the test when exrfog
+ * ends first. Returns whether it appeared. */
+static int await_tmp(const char *dir, const char *name, pid_t pid, int ms, char *tmp, size_t cap)
+{
+    int status = 0;
+    for (int i = 0; i < ms; ++i) {
+        if (find_tmp(dir, name, pid, tmp, cap))
+            return 1;
+        sleep_ms(1);
+        if (waitpid(pid, &status, WNOHANG) == pid)
+            fail_msg("exrfog finished (status %d) before it could be stopped", status);
+    }
+    return 0;
+}
+
 /* Starts exrfog on the big frame, waits for its temporary file to appear,
  * then sends sig. Checks OUTPUT is absent (or unchanged when preexisting),
  * and for catchable signals that no temporary file is left. */
@@ -1800,15 +1816,8 @@ static void kill_case(int sig, int preexisting)
         _exit(127);
     }
     char tmp[2200] = "";
-    int seen = 0, status = 0;
-    for (int i = 0; i < 20000 && !seen; ++i) {
-        if (find_tmp(dir.s, "out.exr", pid, tmp, sizeof tmp))
-            seen = 1;
-        else
-            sleep_ms(1);
-        if (waitpid(pid, &status, WNOHANG) == pid)
-            fail_msg("exrfog finished (status %d) before it could be killed", status);
-    }
+    int status = 0;
+    const int seen = await_tmp(dir.s, "out.exr", pid, 20000, tmp, sizeof tmp);
     if (!seen) {
         kill(pid, SIGKILL);
         waitpid(pid, &status, 0);
@@ -1858,16 +1867,8 @@ static void test_killed_sequence_names_frame(void **state)
         _exit(127);
     }
     char tmp[2200] = "";
-    int seen = 0, status = 0;
-    for (int i = 0; i < 60000 && !seen; ++i) {
-        if (find_tmp(dir.s, "out.0003.exr", pid, tmp, sizeof tmp))
-            seen = 1;
-        else
-            sleep_ms(1);
-        if (waitpid(pid, &status, WNOHANG) == pid)
-            fail_msg("exrfog finished (status %d) before frame 3 could be interrupted", status);
-    }
-    assert_true(seen);
+    int status = 0;
+    assert_true(await_tmp(dir.s, "out.0003.exr", pid, 60000, tmp, sizeof tmp));
     sleep_ms(20);
     assert_int_equal(kill(pid, SIGINT), 0);
     assert_int_equal(waitpid(pid, &status, 0), pid);
