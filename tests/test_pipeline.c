@@ -539,6 +539,13 @@ static void test_camera_file(void **state)
     assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s'", g_dir, chan);
     assert_non_null(strstr(tu_out, "frame 3"));
     assert_non_null(strstr(tu_out, "camera file"));
+    /* and where its fov came from: the file, not "flag --fov" (it said so) */
+    assert_null(strstr(tu_out, "flag --fov"));
+    assert_non_null(strstr(tu_out, "deg horizontal  from camera file"));
+    assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s'", g_dir, json);
+    assert_non_null(strstr(tu_out, "deg horizontal  from camera file"));
+    assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s' --fov 30", g_dir, json);
+    assert_non_null(strstr(tu_out, "30 deg horizontal  from flag --fov"));
     /* a frame the file lacks is named */
     char *s4 = in_dir("shot.0004.exr");
     write_frame(s4, 0);

@@ -391,7 +391,8 @@ static int resolve_lens(const ef_cam_meta *meta, const ef_cam_flags *flags, fam 
                             "view are given; give only one", flags->fov.v, flags->vfov.v);
     }
     if (flags->fov.set)
-        return use_fov(cam, meta, flags->fov.v, "--fov", "flag --fov", err);
+        return use_fov(cam, meta, flags->fov.v, flags->fov_src ? "the camera file's fov" : "--fov",
+                       flags->fov_src ? flags->fov_src : "flag --fov", err);
     if (flags->vfov.set) {
         /* tan(h/2) = tan(v/2) * W * pixelAspect / H over the display window. */
         const double v = flags->vfov.v;
@@ -405,7 +406,9 @@ static int resolve_lens(const ef_cam_meta *meta, const ef_cam_flags *flags, fam 
         const double h = 2.0 * atan(tan(v * (EF_PI / 360.0)) * W * meta->pixel_aspect / H)
                          * (180.0 / EF_PI);
         return use_fov(cam, meta, h, "the vertical fov (vfov)",
-                       "vertical fov (vfov, via the display window's aspect)", err);
+                       flags->fov_src ? flags->fov_src
+                                      : "vertical fov (vfov, via the display window's aspect)",
+                       err);
     }
     const int exr = pf == FAM_EXR || pf == FAM_NONE;
     if (exr && meta->w2c.set && (meta->w2screen.set || meta->w2ndc.set)) {

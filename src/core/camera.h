@@ -59,6 +59,8 @@ typedef struct ef_cam_flags {
                                * both fov and vfov is an error. */
     ef_opt_num near_;         /* --near */
     ef_opt_num far_;          /* --far */
+    const char *fov_src;      /* where fov came from when not --fov (a camera file), or
+                               * NULL; kept as the camera's src_fov, so it must outlive it */
 } ef_cam_flags;
 
 /* Depth-row of the camera->clip projection: z_clip/w = alpha + beta/d for

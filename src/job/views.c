@@ -126,10 +126,13 @@ int ef_camera_flags(ef_job *J, ef_cam_flags *flags, char *src, size_t srclen, ef
         ef_err_set_file(err, path);
         return 1;
     }
-    /* The command line's lens and clip planes win over the file's. */
+    /* The command line's lens and clip planes win over the file's; a lens
+     * from the file says so (src, written below, outlives the camera). */
     if (flags->fov.set) {
         f.fov = flags->fov;
         f.vfov.set = 0;
+    } else if (f.fov.set || f.vfov.set) {
+        f.fov_src = src;
     }
     if (flags->near_.set)
         f.near_ = flags->near_;
