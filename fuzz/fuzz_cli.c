@@ -1,5 +1,5 @@
 /* libFuzzer target: the command line itself (options, SPECs, scene JSON,
- * layered profiles), as src/cli/options.c parses it, then the parsed scene
+ * layered profiles), as src/job/args.c parses it, then the parsed scene
  * evaluated on a fan of rays. One input:
  *   byte 0 = mode: 0 command line only; 1 the rest after the first NUL is a
  *            scene file (--scene FILE); 2 the rest is a layered profile

@@ -1,5 +1,5 @@
 /* libFuzzer target: one input = one EXR file, run through the same sequence
- * as the CLI (src/cli/run.c):
+ * as a run (src/job/frame.c):
  *   ef_exr_open -> ef_find_channels -> ef_exr_read_cam_meta ->
  *   ef_camera_resolve -> ef_depth_conv_init -> ef_exr_stream -> ef_exr_close
  * with a callback that reads every colour/alpha/depth value, reconstructs
