@@ -31,7 +31,7 @@ $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -Wall -Wextra \
     -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -I /usr/include/OpenEXR \
     -o "$exe" \
-    "$here/fuzz_exr.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c \
+    "$here/fuzz_exr.c" "$root"/src/core/*.c "$root"/src/io/exr_*.c "$root/src/io/half_conv.c" \
     -lOpenEXRCore-3_1 -ldeflate -lm -lpthread -ldl
 echo "built $exe"
 # fuzz_cli: the option parser, SPECs, scene files and profiles (no OIIO/OCIO).
@@ -56,7 +56,7 @@ mv fuzz_cli.o args.o argscan.o scene_build.o colour.o "$out/"
 # shellcheck disable=SC2086
 $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
     -I "$root/src/core" -I "$root/src/io" -I "$out/generated" -I /usr/include/OpenEXR \
-    -c "$root"/src/core/*.c "$root"/src/io/exr_*.c "$root/src/io/scene_file.c" \
+    -c "$root"/src/core/*.c "$root"/src/io/exr_*.c "$root/src/io/half_conv.c" "$root/src/io/scene_file.c" \
     "$root/src/io/camera_file.c"
 mkdir -p "$out/obj" && mv ./*.o "$out/obj/"
 # shellcheck disable=SC2086

@@ -8,6 +8,9 @@
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
+#if defined(__clang__)
+#include <cpuid.h>
+#endif
 #define EF_HAVE_F16C 1
 #endif
 
@@ -107,7 +110,12 @@ __attribute__((target("avx,f16c"))) static void f2h_f16c(const float *f, uint16_
 /* Whether this processor runs the F16C paths. */
 static int f16c_ok(void)
 {
-#ifdef EF_HAVE_F16C
+#if defined(EF_HAVE_F16C) && defined(__clang__)
+    /* clang's __builtin_cpu_supports knows no "f16c" (the fuzzers build
+     * with clang): CPUID leaf 1, ECX bit 28 AVX, bit 29 F16C */
+    unsigned a, b, c, d;
+    return __get_cpuid(1, &a, &b, &c, &d) && (c >> 28 & 1) && (c >> 29 & 1);
+#elif defined(EF_HAVE_F16C)
     return __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
 #else
     return 0;
