@@ -46,9 +46,7 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
     if (exr_get_storage(f->ctx, p, &st) || exr_get_data_window(f->ctx, p, &dw) ||
         exr_get_display_window(f->ctx, p, &disp) || exr_get_channels(f->ctx, p, &cl))
         return ef_fail(err, "part %d has an incomplete header (%s)", p, last_core_msg);
-    if (st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED)
-        return ef_fail(err, "part %d holds deep data, which exrfog does not fog (flatten it first, "
-                            "e.g. oiiotool IN --flatten -o FLAT.exr)", p);
+    const int deep = st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED;
     const exr_attr_box2i_t *win[2] = { &dw, &disp };
     const char *wname[2] = { "data", "display" };
     for (int i = 0; i < 2; ++i) {
@@ -94,6 +92,10 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
                                 "(OpenEXR's RgbaInputFile, Nuke), or render without subsampling",
                            cl->entries[c].name.str, cl->entries[c].x_sampling,
                            cl->entries[c].y_sampling);
+    /* Deep parts size their buffers from their sample tables, checked
+     * chunk by chunk as they are read (exr_deep.c). */
+    if (deep)
+        return 0;
     if (st == EXR_STORAGE_TILED) {
         uint32_t tx, ty;
         exr_tile_level_mode_t lm;

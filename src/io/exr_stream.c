@@ -775,6 +775,55 @@ static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, ex
     return t;
 }
 
+int ef_exr_copy_attrs(const ef_exr_file *in, int pin, exr_context_t out, int pout,
+                      const char *params, const char *history, ef_err *err)
+{
+    if (params && exr_attr_set_string(out, pout, "exrfog/parameters", params))
+        return ef_fail(err, "cannot record exrfog/parameters");
+    if (history) {
+        /* Earlier passes' lines first, as oiiotool appends to ImageHistory. */
+        const exr_attribute_t *h = NULL;
+        const char *prev = NULL;
+        if (exr_get_attribute_by_name(in->ctx, pin, "exrfog/history", &h) == EXR_ERR_SUCCESS &&
+            h->type == EXR_ATTR_STRING && h->string && h->string->str && h->string->length > 0)
+            prev = h->string->str;
+        const size_t n = (prev ? strlen(prev) + 1 : 0) + strlen(history) + 1;
+        char *v = malloc(n);
+        if (!v)
+            return ef_fail(err, "out of memory");
+        snprintf(v, n, "%s%s%s", prev ? prev : "", prev ? "\n" : "", history);
+        const int bad = exr_attr_set_string(out, pout, "exrfog/history", v) != EXR_ERR_SUCCESS;
+        free(v);
+        if (bad)
+            return ef_fail(err, "cannot record exrfog/history: %s", ef_exr_last_core_message());
+    }
+    /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
+     * (EXR_ATTR_OPAQUE); declare those first so the copy skips them. */
+    int32_t na = 0;
+    exr_get_attribute_count(in->ctx, pin, &na);
+    for (int32_t i = 0; i < na; ++i) {
+        const exr_attribute_t *a;
+        if (exr_get_attribute_by_index(in->ctx, pin, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
+            a->type != EXR_ATTR_OPAQUE || !a->opaque)
+            continue;
+        if (exr_attr_set_user(out, pout, a->name, a->type_name, a->opaque->size,
+                              a->opaque->packed_data))
+            return ef_fail(err, "cannot copy attribute '%s' of part %d: %s", a->name, pin,
+                           ef_exr_last_core_message());
+    }
+    if (exr_copy_unset_attributes(out, pout, in->ctx, pin))
+        return ef_fail(err, "cannot copy the header of part %d: %s", pin, ef_exr_last_core_message());
+    /* Core 3.1.5 can stop copying early yet report success; never drop
+     * metadata silently. */
+    for (int32_t i = 0; i < na; ++i) {
+        const exr_attribute_t *a, *b;
+        if (exr_get_attribute_by_index(in->ctx, pin, EXR_ATTR_LIST_FILE_ORDER, i, &a) == 0 &&
+            exr_get_attribute_by_name(out, pout, a->name, &b) != EXR_ERR_SUCCESS)
+            return ef_fail(err, "cannot copy attribute '%s' of part %d", a->name, pin);
+    }
+    return 0;
+}
+
 static int define_part(const ef_exr_file *in, exr_context_t out, int p,
                        const char *const *extra, int nextra, const ef_channel_plan *plans,
                        int nplans, const ef_exr_file *df, const ef_stream_opts *o, ef_err *err)
@@ -831,50 +880,7 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p,
         return ef_fail(err, "cannot set compression of part %d", p);
     if (o->zip_level > 0 && exr_set_zip_compression_level(out, p, o->zip_level))
         return ef_fail(err, "cannot set the zip level of part %d", p);
-    if (o->param_attr && exr_attr_set_string(out, p, "exrfog/parameters", o->param_attr))
-        return ef_fail(err, "cannot record exrfog/parameters");
-    if (o->history) {
-        /* Earlier passes' lines first, as oiiotool appends to ImageHistory. */
-        const exr_attribute_t *h = NULL;
-        const char *prev = NULL;
-        if (exr_get_attribute_by_name(in->ctx, p, "exrfog/history", &h) == EXR_ERR_SUCCESS &&
-            h->type == EXR_ATTR_STRING && h->string && h->string->str && h->string->length > 0)
-            prev = h->string->str;
-        const size_t n = (prev ? strlen(prev) + 1 : 0) + strlen(o->history) + 1;
-        char *v = malloc(n);
-        if (!v)
-            return ef_fail(err, "out of memory");
-        snprintf(v, n, "%s%s%s", prev ? prev : "", prev ? "\n" : "", o->history);
-        const int bad = exr_attr_set_string(out, p, "exrfog/history", v) != EXR_ERR_SUCCESS;
-        free(v);
-        if (bad)
-            return ef_fail(err, "cannot record exrfog/history: %s", ef_exr_last_core_message());
-    }
-    /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
-     * (EXR_ATTR_OPAQUE); declare those first so the copy skips them. */
-    int32_t na = 0;
-    exr_get_attribute_count(in->ctx, p, &na);
-    for (int32_t i = 0; i < na; ++i) {
-        const exr_attribute_t *a;
-        if (exr_get_attribute_by_index(in->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
-            a->type != EXR_ATTR_OPAQUE || !a->opaque)
-            continue;
-        if (exr_attr_set_user(out, p, a->name, a->type_name, a->opaque->size,
-                              a->opaque->packed_data))
-            return ef_fail(err, "cannot copy attribute '%s' of part %d: %s", a->name, p,
-                           ef_exr_last_core_message());
-    }
-    if (exr_copy_unset_attributes(out, p, in->ctx, p))
-        return ef_fail(err, "cannot copy the header of part %d: %s", p, ef_exr_last_core_message());
-    /* Core 3.1.5 can stop copying early yet report success; never drop
-     * metadata silently. */
-    for (int32_t i = 0; i < na; ++i) {
-        const exr_attribute_t *a, *b;
-        if (exr_get_attribute_by_index(in->ctx, p, EXR_ATTR_LIST_FILE_ORDER, i, &a) == 0 &&
-            exr_get_attribute_by_name(out, p, a->name, &b) != EXR_ERR_SUCCESS)
-            return ef_fail(err, "cannot copy attribute '%s' of part %d", a->name, p);
-    }
-    return 0;
+    return ef_exr_copy_attrs(in, p, out, p, o->param_attr, o->history, err);
 }
 
 /* The depth must hold every colour pixel (it may hold more). */
@@ -1023,15 +1029,10 @@ static int has_long_names(const ef_exr_file *in)
 /* The output stream: Core writes through the caller's descriptor, so the
  * file is the one the caller created (exclusively, beside OUTPUT) and no
  * name is opened again. The first failure's errno is kept for the message. */
-typedef struct out_sink {
-    int fd;
-    int errnum;
-} out_sink;
-
-static int64_t sink_write(exr_const_context_t ctx, void *user, const void *buf, uint64_t sz,
+int64_t ef_exr_sink_write(exr_const_context_t ctx, void *user, const void *buf, uint64_t sz,
                           uint64_t off, exr_stream_error_func_ptr_t error_cb)
 {
-    out_sink *s = user;
+    ef_exr_sink *s = user;
     const unsigned char *p = buf;
     uint64_t done = 0;
     while (done < sz) {
@@ -1103,9 +1104,9 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
             return ef_fail(err, "part %d already has a channel '%s'", plan[k].rgb[0].part, clash);
     }
     ef_exr_init_context(&init);
-    out_sink sink = { out_fd, 0 };
+    ef_exr_sink sink = { out_fd, 0 };
     init.user_data = &sink;
-    init.write_fn = sink_write;
+    init.write_fn = ef_exr_sink_write;
     if (exr_start_write(&out, out_path, EXR_WRITE_FILE_DIRECTLY, &init)) {
         ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
         err->file = out_path;

@@ -24,7 +24,8 @@ enum {
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE,
-    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC
+    OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
+    OPT_DEEP_TOL
 };
 
 static const struct option long_opts[] = {
@@ -34,6 +35,8 @@ static const struct option long_opts[] = {
     { "depth-channel", required_argument, NULL, OPT_DEPTH_CHANNEL },
     { "depth-mode", required_argument, NULL, OPT_DEPTH_MODE },
     { "sky", required_argument, NULL, OPT_SKY },
+    { "deep", required_argument, NULL, OPT_DEEP },
+    { "deep-tol", required_argument, NULL, OPT_DEEP_TOL },
     { "fog", required_argument, NULL, OPT_FOG },
     { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
     { "scene", required_argument, NULL, OPT_SCENE },
@@ -97,6 +100,11 @@ void ef_options_usage(FILE *out)
             "      --colorspace NAME    the image's working space (default: from the header,\n"
             "                           else the config's scene_linear)\n"
             "      --sky fog|keep|distance=D  background pixels (default fog)\n"
+            "      --deep MODE          deep input: samples (default: the input's samples\n"
+            "                           and the fog as volume samples), fog (a fog-only\n"
+            "                           deep element) or flatten (a flat image)\n"
+            "      --deep-tol E         deep fog: |dT| bound when a fog sample is split\n"
+            "                           later (default 1e-3)\n"
             "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
             "                           the flags given here override it\n"
             "      --up-axis y|z|-y|-z|auto|X,Y,Z  up for the height models (default y;\n"
@@ -263,6 +271,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
     o->dwa_level = -1;
     o->pixel_type = -1;
     o->fps = 24;
+    o->deep_tol = EF_DEEP_DEFAULT_TOL;
     /* The scanner's state is this parse's own: runs parse at once, and the
      * host's getopt state is never touched. */
     ef_argscan scan;
@@ -286,6 +295,23 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
                 return ef_fail(err, "--depth-mode '%s' is not one of planar, radial, inverse, "
                                     "normalized, gl-ndc, gl-window, zero-one, reversed, "
                                     "reversed-infinite", a), EF_PARSE_USAGE;
+            break;
+        case OPT_DEEP:
+            if (!strcmp(a, "samples"))
+                o->deep_mode = EF_DEEP_MODE_SAMPLES;
+            else if (!strcmp(a, "fog"))
+                o->deep_mode = EF_DEEP_MODE_FOG;
+            else if (!strcmp(a, "flatten"))
+                o->deep_mode = EF_DEEP_MODE_FLATTEN;
+            else
+                return ef_fail(err, "--deep '%s' is not samples, fog or flatten", a),
+                       EF_PARSE_USAGE;
+            o->deep_set = 1;
+            break;
+        case OPT_DEEP_TOL:
+            if (ef_parse_numbers(a, &o->deep_tol, 1) || !(o->deep_tol > 0) || !(o->deep_tol < 1))
+                return ef_fail(err, "--deep-tol '%s' must be a number between 0 and 1 (e.g. "
+                                    "1e-3)", a), EF_PARSE_USAGE;
             break;
         case OPT_SKY:
             f.has_sky = 1;

@@ -13,6 +13,10 @@ struct ef_colour;
 
 #define EF_MAX_CHAN_TYPES 64
 
+/* --deep: what a deep input becomes. */
+enum { EF_DEEP_MODE_SAMPLES = 0, EF_DEEP_MODE_FOG, EF_DEEP_MODE_FLATTEN };
+#define EF_DEEP_DEFAULT_TOL 1e-3
+
 typedef struct ef_options {
     const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;
     char *scene_text;         /* the scene file's contents as read (owned), or NULL */
@@ -46,6 +50,8 @@ typedef struct ef_options {
     unsigned aov;             /* EF_AOV_* bits: --aov and the scene file's "aov" */
     int has_aov_origin;       /* --aov-origin given */
     double aov_origin[3];     /* subtracted from fog_P */
+    int deep_mode, deep_set;  /* --deep (EF_DEEP_MODE_*) and whether it was given */
+    double deep_tol;          /* --deep-tol */
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
 

@@ -14,6 +14,8 @@
 #include <unistd.h>
 
 #include "apply.h"
+#include "deep_pass.h"
+#include "exr_deep.h"
 #include "exr_dwa.h"
 #include "job_impl.h"
 #include "output.h"
@@ -65,6 +67,8 @@ typedef struct ef_frame {
     ef_stream_stats st;
     int dwa_out;
     float dwa_level;
+    int deep;                 /* the colour part is deep (deep.c's pass) */
+    ef_deep_result deep_res;
 } ef_frame;
 
 /* A display-referred value (0..1) to 8 bits. */
@@ -284,6 +288,45 @@ static int open_inputs(ef_frame *F)
     return 0;
 }
 
+/* A deep colour part: what its pass can do, refused clearly otherwise. */
+static int check_deep(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    F->deep = ef_exr_part_is_deep(&F->in, F->plans[0].rgb[0].part);
+    if (F->df != &F->in && ef_exr_part_is_deep(F->df, F->plans[0].depth.part)) {
+        ef_fail(&F->err, "the depth file is deep; deep samples carry their own Z (give the deep "
+                         "image as INPUT alone)");
+        return ef_job_report(J, o->depth_file, &F->err, 1);
+    }
+    if (!F->deep) {
+        if (o->deep_set && !o->explain) {
+            ef_fail(&F->err, "--deep applies to deep input, and INPUT is flat (leave --deep out)");
+            return ef_job_report(J, o->input, &F->err, 2);
+        }
+        return 0;
+    }
+    const char *why = NULL;
+    int status = 2;
+    if (F->in.nparts > 1)
+        why = "INPUT has several parts beside its deep one; exrfog fogs single-part deep files "
+              "(split the parts first, e.g. oiiotool IN --subimage NAME -o PART.exr)", status = 1;
+    else if (F->nplans > 1)
+        why = "deep input with several views is not supported (choose one with --view NAME)";
+    else if (F->naov)
+        why = "--aov does not apply to deep input yet (use the flat path: --deep flatten gives "
+              "the fogged image without AOVs)";
+    else if (F->foreign)
+        why = "deep input writes EXR only (--deep flatten to an EXR, then convert it)";
+    else if (o->preview)
+        why = "--preview does not apply to deep input";
+    if (why) {
+        ef_fail(&F->err, "%s", why);
+        return ef_job_report(J, o->input, &F->err, status);
+    }
+    return 0;
+}
+
 /* The views to fog (every view of a multi-view file, or those of --view),
  * each with its channels; the working space, when colours or the preview
  * need it (colours written as #RRGGBB or SPACE:R,G,B are then read again
@@ -326,6 +369,8 @@ static int find_views(ef_frame *F)
                          "overwrite it (leave that AOV out, or rename the channel)", list, clash);
         return ef_job_report(J, o->input, &F->err, 2);
     }
+    if ((status = check_deep(F)) != 0)
+        return status;
     if (F->foreign && F->nplans > 1) {
         ef_fail(&F->err, "%s holds one image and INPUT has %d views (%s, ...); choose one with "
                          "--view NAME", strrchr(o->output, '.'), F->nplans, F->plans[0].view);
@@ -559,6 +604,8 @@ static int choose_dwa_output(ef_frame *F)
     const ef_options *o = F->o;
     F->dwa_out = -1;
     F->dwa_level = o->dwa_level;
+    if (F->deep)
+        return 0;
     if (!F->foreign &&
         (o->compression == EXR_COMPRESSION_DWAA || o->compression == EXR_COMPRESSION_DWAB)) {
         F->dwa_out = o->compression;
@@ -584,6 +631,61 @@ static int choose_dwa_output(ef_frame *F)
     return 0;
 }
 
+static void deep_progress(void *user, long px)
+{
+    ef_progress_add(user, px);
+}
+
+/* A deep part's pass (deep.c), with its own statistics line. */
+static int run_deep_pass(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    char params[sizeof o->params + 160];
+    snprintf(params, sizeof params, "%s%s--deep %s --deep-tol %g", o->params,
+             o->params[0] ? " " : "",
+             o->deep_mode == EF_DEEP_MODE_FOG       ? "fog"
+             : o->deep_mode == EF_DEEP_MODE_FLATTEN ? "flatten"
+                                                    : "samples",
+             o->deep_tol);
+    const ef_deep_req q = { .in = &F->in,
+                            .part = F->plans[0].rgb[0].part,
+                            .cplan = &F->plans[0],
+                            .cam = &F->cams[0],
+                            .conv = &F->convs[0],
+                            .scene = F->job.pass[0].scene,
+                            .mode = o->deep_mode,
+                            .tol = o->deep_tol,
+                            .out_path = o->output,
+                            .out_fd = F->out.fd,
+                            .history = F->history,
+                            .params = params,
+                            .threads = F->so.threads,
+                            .zip_level = o->zip_level,
+                            .cancel = J->stop,
+                            .progress = J->active_pg ? deep_progress : NULL,
+                            .progress_user = J };
+    if (ef_deep_run(&q, &F->deep_res, &F->err))
+        return ef_job_report(J, ef_job_cancelled(J) ? o->output : o->input, &F->err,
+                             ef_job_cancelled(J) ? 3 : 1);
+    if (ef_job_cancelled(J)) {
+        ef_fail(&F->err, "cancelled; nothing was written");
+        return ef_job_report(J, o->output, &F->err, 3);
+    }
+    const ef_deep_result *r = &F->deep_res;
+    if (o->stats || o->verbose)
+        ef_job_note(J,
+                    "exrfog: deep: %.0f pixels, %.0f input samples (mean %.2f, max %.0f per "
+                    "pixel); fog samples mean %.2f per pixel (tau at most %g each%s); largest "
+                    "split-error estimate %.3g (--deep-tol %g)%s; output at most %u samples "
+                    "per pixel\n",
+                    r->pixels, r->samples_in, r->pixels > 0 ? r->samples_in / r->pixels : 0,
+                    r->max_in, r->pixels > 0 ? r->fog_samples / r->pixels : 0, r->tau_cap,
+                    r->chromatic ? ", per channel: AR/AG/AB" : "", r->max_split_est, o->deep_tol,
+                    r->capped > 0 ? "; some pixels reached 4096 fog samples" : "", r->max_out);
+    return 0;
+}
+
 /* The pass itself: decode, fog, encode, into OUTPUT's temporary file (or
  * the intermediate EXR of a DWA or foreign output). */
 static int run_pass(ef_frame *F)
@@ -591,6 +693,8 @@ static int run_pass(ef_frame *F)
     ef_job *J = F->J;
     const ef_options *o = F->o;
     const int fd = F->foreign || F->dwa_out >= 0 ? F->mid.fd : F->out.fd;
+    if (F->deep)
+        return run_deep_pass(F);
     if (ef_exr_stream(&F->in, F->df, F->plans, o->output, fd, &F->so, fog_chunk, &F->job, &F->st,
                       &F->err))
         return ef_job_report(J, o->output, &F->err, ef_job_cancelled(J) ? 3 : 1);

@@ -149,7 +149,7 @@ int ef_output_open(ef_output *o, const char *name, const char *suffix, const ef_
                                      strcmp(dir, "/") ? "/" : "", (int) nb, base, tail);
         if (n < 0 || (size_t) n >= sizeof o->tmp)
             return ef_fail(err, "the path is too long for a temporary file beside it"), 1;
-        o->fd = open(o->tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC,
+        o->fd = open(o->tmp, O_RDWR | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC,
                      o->existed ? 0600 : 0666);
         if (o->fd >= 0)
             break;

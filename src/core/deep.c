@@ -1,0 +1,545 @@
+/* Deep pixels: the OpenEXR rules (split, merge, tidy, flatten) and the fog
+ * as volume samples whose alpha and colour are exact integrals. */
+#include "deep.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void ef_deep_buf_init(ef_deep_buf *b, int nch)
+{
+    memset(b, 0, sizeof *b);
+    b->stride = EF_DEEP_STRIDE(nch);
+}
+
+void ef_deep_buf_free(ef_deep_buf *b)
+{
+    free(b->v);
+    b->v = NULL;
+    b->n = b->cap = 0;
+}
+
+double *ef_deep_buf_push(ef_deep_buf *b)
+{
+    if (b->n == b->cap) {
+        const int cap = b->cap ? 2 * b->cap : 16;
+        double *v = realloc(b->v, (size_t) cap * (size_t) b->stride * sizeof *v);
+        if (!v)
+            return NULL;
+        b->v = v;
+        b->cap = cap;
+    }
+    double *s = b->v + (size_t) b->n++ * (size_t) b->stride;
+    memset(s, 0, (size_t) b->stride * sizeof *s);
+    return s;
+}
+
+double ef_deep_split_alpha(double a, double x)
+{
+    if (!(a < 1))
+        return 1;
+    if (a <= FLT_MIN)
+        return a * x;
+    return -expm1(x * log1p(-a));
+}
+
+/* Scales one sample's values to the fraction x of its slab (the split
+ * rule for every channel of s; COPY channels stay). */
+static void split_values(const ef_deep_layout *L, const double *s, double x, double *d)
+{
+    for (int c = 0; c < L->nch; ++c) {
+        switch (L->role[c]) {
+        case EF_DEEP_ALPHA:
+            d[c] = ef_deep_split_alpha(s[c], x);
+            break;
+        case EF_DEEP_COLOR: {
+            const int ai = L->alpha[c];
+            const double a = ai >= 0 ? s[ai] : 0;
+            if (ai >= 0 && !(a < 1))
+                d[c] = s[c];
+            else if (ai >= 0 && a > FLT_MIN)
+                d[c] = s[c] * (ef_deep_split_alpha(a, x) / a);
+            else
+                d[c] = s[c] * x;
+            break;
+        }
+        default:
+            d[c] = s[c];
+        }
+    }
+}
+
+/* Merges coincident q into p: alphas 1 - (1 - a)(1 - b); colours by the
+ * optical-depth weighting of the spec (u = -log1p(-a), v = u / a). */
+static void merge_into(const ef_deep_layout *L, double *p, const double *q)
+{
+    for (int c = 0; c < L->nch; ++c) {
+        if (L->role[c] == EF_DEEP_COPY) {
+            if (p[c] == 0)
+                p[c] = q[c];
+            continue;
+        }
+        if (L->role[c] != EF_DEEP_COLOR)
+            continue;
+        const int ai = L->alpha[c];
+        if (ai < 0) {
+            p[c] += q[c];
+            continue;
+        }
+        const double a1 = p[ai], a2 = q[ai];
+        if (!(a1 < 1) && !(a2 < 1)) {
+            p[c] = 0.5 * (p[c] + q[c]);
+        } else if (!(a1 < 1)) {
+            /* p's colour stands */
+        } else if (!(a2 < 1)) {
+            p[c] = q[c];
+        } else {
+            const double u1 = -log1p(-a1), u2 = -log1p(-a2);
+            const double v1 = a1 > 0 ? u1 / a1 : 1, v2 = a2 > 0 ? u2 / a2 : 1;
+            const double a = a1 + a2 - a1 * a2;
+            const double w = u1 + u2 > 0 ? a / (u1 + u2) : 1;
+            p[c] = w * (p[c] * v1 + q[c] * v2);
+        }
+    }
+    for (int c = 0; c < L->nch; ++c)
+        if (L->role[c] == EF_DEEP_ALPHA)
+            p[c] = p[c] + q[c] - p[c] * q[c];
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    const double x = *(const double *) a, y = *(const double *) b;
+    return x < y ? -1 : x > y;
+}
+
+typedef struct order {
+    double z, zb;
+    int i;
+} order;
+
+static int cmp_order(const void *a, const void *b)
+{
+    const order *x = a, *y = b;
+    if (x->z != y->z)
+        return x->z < y->z ? -1 : 1;
+    if (x->zb != y->zb)
+        return x->zb < y->zb ? -1 : 1;
+    return (x->i > y->i) - (x->i < y->i);
+}
+
+/* The sorted distinct fronts and backs of b's samples into *bounds (grown
+ * as needed). Returns the count, or -1 when out of memory. */
+static int bounds_of(const ef_deep_buf *b, int nch, double **bounds)
+{
+    double *B = malloc((size_t) (2 * b->n + 1) * sizeof *B);
+    if (!B)
+        return -1;
+    int m = 0;
+    for (int i = 0; i < b->n; ++i) {
+        const double *s = b->v + (size_t) i * (size_t) b->stride;
+        B[m++] = s[nch];
+        if (s[nch + 1] > s[nch])
+            B[m++] = s[nch + 1];
+    }
+    qsort(B, (size_t) m, sizeof *B, cmp_double);
+    int u = 0;
+    for (int i = 0; i < m; ++i)
+        if (u == 0 || B[i] != B[u - 1])
+            B[u++] = B[i];
+    *bounds = B;
+    return u;
+}
+
+int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out)
+{
+    const int nch = L->nch, S = in->stride;
+    out->n = 0;
+    if (in->n == 0)
+        return 0;
+    double *B = NULL;
+    const int nb = bounds_of(in, nch, &B);
+    if (nb < 0)
+        return -1;
+    ef_deep_buf split;
+    ef_deep_buf_init(&split, nch);
+    int rc = 0;
+    for (int i = 0; i < in->n && !rc; ++i) {
+        const double *s = in->v + (size_t) i * (size_t) S;
+        const double z = s[nch], zb = s[nch + 1];
+        if (!(zb > z)) {
+            double *d = ef_deep_buf_push(&split);
+            if (!d) {
+                rc = -1;
+                break;
+            }
+            memcpy(d, s, (size_t) S * sizeof *d);
+            d[nch + 1] = z;
+            continue;
+        }
+        /* B holds z exactly: find it, then every piece up to zb. */
+        int lo = 0, hi = nb - 1;
+        while (lo < hi) {
+            const int mid = (lo + hi) / 2;
+            if (B[mid] < z)
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        for (int j = lo; j + 1 < nb && B[j + 1] <= zb; ++j) {
+            double *d = ef_deep_buf_push(&split);
+            if (!d) {
+                rc = -1;
+                break;
+            }
+            if (B[j] == z && B[j + 1] == zb)
+                memcpy(d, s, (size_t) S * sizeof *d);
+            else
+                split_values(L, s, (B[j + 1] - B[j]) / (zb - z), d);
+            d[nch] = B[j];
+            d[nch + 1] = B[j + 1];
+        }
+    }
+    free(B);
+    order *ord = rc ? NULL : malloc((size_t) split.n * sizeof *ord);
+    if (!ord && !rc && split.n > 0)
+        rc = -1;
+    if (!rc) {
+        for (int i = 0; i < split.n; ++i) {
+            const double *s = split.v + (size_t) i * (size_t) S;
+            ord[i] = (order){ s[nch], s[nch + 1], i };
+        }
+        qsort(ord, (size_t) split.n, sizeof *ord, cmp_order);
+        double *prev = NULL;
+        for (int i = 0; i < split.n; ++i) {
+            const double *s = split.v + (size_t) ord[i].i * (size_t) S;
+            if (prev && prev[nch] == s[nch] && prev[nch + 1] == s[nch + 1]) {
+                merge_into(L, prev, s);
+                continue;
+            }
+            double *d = ef_deep_buf_push(out);
+            if (!d) {
+                rc = -1;
+                break;
+            }
+            memcpy(d, s, (size_t) S * sizeof *d);
+            prev = d;
+        }
+    }
+    free(ord);
+    ef_deep_buf_free(&split);
+    return rc;
+}
+
+/* ---- the fog over one interval ---- */
+
+/* The optical depth per channel of the scene over [a, b) of the ray whose
+ * unit-distance form is r1 (b may be INFINITY), and the colour it scatters
+ * in (the scene's, or the tau-weighted mean of the components' own).
+ * Depth-only models are defined from the camera, so theirs is the
+ * difference of the two distances' optical depths; the others integrate a
+ * density along a segment ray that starts at a. *linear: every component's
+ * density is constant along the ray (a split of this interval is then
+ * exact). */
+static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double tau[3],
+                    double F[3], int *linear)
+{
+    double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 };
+    int ninf[3] = { 0, 0, 0 };
+    tau[0] = tau[1] = tau[2] = 0;
+    if (linear)
+        *linear = 1;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        double t[3];
+        if (c->model->depth_only) {
+            ef_ray ra = *r1, rb = *r1;
+            ra.dist = a;
+            ra.planar = a * r1->planar;
+            rb.dist = b;
+            rb.planar = isinf(b) ? INFINITY : b * r1->planar;
+            double ta[3] = { 0, 0, 0 }, tb[3];
+            if (a > 0)
+                c->model->tau(c, &ra, ta);
+            c->model->tau(c, &rb, tb);
+            for (int k = 0; k < 3; ++k)
+                t[k] = isinf(ta[k]) ? INFINITY : tb[k] - ta[k];
+        } else {
+            ef_ray seg = *r1;
+            for (int k = 0; k < 3; ++k)
+                seg.org[k] = r1->org[k] + r1->dir[k] * a;
+            seg.dist = b - a;
+            seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
+            c->model->tau(c, &seg, t);
+        }
+        if (linear && c->model != &ef_fog_exp)
+            *linear = 0;
+        for (int k = 0; k < 3; ++k) {
+            if (!(t[k] > 0))
+                t[k] = 0;
+            tau[k] += t[k];
+            const double col = c->has_color ? c->color[k] : s->color[k];
+            if (isinf(t[k])) {
+                ninf[k]++;
+                winf[k] += col;
+            } else {
+                wc[k] += t[k] * col;
+            }
+        }
+    }
+    for (int k = 0; k < 3; ++k) {
+        if (!s->any_color || tau[k] == 0)
+            F[k] = s->color[k];
+        else
+            F[k] = ninf[k] ? winf[k] / ninf[k] : wc[k] / tau[k];
+    }
+}
+
+/* Appends one fog sample over [a, b) with optical depths tau. */
+static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog, double a, double b,
+                const double tau[3], const double col[3])
+{
+    double *d = ef_deep_buf_push(fog);
+    if (!d)
+        return -1;
+    double al[3], mean = 0;
+    for (int k = 0; k < 3; ++k) {
+        al[k] = isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
+        mean += al[k] / 3;
+    }
+    if (!F->chromatic)
+        al[1] = al[2] = al[0] = mean;
+    for (int k = 0; k < 3; ++k) {
+        if (L->rgb[k] >= 0)
+            d[L->rgb[k]] = col[k] * al[k];
+        if (L->argb[k] >= 0 && L->argb[k] != L->a)
+            d[L->argb[k]] = al[k];
+    }
+    if (L->a >= 0)
+        d[L->a] = mean;
+    d[L->nch] = a;
+    d[L->nch + 1] = b;
+    return 0;
+}
+
+static double max3(const double v[3])
+{
+    return fmax(v[0], fmax(v[1], v[2]));
+}
+
+/* The fog over [a, b) (b finite) in samples, front to back, splitting
+ * where tau passes the cap or a later split's error estimate passes tol;
+ * *Tf: the largest channel's transmittance from the camera to a, advanced
+ * to b. */
+static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
+                        double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+{
+    enum { DEPTH = 48 };
+    struct {
+        double a, b, tau[3], col[3];
+        int depth;
+    } stack[DEPTH + 2];
+    int sp = 0;
+    stack[0].a = a;
+    stack[0].b = b;
+    stack[0].depth = 0;
+    int linear;
+    seg_tau(F->scene, r1, a, b, stack[0].tau, stack[0].col, &linear);
+    sp = 1;
+    while (sp > 0) {
+        const double sa = stack[sp - 1].a, sb = stack[sp - 1].b;
+        double tau[3], col[3];
+        memcpy(tau, stack[sp - 1].tau, sizeof tau);
+        memcpy(col, stack[sp - 1].col, sizeof col);
+        const int depth = stack[sp - 1].depth;
+        --sp;
+        const double m = 0.5 * (sa + sb);
+        const int can = depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples;
+        int split = can && max3(tau) > F->tau_cap;
+        double tm[3], cm[3], est = 0;
+        int have_mid = 0;
+        if (!split && !linear && *Tf > F->tol && isfinite(max3(tau))) {
+            /* The split error of a slab is largest near its middle, h^2/8
+             * max|sigma'| where sigma varies linearly; 1.5 times the
+             * midpoint's deviation from the slab's rule covers curvature. */
+            seg_tau(F->scene, r1, sa, m, tm, cm, NULL);
+            have_mid = 1;
+            double dev = 0;
+            for (int k = 0; k < 3; ++k)
+                dev = fmax(dev, fabs(tm[k] - 0.5 * tau[k]));
+            est = 1.5 * *Tf * dev;
+            split = can && est > F->tol;
+        }
+        if (split) {
+            if (!have_mid)
+                seg_tau(F->scene, r1, sa, m, tm, cm, NULL);
+            double tb[3], cb[3];
+            seg_tau(F->scene, r1, m, sb, tb, cb, NULL);
+            stack[sp].a = m;
+            stack[sp].b = sb;
+            memcpy(stack[sp].tau, tb, sizeof tb);
+            memcpy(stack[sp].col, cb, sizeof cb);
+            stack[sp].depth = depth + 1;
+            ++sp;
+            stack[sp].a = sa;
+            stack[sp].b = m;
+            memcpy(stack[sp].tau, tm, sizeof tm);
+            memcpy(stack[sp].col, cm, sizeof cm);
+            stack[sp].depth = depth + 1;
+            ++sp;
+            continue;
+        }
+        if (st) {
+            if (est > st->max_split_est)
+                st->max_split_est = est;
+            if (fog->n >= F->max_samples)
+                st->capped = 1;
+        }
+        if (emit(L, F, fog, sa, sb, tau, col))
+            return -1;
+        double T = 0;
+        for (int k = 0; k < 3; ++k)
+            T = fmax(T, isinf(tau[k]) ? 0 : exp(-tau[k]));
+        *Tf *= T;
+    }
+    return 0;
+}
+
+/* Behind the last boundary a to infinity: samples out to where what is
+ * left of the fog changes T by at most tol, the last one carrying the
+ * optical depth to infinity (so the flatten is exact). */
+static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
+                    double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+{
+    double tinf[3], cinf[3];
+    seg_tau(F->scene, r1, a, INFINITY, tinf, cinf, NULL);
+    if (!(max3(tinf) > 0))
+        return 0;
+    double Tinf = 0;
+    for (int k = 0; k < 3; ++k)
+        Tinf = fmax(Tinf, isinf(tinf[k]) ? 0 : exp(-tinf[k]));
+    double h = a > 1 ? a : 1, end = a + h;
+    for (int i = 0; i < 400; ++i) {
+        double t[3], c[3], T = 0;
+        end = a + h;
+        seg_tau(F->scene, r1, a, end, t, c, NULL);
+        for (int k = 0; k < 3; ++k)
+            T = fmax(T, isinf(t[k]) ? 0 : exp(-t[k]));
+        if (*Tf * (T - Tinf) <= F->tol || !isfinite(a + 2 * h))
+            break;
+        h *= 2;
+    }
+    const int first = fog->n;
+    if (fog_interval(L, F, r1, a, end, Tf, fog, st))
+        return -1;
+    if (fog->n > first) {
+        /* the last sample takes everything behind its front */
+        double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
+        const double za = d[L->nch], zb = d[L->nch + 1];
+        double t[3], c[3];
+        seg_tau(F->scene, r1, za, INFINITY, t, c, NULL);
+        fog->n--;
+        if (emit(L, F, fog, za, zb, t, c))
+            return -1;
+    }
+    return 0;
+}
+
+/* Whether a tidy sample hides everything behind its front in every fog
+ * channel. */
+static int opaque(const ef_deep_layout *L, const double *s)
+{
+    int any = 0;
+    for (int k = 0; k < 3; ++k) {
+        const int ai = L->argb[k] >= 0 ? L->argb[k] : L->a;
+        if (ai < 0)
+            continue;
+        any = 1;
+        if (s[ai] < 1)
+            return 0;
+    }
+    return any;
+}
+
+int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r,
+                        const ef_deep_buf *tidy, int stop_at_opaque, ef_deep_buf *fog,
+                        ef_deep_stats *st)
+{
+    const int nch = L->nch;
+    fog->n = 0;
+    ef_ray r1 = *r;
+    r1.dist = 1;
+    if (!(r->planar > 0) || !isfinite(r->planar) || !isfinite(r->dist) || !(r->dist > 0))
+        r1.planar = 1;
+    else
+        r1.planar = r->planar / r->dist;
+    double cut = INFINITY;
+    if (stop_at_opaque)
+        for (int i = 0; i < tidy->n; ++i) {
+            const double *s = tidy->v + (size_t) i * (size_t) tidy->stride;
+            if (opaque(L, s)) {
+                cut = s[nch];
+                break;
+            }
+        }
+    double *B = NULL;
+    const int nb = bounds_of(tidy, nch, &B);
+    if (nb < 0)
+        return -1;
+    double Tf = 1, prev = 0;
+    int rc = 0;
+    for (int j = 0; j < nb && !rc; ++j) {
+        const double b = B[j] < cut ? B[j] : cut;
+        if (b > prev)
+            rc = fog_interval(L, F, &r1, prev, b, &Tf, fog, st);
+        if (b > prev)
+            prev = b;
+        if (B[j] >= cut)
+            break;
+    }
+    free(B);
+    if (!rc && isinf(cut)) {
+        const ef_fog_scene *s = F->scene;
+        if (s->sky == EF_SKY_FOG)
+            rc = fog_tail(L, F, &r1, prev, &Tf, fog, st);
+        else if (s->sky == EF_SKY_DISTANCE_MODE && s->sky_distance > prev)
+            rc = fog_interval(L, F, &r1, prev, s->sky_distance, &Tf, fog, st);
+    }
+    if (st) {
+        st->fog_samples += fog->n;
+        st->pixels += 1;
+    }
+    return rc;
+}
+
+void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *out)
+{
+    const int nch = L->nch;
+    double zf = INFINITY, zb = -INFINITY;
+    for (int c = 0; c < nch; ++c)
+        out[c] = 0;
+    int first = 1;
+    for (int i = 0; i < tidy->n; ++i) {
+        const double *s = tidy->v + (size_t) i * (size_t) tidy->stride;
+        for (int c = 0; c < nch; ++c) {
+            if (L->role[c] == EF_DEEP_COLOR) {
+                const int ai = L->alpha[c];
+                out[c] += (ai >= 0 ? 1 - out[ai] : 1) * s[c];
+            } else if (L->role[c] == EF_DEEP_COPY && first) {
+                out[c] = s[c];
+            }
+        }
+        for (int c = 0; c < nch; ++c)
+            if (L->role[c] == EF_DEEP_ALPHA)
+                out[c] += (1 - out[c]) * s[c];
+        zf = fmin(zf, s[nch]);
+        zb = fmax(zb, fmax(s[nch], s[nch + 1]));
+        first = 0;
+    }
+    for (int c = 0; c < nch; ++c) {
+        if (L->role[c] == EF_DEEP_Z)
+            out[c] = zf;
+        else if (L->role[c] == EF_DEEP_ZBACK)
+            out[c] = tidy->n ? zb : INFINITY;
+    }
+}

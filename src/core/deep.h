@@ -1,0 +1,90 @@
+/* Deep pixels (OpenEXR's "Interpreting OpenEXR Deep Pixels"): tidying,
+ * fog as volume samples, and flattening, one pixel at a time. Pure C; the
+ * caller owns every buffer.
+ *
+ * A sample is nch doubles in the layout's channel order followed by two
+ * more, its front and back depths as distances along the pixel's ray
+ * (EF_DEEP_STRIDE). A sample whose back is not beyond its front is a point
+ * sample; otherwise it is a homogeneous slab over [front, back) with
+ * optical depth -log(1 - alpha) per alpha channel and colour c / alpha. */
+#ifndef EF_DEEP_H
+#define EF_DEEP_H
+
+#include "recon.h"
+#include "scene.h"
+
+/* Channels a deep part may have (OpenEXR allows more; exrfog refuses). */
+#define EF_DEEP_MAX_CH 64
+/* Doubles per sample: the channels, then front and back distance. */
+#define EF_DEEP_STRIDE(nch) ((nch) + 2)
+
+enum {
+    EF_DEEP_COLOR = 0,   /* premultiplied by its alpha channel (alpha[] names it) */
+    EF_DEEP_ALPHA,       /* A, AR, AG, AB (and layer.A...) */
+    EF_DEEP_Z,           /* Z: written from the front distance */
+    EF_DEEP_ZBACK,       /* ZBack: written from the back distance */
+    EF_DEEP_COPY         /* unsigned ints (ids): copied, never scaled */
+};
+
+typedef struct ef_deep_layout {
+    int nch;
+    unsigned char role[EF_DEEP_MAX_CH];
+    signed char alpha[EF_DEEP_MAX_CH];  /* COLOR: its alpha channel (-1: none) */
+    int rgb[3];               /* the colour the fog adds to (-1: absent) */
+    int argb[3];              /* the alpha of each of rgb (AR/AG/AB, else A) */
+    int a;                    /* A (-1: absent) */
+} ef_deep_layout;
+
+/* A growable array of samples (EF_DEEP_STRIDE(nch) doubles each). */
+typedef struct ef_deep_buf {
+    double *v;
+    int n, cap, stride;
+} ef_deep_buf;
+
+void ef_deep_buf_init(ef_deep_buf *b, int nch);
+void ef_deep_buf_free(ef_deep_buf *b);
+/* A new sample at the end (zeroed); NULL when out of memory. */
+double *ef_deep_buf_push(ef_deep_buf *b);
+
+/* What the fog pass needs per pixel. */
+typedef struct ef_deep_fog {
+    const ef_fog_scene *scene;
+    double tol;               /* --deep-tol: bound on |dT| when a fog sample is split later */
+    double tau_cap;           /* largest optical depth per fog sample (alpha precision) */
+    int max_samples;          /* fog samples per pixel, at most */
+    int chromatic;            /* write each channel's alpha (AR/AG/AB) */
+} ef_deep_fog;
+
+/* Counters a pixel adds to (the caller sums them). */
+typedef struct ef_deep_stats {
+    double fog_samples, pixels, capped;   /* capped: pixels that hit max_samples */
+    double max_split_est;     /* the largest split-error estimate left in a fog sample */
+} ef_deep_stats;
+
+/* Tidies in (n samples, front/back set) into out: every volume split at
+ * every other sample's front and back (Beer-Lambert within the slab),
+ * coincident samples merged (optical depths add, sources weight by them),
+ * sorted by front then back (points first). Returns 0, or -1 when out of
+ * memory. out must not be in. */
+int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out);
+
+/* The fog along ray r (the pixel's, dist ignored) as volume samples into
+ * fog: between 0 and every boundary of the tidy samples in tidy, and
+ * behind the last per the scene's sky policy, up to the first sample that
+ * is opaque in every fog channel when stop_at_opaque. Each sample's alpha
+ * and colour are the exact integrals over its interval; boundaries are
+ * added where an optical depth passes tau_cap or where the estimated error
+ * of a later split passes tol. Returns 0, or -1 when out of memory. */
+int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r,
+                        const ef_deep_buf *tidy, int stop_at_opaque, ef_deep_buf *fog,
+                        ef_deep_stats *st);
+
+/* Flattens a tidy list front to back ("over" per alpha channel) into
+ * out[nch]; Z gets the nearest front (INFINITY without samples), ZBack the
+ * farthest back. */
+void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *out);
+
+/* The split rule of one alpha at fraction x of a slab: 1 - (1 - a)^x, stably. */
+double ef_deep_split_alpha(double a, double x);
+
+#endif

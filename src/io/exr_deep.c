@@ -1,0 +1,534 @@
+/* Deep scanline I/O from raw chunks: exr_read_deep_chunk gives the packed
+ * table and data, decompressed here (NONE, RLE, ZIPS, ZIP) and checked;
+ * output chunks are packed and compressed here and handed to
+ * exr_write_deep_scanline_chunk / exr_write_scanline_chunk. */
+#define _GNU_SOURCE 1
+#include "exr_deep.h"
+#include "exr_deflate.h"
+#include "half_conv.h"
+
+#include <errno.h>
+#include <libdeflate.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+int ef_exr_part_is_deep(const ef_exr_file *f, int part)
+{
+    exr_storage_t st;
+    return exr_get_storage(f->ctx, part, &st) == EXR_ERR_SUCCESS &&
+           (st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED);
+}
+
+static int type_bytes(exr_pixel_type_t t)
+{
+    return t == EXR_PIXEL_HALF ? 2 : 4;
+}
+
+int ef_deep_in_open(const ef_exr_file *f, int part, ef_deep_in *d, ef_err *err)
+{
+    memset(d, 0, sizeof *d);
+    d->f = f;
+    d->part = part;
+    exr_storage_t st;
+    exr_attr_box2i_t dw;
+    const exr_attr_chlist_t *cl;
+    int32_t lines = 0;
+    if (exr_get_storage(f->ctx, part, &st) || exr_get_data_window(f->ctx, part, &dw) ||
+        exr_get_channels(f->ctx, part, &cl) || exr_get_compression(f->ctx, part, &d->comp))
+        return ef_fail(err, "part %d has an incomplete header", part);
+    if (st == EXR_STORAGE_DEEP_TILED)
+        return ef_fail(err, "part %d is deep and tiled, which exrfog does not read yet (Nuke "
+                            "cannot read tiled deep either): convert it to deep scanlines, e.g. "
+                            "oiiotool IN --scanline -o OUT", part);
+    if (st != EXR_STORAGE_DEEP_SCANLINE)
+        return ef_fail(err, "part %d is not deep", part);
+    switch (d->comp) {
+    case EXR_COMPRESSION_NONE:
+    case EXR_COMPRESSION_RLE:
+    case EXR_COMPRESSION_ZIPS:
+    case EXR_COMPRESSION_ZIP:
+        break;
+    default:
+        return ef_fail(err, "part %d is deep with a compression deep data cannot have (only "
+                            "none, rle, zips and zip exist for deep parts): the file is corrupt",
+                       part);
+    }
+    if (exr_get_scanlines_per_chunk(f->ctx, part, &lines) || lines < 1 || lines > 16)
+        return ef_fail(err, "part %d has an invalid chunk height", part);
+    d->lines = lines;
+    d->x0 = dw.min.x;
+    d->y0 = dw.min.y;
+    d->w = (int) ((int64_t) dw.max.x - dw.min.x + 1);
+    d->h = (int) ((int64_t) dw.max.y - dw.min.y + 1);
+    if (cl->num_channels > EF_DEEP_IO_MAX_CH)
+        return ef_fail(err, "part %d has %d channels; exrfog handles at most %d in a deep part",
+                       part, cl->num_channels, EF_DEEP_IO_MAX_CH);
+    d->nch = cl->num_channels;
+    for (int c = 0; c < d->nch; ++c) {
+        d->name[c] = cl->entries[c].name.str;
+        d->type[c] = cl->entries[c].pixel_type;
+        if (d->type[c] != EXR_PIXEL_HALF && d->type[c] != EXR_PIXEL_FLOAT &&
+            d->type[c] != EXR_PIXEL_UINT)
+            return ef_fail(err, "channel '%s' has an unknown pixel type", d->name[c]);
+    }
+    return 0;
+}
+
+void ef_deep_rows_free(ef_deep_rows *r)
+{
+    free(r->count);
+    free(r->start);
+    free(r->v);
+    free(r->raw);
+    free(r->packed);
+    free(r->tab);
+    if (r->inflater)
+        libdeflate_free_decompressor(r->inflater);
+    memset(r, 0, sizeof *r);
+}
+
+static int grow(void **p, size_t *cap, size_t need)
+{
+    if (need <= *cap)
+        return 0;
+    size_t n = *cap ? *cap : 4096;
+    while (n < need)
+        n *= 2;
+    void *q = realloc(*p, n);
+    if (!q)
+        return -1;
+    *p = q;
+    *cap = n;
+    return 0;
+}
+
+/* OpenEXR's RLE: a negative count n is -n literal bytes, else n + 1
+ * copies of the next byte. Returns the bytes written, or -1 when the
+ * stream does not fit out exactly. */
+static int64_t rle_decode(const uint8_t *in, uint64_t n, uint8_t *out, uint64_t cap)
+{
+    uint64_t i = 0, o = 0;
+    while (i < n) {
+        const int c = (int8_t) in[i++];
+        if (c < 0) {
+            const uint64_t k = (uint64_t) -c;
+            if (i + k > n || o + k > cap)
+                return -1;
+            memcpy(out + o, in + i, k);
+            i += k;
+            o += k;
+        } else {
+            const uint64_t k = (uint64_t) c + 1;
+            if (i >= n || o + k > cap)
+                return -1;
+            memset(out + o, in[i++], k);
+            o += k;
+        }
+    }
+    return (int64_t) o;
+}
+
+/* Unpacks src (n packed bytes) into dst (want bytes) per the compression;
+ * scratch is a buffer of at least want bytes. Returns 0 or -1. */
+static int unpack(ef_deep_rows *r, exr_compression_t comp, const uint8_t *src, uint64_t n,
+                  uint8_t *dst, uint64_t want, uint8_t *scratch)
+{
+    if (n == want) {   /* stored raw (it did not shrink) */
+        memcpy(dst, src, want);
+        return 0;
+    }
+    if (comp == EXR_COMPRESSION_NONE)
+        return -1;
+    if (comp == EXR_COMPRESSION_RLE) {
+        if (rle_decode(src, n, scratch, want) != (int64_t) want)
+            return -1;
+    } else {
+        if (!r->inflater && !(r->inflater = libdeflate_alloc_decompressor()))
+            return -1;
+        size_t got = 0;
+        if (libdeflate_zlib_decompress(r->inflater, src, n, scratch, want, &got) !=
+                LIBDEFLATE_SUCCESS ||
+            got != want)
+            return -1;
+    }
+    ef_zip_reconstruct(dst, scratch, want);
+    return 0;
+}
+
+static double read_value(const uint8_t *p, exr_pixel_type_t t)
+{
+    if (t == EXR_PIXEL_HALF) {
+        const uint32_t b = ef_half_bits_to_float((uint16_t) (p[0] | p[1] << 8));
+        float f;
+        memcpy(&f, &b, 4);
+        return (double) f;
+    }
+    uint32_t u = (uint32_t) p[0] | (uint32_t) p[1] << 8 | (uint32_t) p[2] << 16 |
+                 (uint32_t) p[3] << 24;
+    if (t == EXR_PIXEL_UINT)
+        return (double) u;
+    float f;
+    memcpy(&f, &u, 4);
+    return (double) f;
+}
+
+/* Reads the chunk starting at row cy into r (rows from r->y). */
+static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
+{
+    exr_chunk_info_t ci;
+    const exr_context_t ctx = d->f->ctx;
+    if (exr_read_scanline_chunk_info(ctx, d->part, cy, &ci))
+        return ef_fail(err, "the deep chunk at row %d cannot be located (%s): the file is "
+                            "truncated or corrupt", cy, ef_exr_last_core_message());
+    const int w = d->w, rows = ci.height;
+    if (ci.start_y != cy || rows < 1 || rows > d->lines || ci.width != w)
+        return ef_fail(err, "the deep chunk at row %d has an inconsistent size", cy);
+    const uint64_t tab_raw = (uint64_t) rows * (uint64_t) w * 4;
+    if (ci.sample_count_table_size > tab_raw || ci.packed_size > (1ull << 34) ||
+        ci.sample_count_table_size == 0)
+        return ef_fail(err, "the deep chunk at row %d has an impossible sample table size "
+                            "(%llu bytes): the file is corrupt", cy,
+                       (unsigned long long) ci.sample_count_table_size);
+    if (grow((void **) &r->packed, &r->packcap, ci.packed_size + ci.sample_count_table_size + 8) ||
+        grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
+        return ef_fail(err, "out of memory for a deep chunk");
+    uint8_t *ptab = r->packed + ci.packed_size;
+    if (exr_read_deep_chunk(ctx, d->part, &ci, r->packed, ptab))
+        return ef_fail(err, "the deep chunk at row %d cannot be read (%s): the file is truncated "
+                            "or corrupt", cy, ef_exr_last_core_message());
+    uint8_t *tab = r->tab, *tscratch = r->tab + tab_raw;
+    if (unpack(r, d->comp, ptab, ci.sample_count_table_size, tab, tab_raw, tscratch))
+        return ef_fail(err, "the sample table of the deep chunk at row %d does not decompress: "
+                            "the file is corrupt", cy);
+    /* Cumulative per row; checked monotonic (OpenEXRCore 3.1.5 does not:
+     * CVE-2023-5841) and capped before anything is sized from it. */
+    const int r0 = cy - r->y;
+    uint64_t total = 0;
+    for (int j = 0; j < rows; ++j) {
+        uint32_t prev = 0;
+        for (int x = 0; x < w; ++x) {
+            const uint8_t *p = tab + ((size_t) j * (size_t) w + (size_t) x) * 4;
+            const uint32_t cum = (uint32_t) p[0] | (uint32_t) p[1] << 8 | (uint32_t) p[2] << 16 |
+                                 (uint32_t) p[3] << 24;
+            if (cum < prev || cum - prev > EF_DEEP_MAX_PIXEL_SAMPLES || cum > INT32_MAX)
+                return ef_fail(err, "the deep chunk at row %d has a corrupt sample table "
+                                    "(counts decreasing or above %d per pixel)",
+                               cy, EF_DEEP_MAX_PIXEL_SAMPLES);
+            r->count[(size_t) (r0 + j) * (size_t) w + (size_t) x] = cum - prev;
+            prev = cum;
+        }
+        total += prev;
+    }
+    uint64_t bps = 0;
+    for (int c = 0; c < d->nch; ++c)
+        bps += (uint64_t) type_bytes(d->type[c]);
+    if (total * bps != ci.unpacked_size)
+        return ef_fail(err, "the deep chunk at row %d holds %llu bytes where its sample table "
+                            "says %llu: the file is corrupt", cy,
+                       (unsigned long long) ci.unpacked_size,
+                       (unsigned long long) (total * bps));
+    const uint64_t base = r->start[(size_t) r0 * (size_t) w];
+    if ((base + total) * (uint64_t) d->nch > EF_DEEP_MAX_CHUNK_VALUES)
+        return ef_fail(err, "rows %d-%d hold %llu deep samples, more than exrfog reads at once "
+                            "(the file is probably corrupt)", r->y, r->y + r->n - 1,
+                       (unsigned long long) (base + total));
+    for (int j = 0; j < rows; ++j)
+        for (int x = 0; x < w; ++x) {
+            const size_t i = (size_t) (r0 + j) * (size_t) w + (size_t) x;
+            r->start[i + 1] = r->start[i] + r->count[i];
+        }
+    if (grow((void **) &r->v, &r->vcap, (size_t) (base + total) * (size_t) d->nch * sizeof(double)) ||
+        grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
+        return ef_fail(err, "out of memory for a deep chunk");
+    if (total > 0 &&
+        unpack(r, d->comp, r->packed, ci.packed_size, r->raw, ci.unpacked_size,
+               r->raw + ci.unpacked_size))
+        return ef_fail(err, "the deep chunk at row %d does not decompress: the file is corrupt",
+                       cy);
+    /* per row, every channel in turn over the row's samples */
+    const uint8_t *p = r->raw;
+    for (int j = 0; j < rows; ++j) {
+        const size_t i0 = (size_t) (r0 + j) * (size_t) w;
+        const uint64_t s0 = r->start[i0], ns = r->start[i0 + (size_t) w] - s0;
+        for (int c = 0; c < d->nch; ++c) {
+            const int b = type_bytes(d->type[c]);
+            double *v = r->v + (size_t) s0 * (size_t) d->nch + (size_t) c;
+            for (uint64_t s = 0; s < ns; ++s, p += b)
+                v[(size_t) s * (size_t) d->nch] = read_value(p, d->type[c]);
+        }
+    }
+    r->total = base + total;
+    return 0;
+}
+
+int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
+{
+    const size_t np = (size_t) n * (size_t) d->w;
+    if (grow((void **) &r->count, &r->ccap, np * sizeof *r->count) ||
+        grow((void **) &r->start, &r->pcap, (np + 1) * sizeof *r->start))
+        return ef_fail(err, "out of memory for a deep chunk");
+    r->y = y;
+    r->n = n;
+    r->w = d->w;
+    r->start[0] = 0;
+    r->total = 0;
+    /* chunks start at the data window's top, every d->lines rows */
+    for (int cy = y - (y - d->y0) % d->lines; cy < y + n; cy += d->lines) {
+        if (cy < y)
+            return ef_fail(err, "internal error: rows %d.. do not start a chunk", y);
+        if (read_chunk(d, cy, r, err))
+            return -1;
+    }
+    return 0;
+}
+
+/* ---- writing ---- */
+
+void ef_deep_packed_free(ef_deep_packed *p)
+{
+    free(p->table);
+    free(p->data);
+    free(p->scratch);
+    memset(p, 0, sizeof *p);
+}
+
+static void put_value(uint8_t *p, exr_pixel_type_t t, double v)
+{
+    if (t == EXR_PIXEL_HALF) {
+        const float f = (float) v;
+        uint32_t b;
+        memcpy(&b, &f, 4);
+        const uint16_t h = ef_float_bits_to_half(b);
+        p[0] = (uint8_t) h;
+        p[1] = (uint8_t) (h >> 8);
+        return;
+    }
+    uint32_t u;
+    if (t == EXR_PIXEL_UINT) {
+        u = v > 0 ? (v < 4294967295.0 ? (uint32_t) v : UINT32_MAX) : 0;
+    } else {
+        const float f = (float) v;
+        memcpy(&u, &f, 4);
+    }
+    p[0] = (uint8_t) u;
+    p[1] = (uint8_t) (u >> 8);
+    p[2] = (uint8_t) (u >> 16);
+    p[3] = (uint8_t) (u >> 24);
+}
+
+/* ZIP-compresses raw (n bytes) into *dst (or stores it raw when that does
+ * not shrink); returns the packed size, 0 when out of memory. */
+static uint64_t zip_pack(const uint8_t *raw, uint64_t n, int level, uint8_t **dst, size_t *dcap,
+                         uint8_t **scratch, size_t *scap)
+{
+    if (grow((void **) scratch, scap, n + 8) || grow((void **) dst, dcap, n + 64))
+        return 0;
+    if (n == 0)
+        return 0;
+    ef_zip_deconstruct(*scratch, raw, n);
+    struct libdeflate_compressor *z = libdeflate_alloc_compressor(ef_deflate_level(level));
+    if (!z)
+        return 0;
+    size_t got = libdeflate_zlib_compress(z, *scratch, n, *dst, n);
+    libdeflate_free_compressor(z);
+    if (got == 0 || got >= n) {
+        memcpy(*dst, raw, n);
+        return n;
+    }
+    return got;
+}
+
+int ef_deep_pack_row(int nch, const exr_pixel_type_t *type, int w, const uint32_t *counts,
+                     const double *v, int zip_level, ef_deep_packed *out)
+{
+    uint64_t total = 0, bps = 0;
+    out->max_count = 0;
+    for (int x = 0; x < w; ++x) {
+        total += counts[x];
+        if (counts[x] > out->max_count)
+            out->max_count = counts[x];
+    }
+    for (int c = 0; c < nch; ++c)
+        bps += (uint64_t) type_bytes(type[c]);
+    uint8_t *tab = malloc((size_t) w * 4 + 8), *raw = malloc((size_t) (total * bps) + 8);
+    if (!tab || !raw) {
+        free(tab);
+        free(raw);
+        return -1;
+    }
+    uint32_t cum = 0;
+    for (int x = 0; x < w; ++x) {
+        cum += counts[x];
+        put_value(tab + (size_t) x * 4, EXR_PIXEL_UINT, (double) cum);
+    }
+    uint8_t *p = raw;
+    for (int c = 0; c < nch; ++c) {
+        const int b = type_bytes(type[c]);
+        for (uint64_t s = 0; s < total; ++s, p += b)
+            put_value(p, type[c], v[(size_t) s * (size_t) nch + (size_t) c]);
+    }
+    int rc = 0;
+    out->table_size = zip_pack(tab, (uint64_t) w * 4, zip_level, &out->table, &out->tcap,
+                               &out->scratch, &out->scap);
+    if (out->table_size == 0)
+        rc = -1;
+    out->data_raw = total * bps;
+    out->data_size = total ? zip_pack(raw, total * bps, zip_level, &out->data, &out->dcap,
+                                      &out->scratch, &out->scap)
+                           : 0;
+    if (total && out->data_size == 0)
+        rc = -1;
+    if (!total && grow((void **) &out->data, &out->dcap, 8))
+        rc = -1;
+    free(tab);
+    free(raw);
+    return rc;
+}
+
+int ef_flat_pack_rows(int nch, const exr_pixel_type_t *type, int w, int n, const double *v,
+                      int zip_level, ef_deep_packed *out)
+{
+    uint64_t bps = 0;
+    for (int c = 0; c < nch; ++c)
+        bps += (uint64_t) type_bytes(type[c]);
+    const uint64_t size = (uint64_t) w * (uint64_t) n * bps;
+    uint8_t *raw = malloc((size_t) size + 8);
+    if (!raw)
+        return -1;
+    uint8_t *p = raw;
+    for (int j = 0; j < n; ++j)
+        for (int c = 0; c < nch; ++c) {
+            const int b = type_bytes(type[c]);
+            for (int x = 0; x < w; ++x, p += b)
+                put_value(p, type[c], v[((size_t) j * (size_t) w + (size_t) x) * (size_t) nch + (size_t) c]);
+        }
+    out->data_raw = size;
+    out->data_size = zip_pack(raw, size, zip_level, &out->data, &out->dcap, &out->scratch,
+                              &out->scap);
+    out->table_size = 0;
+    free(raw);
+    return out->data_size ? 0 : -1;
+}
+
+static int cmp_name(const char *a, const char *b)
+{
+    return strcmp(a, b);
+}
+
+int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_file *in, int part,
+                      int deep, int nch, const char *const *name, const exr_pixel_type_t *type,
+                      const char *history, const char *params, ef_err *err)
+{
+    memset(o, 0, sizeof *o);
+    o->fd = fd;
+    o->deep = deep;
+    o->nch = nch;
+    o->path = path;
+    if (nch < 1 || nch > EF_DEEP_IO_MAX_CH)
+        return ef_fail(err, "internal error: %d output channels", nch);
+    for (int c = 0; c < nch; ++c) {
+        o->type[c] = type[c];
+        if (c && cmp_name(name[c - 1], name[c]) >= 0)
+            return ef_fail(err, "internal error: output channels not sorted");
+    }
+    ef_exr_sink *sink = calloc(1, sizeof *sink);
+    if (!sink)
+        return ef_fail(err, "out of memory");
+    sink->fd = fd;
+    o->sink = sink;
+    exr_context_initializer_t init;
+    ef_exr_init_context(&init);
+    init.user_data = sink;
+    init.write_fn = ef_exr_sink_write;
+    if (exr_start_write(&o->ctx, path, EXR_WRITE_FILE_DIRECTLY, &init)) {
+        free(sink);
+        o->sink = NULL;
+        return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
+    }
+    const char *pname = NULL;
+    exr_get_name(in->ctx, part, &pname);
+    int op;
+    int32_t nparts = 0;
+    exr_get_count(in->ctx, &nparts);
+    if (exr_add_part(o->ctx, nparts > 1 ? pname : NULL,
+                     deep ? EXR_STORAGE_DEEP_SCANLINE : EXR_STORAGE_SCANLINE, &op))
+        return ef_fail(err, "cannot add the output part: %s", ef_exr_last_core_message());
+    for (int c = 0; c < nch; ++c)
+        if (exr_add_channel(o->ctx, op, name[c], type[c], EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
+            return ef_fail(err, "cannot add channel '%s': %s", name[c], ef_exr_last_core_message());
+    if (exr_set_compression(o->ctx, op, deep ? EXR_COMPRESSION_ZIPS : EXR_COMPRESSION_ZIP) ||
+        exr_set_lineorder(o->ctx, op, EXR_LINEORDER_INCREASING_Y))
+        return ef_fail(err, "cannot set the output's compression");
+    /* written as -1 ("unknown", which the spec allows) and set in place at
+     * the end, once every pixel's count is known */
+    if (deep && exr_attr_set_int(o->ctx, op, "maxSamplesPerPixel", -1))
+        return ef_fail(err, "cannot set maxSamplesPerPixel: %s", ef_exr_last_core_message());
+    if (ef_exr_copy_attrs(in, part, o->ctx, op, params, history, err))
+        return -1;
+    if (exr_write_header(o->ctx))
+        return ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
+    return 0;
+}
+
+int ef_deep_out_write(ef_deep_out *o, const ef_deep_packed *p, ef_err *err)
+{
+    exr_result_t rc;
+    if (o->deep) {
+        if (p->max_count > o->max_count)
+            o->max_count = p->max_count;
+        rc = exr_write_deep_scanline_chunk(o->ctx, 0, p->y, p->data, p->data_size, p->data_raw,
+                                           p->table, p->table_size);
+    } else {
+        rc = exr_write_scanline_chunk(o->ctx, 0, p->y, p->data, p->data_size);
+    }
+    if (rc) {
+        const ef_exr_sink *s = o->sink;
+        return ef_fail(err, "cannot write the output: %s",
+                       s && s->errnum ? strerror(s->errnum) : ef_exr_last_core_message());
+    }
+    return 0;
+}
+
+/* Finds "maxSamplesPerPixel\0int\0" + size 4 in the header and writes the
+ * count there. */
+static int patch_max_samples(ef_deep_out *o, ef_err *err)
+{
+    static const char key[] = "maxSamplesPerPixel\0int\0\4\0\0\0";
+    const size_t klen = sizeof key - 1;
+    uint8_t buf[65536];
+    const ssize_t n = pread(o->fd, buf, sizeof buf, 0);
+    if (n <= 0)
+        return ef_fail(err, "cannot read the output header back: %s", strerror(errno));
+    const uint8_t *at = memmem(buf, (size_t) n, key, klen);
+    if (!at || (size_t) (at - buf) + klen + 4 > (size_t) n)
+        return ef_fail(err, "cannot find maxSamplesPerPixel in the output header");
+    uint8_t v[4];
+    put_value(v, EXR_PIXEL_UINT, (double) o->max_count);
+    if (pwrite(o->fd, v, 4, (off_t) ((at - buf) + (ptrdiff_t) klen)) != 4)
+        return ef_fail(err, "cannot write maxSamplesPerPixel: %s", strerror(errno));
+    return 0;
+}
+
+int ef_deep_out_end(ef_deep_out *o, ef_err *err)
+{
+    const ef_exr_sink *s = o->sink;
+    int rc = exr_finish(&o->ctx) ? -1 : 0;
+    if (rc)
+        ef_fail(err, "cannot finish the output: %s",
+                s && s->errnum ? strerror(s->errnum) : ef_exr_last_core_message());
+    if (!rc && o->deep)
+        rc = patch_max_samples(o, err);
+    free(o->sink);
+    o->sink = NULL;
+    return rc;
+}
+
+void ef_deep_out_abort(ef_deep_out *o)
+{
+    if (o->ctx)
+        exr_finish(&o->ctx);
+    free(o->sink);
+    o->sink = NULL;
+}

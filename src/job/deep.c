@@ -1,0 +1,594 @@
+/* A deep input's pass (--deep samples | fog | flatten): rows of 16 read,
+ * fogged per pixel (src/core/deep.c) and packed on the worker threads,
+ * written in order by the calling thread, so memory stays bounded by the
+ * rows in flight. */
+#define _GNU_SOURCE 1
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "deep.h"
+#include "deep_pass.h"
+#include "exr_deep.h"
+#include "recon.h"
+
+#define UNIT_ROWS 16
+
+/* The output channels and how each comes from an input channel. */
+typedef struct plan {
+    ef_deep_layout L;         /* in the output's channel order */
+    const char *name[EF_DEEP_MAX_CH];
+    exr_pixel_type_t type[EF_DEEP_MAX_CH];
+    int from[EF_DEEP_MAX_CH]; /* input channel, or -1 (filled below) */
+    int from_alpha[EF_DEEP_MAX_CH];   /* -1, or the output alpha copied in (AR from A) */
+    int z, zb;                /* output Z / ZBack (-1: none) */
+    int in_z, in_zb;          /* input Z / ZBack (-1: none) */
+    char *own[3];             /* names made here (AR/AG/AB) */
+} plan;
+
+/* The last component of a channel name, and its layer's length. */
+static const char *base_of(const char *name, size_t *layer_len)
+{
+    const char *dot = strrchr(name, '.');
+    *layer_len = dot ? (size_t) (dot - name) : 0;
+    return dot ? dot + 1 : name;
+}
+
+static int find_name(const plan *P, const char *name)
+{
+    for (int c = 0; c < P->L.nch; ++c)
+        if (!strcmp(P->name[c], name))
+            return c;
+    return -1;
+}
+
+/* The alpha channel of colour channel c (same layer: R -> AR else A, and
+ * so on; else the base layer's), or -1. */
+static int alpha_for(const plan *P, int c)
+{
+    size_t ll;
+    const char *b = base_of(P->name[c], &ll);
+    const char *want = !strcmp(b, "R") ? "AR" : !strcmp(b, "G") ? "AG" : !strcmp(b, "B") ? "AB" : NULL;
+    char buf[300];
+    for (int pass = 0; pass < 2; ++pass) {
+        const size_t l = pass == 0 ? ll : 0;
+        if (pass == 1 && ll == 0)
+            break;
+        if (want) {
+            snprintf(buf, sizeof buf, "%.*s%s%s", (int) l, P->name[c], l ? "." : "", want);
+            const int i = find_name(P, buf);
+            if (i >= 0)
+                return i;
+        }
+        snprintf(buf, sizeof buf, "%.*s%sA", (int) l, P->name[c], l ? "." : "");
+        const int i = find_name(P, buf);
+        if (i >= 0)
+            return i;
+    }
+    return -1;
+}
+
+static int cmp_str(const void *a, const void *b)
+{
+    return strcmp(*(const char *const *) a, *(const char *const *) b);
+}
+
+/* Adds output channel name (a static or the input's string). */
+static void add_channel(plan *P, const char *name, exr_pixel_type_t t, int from)
+{
+    const int c = P->L.nch++;
+    P->name[c] = name;
+    P->type[c] = t;
+    P->from[c] = from;
+    P->from_alpha[c] = -1;
+}
+
+/* Sorts the output channels by name (the file's order) and fills the
+ * layout's roles from the names. */
+static int finish_plan(plan *P, const ef_deep_in *d, const ef_channel_plan *cp, int chromatic,
+                       ef_err *err)
+{
+    /* sort (name, type, from) together through an index */
+    const int n = P->L.nch;
+    const char *names[EF_DEEP_MAX_CH];
+    memcpy(names, P->name, sizeof names);
+    qsort(names, (size_t) n, sizeof *names, cmp_str);
+    plan Q = *P;   /* own[] travels with the copy */
+    for (int i = 0; i < n; ++i) {
+        int j = 0;
+        while (strcmp(P->name[j], names[i]))
+            ++j;
+        Q.name[i] = P->name[j];
+        Q.type[i] = P->type[j];
+        Q.from[i] = P->from[j];
+    }
+    *P = Q;
+    ef_deep_layout *L = &P->L;
+    P->z = P->zb = -1;
+    for (int c = 0; c < n; ++c) {
+        size_t ll;
+        const char *b = base_of(P->name[c], &ll);
+        L->alpha[c] = -1;
+        if (ll == 0 && !strcmp(b, "Z"))
+            L->role[c] = EF_DEEP_Z, P->z = c;
+        else if (ll == 0 && !strcmp(b, "ZBack"))
+            L->role[c] = EF_DEEP_ZBACK, P->zb = c;
+        else if (!strcmp(b, "A") || !strcmp(b, "AR") || !strcmp(b, "AG") || !strcmp(b, "AB"))
+            L->role[c] = EF_DEEP_ALPHA;
+        else if (P->type[c] == EXR_PIXEL_UINT)
+            L->role[c] = EF_DEEP_COPY;
+        else
+            L->role[c] = EF_DEEP_COLOR;
+    }
+    for (int c = 0; c < n; ++c)
+        if (L->role[c] == EF_DEEP_COLOR)
+            L->alpha[c] = (signed char) alpha_for(P, c);
+    for (int k = 0; k < 3; ++k) {
+        const char *nm = cp ? cp->rgb[k].name : (const char *[]){ "R", "G", "B" }[k];
+        L->rgb[k] = find_name(P, nm);
+        L->argb[k] = L->rgb[k] >= 0 ? L->alpha[L->rgb[k]] : -1;
+    }
+    {
+        char buf[300];
+        size_t ll = 0;
+        if (L->rgb[0] >= 0)
+            base_of(P->name[L->rgb[0]], &ll);
+        snprintf(buf, sizeof buf, "%.*s%sA", (int) ll, L->rgb[0] >= 0 ? P->name[L->rgb[0]] : "",
+                 ll ? "." : "");
+        L->a = find_name(P, buf);
+    }
+    if (L->a < 0 || L->rgb[0] < 0 || L->rgb[1] < 0 || L->rgb[2] < 0)
+        return ef_fail(err, "the deep part has no colour with alpha (R, G, B and A of one layer): "
+                            "exrfog fogs deep samples through their alpha");
+    /* AR/AG/AB the fog adds to a file with A only: from A */
+    for (int c = 0; c < n; ++c)
+        if (P->from[c] < 0 && L->role[c] == EF_DEEP_ALPHA)
+            P->from_alpha[c] = L->a;
+    (void) d;
+    (void) chromatic;
+    return 0;
+}
+
+/* Whether the scene's fog differs between channels anywhere. */
+static int scene_chromatic(const ef_fog_scene *s)
+{
+    /* a component's density per channel: p[0..2] for every model that
+     * has density=R,G,B; compare its grey test instead: tau of a test ray */
+    ef_ray r = { { 0.3, -0.2, -0.93 }, 50, 50, { 0, 1, 0 } };
+    const double n = sqrt(0.09 + 0.04 + 0.93 * 0.93);
+    for (int k = 0; k < 3; ++k)
+        r.dir[k] /= n;
+    for (int i = 0; i < s->ncomp; ++i) {
+        double t[3];
+        s->comp[i].model->tau(&s->comp[i], &r, t);
+        if (t[0] != t[1] || t[1] != t[2])
+            return 1;
+        if (s->comp[i].has_color)
+            return 1;
+    }
+    return 0;
+}
+
+typedef struct unit {
+    int y, n;
+    ef_deep_packed pk[UNIT_ROWS];
+    int npk;
+    int failed;
+    ef_err err;
+} unit;
+
+typedef struct shared {
+    const ef_deep_req *q;
+    const ef_deep_in *d;
+    const plan *P;
+    ef_deep_fog fog;
+    unit *units;
+    int nunits;
+    _Atomic int next;
+    pthread_mutex_t lock;
+    ef_deep_stats st;
+    double samples_in;
+    double max_in;
+} shared;
+
+typedef struct worker {
+    shared *S;
+    ef_deep_rows rows;
+    ef_deep_buf in, tidy, fog, all, out;
+    double *flat;
+    size_t flatcap;
+    uint32_t *counts;
+    double *ov;
+    size_t ovcap;
+    ef_deep_stats st;
+    double samples_in, max_in;
+} worker;
+
+static int push_values(double **v, size_t *cap, size_t need)
+{
+    if (need <= *cap)
+        return 0;
+    size_t n = *cap ? *cap : 1024;
+    while (n < need)
+        n *= 2;
+    double *p = realloc(*v, n * sizeof *p);
+    if (!p)
+        return -1;
+    *v = p;
+    *cap = n;
+    return 0;
+}
+
+/* One pixel: its input samples into w->in (output layout, distances);
+ * returns 0, or -1 with a message. */
+static int load_pixel(worker *w, const ef_deep_rows *R, size_t pi, double k, int x, int y,
+                      ef_err *err)
+{
+    const shared *S = w->S;
+    const plan *P = S->P;
+    const int nin = S->d->nch, nch = P->L.nch;
+    w->in.n = 0;
+    const uint64_t s0 = R->start[pi], s1 = R->start[pi + 1];
+    for (uint64_t s = s0; s < s1; ++s) {
+        const double *iv = R->v + (size_t) s * (size_t) nin;
+        double *o = ef_deep_buf_push(&w->in);
+        if (!o)
+            return ef_fail(err, "out of memory");
+        for (int c = 0; c < nch; ++c)
+            if (P->from[c] >= 0)
+                o[c] = iv[P->from[c]];
+        for (int c = 0; c < nch; ++c)
+            if (P->from_alpha[c] >= 0)
+                o[c] = o[P->from_alpha[c]];
+        const double z = P->in_z >= 0 ? iv[P->in_z] : NAN;
+        double zb = P->in_zb >= 0 ? iv[P->in_zb] : z;
+        if (!(z >= 0) || !(z < INFINITY) || zb != zb)
+            return ef_fail(err, "pixel (%d, %d) has a sample at Z = %g; deep depths must be "
+                                "finite and not negative (the file is corrupt, or its Z is not "
+                                "a distance)", x, y, z);
+        if (!(zb < INFINITY))
+            zb = z;
+        o[nch] = z * k;
+        o[nch + 1] = zb > z ? zb * k : z * k;
+    }
+    if (s1 - s0 > w->max_in)
+        w->max_in = (double) (s1 - s0);
+    w->samples_in += (double) (s1 - s0);
+    return 0;
+}
+
+/* The samples of b into the row's output values (Z and ZBack back to the
+ * file's depth: distance / k). */
+static int append_out(worker *w, const ef_deep_buf *b, double k, size_t *nv)
+{
+    const plan *P = w->S->P;
+    const int nch = P->L.nch;
+    if (push_values(&w->ov, &w->ovcap, (*nv + (size_t) b->n) * (size_t) nch))
+        return -1;
+    for (int i = 0; i < b->n; ++i) {
+        const double *s = b->v + (size_t) i * (size_t) b->stride;
+        double *o = w->ov + (*nv + (size_t) i) * (size_t) nch;
+        memcpy(o, s, (size_t) nch * sizeof *o);
+        if (P->z >= 0)
+            o[P->z] = s[nch] / k;
+        if (P->zb >= 0)
+            o[P->zb] = s[nch + 1] / k;
+    }
+    *nv += (size_t) b->n;
+    return 0;
+}
+
+/* The fog of one pixel into w->out (samples, fog) or w->flat + i*nch. */
+static int fog_pixel(worker *w, const ef_ray *r, int mode, ef_err *err)
+{
+    const shared *S = w->S;
+    const ef_deep_layout *L = &S->P->L;
+    if (ef_deep_tidy(L, &w->in, &w->tidy) ||
+        ef_deep_fog_samples(L, &S->fog, r, &w->tidy, mode != EF_DEEP_MODE_FOG, &w->fog, &w->st))
+        return ef_fail(err, "out of memory");
+    if (mode == EF_DEEP_MODE_FOG)
+        return 0;
+    /* the input's samples and the fog's, tidied together: fog samples are
+     * split nowhere (they hold every input boundary), input volumes are
+     * split at the fog's boundaries and merged with the fog they share */
+    w->all.n = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+        const ef_deep_buf *b = pass ? &w->fog : &w->tidy;
+        for (int i = 0; i < b->n; ++i) {
+            double *d = ef_deep_buf_push(&w->all);
+            if (!d)
+                return ef_fail(err, "out of memory");
+            memcpy(d, b->v + (size_t) i * (size_t) b->stride, (size_t) b->stride * sizeof *d);
+        }
+    }
+    if (ef_deep_tidy(L, &w->all, &w->out))
+        return ef_fail(err, "out of memory");
+    return 0;
+}
+
+static void do_unit(worker *w, unit *u)
+{
+    shared *S = w->S;
+    const ef_deep_req *q = S->q;
+    const ef_deep_in *d = S->d;
+    const plan *P = S->P;
+    const int nch = P->L.nch, W = d->w, mode = q->mode;
+    if (ef_deep_read_rows(d, u->y, u->n, &w->rows, &u->err)) {
+        u->failed = 1;
+        return;
+    }
+    if (mode == EF_DEEP_MODE_FLATTEN &&
+        push_values(&w->flat, &w->flatcap, (size_t) W * (size_t) u->n * (size_t) nch)) {
+        ef_fail(&u->err, "out of memory");
+        u->failed = 1;
+        return;
+    }
+    if (!w->counts && !(w->counts = malloc((size_t) W * sizeof *w->counts))) {
+        ef_fail(&u->err, "out of memory");
+        u->failed = 1;
+        return;
+    }
+    u->npk = 0;
+    for (int j = 0; j < u->n; ++j) {
+        const int y = u->y + j;
+        size_t nv = 0;
+        for (int i = 0; i < W; ++i) {
+            if (q->cancel && atomic_load_explicit(q->cancel, memory_order_relaxed)) {
+                ef_fail(&u->err, "cancelled");
+                u->failed = 1;
+                return;
+            }
+            const int x = d->x0 + i;
+            ef_ray r;
+            ef_reconstruct(q->cam, q->conv, x, y, 1.0, &r);
+            const double k = r.dist;
+            if (load_pixel(w, &w->rows, (size_t) j * (size_t) W + (size_t) i, k, x, y, &u->err) ||
+                fog_pixel(w, &r, mode, &u->err)) {
+                u->failed = 1;
+                return;
+            }
+            if (mode == EF_DEEP_MODE_FLATTEN) {
+                ef_deep_flatten(&P->L, &w->out,
+                                w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch);
+                double *o = w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch;
+                if (P->z >= 0)
+                    o[P->z] = isfinite(o[P->z]) ? o[P->z] / k : INFINITY;
+                if (P->zb >= 0)
+                    o[P->zb] = isfinite(o[P->zb]) ? o[P->zb] / k : INFINITY;
+                continue;
+            }
+            const ef_deep_buf *b = mode == EF_DEEP_MODE_FOG ? &w->fog : &w->out;
+            w->counts[i] = (uint32_t) b->n;
+            if (append_out(w, b, k, &nv)) {
+                ef_fail(&u->err, "out of memory");
+                u->failed = 1;
+                return;
+            }
+        }
+        if (mode != EF_DEEP_MODE_FLATTEN) {
+            ef_deep_packed *pk = &u->pk[u->npk++];
+            pk->y = y;
+            if (ef_deep_pack_row(nch, P->type, W, w->counts, w->ov, q->zip_level, pk)) {
+                ef_fail(&u->err, "out of memory packing row %d", y);
+                u->failed = 1;
+                return;
+            }
+        }
+    }
+    if (mode == EF_DEEP_MODE_FLATTEN) {
+        ef_deep_packed *pk = &u->pk[u->npk++];
+        pk->y = u->y;
+        if (ef_flat_pack_rows(nch, P->type, W, u->n, w->flat, q->zip_level, pk)) {
+            ef_fail(&u->err, "out of memory packing rows %d-%d", u->y, u->y + u->n - 1);
+            u->failed = 1;
+        }
+    }
+}
+
+static void *work(void *arg)
+{
+    worker *w = arg;
+    shared *S = w->S;
+    for (;;) {
+        const int i = atomic_fetch_add(&S->next, 1);
+        if (i >= S->nunits)
+            break;
+        do_unit(w, &S->units[i]);
+        if (S->units[i].failed)
+            break;
+    }
+    return NULL;
+}
+
+static void worker_free(worker *w)
+{
+    ef_deep_rows_free(&w->rows);
+    ef_deep_buf_free(&w->in);
+    ef_deep_buf_free(&w->tidy);
+    ef_deep_buf_free(&w->fog);
+    ef_deep_buf_free(&w->all);
+    ef_deep_buf_free(&w->out);
+    free(w->flat);
+    free(w->counts);
+    free(w->ov);
+}
+
+/* Builds the output plan for the mode. */
+static int make_plan(const ef_deep_req *q, const ef_deep_in *d, int chromatic, plan *P, ef_err *err)
+{
+    memset(P, 0, sizeof *P);
+    P->in_z = P->in_zb = -1;
+    for (int c = 0; c < d->nch; ++c) {
+        if (!strcmp(d->name[c], "Z"))
+            P->in_z = c;
+        else if (!strcmp(d->name[c], "ZBack"))
+            P->in_zb = c;
+    }
+    if (P->in_z < 0)
+        return ef_fail(err, "the deep part has no Z channel: every deep sample needs its depth");
+    const ef_channel_plan *cp = q->cplan;
+    if (q->mode == EF_DEEP_MODE_FOG) {
+        /* a fog-only element: colour and alpha in half (float where the
+         * scene's fog is chromatic it still fits half), depths in float */
+        static const char *const rgba[] = { "R", "G", "B", "A", "AR", "AG", "AB" };
+        for (int i = 0; i < (chromatic ? 7 : 4); ++i)
+            add_channel(P, rgba[i], EXR_PIXEL_HALF, -1);
+        add_channel(P, "Z", EXR_PIXEL_FLOAT, -1);
+        add_channel(P, "ZBack", EXR_PIXEL_FLOAT, -1);
+        return finish_plan(P, d, NULL, chromatic, err);
+    }
+    for (int c = 0; c < d->nch; ++c) {
+        if (q->mode == EF_DEEP_MODE_FLATTEN && c == P->in_zb)
+            continue;
+        add_channel(P, d->name[c], d->type[c], c);
+    }
+    if (q->mode == EF_DEEP_MODE_SAMPLES && P->in_zb < 0)
+        add_channel(P, "ZBack", EXR_PIXEL_FLOAT, -1);
+    if (chromatic) {
+        /* AR/AG/AB beside the colour's A, when the file has only A */
+        static const char *const ab[] = { "AR", "AG", "AB" };
+        size_t ll;
+        base_of(cp->rgb[0].name, &ll);
+        for (int k = 0; k < 3; ++k) {
+            char buf[300];
+            snprintf(buf, sizeof buf, "%.*s%s%s", (int) ll, cp->rgb[0].name, ll ? "." : "", ab[k]);
+            int have = 0;
+            for (int c = 0; c < P->L.nch; ++c)
+                have |= !strcmp(P->name[c], buf);
+            if (have)
+                continue;
+            char *s = strdup(buf);
+            if (!s)
+                return ef_fail(err, "out of memory");
+            P->own[k] = s;
+            add_channel(P, s, EXR_PIXEL_HALF, -1);
+        }
+    }
+    return finish_plan(P, d, cp, chromatic, err);
+}
+
+int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
+{
+    memset(res, 0, sizeof *res);
+    ef_deep_in d;
+    if (ef_deep_in_open(q->in, q->part, &d, err))
+        return -1;
+    const int chromatic = scene_chromatic(q->scene);
+    plan *P = calloc(1, sizeof *P);
+    if (!P)
+        return ef_fail(err, "out of memory");
+    int rc = make_plan(q, &d, chromatic, P, err);
+    /* Z must be a distance along the ray (affine): planar or radial */
+    if (!rc) {
+        ef_ray r1, r2;
+        const int cx = d.x0 + d.w / 2, cy = d.y0 + d.h / 2;
+        ef_reconstruct(q->cam, q->conv, cx, cy, 1.0, &r1);
+        ef_reconstruct(q->cam, q->conv, cx, cy, 2.0, &r2);
+        if (!(fabs(r2.dist - 2 * r1.dist) <= 1e-9 * r2.dist) || !(r1.dist > 0))
+            rc = ef_fail(err, "deep Z is a distance along each pixel's ray (the OpenEXR deep "
+                              "rules); --depth-mode must be planar (the default) or radial");
+    }
+    shared S;
+    memset(&S, 0, sizeof S);
+    S.q = q;
+    S.d = &d;
+    S.P = P;
+    S.fog.scene = q->scene;
+    S.fog.tol = q->tol;
+    S.fog.tau_cap = P->type[P->L.a] == EXR_PIXEL_HALF ? 2.0 : 10.0;
+    S.fog.max_samples = 4096;
+    S.fog.chromatic = chromatic;
+    res->tau_cap = S.fog.tau_cap;
+    res->chromatic = chromatic;
+    const char *names[EF_DEEP_MAX_CH];
+    for (int c = 0; c < P->L.nch; ++c)
+        names[c] = P->name[c];
+    ef_deep_out out;
+    memset(&out, 0, sizeof out);
+    int began = 0;
+    if (!rc) {
+        rc = ef_deep_out_begin(&out, q->out_path, q->out_fd, q->in, q->part,
+                               q->mode != EF_DEEP_MODE_FLATTEN, P->L.nch, names, P->type,
+                               q->history, q->params, err);
+        began = 1;
+    }
+    const int nthreads = q->threads > 0 ? q->threads : 1;
+    const int batch = 4 * nthreads;
+    S.units = calloc((size_t) batch, sizeof *S.units);
+    worker *W = calloc((size_t) nthreads, sizeof *W);
+    if (!rc && (!S.units || !W))
+        rc = ef_fail(err, "out of memory");
+    for (int t = 0; t < nthreads && W; ++t) {
+        W[t].S = &S;
+        ef_deep_buf_init(&W[t].in, P->L.nch);
+        ef_deep_buf_init(&W[t].tidy, P->L.nch);
+        ef_deep_buf_init(&W[t].fog, P->L.nch);
+        ef_deep_buf_init(&W[t].all, P->L.nch);
+        ef_deep_buf_init(&W[t].out, P->L.nch);
+    }
+    for (int y0 = d.y0; !rc && y0 < d.y0 + d.h;) {
+        /* one batch of units, fogged on the threads, written in order */
+        S.nunits = 0;
+        for (int i = 0; i < batch && y0 < d.y0 + d.h; ++i) {
+            unit *u = &S.units[S.nunits++];
+            u->y = y0;
+            u->n = d.y0 + d.h - y0 < UNIT_ROWS ? d.y0 + d.h - y0 : UNIT_ROWS;
+            u->failed = 0;
+            u->npk = 0;
+            y0 += u->n;
+        }
+        atomic_store(&S.next, 0);
+        pthread_t th[64];
+        int started = 0;
+        for (int t = 1; t < nthreads && t < 64; ++t)
+            if (pthread_create(&th[t], NULL, work, &W[t]) == 0)
+                started = t;
+            else
+                break;
+        work(&W[0]);
+        for (int t = 1; t <= started; ++t)
+            pthread_join(th[t], NULL);
+        for (int i = 0; i < S.nunits && !rc; ++i) {
+            unit *u = &S.units[i];
+            if (u->failed) {
+                *err = u->err;
+                rc = -1;
+                break;
+            }
+            for (int k = 0; k < u->npk && !rc; ++k)
+                rc = ef_deep_out_write(&out, &u->pk[k], err);
+            if (!rc && q->progress)
+                q->progress(q->progress_user, (long) u->n * d.w);
+        }
+        if (!rc && q->cancel && atomic_load(q->cancel))
+            rc = ef_fail(err, "cancelled");
+    }
+    for (int i = 0; S.units && i < batch; ++i)
+        for (int k = 0; k < UNIT_ROWS; ++k)
+            ef_deep_packed_free(&S.units[i].pk[k]);
+    free(S.units);
+    for (int t = 0; t < nthreads && W; ++t) {
+        res->fog_samples += W[t].st.fog_samples;
+        res->pixels += W[t].st.pixels;
+        res->capped += W[t].st.capped;
+        res->samples_in += W[t].samples_in;
+        if (W[t].max_in > res->max_in)
+            res->max_in = W[t].max_in;
+        if (W[t].st.max_split_est > res->max_split_est)
+            res->max_split_est = W[t].st.max_split_est;
+        worker_free(&W[t]);
+    }
+    free(W);
+    if (!rc)
+        rc = ef_deep_out_end(&out, err);
+    else if (began)
+        ef_deep_out_abort(&out);
+    res->max_out = out.max_count;
+    for (int k = 0; k < 3; ++k)
+        free(P->own[k]);
+    free(P);
+    return rc;
+}

@@ -1,0 +1,41 @@
+/* The pass of a deep input (--deep samples | fog | flatten), inside the
+ * job layer. */
+#ifndef EF_DEEP_PASS_H
+#define EF_DEEP_PASS_H
+
+#include <stdatomic.h>
+
+#include "args.h"
+#include "exr_io.h"
+#include "scene.h"
+
+typedef struct ef_deep_req {
+    const ef_exr_file *in;
+    int part;                 /* the deep part holding the colour */
+    const ef_channel_plan *cplan;
+    const ef_camera *cam;
+    const ef_depth_conv *conv;
+    const ef_fog_scene *scene;  /* bound to the camera */
+    int mode;                 /* EF_DEEP_MODE_* */
+    double tol;               /* --deep-tol */
+    const char *out_path;
+    int out_fd;
+    const char *history, *params;
+    int threads, zip_level;
+    const _Atomic int *cancel;
+    void (*progress)(void *user, long pixels);
+    void *progress_user;
+} ef_deep_req;
+
+typedef struct ef_deep_result {
+    double pixels, samples_in, max_in, fog_samples, capped, max_split_est;
+    double tau_cap;
+    unsigned max_out;
+    int chromatic;
+} ef_deep_result;
+
+/* Fogs the deep part q->part of q->in into q->out_fd. Returns 0, or -1
+ * with a message (the output is then unfinished: the caller removes it). */
+int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err);
+
+#endif
