@@ -167,6 +167,14 @@ def flat_pixels(path):
     return [[float(px[y][x][i]) for i in idx] for y in range(H) for x in range(W)]
 
 
+def flat_pixels_any(path):
+    b = oiio.ImageBuf(path)
+    chans = b.spec().channelnames
+    px = b.get_pixels(oiio.FLOAT)
+    idx = [chans.index(n) for n in "RGBA"]
+    return [[float(r[i]) for i in idx] for row in px for r in row]
+
+
 def run(args):
     r = subprocess.run([exrfog] + args, capture_output=True, text=True)
     if r.returncode != 0:
@@ -220,6 +228,34 @@ for name, spec_text, model in (
     for k, e in worst.items():
         print("%s: %s: worst relative error %.2e over %d pixels" % (name, k, e, n))
         check(e < 4e-3, "%s: %s within 4e-3 of the reference (%.2e)" % (name, k, e))
+
+# The merge property on Weta's deep elements (no camera: given by flags):
+# merge the three, make one fog element from the merge, deep-merge it back
+# and flatten (OpenImageIO); it must equal --deep flatten of the merge.
+weta = os.path.join(shared, "real-exr", "openexr-images", "v2", "LowResLeftView")
+if os.path.isdir(weta):
+    cam = ["--fov", "50", "--world-to-camera", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1"]
+    merged = os.path.join(tmp, "weta_merge.exr")
+    merged6 = os.path.join(tmp, "weta_merge6.exr")
+    fog = os.path.join(tmp, "weta_fog.exr")
+    flat = os.path.join(tmp, "weta_flat.exr")
+    back = os.path.join(tmp, "weta_back.exr")
+    e = [os.path.join(weta, n + ".exr") for n in ("Balls", "Leaves", "Trunks")]
+    check(oiiotool([e[0], e[1], "--deepmerge", e[2], "--deepmerge", "-o", merged]) == 0,
+          "oiiotool merges the Weta elements")
+    for mode, out in (("fog", fog), ("flatten", flat)):
+        check(run([merged, "--fog", "height:density=0.05:falloff=0.2:base=0", "--deep", mode,
+                   "-o", out] + cam) == 0, "Weta merge --deep %s runs" % mode)
+    # OIIO merges images with equal channel lists: ZBack = Z (point samples)
+    check(oiiotool([merged, "--ch", "R,G,B,A,Z,ZBack=Z", "-o", merged6]) == 0, "ZBack added")
+    check(oiiotool([merged6, fog, "--deepmerge", "--flatten", "-o", back]) == 0,
+          "the fog element deep-merges back")
+    a, b = flat_pixels_any(flat), flat_pixels_any(back)
+    worst = max(abs(x - y) for pa, pb in zip(a, b) for x, y in zip(pa, pb))
+    print("Weta merge property: largest difference %.2e over %d pixels" % (worst, len(a)))
+    check(len(a) == len(b) and worst <= 2e-3, "Weta: fog element merged back = --deep flatten")
+else:
+    print("no Weta elements: merge property skipped")
 
 if failures:
     print(len(failures), "failure(s)")

@@ -354,7 +354,10 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         const int depth = stack[sp - 1].depth;
         --sp;
         const double m = 0.5 * (sa + sb);
-        const int can = depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples;
+        /* Behind T < tol nothing a later split or alpha's rounding does
+         * can show: one sample takes the rest. */
+        const int can = depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples &&
+                        *Tf > F->tol;
         int split = can && max3(tau) > F->tau_cap;
         double tm[3], cm[3], est = 0;
         int have_mid = 0;

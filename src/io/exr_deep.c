@@ -384,6 +384,10 @@ int ef_deep_pack_row(int nch, const exr_pixel_type_t *type, int w, const uint32_
         rc = -1;
     free(tab);
     free(raw);
+    /* the scratch is the row's raw size: not kept while the chunk waits */
+    free(out->scratch);
+    out->scratch = NULL;
+    out->scap = 0;
     return rc;
 }
 
@@ -409,6 +413,9 @@ int ef_flat_pack_rows(int nch, const exr_pixel_type_t *type, int w, int n, const
                               &out->scap);
     out->table_size = 0;
     free(raw);
+    free(out->scratch);
+    out->scratch = NULL;
+    out->scap = 0;
     return out->data_size ? 0 : -1;
 }
 

@@ -516,7 +516,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         began = 1;
     }
     const int nthreads = q->threads > 0 ? q->threads : 1;
-    const int batch = 4 * nthreads;
+    const int batch = 2 * nthreads;
     S.units = calloc((size_t) batch, sizeof *S.units);
     worker *W = calloc((size_t) nthreads, sizeof *W);
     if (!rc && (!S.units || !W))

@@ -766,12 +766,16 @@ static int commit(ef_frame *F)
         struct rusage ru;
         getrusage(RUSAGE_SELF, &ru);
         const ef_stream_stats *st = &F->st;
-        ef_job_note(J,
-                    "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, encode "
-                    "%.3f s, write %.3f s, wait %.3f s; %ld units on %d threads; peak memory "
-                    "%.1f MB\n",
-                    st->wall_s, st->decode_s, st->fog_s, st->encode_s, st->write_s, st->wait_s,
-                    st->units, F->so.threads, (double) ru.ru_maxrss / 1024.0);
+        if (F->deep) {
+            ef_job_note(J, "exrfog: stats: peak memory %.1f MB\n", (double) ru.ru_maxrss / 1024.0);
+        } else {
+            ef_job_note(J,
+                        "exrfog: stats: wall %.3f s; thread time decode %.3f s, fog %.3f s, "
+                        "encode %.3f s, write %.3f s, wait %.3f s; %ld units on %d threads; peak "
+                        "memory %.1f MB\n",
+                        st->wall_s, st->decode_s, st->fog_s, st->encode_s, st->write_s,
+                        st->wait_s, st->units, F->so.threads, (double) ru.ru_maxrss / 1024.0);
+        }
         ef_print_tau_stats(J, &o->scene, F->job.stats);
     }
     return 0;
