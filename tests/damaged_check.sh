@@ -9,6 +9,23 @@ exrfog=$1 dir=$2/real-exr/openexr-images/Damaged tmp=$3/damaged
 [ -d "$dir" ] || { echo "no $dir: skipped"; exit 77; }
 rm -rf "$tmp" && mkdir -p "$tmp" || exit 1
 fail=0 n=0 refused=0 ran=0
+
+# judge LABEL STATUS: one run's outcome ($tmp/stderr, $out) counted or failed.
+judge() {
+    if grep -q 'Sanitizer\|runtime error' "$tmp/stderr"; then
+        echo "FAIL: $1: sanitizer report"; head -5 "$tmp/stderr"; fail=1
+    elif [ "$2" -eq 0 ]; then
+        ran=$((ran + 1))
+        [ -s "$out" ] || { echo "FAIL: $1: exit 0 without output"; fail=1; }
+    elif [ "$2" -eq 1 ] || [ "$2" -eq 2 ]; then
+        refused=$((refused + 1))
+        [ -e "$out" ] && { echo "FAIL: $1: output left after exit $2"; fail=1; }
+        head -1 "$tmp/stderr" | grep -q '^exrfog: ' ||
+            { echo "FAIL: $1: exit $2 without an exrfog: message"; fail=1; }
+    else
+        echo "FAIL: $1: exit $2"; head -3 "$tmp/stderr"; fail=1
+    fi
+}
 for f in "$dir"/*; do
     [ -f "$f" ] || continue
     case "$f" in *.rst) continue ;; esac
@@ -19,20 +36,7 @@ for f in "$dir"/*; do
         timeout 60 "$exrfog" "$f" -o "$out" --fog exp:density=0.1 --fov 40 \
             --world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --deep "$mode" \
             >"$tmp/stdout" 2>"$tmp/stderr"
-        rc=$?
-        if grep -q 'Sanitizer\|runtime error' "$tmp/stderr"; then
-            echo "FAIL: $f ($mode): sanitizer report"; head -5 "$tmp/stderr"; fail=1
-        elif [ $rc -eq 0 ]; then
-            ran=$((ran + 1))
-            [ -s "$out" ] || { echo "FAIL: $f ($mode): exit 0 without output"; fail=1; }
-        elif [ $rc -eq 1 ] || [ $rc -eq 2 ]; then
-            refused=$((refused + 1))
-            [ -e "$out" ] && { echo "FAIL: $f ($mode): output left after exit $rc"; fail=1; }
-            head -1 "$tmp/stderr" | grep -q '^exrfog: ' ||
-                { echo "FAIL: $f ($mode): exit $rc without an exrfog: message"; fail=1; }
-        else
-            echo "FAIL: $f ($mode): exit $rc"; head -3 "$tmp/stderr"; fail=1
-        fi
+        judge "$f ($mode)" $?
         ls -A "$tmp" | grep -q '^\.out' && { echo "FAIL: $f ($mode): temporary file left"; fail=1; rm -f "$tmp"/.out*; }
     done
 done
@@ -58,19 +62,7 @@ if [ -f "$arnold" ]; then
             rm -f "$out"
             timeout 120 "$exrfog" "$bad" -o "$out" --fog exp:density=0.1 --deep "$mode" \
                 >"$tmp/stdout" 2>"$tmp/stderr"
-            rc=$?
-            if grep -q 'Sanitizer\|runtime error' "$tmp/stderr"; then
-                echo "FAIL: damaged Arnold copy $i ($mode): sanitizer report"; head -5 "$tmp/stderr"; fail=1
-            elif [ $rc -eq 0 ]; then
-                ran=$((ran + 1))
-            elif [ $rc -eq 1 ]; then
-                refused=$((refused + 1))
-                [ -e "$out" ] && { echo "FAIL: damaged Arnold copy $i: output left"; fail=1; }
-                head -1 "$tmp/stderr" | grep -q '^exrfog: ' ||
-                    { echo "FAIL: damaged Arnold copy $i: no exrfog: message"; fail=1; }
-            else
-                echo "FAIL: damaged Arnold copy $i ($mode): exit $rc"; head -3 "$tmp/stderr"; fail=1
-            fi
+            judge "damaged Arnold copy $i ($mode)" $?
         done
         i=$((i + 1))
     done

@@ -229,6 +229,57 @@ for name, spec_text, model in (
         print("%s: %s: worst relative error %.2e over %d pixels" % (name, k, e, n))
         check(e < 4e-3, "%s: %s within 4e-3 of the reference (%.2e)" % (name, k, e))
 
+# The holdout property: a fog sample split at any fraction x by the deep
+# rule, 1 - (1 - alpha)^x, against the exact transmittance of the fog over
+# the same part of the ray (closed form here), weighted by T from the camera
+# to the sample: within --deep-tol (the default, 1e-3).
+import random
+rnd = random.Random(24)
+for spec_text, model in (("height:density=0.4:falloff=0.5:base=-1", ("height", 0.4, 0.5, -1.0)),
+                         ("height:density=2:falloff=3:base=-2", ("height", 2.0, 3.0, -2.0))):
+    el = os.path.join(tmp, "deep_holdout.exr")
+    check(run([src, "--fog", spec_text, "--deep", "fog", "-o", el]) == 0, "holdout element runs")
+    fs = samples_of(oiio.ImageBuf(el))
+    worst, worst_rule, nsplit = 0.0, 0.0, 0
+    for p in range(0, W * H, 7):
+        x, y = p % W, p // W
+        d, k = pixel_ray(x, y)
+        T = 1.0
+        for z, zb, c in fs[p]:
+            a_, b_ = z * k, zb * k
+            if c[3] >= 1 or b_ <= a_:
+                break
+            tab = fog_tau(model, org, d, a_, b_)
+            for _ in range(3):
+                f = rnd.random()
+                exact = math.exp(-fog_tau(model, org, d, a_, a_ + f * (b_ - a_)))
+                # the placement rule alone (the slab's exact tau), and what a
+                # reader gets from the stored half alpha
+                worst_rule = max(worst_rule, T * abs(math.exp(-f * tab) - exact))
+                worst = max(worst, T * abs((1 - c[3]) ** f - exact))
+                nsplit += 1
+            T *= 1 - c[3]
+    print("holdout %s: %d splits, worst T|dT| %.2e from the placement, %.2e with half alpha"
+          % (spec_text, nsplit, worst_rule, worst))
+    check(worst_rule <= 1e-3, "holdout splits of %s: placement within --deep-tol" % spec_text)
+    # half alpha (11 bits) adds its rounding, amplified by e^(tau-1)/tau <= 1.36 at tau 2
+    check(worst <= 1e-3 + 1e-3, "holdout splits of %s within --deep-tol + half rounding" % spec_text)
+
+# Usage: what deep input does not take is refused (exit 2), never ignored.
+flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
+for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
+                   ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2)):
+    r = subprocess.run([exrfog] + args + ["--fog", "exp:density=0.1", "-o",
+                                          os.path.join(tmp, "u.exr")], capture_output=True, text=True)
+    check(r.returncode == want and r.stderr.startswith("exrfog: ") and
+          not os.path.exists(os.path.join(tmp, "u.exr")),
+          "%s -> exit %d with a message (got %d: %s)" % (args[1:], want, r.returncode, r.stderr.strip()))
+r = subprocess.run([exrfog, src, "--fog", "exp:density=0.1", "--explain"], capture_output=True, text=True)
+tot, mx = sum(len(v) for v in input_samples), max(len(v) for v in input_samples)
+check(r.returncode == 0 and ("deep scanline: %d samples over %d pixels" % (tot, W * H)) in r.stdout
+      and ("at most %d per pixel" % mx) in r.stdout,
+      "--explain states the deep samples as OpenImageIO counts them (%d, max %d)" % (tot, mx))
+
 # The merge property on Weta's deep elements (no camera: given by flags):
 # merge the three, make one fog element from the merge, deep-merge it back
 # and flatten (OpenImageIO); it must equal --deep flatten of the merge.

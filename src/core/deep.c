@@ -327,6 +327,18 @@ static double max3(const double v[3])
     return fmax(v[0], fmax(v[1], v[2]));
 }
 
+/* An interval of the fog waiting to be emitted or split. */
+typedef struct piece {
+    double a, b, tau[3], col[3];
+    int depth;
+} piece;
+
+static piece make_piece(double a, double b, const double tau[3], const double col[3], int depth)
+{
+    piece p = { a, b, { tau[0], tau[1], tau[2] }, { col[0], col[1], col[2] }, depth };
+    return p;
+}
+
 /* The fog over [a, b) (b finite) in samples, front to back, splitting
  * where tau passes the cap or a later split's error estimate passes tol;
  * *Tf: the largest channel's transmittance from the camera to a, advanced
@@ -335,17 +347,12 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                         double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
     enum { DEPTH = 48 };
-    struct {
-        double a, b, tau[3], col[3];
-        int depth;
-    } stack[DEPTH + 2];
-    int sp = 0;
-    stack[0].a = a;
-    stack[0].b = b;
-    stack[0].depth = 0;
+    piece stack[DEPTH + 2];
     int linear;
-    seg_tau(F->scene, r1, a, b, stack[0].tau, stack[0].col, &linear);
-    sp = 1;
+    double t0[3], c0[3];
+    seg_tau(F->scene, r1, a, b, t0, c0, &linear);
+    stack[0] = make_piece(a, b, t0, c0, 0);
+    int sp = 1;
     while (sp > 0) {
         const double sa = stack[sp - 1].a, sb = stack[sp - 1].b;
         double tau[3], col[3];
@@ -378,18 +385,8 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                 seg_tau(F->scene, r1, sa, m, tm, cm, NULL);
             double tb[3], cb[3];
             seg_tau(F->scene, r1, m, sb, tb, cb, NULL);
-            stack[sp].a = m;
-            stack[sp].b = sb;
-            memcpy(stack[sp].tau, tb, sizeof tb);
-            memcpy(stack[sp].col, cb, sizeof cb);
-            stack[sp].depth = depth + 1;
-            ++sp;
-            stack[sp].a = sa;
-            stack[sp].b = m;
-            memcpy(stack[sp].tau, tm, sizeof tm);
-            memcpy(stack[sp].col, cm, sizeof cm);
-            stack[sp].depth = depth + 1;
-            ++sp;
+            stack[sp++] = make_piece(m, sb, tb, cb, depth + 1);   /* the back half after */
+            stack[sp++] = make_piece(sa, m, tm, cm, depth + 1);
             continue;
         }
         if (st) {

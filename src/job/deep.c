@@ -592,3 +592,27 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     free(P);
     return rc;
 }
+
+int ef_deep_census(const ef_exr_file *f, int part, double *pixels, double *samples,
+                   double *max_px, ef_err *err)
+{
+    ef_deep_in d;
+    ef_deep_rows r;
+    memset(&r, 0, sizeof r);
+    *pixels = *samples = *max_px = 0;
+    if (ef_deep_in_open(f, part, &d, err))
+        return -1;
+    int rc = 0;
+    for (int y = d.y0; y < d.y0 + d.h && !rc; y += UNIT_ROWS) {
+        const int n = d.y0 + d.h - y < UNIT_ROWS ? d.y0 + d.h - y : UNIT_ROWS;
+        rc = ef_deep_read_rows(&d, y, n, &r, err);
+        for (size_t i = 0; !rc && i < (size_t) n * (size_t) d.w; ++i)
+            if (r.count[i] > *max_px)
+                *max_px = r.count[i];
+        if (!rc)
+            *samples += (double) r.total;
+    }
+    *pixels = (double) d.w * d.h;
+    ef_deep_rows_free(&r);
+    return rc;
+}

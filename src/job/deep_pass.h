@@ -38,4 +38,9 @@ typedef struct ef_deep_result {
  * with a message (the output is then unfinished: the caller removes it). */
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err);
 
+/* For --explain: the pixels, samples and most samples of one pixel of
+ * deep part `part` (every chunk read and checked). Returns 0 or -1. */
+int ef_deep_census(const ef_exr_file *f, int part, double *pixels, double *samples,
+                   double *max_px, ef_err *err);
+
 #endif

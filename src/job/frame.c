@@ -476,6 +476,24 @@ static int resolve_view(ef_frame *F, int v)
         ef_explain(J, J->out, &F->in, pl, cam, &F->convs[v], conv_ok);
         if (!conv_ok)
             fprintf(J->out, "depth conversion: %s\n", F->err.msg);
+        if (F->deep) {
+            double px, ns, mx;
+            ef_err derr = { 0 };
+            const int mode = o->deep_mode;
+            if (ef_deep_census(&F->in, pl->rgb[0].part, &px, &ns, &mx, &derr))
+                fprintf(J->out, "deep: part %d is deep scanline, but %s\n", pl->rgb[0].part,
+                        derr.msg);
+            else
+                fprintf(J->out,
+                        "deep: part %d is deep scanline: %.0f samples over %.0f pixels (mean "
+                        "%.2f, at most %.0f per pixel); --deep %s, --deep-tol %g\n",
+                        pl->rgb[0].part, ns, px, px > 0 ? ns / px : 0, mx,
+                        mode == EF_DEEP_MODE_FOG       ? "fog (a fog-only deep element)"
+                        : mode == EF_DEEP_MODE_FLATTEN ? "flatten (a flat image)"
+                                                       : "samples (the input's samples and the "
+                                                         "fog as volume samples)",
+                        o->deep_tol);
+        }
         return 0;
     }
     if (!conv_ok)
