@@ -16,11 +16,31 @@ void ef_deep_buf_init(ef_deep_buf *b, int nch)
 void ef_deep_buf_free(ef_deep_buf *b)
 {
     free(b->v);
-    b->v = NULL;
-    b->n = b->cap = 0;
+    free(b->bnd);
+    free(b->ord);
+    free(b->sv);
+    const int stride = b->stride;
+    memset(b, 0, sizeof *b);
+    b->stride = stride;
 }
 
-double *ef_deep_buf_push(ef_deep_buf *b)
+/* Grows *p to hold n elements of size sz (capacity in elements in *cap). */
+static int reserve(void **p, int *cap, int n, size_t sz)
+{
+    if (n <= *cap)
+        return 0;
+    int c = *cap ? *cap : 64;
+    while (c < n)
+        c *= 2;
+    void *q = realloc(*p, (size_t) c * sz);
+    if (!q)
+        return -1;
+    *p = q;
+    *cap = c;
+    return 0;
+}
+
+double *ef_deep_buf_push_raw(ef_deep_buf *b)
 {
     if (b->n == b->cap) {
         const int cap = b->cap ? 2 * b->cap : 16;
@@ -30,8 +50,14 @@ double *ef_deep_buf_push(ef_deep_buf *b)
         b->v = v;
         b->cap = cap;
     }
-    double *s = b->v + (size_t) b->n++ * (size_t) b->stride;
-    memset(s, 0, (size_t) b->stride * sizeof *s);
+    return b->v + (size_t) b->n++ * (size_t) b->stride;
+}
+
+double *ef_deep_buf_push(ef_deep_buf *b)
+{
+    double *s = ef_deep_buf_push_raw(b);
+    if (s)
+        memset(s, 0, (size_t) b->stride * sizeof *s);
     return s;
 }
 
@@ -45,35 +71,49 @@ double ef_deep_split_alpha(double a, double x)
 }
 
 /* Scales one sample's values to the fraction x of its slab (the split
- * rule for every channel of s; COPY channels stay). */
+ * rule for every channel of s; COPY channels stay). Each alpha's split is
+ * computed once and shared by the colours that use it. */
 static void split_values(const ef_deep_layout *L, const double *s, double x, double *d)
 {
-    for (int c = 0; c < L->nch; ++c) {
-        switch (L->role[c]) {
-        case EF_DEEP_ALPHA:
+    for (int c = 0; c < L->nch; ++c)
+        if (L->role[c] == EF_DEEP_ALPHA)
             d[c] = ef_deep_split_alpha(s[c], x);
-            break;
-        case EF_DEEP_COLOR: {
-            const int ai = L->alpha[c];
-            const double a = ai >= 0 ? s[ai] : 0;
-            if (ai >= 0 && !(a < 1))
-                d[c] = s[c];
-            else if (ai >= 0 && a > FLT_MIN)
-                d[c] = s[c] * (ef_deep_split_alpha(a, x) / a);
-            else
-                d[c] = s[c] * x;
-            break;
-        }
-        default:
+    for (int c = 0; c < L->nch; ++c) {
+        if (L->role[c] == EF_DEEP_ALPHA)
+            continue;
+        if (L->role[c] != EF_DEEP_COLOR) {
             d[c] = s[c];
+            continue;
         }
+        const int ai = L->alpha[c];
+        const double a = ai >= 0 ? s[ai] : 0;
+        if (ai >= 0 && !(a < 1))
+            d[c] = s[c];
+        else if (ai >= 0 && a > FLT_MIN)
+            d[c] = s[c] * (d[ai] / a);
+        else
+            d[c] = s[c] * x;
     }
 }
 
 /* Merges coincident q into p: alphas 1 - (1 - a)(1 - b); colours by the
- * optical-depth weighting of the spec (u = -log1p(-a), v = u / a). */
+ * optical-depth weighting of the spec (u = -log1p(-a), v = u / a), each
+ * alpha's weights computed once. */
 static void merge_into(const ef_deep_layout *L, double *p, const double *q)
 {
+    double v1[EF_DEEP_MAX_CH], v2[EF_DEEP_MAX_CH], w[EF_DEEP_MAX_CH];
+    for (int c = 0; c < L->nch; ++c) {
+        if (L->role[c] != EF_DEEP_ALPHA)
+            continue;
+        const double a1 = p[c], a2 = q[c];
+        if (a1 < 1 && a2 < 1) {
+            const double u1 = -log1p(-a1), u2 = -log1p(-a2);
+            v1[c] = a1 > 0 ? u1 / a1 : 1;
+            v2[c] = a2 > 0 ? u2 / a2 : 1;
+            const double a = a1 + a2 - a1 * a2;
+            w[c] = u1 + u2 > 0 ? a / (u1 + u2) : 1;
+        }
+    }
     for (int c = 0; c < L->nch; ++c) {
         if (L->role[c] == EF_DEEP_COPY) {
             if (p[c] == 0)
@@ -88,19 +128,13 @@ static void merge_into(const ef_deep_layout *L, double *p, const double *q)
             continue;
         }
         const double a1 = p[ai], a2 = q[ai];
-        if (!(a1 < 1) && !(a2 < 1)) {
+        if (!(a1 < 1) && !(a2 < 1))
             p[c] = 0.5 * (p[c] + q[c]);
-        } else if (!(a1 < 1)) {
-            /* p's colour stands */
-        } else if (!(a2 < 1)) {
+        else if (!(a2 < 1))
             p[c] = q[c];
-        } else {
-            const double u1 = -log1p(-a1), u2 = -log1p(-a2);
-            const double v1 = a1 > 0 ? u1 / a1 : 1, v2 = a2 > 0 ? u2 / a2 : 1;
-            const double a = a1 + a2 - a1 * a2;
-            const double w = u1 + u2 > 0 ? a / (u1 + u2) : 1;
-            p[c] = w * (p[c] * v1 + q[c] * v2);
-        }
+        else if (a1 < 1)
+            p[c] = w[ai] * (p[c] * v1[ai] + q[c] * v2[ai]);
+        /* else p is opaque: its colour stands */
     }
     for (int c = 0; c < L->nch; ++c)
         if (L->role[c] == EF_DEEP_ALPHA)
@@ -128,13 +162,55 @@ static int cmp_order(const void *a, const void *b)
     return (x->i > y->i) - (x->i < y->i);
 }
 
-/* The sorted distinct fronts and backs of b's samples into *bounds (grown
- * as needed). Returns the count, or -1 when out of memory. */
-static int bounds_of(const ef_deep_buf *b, int nch, double **bounds)
+/* Sorts B[0..m): insertion while the input is nearly in order (samples
+ * from renderers, and tidy samples with fog merged in by depth, are), a
+ * full sort once it proves not to be. */
+static void sort_doubles(double *B, int m)
 {
-    double *B = malloc((size_t) (2 * b->n + 1) * sizeof *B);
-    if (!B)
+    long moves = 0;
+    for (int i = 1; i < m; ++i) {
+        const double v = B[i];
+        int j = i;
+        while (j > 0 && B[j - 1] > v) {
+            B[j] = B[j - 1];
+            --j;
+            if (++moves > 8L * m + 64) {
+                B[j] = v;
+                qsort(B, (size_t) m, sizeof *B, cmp_double);
+                return;
+            }
+        }
+        B[j] = v;
+    }
+}
+
+/* The same for the split pieces, by (front, back, index): stable. */
+static void sort_order(order *o, int m)
+{
+    long moves = 0;
+    for (int i = 1; i < m; ++i) {
+        const order v = o[i];
+        int j = i;
+        while (j > 0 && cmp_order(&o[j - 1], &v) > 0) {
+            o[j] = o[j - 1];
+            --j;
+            if (++moves > 8L * m + 64) {
+                o[j] = v;
+                qsort(o, (size_t) m, sizeof *o, cmp_order);
+                return;
+            }
+        }
+        o[j] = v;
+    }
+}
+
+/* The sorted distinct fronts and backs of b's samples, into own->bnd.
+ * Returns the count, or -1 when out of memory. */
+static int bounds_of(const ef_deep_buf *b, int nch, ef_deep_buf *own)
+{
+    if (reserve((void **) &own->bnd, &own->bcap, 2 * b->n + 1, sizeof *own->bnd))
         return -1;
+    double *B = own->bnd;
     int m = 0;
     for (int i = 0; i < b->n; ++i) {
         const double *s = b->v + (size_t) i * (size_t) b->stride;
@@ -142,12 +218,11 @@ static int bounds_of(const ef_deep_buf *b, int nch, double **bounds)
         if (s[nch + 1] > s[nch])
             B[m++] = s[nch + 1];
     }
-    qsort(B, (size_t) m, sizeof *B, cmp_double);
+    sort_doubles(B, m);
     int u = 0;
     for (int i = 0; i < m; ++i)
         if (u == 0 || B[i] != B[u - 1])
             B[u++] = B[i];
-    *bounds = B;
     return u;
 }
 
@@ -157,40 +232,35 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
     out->n = 0;
     if (in->n == 0)
         return 0;
-    double *B = NULL;
-    const int nb = bounds_of(in, nch, &B);
+    const int nb = bounds_of(in, nch, out);
     if (nb < 0)
         return -1;
-    ef_deep_buf split;
-    ef_deep_buf_init(&split, nch);
-    int rc = 0;
-    for (int i = 0; i < in->n && !rc; ++i) {
+    const double *B = out->bnd;
+    /* the pieces: every point, every volume cut at every depth inside it */
+    int np = 0;
+    for (int i = 0; i < in->n; ++i) {
         const double *s = in->v + (size_t) i * (size_t) S;
         const double z = s[nch], zb = s[nch + 1];
-        if (!(zb > z)) {
-            double *d = ef_deep_buf_push(&split);
-            if (!d) {
-                rc = -1;
-                break;
+        int lo = 0;
+        if (zb > z) {
+            /* B holds z exactly: find it, then every piece up to zb */
+            int hi = nb - 1;
+            while (lo < hi) {
+                const int mid = (lo + hi) / 2;
+                if (B[mid] < z)
+                    lo = mid + 1;
+                else
+                    hi = mid;
             }
-            memcpy(d, s, (size_t) S * sizeof *d);
-            d[nch + 1] = z;
-            continue;
         }
-        /* B holds z exactly: find it, then every piece up to zb. */
-        int lo = 0, hi = nb - 1;
-        while (lo < hi) {
-            const int mid = (lo + hi) / 2;
-            if (B[mid] < z)
-                lo = mid + 1;
-            else
-                hi = mid;
-        }
-        for (int j = lo; j + 1 < nb && B[j + 1] <= zb; ++j) {
-            double *d = ef_deep_buf_push(&split);
-            if (!d) {
-                rc = -1;
-                break;
+        for (int j = lo; zb > z ? j + 1 < nb && B[j + 1] <= zb : j == lo; ++j) {
+            if (reserve((void **) &out->sv, &out->scap, (np + 1) * S, sizeof *out->sv))
+                return -1;
+            double *d = out->sv + (size_t) np++ * (size_t) S;
+            if (!(zb > z)) {
+                memcpy(d, s, (size_t) S * sizeof *d);
+                d[nch + 1] = z;
+                continue;
             }
             if (B[j] == z && B[j + 1] == zb)
                 memcpy(d, s, (size_t) S * sizeof *d);
@@ -200,35 +270,28 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
             d[nch + 1] = B[j + 1];
         }
     }
-    free(B);
-    order *ord = rc ? NULL : malloc((size_t) split.n * sizeof *ord);
-    if (!ord && !rc && split.n > 0)
-        rc = -1;
-    if (!rc) {
-        for (int i = 0; i < split.n; ++i) {
-            const double *s = split.v + (size_t) i * (size_t) S;
-            ord[i] = (order){ s[nch], s[nch + 1], i };
-        }
-        qsort(ord, (size_t) split.n, sizeof *ord, cmp_order);
-        double *prev = NULL;
-        for (int i = 0; i < split.n; ++i) {
-            const double *s = split.v + (size_t) ord[i].i * (size_t) S;
-            if (prev && prev[nch] == s[nch] && prev[nch + 1] == s[nch + 1]) {
-                merge_into(L, prev, s);
-                continue;
-            }
-            double *d = ef_deep_buf_push(out);
-            if (!d) {
-                rc = -1;
-                break;
-            }
-            memcpy(d, s, (size_t) S * sizeof *d);
-            prev = d;
-        }
+    if (reserve(&out->ord, &out->ocap, np, sizeof(order)))
+        return -1;
+    order *ord = out->ord;
+    for (int i = 0; i < np; ++i) {
+        const double *s = out->sv + (size_t) i * (size_t) S;
+        ord[i] = (order){ s[nch], s[nch + 1], i };
     }
-    free(ord);
-    ef_deep_buf_free(&split);
-    return rc;
+    sort_order(ord, np);
+    double *prev = NULL;
+    for (int i = 0; i < np; ++i) {
+        const double *s = out->sv + (size_t) ord[i].i * (size_t) S;
+        if (prev && prev[nch] == s[nch] && prev[nch + 1] == s[nch + 1]) {
+            merge_into(L, prev, s);
+            continue;
+        }
+        double *d = ef_deep_buf_push_raw(out);
+        if (!d)
+            return -1;
+        memcpy(d, s, (size_t) S * sizeof *d);
+        prev = d;
+    }
+    return 0;
 }
 
 /* ---- the fog over one interval ---- */
@@ -304,7 +367,7 @@ static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog,
         return -1;
     double al[3], mean = 0;
     for (int k = 0; k < 3; ++k) {
-        al[k] = isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
+        al[k] = k && tau[k] == tau[k - 1] ? al[k - 1] : isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
         mean += al[k] / 3;
     }
     if (!F->chromatic)
@@ -397,10 +460,9 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         }
         if (emit(L, F, fog, sa, sb, tau, col))
             return -1;
-        double T = 0;
-        for (int k = 0; k < 3; ++k)
-            T = fmax(T, isinf(tau[k]) ? 0 : exp(-tau[k]));
-        *Tf *= T;
+        /* the clearest channel's transmittance: exp of the smallest tau */
+        const double tmin = fmin(tau[0], fmin(tau[1], tau[2]));
+        *Tf *= isinf(tmin) ? 0 : exp(-tmin);
     }
     return 0;
 }
@@ -482,10 +544,10 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                 break;
             }
         }
-    double *B = NULL;
-    const int nb = bounds_of(tidy, nch, &B);
+    const int nb = bounds_of(tidy, nch, fog);
     if (nb < 0)
         return -1;
+    const double *B = fog->bnd;
     double Tf = 1, prev = 0;
     int rc = 0;
     for (int j = 0; j < nb && !rc; ++j) {
@@ -497,7 +559,6 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         if (B[j] >= cut)
             break;
     }
-    free(B);
     if (!rc && isinf(cut)) {
         const ef_fog_scene *s = F->scene;
         if (s->sky == EF_SKY_FOG)

@@ -39,12 +39,22 @@ typedef struct ef_deep_layout {
 typedef struct ef_deep_buf {
     double *v;
     int n, cap, stride;
+    /* scratch the calls that fill this buffer keep between pixels (owned):
+     * depths, sort order, split pieces */
+    double *bnd;
+    int bcap;
+    void *ord;
+    int ocap;
+    double *sv;
+    int scap;
 } ef_deep_buf;
 
 void ef_deep_buf_init(ef_deep_buf *b, int nch);
 void ef_deep_buf_free(ef_deep_buf *b);
 /* A new sample at the end (zeroed); NULL when out of memory. */
 double *ef_deep_buf_push(ef_deep_buf *b);
+/* The same, uninitialised: for the caller that fills every value. */
+double *ef_deep_buf_push_raw(ef_deep_buf *b);
 
 /* What the fog pass needs per pixel. */
 typedef struct ef_deep_fog {

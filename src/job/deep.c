@@ -295,14 +295,21 @@ static int fog_pixel(worker *w, const ef_ray *r, int mode, ef_err *err)
      * split nowhere (they hold every input boundary), input volumes are
      * split at the fog's boundaries and merged with the fog they share */
     w->all.n = 0;
-    for (int pass = 0; pass < 2; ++pass) {
-        const ef_deep_buf *b = pass ? &w->fog : &w->tidy;
-        for (int i = 0; i < b->n; ++i) {
-            double *d = ef_deep_buf_push(&w->all);
-            if (!d)
-                return ef_fail(err, "out of memory");
-            memcpy(d, b->v + (size_t) i * (size_t) b->stride, (size_t) b->stride * sizeof *d);
-        }
+    const int nch = L->nch, SS = w->tidy.stride;
+    for (int i = 0, j = 0; i < w->tidy.n || j < w->fog.n;) {
+        /* merged by (front, back), so that the tidy below finds them in
+         * order and sorts nothing */
+        const double *a = i < w->tidy.n ? w->tidy.v + (size_t) i * (size_t) SS : NULL;
+        const double *b = j < w->fog.n ? w->fog.v + (size_t) j * (size_t) SS : NULL;
+        const int take_a = a && (!b || a[nch] < b[nch] || (a[nch] == b[nch] && a[nch + 1] <= b[nch + 1]));
+        double *d = ef_deep_buf_push_raw(&w->all);
+        if (!d)
+            return ef_fail(err, "out of memory");
+        memcpy(d, take_a ? a : b, (size_t) SS * sizeof *d);
+        if (take_a)
+            ++i;
+        else
+            ++j;
     }
     if (ef_deep_tidy(L, &w->all, &w->out))
         return ef_fail(err, "out of memory");
