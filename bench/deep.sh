@@ -8,8 +8,9 @@
 # deep scanline ZIPS. Entries, interleaved, DEEP_ROUNDS rounds (default 2),
 # medians of wall time and of peak RSS (/usr/bin/time):
 #   oiiotool IN -o OUT (a deep copy), oiiotool IN --flatten -o OUT,
-#   exrfog --deep samples | fog | flatten with exp fog, and samples with
-#   height fog; output sizes and samples per pixel from exrfog --stats.
+#   exrfog --deep samples | fog | flatten with exp fog, samples with height
+#   fog, and fog elements of height fog at three --deep-tol; output sizes,
+#   fog samples per pixel and the largest split-error estimate from --stats.
 set -u
 build="${1:-build}"
 N="${DEEP_SAMPLES:-20}"
@@ -24,13 +25,18 @@ trap 'rm -rf "$tmp"' EXIT
 "$build/make_deep" "$tmp/flat.exr" "$tmp/in.exr" "$N" || die "make_deep"
 oiiotool --info "$tmp/in.exr" >/dev/null || die "oiiotool cannot read the deep frame"
 names=("oiiotool deep copy" "oiiotool --flatten" "exrfog --deep samples, exp"
-       "exrfog --deep fog, exp" "exrfog --deep flatten, exp" "exrfog --deep samples, height")
+       "exrfog --deep fog, exp" "exrfog --deep flatten, exp" "exrfog --deep samples, height"
+       "exrfog --deep fog, height, --deep-tol 1e-2" "exrfog --deep fog, height (--deep-tol 1e-3)"
+       "exrfog --deep fog, height, --deep-tol 1e-4")
 cmds=("oiiotool $tmp/in.exr -o $tmp/out.exr"
       "oiiotool $tmp/in.exr --flatten -o $tmp/out.exr"
       "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog exp:density=0.02 --stats"
       "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog exp:density=0.02 --deep fog --stats"
       "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog exp:density=0.02 --deep flatten --stats"
-      "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog height:density=0.05:falloff=0.3:base=0 --stats")
+      "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog height:density=0.05:falloff=0.3:base=0 --stats"
+      "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog height:density=0.05:falloff=0.3:base=0 --deep fog --deep-tol 1e-2 --stats"
+      "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog height:density=0.05:falloff=0.3:base=0 --deep fog --stats"
+      "$build/exrfog $tmp/in.exr -o $tmp/out.exr --fog height:density=0.05:falloff=0.3:base=0 --deep fog --deep-tol 1e-4 --stats")
 declare -A T M S F
 load0="$(cut -d' ' -f1-3 /proc/loadavg)"
 for ((r = 0; r < rounds; ++r)); do
@@ -42,7 +48,7 @@ for ((r = 0; r < rounds; ++r)); do
         T[$i]+="$sec "
         M[$i]+="$kb "
         S[$i]=$(stat -c %s "$tmp/out.exr")
-        F[$i]=$(grep -o 'fog samples mean [0-9.]* per pixel' "$tmp/err" | head -1)
+        F[$i]=$(grep -o 'fog samples mean [0-9.]* per pixel\|largest split-error estimate [0-9.e-]*' "$tmp/err" | paste -sd ';' -)
     done
 done
 median() { tr ' ' '\n' | grep . | sort -g | awk '{a[NR]=$1} END {print (NR%2 ? a[(NR+1)/2] : (a[NR/2]+a[NR/2+1])/2)}'; }
@@ -58,7 +64,7 @@ echo "|---|---:|---:|---:|---:|---:|---|"
 t0=$(echo "${T[0]}" | median); t1=$(echo "${T[1]}" | median)
 for i in "${!cmds[@]}"; do
     t=$(echo "${T[$i]}" | median); m=$(echo "${M[$i]}" | median)
-    printf '| %s | %.2f | %.2f× | %.2f× | %.0f | %.0f | %s |\n' "${names[$i]}" "$t" \
+    printf '| %s | %.2f | %.2f× | %.2f× | %.0f | %.1f | %s |\n' "${names[$i]}" "$t" \
         "$(echo "$t / $t0" | bc -l)" "$(echo "$t / $t1" | bc -l)" "$(echo "$m / 1024" | bc -l)" \
         "$(echo "${S[$i]} / 1048576" | bc -l)" "${F[$i]:-–}"
 done
