@@ -226,12 +226,41 @@ static int bounds_of(const ef_deep_buf *b, int nch, ef_deep_buf *own)
     return u;
 }
 
+/* Whether b is tidy already (renderers mostly write it so): sorted, no
+ * two samples alike, none starting inside an earlier volume. */
+static int is_tidy(const ef_deep_buf *b, int nch)
+{
+    double back = -INFINITY, pz = -INFINITY, pzb = -INFINITY;
+    for (int i = 0; i < b->n; ++i) {
+        const double *s = b->v + (size_t) i * (size_t) b->stride;
+        const double z = s[nch], zb = s[nch + 1] > z ? s[nch + 1] : z;
+        if (z < back || !(z > pz || (z == pz && zb > pzb)))
+            return 0;
+        back = zb;
+        pz = z;
+        pzb = zb;
+    }
+    return 1;
+}
+
 int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out)
 {
     const int nch = L->nch, S = in->stride;
     out->n = 0;
     if (in->n == 0)
         return 0;
+    if (is_tidy(in, nch)) {
+        for (int i = 0; i < in->n; ++i) {
+            const double *s = in->v + (size_t) i * (size_t) S;
+            double *d = ef_deep_buf_push_raw(out);
+            if (!d)
+                return -1;
+            memcpy(d, s, (size_t) S * sizeof *d);
+            if (!(d[nch + 1] > d[nch]))
+                d[nch + 1] = d[nch];
+        }
+        return 0;
+    }
     const int nb = bounds_of(in, nch, out);
     if (nb < 0)
         return -1;
@@ -573,6 +602,63 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
     return rc;
 }
 
+/* "Over" of one sample onto the running flat values. */
+static void over(const ef_deep_layout *L, const double *s, double *out, int first)
+{
+    for (int c = 0; c < L->nch; ++c) {
+        if (L->role[c] == EF_DEEP_COLOR) {
+            const int ai = L->alpha[c];
+            out[c] += (ai >= 0 ? 1 - out[ai] : 1) * s[c];
+        } else if (L->role[c] == EF_DEEP_COPY && first) {
+            out[c] = s[c];
+        }
+    }
+    for (int c = 0; c < L->nch; ++c)
+        if (L->role[c] == EF_DEEP_ALPHA)
+            out[c] += (1 - out[c]) * s[c];
+}
+
+int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef_deep_buf *b,
+                         double *out)
+{
+    const int nch = L->nch, S = a->stride;
+    double zf = INFINITY, zb = -INFINITY, m[EF_DEEP_STRIDE(EF_DEEP_MAX_CH)];
+    for (int c = 0; c < nch; ++c)
+        out[c] = 0;
+    int i = 0, j = 0, first = 1;
+    while (i < a->n || j < b->n) {
+        const double *p = i < a->n ? a->v + (size_t) i * (size_t) S : NULL;
+        const double *q = j < b->n ? b->v + (size_t) j * (size_t) S : NULL;
+        const double *s;
+        if (p && q && p[nch] == q[nch] && p[nch + 1] == q[nch + 1]) {
+            memcpy(m, p, (size_t) S * sizeof *m);
+            merge_into(L, m, q);
+            s = m;
+            ++i, ++j;
+        } else {
+            const int take_p = p && (!q || p[nch] < q[nch] ||
+                                     (p[nch] == q[nch] && p[nch + 1] < q[nch + 1]));
+            s = take_p ? p : q;
+            const double *o = take_p ? q : p;
+            /* the other list's next sample must not start inside this one */
+            if (o && s[nch + 1] > s[nch] && o[nch] < s[nch + 1])
+                return 1;
+            take_p ? ++i : ++j;
+        }
+        over(L, s, out, first);
+        zf = fmin(zf, s[nch]);
+        zb = fmax(zb, fmax(s[nch], s[nch + 1]));
+        first = 0;
+    }
+    for (int c = 0; c < nch; ++c) {
+        if (L->role[c] == EF_DEEP_Z)
+            out[c] = zf;
+        else if (L->role[c] == EF_DEEP_ZBACK)
+            out[c] = first ? INFINITY : zb;
+    }
+    return 0;
+}
+
 void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *out)
 {
     const int nch = L->nch;
@@ -582,17 +668,7 @@ void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *o
     int first = 1;
     for (int i = 0; i < tidy->n; ++i) {
         const double *s = tidy->v + (size_t) i * (size_t) tidy->stride;
-        for (int c = 0; c < nch; ++c) {
-            if (L->role[c] == EF_DEEP_COLOR) {
-                const int ai = L->alpha[c];
-                out[c] += (ai >= 0 ? 1 - out[ai] : 1) * s[c];
-            } else if (L->role[c] == EF_DEEP_COPY && first) {
-                out[c] = s[c];
-            }
-        }
-        for (int c = 0; c < nch; ++c)
-            if (L->role[c] == EF_DEEP_ALPHA)
-                out[c] += (1 - out[c]) * s[c];
+        over(L, s, out, first);
         zf = fmin(zf, s[nch]);
         zb = fmax(zb, fmax(s[nch], s[nch + 1]));
         first = 0;

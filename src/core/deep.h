@@ -94,6 +94,13 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
  * farthest back. */
 void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *out);
 
+/* ef_deep_flatten of the tidy union of two tidy lists a and b whose
+ * samples either coincide (merged) or do not overlap, without building
+ * it. Returns 0, or 1 (out undefined) when a sample of one starts inside a
+ * volume of the other: tidy the union then. */
+int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef_deep_buf *b,
+                         double *out);
+
 /* The split rule of one alpha at fraction x of a slab: 1 - (1 - a)^x, stably. */
 double ef_deep_split_alpha(double a, double x);
 

@@ -282,7 +282,7 @@ static int append_out(worker *w, const ef_deep_buf *b, double k, size_t *nv)
 }
 
 /* The fog of one pixel into w->out (samples, fog) or w->flat + i*nch. */
-static int fog_pixel(worker *w, const ef_ray *r, int mode, ef_err *err)
+static int fog_pixel(worker *w, const ef_ray *r, int mode, double *flat, ef_err *err)
 {
     const shared *S = w->S;
     const ef_deep_layout *L = &S->P->L;
@@ -290,6 +290,10 @@ static int fog_pixel(worker *w, const ef_ray *r, int mode, ef_err *err)
         ef_deep_fog_samples(L, &S->fog, r, &w->tidy, mode != EF_DEEP_MODE_FOG, &w->fog, &w->st))
         return ef_fail(err, "out of memory");
     if (mode == EF_DEEP_MODE_FOG)
+        return 0;
+    /* flatten: the fog has no boundary the input lacks, so the union
+     * needs no split, and is composited as it is walked */
+    if (mode == EF_DEEP_MODE_FLATTEN && !ef_deep_flatten_pair(L, &w->tidy, &w->fog, flat))
         return 0;
     /* the input's samples and the fog's, tidied together: fog samples are
      * split nowhere (they hold every input boundary), input volumes are
@@ -313,6 +317,8 @@ static int fog_pixel(worker *w, const ef_ray *r, int mode, ef_err *err)
     }
     if (ef_deep_tidy(L, &w->all, &w->out))
         return ef_fail(err, "out of memory");
+    if (mode == EF_DEEP_MODE_FLATTEN)
+        ef_deep_flatten(L, &w->out, flat);
     return 0;
 }
 
@@ -352,15 +358,15 @@ static void do_unit(worker *w, unit *u)
             ef_ray r;
             ef_reconstruct(q->cam, q->conv, x, y, 1.0, &r);
             const double k = r.dist;
+            double *o = mode == EF_DEEP_MODE_FLATTEN
+                            ? w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch
+                            : NULL;
             if (load_pixel(w, &w->rows, (size_t) j * (size_t) W + (size_t) i, k, x, y, &u->err) ||
-                fog_pixel(w, &r, mode, &u->err)) {
+                fog_pixel(w, &r, mode, o, &u->err)) {
                 u->failed = 1;
                 return;
             }
-            if (mode == EF_DEEP_MODE_FLATTEN) {
-                ef_deep_flatten(&P->L, &w->out,
-                                w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch);
-                double *o = w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch;
+            if (o) {
                 if (P->z >= 0)
                     o[P->z] = isfinite(o[P->z]) ? o[P->z] / k : INFINITY;
                 if (P->zb >= 0)
@@ -507,6 +513,12 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     S.fog.tol = q->tol;
     S.fog.tau_cap = P->type[P->L.a] == EXR_PIXEL_HALF ? 2.0 : 10.0;
     S.fog.max_samples = 4096;
+    if (q->mode == EF_DEEP_MODE_FLATTEN) {
+        /* a flat result is exact whatever the fog's sample count: no
+         * boundaries beyond the input's (nothing splits them later) */
+        S.fog.tau_cap = INFINITY;
+        S.fog.tol = 1;
+    }
     S.fog.chromatic = chromatic;
     res->tau_cap = S.fog.tau_cap;
     res->chromatic = chromatic;

@@ -694,7 +694,8 @@ static int run_deep_pass(ef_frame *F)
     if (o->stats || o->verbose)
         ef_job_note(J,
                     "exrfog: deep: %.0f pixels, %.0f input samples (mean %.2f, max %.0f per "
-                    "pixel); fog samples mean %.2f per pixel (tau at most %g each%s); largest "
+                    "pixel); fog samples mean %.2f per pixel (tau at most %g each%s; inf: "
+                    "flatten splits nothing); largest "
                     "split-error estimate %.3g (--deep-tol %g)%s; output at most %u samples "
                     "per pixel\n",
                     r->pixels, r->samples_in, r->pixels > 0 ? r->samples_in / r->pixels : 0,
