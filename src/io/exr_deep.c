@@ -38,11 +38,7 @@ int ef_deep_in_open(const ef_exr_file *f, int part, ef_deep_in *d, ef_err *err)
     if (exr_get_storage(f->ctx, part, &st) || exr_get_data_window(f->ctx, part, &dw) ||
         exr_get_channels(f->ctx, part, &cl) || exr_get_compression(f->ctx, part, &d->comp))
         return ef_fail(err, "part %d has an incomplete header", part);
-    if (st == EXR_STORAGE_DEEP_TILED)
-        return ef_fail(err, "part %d is deep and tiled, which exrfog does not read yet (Nuke "
-                            "cannot read tiled deep either): convert it to deep scanlines, e.g. "
-                            "oiiotool IN --scanline -o OUT", part);
-    if (st != EXR_STORAGE_DEEP_SCANLINE)
+    if (st != EXR_STORAGE_DEEP_SCANLINE && st != EXR_STORAGE_DEEP_TILED)
         return ef_fail(err, "part %d is not deep", part);
     switch (d->comp) {
     case EXR_COMPRESSION_NONE:
@@ -55,9 +51,20 @@ int ef_deep_in_open(const ef_exr_file *f, int part, ef_deep_in *d, ef_err *err)
                             "none, rle, zips and zip exist for deep parts): the file is corrupt",
                        part);
     }
-    if (exr_get_scanlines_per_chunk(f->ctx, part, &lines) || lines < 1 || lines > 16)
-        return ef_fail(err, "part %d has an invalid chunk height", part);
-    d->lines = lines;
+    if (st == EXR_STORAGE_DEEP_TILED) {
+        uint32_t tx, ty;
+        if (exr_get_tile_descriptor(f->ctx, part, &tx, &ty, NULL, NULL) || tx < 1 || ty < 1 ||
+            tx > 4096 || ty > 4096)
+            return ef_fail(err, "part %d is deep and tiled with an invalid tile size", part);
+        d->tiled = 1;
+        d->tw = (int) tx;
+        d->th = (int) ty;
+        d->lines = (int) ty;
+    } else {
+        if (exr_get_scanlines_per_chunk(f->ctx, part, &lines) || lines < 1 || lines > 16)
+            return ef_fail(err, "part %d has an invalid chunk height", part);
+        d->lines = lines;
+    }
     d->x0 = dw.min.x;
     d->y0 = dw.min.y;
     d->w = (int) ((int64_t) dw.max.x - dw.min.x + 1);
@@ -263,6 +270,129 @@ static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
     return 0;
 }
 
+static uint32_t le32(const uint8_t *p)
+{
+    return (uint32_t) p[0] | (uint32_t) p[1] << 8 | (uint32_t) p[2] << 16 | (uint32_t) p[3] << 24;
+}
+
+/* The tile (tx, ty) of level 0: its chunk, and its sample table unpacked
+ * into r->tab (tile rows x width, cumulative per row), checked. */
+static int tile_table(const ef_deep_in *d, int tx, int ty, ef_deep_rows *r, exr_chunk_info_t *ci,
+                      ef_err *err)
+{
+    const exr_context_t ctx = d->f->ctx;
+    if (exr_read_tile_chunk_info(ctx, d->part, tx, ty, 0, 0, ci))
+        return ef_fail(err, "the deep tile (%d, %d) cannot be located (%s): the file is "
+                            "truncated or corrupt", tx, ty, ef_exr_last_core_message());
+    if (ci->width < 1 || ci->height < 1 || ci->width > d->tw || ci->height > d->th)
+        return ef_fail(err, "the deep tile (%d, %d) has an inconsistent size", tx, ty);
+    const uint64_t tab_raw = (uint64_t) ci->width * (uint64_t) ci->height * 4;
+    if (ci->sample_count_table_size > tab_raw || ci->sample_count_table_size == 0 ||
+        ci->packed_size > (1ull << 34))
+        return ef_fail(err, "the deep tile (%d, %d) has an impossible sample table: the file is "
+                            "corrupt", tx, ty);
+    if (grow((void **) &r->packed, &r->packcap, ci->packed_size + ci->sample_count_table_size + 8) ||
+        grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
+        return ef_fail(err, "out of memory for a deep tile");
+    uint8_t *ptab = r->packed + ci->packed_size;
+    if (exr_read_deep_chunk(ctx, d->part, ci, NULL, ptab))
+        return ef_fail(err, "the deep tile (%d, %d) cannot be read (%s): the file is truncated "
+                            "or corrupt", tx, ty, ef_exr_last_core_message());
+    if (unpack(r, d->comp, ptab, ci->sample_count_table_size, r->tab, tab_raw, r->tab + tab_raw))
+        return ef_fail(err, "the sample table of the deep tile (%d, %d) does not decompress: the "
+                            "file is corrupt", tx, ty);
+    return 0;
+}
+
+/* Rows [y, y + n) of a deep tiled part: every tile they cross, tables
+ * first (counts, then each pixel's first sample), then the samples
+ * scattered to their pixels. */
+static int read_tiles(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
+{
+    const int w = d->w;
+    const int ty0 = (y - d->y0) / d->th, ty1 = (y + n - 1 - d->y0) / d->th;
+    const int ntx = (w + d->tw - 1) / d->tw;
+    exr_chunk_info_t ci;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (int ty = ty0; ty <= ty1; ++ty)
+            for (int tx = 0; tx < ntx; ++tx) {
+                if (tile_table(d, tx, ty, r, &ci, err))
+                    return -1;
+                const int ty_abs = d->y0 + ty * d->th, tx_abs = tx * d->tw;
+                uint64_t total = 0;
+                for (int j = 0; j < ci.height; ++j) {
+                    uint32_t prev = 0;
+                    for (int x = 0; x < ci.width; ++x) {
+                        const uint32_t cum = le32(r->tab + ((size_t) j * (size_t) ci.width + (size_t) x) * 4);
+                        if (cum < prev || cum - prev > EF_DEEP_MAX_PIXEL_SAMPLES || cum > INT32_MAX)
+                            return ef_fail(err, "the deep tile (%d, %d) has a corrupt sample "
+                                                "table (counts decreasing or above %d per pixel)",
+                                           tx, ty, EF_DEEP_MAX_PIXEL_SAMPLES);
+                        const int row = ty_abs + j - y, col = tx_abs + x;
+                        if (pass == 0 && row >= 0 && row < n && col < w)
+                            r->count[(size_t) row * (size_t) w + (size_t) col] = cum - prev;
+                        prev = cum;
+                    }
+                    total += prev;
+                }
+                if (pass == 0)
+                    continue;
+                uint64_t bps = 0;
+                for (int c = 0; c < d->nch; ++c)
+                    bps += (uint64_t) type_bytes(d->type[c]);
+                if (total * bps != ci.unpacked_size)
+                    return ef_fail(err, "the deep tile (%d, %d) holds %llu bytes where its sample "
+                                        "table says %llu: the file is corrupt", tx, ty,
+                                   (unsigned long long) ci.unpacked_size,
+                                   (unsigned long long) (total * bps));
+                if (total == 0)
+                    continue;
+                if (grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
+                    return ef_fail(err, "out of memory for a deep tile");
+                if (exr_read_deep_chunk(d->f->ctx, d->part, &ci, r->packed, NULL) ||
+                    unpack(r, d->comp, r->packed, ci.packed_size, r->raw, ci.unpacked_size,
+                           r->raw + ci.unpacked_size))
+                    return ef_fail(err, "the deep tile (%d, %d) does not decompress: the file "
+                                        "is corrupt", tx, ty);
+                const uint8_t *p = r->raw;
+                for (int j = 0; j < ci.height; ++j) {
+                    const int row = ty_abs + j - y;
+                    const uint8_t *rowtab = r->tab + (size_t) j * (size_t) ci.width * 4;
+                    const uint32_t row_total = le32(rowtab + ((size_t) ci.width - 1) * 4);
+                    for (int c = 0; c < d->nch; ++c) {
+                        const int b = type_bytes(d->type[c]);
+                        uint32_t prev = 0;
+                        for (int x = 0; x < ci.width; ++x) {
+                            const uint32_t cum = le32(rowtab + (size_t) x * 4);
+                            const int col = tx_abs + x;
+                            if (row >= 0 && row < n && col < w) {
+                                const size_t i = (size_t) row * (size_t) w + (size_t) col;
+                                double *v = r->v + (size_t) r->start[i] * (size_t) d->nch + (size_t) c;
+                                for (uint32_t s = 0; s < cum - prev; ++s)
+                                    v[(size_t) s * (size_t) d->nch] = read_value(p + (size_t) (prev + s) * (size_t) b, d->type[c]);
+                            }
+                            prev = cum;
+                        }
+                        p += (size_t) row_total * (size_t) b;
+                    }
+                }
+            }
+        if (pass == 0) {
+            r->start[0] = 0;
+            for (size_t i = 0; i < (size_t) n * (size_t) w; ++i)
+                r->start[i + 1] = r->start[i] + r->count[i];
+            r->total = r->start[(size_t) n * (size_t) w];
+            if (r->total * (uint64_t) d->nch > EF_DEEP_MAX_CHUNK_VALUES)
+                return ef_fail(err, "rows %d-%d hold %llu deep samples, more than exrfog reads "
+                                    "at once (the file is probably corrupt)", y, y + n - 1,
+                               (unsigned long long) r->total);
+            if (grow((void **) &r->v, &r->vcap, (size_t) r->total * (size_t) d->nch * sizeof(double)))
+                return ef_fail(err, "out of memory for deep samples");
+        }
+    }
+    return 0;
+}
+
 int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
 {
     const size_t np = (size_t) n * (size_t) d->w;
@@ -274,6 +404,10 @@ int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
     r->w = d->w;
     r->start[0] = 0;
     r->total = 0;
+    if (d->tiled) {
+        memset(r->count, 0, np * sizeof *r->count);
+        return read_tiles(d, y, n, r, err);
+    }
     /* chunks start at the data window's top, every d->lines rows */
     for (int cy = y - (y - d->y0) % d->lines; cy < y + n; cy += d->lines) {
         if (cy < y)

@@ -26,14 +26,16 @@ typedef struct ef_deep_in {
     const char *name[EF_DEEP_IO_MAX_CH];
     exr_pixel_type_t type[EF_DEEP_IO_MAX_CH];
     exr_compression_t comp;
-    int lines;                /* scanlines per chunk */
+    int lines;                /* scanlines per chunk (tiled: the tile height) */
+    int tiled, tw, th;        /* deep tiled: level 0's tiles of tw x th */
 } ef_deep_in;
 
 /* Whether part p of f is deep (scanline or tiled). */
 int ef_exr_part_is_deep(const ef_exr_file *f, int part);
 
-/* Describes deep part p of f. Refuses deep tiled parts, compressions a
- * deep part cannot have, and channel lists exrfog cannot hold. */
+/* Describes deep part p of f (scanline, or tiled: level 0 is read).
+ * Refuses compressions a deep part cannot have and channel lists exrfog
+ * cannot hold. */
 int ef_deep_in_open(const ef_exr_file *f, int part, ef_deep_in *d, ef_err *err);
 
 /* Rows [y, y + n) decoded: per pixel its sample count and first sample,

@@ -23,15 +23,15 @@ static void *module_sym(const char *name, void **mod, char *err, size_t errlen)
     return f;
 }
 
-int ef_preview_write(const char *path, int w, int h, const unsigned char *rgb, char *err,
-                     size_t errlen)
+int ef_preview_write(const char *path, const char *fmt, int w, int h, const unsigned char *rgb,
+                     char *err, size_t errlen)
 {
     void *mod;
-    int (*fn)(const char *, int, int, const unsigned char *, char *, size_t);
+    int (*fn)(const char *, const char *, int, int, const unsigned char *, char *, size_t);
     *(void **) &fn = module_sym("ef_oiio_write_rgb8", &mod, err, errlen);
     if (!fn)
         return -1;
-    const int rc = fn(path, w, h, rgb, err, errlen);
+    const int rc = fn(path, fmt, w, h, rgb, err, errlen);
     dlclose(mod);
     return rc;
 }
@@ -49,14 +49,15 @@ int ef_preview_check(const char *path, char *err, size_t errlen)
 }
 
 int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
-                        const char *dst, char *err, size_t errlen)
+                        const char *dst, const char *dst_fmt, char *err, size_t errlen)
 {
     void *mod;
-    int (*fn)(const char *, int, const char *const *, int, const char *, char *, size_t);
+    int (*fn)(const char *, int, const char *const *, int, const char *, const char *, char *,
+              size_t);
     *(void **) &fn = module_sym("ef_oiio_convert", &mod, err, errlen);
     if (!fn)
         return -1;
-    const int rc = fn(src, part, names, n, dst, err, errlen);
+    const int rc = fn(src, part, names, n, dst, dst_fmt, err, errlen);
     dlclose(mod);
     return rc;
 }

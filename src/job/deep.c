@@ -15,7 +15,11 @@
 #include "exr_deep.h"
 #include "recon.h"
 
+/* Rows per unit: 16 (a ZIP chunk of the flat output, 16 ZIPS rows of the
+ * deep one), or a deep tiled input's tile height when it is a multiple of
+ * 16 up to UNIT_MAX, so that no tile is decoded twice. */
 #define UNIT_ROWS 16
+#define UNIT_MAX 256
 
 /* The output channels and how each comes from an input channel. */
 typedef struct plan {
@@ -174,7 +178,7 @@ static int scene_chromatic(const ef_fog_scene *s)
 
 typedef struct unit {
     int y, n;
-    ef_deep_packed pk[UNIT_ROWS];
+    ef_deep_packed pk[UNIT_MAX];
     int npk;
     int failed;
     ef_err err;
@@ -391,12 +395,16 @@ static void do_unit(worker *w, unit *u)
             }
         }
     }
-    if (mode == EF_DEEP_MODE_FLATTEN) {
+    for (int j = 0; mode == EF_DEEP_MODE_FLATTEN && j < u->n; j += UNIT_ROWS) {
+        /* one ZIP chunk per 16 rows */
+        const int n = u->n - j < UNIT_ROWS ? u->n - j : UNIT_ROWS;
         ef_deep_packed *pk = &u->pk[u->npk++];
-        pk->y = u->y;
-        if (ef_flat_pack_rows(nch, P->type, W, u->n, w->flat, q->zip_level, pk)) {
-            ef_fail(&u->err, "out of memory packing rows %d-%d", u->y, u->y + u->n - 1);
+        pk->y = u->y + j;
+        if (ef_flat_pack_rows(nch, P->type, W, n, w->flat + (size_t) j * (size_t) W * (size_t) nch,
+                              q->zip_level, pk)) {
+            ef_fail(&u->err, "out of memory packing rows %d-%d", pk->y, pk->y + n - 1);
             u->failed = 1;
+            return;
         }
     }
 }
@@ -548,13 +556,14 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         ef_deep_buf_init(&W[t].all, P->L.nch);
         ef_deep_buf_init(&W[t].out, P->L.nch);
     }
+    const int urows = d.tiled && d.th % UNIT_ROWS == 0 && d.th <= UNIT_MAX ? d.th : UNIT_ROWS;
     for (int y0 = d.y0; !rc && y0 < d.y0 + d.h;) {
         /* one batch of units, fogged on the threads, written in order */
         S.nunits = 0;
         for (int i = 0; i < batch && y0 < d.y0 + d.h; ++i) {
             unit *u = &S.units[S.nunits++];
             u->y = y0;
-            u->n = d.y0 + d.h - y0 < UNIT_ROWS ? d.y0 + d.h - y0 : UNIT_ROWS;
+            u->n = d.y0 + d.h - y0 < urows ? d.y0 + d.h - y0 : urows;
             u->failed = 0;
             u->npk = 0;
             y0 += u->n;
@@ -586,7 +595,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
             rc = ef_fail(err, "cancelled");
     }
     for (int i = 0; S.units && i < batch; ++i)
-        for (int k = 0; k < UNIT_ROWS; ++k)
+        for (int k = 0; k < UNIT_MAX; ++k)
             ef_deep_packed_free(&S.units[i].pk[k]);
     free(S.units);
     for (int t = 0; t < nthreads && W; ++t) {

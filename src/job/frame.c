@@ -68,6 +68,7 @@ typedef struct ef_frame {
     int dwa_out;
     float dwa_level;
     int deep;                 /* the colour part is deep (deep.c's pass) */
+    char din_path[PATH_MAX], dconv_path[PATH_MAX];   /* fd_path of din and dconv */
     ef_deep_result deep_res;
 } ef_frame;
 
@@ -154,6 +155,19 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     ef_progress_add(j->J, (long) ck->w * ck->h);
     if (j->preview && ck->view == 0)
         preview_unit(j, ck);
+}
+
+/* The name other libraries open one of our temporary files by: its
+ * descriptor's /proc/self/fd/N, which reaches the file this run created
+ * even if its directory entry was replaced meanwhile (by a symlink to a
+ * file of someone else's, say); the plain name only where /proc is
+ * missing. */
+static void fd_path(char *buf, size_t len, int fd, const char *name)
+{
+    if (fd >= 0 && access("/proc/self/fd", X_OK) == 0)
+        snprintf(buf, len, "/proc/self/fd/%d", fd);
+    else
+        snprintf(buf, len, "%s", name);
 }
 
 /* Where temporary copies of inputs go: $TMPDIR, else /tmp. */
@@ -261,7 +275,8 @@ static int open_inputs(ef_frame *F)
             ef_fail(&F->err, "%s", msg);
             return ef_job_report(J, o->input, &F->err, 1);
         }
-        F->ipath = F->din.tmp;
+        fd_path(F->din_path, sizeof F->din_path, F->din.fd, F->din.tmp);
+        F->ipath = F->din_path;
     }
     if (ef_exr_open(F->ipath, &F->in, &F->err))
         return ef_job_report(J, o->input, &F->err, 1);
@@ -279,7 +294,8 @@ static int open_inputs(ef_frame *F)
             ef_fail(&F->err, "%s", msg);
             return ef_job_report(J, o->depth_file, &F->err, 1);
         }
-        dpath = F->dconv.tmp;
+        fd_path(F->dconv_path, sizeof F->dconv_path, F->dconv.fd, F->dconv.tmp);
+        dpath = F->dconv_path;
     }
     if (ef_exr_open(dpath, &F->dep, &F->err))
         return ef_job_report(J, o->depth_file, &F->err, 1);
@@ -480,14 +496,17 @@ static int resolve_view(ef_frame *F, int v)
             double px, ns, mx;
             ef_err derr = { 0 };
             const int mode = o->deep_mode;
+            exr_storage_t st = EXR_STORAGE_DEEP_SCANLINE;
+            exr_get_storage(F->in.ctx, pl->rgb[0].part, &st);
+            const char *kind = st == EXR_STORAGE_DEEP_TILED ? "tiled" : "scanline";
             if (ef_deep_census(&F->in, pl->rgb[0].part, &px, &ns, &mx, &derr))
-                fprintf(J->out, "deep: part %d is deep scanline, but %s\n", pl->rgb[0].part,
+                fprintf(J->out, "deep: part %d is deep %s, but %s\n", pl->rgb[0].part, kind,
                         derr.msg);
             else
                 fprintf(J->out,
-                        "deep: part %d is deep scanline: %.0f samples over %.0f pixels (mean "
+                        "deep: part %d is deep %s: %.0f samples over %.0f pixels (mean "
                         "%.2f, at most %.0f per pixel); --deep %s, --deep-tol %g\n",
-                        pl->rgb[0].part, ns, px, px > 0 ? ns / px : 0, mx,
+                        pl->rgb[0].part, kind, ns, px, px > 0 ? ns / px : 0, mx,
                         mode == EF_DEEP_MODE_FOG       ? "fog (a fog-only deep element)"
                         : mode == EF_DEEP_MODE_FLATTEN ? "flatten (a flat image)"
                                                        : "samples (the input's samples and the "
@@ -731,11 +750,11 @@ static int convert_output(ef_frame *F)
 {
     ef_job *J = F->J;
     const ef_options *o = F->o;
+    char mid[sizeof F->mid.tmp];
+    fd_path(mid, sizeof mid, F->mid.fd, F->mid.tmp);
     if (F->dwa_out >= 0) {
         char msg[800];
-        close(F->mid.fd);
-        F->mid.fd = -1;
-        if (ef_dwa_transcode(F->mid.tmp, F->out.fd, o->output, -1, F->dwa_out,
+        if (ef_dwa_transcode(mid, F->out.fd, o->output, -1, F->dwa_out,
                              F->dwa_level > 0 ? F->dwa_level : EF_DWA_DEFAULT_LEVEL,
                              F->so.threads, msg, sizeof msg)) {
             ef_fail(&F->err, "%s", msg);
@@ -747,12 +766,9 @@ static int convert_output(ef_frame *F)
         const ef_channel_plan *pl = &F->plans[0];
         const char *names[4] = { pl->rgb[0].name, pl->rgb[1].name, pl->rgb[2].name,
                                  pl->alpha.part >= 0 ? pl->alpha.name : NULL };
-        char msg[512];
-        close(F->mid.fd);
-        F->mid.fd = -1;
-        close(F->out.fd);
-        F->out.fd = -1;
-        if (ef_oiio_convert_exr(F->mid.tmp, pl->rgb[0].part, names, names[3] ? 4 : 3, F->out.tmp,
+        char msg[512], out[sizeof F->out.tmp];
+        fd_path(out, sizeof out, F->out.fd, F->out.tmp);
+        if (ef_oiio_convert_exr(mid, pl->rgb[0].part, names, names[3] ? 4 : 3, out, F->out.tmp,
                                 msg, sizeof msg)) {
             ef_fail(&F->err, "%s", msg);
             return ef_job_report(J, o->output, &F->err, 1);
@@ -769,10 +785,10 @@ static int commit(ef_frame *F)
     ef_job *J = F->J;
     const ef_options *o = F->o;
     if (F->job.preview) {
-        char msg[512];
-        close(F->pv.fd);
-        F->pv.fd = -1;
-        if (ef_preview_write(F->pv.tmp, F->job.pv_w, F->job.pv_h, F->job.preview, msg, sizeof msg)) {
+        char msg[512], pv[sizeof F->pv.tmp];
+        fd_path(pv, sizeof pv, F->pv.fd, F->pv.tmp);
+        if (ef_preview_write(pv, F->pv.tmp, F->job.pv_w, F->job.pv_h, F->job.preview, msg,
+                             sizeof msg)) {
             ef_fail(&F->err, "%s; nothing was written", msg);
             return ef_job_report(J, o->preview, &F->err, 1);
         }

@@ -10,12 +10,15 @@
 #include <exception>
 #include <vector>
 
+// path may be a descriptor's /proc/self/fd/N name (the caller's own file,
+// whatever its directory entry has become since); fmt, a name whose
+// extension gives the format (NULL: path's own).
 extern "C" __attribute__((visibility("default"))) int
-ef_oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb, char *err,
-                   size_t errlen)
+ef_oiio_write_rgb8(const char *path, const char *fmt, int w, int h, const unsigned char *rgb,
+                   char *err, size_t errlen)
 {
     try {
-        auto out = OIIO::ImageOutput::create(path);
+        auto out = OIIO::ImageOutput::create(fmt ? fmt : path);
         if (!out) {
             std::snprintf(err, errlen, "cannot write a preview in this format: %s",
                           OIIO::geterror().c_str());
@@ -73,12 +76,17 @@ extern "C" __attribute__((visibility("default"))) const char *ef_oiio_version(vo
 // in the format dst's extension names (colour and alpha of a fogged frame:
 // --output with a non-EXR name). Values go as float; the writer converts
 // to what its format holds.
+// src and dst may be /proc/self/fd/N names (the caller's own files): src
+// is read as EXR, dst written in dst_fmt's format (NULL: dst's extension).
 extern "C" __attribute__((visibility("default"))) int
 ef_oiio_convert(const char *src, int part, const char *const *names, int n, const char *dst,
-                char *err, size_t errlen)
+                const char *dst_fmt, char *err, size_t errlen)
 {
     try {
-        auto in = OIIO::ImageInput::open(src);
+        auto in = OIIO::ImageInput::create("exr");
+        OIIO::ImageSpec none;
+        if (in && !in->open(src, none))
+            in.reset();
         if (!in || !in->seek_subimage(part, 0)) {
             std::snprintf(err, errlen, "cannot read the fogged frame back: %s",
                           in ? in->geterror().c_str() : OIIO::geterror().c_str());
@@ -107,7 +115,7 @@ ef_oiio_convert(const char *src, int part, const char *const *names, int n, cons
         for (size_t i = 0; i < npx; ++i)
             for (int k = 0; k < n; ++k)
                 sel[i * (size_t) n + (size_t) k] = all[i * (size_t) is.nchannels + (size_t) idx[(size_t) k]];
-        auto out = OIIO::ImageOutput::create(dst);
+        auto out = OIIO::ImageOutput::create(dst_fmt ? dst_fmt : dst);
         if (!out) {
             std::snprintf(err, errlen, "no writer for this format: %s", OIIO::geterror().c_str());
             return -1;
