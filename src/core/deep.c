@@ -162,45 +162,26 @@ static int cmp_order(const void *a, const void *b)
     return (x->i > y->i) - (x->i < y->i);
 }
 
-/* Sorts B[0..m): insertion while the input is nearly in order (samples
- * from renderers, and tidy samples with fog merged in by depth, are), a
- * full sort once it proves not to be. */
-static void sort_doubles(double *B, int m)
+/* Sorts m elements of sz <= 32 bytes: insertion while the input is nearly
+ * in order (samples from renderers, and tidy samples with fog merged in by
+ * depth, are), a full sort once it proves not to be. */
+static void sort_nearly(void *base, int m, size_t sz, int (*cmp)(const void *, const void *))
 {
+    unsigned char *e = base, v[32];
     long moves = 0;
     for (int i = 1; i < m; ++i) {
-        const double v = B[i];
+        memcpy(v, e + (size_t) i * sz, sz);
         int j = i;
-        while (j > 0 && B[j - 1] > v) {
-            B[j] = B[j - 1];
+        while (j > 0 && cmp(e + (size_t) (j - 1) * sz, v) > 0) {
+            memcpy(e + (size_t) j * sz, e + (size_t) (j - 1) * sz, sz);
             --j;
             if (++moves > 8L * m + 64) {
-                B[j] = v;
-                qsort(B, (size_t) m, sizeof *B, cmp_double);
+                memcpy(e + (size_t) j * sz, v, sz);
+                qsort(base, (size_t) m, sz, cmp);
                 return;
             }
         }
-        B[j] = v;
-    }
-}
-
-/* The same for the split pieces, by (front, back, index): stable. */
-static void sort_order(order *o, int m)
-{
-    long moves = 0;
-    for (int i = 1; i < m; ++i) {
-        const order v = o[i];
-        int j = i;
-        while (j > 0 && cmp_order(&o[j - 1], &v) > 0) {
-            o[j] = o[j - 1];
-            --j;
-            if (++moves > 8L * m + 64) {
-                o[j] = v;
-                qsort(o, (size_t) m, sizeof *o, cmp_order);
-                return;
-            }
-        }
-        o[j] = v;
+        memcpy(e + (size_t) j * sz, v, sz);
     }
 }
 
@@ -218,7 +199,7 @@ static int bounds_of(const ef_deep_buf *b, int nch, ef_deep_buf *own)
         if (s[nch + 1] > s[nch])
             B[m++] = s[nch + 1];
     }
-    sort_doubles(B, m);
+    sort_nearly(B, m, sizeof *B, cmp_double);
     int u = 0;
     for (int i = 0; i < m; ++i)
         if (u == 0 || B[i] != B[u - 1])
@@ -306,7 +287,7 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
         const double *s = out->sv + (size_t) i * (size_t) S;
         ord[i] = (order){ s[nch], s[nch + 1], i };
     }
-    sort_order(ord, np);
+    sort_nearly(ord, np, sizeof *ord, cmp_order);
     double *prev = NULL;
     for (int i = 0; i < np; ++i) {
         const double *s = out->sv + (size_t) ord[i].i * (size_t) S;
@@ -399,13 +380,13 @@ static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog,
         al[k] = k && tau[k] == tau[k - 1] ? al[k - 1] : isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
         mean += al[k] / 3;
     }
-    if (!F->chromatic)
-        al[1] = al[2] = al[0] = mean;
+    /* colour per channel always (exact); alpha per channel where the
+     * layout has AR/AG/AB, else A alone, the mean */
     for (int k = 0; k < 3; ++k) {
         if (L->rgb[k] >= 0)
             d[L->rgb[k]] = col[k] * al[k];
         if (L->argb[k] >= 0 && L->argb[k] != L->a)
-            d[L->argb[k]] = al[k];
+            d[L->argb[k]] = F->chromatic ? al[k] : mean;
     }
     if (L->a >= 0)
         d[L->a] = mean;

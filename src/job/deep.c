@@ -156,23 +156,31 @@ static int finish_plan(plan *P, const ef_deep_in *d, const ef_channel_plan *cp, 
     return 0;
 }
 
-/* Whether the scene's fog differs between channels anywhere. */
-static int scene_chromatic(const ef_fog_scene *s)
+/* Whether the scene's optical depth differs between channels: probed on
+ * rays from the camera in 26 directions to 4 lengths (a component's own
+ * colour changes what the fog adds, not its alpha). A chromatic fog the
+ * probes miss still gets its colour right per channel; only its alpha is
+ * then A alone, the mean (as for consumers that read A only). */
+static int scene_chromatic(const ef_fog_scene *s, const double org[3])
 {
-    /* a component's density per channel: p[0..2] for every model that
-     * has density=R,G,B; compare its grey test instead: tau of a test ray */
-    ef_ray r = { { 0.3, -0.2, -0.93 }, 50, 50, { 0, 1, 0 } };
-    const double n = sqrt(0.09 + 0.04 + 0.93 * 0.93);
-    for (int k = 0; k < 3; ++k)
-        r.dir[k] /= n;
-    for (int i = 0; i < s->ncomp; ++i) {
-        double t[3];
-        s->comp[i].model->tau(&s->comp[i], &r, t);
-        if (t[0] != t[1] || t[1] != t[2])
-            return 1;
-        if (s->comp[i].has_color)
-            return 1;
-    }
+    static const double len[4] = { 1, 30, 1000, INFINITY };
+    for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dz = -1; dz <= 1; ++dz) {
+                if (!dx && !dy && !dz)
+                    continue;
+                const double n = sqrt((double) (dx * dx + dy * dy + dz * dz));
+                for (int l = 0; l < 4; ++l) {
+                    ef_ray r = { { dx / n, dy / n, dz / n }, len[l], len[l],
+                                 { org[0], org[1], org[2] } };
+                    for (int i = 0; i < s->ncomp; ++i) {
+                        double t[3];
+                        s->comp[i].model->tau(&s->comp[i], &r, t);
+                        if (t[0] != t[1] || t[1] != t[2])
+                            return 1;
+                    }
+                }
+            }
     return 0;
 }
 
@@ -497,7 +505,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     ef_deep_in d;
     if (ef_deep_in_open(q->in, q->part, &d, err))
         return -1;
-    const int chromatic = scene_chromatic(q->scene);
+    const int chromatic = scene_chromatic(q->scene, q->cam->pos);
     plan *P = calloc(1, sizeof *P);
     if (!P)
         return ef_fail(err, "out of memory");
