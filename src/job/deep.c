@@ -92,8 +92,7 @@ static void add_channel(plan *P, const char *name, exr_pixel_type_t t, int from)
 
 /* Sorts the output channels by name (the file's order) and fills the
  * layout's roles from the names. */
-static int finish_plan(plan *P, const ef_deep_in *d, const ef_channel_plan *cp, int chromatic,
-                       ef_err *err)
+static int finish_plan(plan *P, const ef_channel_plan *cp, ef_err *err)
 {
     /* sort (name, type, from) together through an index */
     const int n = P->L.nch;
@@ -151,8 +150,6 @@ static int finish_plan(plan *P, const ef_deep_in *d, const ef_channel_plan *cp, 
     for (int c = 0; c < n; ++c)
         if (P->from[c] < 0 && L->role[c] == EF_DEEP_ALPHA)
             P->from_alpha[c] = L->a;
-    (void) d;
-    (void) chromatic;
     return 0;
 }
 
@@ -460,14 +457,14 @@ static int make_plan(const ef_deep_req *q, const ef_deep_in *d, int chromatic, p
         return ef_fail(err, "the deep part has no Z channel: every deep sample needs its depth");
     const ef_channel_plan *cp = q->cplan;
     if (q->mode == EF_DEEP_MODE_FOG) {
-        /* a fog-only element: colour and alpha in half (float where the
-         * scene's fog is chromatic it still fits half), depths in float */
+        /* a fog-only element: colour and alpha in half (tau is capped at 2
+         * per sample for half alpha), depths in float */
         static const char *const rgba[] = { "R", "G", "B", "A", "AR", "AG", "AB" };
         for (int i = 0; i < (chromatic ? 7 : 4); ++i)
             add_channel(P, rgba[i], EXR_PIXEL_HALF, -1);
         add_channel(P, "Z", EXR_PIXEL_FLOAT, -1);
         add_channel(P, "ZBack", EXR_PIXEL_FLOAT, -1);
-        return finish_plan(P, d, NULL, chromatic, err);
+        return finish_plan(P, NULL, err);
     }
     for (int c = 0; c < d->nch; ++c) {
         if (q->mode == EF_DEEP_MODE_FLATTEN && c == P->in_zb)
@@ -496,7 +493,7 @@ static int make_plan(const ef_deep_req *q, const ef_deep_in *d, int chromatic, p
             add_channel(P, s, EXR_PIXEL_HALF, -1);
         }
     }
-    return finish_plan(P, d, cp, chromatic, err);
+    return finish_plan(P, cp, err);
 }
 
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
