@@ -642,22 +642,8 @@ int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef
 
 void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *out)
 {
-    const int nch = L->nch;
-    double zf = INFINITY, zb = -INFINITY;
-    for (int c = 0; c < nch; ++c)
-        out[c] = 0;
-    int first = 1;
-    for (int i = 0; i < tidy->n; ++i) {
-        const double *s = tidy->v + (size_t) i * (size_t) tidy->stride;
-        over(L, s, out, first);
-        zf = fmin(zf, s[nch]);
-        zb = fmax(zb, fmax(s[nch], s[nch + 1]));
-        first = 0;
-    }
-    for (int c = 0; c < nch; ++c) {
-        if (L->role[c] == EF_DEEP_Z)
-            out[c] = zf;
-        else if (L->role[c] == EF_DEEP_ZBACK)
-            out[c] = tidy->n ? zb : INFINITY;
-    }
+    /* the union with nothing: no sample can start inside another list's */
+    ef_deep_buf none;
+    ef_deep_buf_init(&none, L->nch);
+    ef_deep_flatten_pair(L, tidy, &none, out);
 }
