@@ -96,7 +96,7 @@ void ef_deep_rows_free(ef_deep_rows *r)
     memset(r, 0, sizeof *r);
 }
 
-static int grow(void **p, size_t *cap, size_t need)
+int ef_deep_grow(void **p, size_t *cap, size_t need)
 {
     if (need <= *cap)
         return 0;
@@ -198,8 +198,8 @@ static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
         return ef_fail(err, "the deep chunk at row %d has an impossible sample table size "
                             "(%llu bytes): the file is corrupt", cy,
                        (unsigned long long) ci.sample_count_table_size);
-    if (grow((void **) &r->packed, &r->packcap, ci.packed_size + ci.sample_count_table_size + 8) ||
-        grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
+    if (ef_deep_grow((void **) &r->packed, &r->packcap, ci.packed_size + ci.sample_count_table_size + 8) ||
+        ef_deep_grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
         return ef_fail(err, "out of memory for a deep chunk");
     uint8_t *ptab = r->packed + ci.packed_size;
     if (exr_read_deep_chunk(ctx, d->part, &ci, r->packed, ptab))
@@ -246,8 +246,8 @@ static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
             const size_t i = (size_t) (r0 + j) * (size_t) w + (size_t) x;
             r->start[i + 1] = r->start[i] + r->count[i];
         }
-    if (grow((void **) &r->v, &r->vcap, (size_t) (base + total) * (size_t) d->nch * sizeof(double)) ||
-        grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
+    if (ef_deep_grow((void **) &r->v, &r->vcap, (size_t) (base + total) * (size_t) d->nch * sizeof(double)) ||
+        ef_deep_grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
         return ef_fail(err, "out of memory for a deep chunk");
     if (total > 0 &&
         unpack(r, d->comp, r->packed, ci.packed_size, r->raw, ci.unpacked_size,
@@ -291,8 +291,8 @@ static int tile_table(const ef_deep_in *d, int tx, int ty, ef_deep_rows *r, exr_
         ci->packed_size > (1ull << 34))
         return ef_fail(err, "the deep tile (%d, %d) has an impossible sample table: the file is "
                             "corrupt", tx, ty);
-    if (grow((void **) &r->packed, &r->packcap, ci->packed_size + ci->sample_count_table_size + 8) ||
-        grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
+    if (ef_deep_grow((void **) &r->packed, &r->packcap, ci->packed_size + ci->sample_count_table_size + 8) ||
+        ef_deep_grow((void **) &r->tab, &r->tabcap, tab_raw * 2 + 8))
         return ef_fail(err, "out of memory for a deep tile");
     uint8_t *ptab = r->packed + ci->packed_size;
     if (exr_read_deep_chunk(ctx, d->part, ci, NULL, ptab))
@@ -347,7 +347,7 @@ static int read_tiles(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
                                    (unsigned long long) (total * bps));
                 if (total == 0)
                     continue;
-                if (grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
+                if (ef_deep_grow((void **) &r->raw, &r->rawcap, 2 * ci.unpacked_size + 8))
                     return ef_fail(err, "out of memory for a deep tile");
                 if (exr_read_deep_chunk(d->f->ctx, d->part, &ci, r->packed, NULL) ||
                     unpack(r, d->comp, r->packed, ci.packed_size, r->raw, ci.unpacked_size,
@@ -386,7 +386,7 @@ static int read_tiles(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
                 return ef_fail(err, "rows %d-%d hold %llu deep samples, more than exrfog reads "
                                     "at once (the file is probably corrupt)", y, y + n - 1,
                                (unsigned long long) r->total);
-            if (grow((void **) &r->v, &r->vcap, (size_t) r->total * (size_t) d->nch * sizeof(double)))
+            if (ef_deep_grow((void **) &r->v, &r->vcap, (size_t) r->total * (size_t) d->nch * sizeof(double)))
                 return ef_fail(err, "out of memory for deep samples");
         }
     }
@@ -396,8 +396,8 @@ static int read_tiles(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
 int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
 {
     const size_t np = (size_t) n * (size_t) d->w;
-    if (grow((void **) &r->count, &r->ccap, np * sizeof *r->count) ||
-        grow((void **) &r->start, &r->pcap, (np + 1) * sizeof *r->start))
+    if (ef_deep_grow((void **) &r->count, &r->ccap, np * sizeof *r->count) ||
+        ef_deep_grow((void **) &r->start, &r->pcap, (np + 1) * sizeof *r->start))
         return ef_fail(err, "out of memory for a deep chunk");
     r->y = y;
     r->n = n;
@@ -457,7 +457,7 @@ static void put_value(uint8_t *p, exr_pixel_type_t t, double v)
 static uint64_t zip_pack(const uint8_t *raw, uint64_t n, int level, uint8_t **dst, size_t *dcap,
                          uint8_t **scratch, size_t *scap)
 {
-    if (grow((void **) scratch, scap, n + 8) || grow((void **) dst, dcap, n + 64))
+    if (ef_deep_grow((void **) scratch, scap, n + 8) || ef_deep_grow((void **) dst, dcap, n + 64))
         return 0;
     if (n == 0)
         return 0;
@@ -514,7 +514,7 @@ int ef_deep_pack_row(int nch, const exr_pixel_type_t *type, int w, const uint32_
                            : 0;
     if (total && out->data_size == 0)
         rc = -1;
-    if (!total && grow((void **) &out->data, &out->dcap, 8))
+    if (!total && ef_deep_grow((void **) &out->data, &out->dcap, 8))
         rc = -1;
     free(tab);
     free(raw);

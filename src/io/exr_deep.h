@@ -54,6 +54,10 @@ typedef struct ef_deep_rows {
 
 void ef_deep_rows_free(ef_deep_rows *r);
 
+/* Grows the buffer *p of *cap bytes to at least need bytes (doubling).
+ * Returns 0, or -1 when out of memory (*p is then unchanged). */
+int ef_deep_grow(void **p, size_t *cap, size_t need);
+
 /* Reads rows [y, y + n) (inside the data window) of d into r, chunk by
  * chunk. Thread-safe for distinct r. Returns 0, or -1 with a message
  * (corrupt chunk, absurd sample counts, out of memory). */

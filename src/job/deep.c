@@ -208,28 +208,14 @@ typedef struct worker {
     ef_deep_rows rows;
     ef_deep_buf in, tidy, fog, all, out;
     double *flat;
-    size_t flatcap;
+    size_t flatcap;           /* bytes */
     uint32_t *counts;
     double *ov;
-    size_t ovcap;
+    size_t ovcap;             /* bytes */
     ef_deep_stats st;
     double samples_in, max_in;
 } worker;
 
-static int push_values(double **v, size_t *cap, size_t need)
-{
-    if (need <= *cap)
-        return 0;
-    size_t n = *cap ? *cap : 1024;
-    while (n < need)
-        n *= 2;
-    double *p = realloc(*v, n * sizeof *p);
-    if (!p)
-        return -1;
-    *v = p;
-    *cap = n;
-    return 0;
-}
 
 /* One pixel: its input samples into w->in (output layout, distances);
  * returns 0, or -1 with a message. */
@@ -275,7 +261,8 @@ static int append_out(worker *w, const ef_deep_buf *b, double k, size_t *nv)
 {
     const plan *P = w->S->P;
     const int nch = P->L.nch;
-    if (push_values(&w->ov, &w->ovcap, (*nv + (size_t) b->n) * (size_t) nch))
+    if (ef_deep_grow((void **) &w->ov, &w->ovcap,
+                     (*nv + (size_t) b->n) * (size_t) nch * sizeof *w->ov))
         return -1;
     for (int i = 0; i < b->n; ++i) {
         const double *s = b->v + (size_t) i * (size_t) b->stride;
@@ -343,7 +330,8 @@ static void do_unit(worker *w, unit *u)
         return;
     }
     if (mode == EF_DEEP_MODE_FLATTEN &&
-        push_values(&w->flat, &w->flatcap, (size_t) W * (size_t) u->n * (size_t) nch)) {
+        ef_deep_grow((void **) &w->flat, &w->flatcap,
+                     (size_t) W * (size_t) u->n * (size_t) nch * sizeof *w->flat)) {
         ef_fail(&u->err, "out of memory");
         u->failed = 1;
         return;
