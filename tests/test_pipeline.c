@@ -448,25 +448,27 @@ static void test_progress_bar(void **state)
     assert_string_equal(out, "");
 }
 
-/* The render-farm recipe (samples/farm/exrfog-parallel.sh, GNU parallel):
- * chunks of frames as parallel jobs give the same pixels as one run. */
+/* exrfog-farm --engine parallel (GNU parallel here): chunks of frames as
+ * parallel tasks give the same pixels as one run; a damaged frame fails
+ * its chunk, is named with its log and leaves the other frames written. */
 static void test_parallel_recipe(void **state)
 {
     (void) state;
-    if (system("command -v parallel >/dev/null 2>&1"))
+    if (system("command -v parallel >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1"))
         skip();
     fresh("farm");
     write_sequence(1, 5);
     const char *src = getenv("EXRFOG_SOURCE_DIR"), *bin = getenv("EXRFOG_BIN");
-    char cmd[4096];
+    char cmd[16384];
     snprintf(cmd, sizeof cmd,
-             "EXRFOG='%s' '%s/samples/farm/exrfog-parallel.sh' -j 2 -c 2 1-5 -- '%s/shot.#.exr' "
-             "-o '%s/par.#.exr' --fog exp:density=0.05 >'%s/log' 2>&1",
-             bin, src, g_dir, g_dir, g_dir);
+             "cd '%s' && python3 '%s/src/farm/exrfog-farm' submit --engine parallel --jobs 2 "
+             "--chunk 2 --exrfog '%s' --jobdir job1 -- '%s/shot.#.exr' -o '%s/par.#.exr' "
+             "--frames 1-5 --fog exp:density=0.05 >'%s/log' 2>&1",
+             g_dir, src, bin, g_dir, g_dir, g_dir);
     if (system(cmd)) {
         snprintf(cmd, sizeof cmd, "cat '%s/log' >&2", g_dir);
         (void) system(cmd);
-        fail_msg("the parallel recipe failed");
+        fail_msg("exrfog-farm --engine parallel failed");
     }
     assert_run(0, "'%s/shot.#.exr' -o '%s/one.#.exr' --fog exp:density=0.05", g_dir, g_dir);
     for (int f = 1; f <= 5; ++f) {
@@ -475,14 +477,22 @@ static void test_parallel_recipe(void **state)
         free(a);
         free(b);
     }
-    /* a failing chunk makes the recipe fail */
+    /* a damaged frame fails its chunk (exit 1), named with its log */
     char *s3 = in_dir("shot.0003.exr");
     assert_int_equal(tu_write_bytes(s3, "junk", 4), 0);
     snprintf(cmd, sizeof cmd,
-             "EXRFOG='%s' '%s/samples/farm/exrfog-parallel.sh' -j 2 -c 2 1-5 -- '%s/shot.#.exr' "
-             "-o '%s/par.#.exr' --fog exp:density=0.05 >'%s/log' 2>&1",
-             bin, src, g_dir, g_dir, g_dir);
-    assert_true(system(cmd) != 0);
+             "cd '%s' && python3 '%s/src/farm/exrfog-farm' submit --engine parallel --chunk 2 "
+             "--exrfog '%s' --jobdir job2 -- '%s/shot.#.exr' -o '%s/par2.#.exr' --frames 1-5 "
+             "--fog exp:density=0.05 >'%s/log' 2>&1; test $? = 1 && "
+             "grep -q 'frames not written: 3; log %s/job2/logs/chunk-0001.log' '%s/log' && "
+             "grep -q 'shot.0003.exr' '%s/job2/logs/chunk-0001.log' && test -e '%s/par2.0004.exr' "
+             "&& test ! -e '%s/par2.0003.exr'",
+             g_dir, src, bin, g_dir, g_dir, g_dir, g_dir, g_dir, g_dir, g_dir, g_dir);
+    if (system(cmd)) {
+        snprintf(cmd, sizeof cmd, "cat '%s/log' '%s/job2/logs/chunk-0001.log' >&2", g_dir, g_dir);
+        (void) system(cmd);
+        fail_msg("a damaged frame was not reported by exrfog-farm");
+    }
     free(s3);
 }
 

@@ -23,7 +23,7 @@ enum {
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
-    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_VIEW, OPT_CAMERA_FILE,
+    OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_FAILED_LIST, OPT_VIEW, OPT_CAMERA_FILE,
     OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
     OPT_DEEP_TOL
 };
@@ -46,6 +46,7 @@ static const struct option long_opts[] = {
     { "frames", required_argument, NULL, OPT_FRAMES },
     { "fps", required_argument, NULL, OPT_FPS },
     { "keep-going", no_argument, NULL, OPT_KEEP_GOING },
+    { "failed-list", required_argument, NULL, OPT_FAILED_LIST },
     { "view", required_argument, NULL, OPT_VIEW },
     { "camera-file", required_argument, NULL, OPT_CAMERA_FILE },
     { "colorconfig", required_argument, NULL, OPT_COLORCONFIG },
@@ -117,6 +118,8 @@ void ef_options_usage(FILE *out)
             "                           (default: every frame on disk matching INPUT)\n"
             "      --fps N              frames per second for the default time (default 24)\n"
             "      --keep-going         a failed frame does not stop the sequence\n"
+            "      --failed-list FILE   write the frames that failed (or were missing), one\n"
+            "                           per line, to FILE (empty when none failed)\n"
             "      --view NAME          fog this view of a stereo/multi-view file, repeatable\n"
             "                           (default: every view with a camera)\n"
             "      --aov LIST           extra output channels, repeatable: a comma list of\n"
@@ -200,7 +203,7 @@ static void record(ef_options *o, const char *a)
  * file (threads, messages, preview): equal outputs get equal headers. */
 static void record_option(ef_options *o, int c, const char *arg)
 {
-    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES ||
+    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES || c == OPT_FAILED_LIST ||
         c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' || c == 'q' || c == 'o')
         return;
     for (const struct option *lo = long_opts; lo->name; ++lo)
@@ -374,6 +377,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
                        EF_PARSE_USAGE;
             break;
         case OPT_KEEP_GOING: o->keep_going = 1; break;
+        case OPT_FAILED_LIST: o->failed_list = a; break;
         case OPT_CAMERA_FILE:
             if (!a[0])
                 return ef_fail(err, "--camera-file: the file name is empty"), EF_PARSE_USAGE;

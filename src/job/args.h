@@ -38,6 +38,7 @@ typedef struct ef_options {
     const char *frames;       /* --frames LIST, or NULL: every frame on disk */
     double fps;               /* --fps, for the default time of a frame */
     int keep_going;           /* --keep-going */
+    const char *failed_list;  /* --failed-list FILE: failed frames, one per line */
     int time_set;             /* --time or the scene file's "time" was given */
     const char *views[16];    /* --view NAME, repeatable */
     const char *camera_file;  /* --camera-file FILE (may hold a frame pattern) */

@@ -49,7 +49,8 @@ static int grow_quoted(char **b, size_t *len, size_t *cap, const char *a)
 static int history_skip(char **argv, int argc, int i)
 {
     const char *a = argv[i];
-    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o", "--frames" };
+    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o", "--frames",
+                                            "--failed-list" };
     static const char *const alone[] = { "--stats", "--verbose", "--quiet", "--keep-going" };
     for (size_t k = 0; k < sizeof with_arg / sizeof with_arg[0]; ++k) {
         const size_t n = strlen(with_arg[k]);

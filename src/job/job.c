@@ -124,6 +124,30 @@ static int check_overwrites(ef_job *J, const char *pattern, const ef_frame_patte
     return status;
 }
 
+/* Writes --failed-list: every frame of frames[0..n) not marked written,
+ * one per line (an empty file when all were). Returns status, or 1 with
+ * the message printed when the list cannot be written. */
+static int write_failed_list(ef_job *J, int status, const long *frames, int n,
+                             const unsigned char *written)
+{
+    const char *path = J->o.failed_list;
+    if (!path)
+        return status;
+    FILE *f = fopen(path, "w");
+    int bad = !f;
+    for (int i = 0; f && i < n; ++i)
+        if (!(written && written[i]))
+            bad |= fprintf(f, "%ld\n", frames[i]) < 0;
+    if (f)
+        bad |= fclose(f) != 0;
+    if (bad) {
+        const int e = errno;
+        return ef_job_say(J, status ? status : 1, "--failed-list %s: cannot write it (%s)", path,
+                          strerror(e ? e : EIO));
+    }
+    return status;
+}
+
 /* Runs every frame of a sequence in order: the frames of --frames, or
  * every frame on disk matching INPUT. Missing frames are found before any
  * work; a failed frame stops the run unless --keep-going, which fogs the
@@ -171,6 +195,7 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
     int ow;
     if (out_pat && !o->explain &&
         (ow = check_overwrites(J, pattern, pin, out_pat, &pout, frames, n)) != 0) {
+        ow = write_failed_list(J, ow, frames, n, NULL);
         free(frames);
         return ow;
     }
@@ -183,7 +208,7 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
          *pv_path = paths + 3 * 4096;
     char missing[400] = "";
     int nmissing = 0;
-    unsigned char *skip = calloc((size_t) n, 1);
+    unsigned char *skip = calloc(2 * (size_t) n, 1), *written = skip + n;
     if (!skip) {
         free(paths);
         free(frames);
@@ -207,11 +232,16 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
                      "them, choose others with --frames, or pass --keep-going)", pattern,
                   nmissing, n, n > 1 ? "s" : "", dep_pat && pdep.has ? " (colour or depth)" : "",
                   missing);
+        const int rc = write_failed_list(J, 1, frames, n, NULL);
         free(paths);
         free(skip);
         free(frames);
-        return 1;
+        return rc;
     }
+    if (nmissing && !o->explain)
+        ef_job_note(J, "exrfog: %s: %d of %d frame%s missing on disk%s: %s; fogging the others "
+                       "(--keep-going)\n", pattern, nmissing, n, n > 1 ? "s" : "",
+                    dep_pat && pdep.has ? " (colour or depth)" : "", missing);
     if (o->explain && !o->json)
         fprintf(J->out, "sequence: %s, %d frame%s (%ld to %ld), time = frame / %g fps%s\n", pattern, n,
                n > 1 ? "s" : "", frames[0], frames[n - 1], o->fps,
@@ -246,8 +276,10 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
         ef_progress_frame_done(J);
         if (o->explain)
             break;   /* the first frame tells what every frame is read as */
-        if (rc == 0)
+        if (rc == 0) {
+            written[i] = 1;
             continue;
+        }
         /* A usage error is the same for every frame; a cancel stops all. */
         if (rc == 2 || rc == 3 || !o->keep_going) {
             status = rc;
@@ -260,8 +292,14 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
         list_frame(failed, sizeof failed, frames[i]);
     }
     if (status == 0 && nfailed) {
-        status = ef_job_say(J, 1, "%s: %d of %d frames failed: %s", pattern, nfailed, n, failed);
+        status = ef_job_say(J, 1, "%s: %d of %d frames failed: %s%s", pattern, nfailed, n, failed,
+                            strstr(failed, "...") ? (o->failed_list ? " (every one in --failed-list)"
+                                                                    : " (--failed-list FILE "
+                                                                      "writes every one)")
+                                                  : "");
     }
+    if (!o->explain)
+        status = write_failed_list(J, status, frames, n, written);
     o->input = pattern;
     o->output = out_pat;
     o->depth_file = dep_pat;
@@ -287,9 +325,10 @@ static int run_parsed(ef_job *J)
     int status = 0;
     ef_frame_pattern pin;
     if (!ef_frame_pattern_find(o->input, &pin)) {
-        if (o->frames) {
-            status = ef_job_say(J, 2, "--frames needs a frame pattern in INPUT (shot.#.exr, "
-                                      "shot.%%04d.exr or shot.@@@@.exr)");
+        if (o->frames || o->failed_list) {
+            status = ef_job_say(J, 2, "%s needs a frame pattern in INPUT (shot.#.exr, "
+                                      "shot.%%04d.exr or shot.@@@@.exr)",
+                                o->frames ? "--frames" : "--failed-list");
         } else {
             J->pg.nframes = 1;
             status = ef_run_frame(J);

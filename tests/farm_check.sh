@@ -1,0 +1,124 @@
+#!/usr/bin/env bash
+# exrfog-farm on a real single-node Slurm (tests/slurm-local) and on GNU
+# parallel: a 12-frame sequence with one frame missing fails with that frame
+# and its log named, the other eleven are written, a resubmit after the frame
+# is restored reruns only it, and every frame equals a sequential exrfog run
+# byte for byte. Usage errors are never retried, exit 1 is (--retries).
+# usage: farm_check.sh EXRFOG MAKE_SAMPLE SOURCE_DIR TMPDIR
+#   (exit 77: skipped, when Slurm is not installed or this is not root and
+#   EXRFOG_REQUIRE_SLURM is unset; .ci/setup test --slow installs it)
+set -uo pipefail
+exrfog=$1 make_sample=$2 src=$3 tmp=$4/farm
+farm=$src/src/farm/exrfog-farm
+fail=0
+bad() { echo "FAIL: $*"; fail=1; }
+
+have_slurm=1
+for p in sbatch squeue scontrol slurmctld slurmd munged; do
+  command -v "$p" >/dev/null 2>&1 || [ -x "/usr/sbin/$p" ] || have_slurm=0
+done
+[ "$(id -u)" = 0 ] || have_slurm=0
+if [ $have_slurm = 0 ]; then
+  [ -n "${EXRFOG_REQUIRE_SLURM:-}" ] && { echo "FAIL: Slurm (or root) is missing"; exit 1; }
+  echo "Slurm is not installed (or not root): skipped"; exit 77
+fi
+
+rm -rf "$tmp" && mkdir -p "$tmp/seq" || exit 1
+cd "$tmp" || exit 1
+"$make_sample" frame.exr --size 96x54 --compression zip >/dev/null || exit 1
+for f in $(seq 1 12); do cp frame.exr "seq/shot.$(printf %04d "$f").exr"; done
+# The fog moves with the frame's time: a frame fogged as another shows.
+fog=(--fog 'noise:density=0.05:scale=4:octaves=2:velocity=3,0,1:method=exact')
+"$exrfog" seq/shot.#.exr -o seq/ref.#.exr --frames 1-12 "${fog[@]}" -q ||
+  { echo "FAIL: the sequential run"; exit 1; }
+cmp -s seq/ref.0001.exr seq/ref.0002.exr && bad "frames 1 and 2 fog alike (time does not move the fog)"
+
+D=$tmp/slurm
+conf=$("$src/tests/slurm-local" start "$D") || { echo "FAIL: slurm-local start"; exit 1; }
+eval "$conf"
+trap '"$src/tests/slurm-local" stop "$D" >/dev/null 2>&1' EXIT
+[ -n "${SLURM_CONF:-}" ] || bad "slurm-local start printed no SLURM_CONF"
+
+# run ENGINE: the missing-frame round, the resubmit, the comparison.
+run() {
+  local engine=$1 job=$tmp/job-$1 rc
+  rm -f seq/fog.*.exr
+  mv seq/shot.0007.exr seq/hidden.exr
+  "$farm" submit --engine "$engine" --chunk 5 --retries 1 --exrfog "$exrfog" --jobdir "$job" \
+      --wait -- seq/shot.#.exr -o seq/fog.#.exr --frames 1-12 "${fog[@]}" >out.txt 2>err.txt
+  rc=$?
+  [ $rc = 1 ] || { bad "$engine: submit with frame 7 missing: exit $rc, not 1"; cat err.txt; }
+  grep -q "frames not written: 7; log $job/logs/chunk-0001.log" err.txt ||
+    { bad "$engine: the report does not name frame 7 and its log"; cat err.txt; }
+  grep -q "1 of 12 frames failed: 7" err.txt || bad "$engine: no summary naming frame 7"
+  [ "$(cat out.txt)" = "$job" ] || bad "$engine: stdout is not the job directory"
+  grep -q "missing on disk: 7" "$job/logs/chunk-0001.log" ||
+    bad "$engine: the chunk log lacks exrfog's own reason"
+  [ "$(grep -c '^== exrfog-farm: chunk 1 ' "$job/logs/chunk-0001.log")" = 2 ] ||
+    bad "$engine: exit 1 was not retried once (--retries 1)"
+  grep -q -- "attempt 2 of 2, .*" "$job/logs/chunk-0001.log" && \
+    grep -q -- "--frames 7 " "$job/logs/chunk-0001.log" ||
+    bad "$engine: the retry did not rerun frame 7 alone"
+  [ "$(ls seq/fog.*.exr 2>/dev/null | wc -l)" = 11 ] || bad "$engine: not 11 frames written"
+  [ -e seq/fog.0007.exr ] && bad "$engine: frame 7 written"
+  "$farm" status "$job" >status.txt 2>&1
+  rc=$?
+  [ $rc = 1 ] || bad "$engine: status exit $rc with a failed chunk"
+  grep -Eq '^ +1 +6-10 +failed +1 +2 +7 ' status.txt || { bad "$engine: status line"; cat status.txt; }
+  grep -Eq '^ +0 +1-5 +done +0 +1' status.txt || bad "$engine: status of chunk 0"
+
+  mv seq/hidden.exr seq/shot.0007.exr
+  "$farm" resubmit "$job" --wait >out.txt 2>err.txt
+  rc=$?
+  [ $rc = 0 ] || { bad "$engine: resubmit exit $rc"; cat err.txt; }
+  grep -q "resubmitting chunk(s) 1$" err.txt || bad "$engine: resubmit did not rerun chunk 1 alone"
+  grep -q -- "--frames 7 " "$job/logs/chunk-0001.log" || bad "$engine: resubmit reran more than frame 7"
+  "$farm" status "$job" >status.txt 2>&1 || bad "$engine: status after the resubmit is not 0"
+  [ "$(grep -c ' done ' status.txt)" = 3 ] || bad "$engine: not every chunk done"
+  for f in $(seq -f %04g 1 12); do
+    cmp -s "seq/fog.$f.exr" "seq/ref.$f.exr" || bad "$engine: frame $f differs from the sequential run"
+  done
+  "$farm" resubmit "$job" 2>err.txt || bad "$engine: resubmit of a finished job"
+  grep -q "nothing to resubmit" err.txt || bad "$engine: resubmit of a finished job says what"
+
+  # A usage error is the same on every attempt: never retried.
+  "$farm" submit --engine "$engine" --chunk 6 --retries 3 --exrfog "$exrfog" --jobdir "$job-usage" \
+      --wait -- seq/shot.#.exr -o seq/u.#.exr --frames 1-12 --fog nosuchfog:density=1 >/dev/null 2>err.txt
+  rc=$?
+  [ $rc = 2 ] || { bad "$engine: a usage error: exit $rc, not 2"; cat err.txt; }
+  for c in 0 1; do
+    [ "$(grep -c '^== exrfog-farm: chunk' "$job-usage/logs/chunk-000$c.log")" = 1 ] ||
+      bad "$engine: usage error retried (chunk $c)"
+  done
+  ls seq/u.*.exr >/dev/null 2>&1 && bad "$engine: output after a usage error"
+}
+
+run slurm
+# A job submitted without --wait: status follows it to the end.
+job=$tmp/job-nowait
+"$farm" submit --engine slurm --chunk 4 --exrfog "$exrfog" --jobdir "$job" -- \
+    seq/shot.#.exr -o seq/nw.#.exr --frames 1-12 "${fog[@]}" >/dev/null 2>err.txt ||
+  bad "slurm: submit without --wait"
+for _ in $(seq 60); do
+  "$farm" status "$job" >status.txt 2>&1
+  rc=$?
+  [ $rc = 3 ] || break
+  sleep 1
+done
+[ $rc = 0 ] || { bad "slurm: status of the unwaited job ended $rc"; cat status.txt; }
+for f in $(seq -f %04g 1 12); do
+  cmp -s "seq/nw.$f.exr" "seq/ref.$f.exr" || bad "slurm (no --wait): frame $f differs"
+done
+run parallel
+
+# Usage of the farm itself.
+"$farm" submit --engine slurm -- seq/shot.#.exr -o seq/x.#.exr --fog exp:density=1 2>err.txt
+[ $? = 2 ] && grep -q "need --frames" err.txt || bad "submit without --frames is not a usage error"
+"$farm" status "$tmp/seq" 2>err.txt
+[ $? = 2 ] && grep -q "not an exrfog-farm job directory" err.txt || bad "status of a non-job"
+"$farm" submit --engine parallel --exrfog "$exrfog" --jobdir "$tmp/job-slurm" -- seq/shot.#.exr -o seq/x.#.exr \
+    --frames 1 --fog exp:density=1 2>err.txt
+[ $? = 2 ] && grep -q "not empty" err.txt || bad "an existing job directory is reused"
+
+[ $fail = 0 ] && echo "farm: slurm and parallel: failure report, retries, resubmit, 12 frames equal"
+exit $fail
