@@ -26,6 +26,8 @@ static struct {
     int (*parse_color)(const ef_ocio *, const char *, const char *, double[3], char *, size_t);
     ef_ocio_display *(*display_open)(const ef_ocio *, const char *, const char *, char *, size_t,
                                      char *, size_t);
+    ef_ocio_display *(*space_open)(const ef_ocio *, const char *, const char *, char *, size_t,
+                                   char *, size_t);
     int (*display_apply)(const ef_ocio_display *, float *, long);
     void (*display_close)(ef_ocio_display *);
     int (*dwa_transcode)(const char *, int, const char *, int, int, float, int, char *, size_t);
@@ -51,6 +53,7 @@ static void load(void)
         { (void **) &m.from_chrom, "ef_ocio_space_from_chromaticities" },
         { (void **) &m.parse_color, "ef_ocio_parse_color" },
         { (void **) &m.display_open, "ef_ocio_display_open" },
+        { (void **) &m.space_open, "ef_ocio_space_open" },
         { (void **) &m.display_apply, "ef_ocio_display_apply" },
         { (void **) &m.display_close, "ef_ocio_display_close" },
         { (void **) &m.dwa_transcode, "ef_dwa_transcode" },
@@ -127,6 +130,12 @@ ef_ocio_display *ef_ocio_display_open(const ef_ocio *o, const char *working,
                                       char *msg, size_t msg_len)
 {
     return m.display_open(o, working, display_view, used, used_len, msg, msg_len);
+}
+
+ef_ocio_display *ef_ocio_space_open(const ef_ocio *o, const char *working, const char *target,
+                                    char *used, size_t used_len, char *msg, size_t msg_len)
+{
+    return m.space_open(o, working, target, used, used_len, msg, msg_len);
 }
 
 int ef_ocio_display_apply(const ef_ocio_display *d, float *rgb, long npixels)

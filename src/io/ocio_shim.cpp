@@ -92,6 +92,21 @@ std::string resolve(const OCIO::ConstConfigRcPtr &cfg, const char *name)
     return cs ? cs->getName() : "";
 }
 
+// The config's sRGB texture space (piecewise sRGB encoding, Rec.709
+// primaries) under the names configs give it, or "".
+std::string srgb_texture(const OCIO::ConstConfigRcPtr &cfg)
+{
+    static const char *const srgb[] = {"sRGB - Texture", "srgb_texture", "srgb_tx",
+                                       "Utility - sRGB - Texture", "sRGB Encoded Rec.709 (sRGB)",
+                                       "sRGB"};
+    for (const char *s : srgb) {
+        std::string n = resolve(cfg, s);
+        if (!n.empty())
+            return n;
+    }
+    return "";
+}
+
 // The working space: name, or the scene_linear role when name is NULL.
 bool working_space(const ef_ocio *o, const char *working, std::string &out, std::string &err)
 {
@@ -490,13 +505,7 @@ extern "C" int ef_ocio_parse_color(const ef_ocio *o, const char *text, const cha
                 say(msg, msg_len, quoted + ": expected #RRGGBB with six hexadecimal digits");
                 return -1;
             }
-            static const char *const srgb[] = {"sRGB - Texture", "srgb_texture", "srgb_tx",
-                                               "Utility - sRGB - Texture", "sRGB Encoded Rec.709 (sRGB)",
-                                               "sRGB"};
-            std::string src;
-            for (const char *s : srgb)
-                if (src.empty())
-                    src = resolve(cfg, s);
+            std::string src = srgb_texture(cfg);
             if (src.empty()) {
                 say(msg, msg_len, quoted + ": the colour config (" + o->where +
                                       ") has no sRGB texture space (looked for 'sRGB - Texture', "
@@ -584,6 +593,46 @@ extern "C" ef_ocio_display *ef_ocio_display_open(const ef_ocio *o, const char *w
         say(msg, msg_len, std::string("preview: OpenColorIO: ") + e.what());
     } catch (...) {
         say(msg, msg_len, "preview: OpenColorIO failed");
+    }
+    return nullptr;
+}
+
+extern "C" ef_ocio_display *ef_ocio_space_open(const ef_ocio *o, const char *working,
+                                               const char *target, char *used, size_t used_len,
+                                               char *msg, size_t msg_len)
+{
+    try {
+        const OCIO::ConstConfigRcPtr &cfg = o->cfg;
+        std::string work, err;
+        if (!working_space(o, working, work, err)) {
+            say(msg, msg_len, err + "; known spaces: " + some_spaces(cfg, 8));
+            return nullptr;
+        }
+        std::string dst = target ? resolve(cfg, target) : srgb_texture(cfg);
+        if (dst.empty()) {
+            say(msg, msg_len, target ? "--output-colorspace '" + std::string(target) +
+                                           "' is not a colour space of the config (" + o->where +
+                                           "); known spaces: " + some_spaces(cfg, 8)
+                                     : "the colour config (" + o->where +
+                                           ") has no sRGB texture space (looked for 'sRGB - "
+                                           "Texture', 'srgb_texture', 'srgb_tx', 'sRGB'); name "
+                                           "the output's with --output-colorspace");
+            return nullptr;
+        }
+        OCIO::ConstProcessorRcPtr proc = cfg->getProcessor(work.c_str(), dst.c_str());
+        ef_ocio_display *d = new ef_ocio_display;
+        d->cpu = proc->getOptimizedCPUProcessor(OCIO::BIT_DEPTH_F32, OCIO::BIT_DEPTH_F32,
+                                                OCIO::OPTIMIZATION_DEFAULT);
+        if (put(used, used_len, dst) != 0 && used) {
+            delete d;
+            say(msg, msg_len, "the colour space's name is too long");
+            return nullptr;
+        }
+        return d;
+    } catch (const std::exception &e) {
+        say(msg, msg_len, std::string("OpenColorIO: ") + e.what());
+    } catch (...) {
+        say(msg, msg_len, "OpenColorIO failed");
     }
     return nullptr;
 }

@@ -71,6 +71,15 @@ int ef_ocio_parse_color(const ef_ocio *o, const char *text, const char *working,
 ef_ocio_display *ef_ocio_display_open(const ef_ocio *o, const char *working,
                                       const char *display_view, char *used, size_t used_len,
                                       char *msg, size_t msg_len);
+/* Opens a CPU processor from the working space (NULL: scene_linear) to
+ * the colour space target (a name, alias or role; NULL: the config's sRGB
+ * texture space), for files written in that space. used receives the
+ * target's canonical name. Returns NULL with msg on failure (an unknown
+ * name: some of the config's spaces listed). Applied and freed as a
+ * display. */
+ef_ocio_display *ef_ocio_space_open(const ef_ocio *o, const char *working, const char *target,
+                                    char *used, size_t used_len, char *msg, size_t msg_len);
+
 /* Applies the display transform in place to npixels interleaved RGB floats.
  * Thread-safe (concurrent calls on one display are fine). 0, or -1 if OCIO
  * failed (the pixels are then unspecified). */

@@ -49,15 +49,29 @@ int ef_preview_check(const char *path, char *err, size_t errlen)
 }
 
 int ef_oiio_convert_exr(const char *src, int part, const char *const *names, int n,
-                        const char *dst, const char *dst_fmt, char *err, size_t errlen)
+                        const char *dst, const char *dst_fmt, const ef_oiio_deliver *d,
+                        char *err, size_t errlen)
 {
     void *mod;
-    int (*fn)(const char *, int, const char *const *, int, const char *, const char *, char *,
-              size_t);
+    int (*fn)(const char *, int, const char *const *, int, const char *, const char *,
+              const ef_oiio_deliver *, char *, size_t);
     *(void **) &fn = module_sym("ef_oiio_convert", &mod, err, errlen);
     if (!fn)
         return -1;
-    const int rc = fn(src, part, names, n, dst, dst_fmt, err, errlen);
+    const int rc = fn(src, part, names, n, dst, dst_fmt, d, err, errlen);
+    dlclose(mod);
+    return rc;
+}
+
+int ef_oiio_output_probe(const char *ext, int dt, int nch, int *got, int *alpha, char *err,
+                         size_t errlen)
+{
+    void *mod;
+    int (*fn)(const char *, int, int, int *, int *, char *, size_t);
+    *(void **) &fn = module_sym("ef_oiio_output_probe", &mod, err, errlen);
+    if (!fn)
+        return -1;
+    const int rc = fn(ext, dt, nch, got, alpha, err, errlen);
     dlclose(mod);
     return rc;
 }

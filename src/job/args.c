@@ -10,6 +10,7 @@
 
 #include "aov.h"
 #include "argscan.h"
+#include "preview.h"
 #include "exr_deflate.h"
 #include "exr_io.h"
 #include "colour.h"
@@ -25,7 +26,7 @@ enum {
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_FAILED_LIST, OPT_VIEW, OPT_CAMERA_FILE,
     OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
-    OPT_DEEP_TOL
+    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP
 };
 
 static const struct option long_opts[] = {
@@ -52,6 +53,8 @@ static const struct option long_opts[] = {
     { "colorconfig", required_argument, NULL, OPT_COLORCONFIG },
     { "colorspace", required_argument, NULL, OPT_COLORSPACE },
     { "preview-view", required_argument, NULL, OPT_PREVIEW_VIEW },
+    { "output-colorspace", required_argument, NULL, OPT_OUTPUT_COLORSPACE },
+    { "crop", required_argument, NULL, OPT_CROP },
     { "aov", required_argument, NULL, OPT_AOV },
     { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
     { "world-to-camera", required_argument, NULL, OPT_W2C },
@@ -146,7 +149,14 @@ void ef_options_usage(FILE *out)
             "                           1-9; dwaa:LEVEL, dwab:LEVEL (default 45)\n"
             "      --codec C            libdeflate (default) or zlib: the DEFLATE of zip/zips\n"
             "  -d, --data-type T        half|float output for half/float channels (depth,\n"
-            "                           P and ids stay float), or CHANNEL=half|float\n"
+            "                           P and ids stay float), or CHANNEL=half|float; for\n"
+            "                           .png/.tif/.dpx/.jpg...: uint8|uint10|uint12|uint16|\n"
+            "                           half|float (default: DPX uint10 RGB, TIFF uint16,\n"
+            "                           PNG and JPEG uint8)\n"
+            "      --output-colorspace NAME  an integer (display-referred) non-EXR output's\n"
+            "                           colour space (default: the config's sRGB texture)\n"
+            "      --crop display|data  a non-EXR output covers the display window (default)\n"
+            "                           or only the data window\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
             "      --preview FILE       also write a preview (PNG, JPEG, ...) through an OCIO view\n"
             "      --preview-view \"DISPLAY, VIEW\"  its display and view (default: the config's)\n"
@@ -342,6 +352,12 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             o->colorspace = a;
             break;
         case OPT_PREVIEW_VIEW: o->preview_view = a; break;
+        case OPT_OUTPUT_COLORSPACE: o->output_colorspace = a; break;
+        case OPT_CROP:
+            if (strcmp(a, "display") && strcmp(a, "data"))
+                return ef_fail(err, "--crop '%s' is not display or data", a), EF_PARSE_USAGE;
+            o->crop_data = !strcmp(a, "data");
+            break;
         case OPT_SCENE: o->scene_file = a; break;
         case OPT_UP_AXIS:
             if (!strcmp(a, "auto")) {
@@ -456,15 +472,28 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             /* TYPE for every half/float channel, or CHANNEL=TYPE for one */
             const char *eq = strrchr(a, '='), *ty = eq ? eq + 1 : a;
             int t;
+            static const char *const uints[] = { "uint8", "uint10", "uint12", "uint16" };
+            int dt = 0;
+            for (int k = 0; k < 4; ++k)
+                if (!strcmp(ty, uints[k]))
+                    dt = EF_DT_UINT8 + k;
+            if (dt && !eq) {
+                o->out_dt = dt;
+                break;
+            }
+            if (dt)
+                return ef_fail(err, "--data-type '%s': integer types apply to a whole non-EXR "
+                                    "output (write -d %s)", a, ty), EF_PARSE_USAGE;
             if (!strcmp(ty, "half"))
                 t = EXR_PIXEL_HALF;
             else if (!strcmp(ty, "float"))
                 t = EXR_PIXEL_FLOAT;
             else
-                return ef_fail(err, "--data-type '%s' is not half, float or CHANNEL=half|float",
-                               a), EF_PARSE_USAGE;
+                return ef_fail(err, "--data-type '%s' is not uint8, uint10, uint12, uint16, half, "
+                                    "float or CHANNEL=half|float", a), EF_PARSE_USAGE;
             if (!eq) {
                 o->pixel_type = t;
+                o->out_dt = t == EXR_PIXEL_HALF ? EF_DT_HALF : EF_DT_FLOAT;
             } else if (eq == a) {
                 return ef_fail(err, "--data-type '%s' names no channel (write CHANNEL=%s)", a, ty),
                        EF_PARSE_USAGE;
@@ -514,6 +543,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
         const char *opt, *v;
     } names[] = { { "layer", o->layer }, { "depth-channel", o->depth_channel },
                   { "colorspace", o->colorspace }, { "preview-view", o->preview_view },
+                  { "output-colorspace", o->output_colorspace },
                   { "view", o->nviews > 0 ? o->views[0] : NULL },
                   { "view", o->nviews > 1 ? o->views[1] : NULL } };
     for (size_t k = 0; k < sizeof names / sizeof names[0]; ++k)

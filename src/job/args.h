@@ -31,6 +31,9 @@ typedef struct ef_options {
     int codec;                /* --codec: EF_CODEC_LIBDEFLATE (0, default) or EF_CODEC_ZLIB */
     float dwa_level;          /* --compression dwaa:LEVEL, or -1 */
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
+    int out_dt;               /* -d TYPE for a non-EXR output: EF_DT_*, 0: the format's */
+    const char *output_colorspace;   /* --output-colorspace NAME, or NULL */
+    int crop_data;            /* --crop data: a non-EXR output is the data window */
     /* -d CHANNEL=TYPE, as oiiotool: per-channel types over pixel_type */
     const char *chan_type_name[EF_MAX_CHAN_TYPES];
     int chan_type[EF_MAX_CHAN_TYPES], nchan_type;

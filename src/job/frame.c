@@ -17,6 +17,7 @@
 #include "deep_pass.h"
 #include "exr_deep.h"
 #include "exr_dwa.h"
+#include "deliver.h"
 #include "job_impl.h"
 #include "output.h"
 #include "preview.h"
@@ -61,6 +62,7 @@ typedef struct ef_frame {
     ef_output out, pv, mid, dconv, din;
     const char *ext;          /* OUTPUT's extension when it is not .exr */
     int foreign;
+    ef_deliver dv;            /* foreign: its type, channels, colour, geometry */
     char *history;
     exr_attr_box2i_t dw;
     ef_stream_opts so;
@@ -229,18 +231,21 @@ static int open_destinations(ef_frame *F)
     int rc;
     if (o->preview && (rc = open_preview(F)) != 0)
         return rc;
+    if (!F->foreign && o->output && o->out_dt >= EF_DT_UINT8 && o->out_dt <= EF_DT_UINT16) {
+        ef_fail(&F->err, "-d uint%s is for non-EXR outputs (.png, .tif, .dpx, .jpg); EXR colour "
+                         "is half or float (-d half|float)",
+                o->out_dt == EF_DT_UINT8 ? "8" : o->out_dt == EF_DT_UINT10 ? "10"
+                : o->out_dt == EF_DT_UINT12 ? "12" : "16");
+        return ef_job_report(J, o->output, &F->err, 2);
+    }
     if (F->foreign) {
-        char msg[512];
         if (F->naov) {
             ef_fail(&F->err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
                              "colour and alpha only", F->ext);
             return ef_job_report(J, o->output, &F->err, 2);
         }
-        if (ef_preview_check(o->output, msg, sizeof msg)) {
-            ef_fail(&F->err, "no writer for '%s' files (exrfog writes .exr itself, and through "
-                             "OpenImageIO .tif, .png, .jpg, .dpx and the rest): %s", F->ext, msg);
-            return ef_job_report(J, o->output, &F->err, 2);
-        }
+        if ((rc = ef_deliver_plan(J, F->ext, &F->dv, &F->err)) != 0)
+            return ef_job_report(J, o->output, &F->err, rc);
     }
     if ((rc = ef_output_open(&F->out, o->output, F->foreign ? F->ext : NULL, J->h.temps,
                              &F->err)) != 0)
@@ -369,9 +374,12 @@ static int find_views(ef_frame *F)
         return ef_job_report(J, o->input, &F->err, status);
     }
     if ((status = ef_colour_working(&J->colour, &F->in, F->plans[0].rgb[0].part,
-                                    ef_colour_converted(&J->colour) || o->preview || o->explain,
+                                    ef_colour_converted(&J->colour) || o->preview || o->explain ||
+                                        (F->foreign && ef_deliver_needs_colour(J, &F->dv)),
                                     &F->err)) != 0)
         return ef_job_report(J, o->input, &F->err, status);
+    if (F->foreign && !o->explain && (status = ef_deliver_colour(J, &F->dv, &F->err)) != 0)
+        return ef_job_report(J, o->output, &F->err, status);
     if (ef_colour_converted(&J->colour)) {
         if (ef_scene_rebuild(&o->scene, NULL, o->scene.ctx.time, &F->err) ||
             (o->fog_color && ef_colour_parse(&J->colour, o->fog_color, o->scene.color, &F->err)))
@@ -768,8 +776,14 @@ static int convert_output(ef_frame *F)
                                  pl->alpha.part >= 0 ? pl->alpha.name : NULL };
         char msg[512], out[sizeof F->out.tmp];
         fd_path(out, sizeof out, F->out.fd, F->out.tmp);
-        if (ef_oiio_convert_exr(mid, pl->rgb[0].part, names, names[3] ? 4 : 3, out, F->out.tmp,
-                                msg, sizeof msg)) {
+        if (names[3] && !F->dv.alpha && !J->noted_alpha) {
+            J->noted_alpha = 1;
+            ef_job_note(J, "exrfog: %s: note: alpha is not written (%s)\n", o->output,
+                        !strcmp(F->dv.ext, ".dpx") ? "DPX deliveries are RGB"
+                                                   : "the format cannot hold it");
+        }
+        if (ef_oiio_convert_exr(mid, pl->rgb[0].part, names, names[3] && F->dv.alpha ? 4 : 3,
+                                out, F->out.tmp, &F->dv.d, msg, sizeof msg)) {
             ef_fail(&F->err, "%s", msg);
             return ef_job_report(J, o->output, &F->err, 1);
         }
@@ -833,6 +847,7 @@ static void frame_free(ef_frame *F)
             free(F->view_scene[v]);
         }
     ef_ocio_display_close(F->disp);
+    ef_deliver_free(&F->dv);
     ef_exr_close(&F->dep);
     ef_exr_close(&F->in);
     free(F);

@@ -54,6 +54,7 @@ typedef struct ef_job {
     char **typed;             /* the command line as typed, for the history */
     int has_frame;            /* a frame of a sequence: */
     long frame;               /* its number */
+    int noted_alpha;          /* the note on a deliverable without alpha was given */
 } ef_job;
 
 /* Whether the run is to stop: the host's flag or the progress hook's. */
