@@ -2626,7 +2626,7 @@ static void test_trap_warnings(void **state)
 }
 
 /* OUTPUT's extension chooses the format (issue 9): .tif/.png through
- * OpenImageIO with the fogged colour and alpha (a -d float TIFF's values equal
+ * OpenImageIO with the fogged colour and alpha (a -d half TIFF's values equal
  * the EXR run's R,G,B,A, compared by oiiotool --diff); an extension no
  * writer knows, or AOVs with a colour-only format, is a usage error before
  * any work, and never an EXR under another name. */
@@ -2637,7 +2637,7 @@ static void test_output_formats(void **state)
     path_t exr = pth("formats/out.exr"), tif = pth("formats/out.tif"), png = pth("formats/out.png"),
            foo = pth("formats/out.foo");
     assert_status(run("'%s' -o '%s' --fog exp:density=0.05", sample(), exr.s), 0);
-    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 -d float", sample(), tif.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 -d half", sample(), tif.s), 0);
     assert_status(run("'%s' -o '%s' --fog exp:density=0.05", sample(), png.s), 0);
     size_t n;
     unsigned char *d = slurp(png.s, &n);

@@ -448,6 +448,71 @@ static void test_progress_bar(void **state)
     assert_string_equal(out, "");
 }
 
+/* Messages of the hostile campaign (issue 23): the #### padding hint names
+ * the file looked for and the four-digit one found; limits are stated;
+ * a single INPUT with a pattern in -o, a directory as -o and a file named
+ * like an option are refused with what to write instead; --failed-list
+ * holds every frame not written when the message must abbreviate. */
+static void test_sequence_messages(void **state)
+{
+    (void) state;
+    fresh("seqmsg");
+    write_sequence(1, 3);
+    assert_run(1, "'%s/shot.####.exr' -o '%s/o.#.exr' --frames 1-3 --fog exp:density=0.05", g_dir,
+               g_dir);
+    assert_non_null(strstr(tu_err, "looked for"));
+    assert_non_null(strstr(tu_err, "shot.0000000000000001.exr, but"));
+    assert_non_null(strstr(tu_err, "shot.0001.exr exists"));
+    assert_non_null(strstr(tu_err, "shot.#.exr or"));
+    assert_non_null(strstr(tu_err, "shot.%04d.exr)"));
+    assert_run(1, "'%s/shot.%%08d.exr' -o '%s/o.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "names with 8 digits, but"));
+    assert_run(2, "'%s/shot.#.exr' -o '%s/o.#.exr' --frames 1-1000000000 --fog exp:density=0.05",
+               g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "frame numbers run from -999999999 to 999999999"));
+    assert_run(2, "'%s/shot.%%0240d.exr' -o '%s/o.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "asks for 240 digits; at most 100"));
+    assert_run(2, "'%s/shot.0001.exr' -o '%s/f.#.exr' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "has a frame pattern but INPUT"));
+    char *lit = in_dir("f.#.exr");
+    assert_false(tu_exists(lit));
+    free(lit);
+    assert_run(2, "'%s/shot.0001.exr' -o '%s' --fog exp:density=0.05", g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "is a directory; give a file name"));
+    assert_run(2, "-in.exr -o '%s/x.exr' --fog exp:density=0.05", g_dir);
+    assert_non_null(strstr(tu_err, "unknown option '-i' in '-in.exr'"));
+    assert_non_null(strstr(tu_err, "./-in.exr"));
+    /* 197 of 200 frames missing: the message abbreviates, the list does not */
+    assert_run(1, "'%s/shot.#.exr' -o '%s/o.#.exr' --frames 1-200 --keep-going --failed-list "
+                  "'%s/failed.txt' --fog exp:density=0.05", g_dir, g_dir, g_dir);
+    assert_non_null(strstr(tu_err, "197 of 200 frames missing on disk"));
+    assert_non_null(strstr(tu_err, "(every one in --failed-list)"));
+    char *fl = in_dir("failed.txt");
+    FILE *f = fopen(fl, "r");
+    assert_non_null(f);
+    long v, want = 4;
+    int count = 0;
+    while (fscanf(f, "%ld", &v) == 1) {
+        assert_int_equal(v, want);
+        ++want;
+        ++count;
+    }
+    fclose(f);
+    assert_int_equal(count, 197);
+    for (int k = 1; k <= 3; ++k) {
+        char *o = in_dir("o.%04d.exr", k);
+        assert_true(tu_exists(o));
+        free(o);
+    }
+    /* every frame written: an empty list */
+    assert_run(0, "'%s/shot.#.exr' -o '%s/o.#.exr' --frames 1-3 --failed-list '%s/failed.txt' "
+                  "--fog exp:density=0.05", g_dir, g_dir, g_dir);
+    struct stat st;
+    assert_int_equal(stat(fl, &st), 0);
+    assert_int_equal((int) st.st_size, 0);
+    free(fl);
+}
+
 /* exrfog-farm --engine parallel (GNU parallel here): chunks of frames as
  * parallel tasks give the same pixels as one run; a damaged frame fails
  * its chunk, is named with its log and leaves the other frames written. */
@@ -1159,6 +1224,7 @@ int main(void)
         cmocka_unit_test(test_views_multipart),
         cmocka_unit_test(test_views_singlepart),
         cmocka_unit_test(test_views_over_limit),
+        cmocka_unit_test(test_sequence_messages),
         cmocka_unit_test(test_beachball_left),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -117,6 +117,9 @@ void ef_options_usage(FILE *out)
             "                           densities are per metre\n"
             "      --time T             time in seconds for velocity= keys (default: the\n"
             "                           frame / --fps in a sequence, else 0)\n"
+            "                           Frame patterns: # is four digits (#### sixteen, as\n"
+            "                           in oiiotool; Nuke/Houdini/Blender's #### is # here),\n"
+            "                           @ one digit, %%04d four\n"
             "      --frames LIST        frames of a sequence: 1-100, 1-100x2, 1,5,10-20\n"
             "                           (default: every frame on disk matching INPUT)\n"
             "      --fps N              frames per second for the default time (default 24)\n"
@@ -531,9 +534,17 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             return EF_PARSE_EXIT;
         case ':':
             return ef_fail(err, "option '%s' needs a value", argv[scan.optind - 1]), EF_PARSE_USAGE;
-        default:
-            return ef_fail(err, "unknown option '%s' (see exrfog --help)", argv[scan.optind - 1]),
-                   EF_PARSE_USAGE;
+        default: {
+            /* Inside a cluster (-in.exr: 'i' unknown, "n.exr" left) the
+             * element is still argv[optind]; else the one just passed. */
+            const int inside = scan.nextchar && *scan.nextchar;
+            const char *elem = argv[inside ? scan.optind : scan.optind - 1];
+            if (scan.optopt > 0 && scan.optopt < 128 && elem[0] == '-' && elem[1] != '-')
+                return ef_fail(err, "unknown option '-%c' in '%s' (see exrfog --help; a file "
+                                    "whose name starts with '-' is written ./%s, or after --)",
+                               scan.optopt, elem, elem), EF_PARSE_USAGE;
+            return ef_fail(err, "unknown option '%s' (see exrfog --help)", elem), EF_PARSE_USAGE;
+        }
         }
     }
     *cur_arg = NULL;   /* later errors are not about one option's number */

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <strings.h>
 #include <sys/resource.h>
 #include <time.h>
@@ -231,6 +232,11 @@ static int open_destinations(ef_frame *F)
     int rc;
     if (o->preview && (rc = open_preview(F)) != 0)
         return rc;
+    struct stat ost;
+    if (o->output && stat(o->output, &ost) == 0 && S_ISDIR(ost.st_mode)) {
+        ef_fail(&F->err, "is a directory; give a file name (e.g. %s/fog.exr)", o->output);
+        return ef_job_report(J, o->output, &F->err, 2);
+    }
     if (!F->foreign && o->output && o->out_dt >= EF_DT_UINT8 && o->out_dt <= EF_DT_UINT16) {
         ef_fail(&F->err, "-d uint%s is for non-EXR outputs (.png, .tif, .dpx, .jpg); EXR colour "
                          "is half or float (-d half|float)",

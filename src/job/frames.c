@@ -10,6 +10,8 @@
 
 /* More frames than this in one --frames list is a typo, not a shot. */
 #define EF_MAX_FRAMES 1000000
+/* Frame numbers have at most nine digits. */
+#define EF_MAX_FRAME 999999999
 
 int ef_frame_pattern_find(const char *path, ef_frame_pattern *p)
 {
@@ -73,8 +75,8 @@ static int read_frame(const char **s, long *v)
         return -1;
     errno = 0;
     const long x = strtol(b, &end, 10);
-    if (errno || x > 999999999 || x < -999999999)
-        return -1;
+    if (errno || x > EF_MAX_FRAME || x < -EF_MAX_FRAME)
+        return -2;
     *v = x;
     *s = end;
     return 0;
@@ -87,18 +89,19 @@ int ef_frames_parse(const char *text, long **frames, int *n, ef_err *err)
     *frames = NULL;
     *n = 0;
     const char *s = text;
+    int rc = 0;
     while (*s) {
         long a, b, step = 1;
-        if (read_frame(&s, &a))
+        if ((rc = read_frame(&s, &a)) != 0)
             goto bad;
         b = a;
         if (*s == '-') {
             ++s;
-            if (read_frame(&s, &b))
+            if ((rc = read_frame(&s, &b)) != 0)
                 goto bad;
             if (*s == 'x') {
                 ++s;
-                if (!isdigit((unsigned char) *s) || read_frame(&s, &step) || step < 1)
+                if (!isdigit((unsigned char) *s) || (rc = read_frame(&s, &step)) != 0 || step < 1)
                     goto bad;
             }
             if (b < a) {
@@ -135,6 +138,9 @@ int ef_frames_parse(const char *text, long **frames, int *n, ef_err *err)
     return 0;
 bad:
     free(f);
+    if (rc == -2)
+        return ef_fail(err, "--frames '%s': frame numbers run from -%d to %d", text, EF_MAX_FRAME,
+                       EF_MAX_FRAME);
     return ef_fail(err, "--frames '%s' is not a frame list (e.g. 1-100, 1-100x2, 1,5,10-20)", text);
 }
 

@@ -148,6 +148,46 @@ static int write_failed_list(ef_job *J, int status, const long *frames, int n,
     return status;
 }
 
+/* When a padded pattern (####, %08d...) finds nothing, whether the same
+ * frames exist with four digits, the padding Nuke, Houdini and Blender
+ * users mean by ####: writes a hint naming such a file (and the file
+ * looked for, for frame, or the pattern's digits when frame is absent) to
+ * hint. Returns 1 with the hint, 0 when there is none. */
+static int padding_hint(const char *pattern, const ef_frame_pattern *pin, const long *frame,
+                        char *hint, size_t len)
+{
+    if (!pin->has || pin->width == 4)
+        return 0;
+    ef_frame_pattern four = *pin;
+    four.width = 4;
+    long *fr = NULL;
+    int n = 0;
+    ef_err e = { 0 };
+    char seen[4096], want[4096];
+    int found = 0;
+    if (frame) {
+        struct stat st;
+        found = !ef_frame_path(pattern, &four, *frame, seen, sizeof seen) && stat(seen, &st) == 0;
+    } else if (!ef_frames_on_disk(pattern, &four, &fr, &n, &e) && n > 0) {
+        found = !ef_frame_path(pattern, &four, fr[0], seen, sizeof seen);
+    }
+    free(fr);
+    if (!found)
+        return 0;
+    if (frame)
+        ef_frame_path(pattern, pin, *frame, want, sizeof want);
+    else
+        snprintf(want, sizeof want, "names with %d digits", pin->width);
+    snprintf(hint, len, "; it looked for %s, but %s exists: %s (write %.*s#%s or %.*s%%04d%s)",
+             want, seen,
+             pattern[pin->at] == '#' ? "under oiiotool's rule each # is four digits, so #### "
+                                       "is sixteen"
+                                     : "the pattern's width is not four",
+             (int) pin->at, pattern, pattern + pin->at + pin->len, (int) pin->at, pattern,
+             pattern + pin->at + pin->len);
+    return 1;
+}
+
 /* Runs every frame of a sequence in order: the frames of --frames, or
  * every frame on disk matching INPUT. Missing frames are found before any
  * work; a failed frame stops the run unless --keep-going, which fogs the
@@ -169,6 +209,14 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
     }
     if (dep_pat)
         ef_frame_pattern_find(dep_pat, &pdep);   /* one depth for every frame is allowed */
+    const struct {
+        const char *path;
+        const ef_frame_pattern *p;
+    } pats[] = { { pattern, pin }, { out_pat, &pout }, { dep_pat, &pdep }, { pv_pat, &ppv } };
+    for (size_t k = 0; k < sizeof pats / sizeof pats[0]; ++k)
+        if (pats[k].path && pats[k].p->has && pats[k].p->width > 100)
+            return ef_job_say(J, 2, "%s: the frame pattern asks for %d digits; at most 100 "
+                                    "(write e.g. %%04d)", pats[k].path, pats[k].p->width);
     long *frames = NULL;
     int n = 0;
     if (o->frames ? ef_frames_parse(o->frames, &frames, &n, &err)
@@ -176,6 +224,11 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
         if (o->frames) {
             return ef_job_say(J, 2, "%s", err.msg);
         }
+        return ef_job_report(J, pattern, &err, 1);
+    }
+    char hint[20000];
+    if (n == 0 && padding_hint(pattern, pin, NULL, hint, sizeof hint)) {
+        ef_fail(&err, "no file on disk matches this frame pattern%s", hint);
         return ef_job_report(J, pattern, &err, 1);
     }
     if (n == 0) {
@@ -227,11 +280,21 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
         }
     }
     int status = 0;
+    long first_missing = 0;
+    for (int i = 0; i < n; ++i)
+        if (skip[i]) {
+            first_missing = frames[i];
+            break;
+        }
     if (nmissing && !o->keep_going) {
-        ef_job_say(J, 1, "%s: %d of %d frame%s missing on disk%s: %s; nothing was written (render "
-                     "them, choose others with --frames, or pass --keep-going)", pattern,
-                  nmissing, n, n > 1 ? "s" : "", dep_pat && pdep.has ? " (colour or depth)" : "",
-                  missing);
+        if (nmissing == n && padding_hint(pattern, pin, &first_missing, hint, sizeof hint))
+            ef_job_say(J, 1, "%s: %d of %d frame%s missing on disk%s; nothing was written", pattern,
+                       nmissing, n, n > 1 ? "s" : "", hint);
+        else
+            ef_job_say(J, 1, "%s: %d of %d frame%s missing on disk%s: %s; nothing was written "
+                             "(render them, choose others with --frames, or pass --keep-going)",
+                       pattern, nmissing, n, n > 1 ? "s" : "",
+                       dep_pat && pdep.has ? " (colour or depth)" : "", missing);
         const int rc = write_failed_list(J, 1, frames, n, NULL);
         free(paths);
         free(skip);
@@ -330,8 +393,18 @@ static int run_parsed(ef_job *J)
                                       "shot.%%04d.exr or shot.@@@@.exr)",
                                 o->frames ? "--frames" : "--failed-list");
         } else {
-            J->pg.nframes = 1;
-            status = ef_run_frame(J);
+            ef_frame_pattern pp;
+            const char *pat = o->output && ef_frame_pattern_find(o->output, &pp) ? o->output
+                              : o->preview && ef_frame_pattern_find(o->preview, &pp) ? o->preview
+                                                                                   : NULL;
+            if (pat) {
+                status = ef_job_say(J, 2, "%s has a frame pattern but INPUT %s is one file, so "
+                                          "nothing would fill it in (give INPUT the pattern, e.g. "
+                                          "shot.#.exr, or name one file)", pat, o->input);
+            } else {
+                J->pg.nframes = 1;
+                status = ef_run_frame(J);
+            }
         }
     } else {
         status = run_sequence(J, &pin);
