@@ -19,28 +19,14 @@ static void explain_channels(FILE *out, const ef_options *o, const ef_channel_pl
                              const ef_depth_conv *conv, int conv_ok);
 static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan);
 
-void ef_explain(ef_job *J, FILE *out, const ef_exr_file *in, const ef_channel_plan *plan,
-                const ef_camera *cam, const ef_depth_conv *conv, int conv_ok)
+/* The camera block of --explain. */
+static void explain_camera(FILE *out, const ef_camera *cam, const char *whose)
 {
-    const ef_options *o = &J->o;
     static const double fwd[3] = { 0, 0, 1 }, upc[3] = { 0, 1, 0 };
     double f[3], u[3];
-    fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
-    if (!plan) {
-        /* What was found before the first thing that was not. */
-        fprintf(out, "colour, depth and views: not resolved (see the error)\n");
-        explain_scene(J, out, NULL);
-        return;
-    }
-    if (!cam) {
-        fprintf(out, "camera: not resolved (see the error)\n");
-        explain_channels(out, o, plan, NULL, 0);
-        explain_scene(J, out, plan);
-        return;
-    }
     ef_camera_to_world_dir(cam, fwd, f);
     ef_camera_to_world_dir(cam, upc, u);
-    fprintf(out, "camera:\n");
+    fprintf(out, "camera%s:\n", whose);
     print_vec(out, "position", cam->pos, cam->src_pose);
     print_vec(out, "forward", f, NULL);
     print_vec(out, "up", u, NULL);
@@ -53,6 +39,29 @@ void ef_explain(ef_job *J, FILE *out, const ef_exr_file *in, const ef_channel_pl
         fprintf(out, "  %-11s %.9g  from %s\n", "far", cam->far_.v, cam->src_far);
     if (cam->warning[0])
         fprintf(out, "  warning:    %s\n", cam->warning);
+}
+
+void ef_explain(ef_job *J, FILE *out, const ef_exr_file *in, const ef_channel_plan *plan,
+                const ef_camera *cam, const ef_depth_conv *conv, int conv_ok)
+{
+    const ef_options *o = &J->o;
+    fprintf(out, "input: %s (%d part%s)\n", in->path, in->nparts, in->nparts > 1 ? "s" : "");
+    if (!plan) {
+        /* What was found before the first thing that was not: the
+         * camera of the first part's header, when it has one. */
+        if (cam)
+            explain_camera(out, cam, " (the first part's header)");
+        fprintf(out, "colour, depth and views: not resolved (see the error)\n");
+        explain_scene(J, out, NULL);
+        return;
+    }
+    if (!cam) {
+        fprintf(out, "camera: not resolved (see the error)\n");
+        explain_channels(out, o, plan, NULL, 0);
+        explain_scene(J, out, plan);
+        return;
+    }
+    explain_camera(out, cam, "");
     explain_channels(out, o, plan, conv, conv_ok);
     explain_scene(J, out, plan);
 }

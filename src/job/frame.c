@@ -375,8 +375,17 @@ static int find_views(ef_frame *F)
     int status = ef_choose_views(J, &F->in, F->df, views, nfile_views, F->plans, &F->nplans,
                                  &F->err);
     if (status) {
-        if (o->explain && status == 1)
-            ef_explain(J, J->out, &F->in, NULL, NULL, NULL, 0);
+        if (o->explain && status == 1) {
+            /* Everything found, then the error: the header's camera too. */
+            ef_cam_flags flags = o->cam;
+            ef_cam_meta meta;
+            ef_err e2 = { 0 };
+            const int have = ef_camera_flags(J, &flags, F->camfile_src, sizeof F->camfile_src,
+                                             &e2) == 0 &&
+                             ef_exr_read_cam_meta(&F->in, 0, &meta, &e2) == 0 &&
+                             ef_camera_resolve(&meta, &flags, &F->cams[0], &e2) == 0;
+            ef_explain(J, J->out, &F->in, NULL, have ? &F->cams[0] : NULL, NULL, 0);
+        }
         return ef_job_report(J, o->input, &F->err, status);
     }
     if ((status = ef_colour_working(&J->colour, &F->in, F->plans[0].rgb[0].part,

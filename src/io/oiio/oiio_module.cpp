@@ -324,8 +324,18 @@ ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
             return -1;
         }
         std::vector<float> px((size_t) is.width * (size_t) is.height * (size_t) is.nchannels);
-        if (!in->read_image(0, 0, 0, is.nchannels, OIIO::TypeDesc::FLOAT, px.data())) {
-            std::snprintf(err, errlen, "cannot read the depth image: %s", in->geterror().c_str());
+        // A truncated or damaged file may read "successfully" with its
+        // errors left pending (TIFF strips past the end): any error fails.
+        const bool ok = in->read_image(0, 0, 0, is.nchannels, OIIO::TypeDesc::FLOAT, px.data());
+        std::string why = in->has_error() ? in->geterror() : "";
+        if (why.empty() && OIIO::has_error())
+            why = OIIO::geterror();
+        const size_t nl = why.find('\n');
+        if (nl != std::string::npos)
+            why.resize(nl);   // the first of the reader's lines says it
+        if (!ok || !why.empty()) {
+            std::snprintf(err, errlen, "cannot read the depth image (truncated or damaged?): %s",
+                          why.empty() ? "the reader failed" : why.c_str());
             return -1;
         }
         OIIO::ImageSpec os(is.width, is.height, is.nchannels, OIIO::TypeDesc::FLOAT);
