@@ -2657,6 +2657,30 @@ static void test_output_formats(void **state)
     assert_err_has("--aov needs an EXR");
 }
 
+/* method=exact with an extreme cost (the hostile campaign's 0.1 scale, 16
+ * octaves, falloff 1e-6: 147 s on a 64x64 frame) is warned about before
+ * the work, from a sample of the frame's rays; the default method is not.
+ * The run is stopped by timeout once the warning is out. */
+static void test_exact_cost_warning(void **state)
+{
+    (void) state;
+    path_t dir = fresh_dir("exactcost");
+    path_t out = pth("exactcost/out.exr"), err = pth("exactcost/err");
+    char cmd[16384];
+    snprintf(cmd, sizeof cmd, "'%s' '%s' -o '%s' --fog "
+             "noise:density=0.001:scale=0.1:octaves=16:falloff=1e-6:method=exact --threads 2 "
+             "2>'%s' & p=$!; for i in $(seq 100); do grep -q predicted '%s' 2>/dev/null && break; "
+             "sleep 0.1; done; kill $p; wait $p", bin(), sample(), out.s, err.s, err.s);
+    (void) system(cmd);
+    slurp_text(err.s, g_err, sizeof g_err);
+    assert_non_null(strstr(g_err, "warning: method=exact is predicted to take about"));
+    assert_non_null(strstr(g_err, "drop method=exact"));
+    assert_int_equal(dir_count(dir.s), 0);
+    assert_status(run("'%s' -o '%s' --fog noise:density=0.02:scale=10:octaves=2:method=exact",
+                      sample(), out.s), 0);
+    assert_null(strstr(g_err, "predicted"));
+}
+
 /* -d CHANNEL=TYPE as oiiotool (issue 9): per-channel types over -d TYPE,
  * the last one naming a channel winning; a name-less override is a usage
  * error. */
@@ -2968,6 +2992,7 @@ int main(void)
         cmocka_unit_test(test_history),
         cmocka_unit_test(test_trap_warnings),
         cmocka_unit_test(test_output_formats),
+        cmocka_unit_test(test_exact_cost_warning),
         cmocka_unit_test(test_data_type_per_channel),
         cmocka_unit_test(test_focal_length),
         cmocka_unit_test(test_explain_partial),

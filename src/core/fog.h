@@ -131,6 +131,10 @@ typedef struct ef_fog_model {
      * only read for distance=radial. */
     void (*tau_dist)(const ef_fog_component *c, const double *planar, const double *dist, int n,
                      int first, double *const tau[3]);
+    /* Optional: the noise evaluations tau is predicted to make along r
+     * when that work is not bounded per ray (method=exact), else 0: an
+     * estimate for a warning before an extreme run, not a bound. */
+    double (*work)(const ef_fog_component *c, const ef_ray *r);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

@@ -2963,16 +2963,53 @@ static void density_noise(const ef_fog_component *c, const long double *v, long 
         out[k] = s->rho[k] == 0 ? 0 : s->rho[k] * env * shape;
 }
 
+/* method=exact's evaluations along r, predicted from the part of r it
+ * walks (to the box, the opaque cut or, on a sky ray, where the envelope's
+ * tail drops below 1e-16 of the bound): per octave its cells times 9
+ * Gauss nodes (13 under an envelope, whose cells take the bisected pair),
+ * an octave past the cell budget at the budget's fallback instead. The
+ * clamped and separable densities cost more per cell (their pieces); the
+ * estimate leaves that out, so it errs low. */
+static double work_noise(const ef_fog_component *c, const ef_ray *r)
+{
+    const nstate *s = state(c);
+    long double t0, t1;
+    if (s->method != M_EXACT || !(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1))
+        return 0;
+    rayc R;
+    ray_setup(s, r, &R);
+    long double tend = t1;
+    if (isinf(t1)) {
+        if (!(s->k > 0 && R.hs > 0))
+            return 0;   /* opaque: nothing is walked */
+        tend = tail_end(&R, t0, 1e-16, 0);
+    }
+    if (env_overflows(s, (double) R.h0, (double) R.hs, (double) t0, (double) t1))
+        return 0;
+    opaque_cut(&R, t0, &tend);
+    const double L = (double) (tend - t0), nodes = s->k > 0 ? 13 : 9;
+    const double cross = fabs(r->dir[0]) + fabs(r->dir[1]) + fabs(r->dir[2]);
+    const int linear = !s->separable && !s->clamp;
+    double evals = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i) {
+        const double cells = L * cross * s->fbm.freq[i] / s->scale;
+        evals += cells <= (linear ? CELL_BUDGET : CELL_BUDGET_FULL)
+                     ? (cells + 1) * nodes
+                     : (linear ? 0 : MARCH_FALLBACK);
+    }
+    return evals;
+}
+
 const ef_fog_model ef_fog_noise = {
     .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .tau_add = tau_add_noise, .bind = bind_noise, .uses_up = 1
+    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
 };
 
 const ef_fog_model ef_fog_noise_separable = {
     .name = "noise-separable", .keys = separable_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .tau_add = tau_add_noise, .bind = bind_noise, .uses_up = 1
+    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
 };

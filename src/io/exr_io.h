@@ -166,6 +166,13 @@ int ef_exr_stream_file(const ef_exr_file *in, const ef_exr_file *depth_file,
 /* Whether part p of f has an attribute of this name. */
 int ef_exr_has_attr(const ef_exr_file *f, int part, const char *name);
 
+/* Channel chan (an index in part's channel list) of nrows rows spread
+ * evenly over part's data window, as float: *out (malloc'd, nrows rows of
+ * *width values), the rows' y in ys[0..nrows). For estimates before a
+ * pass (a sample of the depth). Returns the rows read, or -1. */
+int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
+                       int *ys);
+
 /* Whether -d half must leave channel name in float: depth (Z, *.Z,
  * *.ZBack, depth...), positions (P.*, position.*, fog_P.*), ids (id.*,
  * *Id.*, Cryptomatte). */

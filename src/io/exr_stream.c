@@ -416,6 +416,44 @@ static void depth_reader_free(depth_reader *r)
     free(r->hs.buf);
 }
 
+int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
+                       int *ys)
+{
+    depth_reader r;
+    memset(&r, 0, sizeof r);
+    *out = NULL;
+    const exr_attr_chlist_t *cl;
+    if (exr_get_channels(f->ctx, part, &cl) || chan < 0 || chan >= cl->num_channels ||
+        geom_init(f->ctx, part, 1, &r.g) || nrows < 1)
+        return -1;
+    r.ctx = f->ctx;
+    r.part = part;
+    r.chan = chan;
+    r.nch = cl->num_channels;
+    r.codec = EF_CODEC_LIBDEFLATE;
+    r.hs.fast = ef_half_fast();
+    const int w = r.g.width, h = r.g.height;
+    if (nrows > h)
+        nrows = h;
+    int ok = (r.planes = calloc((size_t) r.nch, sizeof *r.planes)) != NULL &&
+             (r.as_float = calloc((size_t) r.nch, 1)) != NULL &&
+             (*out = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
+    if (ok)
+        r.as_float[chan] = 1;
+    for (int i = 0; ok && i < nrows; ++i) {
+        ys[i] = r.g.dw.min.y + (int) (((long) (2 * i + 1) * h) / (2 * nrows));
+        ok = depth_read(&r, r.g.dw.min.x, ys[i], w, 1, *out + (size_t) i * (size_t) w) == 0;
+    }
+    depth_reader_free(&r);
+    if (!ok) {
+        free(*out);
+        *out = NULL;
+        return -1;
+    }
+    *width = w;
+    return nrows;
+}
+
 /* Shared state of one part's parallel pass. */
 typedef struct part_job {
     exr_const_context_t in;

@@ -59,16 +59,25 @@ int ef_colour_parse(void *user, const char *text, double out[3], ef_err *err)
         return ef_fail(err, "%s", msg);
     /* Before the image's working space is known the value is provisional
      * (it is read again per image): only the final one is checked. */
-    for (int k = 0; k < 3 && g->resolved; ++k)
-        if (!(out[k] >= 0 && out[k] <= EF_COLOR_MAX)) {
+    if (g->resolved) {
+        int neg = 0, big = 0;
+        for (int k = 0; k < 3; ++k) {
             /* A saturated colour of a wide space may leave a small one. */
             if (out[k] < 0 && out[k] > -1e-6)
                 out[k] = 0;
-            else
-                return ef_fail(err, "'%s' is %.6g, %.6g, %.6g in the working space %s: outside "
-                                    "its gamut (a fog colour is R,G,B >= 0)", text, out[0], out[1],
-                               out[2], g->space[0] ? g->space : "scene_linear");
+            neg |= !(out[k] >= 0);
+            big |= out[k] > EF_COLOR_MAX;
         }
+        const char *ws = g->space[0] ? g->space : "scene_linear";
+        if (neg)
+            return ef_fail(err, "'%s' is %.6g, %.6g, %.6g in the working space %s: outside "
+                                "its gamut (a fog colour is R,G,B >= 0)", text, out[0], out[1],
+                           out[2], ws);
+        if (big)
+            return ef_fail(err, "'%s' is %.6g, %.6g, %.6g in the working space %s: above %d, "
+                                "the largest value a half-float output holds (give a dimmer "
+                                "colour)", text, out[0], out[1], out[2], ws, (int) EF_COLOR_MAX);
+    }
     g->converted = 1;
     return 0;
 }

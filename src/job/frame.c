@@ -477,6 +477,64 @@ static int bind_view(ef_frame *F, int v)
     return 0;
 }
 
+/* Before an extreme run: method=exact's work on a sample of this frame's
+ * rays (16 rows of the depth, 64 pixels each), projected over the frame on
+ * the run's threads at 150 ns an evaluation (exact's long-double walk and
+ * bisected cells, measured); a warning past two minutes, once per run.
+ * Other methods bound their work per pixel. */
+static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_camera *cam,
+                            const ef_depth_conv *conv)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    const ef_fog_scene *sc = &o->scene;
+    if (J->warned_cost || o->quiet || o->explain)
+        return;
+    /* Only where some component's work is unbounded: a short probe ray. */
+    ef_ray probe = { { 0, 0, 1 }, 1, 1, { cam->pos[0], cam->pos[1], cam->pos[2] } };
+    int any = 0;
+    for (int i = 0; i < sc->ncomp; ++i)
+        any |= sc->comp[i].model->work && sc->comp[i].model->work(&sc->comp[i], &probe) > 0;
+    if (!any)
+        return;
+    float *d;
+    int w, ys[16];
+    const int n = ef_exr_sample_rows(F->df, pl->depth.part, pl->depth.index, 16, &d, &w, ys);
+    exr_attr_box2i_t dw, cw;
+    if (n < 1 || exr_get_data_window(F->df->ctx, pl->depth.part, &dw) ||
+        exr_get_data_window(F->in.ctx, pl->rgb[0].part, &cw)) {
+        if (n >= 1)
+            free(d);
+        return;
+    }
+    const int step = w > 64 ? w / 64 : 1;
+    double sum = 0, cnt = 0;
+    for (int i = 0; i < n; ++i)
+        for (int x = 0; x < w; x += step) {
+            ef_ray r;
+            ef_reconstruct(cam, conv, dw.min.x + x, ys[i], d[(size_t) i * (size_t) w + (size_t) x],
+                           &r);
+            for (int k = 0; k < sc->ncomp; ++k)
+                if (sc->comp[k].model->work)
+                    sum += sc->comp[k].model->work(&sc->comp[k], &r);
+            cnt += 1;
+        }
+    free(d);
+    const double px = ((double) cw.max.x - cw.min.x + 1) * ((double) cw.max.y - cw.min.y + 1);
+    const int threads = o->threads > 0 ? o->threads : ef_cpu_count();
+    const double per_px = cnt > 0 ? sum / cnt : 0, secs = per_px * px * 150e-9 / threads;
+    if (!(secs > 120))
+        return;
+    J->warned_cost = 1;
+    char msg[400];
+    snprintf(msg, sizeof msg, "method=exact is predicted to take about %.0f minutes on this frame "
+                              "(%.3g noise evaluations per pixel on a sample of its rays, %d "
+                              "thread%s); the default method bounds each pixel's work (drop "
+                              "method=exact), or use a coarser scale or fewer octaves",
+             secs / 60, per_px, threads, threads > 1 ? "s" : "");
+    ef_job_warn(J, o->input, msg);
+}
+
 /* View v's camera, resolved and explained (or warned about), its depth
  * conversion, and its pass. */
 static int resolve_view(ef_frame *F, int v)
@@ -540,6 +598,8 @@ static int resolve_view(ef_frame *F, int v)
     }
     if (!conv_ok)
         return ef_job_report(J, o->input, &F->err, 1);
+    if (v == 0 && !F->deep)
+        warn_exact_cost(F, pl, cam, &F->convs[0]);
     return bind_view(F, v);
 }
 

@@ -55,6 +55,7 @@ typedef struct ef_job {
     int has_frame;            /* a frame of a sequence: */
     long frame;               /* its number */
     int noted_alpha;          /* the note on a deliverable without alpha was given */
+    int warned_cost;          /* the warning on an extreme method=exact run was given */
 } ef_job;
 
 /* Whether the run is to stop: the host's flag or the progress hook's. */
