@@ -21,6 +21,7 @@
 #include <string.h>
 #include <unistd.h>
 #include <cmocka.h>
+#include <sys/stat.h>
 
 #include "ocio_shim.h"
 #include "tassert.h"
@@ -172,6 +173,53 @@ static void test_open_explicit_and_errors(void **state)
     /* A directory is not a config either. */
     assert_null(ef_ocio_open(g_dir, where, sizeof where, msg, sizeof msg));
     assert_contains(msg, "not a file");
+}
+
+/* A config whose FileTransform names /dev/zero (OCIO would read it without
+ * end), a FIFO (it would block for ever) or a directory is refused when
+ * opened, naming the file; a real LUT file in a group is fine. (The
+ * hostile campaign: 4 GB in 10 s, and a hang.) */
+static void test_lut_files_checked(void **state)
+{
+    (void)state;
+    char where[1200], msg[2048], cfg[1200], lut[1200], fifo[1200];
+    snprintf(cfg, sizeof cfg, "%s/lut.ocio", g_dir);
+    snprintf(lut, sizeof lut, "%s/gain.spi1d", g_dir);
+    snprintf(fifo, sizeof fifo, "%s/pipe.spi1d", g_dir);
+    write_file(lut, "Version 1\nFrom 0.0 1.0\nLength 2\nComponents 1\n{\n0.0\n2.0\n}\n");
+    assert_int_equal(mkfifo(fifo, 0600), 0);
+    static const char *const head =
+        "ocio_profile_version: 2.1\n"
+        "search_path: \".\"\n"
+        "roles:\n  default: lin\n  scene_linear: lin\n  data: Raw\n"
+        "file_rules:\n  - !<Rule> {name: Default, colorspace: default}\n"
+        "displays:\n  sRGB:\n    - !<View> {name: Raw, colorspace: Raw}\n"
+        "colorspaces:\n  - !<ColorSpace>\n    name: lin\n    isdata: false\n"
+        "  - !<ColorSpace>\n    name: Raw\n    isdata: true\n"
+        "  - !<ColorSpace>\n    name: lut\n    isdata: false\n"
+        "    from_scene_reference: !<GroupTransform> {children: [!<FileTransform> {src: \"%s\"}]}\n";
+    const char *const srcs[] = { lut, "/dev/zero", fifo, g_dir };
+    const char *const says[] = { NULL, "a character device", "a FIFO", "a directory" };
+    for (int k = 0; k < 4; ++k) {
+        char text[4096];
+        snprintf(text, sizeof text, head, srcs[k]);
+        write_file(cfg, text);
+        ef_ocio *o = ef_ocio_open(cfg, where, sizeof where, msg, sizeof msg);
+        if (!says[k]) {
+            if (!o)
+                print_error("%s\n", msg);
+            assert_non_null(o);
+            ef_ocio_close(o);
+            continue;
+        }
+        assert_null(o);
+        assert_contains(msg, srcs[k]);
+        assert_contains(msg, says[k]);
+        assert_contains(msg, "a LUT must be a file");
+    }
+    remove(cfg);
+    remove(lut);
+    remove(fifo);
 }
 
 static void test_env_and_precedence(void **state)
@@ -553,6 +601,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_open_explicit_and_errors),
+        cmocka_unit_test(test_lut_files_checked),
         cmocka_unit_test(test_env_and_precedence),
         cmocka_unit_test(test_names_aliases_roles),
         cmocka_unit_test(test_chromaticities),

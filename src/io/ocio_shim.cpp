@@ -329,6 +329,88 @@ extern "C" const char *ef_ocio_version(void)
     return OCIO::GetVersion();
 }
 
+namespace {
+
+// The largest LUT file a config may reference: a 65^3 cube as text is
+// about 20 MB; anything past this is not a LUT (or /dev/zero's cousin).
+const off_t LUT_MAX_BYTES = (off_t) 1 << 30;
+
+// Checks the file t references (recursing into groups): OCIO reads LUTs
+// whole, so a device (/dev/zero grows without bound), a FIFO (blocks for
+// ever) or a huge file is refused before it ever opens one. Files it
+// cannot find are left to OCIO's own message.
+bool check_transform(const OCIO::ConstConfigRcPtr &cfg, const OCIO::ConstTransformRcPtr &t,
+                     std::string &bad)
+{
+    if (!t)
+        return true;
+    if (auto g = OCIO::DynamicPtrCast<const OCIO::GroupTransform>(t)) {
+        for (int i = 0; i < g->getNumTransforms(); ++i)
+            if (!check_transform(cfg, g->getTransform(i), bad))
+                return false;
+        return true;
+    }
+    auto f = OCIO::DynamicPtrCast<const OCIO::FileTransform>(t);
+    if (!f || !f->getSrc() || !*f->getSrc())
+        return true;
+    std::string path;
+    try {
+        path = cfg->getCurrentContext()->resolveFileLocation(f->getSrc());
+    } catch (...) {
+        return true;
+    }
+    struct stat st;
+    if (stat(path.c_str(), &st) != 0)
+        return true;
+    if (!S_ISREG(st.st_mode)) {
+        bad = "its FileTransform '" + path + "' is not a regular file (" +
+              (S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISCHR(st.st_mode) ? "a character device"
+               : S_ISDIR(st.st_mode) ? "a directory" : "a device or socket") +
+              "); a LUT must be a file";
+        return false;
+    }
+    if (st.st_size > LUT_MAX_BYTES) {
+        bad = "its FileTransform '" + path + "' is " + std::to_string((long long) st.st_size) +
+              " bytes, more than any LUT (1 GiB at most)";
+        return false;
+    }
+    return true;
+}
+
+// Every file the config's transforms reference: colour spaces (both
+// directions), looks, view transforms and named transforms.
+bool check_files(const OCIO::ConstConfigRcPtr &cfg, std::string &bad)
+{
+    for (int i = 0; i < cfg->getNumColorSpaces(OCIO::SEARCH_REFERENCE_SPACE_ALL, OCIO::COLORSPACE_ALL); ++i) {
+        auto cs = cfg->getColorSpace(
+            cfg->getColorSpaceNameByIndex(OCIO::SEARCH_REFERENCE_SPACE_ALL, OCIO::COLORSPACE_ALL, i));
+        if (cs && (!check_transform(cfg, cs->getTransform(OCIO::COLORSPACE_DIR_TO_REFERENCE), bad) ||
+                   !check_transform(cfg, cs->getTransform(OCIO::COLORSPACE_DIR_FROM_REFERENCE), bad)))
+            return false;
+    }
+    for (int i = 0; i < cfg->getNumLooks(); ++i) {
+        auto lk = cfg->getLook(cfg->getLookNameByIndex(i));
+        if (lk && (!check_transform(cfg, lk->getTransform(), bad) ||
+                   !check_transform(cfg, lk->getInverseTransform(), bad)))
+            return false;
+    }
+    for (int i = 0; i < cfg->getNumViewTransforms(); ++i) {
+        auto vt = cfg->getViewTransform(cfg->getViewTransformNameByIndex(i));
+        if (vt && (!check_transform(cfg, vt->getTransform(OCIO::VIEWTRANSFORM_DIR_TO_REFERENCE), bad) ||
+                   !check_transform(cfg, vt->getTransform(OCIO::VIEWTRANSFORM_DIR_FROM_REFERENCE), bad)))
+            return false;
+    }
+    for (int i = 0; i < cfg->getNumNamedTransforms(OCIO::NAMEDTRANSFORM_ALL); ++i) {
+        auto nt = cfg->getNamedTransform(cfg->getNamedTransformNameByIndex(OCIO::NAMEDTRANSFORM_ALL, i));
+        if (nt && (!check_transform(cfg, nt->getTransform(OCIO::TRANSFORM_DIR_FORWARD), bad) ||
+                   !check_transform(cfg, nt->getTransform(OCIO::TRANSFORM_DIR_INVERSE), bad)))
+            return false;
+    }
+    return true;
+}
+
+} // namespace
+
 extern "C" ef_ocio *ef_ocio_open(const char *path, char *where, size_t where_len, char *msg,
                                  size_t msg_len)
 {
@@ -378,6 +460,11 @@ extern "C" ef_ocio *ef_ocio_open(const char *path, char *where, size_t where_len
     try {
         OCIO::ConstConfigRcPtr cfg = OCIO::Config::CreateFromFile(file.c_str());
         cfg->validate();
+        std::string bad;
+        if (!check_files(cfg, bad)) {
+            say(msg, msg_len, "colour config (" + desc + "): " + bad + "; " + fix);
+            return nullptr;
+        }
         ef_ocio *o = new ef_ocio;
         o->cfg = cfg;
         o->where = desc;
