@@ -711,6 +711,22 @@ static void test_views_multipart(void **state)
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P --view right --fov 90 "
                   "--world-to-camera 1,0,0,0,0,1,0,0,0,0,1,0,-3,0,0,1", in, out);
     check_positions_in(out, 1, "", 3.0);
+    /* Parts named as their views ("left"/"right") or as oiiotool names
+     * them ("subimage00/01"), with a view attribute: both eyes, each with
+     * its camera (the part name is not a layer of its channels). */
+    static const char *const names[2][2] = { { "left", "right" }, { "subimage00", "subimage01" } };
+    for (int n = 0; n < 2; ++n) {
+        for (int k = 0; k < 2; ++k) {
+            p[k].name = names[n][k];
+            set_camera(&p[k], k ? 1.0 : -1.0);
+        }
+        assert_int_equal(tu_write_exr(in, p, 2), 0);
+        assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --aov P", in, out);
+        check_positions_in(out, 0, "", -1.0);
+        check_positions_in(out, 1, "", 1.0);
+        assert_true(channel_differs(in, out, 0, "R"));
+        assert_true(channel_differs(in, out, 1, "R"));
+    }
     free(in);
     free(out);
 }

@@ -23,7 +23,8 @@ static int ends_with(const char *s, const char *suffix)
 }
 
 /* The layer a multi-part part stands for: its name without the ".view" or
- * "_view" suffix Nuke and the Beachball frames add. */
+ * "_view" suffix Nuke and the Beachball frames add; none for a part named
+ * as its view or oiiotool's subimageNN. */
 static void part_layer(const ef_exr_file *f, int p, char *layer, size_t len, char *view, size_t vlen)
 {
     const char *name = NULL, *v = NULL;
@@ -34,6 +35,14 @@ static void part_layer(const ef_exr_file *f, int p, char *layer, size_t len, cha
     if (f->nparts < 2 || exr_get_name(f->ctx, p, &name) != EXR_ERR_SUCCESS || !name)
         return;
     snprintf(layer, len, "%s", name);
+    /* A part named for its view ("left" with view "left"), or by
+     * oiiotool's default ("subimage00"), is that view's whole image: its
+     * channels are not a layer of that name. */
+    size_t digits = strncmp(name, "subimage", 8) ? 0 : strspn(name + 8, "0123456789");
+    if ((view[0] && !strcmp(name, view)) || (digits > 0 && name[8 + digits] == '\0')) {
+        layer[0] = '\0';
+        return;
+    }
     if (view[0]) {
         char sfx[80];
         for (int k = 0; k < 2; ++k) {
