@@ -2623,6 +2623,18 @@ static void test_trap_warnings(void **state)
     assert_null(strstr(g_err, "warning"));
     assert_status(run("'%s' -o '%s' --fog exp:density=0.1", vr.s, out.s), 0);
     assert_null(strstr(g_err, "warning"));
+    /* A Blender-convention camera is Z-up too: the same warning, and
+     * --up-axis auto says what it chose. */
+    static const char blender_cam[] = "--camera-convention blender --fov 50 --camera-to-world "
+                                      "1,0,0,0,0,0,-1,-10,0,1,0,2,0,0,0,1";
+    assert_status(run("'%s' -o '%s' %s --fog height:density=0.1:falloff=0.2", vr.s, out.s,
+                      blender_cam), 0);
+    assert_err_has("in Blender's convention, whose world is Z-up");
+    assert_err_has("--up-axis auto");
+    assert_status(run("'%s' -o '%s' %s --fog height:density=0.1:falloff=0.2 --up-axis auto", vr.s,
+                      out.s, blender_cam), 0);
+    assert_null(strstr(g_err, "warning"));
+    assert_err_has("note: --up-axis auto: z, since the camera is in Blender's convention");
 }
 
 /* OUTPUT's extension chooses the format (issue 9): .tif/.png through

@@ -557,11 +557,19 @@ static int resolve_view(ef_frame *F, int v)
     if (cam->warning[0] && !o->quiet && !o->explain)
         ef_job_warn(J, o->input, cam->warning);
     static const double z_up[3] = { 0, 0, 1 };
-    if (v == 0 && o->up_auto && ef_z_up_camera(&flags, cam) &&
-        ef_scene_rebuild(&o->scene, z_up, o->scene.ctx.time, &F->err))
-        return ef_job_report(J, o->input, &F->err, 1);
+    if (v == 0 && o->up_auto && ef_z_up_camera(&flags, cam)) {
+        if (ef_scene_rebuild(&o->scene, z_up, o->scene.ctx.time, &F->err))
+            return ef_job_report(J, o->input, &F->err, 1);
+        if (!J->noted_up && !o->quiet && !o->explain) {
+            J->noted_up = 1;
+            ef_job_note(J, "exrfog: %s: note: --up-axis auto: z, since the camera is %s\n",
+                        o->input, strstr(cam->src_pose, "cameraTransform")
+                                      ? "V-Ray's (cameraTransform)"
+                                      : "in Blender's convention");
+        }
+    }
     if (v == 0 && !o->quiet && !o->explain)
-        ef_warn_traps(J, &F->in, pl->rgb[0].part, cam);
+        ef_warn_traps(J, &F->in, pl->rgb[0].part, &flags, cam);
     const int conv_ok = ef_depth_conv_init(&F->convs[v], o->depth_mode, cam, &F->err) == 0;
     F->convs_ok[v] = conv_ok;
     if (o->explain && o->json)

@@ -56,6 +56,7 @@ typedef struct ef_job {
     long frame;               /* its number */
     int noted_alpha;          /* the note on a deliverable without alpha was given */
     int warned_cost;          /* the warning on an extreme method=exact run was given */
+    int noted_up;             /* --up-axis auto's choice was told */
 } ef_job;
 
 /* Whether the run is to stop: the host's flag or the progress hook's. */
@@ -101,7 +102,8 @@ int ef_choose_views(ef_job *J, const ef_exr_file *in, const ef_exr_file *df, cha
                     int nv, ef_channel_plan *plans, int *nplans, ef_err *err);
 int ef_camera_flags(ef_job *J, ef_cam_flags *flags, char *src, size_t srclen, ef_err *err);
 int ef_z_up_camera(const ef_cam_flags *flags, const ef_camera *cam);
-void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_camera *cam);
+void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_cam_flags *flags,
+                   const ef_camera *cam);
 int ef_regular_file(const char *path);
 int ef_is_exr_file(const char *path);
 

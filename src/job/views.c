@@ -17,8 +17,10 @@ int ef_z_up_camera(const ef_cam_flags *flags, const ef_camera *cam)
 }
 
 /* Silent traps of real renders, each with its fix: Nuke's depth.Z is 1/z;
- * V-Ray's world is Z-up while the height models default to y. */
-void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_camera *cam)
+ * V-Ray's and Blender's worlds are Z-up while the height models default
+ * to y. */
+void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_cam_flags *flags,
+                   const ef_camera *cam)
 {
     const ef_options *o = &J->o;
     if (!o->depth_mode_set && ef_exr_has_attr(in, part, "nuke/version"))
@@ -28,10 +30,15 @@ void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_camera *
     int height = 0;
     for (int i = 0; i < o->scene.ncomp; ++i)
         height |= o->scene.comp[i].model->uses_up && !o->scene.comp[i].has_up;
-    if (height && !o->up_set && strstr(cam->src_pose, "cameraTransform"))
-        ef_job_warn(J, o->input, "the camera is V-Ray's (cameraTransform), whose world is Z-up, and the "
-                       "height fog uses y as up; pass --up-axis z (or --up-axis y to keep y and "
-                       "silence this)");
+    if (height && !o->up_set && ef_z_up_camera(flags, cam)) {
+        char msg[400];
+        snprintf(msg, sizeof msg, "the camera is %s, whose world is Z-up, and the height fog uses "
+                                  "y as up; pass --up-axis z or --up-axis auto (or --up-axis y to "
+                                  "keep y and silence this)",
+                 strstr(cam->src_pose, "cameraTransform") ? "V-Ray's (cameraTransform)"
+                                                          : "in Blender's convention");
+        ef_job_warn(J, o->input, msg);
+    }
 }
 
 /* Whether path is a regular file (opening a FIFO would block: the EXR
