@@ -64,4 +64,42 @@ with tempfile.TemporaryDirectory() as d:
     r = subprocess.run(["oiiotool", "--diff", render, fogged], capture_output=True, text=True)
     if "PASS" in r.stdout:
         raise SystemExit("blender_addon: FAILED: the fogged frame equals the render")
-print("blender_addon: the add-on's fog equals exrfog's with the camera by flags and by file")
+    # AOVs of a Blender multilayer render are passes of its view layer:
+    # Blender itself (a CompositorNodeImage, headless) must list them.
+    layer = flags["layer"]
+    aov = d + "/aov.exr"
+    run([exrfog, render, "-o", aov, "--aov", "fog,T,error,P,distance", "--camera-convention",
+         "blender", "--camera-to-world", ",".join(repr(v) for v in flags["camera_to_world"]),
+         "--fov", repr(flags["fov"]), "--near", repr(flags["near"]), "--far", repr(flags["far"])]
+        + common)
+    r = run(["oiiotool", "--info", "-v", aov])
+    want = [layer + "." + c for c in ("Fog.R", "Fog.A", "FogT.B", "FogError.G", "FogP.X",
+                                      "FogDistance.Z")]
+    for c in want:
+        if c not in r.stdout:
+            raise SystemExit("blender_addon: FAILED: no channel %s in %s" % (c, r.stdout[-2000:]))
+    if "fog_T." in r.stdout or "fog.R" in r.stdout:
+        raise SystemExit("blender_addon: FAILED: Nuke-style AOV names on a Blender input")
+    lister = d + "/list_passes.py"
+    with open(lister, "w") as fh:
+        fh.write("import bpy, sys\n"
+                 "img = bpy.data.images.load(sys.argv[sys.argv.index('--') + 1])\n"
+                 "bpy.context.scene.use_nodes = True\n"
+                 "node = bpy.context.scene.node_tree.nodes.new('CompositorNodeImage')\n"
+                 "node.image = img\n"
+                 "print('PASSES:', img.type, node.layer, '|'.join(o.name for o in node.outputs))\n")
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                        lister, "--", aov], capture_output=True, text=True, env=env)
+    line = [l for l in r.stdout.splitlines() if l.startswith("PASSES:")]
+    if r.returncode or not line:
+        print(r.stdout[-3000:], r.stderr[-3000:], file=sys.stderr)
+        raise SystemExit("blender_addon: FAILED: Blender could not list the passes")
+    kind, _, outs = line[0].split(" ", 3)[1:]
+    outs = outs.split("|")
+    for p in ("Combined", "Depth", "Fog", "FogT", "FogError", "FogP", "FogDistance"):
+        if p not in outs:
+            raise SystemExit("blender_addon: FAILED: Blender lists %s, not %s" % (outs, p))
+    if kind != "MULTILAYER":
+        raise SystemExit("blender_addon: FAILED: Blender reads the output as %s" % kind)
+print("blender_addon: the add-on's fog equals exrfog's with the camera by flags and by file; "
+      "Blender lists the AOVs as passes")

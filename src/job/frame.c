@@ -60,6 +60,7 @@ typedef struct ef_frame {
     fog_job job;
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     int naov;
+    char blender_aov[EF_AOV_MAX_CHANNELS][256];   /* Blender's pass names, when used */
     ef_output out, pv, mid, dconv, din;
     const char *ext;          /* OUTPUT's extension when it is not .exr */
     int foreign;
@@ -354,6 +355,34 @@ static int check_deep(ef_frame *F)
     return 0;
 }
 
+/* On a Blender multilayer input (colour LAYER.Combined.R), the AOVs are
+ * passes of that view layer, as Blender's compositor lists them:
+ * LAYER.Fog.R, LAYER.FogT.R, LAYER.FogError.R, LAYER.FogP.X and
+ * LAYER.FogDistance.Z (Blender 3.4 reads LAYER.PASS.CHANNEL). Other inputs
+ * keep the Nuke-style names (fog.R, fog_T.R...). */
+static void blender_aov_names(ef_frame *F)
+{
+    const char *r = F->plans[0].rgb[0].name, *at = strstr(r, ".Combined.");
+    if (!F->naov || !at || at == r || strstr(at + 1, ".Combined."))
+        return;
+    static const struct {
+        const char *from, *to;
+    } pass[] = { { "fog_distance.", "FogDistance." }, { "fog_error.", "FogError." },
+                 { "fog_T.", "FogT." }, { "fog_P.", "FogP." }, { "fog.", "Fog." } };
+    for (int i = 0; i < F->naov; ++i) {
+        const char *n = F->aov_names[i];
+        for (size_t k = 0; k < sizeof pass / sizeof pass[0]; ++k) {
+            const size_t len = strlen(pass[k].from);
+            if (!strncmp(n, pass[k].from, len)) {
+                snprintf(F->blender_aov[i], sizeof F->blender_aov[i], "%.*s.%s%s",
+                         (int) (at - r), r, pass[k].to, n + len);
+                F->aov_names[i] = F->blender_aov[i];
+                break;
+            }
+        }
+    }
+}
+
 /* The views to fog (every view of a multi-view file, or those of --view),
  * each with its channels; the working space, when colours or the preview
  * need it (colours written as #RRGGBB or SPACE:R,G,B are then read again
@@ -400,6 +429,7 @@ static int find_views(ef_frame *F)
             (o->fog_color && ef_colour_parse(&J->colour, o->fog_color, o->scene.color, &F->err)))
             return ef_job_report(J, o->input, &F->err, 1);
     }
+    blender_aov_names(F);
     const char *clash = ef_exr_part_has_any(&F->in, F->plans[0].rgb[0].part, F->aov_names, F->naov);
     if (clash && !F->plans[0].chan_view[0]) {
         char list[64];
