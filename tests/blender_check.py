@@ -5,6 +5,7 @@ computes it itself (Blender's angle_x, matrix_world) for the comparison
 run outside Blender (tests/blender_check_run.py)."""
 import json
 import math
+import os
 import sys
 
 import addon_utils
@@ -38,6 +39,18 @@ s.camera_file = out_dir + "/cams.json"
 bpy.ops.render.render(animation=True)   # writes render_0001.exr, then render_write
 assert bpy.ops.exrfog.write_camera() == {'FINISHED'}
 
+# Blender's output-path rule, worked out by hand.
+import exrfog_blender as eb
+for path, frame, want in [("/a/fog_####.exr", 7, "/a/fog_0007.exr"), ("/a/fog_##.exr", 7, "/a/fog_07.exr"),
+                          ("/a/f#_###.exr", 12, "/a/f#_012.exr"), ("/a/fog.exr", 7, "/a/fog0007.exr"),
+                          ("/a/fog", 123, "/a/fog0123.exr"), ("/a/fog_#.exr", 1234, "/a/fog_1234.exr")]:
+    got = eb.frame_path(path, frame)
+    assert got == want, "frame_path(%r, %d) = %r, not %r" % (path, frame, got, want)
+s.output = out_dir + "/sub/dir/fog_##.exr"
+made = eb.fog_output_path(scene, 3)
+assert made == out_dir + "/sub/dir/fog_03.exr" and os.path.isdir(out_dir + "/sub/dir"), made
+s.output = out_dir + "/fog_####.exr"
+
 cam = scene.camera
 m = cam.matrix_world
 with open(out_dir + "/flags.json", "w") as fh:
@@ -45,4 +58,8 @@ with open(out_dir + "/flags.json", "w") as fh:
                "fov": math.degrees(cam.data.angle_x),   # AUTO fit, landscape: the width's angle
                "near": cam.data.clip_start, "far": cam.data.clip_end,
                "fog_color": list(s.fog_color), "layer": bpy.context.view_layer.name}, fh)
+# A scene whose fog fails, for the farm-style `blender -b ... -a` run.
+s.fog = "nosuchfog:density=1"
+s.output = out_dir + "/failed/fog_####.exr"
+bpy.ops.wm.save_as_mainfile(filepath=out_dir + "/fail.blend", copy=True)
 print("blender_check: rendered and fogged")

@@ -101,5 +101,17 @@ with tempfile.TemporaryDirectory() as d:
             raise SystemExit("blender_addon: FAILED: Blender lists %s, not %s" % (outs, p))
     if kind != "MULTILAYER":
         raise SystemExit("blender_addon: FAILED: Blender reads the output as %s" % kind)
+    # A failing fog fails the render job: `blender -b scene -a` exits non-zero.
+    enable = ("import sys; sys.path.insert(0, %r); import addon_utils; "
+              "addon_utils.enable('exrfog_blender', default_set=True, handle_error=None)"
+              % os.path.join(src, "integrations", "blender"))
+    r = subprocess.run([blender, "-b", d + "/fail.blend", "--python-expr", enable, "-a"],
+                       capture_output=True, text=True, env=env)
+    if r.returncode == 0 or "exrfog: error: frame 1" not in r.stdout + r.stderr:
+        print(r.stdout[-3000:], r.stderr[-3000:], file=sys.stderr)
+        raise SystemExit("blender_addon: FAILED: a failing fog let blender -b -a exit %d"
+                         % r.returncode)
+    if "unknown fog model" not in r.stdout + r.stderr and "nosuchfog" not in r.stdout + r.stderr:
+        raise SystemExit("blender_addon: FAILED: exrfog's reason is not in the render log")
 print("blender_addon: the add-on's fog equals exrfog's with the camera by flags and by file; "
       "Blender lists the AOVs as passes")

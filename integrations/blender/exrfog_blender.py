@@ -6,7 +6,11 @@ the lens and sensor fit as a horizontal field of view, the clip range):
 
 * after each render written as a multilayer EXR with the Depth pass, the
   frame is fogged into the output path set in the panel (Output
-  Properties > exrfog), when "Fog after render" is on;
+  Properties > exrfog), when "Fog after render" is on. The path follows
+  Blender's rule (the last run of '#' is the frame, zero-padded to its
+  width; no '#': 4 digits added) and its directories are created. A
+  failing fog shows its error in the UI; in background mode
+  (blender -b ... -a, a farm) it stops the render with exit status 1;
 * "Fog EXR" fogs a chosen EXR with the current frame's camera;
 * "Write camera file" writes a camera file (exrfog --camera-file) for the
   frame range, so any later exrfog run finds the cameras.
@@ -102,8 +106,51 @@ def run_exrfog(args):
     return r
 
 
+def frame_path(path, frame):
+    """Blender's output-path rule: the last run of '#' becomes the frame,
+    zero-padded to the run's width (fog_##.exr -> fog_07.exr); a path with
+    no '#' gets the frame in 4 digits before its .exr (fog.exr ->
+    fog0007.exr, fog -> fog0007.exr)."""
+    head, sep, name = path.rpartition("/")
+    end = name.rfind("#")
+    if end >= 0:
+        start = end
+        while start > 0 and name[start - 1] == "#":
+            start -= 1
+        width = end - start + 1
+        digits = ("-%0*d" % (width - 1, -frame)) if frame < 0 else "%0*d" % (width, frame)
+        name = name[:start] + digits + name[end + 1:]
+    else:
+        stem = name[:-4] if name.lower().endswith(".exr") else name
+        name = stem + ("-%03d" % -frame if frame < 0 else "%04d" % frame) + ".exr"
+    return head + sep + name
+
+
 def fog_output_path(scene, frame):
-    return bpy.path.abspath(scene.exrfog.output.replace("####", "%04d" % frame))
+    """The fogged frame's path (Blender's '#' rule), its directory created."""
+    path = frame_path(bpy.path.abspath(scene.exrfog.output), frame)
+    d = os.path.dirname(path)
+    if d:
+        os.makedirs(d, exist_ok=True)
+    return path
+
+
+# The last failure of the after-render fog, shown in the panel.
+LAST_ERROR = ""
+
+
+def show_error(message):
+    """The error in the UI, from the main thread (a timer): a popup, and
+    the panel keeps it until the next success."""
+    def popup():
+        def draw(menu, context):
+            for line in message.splitlines()[:6]:
+                menu.layout.label(text=line[:200])
+        wm = bpy.context.window_manager
+        if wm is not None and wm.windows:
+            wm.popup_menu(draw, title="exrfog failed", icon='ERROR')
+        return None
+    bpy.app.timers.register(popup, first_interval=0.1)
 
 
 class ExrfogSettings(bpy.types.PropertyGroup):
@@ -118,7 +165,9 @@ class ExrfogSettings(bpy.types.PropertyGroup):
     fog_color: bpy.props.FloatVectorProperty(name="Fog colour", subtype='COLOR', size=3,
                                              default=(0.7, 0.75, 0.8), min=0.0)
     output: bpy.props.StringProperty(name="Output", default="//fog_####.exr", subtype='FILE_PATH',
-                                     description="Where fogged frames go (#### = frame)")
+                                     description="Where fogged frames go: the last run of # is "
+                                                 "the frame, zero-padded to its width; without "
+                                                 "#, 4 digits are added. Directories are created")
     extra: bpy.props.StringProperty(name="Extra options", default="",
                                     description="More exrfog options, as on a command line")
     camera_file: bpy.props.StringProperty(name="Camera file", default="//cameras.json",
@@ -178,6 +227,10 @@ class EXRFOG_PT_panel(bpy.types.Panel):
     def draw(self, context):
         s = context.scene.exrfog
         col = self.layout.column()
+        if LAST_ERROR:
+            box = col.box()
+            for line in LAST_ERROR.splitlines()[:4]:
+                box.label(text=line[:200], icon='ERROR')
         col.prop(s, "enabled")
         col.prop(s, "fog")
         col.prop(s, "fog_color")
@@ -198,13 +251,24 @@ def fog_written_frame(scene, *args):
     if scene.render.image_settings.file_format != 'OPEN_EXR_MULTILAYER':
         print("exrfog: skipped: the render output is not a multilayer EXR")
         return
+    global LAST_ERROR
     path = bpy.path.abspath(scene.render.frame_path(frame=scene.frame_current))
-    out = fog_output_path(scene, scene.frame_current)
     try:
+        out = fog_output_path(scene, scene.frame_current)
         run_exrfog(exrfog_command(scene, path, out))
+        LAST_ERROR = ""
         print("exrfog: fogged %s -> %s" % (path, out))
     except (RuntimeError, ValueError, OSError) as e:
-        print("exrfog: error: %s" % e)
+        LAST_ERROR = "frame %d: %s" % (scene.frame_current, e)
+        print("exrfog: error: %s" % LAST_ERROR, flush=True)
+        if bpy.app.background:
+            # A farm's `blender -b ... -a` must fail: Blender ignores a
+            # handler's exceptions, so the render job ends here, exit 1.
+            import sys
+            sys.stderr.write("exrfog: the fog failed; stopping the render with exit status 1\n")
+            sys.stderr.flush()
+            os._exit(1)
+        show_error(LAST_ERROR)
 
 
 classes = (ExrfogSettings, EXRFOG_OT_write_camera, EXRFOG_OT_fog_file, EXRFOG_PT_panel)
