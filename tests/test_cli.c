@@ -2430,6 +2430,18 @@ static void test_messages(void **state)
     assert_err_has("luminance-only");
     if (strstr(g_err, "--layer"))
         fail_msg("the luminance message points at --layer:\n%s", g_err);
+    /* Its hint names only channels the file has (Y and Z, no A), and works
+     * as written: the converted file fogs. */
+    assert_err_has("--ch R=Y,G=Y,B=Y,Z -o RGB.exr");
+    if (system("command -v oiiotool >/dev/null 2>&1") == 0) {
+        path_t rgb = pth("msgs/rgb.exr");
+        char cmd[4200];
+        snprintf(cmd, sizeof cmd, "oiiotool '%s' --ch R=Y,G=Y,B=Y,Z -o '%s'", lum.s, rgb.s);
+        assert_int_equal(system(cmd), 0);
+        assert_status(run("'%s' -o '%s' --fog exp:density=0.1", rgb.s, out.s), 0);
+        unlink(rgb.s);
+        unlink(out.s);
+    }
     check_failure(1, noc.s, dir.s, "'%s' -o '%s' --fog exp:density=0.1", noc.s, out.s);
     assert_err_has("no R,G,B colour");
     assert_err_has("foo.A");

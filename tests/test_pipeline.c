@@ -630,6 +630,19 @@ static void test_camera_file(void **state)
     /* one pose source only */
     assert_run(2, "'%s/shot.#.exr' -o '%s/j.#.exr' --camera-file '%s' --camera-to-world "
                   "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --fog exp:density=0.05", g_dir, g_dir, json);
+    /* a singular matrix in the file is the file's error (exit 1), named by
+     * its key and frame, not the flag's */
+    FILE *bad = fopen(json, "w");
+    assert_non_null(bad);
+    fprintf(bad, "{\"fov\": 90, \"frames\": {\"1\": {\"camera_to_world\": "
+                 "[1,0,0,0, 0,0,0,0, 0,0,1,0, 0,0,0,1]}}}\n");
+    fclose(bad);
+    assert_run(1, "'%s/shot.#.exr' -o '%s/j.#.exr' --frames 1 --camera-file '%s' "
+                  "--fog exp:density=0.05", g_dir, g_dir, json);
+    assert_non_null(strstr(tu_err, "camera_to_world of camera file"));
+    assert_non_null(strstr(tu_err, "frame 1"));
+    assert_non_null(strstr(tu_err, "is singular"));
+    assert_null(strstr(tu_err, "--camera-to-world is"));
     free(s4);
     free(one);
     free(json);

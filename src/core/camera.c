@@ -145,15 +145,21 @@ static int resolve_pose(const ef_cam_meta *meta, const ef_cam_flags *flags,
     const char *name;
     int is_w2c = 0, minus_z = 0;
     ef_mat4 conv;
+    char fname[400];
     *f = FAM_NONE;
-    if (flags->w2c.set) {
-        conv = from_convention(&flags->w2c.v, flags->convention, 1);
-        m = &conv, name = "--world-to-camera", is_w2c = 1;
-        cam->src_pose = "flag --world-to-camera";
-    } else if (flags->c2w.set) {
-        conv = from_convention(&flags->c2w.v, flags->convention, 0);
-        m = &conv, name = "--camera-to-world";
-        cam->src_pose = "flag --camera-to-world";
+    if (flags->w2c.set || flags->c2w.set) {
+        is_w2c = flags->w2c.set;
+        conv = from_convention(is_w2c ? &flags->w2c.v : &flags->c2w.v, flags->convention, is_w2c);
+        m = &conv;
+        name = is_w2c ? "--world-to-camera" : "--camera-to-world";
+        cam->src_pose = is_w2c ? "flag --world-to-camera" : "flag --camera-to-world";
+        if (flags->pose_src) {
+            /* A camera file's matrix: its errors name the file's key. */
+            snprintf(fname, sizeof fname, "%s of %s",
+                     is_w2c ? "world_to_camera" : "camera_to_world", flags->pose_src);
+            name = fname;
+            cam->src_pose = flags->pose_src;
+        }
     } else if (meta->w2c.set) {
         m = &meta->w2c.v, name = "worldToCamera", is_w2c = 1, *f = FAM_EXR;
         cam->src_pose = "header worldToCamera";
@@ -584,7 +590,7 @@ int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
     ef_mat4 c2w;
     fam pf = FAM_NONE, lf = FAM_NONE;
     if (resolve_pose(meta, flags, &c2w, &pf, cam, err)) {
-        cam->flag_error = flags->w2c.set || flags->c2w.set;
+        cam->flag_error = (flags->w2c.set || flags->c2w.set) && !flags->pose_src;
         return -1;
     }
     if (resolve_lens(meta, flags, pf, &c2w, &lf, cam, err)

@@ -61,6 +61,8 @@ typedef struct ef_cam_flags {
     ef_opt_num far_;          /* --far */
     const char *fov_src;      /* where fov came from when not --fov (a camera file), or
                                * NULL; kept as the camera's src_fov, so it must outlive it */
+    const char *pose_src;     /* where w2c/c2w came from when not the flags (a camera
+                               * file's frame), or NULL: its errors are then the file's */
 } ef_cam_flags;
 
 /* Depth-row of the camera->clip projection: z_clip/w = alpha + beta/d for

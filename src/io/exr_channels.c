@@ -14,7 +14,10 @@ typedef struct qchan {
 typedef struct qlist {
     qchan *c;
     int n;
+    int one_image;            /* one part and no multiView: a plain image */
 } qlist;
+
+static int multiview_names(const ef_exr_file *f, int p, char names[][64], int max);
 
 static int ends_with(const char *s, const char *suffix)
 {
@@ -66,6 +69,8 @@ static int build_list(const ef_exr_file *f, qlist *q)
     }
     q->c = calloc((size_t) total + 1, sizeof *q->c);
     q->n = 0;
+    char views[2][64];
+    q->one_image = f->nparts == 1 && multiview_names(f, 0, views, 2) == 0;
     if (!q->c)
         return -1;
     for (int p = 0; p < f->nparts; ++p) {
@@ -205,15 +210,26 @@ static int find_colour(const qlist *q, const char *layer, ef_channel_plan *plan,
                             "layers with R: %s); choose one with --layer NAME", layers);
     char all[600];
     list_all(q, all, sizeof all);
-    int lum = 0;
+    int lum = 0, plain_y = 0, has_a = 0, has_z = 0;
     for (int i = 0; i < q->n; ++i) {
         const char *n = q->c[i].name, *dot = strrchr(n, '.');
         lum |= !strcmp(dot ? dot + 1 : n, "Y");
+        plain_y |= !strcmp(n, "Y");
+        has_a |= !strcmp(n, "A");
+        has_z |= !strcmp(n, "Z");
     }
-    if (lum)
+    /* The conversion hint only where it works as written: one part, one
+     * view, a plain Y (with the A and Z the file has); else none. */
+    const int simple = plain_y && q->one_image;
+    if (lum && simple)
         return ef_fail(err, "the image is luminance-only (no R,G,B colour; its channels: %s): "
                             "exrfog fogs colour; convert it first, e.g. oiiotool IN --ch "
-                            "R=Y,G=Y,B=Y,A,Z -o RGB.exr", all);
+                            "R=Y,G=Y,B=Y%s%s -o RGB.exr", all, has_a ? ",A" : "",
+                       has_z ? ",Z" : "");
+    if (lum)
+        return ef_fail(err, "the image is luminance-only (no R,G,B colour; its channels: %s): "
+                            "exrfog fogs colour; convert each view or part to R,G,B first",
+                       all);
     return ef_fail(err, "the image has no R,G,B colour channels (its channels: %s), so there is "
                         "nothing to fog; give exrfog the beauty pass", all);
 }

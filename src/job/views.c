@@ -141,6 +141,8 @@ int ef_camera_flags(ef_job *J, ef_cam_flags *flags, char *src, size_t srclen, ef
     } else if (f.fov.set || f.vfov.set) {
         f.fov_src = src;
     }
+    if (!flags->w2c.set && !flags->c2w.set && (f.w2c.set || f.c2w.set))
+        f.pose_src = src;
     if (flags->near_.set)
         f.near_ = flags->near_;
     if (flags->far_.set)
