@@ -11,7 +11,7 @@
 int main(int argc, char **argv)
 {
     ef_cli_signals_install();
-    const ef_job_hooks hooks = { .msg = stderr, .out = stdout, .bar = 1,
+    const ef_job_hooks hooks = { .msg = stderr, .out = stdout, .bar = 1, .own_stderr = 1,
                                  .temps = ef_cli_signal_temps() };
     char err[16];
     return ef_job_run(&hooks, argc, (const char *const *) argv, err, sizeof err);

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <strings.h>
 #include <sys/resource.h>
@@ -263,6 +264,55 @@ static int open_destinations(ef_frame *F)
     return 0;
 }
 
+/* Standard error taken over while a third-party reader runs, when the
+ * host owns it (the program): libpng prints "libpng error: ..." on
+ * descriptor 2 beside the error it returns. */
+typedef struct err_capture {
+    int saved, fd;
+} err_capture;
+
+static void capture_begin(const ef_job *J, err_capture *c)
+{
+    c->saved = c->fd = -1;
+    if (!J->h.own_stderr)
+        return;
+    fflush(stderr);
+    c->fd = memfd_create("exrfog-stderr", MFD_CLOEXEC);
+    if (c->fd >= 0 && (c->saved = dup(2)) >= 0 && dup2(c->fd, 2) >= 0)
+        return;
+    if (c->saved >= 0)
+        close(c->saved);
+    if (c->fd >= 0)
+        close(c->fd);
+    c->saved = c->fd = -1;
+}
+
+/* Gives descriptor 2 back; what was printed meanwhile, one line joined by
+ * "; ", goes to text (empty when nothing was). */
+static void capture_end(err_capture *c, char *text, size_t len)
+{
+    text[0] = '\0';
+    if (c->fd < 0)
+        return;
+    fflush(stderr);
+    dup2(c->saved, 2);
+    close(c->saved);
+    char buf[1024];
+    const ssize_t n = pread(c->fd, buf, sizeof buf - 1, 0);
+    close(c->fd);
+    size_t at = 0;
+    for (ssize_t i = 0; n > 0 && i < n && at + 3 < len; ++i) {
+        const char ch = buf[i];
+        if (ch == '\n') {
+            if (i + 1 < n && at)
+                at += (size_t) snprintf(text + at, len - at, "; ");
+        } else if (ch >= 0x20 && ch < 0x7f) {
+            text[at++] = ch;
+        }
+    }
+    text[at < len ? at : len - 1] = '\0';
+}
+
 /* The inputs: DWA parts (which OpenEXRCore 3.1.5 cannot decode) decoded by
  * the OpenEXR C++ library into a temporary ZIP file first; a depth in
  * another format (a 32-bit TIFF pass) read through OpenImageIO into a
@@ -302,10 +352,18 @@ static int open_inputs(ef_frame *F)
         temp_name(name, sizeof name, "exrfog-depth");
         if (ef_output_open(&F->dconv, name, ".exr", J->h.temps, &F->err))
             return ef_job_report(J, o->depth_file, &F->err, 1);
-        if (ef_oiio_image_to_exr(o->depth_file, F->dconv.fd, msg, sizeof msg)) {
-            ef_fail(&F->err, "%s", msg);
+        err_capture cap;
+        char raw[600];
+        capture_begin(J, &cap);
+        const int bad = ef_oiio_image_to_exr(o->depth_file, F->dconv.fd, msg, sizeof msg);
+        capture_end(&cap, raw, sizeof raw);
+        if (bad) {
+            ef_fail(&F->err, "%s%s%s%s", msg, raw[0] ? " (the reader said: " : "", raw,
+                    raw[0] ? ")" : "");
             return ef_job_report(J, o->depth_file, &F->err, 1);
         }
+        if (raw[0])
+            ef_job_warn(J, o->depth_file, raw);
         fd_path(F->dconv_path, sizeof F->dconv_path, F->dconv.fd, F->dconv.tmp);
         dpath = F->dconv_path;
     }

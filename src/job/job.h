@@ -23,6 +23,10 @@ typedef struct ef_job_hooks {
     FILE *msg;                /* errors, warnings, notes, -v, --stats; NULL: nowhere */
     FILE *out;                /* --explain, --help, --version; NULL: nowhere */
     int bar;                  /* draw the progress bar on msg when it is a terminal */
+    /* The host owns the process's standard error (the program): raw lines
+     * other libraries print on descriptor 2 (libpng's) during a read are
+     * captured into exrfog's own messages. A library host leaves it 0. */
+    int own_stderr;
     /* Called with the fraction done (monotonic, 1.0 at the end of a
      * successful run); a non-zero return cancels the run (status 3). */
     int (*progress)(void *user, double fraction);
