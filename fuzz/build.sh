@@ -73,3 +73,23 @@ $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wa
     "$here/fuzz_camfile.c" "$root"/src/core/*.c "$root/src/io/camera_file.c" \
     "$root/src/io/scene_file.c" -ljansson -lm
 echo "built $exe"
+# fuzz_ocio: OpenColorIO configs through the shim (names, colours, displays).
+[ $cov = 1 ] && exe="$out/fuzz_ocio_cov" || exe="$out/fuzz_ocio"
+# shellcheck disable=SC2086
+$CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
+    -I "$root/src/io" -c "$here/fuzz_ocio.c" -o "$out/fuzz_ocio.o"
+# shellcheck disable=SC2086
+$CXX $flags -o "$exe" "$out/fuzz_ocio.o" "$out/ocio_shim.o" $(pkg-config --libs OpenColorIO) -ldl
+echo "built $exe"
+# fuzz_depth: --depth images through OpenImageIO (the module's reader).
+[ $cov = 1 ] && exe="$out/fuzz_depth_cov" || exe="$out/fuzz_depth"
+# shellcheck disable=SC2086
+$CXX -std=c++17 -g -O1 -fno-omit-frame-pointer $(echo $flags | sed 's/-fsanitize=fuzzer,/-fsanitize=fuzzer-no-link,/; s/-fsanitize=fuzzer /-fsanitize=fuzzer-no-link /') \
+    -I "$root/src/io" $(pkg-config --cflags OpenImageIO) -c "$root/src/io/oiio/oiio_module.cpp" \
+    -o "$out/oiio_module.o"
+# shellcheck disable=SC2086
+$CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags -Wall -Wextra \
+    -c "$here/fuzz_depth.c" -o "$out/fuzz_depth.o"
+# shellcheck disable=SC2086
+$CXX $flags -o "$exe" "$out/fuzz_depth.o" "$out/oiio_module.o" $(pkg-config --libs OpenImageIO) -ldl
+echo "built $exe"

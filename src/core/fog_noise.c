@@ -2182,7 +2182,9 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
         const int out = (!sky) | ((k > 0) & (hs > 0));
         const double hlow = hs < 0 ? h0 + hs * t1 : h0;
         const int over = (k > 0) & !(-k * hlow < 690);
-        const int w = (!(rho_max > 0)) | (!(d > 0)) ? P1_NONE : (!out) | over ? P1_OPAQUE : P1_LANE;
+        const int w = ((!(rho_max > 0)) | (!(d > 0))) ? P1_NONE
+                      : ((!out) | over)               ? P1_OPAQUE
+                                                      : P1_LANE;
         const double b = k * hs * t1;
         /* the envelope as env_piece forms it from the camera's end */
         const int varies = (k > 0) & (hs != 0);
@@ -2260,7 +2262,7 @@ EF_MULTIVERSION static void preint1_units(const ef_fog_component *c, const nstat
                  * the two (no rounding of the far end's period position) */
                 const double yc = cp.y + ds[j];
                 const double g1 = piece_int(cc, yc) - cp.I;
-                g[j] = (yc >= 0) & (yc <= cend) ? g1 : g[j];
+                g[j] = ((yc >= 0) & (yc <= cend)) ? g1 : g[j];
             }
         for (int j = 0; j < n; ++j) {
             const double G = ds[j] < 0 ? -g[j] : g[j], w = fabs(ds[j]);

@@ -323,6 +323,14 @@ ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
             std::snprintf(err, errlen, "the depth image is empty or deep");
             return -1;
         }
+        // A header may claim any size: past 2^28 values (1 GiB of float)
+        // it is not a depth pass exrfog can use, and is refused unread.
+        if ((double) is.width * (double) is.height * (double) is.nchannels > (double) (1u << 28)) {
+            std::snprintf(err, errlen, "the depth image claims %d x %d pixels of %d channels, "
+                          "more than exrfog reads (2^28 values)", is.width, is.height,
+                          is.nchannels);
+            return -1;
+        }
         std::vector<float> px((size_t) is.width * (size_t) is.height * (size_t) is.nchannels);
         // A truncated or damaged file may read "successfully" with its
         // errors left pending (TIFF strips past the end): any error fails.

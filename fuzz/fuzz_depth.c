@@ -1,0 +1,45 @@
+/* libFuzzer target for --depth images read through OpenImageIO (a float
+ * TIFF depth pass, a 16-bit PNG, DPX, HDR...): the first byte picks the
+ * extension, the rest is the file, written to a private directory. The
+ * reader must turn it into a float EXR or refuse it with a message (a
+ * truncated or damaged file is refused, never half read); nothing may
+ * crash or hang. */
+#define _GNU_SOURCE 1
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+int ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen);
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    static const char *const ext[] = { "tif", "png", "dpx", "hdr", "jpg", "tga", "bmp", "pnm" };
+    if (size < 1)
+        return 0;
+    char dir[] = "/tmp/fzdepthXXXXXX", path[128];
+    if (!mkdtemp(dir))
+        return 0;
+    snprintf(path, sizeof path, "%s/depth.%s", dir, ext[data[0] % 8]);
+    FILE *f = fopen(path, "wb");
+    if (!f || (size > 1 && fwrite(data + 1, 1, size - 1, f) != size - 1)) {
+        if (f)
+            fclose(f);
+        unlink(path);
+        rmdir(dir);
+        return 0;
+    }
+    fclose(f);
+    int out = memfd_create("depth-exr", 0);
+    char msg[1024] = "";
+    if (out >= 0) {
+        if (ef_oiio_to_exr(path, out, msg, sizeof msg) && !msg[0])
+            abort();   /* a refusal says why */
+        close(out);
+    }
+    unlink(path);
+    rmdir(dir);
+    return 0;
+}
