@@ -12,6 +12,8 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include "fuzz_file.h"
+
 int ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen);
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -19,19 +21,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static const char *const ext[] = { "tif", "png", "dpx", "hdr", "jpg", "tga", "bmp", "pnm" };
     if (size < 1)
         return 0;
-    char dir[] = "/tmp/fzdepthXXXXXX", path[128];
-    if (!mkdtemp(dir))
+    char dir[] = "/tmp/fzdepthXXXXXX", path[128], name[32];
+    snprintf(name, sizeof name, "depth.%s", ext[data[0] % 8]);
+    if (fuzz_file_make(dir, name, data + 1, size - 1, path, sizeof path))
         return 0;
-    snprintf(path, sizeof path, "%s/depth.%s", dir, ext[data[0] % 8]);
-    FILE *f = fopen(path, "wb");
-    if (!f || (size > 1 && fwrite(data + 1, 1, size - 1, f) != size - 1)) {
-        if (f)
-            fclose(f);
-        unlink(path);
-        rmdir(dir);
-        return 0;
-    }
-    fclose(f);
     int out = memfd_create("depth-exr", 0);
     char msg[1024] = "";
     if (out >= 0) {
@@ -39,7 +32,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             abort();   /* a refusal says why */
         close(out);
     }
-    unlink(path);
-    rmdir(dir);
+    fuzz_file_drop(dir, path);
     return 0;
 }

@@ -13,23 +13,14 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "fuzz_file.h"
 #include "ocio_shim.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     char dir[] = "/tmp/fzocioXXXXXX", path[128];
-    if (!mkdtemp(dir))
+    if (fuzz_file_make(dir, "config.ocio", data, size, path, sizeof path))
         return 0;
-    snprintf(path, sizeof path, "%s/config.ocio", dir);
-    FILE *f = fopen(path, "wb");
-    if (!f || fwrite(data, 1, size, f) != size) {
-        if (f)
-            fclose(f);
-        unlink(path);
-        rmdir(dir);
-        return 0;
-    }
-    fclose(f);
     char where[1200], msg[2048] = "";
     ef_ocio *o = ef_ocio_open(path, where, sizeof where, msg, sizeof msg);
     if (!o) {
@@ -66,7 +57,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         ef_ocio_close(o);
     }
-    unlink(path);
-    rmdir(dir);
+    fuzz_file_drop(dir, path);
     return 0;
 }

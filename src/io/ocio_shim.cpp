@@ -631,6 +631,26 @@ extern "C" int ef_ocio_parse_color(const ef_ocio *o, const char *text, const cha
     return -1;
 }
 
+namespace {
+
+// A float CPU processor for proc, its name (display and view, or a space)
+// written to used; NULL with msg when the name does not fit.
+ef_ocio_display *make_display(const OCIO::ConstProcessorRcPtr &proc, const std::string &name,
+                              char *used, size_t used_len, char *msg, size_t msg_len)
+{
+    ef_ocio_display *d = new ef_ocio_display;
+    d->cpu = proc->getOptimizedCPUProcessor(OCIO::BIT_DEPTH_F32, OCIO::BIT_DEPTH_F32,
+                                            OCIO::OPTIMIZATION_DEFAULT);
+    if (put(used, used_len, name) != 0 && used) {
+        delete d;
+        say(msg, msg_len, "the name '" + name.substr(0, 60) + "...' is too long");
+        return nullptr;
+    }
+    return d;
+}
+
+} // namespace
+
 extern "C" ef_ocio_display *ef_ocio_display_open(const ef_ocio *o, const char *working,
                                                  const char *display_view, char *used, size_t used_len,
                                                  char *msg, size_t msg_len)
@@ -666,16 +686,8 @@ extern "C" ef_ocio_display *ef_ocio_display_open(const ef_ocio *o, const char *w
         dvt->setSrc(work.c_str());
         dvt->setDisplay(display);
         dvt->setView(view);
-        OCIO::ConstProcessorRcPtr proc = cfg->getProcessor(dvt);
-        ef_ocio_display *d = new ef_ocio_display;
-        d->cpu = proc->getOptimizedCPUProcessor(OCIO::BIT_DEPTH_F32, OCIO::BIT_DEPTH_F32,
-                                                OCIO::OPTIMIZATION_DEFAULT);
-        if (put(used, used_len, std::string(display) + ", " + view) != 0 && used) {
-            delete d;
-            say(msg, msg_len, "preview: the display/view name is too long");
-            return nullptr;
-        }
-        return d;
+        return make_display(cfg->getProcessor(dvt), std::string(display) + ", " + view, used,
+                            used_len, msg, msg_len);
     } catch (const std::exception &e) {
         say(msg, msg_len, std::string("preview: OpenColorIO: ") + e.what());
     } catch (...) {
@@ -706,16 +718,8 @@ extern "C" ef_ocio_display *ef_ocio_space_open(const ef_ocio *o, const char *wor
                                            "the output's with --output-colorspace");
             return nullptr;
         }
-        OCIO::ConstProcessorRcPtr proc = cfg->getProcessor(work.c_str(), dst.c_str());
-        ef_ocio_display *d = new ef_ocio_display;
-        d->cpu = proc->getOptimizedCPUProcessor(OCIO::BIT_DEPTH_F32, OCIO::BIT_DEPTH_F32,
-                                                OCIO::OPTIMIZATION_DEFAULT);
-        if (put(used, used_len, dst) != 0 && used) {
-            delete d;
-            say(msg, msg_len, "the colour space's name is too long");
-            return nullptr;
-        }
-        return d;
+        return make_display(cfg->getProcessor(work.c_str(), dst.c_str()), dst, used, used_len,
+                            msg, msg_len);
     } catch (const std::exception &e) {
         say(msg, msg_len, std::string("OpenColorIO: ") + e.what());
     } catch (...) {
