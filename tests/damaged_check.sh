@@ -10,22 +10,7 @@ exrfog=$1 dir=$2/real-exr/openexr-images/Damaged tmp=$3/damaged
 rm -rf "$tmp" && mkdir -p "$tmp" || exit 1
 fail=0 n=0 refused=0 ran=0
 
-# judge LABEL STATUS: one run's outcome ($tmp/stderr, $out) counted or failed.
-judge() {
-    if grep -q 'Sanitizer\|runtime error' "$tmp/stderr"; then
-        echo "FAIL: $1: sanitizer report"; head -5 "$tmp/stderr"; fail=1
-    elif [ "$2" -eq 0 ]; then
-        ran=$((ran + 1))
-        [ -s "$out" ] || { echo "FAIL: $1: exit 0 without output"; fail=1; }
-    elif [ "$2" -eq 1 ] || [ "$2" -eq 2 ]; then
-        refused=$((refused + 1))
-        [ -e "$out" ] && { echo "FAIL: $1: output left after exit $2"; fail=1; }
-        head -1 "$tmp/stderr" | grep -q '^exrfog: ' ||
-            { echo "FAIL: $1: exit $2 without an exrfog: message"; fail=1; }
-    else
-        echo "FAIL: $1: exit $2"; head -3 "$tmp/stderr"; fail=1
-    fi
-}
+. "$(dirname "$0")/judge.sh"
 for f in "$dir"/*; do
     [ -f "$f" ] || continue
     case "$f" in *.rst) continue ;; esac
