@@ -343,6 +343,27 @@ for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
     check(r.returncode == want and r.stderr.startswith("exrfog: ") and
           not os.path.exists(os.path.join(tmp, "u.exr")),
           "%s -> exit %d with a message (got %d: %s)" % (args[1:], want, r.returncode, r.stderr.strip()))
+# --deep flatten writes any format (issue 23's deliverables): a PNG of the
+# flattened frame is its EXR encoded by the sRGB formula (straight alpha);
+# the deep modes are EXR only.
+fe, fp = os.path.join(tmp, "flat_any.exr"), os.path.join(tmp, "flat_any.png")
+check(run([src, "-o", fe, "--deep", "flatten", "--fog", "exp:density=0.1"]) == 0 and
+      run([src, "-o", fp, "--deep", "flatten", "--fog", "exp:density=0.1"]) == 0,
+      "--deep flatten to EXR and to PNG")
+pe, pp = oiio.ImageBuf(fe).get_pixels(oiio.FLOAT), oiio.ImageBuf(fp).get_pixels(oiio.FLOAT)
+worst = 0
+for y in range(len(pe)):
+    for x in range(len(pe[y])):
+        a = float(pe[y][x][3])
+        for k in range(3):
+            v = float(pe[y][x][k]) / a if 0 < a < 1 else float(pe[y][x][k])
+            v = min(max(v, 0.0), 1.0)
+            enc = 12.92 * v if v <= 0.0031308 else 1.055 * v ** (1 / 2.4) - 0.055
+            worst = max(worst, abs(round(float(pp[y][x][k]) * 255) - round(enc * 255)))
+check(worst <= 1, "--deep flatten PNG = its EXR sRGB-encoded (worst %d codes)" % worst)
+r = subprocess.run([exrfog, src, "-o", os.path.join(tmp, "u.png"), "--fog", "exp:density=0.1"],
+                   capture_output=True, text=True)
+check(r.returncode == 2 and "deep output is EXR" in r.stderr, "deep samples to PNG refused")
 r = subprocess.run([exrfog, src, "--fog", "exp:density=0.1", "--explain"], capture_output=True, text=True)
 tot, mx = sum(len(v) for v in input_samples), max(len(v) for v in input_samples)
 check(r.returncode == 0 and ("deep scanline: %d samples over %d pixels" % (tot, W * H)) in r.stdout

@@ -9,6 +9,7 @@
 # their errors pending: every error is checked.)
 # usage: depth_trunc_check.sh EXRFOG MAKE_SAMPLE TMPDIR   (77: no oiiotool)
 exrfog=$1 make_sample=$2 tmp=$3/depth_trunc
+here=$(cd "$(dirname "$0")" && pwd)
 command -v oiiotool >/dev/null 2>&1 || { echo "no oiiotool: skipped"; exit 77; }
 rm -rf "$tmp" && mkdir -p "$tmp" && cd "$tmp" || exit 1
 "$make_sample" in.exr --size 160x90 >/dev/null || exit 1
@@ -43,5 +44,13 @@ for spec in "z.tif -d float" "zh.tif -d half" "zc.tif -d float --compression zip
         [ -e out.exr ] && { echo "FAIL: $f cut to $frac %: output written"; fail=1; }
     done
 done
+# fuzz_depth's finding: a 372-byte BMP claiming 13 million pixels a row
+# took 1 GB before its truncation was found; now refused unread.
+huge="$here/../fuzz/regressions_depth/huge-row.bmp"
+rm -f out.exr
+"$exrfog" in.exr --depth "$huge" -o out.exr --fog exp:density=0.02 2>err.txt
+rc=$?
+{ [ $rc -eq 1 ] && grep -q "far more than the colour image has" err.txt && [ ! -e out.exr ]; } ||
+    { echo "FAIL: huge-row.bmp: exit $rc: $(head -c 300 err.txt)"; fail=1; }
 [ $fail = 0 ] && echo "depth truncations: $n runs (refused, or the whole pixels), 5 whole files accepted"
 exit $fail

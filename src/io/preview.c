@@ -76,14 +76,14 @@ int ef_oiio_output_probe(const char *ext, int dt, int nch, int *got, int *alpha,
     return rc;
 }
 
-int ef_oiio_image_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
+int ef_oiio_image_to_exr(const char *src, int dst_fd, double max_pixels, char *err, size_t errlen)
 {
     void *mod;
-    int (*fn)(const char *, int, char *, size_t);
+    int (*fn)(const char *, int, double, char *, size_t);
     *(void **) &fn = module_sym("ef_oiio_to_exr", &mod, err, errlen);
     if (!fn)
         return -1;
-    const int rc = fn(src, dst_fd, err, errlen);
+    const int rc = fn(src, dst_fd, max_pixels, err, errlen);
     dlclose(mod);
     return rc;
 }

@@ -53,9 +53,10 @@ int ef_oiio_output_probe(const char *ext, int dt, int nch, int *got, int *alpha,
 /* Reads the first image of src (any format OpenImageIO reads: a 32-bit
  * TIFF depth pass...) as float and writes it to the open descriptor dst_fd
  * as a float EXR, ZIP, with its channel names (a single channel is
- * called Z) and its origin and full window. Returns 0, or -1 with a
- * message. */
-int ef_oiio_image_to_exr(const char *src, int dst_fd, char *err, size_t errlen);
+ * called Z) and its origin and full window. An image of more than
+ * max_pixels (0: no bound but 2^28 values) is refused before it is read.
+ * Returns 0, or -1 with a message. */
+int ef_oiio_image_to_exr(const char *src, int dst_fd, double max_pixels, char *err, size_t errlen);
 
 #ifdef __cplusplus
 }

@@ -355,7 +355,15 @@ static int open_inputs(ef_frame *F)
         err_capture cap;
         char raw[600];
         capture_begin(J, &cap);
-        const int bad = ef_oiio_image_to_exr(o->depth_file, F->dconv.fd, msg, sizeof msg);
+        /* A depth pass covers its render's windows (overscan: a little
+         * more): four times the larger is the most that can be one. */
+        exr_attr_box2i_t dw, disp;
+        double most = 0;
+        if (!exr_get_data_window(F->in.ctx, 0, &dw) && !exr_get_display_window(F->in.ctx, 0, &disp))
+            most = 4 * fmax(((double) dw.max.x - dw.min.x + 1) * ((double) dw.max.y - dw.min.y + 1),
+                            ((double) disp.max.x - disp.min.x + 1) *
+                                ((double) disp.max.y - disp.min.y + 1));
+        const int bad = ef_oiio_image_to_exr(o->depth_file, F->dconv.fd, most, msg, sizeof msg);
         capture_end(&cap, raw, sizeof raw);
         if (bad) {
             ef_fail(&F->err, "%s%s%s%s", msg, raw[0] ? " (the reader said: " : "", raw,
@@ -402,8 +410,8 @@ static int check_deep(ef_frame *F)
     else if (F->naov)
         why = "--aov does not apply to deep input yet (use the flat path: --deep flatten gives "
               "the fogged image without AOVs)";
-    else if (F->foreign)
-        why = "deep input writes EXR only (--deep flatten to an EXR, then convert it)";
+    else if (F->foreign && o->deep_mode != EF_DEEP_MODE_FLATTEN)
+        why = "a deep output is EXR (--deep flatten writes other formats)";
     else if (o->preview)
         why = "--preview does not apply to deep input";
     if (why) {
@@ -873,7 +881,8 @@ static int run_deep_pass(ef_frame *F)
                             .mode = o->deep_mode,
                             .tol = o->deep_tol,
                             .out_path = o->output,
-                            .out_fd = F->out.fd,
+                            /* a flattened foreign output goes through its EXR */
+                            .out_fd = F->foreign ? F->mid.fd : F->out.fd,
                             .history = F->history,
                             .params = params,
                             .threads = F->so.threads,

@@ -310,7 +310,7 @@ ef_oiio_convert(const char *src, int part, const char *const *names, int n, cons
 // the open descriptor dst_fd (--depth from a TIFF or any other format):
 // channel names kept (one channel is Z), origin and full window kept.
 extern "C" __attribute__((visibility("default"))) int
-ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
+ef_oiio_to_exr(const char *src, int dst_fd, double max_pixels, char *err, size_t errlen)
 {
     try {
         auto in = OIIO::ImageInput::open(src);
@@ -323,8 +323,16 @@ ef_oiio_to_exr(const char *src, int dst_fd, char *err, size_t errlen)
             std::snprintf(err, errlen, "the depth image is empty or deep");
             return -1;
         }
-        // A header may claim any size: past 2^28 values (1 GiB of float)
-        // it is not a depth pass exrfog can use, and is refused unread.
+        // A header may claim any size (a 372-byte BMP claimed 13 million
+        // pixels a row): more pixels than max_pixels, or past 2^28 values
+        // (1 GiB of float), is not a depth pass of this frame, and is
+        // refused unread.
+        if (max_pixels > 0 && (double) is.width * (double) is.height > max_pixels) {
+            std::snprintf(err, errlen, "the depth image claims %d x %d pixels, far more than the "
+                          "colour image has (a depth pass matches its render)", is.width,
+                          is.height);
+            return -1;
+        }
         if ((double) is.width * (double) is.height * (double) is.nchannels > (double) (1u << 28)) {
             std::snprintf(err, errlen, "the depth image claims %d x %d pixels of %d channels, "
                           "more than exrfog reads (2^28 values)", is.width, is.height,
