@@ -34,10 +34,17 @@ PKG_CONFIG_PATH="$libdir/pkgconfig" cc $flags "$src/tests/external/use_exrfog.c"
   -lm -o "$d/static_use"
 mkdir "$d/st"
 "$d/static_use" "$src/samples/sample.exr" "$d/st"
-# the installed Python module finds the installed library by itself
-if command -v python3 >/dev/null 2>&1 && [ "$sanitize" != 1 ]; then
-  env -u LD_LIBRARY_PATH PYTHONPATH="$d/prefix/lib/python3/dist-packages" python3 -c \
+# the installed Python module finds the installed library by itself (a
+# sanitized build's library needs the sanitizer's runtime preloaded into
+# python, which is no user's concern)
+if command -v python3 >/dev/null 2>&1; then
+  pre=
+  [ "$sanitize" = 1 ] && pre="$(cc -print-file-name=libasan.so):$(cc -print-file-name=libubsan.so)"
+  env -u LD_LIBRARY_PATH LD_PRELOAD="$pre" ASAN_OPTIONS=detect_leaks=0 \
+    PYTHONPATH="$d/prefix/lib/python3/dist-packages" python3 -c \
     "import exrfog; assert exrfog.library_version() == exrfog.version; exrfog.fog('$src/samples/sample.exr', '$d/py.exr', fog='exp:density=0.02')"
   [ -s "$d/py.exr" ]
+  # the farm front end is installed beside the program and runs from there
+  env -u LD_LIBRARY_PATH "$d/prefix/bin/exrfog-farm" submit --help >/dev/null
 fi
 echo "install check passed"
