@@ -190,6 +190,11 @@ int ef_output_open(ef_output *o, const char *name, const char *suffix, const ef_
 
 int ef_output_commit(ef_output *o, ef_err *err)
 {
+    /* The temporary name must still be the file written through fd: one
+     * who can write the directory could have put a link of theirs there,
+     * which the rename would make OUTPUT. */
+    struct stat mine, now;
+    const int have = o->fd >= 0 && fstat(o->fd, &mine) == 0;
     if (o->fd >= 0) {
         const int rc = close(o->fd);
         o->fd = -1;
@@ -200,6 +205,17 @@ int ef_output_commit(ef_output *o, ef_err *err)
             err->file = o->name;
             return 1;
         }
+    }
+    if (have && (lstat(o->tmp, &now) != 0 || !S_ISREG(now.st_mode) || now.st_dev != mine.st_dev ||
+                 now.st_ino != mine.st_ino)) {
+        /* Not ours to remove or move: the name is someone else's now. */
+        if (o->hooks && o->hooks->drop)
+            o->hooks->drop(o->hooks->user, o->tmp);
+        ef_fail(err, "the temporary file %s was replaced while exrfog ran (someone else writes "
+                     "this directory); nothing was written", o->tmp);
+        o->tmp[0] = '\0';
+        err->file = o->name;
+        return 1;
     }
     if (rename(o->tmp, o->path) != 0) {
         const int e = errno;
