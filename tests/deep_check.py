@@ -361,6 +361,26 @@ for y in range(len(pe)):
             enc = 12.92 * v if v <= 0.0031308 else 1.055 * v ** (1 / 2.4) - 0.055
             worst = max(worst, abs(round(float(pp[y][x][k]) * 255) - round(enc * 255)))
 check(worst <= 1, "--deep flatten PNG = its EXR sRGB-encoded (worst %d codes)" % worst)
+# -d on deep input as on flat: --deep flatten -d float writes float colour
+# (the half flatten's values to half precision), -d half never demotes Z,
+# NAME=TYPE overrides win, and the deep modes take it too.
+ff = os.path.join(tmp, "flat_float.exr")
+check(run([src, "-o", ff, "--deep", "flatten", "-d", "float", "--fog", "exp:density=0.1"]) == 0,
+      "--deep flatten -d float runs")
+sf = oiio.ImageBuf(ff).spec()
+check(all(str(sf.channelformat(i)) == "float" for i in range(sf.nchannels)),
+      "--deep flatten -d float: every channel float")
+pf = oiio.ImageBuf(ff).get_pixels(oiio.FLOAT)
+worst = max(abs(float(pf[y][x][k]) - float(pe[y][x][k])) / max(abs(float(pf[y][x][k])), 1e-3)
+            for y in range(len(pf)) for x in range(len(pf[y])) for k in range(4))
+check(worst <= 2 ** -10, "--deep flatten -d float = the half flatten to half precision (%.2g)" % worst)
+sd = os.path.join(tmp, "samples_types.exr")
+check(run([src, "-o", sd, "--deep", "samples", "-d", "half", "-d", "A=float",
+           "--fog", "exp:density=0.1"]) == 0, "--deep samples -d half -d A=float runs")
+ss = oiio.ImageInput.open(sd).spec()
+types = {ss.channelnames[i]: str(ss.channelformat(i)) for i in range(ss.nchannels)}
+check(types.get("R") == "half" and types.get("A") == "float" and types.get("Z") == "float" and
+      types.get("ZBack") == "float", "--deep samples -d half -d A=float: %s" % types)
 r = subprocess.run([exrfog, src, "-o", os.path.join(tmp, "u.png"), "--fog", "exp:density=0.1"],
                    capture_output=True, text=True)
 check(r.returncode == 2 and "deep output is EXR" in r.stderr, "deep samples to PNG refused")

@@ -87,6 +87,11 @@ int ef_find_view_channels(const ef_exr_file *f, const ef_exr_file *depth_file, c
                           const char *layer, const char *depth_channel, ef_channel_plan *plan,
                           ef_err *err);
 
+/* A channel's output type under -d NAME=TYPE overrides names[0..n) ("R=half"
+ * with types[k] its EXR_PIXEL_ type): the last one naming it wins; uint
+ * stays uint. */
+int ef_exr_named_type(const char *const *names, const int *types, int n, const char *name, int t);
+
 /* Channels the stream can add to the colour part (ef_stream_opts.extra). */
 #define EF_MAX_EXTRA_CHANNELS 16
 

@@ -799,18 +799,24 @@ static int plan_in_part(const ef_channel_plan *plans, int nplans, int p)
     return 0;
 }
 
-/* -d NAME=TYPE: the last override naming this channel wins; uint stays. */
-static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, exr_pixel_type_t t)
+int ef_exr_named_type(const char *const *names, const int *types, int n, const char *name, int t)
 {
     if (t == EXR_PIXEL_UINT)
         return t;
-    const size_t n = strlen(name);
-    for (int k = 0; k < o->nchan_type; ++k) {
-        const char *e = strrchr(o->chan_type_name[k], '=');
-        if (e && (size_t) (e - o->chan_type_name[k]) == n && !strncmp(o->chan_type_name[k], name, n))
-            t = (exr_pixel_type_t) o->chan_type[k];
+    const size_t len = strlen(name);
+    for (int k = 0; k < n; ++k) {
+        const char *e = strrchr(names[k], '=');
+        if (e && (size_t) (e - names[k]) == len && !strncmp(names[k], name, len))
+            t = types[k];
     }
     return t;
+}
+
+/* -d NAME=TYPE: the last override naming this channel wins; uint stays. */
+static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, exr_pixel_type_t t)
+{
+    return (exr_pixel_type_t) ef_exr_named_type(o->chan_type_name, o->chan_type, o->nchan_type,
+                                                 name, (int) t);
 }
 
 /* Attributes that describe a part's storage: set for the output by what

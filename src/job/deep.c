@@ -484,6 +484,21 @@ static int make_plan(const ef_deep_req *q, const ef_deep_in *d, int chromatic, p
     return finish_plan(P, cp, err);
 }
 
+/* -d on the output's channels, as the flat stream applies it: TYPE for
+ * half and float channels (half never demotes Z, ZBack or other data),
+ * then NAME=TYPE overrides; uint stays. */
+static void apply_types(plan *P, const ef_deep_req *q)
+{
+    for (int c = 0; c < P->L.nch; ++c) {
+        int t = P->type[c];
+        if (q->pixel_type >= 0 && t != EXR_PIXEL_UINT &&
+            !(q->pixel_type == EXR_PIXEL_HALF && ef_data_channel(P->name[c])))
+            t = q->pixel_type;
+        P->type[c] = (exr_pixel_type_t) ef_exr_named_type(q->chan_type_name, q->chan_type,
+                                                          q->nchan_type, P->name[c], t);
+    }
+}
+
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
@@ -495,6 +510,8 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     if (!P)
         return ef_fail(err, "out of memory");
     int rc = make_plan(q, &d, chromatic, P, err);
+    if (!rc)
+        apply_types(P, q);
     /* Z must be a distance along the ray (affine): planar or radial */
     if (!rc) {
         ef_ray r1, r2;

@@ -22,6 +22,12 @@ typedef struct ef_deep_req {
     int out_fd;
     const char *history, *params;
     int threads, zip_level;
+    /* -d: half/float for the output's half and float channels (-1: keep;
+     * half never demotes depth), and NAME=TYPE overrides */
+    int pixel_type;
+    const char *const *chan_type_name;
+    const int *chan_type;
+    int nchan_type;
     const _Atomic int *cancel;
     void (*progress)(void *user, long pixels);
     void *progress_user;

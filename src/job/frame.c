@@ -887,6 +887,10 @@ static int run_deep_pass(ef_frame *F)
                             .params = params,
                             .threads = F->so.threads,
                             .zip_level = o->zip_level,
+                            .pixel_type = o->pixel_type,
+                            .chan_type_name = o->chan_type_name,
+                            .chan_type = o->chan_type,
+                            .nchan_type = o->nchan_type,
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
                             .progress_user = J };
