@@ -361,6 +361,41 @@ for y in range(len(pe)):
             enc = 12.92 * v if v <= 0.0031308 else 1.055 * v ** (1 / 2.4) - 0.055
             worst = max(worst, abs(round(float(pp[y][x][k]) * 255) - round(enc * 255)))
 check(worst <= 1, "--deep flatten PNG = its EXR sRGB-encoded (worst %d codes)" % worst)
+# Unsorted input (issue 24's "messy samples, tidied first"): the Arnold
+# frame with every pixel's samples shuffled (OpenImageIO writes it). Its
+# --deep flatten equals the sorted file's exactly, and its --deep samples
+# output is tidy: OpenImageIO's flatten (which assumes sorted samples, and
+# gets the shuffled input itself wrong in most pixels) of it equals that of
+# the sorted file's.
+mb = oiio.ImageBuf(src)
+mspec, mdd = mb.spec(), mb.deepdata()
+messy = oiio.ImageBuf(mspec)
+rng = random.Random(7)
+for p in range(mdd.pixels):
+    n = mdd.samples(p)
+    order = list(range(n))
+    rng.shuffle(order)
+    x, y = mspec.x + p % mspec.width, mspec.y + p // mspec.width
+    messy.set_deep_samples(x, y, 0, n)
+    for s2, s0 in enumerate(order):
+        for c in range(mdd.channels):
+            messy.set_deep_value(x, y, 0, c, s2, mdd.deep_value(p, c, s0))
+mpath = os.path.join(tmp, "messy.exr")
+check(messy.write(mpath), "OpenImageIO writes the shuffled deep file")
+mf, sfl = os.path.join(tmp, "messy_flat.exr"), os.path.join(tmp, "sorted_flat.exr")
+ms, ssm = os.path.join(tmp, "messy_samples.exr"), os.path.join(tmp, "sorted_samples.exr")
+for a, b, mode in ((mpath, mf, "flatten"), (src, sfl, "flatten"), (mpath, ms, "samples"),
+                   (src, ssm, "samples")):
+    check(run([a, "-o", b, "--deep", mode, "--fog", "exp:density=0.1"]) == 0, "%s %s runs" % (a, mode))
+check(flat_pixels_any(mf) == flat_pixels_any(sfl), "--deep flatten of shuffled samples = of sorted")
+oa, ob = os.path.join(tmp, "messy_samples_flat.exr"), os.path.join(tmp, "sorted_samples_flat.exr")
+check(oiiotool([ms, "--flatten", "-o", oa]) == 0 and oiiotool([ssm, "--flatten", "-o", ob]) == 0,
+      "oiiotool flattens both")
+worst = max(abs(p - q) / max(abs(q), 1e-3) for u, v in zip(flat_pixels_any(oa), flat_pixels_any(ob))
+            for p, q in zip(u, v))
+check(worst <= 2 ** -10, "--deep samples of shuffled input is tidy (OIIO's flatten agrees within %.2g)"
+      % worst)
+
 # -d on deep input as on flat: --deep flatten -d float writes float colour
 # (the half flatten's values to half precision), -d half never demotes Z,
 # NAME=TYPE overrides win, and the deep modes take it too.
