@@ -22,6 +22,16 @@ static int default_dt(const char *ext)
     return 0;
 }
 
+/* The plan from the writer's type and alpha and the options. */
+static void set_plan(const ef_job *J, ef_deliver *dv, int type, int alpha)
+{
+    dv->alpha = alpha;
+    dv->d.type = type;
+    dv->integer = type >= EF_DT_UINT8 && type <= EF_DT_UINT16;
+    dv->d.full_window = !J->o.crop_data;
+    dv->d.unassociate = dv->integer;
+}
+
 int ef_deliver_plan(ef_job *J, const char *ext, ef_deliver *dv, ef_err *err)
 {
     const ef_options *o = &J->o;
@@ -30,9 +40,16 @@ int ef_deliver_plan(ef_job *J, const char *ext, ef_deliver *dv, ef_err *err)
     if (n >= sizeof dv->ext)
         return ef_fail(err, "'%.20s...' is not a file extension any writer knows (use .exr, .png, "
                             ".jpg, .tif or .dpx)", ext), 2;
-    for (size_t i = 0; i <= n; ++i) {
+    /* ext ".png": the lower-case extension, and "PNG" for messages */
+    for (size_t i = 0; i <= n; ++i)
         dv->ext[i] = (char) tolower((unsigned char) ext[i]);
-        dv->fmt[i] = (char) toupper((unsigned char) ext[i + (i < n)]);
+    for (size_t i = 1; i <= n; ++i)
+        dv->fmt[i - 1] = (char) toupper((unsigned char) ext[i]);
+    /* Every frame of a sequence has the same extension and options: the
+     * writer is probed once per run. */
+    if (J->dl_ok && !strcmp(J->dl_ext, dv->ext)) {
+        set_plan(J, dv, J->dl_type, J->dl_alpha);
+        return 0;
     }
     if (!strcmp(dv->ext, ".null"))
         return ef_fail(err, "'.null' is OpenImageIO's discard format: nothing would be written "
@@ -61,11 +78,11 @@ int ef_deliver_plan(ef_job *J, const char *ext, ef_deliver *dv, ef_err *err)
     } else {
         alpha = 0;
     }
-    dv->alpha = alpha;
-    dv->d.type = got;
-    dv->integer = got >= EF_DT_UINT8 && got <= EF_DT_UINT16;
-    dv->d.full_window = !o->crop_data;
-    dv->d.unassociate = dv->integer;
+    set_plan(J, dv, got, alpha);
+    snprintf(J->dl_ext, sizeof J->dl_ext, "%s", dv->ext);
+    J->dl_type = got;
+    J->dl_alpha = alpha;
+    J->dl_ok = 1;
     return 0;
 }
 

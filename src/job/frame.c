@@ -576,7 +576,8 @@ static int bind_view(ef_frame *F, int v)
 /* Before an extreme run: method=exact's work on a sample of this frame's
  * rays (16 rows of the depth, 64 pixels each), projected over the frame on
  * the run's threads at 150 ns an evaluation (exact's long-double walk and
- * bisected cells, measured); a warning past two minutes, once per run.
+ * bisected cells, measured); a warning past two minutes. Once per run, on
+ * its first frame: the sample's decoding is not repeated frame by frame.
  * Other methods bound their work per pixel. */
 static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_camera *cam,
                             const ef_depth_conv *conv)
@@ -584,8 +585,9 @@ static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_cam
     ef_job *J = F->J;
     const ef_options *o = F->o;
     const ef_fog_scene *sc = &o->scene;
-    if (J->warned_cost || o->quiet || o->explain)
+    if (J->cost_checked || o->quiet || o->explain)
         return;
+    J->cost_checked = 1;   /* the first frame speaks for the sequence */
     /* Only where some component's work is unbounded: a short probe ray. */
     ef_ray probe = { { 0, 0, 1 }, 1, 1, { cam->pos[0], cam->pos[1], cam->pos[2] } };
     int any = 0;
@@ -621,7 +623,6 @@ static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_cam
     const double per_px = cnt > 0 ? sum / cnt : 0, secs = per_px * px * 150e-9 / threads;
     if (!(secs > 120))
         return;
-    J->warned_cost = 1;
     char msg[400];
     snprintf(msg, sizeof msg, "method=exact is predicted to take about %.0f minutes on this frame "
                               "(%.3g noise evaluations per pixel on a sample of its rays, %d "

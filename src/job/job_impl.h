@@ -55,7 +55,10 @@ typedef struct ef_job {
     int has_frame;            /* a frame of a sequence: */
     long frame;               /* its number */
     int noted_alpha;          /* the note on a deliverable without alpha was given */
-    int warned_cost;          /* the warning on an extreme method=exact run was given */
+    int cost_checked;         /* method=exact's cost was predicted (on the first frame) */
+    /* A non-EXR output's writer, probed once per run (deliver.c) */
+    int dl_ok, dl_type, dl_alpha;
+    char dl_ext[32];
     int noted_up;             /* --up-axis auto's choice was told */
 } ef_job;
 
