@@ -72,11 +72,26 @@ org = C[3][:3]
 tanh = math.tan(fov / 2)
 
 
+# Which way the camera looks in its own space: the unit point ahead has a
+# positive homogeneous w under worldToNDC (this Arnold file's camera space
+# looks down +Z).
+w2n = spec.getattribute("worldToNDC")
+N = [[w2n[4 * i + j] for j in range(4)] for i in range(4)]
+
+
+def ahead_w(s):
+    p = [sum((0.0, 0.0, s, 1.0)[j] * C[j][i] for j in range(4)) for i in range(4)]
+    return sum(p[i] * N[i][3] for i in range(4))
+
+
+FWD = 1.0 if ahead_w(1.0) > 0 else -1.0
+
+
 def pixel_ray(x, y):
     """World direction of pixel (x, y) and the distance per unit of planar Z."""
     sx = (2 * (x + 0.5) / W - 1) * tanh
     sy = -(2 * (y + 0.5) / H - 1) * tanh * H / W
-    dc = (sx, sy, -1.0)
+    dc = (sx, sy, FWD)
     k = math.sqrt(sx * sx + sy * sy + 1)
     d = [sum(dc[j] * C[j][i] for j in range(3)) for i in range(3)]
     n = math.sqrt(sum(v * v for v in d))
@@ -97,8 +112,12 @@ def fog_tau(model, o, d, a, b):
     return e0 * (fa - fb) / (kf * dy)
 
 
-def reference(model, x, y, samples):
-    """Flat RGBA of pixel (x, y): samples = [(z, zb, rgba)] in file Z."""
+def reference(model, x, y, samples, what="all", fog_on=True):
+    """Flat RGBA of pixel (x, y): samples = [(z, zb, rgba)] in file Z.
+    what: "all" (the fogged flatten), "in" (only the input's light, as the
+    fog attenuates it: the fog's own source left out), "cov" (the input's
+    coverage as the fog attenuates it: every input sample's source 1, so a
+    point sample adds its alpha); fog_on=False: no fog at all."""
     d, k = pixel_ray(x, y)
     pts, vols, bounds = [], [], {0.0}
     for z, zb, c in samples:
@@ -115,7 +134,7 @@ def reference(model, x, y, samples):
         for zp, c in pts:
             if zp == a:
                 for ch in range(3):
-                    L[ch] += T * c[ch]
+                    L[ch] += T * (c[3] if what == "cov" else c[ch])
                 T *= 1 - c[3]
         if i + 1 == len(bounds):
             break
@@ -123,22 +142,23 @@ def reference(model, x, y, samples):
         media = [(-math.log1p(-c[3]) / (zb - z), c) for z, zb, c in vols if z <= a and zb >= b]
         for s in range(16):
             sa, sb = a + (b - a) * s / 16, a + (b - a) * (s + 1) / 16
-            tf = fog_tau(model, org, d, sa, sb)
+            tf = fog_tau(model, org, d, sa, sb) if fog_on else 0.0
             tt = tf + sum(kap * (sb - sa) for kap, c in media)
             if tt <= 0:
                 continue
             em = 1 - math.exp(-tt) if tt < math.inf else 1.0
             for ch in range(3):
-                srcw = tf * FOG_COLOR[ch]
+                srcw = tf * FOG_COLOR[ch] if what == "all" else 0.0
                 for kap, c in media:
-                    srcw += kap * (sb - sa) * (c[ch] / c[3] if c[3] > 0 else 0)
+                    srcw += kap * (sb - sa) * (1.0 if what == "cov" else
+                                               c[ch] / c[3] if c[3] > 0 else 0)
                 L[ch] += T * em * srcw / tt
             T *= 1 - em
     # the tail: fog alone to infinity
-    tf = fog_tau(model, org, d, bounds[-1], math.inf)
+    tf = fog_tau(model, org, d, bounds[-1], math.inf) if fog_on else 0.0
     em = 1 - math.exp(-tf) if tf < math.inf else 1.0
     for ch in range(3):
-        L[ch] += T * em * FOG_COLOR[ch]
+        L[ch] += T * em * FOG_COLOR[ch] if what == "all" else 0.0
     T *= 1 - em
     return L + [1 - T]
 
@@ -270,6 +290,66 @@ for name, spec_text, model in (
     for k, e in worst.items():
         print("%s: %s: worst relative error %.2e over %d pixels" % (name, k, e, n))
         check(e < 4e-3, "%s: %s within 4e-3 of the reference (%.2e)" % (name, k, e))
+
+# --deep flatten --aov (issue 24): the AOVs against the reference's parts,
+# per pixel (every 3rd each way):
+#   fog.RGB = the fogged flatten less the input's light as the fog
+#             attenuates it; fog.A = its alpha less the input's own
+#   fog_T   = the input's coverage as the fog attenuates it over the input's
+#             own coverage (where it covers nothing: the fog's own T)
+#   fog_distance.Z = the nearest sample's Z times the ray's distance per Z,
+#   fog_P   = the camera plus the ray to there
+for spec_text, model in (("exp:density=0.05", ("exp", 0.05)),
+                         ("height:density=0.4:falloff=0.5:base=-1", ("height", 0.4, 0.5, -1.0))):
+    out = os.path.join(tmp, "deep_aov.exr")
+    check(run([src, "--fog", spec_text, "--deep", "flatten", "--aov", "fog,T,error,P,distance",
+               "-o", out]) == 0, "--deep flatten --aov runs (%s)" % spec_text)
+    b = oiio.ImageBuf(out)
+    cn = b.spec().channelnames
+    px = b.get_pixels(oiio.FLOAT)
+    need = ["fog.R", "fog.G", "fog.B", "fog.A", "fog_T.R", "fog_T.G", "fog_T.B",
+            "fog_error.R", "fog_P.X", "fog_P.Y", "fog_P.Z", "fog_distance.Z"]
+    check(all(c in cn for c in need), "AOV channels present (%s)" % ",".join(cn))
+    if not all(c in cn for c in need):
+        continue
+    ix = {c: cn.index(c) for c in need + ["R", "G", "B", "A"]}
+    worst = {"fog": 0.0, "T": 0.0, "P": 0.0, "identity": 0.0}
+    n = 0
+    for y in range(0, H, 3):
+        for x in range(0, W, 3):
+            p = y * W + x
+            smp = input_samples[p]
+            allp = reference(model, x, y, smp)
+            inp_ = reference(model, x, y, smp, "in")
+            cov = reference(model, x, y, smp, "cov")
+            own = reference(model, x, y, smp, "cov", fog_on=False)
+            v = px[y][x]
+            for ch in range(3):
+                e = abs(v[ix["fog." + "RGB"[ch]]] - (allp[ch] - inp_[ch]))
+                worst["fog"] = max(worst["fog"], e / (1e-3 + abs(allp[ch])))
+            worst["fog"] = max(worst["fog"], abs(v[ix["fog.A"]] - (allp[3] - own[3])) / (1e-3 + allp[3]))
+            if own[0] > 0:
+                tref = cov[0] / own[0]
+            else:
+                tref = 1 - allp[3]
+            for c in ("fog_T.R", "fog_T.G", "fog_T.B"):
+                worst["T"] = max(worst["T"], abs(v[ix[c]] - tref))
+            d, k = pixel_ray(x, y)
+            if smp:
+                zmin = min(z for z, zb, c in smp) * k
+                for a, c in enumerate(("fog_P.X", "fog_P.Y", "fog_P.Z")):
+                    worst["P"] = max(worst["P"], abs(v[ix[c]] - (org[a] + d[a] * zmin)) / (1 + abs(zmin)))
+                worst["P"] = max(worst["P"], abs(v[ix["fog_distance.Z"]] - zmin) / (1 + zmin))
+            else:
+                check(math.isinf(v[ix["fog_distance.Z"]]), "an empty pixel's distance is inf")
+            # closed forms: no error
+            check(v[ix["fog_error.R"]] == 0, "closed-form fog: fog_error is 0")
+            n += 1
+    print("--deep flatten --aov %s: %d pixels, worst fog %.2e (relative), T %.2e, P %.2e"
+          % (spec_text, n, worst["fog"], worst["T"], worst["P"]))
+    check(worst["fog"] < 4e-3, "%s: fog AOV within 4e-3 of the reference" % spec_text)
+    check(worst["T"] < 2e-3, "%s: fog_T within 2e-3 of the reference" % spec_text)
+    check(worst["P"] < 1e-5, "%s: fog_P and fog_distance at the nearest sample" % spec_text)
 
 # The holdout property: a fog sample split at any fraction x by the deep
 # rule, 1 - (1 - alpha)^x, against the exact transmittance of the fog over
@@ -470,8 +550,9 @@ if os.path.isdir(weta):
                       "exp:density=0.01,0.02,0.04"):
         dflat = os.path.join(tmp, "balls_deep_flat.exr")
         fflat = os.path.join(tmp, "balls_flat_fog.exr")
-        ok = run([balls, "--fog", spec_text, "--deep", "flatten", "-o", dflat] + cam) == 0
-        ok &= run([bflat, "--fog", spec_text, "-o", fflat] + cam) == 0
+        aovs = ["--aov", "fog,T,error,distance"]
+        ok = run([balls, "--fog", spec_text, "--deep", "flatten", "-o", dflat] + aovs + cam) == 0
+        ok &= run([bflat, "--fog", spec_text, "-o", fflat] + aovs + cam) == 0
         check(ok, "Balls, %s: both paths run" % spec_text)
         if not ok:
             continue
@@ -483,6 +564,35 @@ if os.path.isdir(weta):
         print("Balls, %s: deep vs flat at %d one-sample pixels: worst relative %.2e"
               % (spec_text, len(single), worst))
         check(worst <= 2e-3, "Balls, %s: deep flatten = flat path (%.2e)" % (spec_text, worst))
+        # --aov: at one opaque point sample the deep AOVs are the flat ones
+        # (fog, T, the error estimate, the distance)
+        ba, bb = oiio.ImageBuf(dflat), oiio.ImageBuf(fflat)
+        ca, cb = ba.spec().channelnames, bb.spec().channelnames
+        pa, pb = ba.get_pixels(oiio.FLOAT), bb.get_pixels(oiio.FLOAT)
+        names = ["fog.R", "fog.G", "fog.B", "fog.A", "fog_T.R", "fog_T.G", "fog_T.B",
+                 "fog_error.R", "fog_distance.Z"]
+        if not all(c in ca and c in cb for c in names):
+            check(False, "Balls, %s: AOV channels in both outputs" % spec_text)
+            continue
+        wa = bspec.width
+        worst_aov, nop, err_seen = 0.0, 0, 0.0
+        for i in single:
+            if bs[i][0][2][3] < 1:
+                continue
+            y, x = divmod(i, wa)
+            va, vb = pa[y][x], pb[y][x]
+            for c in names:
+                u, v = va[ca.index(c)], vb[cb.index(c)]
+                worst_aov = max(worst_aov, abs(u - v) / (1e-6 + abs(v)))
+            err_seen = max(err_seen, va[ca.index("fog_error.R")])
+            nop += 1
+        print("Balls, %s: deep vs flat AOVs at %d opaque one-sample pixels: worst relative %.2e"
+              "%s" % (spec_text, nop, worst_aov,
+                      ", largest fog_error %.2e" % err_seen if "noise" in spec_text else ""))
+        check(nop > 1000 and worst_aov <= 1e-5,
+              "Balls, %s: deep flatten AOVs = flat AOVs (%.2e)" % (spec_text, worst_aov))
+        if "noise" in spec_text:
+            check(err_seen > 0, "Balls, noise: fog_error reports the noise's estimate")
 else:
     print("no Weta elements: merge property skipped")
 

@@ -315,8 +315,11 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
  * density is constant along the ray (a split of this interval is then
  * exact). */
 static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double tau[3],
-                    double F[3], int *linear)
+                    double F[3], int *linear, double err[3])
 {
+    ef_tau_info info, *ip = err ? &info : NULL;
+    if (err)
+        err[0] = err[1] = err[2] = 0;
     double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
     tau[0] = tau[1] = tau[2] = 0;
@@ -332,9 +335,12 @@ static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b,
             rb.dist = b;
             rb.planar = isinf(b) ? INFINITY : b * r1->planar;
             double ta[3] = { 0, 0, 0 }, tb[3];
-            if (a > 0)
-                c->model->tau(c, &ra, ta);
-            c->model->tau(c, &rb, tb);
+            if (a > 0) {
+                ef_fog_tau(c, &ra, ta, ip);
+                for (int k = 0; err && k < 3; ++k)
+                    err[k] += info.err[k];
+            }
+            ef_fog_tau(c, &rb, tb, ip);
             for (int k = 0; k < 3; ++k)
                 t[k] = isinf(ta[k]) ? INFINITY : tb[k] - ta[k];
         } else {
@@ -343,8 +349,10 @@ static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b,
                 seg.org[k] = r1->org[k] + r1->dir[k] * a;
             seg.dist = b - a;
             seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
-            c->model->tau(c, &seg, t);
+            ef_fog_tau(c, &seg, t, ip);
         }
+        for (int k = 0; err && k < 3; ++k)
+            err[k] += info.err[k];
         if (linear && c->model != &ef_fog_exp)
             *linear = 0;
         for (int k = 0; k < 3; ++k) {
@@ -402,13 +410,15 @@ static double max3(const double v[3])
 
 /* An interval of the fog waiting to be emitted or split. */
 typedef struct piece {
-    double a, b, tau[3], col[3];
+    double a, b, tau[3], col[3], err[3];
     int depth;
 } piece;
 
-static piece make_piece(double a, double b, const double tau[3], const double col[3], int depth)
+static piece make_piece(double a, double b, const double tau[3], const double col[3],
+                        const double err[3], int depth)
 {
-    piece p = { a, b, { tau[0], tau[1], tau[2] }, { col[0], col[1], col[2] }, depth };
+    piece p = { a, b, { tau[0], tau[1], tau[2] }, { col[0], col[1], col[2] },
+                { err[0], err[1], err[2] }, depth };
     return p;
 }
 
@@ -422,15 +432,16 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
     enum { DEPTH = 48 };
     piece stack[DEPTH + 2];
     int linear;
-    double t0[3], c0[3];
-    seg_tau(F->scene, r1, a, b, t0, c0, &linear);
-    stack[0] = make_piece(a, b, t0, c0, 0);
+    double t0[3], c0[3], e0[3] = { 0, 0, 0 }, *const ep = F->want_err ? e0 : NULL;
+    seg_tau(F->scene, r1, a, b, t0, c0, &linear, ep);
+    stack[0] = make_piece(a, b, t0, c0, e0, 0);
     int sp = 1;
     while (sp > 0) {
         const double sa = stack[sp - 1].a, sb = stack[sp - 1].b;
-        double tau[3], col[3];
+        double tau[3], col[3], perr[3];
         memcpy(tau, stack[sp - 1].tau, sizeof tau);
         memcpy(col, stack[sp - 1].col, sizeof col);
+        memcpy(perr, stack[sp - 1].err, sizeof perr);
         const int depth = stack[sp - 1].depth;
         --sp;
         const double m = 0.5 * (sa + sb);
@@ -439,13 +450,13 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         const int can = depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples &&
                         *Tf > F->tol;
         int split = can && max3(tau) > F->tau_cap;
-        double tm[3], cm[3], est = 0;
+        double tm[3], cm[3], em[3] = { 0, 0, 0 }, est = 0;
         int have_mid = 0;
         if (!split && !linear && *Tf > F->tol && isfinite(max3(tau))) {
             /* The split error of a slab is largest near its middle, h^2/8
              * max|sigma'| where sigma varies linearly; 1.5 times the
              * midpoint's deviation from the slab's rule covers curvature. */
-            seg_tau(F->scene, r1, sa, m, tm, cm, NULL);
+            seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
             have_mid = 1;
             double dev = 0;
             for (int k = 0; k < 3; ++k)
@@ -455,11 +466,11 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         }
         if (split) {
             if (!have_mid)
-                seg_tau(F->scene, r1, sa, m, tm, cm, NULL);
-            double tb[3], cb[3];
-            seg_tau(F->scene, r1, m, sb, tb, cb, NULL);
-            stack[sp++] = make_piece(m, sb, tb, cb, depth + 1);   /* the back half after */
-            stack[sp++] = make_piece(sa, m, tm, cm, depth + 1);
+                seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
+            double tb[3], cb[3], eb[3] = { 0, 0, 0 };
+            seg_tau(F->scene, r1, m, sb, tb, cb, NULL, ep ? eb : NULL);
+            stack[sp++] = make_piece(m, sb, tb, cb, eb, depth + 1);   /* the back half after */
+            stack[sp++] = make_piece(sa, m, tm, cm, em, depth + 1);
             continue;
         }
         if (st) {
@@ -470,6 +481,8 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         }
         if (emit(L, F, fog, sa, sb, tau, col))
             return -1;
+        for (int k = 0; st && k < 3; ++k)
+            st->pix_err[k] += perr[k];
         /* the clearest channel's transmittance: exp of the smallest tau */
         const double tmin = fmin(tau[0], fmin(tau[1], tau[2]));
         *Tf *= isinf(tmin) ? 0 : exp(-tmin);
@@ -484,7 +497,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray 
                     double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
     double tinf[3], cinf[3];
-    seg_tau(F->scene, r1, a, INFINITY, tinf, cinf, NULL);
+    seg_tau(F->scene, r1, a, INFINITY, tinf, cinf, NULL, NULL);
     if (!(max3(tinf) > 0))
         return 0;
     double Tinf = 0;
@@ -494,7 +507,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray 
     for (int i = 0; i < 400; ++i) {
         double t[3], c[3], T = 0;
         end = a + h;
-        seg_tau(F->scene, r1, a, end, t, c, NULL);
+        seg_tau(F->scene, r1, a, end, t, c, NULL, NULL);
         for (int k = 0; k < 3; ++k)
             T = fmax(T, isinf(t[k]) ? 0 : exp(-t[k]));
         if (*Tf * (T - Tinf) <= F->tol || !isfinite(a + 2 * h))
@@ -508,8 +521,12 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray 
         /* the last sample takes everything behind its front */
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
         const double za = d[L->nch], zb = d[L->nch + 1];
-        double t[3], c[3];
-        seg_tau(F->scene, r1, za, INFINITY, t, c, NULL);
+        double t[3], c[3], e[3];
+        /* (its error replaces nothing: the piece it extends stays counted,
+         * an over-estimate) */
+        seg_tau(F->scene, r1, za, INFINITY, t, c, NULL, F->want_err ? e : NULL);
+        for (int k = 0; st && F->want_err && k < 3; ++k)
+            st->pix_err[k] += e[k];
         fog->n--;
         if (emit(L, F, fog, za, zb, t, c))
             return -1;
@@ -539,6 +556,8 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
 {
     const int nch = L->nch;
     fog->n = 0;
+    if (st)
+        st->pix_err[0] = st->pix_err[1] = st->pix_err[2] = 0;
     ef_ray r1 = *r;
     r1.dist = 1;
     if (!(r->planar > 0) || !isfinite(r->planar) || !isfinite(r->dist) || !(r->dist > 0))

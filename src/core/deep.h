@@ -63,12 +63,16 @@ typedef struct ef_deep_fog {
     double tau_cap;           /* largest optical depth per fog sample (alpha precision) */
     int max_samples;          /* fog samples per pixel, at most */
     int chromatic;            /* write each channel's alpha (AR/AG/AB) */
+    int want_err;             /* sum the models' tau error estimates (ef_deep_stats.pix_err) */
 } ef_deep_fog;
 
 /* Counters a pixel adds to (the caller sums them). */
 typedef struct ef_deep_stats {
     double fog_samples, pixels, capped;   /* capped: pixels that hit max_samples */
     double max_split_est;     /* the largest split-error estimate left in a fog sample */
+    /* The last pixel's (reset by each ef_deep_fog_samples, filled when
+     * want_err): the fog's tau error estimates summed over its samples. */
+    double pix_err[3];
 } ef_deep_stats;
 
 /* Tidies in (n samples, front/back set) into out: every volume split at

@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "aov.h"
 #include "deep.h"
 #include "deep_pass.h"
 #include "exr_deep.h"
@@ -189,10 +190,22 @@ typedef struct unit {
     ef_err err;
 } unit;
 
+/* The flat output's channels (--deep flatten): the plan's and the AOVs',
+ * sorted by name together. src >= 0: plan channel; else AOV -1 - src (in
+ * ef_aov_channels order). */
+typedef struct flat_out {
+    int n;
+    const char *name[EF_DEEP_IO_MAX_CH];
+    exr_pixel_type_t type[EF_DEEP_IO_MAX_CH];
+    int src[EF_DEEP_IO_MAX_CH];
+} flat_out;
+
 typedef struct shared {
     const ef_deep_req *q;
     const ef_deep_in *d;
     const plan *P;
+    flat_out FO;
+    unsigned aov;             /* AOVs of the flat output (0: none) */
     ef_deep_fog fog;
     unit *units;
     int nunits;
@@ -207,6 +220,7 @@ typedef struct worker {
     shared *S;
     ef_deep_rows rows;
     ef_deep_buf in, tidy, fog, all, out;
+    ef_deep_buf ta, tb;       /* --aov: the input's and the fog's samples, recoloured */
     double *flat;
     size_t flatcap;           /* bytes */
     uint32_t *counts;
@@ -277,7 +291,49 @@ static int append_out(worker *w, const ef_deep_buf *b, double k, size_t *nv)
     return 0;
 }
 
-/* The fog of one pixel into w->out (samples, fog) or w->flat + i*nch. */
+/* The tidy union of the tidy lists a and b into w->out, when b's samples
+ * hold every boundary of a's (the fog's do): b is split nowhere, a's
+ * volumes are split at b's boundaries and merged with what they share. */
+static int union_tidy(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, ef_err *err)
+{
+    const ef_deep_layout *L = &w->S->P->L;
+    w->all.n = 0;
+    const int nch = L->nch, SS = a->stride;
+    for (int i = 0, j = 0; i < a->n || j < b->n;) {
+        /* merged by (front, back), so that the tidy below finds them in
+         * order and sorts nothing */
+        const double *p = i < a->n ? a->v + (size_t) i * (size_t) SS : NULL;
+        const double *q = j < b->n ? b->v + (size_t) j * (size_t) SS : NULL;
+        const int take_p =
+            p && (!q || p[nch] < q[nch] || (p[nch] == q[nch] && p[nch + 1] <= q[nch + 1]));
+        double *d = ef_deep_buf_push_raw(&w->all);
+        if (!d)
+            return ef_fail(err, "out of memory");
+        memcpy(d, take_p ? p : q, (size_t) SS * sizeof *d);
+        if (take_p)
+            ++i;
+        else
+            ++j;
+    }
+    if (ef_deep_tidy(L, &w->all, &w->out))
+        return ef_fail(err, "out of memory");
+    return 0;
+}
+
+/* The flatten of the union of a and b (union_tidy's lists) into out. */
+static int flatten_union(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, double *out,
+                         ef_err *err)
+{
+    const ef_deep_layout *L = &w->S->P->L;
+    if (!ef_deep_flatten_pair(L, a, b, out))
+        return 0;
+    if (union_tidy(w, a, b, err))
+        return -1;
+    ef_deep_flatten(L, &w->out, out);
+    return 0;
+}
+
+/* The fog of one pixel into w->out (samples, fog) or flat (nch values). */
 static int fog_pixel(worker *w, const ef_ray *r, int mode, double *flat, ef_err *err)
 {
     const shared *S = w->S;
@@ -289,32 +345,87 @@ static int fog_pixel(worker *w, const ef_ray *r, int mode, double *flat, ef_err 
         return 0;
     /* flatten: the fog has no boundary the input lacks, so the union
      * needs no split, and is composited as it is walked */
-    if (mode == EF_DEEP_MODE_FLATTEN && !ef_deep_flatten_pair(L, &w->tidy, &w->fog, flat))
-        return 0;
-    /* the input's samples and the fog's, tidied together: fog samples are
-     * split nowhere (they hold every input boundary), input volumes are
-     * split at the fog's boundaries and merged with the fog they share */
-    w->all.n = 0;
-    const int nch = L->nch, SS = w->tidy.stride;
-    for (int i = 0, j = 0; i < w->tidy.n || j < w->fog.n;) {
-        /* merged by (front, back), so that the tidy below finds them in
-         * order and sorts nothing */
-        const double *a = i < w->tidy.n ? w->tidy.v + (size_t) i * (size_t) SS : NULL;
-        const double *b = j < w->fog.n ? w->fog.v + (size_t) j * (size_t) SS : NULL;
-        const int take_a = a && (!b || a[nch] < b[nch] || (a[nch] == b[nch] && a[nch + 1] <= b[nch + 1]));
-        double *d = ef_deep_buf_push_raw(&w->all);
-        if (!d)
-            return ef_fail(err, "out of memory");
-        memcpy(d, take_a ? a : b, (size_t) SS * sizeof *d);
-        if (take_a)
-            ++i;
-        else
-            ++j;
-    }
-    if (ef_deep_tidy(L, &w->all, &w->out))
-        return ef_fail(err, "out of memory");
     if (mode == EF_DEEP_MODE_FLATTEN)
-        ef_deep_flatten(L, &w->out, flat);
+        return flatten_union(w, &w->tidy, &w->fog, flat, err);
+    return union_tidy(w, &w->tidy, &w->fog, err);
+}
+
+/* Copies src into dst. */
+static int copy_buf(ef_deep_buf *dst, const ef_deep_buf *src)
+{
+    dst->n = 0;
+    for (int i = 0; i < src->n; ++i) {
+        double *d = ef_deep_buf_push_raw(dst);
+        if (!d)
+            return -1;
+        memcpy(d, src->v + (size_t) i * (size_t) src->stride, (size_t) src->stride * sizeof *d);
+    }
+    return 0;
+}
+
+/* The AOVs of one flattened pixel (--deep flatten --aov), in
+ * ef_aov_channels order, from its tidy input, its fog samples and its
+ * flatten (distances, before Z goes back to the file's depth):
+ *   fog       the flatten less the input's light as the fog attenuates it
+ *             (the flatten with the fog's colour zeroed); A: the flatten's
+ *             alpha less the input's own
+ *   T         the fog's transmittance to the input, weighted by coverage:
+ *             the input's alpha attenuated by the fog (each sample's alpha
+ *             as its colour, the fog's zeroed) over the input's own alpha;
+ *             where the input covers nothing, the fog's own transmittance
+ *             (1 without fog behind, as a sky pixel under --sky keep)
+ *   error     T expm1(e), e the models' tau error estimates summed along
+ *             the pixel's fog samples (at most 1)
+ *   P, distance  the nearest sample's front (inf where there is none),
+ *             as the flattened Z
+ * For a pixel of one opaque point sample these are the flat image's AOVs. */
+static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *aov, ef_err *err)
+{
+    const shared *S = w->S;
+    const ef_deep_layout *L = &S->P->L;
+    const int nch = L->nch;
+    double in[EF_DEEP_MAX_CH], att[EF_DEEP_MAX_CH], cov[EF_DEEP_MAX_CH], fog[EF_DEEP_MAX_CH];
+    ef_deep_flatten(L, &w->tidy, in);
+    if (copy_buf(&w->ta, &w->tidy) || copy_buf(&w->tb, &w->fog))
+        return ef_fail(err, "out of memory");
+    for (int i = 0; i < w->tb.n; ++i)
+        for (int k = 0; k < 3; ++k)
+            w->tb.v[(size_t) i * (size_t) w->tb.stride + (size_t) L->rgb[k]] = 0;
+    if (flatten_union(w, &w->ta, &w->tb, att, err))
+        return -1;
+    for (int i = 0; i < w->ta.n; ++i) {
+        double *s = w->ta.v + (size_t) i * (size_t) w->ta.stride;
+        for (int k = 0; k < 3; ++k)
+            s[L->rgb[k]] = s[L->argb[k] >= 0 ? L->argb[k] : L->a];
+    }
+    if (flatten_union(w, &w->ta, &w->tb, cov, err))
+        return -1;
+    ef_deep_flatten(L, &w->fog, fog);
+    double T[3];
+    for (int k = 0; k < 3; ++k) {
+        const int ai = L->argb[k] >= 0 ? L->argb[k] : L->a;
+        const double c = in[ai];
+        const double t = c > 0 ? cov[L->rgb[k]] / c : 1 - fog[ai];
+        T[k] = t > 1 ? 1 : t > 0 ? t : 0;
+    }
+    const double front = w->tidy.n > 0 ? w->tidy.v[nch] : INFINITY;
+    int n = 0;
+    if (S->aov & EF_AOV_FOG) {
+        for (int k = 0; k < 3; ++k)
+            aov[n++] = flat[L->rgb[k]] - att[L->rgb[k]];
+        aov[n++] = flat[L->a] - in[L->a];
+    }
+    for (int k = 0; k < 3 && (S->aov & EF_AOV_T); ++k)
+        aov[n++] = T[k];
+    for (int k = 0; k < 3 && (S->aov & EF_AOV_ERROR); ++k) {
+        const double e = w->st.pix_err[k], b = e > 0 ? T[k] * expm1(e) : 0;
+        aov[n++] = b < 1 ? b : 1;
+    }
+    for (int k = 0; k < 3 && (S->aov & EF_AOV_P); ++k)
+        aov[n++] = isfinite(front) ? (r->org[k] - S->q->aov_origin[k]) + r->dir[k] * front
+                   : r->dir[k] == 0 ? 0 : r->dir[k] > 0 ? INFINITY : -INFINITY;
+    if (S->aov & EF_AOV_DISTANCE)
+        aov[n++] = front;
     return 0;
 }
 
@@ -329,9 +440,10 @@ static void do_unit(worker *w, unit *u)
         u->failed = 1;
         return;
     }
+    const int nfo = S->FO.n;
     if (mode == EF_DEEP_MODE_FLATTEN &&
         ef_deep_grow((void **) &w->flat, &w->flatcap,
-                     (size_t) W * (size_t) u->n * (size_t) nch * sizeof *w->flat)) {
+                     (size_t) W * (size_t) u->n * (size_t) nfo * sizeof *w->flat)) {
         ef_fail(&u->err, "out of memory");
         u->failed = 1;
         return;
@@ -355,11 +467,11 @@ static void do_unit(worker *w, unit *u)
             ef_ray r;
             ef_reconstruct(q->cam, q->conv, x, y, 1.0, &r);
             const double k = r.dist;
-            double *o = mode == EF_DEEP_MODE_FLATTEN
-                            ? w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nch
-                            : NULL;
+            double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
+            double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
             if (load_pixel(w, &w->rows, (size_t) j * (size_t) W + (size_t) i, k, x, y, &u->err) ||
-                fog_pixel(w, &r, mode, o, &u->err)) {
+                fog_pixel(w, &r, mode, o, &u->err) ||
+                (o && S->aov && pixel_aovs(w, &r, o, av, &u->err))) {
                 u->failed = 1;
                 return;
             }
@@ -368,6 +480,9 @@ static void do_unit(worker *w, unit *u)
                     o[P->z] = isfinite(o[P->z]) ? o[P->z] / k : INFINITY;
                 if (P->zb >= 0)
                     o[P->zb] = isfinite(o[P->zb]) ? o[P->zb] / k : INFINITY;
+                double *f = w->flat + ((size_t) j * (size_t) W + (size_t) i) * (size_t) nfo;
+                for (int c = 0; c < nfo; ++c)
+                    f[c] = S->FO.src[c] >= 0 ? o[S->FO.src[c]] : av[-1 - S->FO.src[c]];
                 continue;
             }
             const ef_deep_buf *b = mode == EF_DEEP_MODE_FOG ? &w->fog : &w->out;
@@ -393,8 +508,8 @@ static void do_unit(worker *w, unit *u)
         const int n = u->n - j < UNIT_ROWS ? u->n - j : UNIT_ROWS;
         ef_deep_packed *pk = &u->pk[u->npk++];
         pk->y = u->y + j;
-        if (ef_flat_pack_rows(nch, P->type, W, n, w->flat + (size_t) j * (size_t) W * (size_t) nch,
-                              q->zip_level, pk)) {
+        if (ef_flat_pack_rows(nfo, S->FO.type, W, n,
+                              w->flat + (size_t) j * (size_t) W * (size_t) nfo, q->zip_level, pk)) {
             ef_fail(&u->err, "out of memory packing rows %d-%d", pk->y, pk->y + n - 1);
             u->failed = 1;
             return;
@@ -425,6 +540,8 @@ static void worker_free(worker *w)
     ef_deep_buf_free(&w->fog);
     ef_deep_buf_free(&w->all);
     ef_deep_buf_free(&w->out);
+    ef_deep_buf_free(&w->ta);
+    ef_deep_buf_free(&w->tb);
     free(w->flat);
     free(w->counts);
     free(w->ov);
@@ -499,6 +616,57 @@ static void apply_types(plan *P, const ef_deep_req *q)
     }
 }
 
+/* The flat output's channels: the plan's, and under --aov the AOVs'
+ * (FLOAT, then -d as for every channel: half does not demote data
+ * channels such as fog_P and fog_distance), sorted by name together. */
+static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_err *err)
+{
+    const int naov = q->mode == EF_DEEP_MODE_FLATTEN ? q->naov : 0;
+    if (P->L.nch + naov > EF_DEEP_IO_MAX_CH)
+        return ef_fail(err, "too many channels with the AOVs (%d, at most %d)", P->L.nch + naov,
+                       EF_DEEP_IO_MAX_CH);
+    const char *nm[EF_DEEP_IO_MAX_CH];
+    int src[EF_DEEP_IO_MAX_CH];
+    exr_pixel_type_t ty[EF_DEEP_IO_MAX_CH];
+    int n = 0;
+    for (int c = 0; c < P->L.nch; ++c, ++n) {
+        nm[n] = P->name[c];
+        ty[n] = P->type[c];
+        src[n] = c;
+    }
+    for (int a = 0; a < naov; ++a, ++n) {
+        nm[n] = q->aov_names[a];
+        int t = EXR_PIXEL_FLOAT;
+        if (q->pixel_type >= 0 && !(q->pixel_type == EXR_PIXEL_HALF && ef_data_channel(nm[n])))
+            t = q->pixel_type;
+        ty[n] = (exr_pixel_type_t) ef_exr_named_type(q->chan_type_name, q->chan_type,
+                                                     q->nchan_type, nm[n], t);
+        src[n] = -1 - a;
+    }
+    /* insertion sort by name: a few dozen channels */
+    for (int i = 1; i < n; ++i)
+        for (int j = i; j > 0 && strcmp(nm[j - 1], nm[j]) > 0; --j) {
+            const char *tn = nm[j];
+            nm[j] = nm[j - 1];
+            nm[j - 1] = tn;
+            const exr_pixel_type_t tt = ty[j];
+            ty[j] = ty[j - 1];
+            ty[j - 1] = tt;
+            const int ts = src[j];
+            src[j] = src[j - 1];
+            src[j - 1] = ts;
+        }
+    for (int i = 1; i < n; ++i)
+        if (!strcmp(nm[i - 1], nm[i]))
+            return ef_fail(err, "the AOV channel %s is already in the deep part (choose other "
+                                "AOVs, or rename the channel)", nm[i]);
+    FO->n = n;
+    memcpy(FO->name, nm, sizeof nm);
+    memcpy(FO->type, ty, sizeof ty);
+    memcpy(FO->src, src, sizeof src);
+    return 0;
+}
+
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
@@ -538,6 +706,10 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         S.fog.tol = 1;
     }
     S.fog.chromatic = chromatic;
+    S.aov = q->mode == EF_DEEP_MODE_FLATTEN && q->naov ? q->aov : 0;
+    S.fog.want_err = (S.aov & EF_AOV_ERROR) != 0;
+    if (!rc)
+        rc = make_flat_out(q, P, &S.FO, err);
     res->tau_cap = S.fog.tau_cap;
     res->chromatic = chromatic;
     const char *names[EF_DEEP_MAX_CH];
@@ -547,9 +719,10 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     memset(&out, 0, sizeof out);
     int began = 0;
     if (!rc) {
-        rc = ef_deep_out_begin(&out, q->out_path, q->out_fd, q->in, q->part,
-                               q->mode != EF_DEEP_MODE_FLATTEN, P->L.nch, names, P->type,
-                               q->history, q->params, err);
+        const int flat = q->mode == EF_DEEP_MODE_FLATTEN;
+        rc = ef_deep_out_begin(&out, q->out_path, q->out_fd, q->in, q->part, !flat,
+                               flat ? S.FO.n : P->L.nch, flat ? S.FO.name : names,
+                               flat ? S.FO.type : P->type, q->history, q->params, err);
         began = 1;
     }
     const int nthreads = q->threads > 0 ? q->threads : 1;
@@ -565,6 +738,8 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         ef_deep_buf_init(&W[t].fog, P->L.nch);
         ef_deep_buf_init(&W[t].all, P->L.nch);
         ef_deep_buf_init(&W[t].out, P->L.nch);
+        ef_deep_buf_init(&W[t].ta, P->L.nch);
+        ef_deep_buf_init(&W[t].tb, P->L.nch);
     }
     const int urows = d.tiled && d.th % UNIT_ROWS == 0 && d.th <= UNIT_MAX ? d.th : UNIT_ROWS;
     for (int y0 = d.y0; !rc && y0 < d.y0 + d.h;) {

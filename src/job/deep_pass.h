@@ -28,6 +28,12 @@ typedef struct ef_deep_req {
     const char *const *chan_type_name;
     const int *chan_type;
     int nchan_type;
+    /* --deep flatten: the AOVs (ef_aov_channels order of aov), under
+     * these channel names (Blender's where the input is a multilayer) */
+    unsigned aov;
+    const char *const *aov_names;
+    int naov;
+    double aov_origin[3];
     const _Atomic int *cancel;
     void (*progress)(void *user, long pixels);
     void *progress_user;

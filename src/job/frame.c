@@ -407,9 +407,9 @@ static int check_deep(ef_frame *F)
               "(split the parts first, e.g. oiiotool IN --subimage NAME -o PART.exr)", status = 1;
     else if (F->nplans > 1)
         why = "deep input with several views is not supported (choose one with --view NAME)";
-    else if (F->naov)
-        why = "--aov does not apply to deep input yet (use the flat path: --deep flatten gives "
-              "the fogged image without AOVs)";
+    else if (F->naov && o->deep_mode != EF_DEEP_MODE_FLATTEN)
+        why = "--aov with deep input needs --deep flatten (a deep output carries no AOVs: "
+              "its fog samples are the fog)";
     else if (F->foreign && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "a deep output is EXR (--deep flatten writes other formats)";
     else if (o->preview)
@@ -892,6 +892,11 @@ static int run_deep_pass(ef_frame *F)
                             .chan_type_name = o->chan_type_name,
                             .chan_type = o->chan_type,
                             .nchan_type = o->nchan_type,
+                            .aov = o->aov,
+                            .aov_names = F->aov_names,
+                            .naov = F->naov,
+                            .aov_origin = { o->aov_origin[0], o->aov_origin[1],
+                                            o->aov_origin[2] },
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
                             .progress_user = J };
