@@ -37,7 +37,8 @@ int main(int argc, char **argv)
     const exr_pixel_type_t types[] = { EXR_PIXEL_HALF, EXR_PIXEL_HALF, EXR_PIXEL_HALF,
                                        EXR_PIXEL_HALF, EXR_PIXEL_FLOAT, EXR_PIXEL_FLOAT };
     ef_deep_out out;
-    if (fd < 0 || ef_deep_out_begin(&out, argv[2], fd, &in, 0, 1, 6, names, types, NULL, NULL, &err)) {
+    if (fd < 0 || ef_deep_out_begin(&out, argv[2], fd, &in, 0, 1, 6, names, types, NULL, NULL,
+                                    NULL, 0, &err)) {
         fprintf(stderr, "make_deep: %s\n", fd < 0 ? "cannot create the output" : err.msg);
         return 1;
     }

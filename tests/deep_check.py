@@ -17,7 +17,12 @@ Checked, per scene (exp and height fog):
 and that every output reads back in OpenImageIO and exrheader, with
 maxSamplesPerPixel equal to the largest count.
 
-usage: deep_check.py EXRFOG SHARED_DIR TMPDIR   (exit 77: skipped)
+Multi-part input (with EXR_PARTS, tests/exr_parts.cpp: the OpenEXR C++
+library writes a flat part and a deep one into one file, which OIIO
+refuses to write, and reads every output part back): the fogged part
+equals the single-part run exactly, every other part its input exactly.
+
+usage: deep_check.py EXRFOG SHARED_DIR TMPDIR [EXR_PARTS]   (exit 77: skipped)
 """
 import math
 import os
@@ -31,6 +36,7 @@ except ImportError:
     sys.exit(77)
 
 exrfog, shared, tmp = sys.argv[1:4]
+exr_parts = sys.argv[4] if len(sys.argv) > 4 else None
 src = os.path.join(shared, "real-exr", "arnold-deep-representative.exr")
 if not os.path.exists(src):
     print("no", src, ": skipped")
@@ -350,6 +356,82 @@ for spec_text, model in (("exp:density=0.05", ("exp", 0.05)),
     check(worst["fog"] < 4e-3, "%s: fog AOV within 4e-3 of the reference" % spec_text)
     check(worst["T"] < 2e-3, "%s: fog_T within 2e-3 of the reference" % spec_text)
     check(worst["P"] < 1e-5, "%s: fog_P and fog_distance at the nearest sample" % spec_text)
+
+# Multi-part input: a deep part beside a flat one (and two deep parts).
+def deep_values(path, sub):
+    b = oiio.ImageBuf(path, sub, 0)
+    dd = b.deepdata()
+    cn = b.spec().channelnames
+    return [(cn[c], dd.samples(p), [dd.deep_value(p, c, j) for j in range(dd.samples(p))])
+            for p in range(dd.pixels) for c in range(len(cn))]
+
+
+def flat_values(path, sub):
+    b = oiio.ImageBuf(path, sub, 0)
+    return b.spec().channelnames, b.get_pixels(oiio.FLOAT)
+
+
+if exr_parts and os.path.exists(exr_parts):
+    flat_src = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
+    mixed = os.path.join(tmp, "mixed_parts.exr")
+    check(subprocess.run([exr_parts, "mix", mixed, flat_src, src]).returncode == 0,
+          "exr_parts writes a flat and a deep part into one file")
+    fogs = "height:density=0.4:falloff=0.5:base=-1"
+    single = {m: os.path.join(tmp, "single_%s.exr" % m) for m in ("samples", "flatten")}
+    for m, out in single.items():
+        check(run([src, "--fog", fogs, "--deep", m, "-o", out]) == 0, "single-part %s runs" % m)
+    single_flat = os.path.join(tmp, "single_flatpart.exr")
+    check(run([flat_src, "--fog", fogs, "-o", single_flat]) == 0, "the flat file alone runs")
+    for m in ("samples", "flatten", "flat part"):
+        out = os.path.join(tmp, "mixed_out_%s.exr" % m.replace(" ", "_"))
+        args = [mixed, "--fog", fogs, "--layer", "part0" if m == "flat part" else "part1", "-o", out]
+        if m != "flat part":
+            args += ["--deep", m]
+        check(run(args) == 0, "multi-part input, %s: runs" % m)
+        rb = subprocess.run([exr_parts, "read", out], capture_output=True, text=True)
+        lines = rb.stdout.split("\n")
+        check(rb.returncode == 0 and len([l for l in lines if l]) == 2,
+              "multi-part %s: the OpenEXR library reads both parts back (%s%s)"
+              % (m, rb.stdout.strip(), rb.stderr.strip()))
+        # part 0: the flat part, as it was or fogged as the flat file alone
+        ca, pa = flat_values(out, 0)
+        cb, pb = flat_values(single_flat if m == "flat part" else flat_src, 0)
+        check(list(ca) == list(cb) and (pa == pb).all(),
+              "multi-part %s: the flat part is %s" % (m, "fogged as alone" if m == "flat part"
+                                                      else "copied exactly"))
+        # part 1: the deep part, fogged as alone or copied
+        if m == "flatten":
+            ca, pa = flat_values(out, 1)
+            cb, pb = flat_values(single["flatten"], 0)
+            check(list(ca) == list(cb) and (pa == pb).all(),
+                  "multi-part flatten: the deep part flattens as alone")
+        else:
+            ref_path = single["samples"] if m == "samples" else src
+            check(deep_values(out, 1) == deep_values(ref_path, 0),
+                  "multi-part %s: the deep part is %s" % (m, "fogged as alone" if m == "samples"
+                                                          else "copied exactly"))
+        hdr = subprocess.run(["exrheader", out], capture_output=True, text=True)
+        names = [l for l in hdr.stdout.split("\n") if l.startswith("name (type string)")]
+        check(hdr.returncode == 0 and len(names) == 2,
+              "multi-part %s: exrheader lists both parts (%s)" % (m, names))
+    # two deep parts (OIIO writes those): the chosen one fogged, the other copied
+    two = os.path.join(tmp, "two_deep.exr")
+    check(oiiotool([src, "--attrib", "name", "left", src, "--attrib", "name", "right",
+                    "--siappend", "-o", two]) == 0, "oiiotool writes two deep parts")
+    # (OIIO writes float channels: the single-part yardstick is its float copy,
+    # whose alpha takes more optical depth per fog sample than half)
+    src_f = os.path.join(tmp, "src_float.exr")
+    single_f = os.path.join(tmp, "single_float_samples.exr")
+    check(oiiotool([src, "-o", src_f]) == 0 and run([src_f, "--fog", fogs, "-o", single_f]) == 0,
+          "the float copy alone runs")
+    out = os.path.join(tmp, "two_deep_out.exr")
+    check(run([two, "--fog", fogs, "--layer", "right", "-o", out]) == 0, "two deep parts run")
+    check(deep_values(out, 0) == deep_values(src_f, 0), "two deep parts: left copied exactly")
+    check(deep_values(out, 1) == deep_values(single_f, 0),
+          "two deep parts: right fogged as alone")
+    print("multi-part deep input: checked")
+else:
+    print("no exr_parts: multi-part checks skipped")
 
 # The holdout property: a fog sample split at any fraction x by the deep
 # rule, 1 - (1 - alpha)^x, against the exact transmittance of the fog over

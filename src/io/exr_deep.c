@@ -558,9 +558,156 @@ static int cmp_name(const char *a, const char *b)
     return strcmp(a, b);
 }
 
+int ef_exr_define_part_copy(const ef_exr_file *in, int p, exr_context_t out,
+                            const char *history, const char *params, ef_err *err)
+{
+    const char *name = NULL;
+    exr_storage_t st;
+    exr_compression_t comp;
+    exr_lineorder_t lo;
+    const exr_attr_chlist_t *cl;
+    int op;
+    exr_get_name(in->ctx, p, &name);
+    if (exr_get_storage(in->ctx, p, &st) || exr_get_compression(in->ctx, p, &comp) ||
+        exr_get_lineorder(in->ctx, p, &lo) || exr_get_channels(in->ctx, p, &cl))
+        return ef_fail(err, "part %d: cannot read its header: %s", p, ef_exr_last_core_message());
+    if (exr_add_part(out, name, st, &op) || op != p)
+        return ef_fail(err, "cannot add output part %d: %s", p, ef_exr_last_core_message());
+    if (st == EXR_STORAGE_TILED || st == EXR_STORAGE_DEEP_TILED) {
+        uint32_t tx, ty;
+        exr_tile_level_mode_t lm;
+        exr_tile_round_mode_t rm;
+        exr_get_tile_descriptor(in->ctx, p, &tx, &ty, &lm, &rm);
+        if (lm != EXR_TILE_ONE_LEVEL)
+            return ef_fail(err, "part %d is tiled with mipmap or ripmap levels: exrfog copies "
+                                "one-level parts beside a deep one (split the parts first, e.g. "
+                                "oiiotool IN --subimage NAME -o PART.exr)", p);
+        if (exr_set_tile_descriptor(out, p, tx, ty, lm, rm))
+            return ef_fail(err, "cannot set the tile size of part %d", p);
+    }
+    for (int c = 0; c < cl->num_channels; ++c) {
+        const exr_attr_chlist_entry_t *e = &cl->entries[c];
+        if (exr_add_channel(out, p, e->name.str, e->pixel_type,
+                            e->p_linear ? EXR_PERCEPTUALLY_LINEAR : EXR_PERCEPTUALLY_LOGARITHMIC,
+                            e->x_sampling, e->y_sampling))
+            return ef_fail(err, "cannot add channel '%s' to part %d", e->name.str, p);
+    }
+    /* the chunks go in as they are: the same compression and line order */
+    if (exr_set_compression(out, p, comp) || exr_set_lineorder(out, p, lo))
+        return ef_fail(err, "cannot set the compression of part %d", p);
+    return ef_exr_copy_attrs(in, p, out, p, params, history, err);
+}
+
+/* Copies one chunk of part p (ci read from in) into out. */
+static int copy_chunk(const ef_exr_file *in, int p, exr_context_t out, int deep, int tiled,
+                      int tx, int ty, int y, const exr_chunk_info_t *ci, uint8_t **buf,
+                      size_t *cap, uint8_t **tab, size_t *tcap, ef_err *err)
+{
+    if (ci->packed_size > (1ull << 34) || ci->sample_count_table_size > (1ull << 34))
+        return ef_fail(err, "part %d has a chunk of %llu bytes: the file is corrupt", p,
+                       (unsigned long long) ci->packed_size);
+    if (ef_deep_grow((void **) buf, cap, (size_t) ci->packed_size + 1) ||
+        (deep && ef_deep_grow((void **) tab, tcap, (size_t) ci->sample_count_table_size + 1)))
+        return ef_fail(err, "out of memory");
+    exr_result_t rc = deep ? exr_read_deep_chunk(in->ctx, p, ci, *buf, *tab)
+                           : exr_read_chunk(in->ctx, p, ci, *buf);
+    if (rc)
+        return ef_fail(err, "part %d: cannot read a chunk: %s", p, ef_exr_last_core_message());
+    if (deep && tiled)
+        rc = exr_write_deep_tile_chunk(out, p, tx, ty, 0, 0, *buf, ci->packed_size,
+                                       ci->unpacked_size, *tab, ci->sample_count_table_size);
+    else if (deep)
+        rc = exr_write_deep_scanline_chunk(out, p, y, *buf, ci->packed_size, ci->unpacked_size,
+                                           *tab, ci->sample_count_table_size);
+    else if (tiled)
+        rc = exr_write_tile_chunk(out, p, tx, ty, 0, 0, *buf, ci->packed_size);
+    else
+        rc = exr_write_scanline_chunk(out, p, y, *buf, ci->packed_size);
+    if (rc)
+        return ef_fail(err, "cannot write part %d: %s", p, ef_exr_last_core_message());
+    return 0;
+}
+
+int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_err *err)
+{
+    exr_storage_t st;
+    exr_attr_box2i_t dw;
+    if (exr_get_storage(in->ctx, p, &st) || exr_get_data_window(in->ctx, p, &dw))
+        return ef_fail(err, "part %d: cannot read its header", p);
+    const int deep = st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED;
+    const int tiled = st == EXR_STORAGE_TILED || st == EXR_STORAGE_DEEP_TILED;
+    uint8_t *buf = NULL, *tab = NULL;
+    size_t cap = 0, tcap = 0;
+    int rc = 0;
+    exr_chunk_info_t ci;
+    if (tiled) {
+        uint32_t tw, th;
+        exr_get_tile_descriptor(in->ctx, p, &tw, &th, NULL, NULL);
+        const int64_t w = (int64_t) dw.max.x - dw.min.x + 1, h = (int64_t) dw.max.y - dw.min.y + 1;
+        const int64_t nx = tw ? (w + tw - 1) / tw : 0, ny = th ? (h + th - 1) / th : 0;
+        for (int64_t ty = 0; ty < ny && !rc; ++ty)
+            for (int64_t tx = 0; tx < nx && !rc; ++tx) {
+                if (exr_read_tile_chunk_info(in->ctx, p, (int) tx, (int) ty, 0, 0, &ci))
+                    rc = ef_fail(err, "part %d: tile (%lld, %lld) is missing or damaged: %s", p,
+                                 (long long) tx, (long long) ty, ef_exr_last_core_message());
+                else
+                    rc = copy_chunk(in, p, out, deep, 1, (int) tx, (int) ty, 0, &ci, &buf,
+                                    &cap, &tab, &tcap, err);
+            }
+    } else {
+        int32_t lines = 1;
+        exr_get_scanlines_per_chunk(in->ctx, p, &lines);
+        if (lines < 1)
+            lines = 1;
+        for (int64_t y = dw.min.y; y <= dw.max.y && !rc; y += lines) {
+            if (exr_read_scanline_chunk_info(in->ctx, p, (int) y, &ci))
+                rc = ef_fail(err, "part %d: the chunk of line %lld is missing or damaged: %s", p,
+                             (long long) y, ef_exr_last_core_message());
+            else
+                rc = copy_chunk(in, p, out, deep, 0, 0, 0, (int) y, &ci, &buf, &cap, &tab,
+                                &tcap, err);
+        }
+    }
+    free(buf);
+    free(tab);
+    return rc;
+}
+
+/* Adds the written part (index op = its place) to o->ctx. */
+static int define_own(ef_deep_out *o, const ef_exr_file *in, int part, int multi, int nch,
+                      const char *const *name, const exr_pixel_type_t *type, const char *history,
+                      const char *params, const double *aov_origin, ef_err *err)
+{
+    const char *pname = NULL;
+    exr_get_name(in->ctx, part, &pname);
+    const int deep = o->deep;
+    int op;
+    if (exr_add_part(o->ctx, multi ? pname : NULL,
+                     deep ? EXR_STORAGE_DEEP_SCANLINE : EXR_STORAGE_SCANLINE, &op) ||
+        op != o->part)
+        return ef_fail(err, "cannot add the output part: %s", ef_exr_last_core_message());
+    for (int c = 0; c < nch; ++c)
+        if (exr_add_channel(o->ctx, op, name[c], type[c], EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
+            return ef_fail(err, "cannot add channel '%s': %s", name[c], ef_exr_last_core_message());
+    if (exr_set_compression(o->ctx, op, deep ? EXR_COMPRESSION_ZIPS : EXR_COMPRESSION_ZIP) ||
+        exr_set_lineorder(o->ctx, op, EXR_LINEORDER_INCREASING_Y))
+        return ef_fail(err, "cannot set the output's compression");
+    /* written as -1 ("unknown", which the spec allows) and set in place at
+     * the end, once every pixel's count is known */
+    if (deep && exr_attr_set_int(o->ctx, op, "maxSamplesPerPixel", -1))
+        return ef_fail(err, "cannot set maxSamplesPerPixel: %s", ef_exr_last_core_message());
+    if (aov_origin) {
+        const exr_attr_v3d_t v = { .x = aov_origin[0], .y = aov_origin[1], .z = aov_origin[2] };
+        if (exr_attr_set_v3d(o->ctx, op, "exrfog/aovOrigin", &v))
+            return ef_fail(err, "cannot record exrfog/aovOrigin: %s", ef_exr_last_core_message());
+    }
+    return ef_exr_copy_attrs(in, part, o->ctx, op, params, history, err);
+}
+
 int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_file *in, int part,
                       int deep, int nch, const char *const *name, const exr_pixel_type_t *type,
-                      const char *history, const char *params, ef_err *err)
+                      const char *history, const char *params, const double *aov_origin,
+                      int others, ef_err *err)
 {
     memset(o, 0, sizeof *o);
     o->fd = fd;
@@ -588,28 +735,34 @@ int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_fil
         o->sink = NULL;
         return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
     }
-    const char *pname = NULL;
-    exr_get_name(in->ctx, part, &pname);
-    int op;
     int32_t nparts = 0;
     exr_get_count(in->ctx, &nparts);
-    if (exr_add_part(o->ctx, nparts > 1 ? pname : NULL,
-                     deep ? EXR_STORAGE_DEEP_SCANLINE : EXR_STORAGE_SCANLINE, &op))
-        return ef_fail(err, "cannot add the output part: %s", ef_exr_last_core_message());
-    for (int c = 0; c < nch; ++c)
-        if (exr_add_channel(o->ctx, op, name[c], type[c], EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
-            return ef_fail(err, "cannot add channel '%s': %s", name[c], ef_exr_last_core_message());
-    if (exr_set_compression(o->ctx, op, deep ? EXR_COMPRESSION_ZIPS : EXR_COMPRESSION_ZIP) ||
-        exr_set_lineorder(o->ctx, op, EXR_LINEORDER_INCREASING_Y))
-        return ef_fail(err, "cannot set the output's compression");
-    /* written as -1 ("unknown", which the spec allows) and set in place at
-     * the end, once every pixel's count is known */
-    if (deep && exr_attr_set_int(o->ctx, op, "maxSamplesPerPixel", -1))
-        return ef_fail(err, "cannot set maxSamplesPerPixel: %s", ef_exr_last_core_message());
-    if (ef_exr_copy_attrs(in, part, o->ctx, op, params, history, err))
-        return -1;
+    const int multi = nparts > 1;
+    if (!others || nparts < 2) {
+        o->part = 0;
+        if (define_own(o, in, part, multi, nch, name, type, history, params, aov_origin, err))
+            return -1;
+    } else {
+        o->in = in;
+        o->part = part;
+        /* every part in its place: the copies before and after it */
+        for (int p = 0; p < nparts; ++p)
+            if (p == part ? define_own(o, in, part, 1, nch, name, type, history, params,
+                                       aov_origin, err)
+                          : ef_exr_define_part_copy(in, p, o->ctx, history, params, err))
+                return -1;
+    }
+    for (int p = 0; p < o->part; ++p) {
+        const exr_attribute_t *a;
+        o->msp_skip +=
+            exr_get_attribute_by_name(o->ctx, p, "maxSamplesPerPixel", &a) == EXR_ERR_SUCCESS;
+    }
     if (exr_write_header(o->ctx))
         return ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
+    /* Core takes the parts' chunks in part order */
+    for (int p = 0; o->in && p < o->part; ++p)
+        if (ef_exr_copy_part_chunks(in, p, o->ctx, err))
+            return -1;
     return 0;
 }
 
@@ -619,10 +772,10 @@ int ef_deep_out_write(ef_deep_out *o, const ef_deep_packed *p, ef_err *err)
     if (o->deep) {
         if (p->max_count > o->max_count)
             o->max_count = p->max_count;
-        rc = exr_write_deep_scanline_chunk(o->ctx, 0, p->y, p->data, p->data_size, p->data_raw,
-                                           p->table, p->table_size);
+        rc = exr_write_deep_scanline_chunk(o->ctx, o->part, p->y, p->data, p->data_size,
+                                           p->data_raw, p->table, p->table_size);
     } else {
-        rc = exr_write_scanline_chunk(o->ctx, 0, p->y, p->data, p->data_size);
+        rc = exr_write_scanline_chunk(o->ctx, o->part, p->y, p->data, p->data_size);
     }
     if (rc) {
         const ef_exr_sink *s = o->sink;
@@ -642,7 +795,13 @@ static int patch_max_samples(ef_deep_out *o, ef_err *err)
     const ssize_t n = pread(o->fd, buf, sizeof buf, 0);
     if (n <= 0)
         return ef_fail(err, "cannot read the output header back: %s", strerror(errno));
+    /* the headers come in part order: skip the copied parts' own */
+    int skip = o->msp_skip;
     const uint8_t *at = memmem(buf, (size_t) n, key, klen);
+    for (; at && skip > 0; --skip) {
+        const size_t off = (size_t) (at - buf) + klen;
+        at = off < (size_t) n ? memmem(buf + off, (size_t) n - off, key, klen) : NULL;
+    }
     if (!at || (size_t) (at - buf) + klen + 4 > (size_t) n)
         return ef_fail(err, "cannot find maxSamplesPerPixel in the output header");
     uint8_t v[4];
@@ -655,6 +814,14 @@ static int patch_max_samples(ef_deep_out *o, ef_err *err)
 int ef_deep_out_end(ef_deep_out *o, ef_err *err)
 {
     const ef_exr_sink *s = o->sink;
+    int32_t nparts = 0;
+    if (o->in)
+        exr_get_count(o->in->ctx, &nparts);
+    for (int p = o->part + 1; p < nparts; ++p)
+        if (ef_exr_copy_part_chunks(o->in, p, o->ctx, err)) {
+            ef_deep_out_abort(o);
+            return -1;
+        }
     int rc = exr_finish(&o->ctx) ? -1 : 0;
     if (rc)
         ef_fail(err, "cannot finish the output: %s",

@@ -92,6 +92,9 @@ typedef struct ef_deep_out {
     exr_context_t ctx;
     void *sink;
     int fd, deep, nch;
+    int part;                 /* the written part's index */
+    const ef_exr_file *in;    /* parts copied beside it, or NULL */
+    int msp_skip;             /* copied parts before it with their own maxSamplesPerPixel */
     exr_pixel_type_t type[EF_DEEP_IO_MAX_CH];
     const char *path;
     uint32_t max_count;
@@ -100,10 +103,25 @@ typedef struct ef_deep_out {
 /* Starts OUTPUT (fd: a new empty file) with one part: deep scanline ZIPS
  * when deep, else flat scanline ZIP, holding channels name/type (sorted
  * by name here), with every attribute of in's part p (plus history and
- * parameters) and, when deep, maxSamplesPerPixel (set at the end). */
+ * parameters, and exrfog/aovOrigin when aov_origin is not NULL) and, when
+ * deep, maxSamplesPerPixel (set at the end). With others, every other part
+ * of in is kept beside it, in its place: the same header (plus history and
+ * parameters) and its chunks copied as they are, flat or deep, scanline or
+ * tiled (one level); the parts before p are written here, those after by
+ * ef_deep_out_end. */
 int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_file *in, int part,
                       int deep, int nch, const char *const *name, const exr_pixel_type_t *type,
-                      const char *history, const char *params, ef_err *err);
+                      const char *history, const char *params, const double *aov_origin,
+                      int others, ef_err *err);
+/* Adds part p of in to out (its next part, index p) as it is: storage,
+ * tiles (one level; mip and rip maps are refused), channels, compression,
+ * line order and every attribute, plus history and parameters. */
+int ef_exr_define_part_copy(const ef_exr_file *in, int p, exr_context_t out,
+                            const char *history, const char *params, ef_err *err);
+/* Copies every chunk of part p of in, flat or deep, scanline or tiled, into
+ * part p of out as it is (no decoding), in increasing y. */
+int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_err *err);
+
 /* Writes one packed chunk (in increasing y). */
 int ef_deep_out_write(ef_deep_out *o, const ef_deep_packed *p, ef_err *err);
 /* Finishes the file (maxSamplesPerPixel in place). Returns 0 or -1. */

@@ -3,6 +3,7 @@
  * through the fog callback, and the result is compressed in parallel and
  * written in chunk order. Memory is a few units per thread, whatever the
  * image size. */
+#include "exr_deep.h"
 #include "exr_io.h"
 #include "exr_deflate.h"
 #include "exr_ring.h"
@@ -1264,14 +1265,19 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
     int rc = 0;
     for (int p = 0; p < in->nparts && !rc; ++p) {
         const int n = part_extras(plan, nplans, p, xname, o->nextra, part_extra);
-        rc = define_part(in, out, p, part_extra, n, plan, nplans, df, o, err);
+        /* a deep part beside the fogged ones goes through as it is */
+        rc = ef_exr_part_is_deep(in, p)
+                 ? ef_exr_define_part_copy(in, p, out, o->history, o->param_attr, err)
+                 : define_part(in, out, p, part_extra, n, plan, nplans, df, o, err);
     }
     if (!rc && exr_write_header(out))
         rc = ef_fail(err, "cannot write the output header: %s", ef_exr_last_core_message());
     for (int p = 0; p < in->nparts && !rc; ++p) {
         part_extras(plan, nplans, p, xname, o->nextra, part_extra);
-        rc = run_part(in, df, out, out_path, p, plan, nplans, part_extra, o->nextra, o, fn, user,
-                      stats, err);
+        rc = ef_exr_part_is_deep(in, p)
+                 ? ef_exr_copy_part_chunks(in, p, out, err)
+                 : run_part(in, df, out, out_path, p, plan, nplans, part_extra, o->nextra, o, fn,
+                            user, stats, err);
     }
     free(part_extra);
     if (exr_finish(&out) && !rc)

@@ -131,8 +131,14 @@ static int finish_plan(plan *P, const ef_channel_plan *cp, ef_err *err)
         if (L->role[c] == EF_DEEP_COLOR)
             L->alpha[c] = (signed char) alpha_for(P, c);
     for (int k = 0; k < 3; ++k) {
-        const char *nm = cp ? cp->rgb[k].name : (const char *[]){ "R", "G", "B" }[k];
-        L->rgb[k] = find_name(P, nm);
+        /* the colour by its index in the part (the plan's names carry a
+         * multi-part file's part name as their layer) */
+        L->rgb[k] = -1;
+        for (int c = 0; cp && c < n; ++c)
+            if (P->from[c] == cp->rgb[k].index)
+                L->rgb[k] = c;
+        if (!cp)
+            L->rgb[k] = find_name(P, (const char *[]){ "R", "G", "B" }[k]);
         L->argb[k] = L->rgb[k] >= 0 ? L->alpha[L->rgb[k]] : -1;
     }
     {
@@ -582,10 +588,11 @@ static int make_plan(const ef_deep_req *q, const ef_deep_in *d, int chromatic, p
         /* AR/AG/AB beside the colour's A, when the file has only A */
         static const char *const ab[] = { "AR", "AG", "AB" };
         size_t ll;
-        base_of(cp->rgb[0].name, &ll);
+        const char *r0 = d->name[cp->rgb[0].index];   /* as the part names it */
+        base_of(r0, &ll);
         for (int k = 0; k < 3; ++k) {
             char buf[300];
-            snprintf(buf, sizeof buf, "%.*s%s%s", (int) ll, cp->rgb[0].name, ll ? "." : "", ab[k]);
+            snprintf(buf, sizeof buf, "%.*s%s%s", (int) ll, r0, ll ? "." : "", ab[k]);
             int have = 0;
             for (int c = 0; c < P->L.nch; ++c)
                 have |= !strcmp(P->name[c], buf);
@@ -720,9 +727,14 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     int began = 0;
     if (!rc) {
         const int flat = q->mode == EF_DEEP_MODE_FLATTEN;
+        /* samples and flatten keep the input's other parts beside the
+         * fogged one (not in a foreign deliverable's intermediate); a fog
+         * element is its one part */
+        const int others = q->mode != EF_DEEP_MODE_FOG && q->keep_parts;
         rc = ef_deep_out_begin(&out, q->out_path, q->out_fd, q->in, q->part, !flat,
                                flat ? S.FO.n : P->L.nch, flat ? S.FO.name : names,
-                               flat ? S.FO.type : P->type, q->history, q->params, err);
+                               flat ? S.FO.type : P->type, q->history, q->params,
+                               S.aov && q->has_aov_origin ? q->aov_origin : NULL, others, err);
         began = 1;
     }
     const int nthreads = q->threads > 0 ? q->threads : 1;

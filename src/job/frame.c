@@ -402,10 +402,7 @@ static int check_deep(ef_frame *F)
     }
     const char *why = NULL;
     int status = 2;
-    if (F->in.nparts > 1)
-        why = "INPUT has several parts beside its deep one; exrfog fogs single-part deep files "
-              "(split the parts first, e.g. oiiotool IN --subimage NAME -o PART.exr)", status = 1;
-    else if (F->nplans > 1)
+    if (F->nplans > 1)
         why = "deep input with several views is not supported (choose one with --view NAME)";
     else if (F->naov && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "--aov with deep input needs --deep flatten (a deep output carries no AOVs: "
@@ -897,6 +894,8 @@ static int run_deep_pass(ef_frame *F)
                             .naov = F->naov,
                             .aov_origin = { o->aov_origin[0], o->aov_origin[1],
                                             o->aov_origin[2] },
+                            .has_aov_origin = o->has_aov_origin,
+                            .keep_parts = !F->foreign,
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
                             .progress_user = J };
