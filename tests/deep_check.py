@@ -435,28 +435,95 @@ else:
 
 # The holdout property: a fog sample split at any fraction x by the deep
 # rule, 1 - (1 - alpha)^x, against the exact transmittance of the fog over
-# the same part of the ray (closed form here), weighted by T from the camera
-# to the sample: within --deep-tol (the default, 1e-3).
+# the same part of the ray, weighted by T from the camera to the sample:
+# within --deep-tol (the default, 1e-3). The exact part is computed here:
+# closed forms for height, layered (piecewise linear in height, integrated
+# piece by piece) and box (the length inside), and for noise a fine
+# Gauss-Legendre quadrature of the density from tests/perlin_ref.py's
+# independent Perlin noise (floats), 8 nodes per eighth of the finest cell.
 import random
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import perlin_ref
+
+GL8 = [(-0.9602898564975363, 0.1012285362903763), (-0.7966664774136267, 0.2223810344533745),
+       (-0.5255324099163290, 0.3137066458778873), (-0.1834346424956498, 0.3626837833783620),
+       (0.1834346424956498, 0.3626837833783620), (0.5255324099163290, 0.3137066458778873),
+       (0.7966664774136267, 0.2223810344533745), (0.9602898564975363, 0.1012285362903763)]
+
+
+def tau_exact(model, d, a, b):
+    """The fog's optical depth over distances [a, b) of direction d."""
+    kind = model[0]
+    if kind in ("exp", "height"):
+        return fog_tau(model, org, d, a, b)
+    if kind == "layered":
+        hs, ds = model[1], model[2]
+        def dens(y):
+            if y <= hs[0]:
+                return ds[0]
+            if y >= hs[-1]:
+                return ds[-1]
+            for i in range(len(hs) - 1):
+                if y <= hs[i + 1]:
+                    w = (y - hs[i]) / (hs[i + 1] - hs[i])
+                    return ds[i] * (1 - w) + ds[i + 1] * w
+        cuts = [a, b]
+        if d[1] != 0:
+            cuts += [t for t in ((h - org[1]) / d[1] for h in hs) if a < t < b]
+        cuts.sort()
+        return sum((t1 - t0) * 0.5 * (dens(org[1] + d[1] * t0) + dens(org[1] + d[1] * t1))
+                   for t0, t1 in zip(cuts, cuts[1:]))
+    if kind == "box":
+        lo, hi, rho = model[1], model[2], model[3]
+        t0, t1 = a, b
+        for k in range(3):
+            if d[k] == 0:
+                if not (lo[k] < org[k] < hi[k]):
+                    return 0.0
+                continue
+            ta, tb = (lo[k] - org[k]) / d[k], (hi[k] - org[k]) / d[k]
+            t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+        return rho * max(0.0, t1 - t0)
+    # noise: (rho, scale, octaves, contrast)
+    rho, scale, octaves, c = model[1:]
+    step = scale / 2 ** (octaves - 1) / 8
+    n = max(1, int(math.ceil((b - a) / step)))
+    h = (b - a) / n
+    tot = 0.0
+    for i in range(n):
+        m0 = a + (i + 0.5) * h
+        for x, w in GL8:
+            t = m0 + 0.5 * h * x
+            p = [org[k] + d[k] * t for k in range(3)]
+            q = perlin_ref.noise_q(p, (0, 0, 0), (0, 0, 0), 0.0, scale, 0.0)
+            f = perlin_ref.fbm(q, octaves, 2.0, 0.5)
+            tot += 0.5 * h * w * rho * max(0.0, 1 + c * f)
+    return tot
+
+
 rnd = random.Random(24)
-for spec_text, model in (("height:density=0.4:falloff=0.5:base=-1", ("height", 0.4, 0.5, -1.0)),
-                         ("height:density=2:falloff=3:base=-2", ("height", 2.0, 3.0, -2.0))):
+for spec_text, model, step in (
+        ("height:density=0.4:falloff=0.5:base=-1", ("height", 0.4, 0.5, -1.0), 7),
+        ("height:density=2:falloff=3:base=-2", ("height", 2.0, 3.0, -2.0), 7),
+        ("layered:heights=-1,0,1:densities=0.05,0.5,0.1", ("layered", [-1, 0, 1], [0.05, 0.5, 0.1]), 7),
+        ("box:min=-1,-1,-1:max=1,0.5,2:density=0.6", ("box", [-1, -1, -1], [1, 0.5, 2], 0.6), 7),
+        ("noise:density=0.3:scale=2:octaves=2", ("noise", 0.3, 2.0, 2, 0.9), 97)):
     el = os.path.join(tmp, "deep_holdout.exr")
     check(run([src, "--fog", spec_text, "--deep", "fog", "-o", el]) == 0, "holdout element runs")
     fs = samples_of(oiio.ImageBuf(el))
     worst, worst_rule, nsplit = 0.0, 0.0, 0
-    for p in range(0, W * H, 7):
+    for p in range(0, W * H, step):
         x, y = p % W, p // W
         d, k = pixel_ray(x, y)
         T = 1.0
         for z, zb, c in fs[p]:
             a_, b_ = z * k, zb * k
-            if c[3] >= 1 or b_ <= a_:
+            if c[3] >= 1 or b_ <= a_ or T < 1e-3:
                 break
-            tab = fog_tau(model, org, d, a_, b_)
-            for _ in range(3):
+            tab = tau_exact(model, d, a_, b_)
+            for _ in range(3 if model[0] != "noise" else 1):
                 f = rnd.random()
-                exact = math.exp(-fog_tau(model, org, d, a_, a_ + f * (b_ - a_)))
+                exact = math.exp(-tau_exact(model, d, a_, a_ + f * (b_ - a_)))
                 # the placement rule alone (the slab's exact tau), and what a
                 # reader gets from the stored half alpha
                 worst_rule = max(worst_rule, T * abs(math.exp(-f * tab) - exact))

@@ -308,56 +308,66 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
 
 /* The optical depth per channel of the scene over [a, b) of the ray whose
  * unit-distance form is r1 (b may be INFINITY), and the colour it scatters
- * in (the scene's, or the tau-weighted mean of the components' own).
- * Depth-only models are defined from the camera, so theirs is the
- * difference of the two distances' optical depths; the others integrate a
- * density along a segment ray that starts at a. *linear: every component's
+ * in (the scene's, or the tau-weighted mean of the components' own); with
+ * err, the models' error estimates summed. *linear: every component's
  * density is constant along the ray (a split of this interval is then
  * exact). */
+/* One component's optical depth per channel over [a, b) of the ray whose
+ * unit-distance form is r1 (b may be INFINITY), into t; with ip, its error
+ * estimate added to err. Depth-only models are defined from the camera, so
+ * theirs is the difference of the two distances' optical depths; the
+ * others integrate a density along a segment ray that starts at a. */
+static void comp_tau(const ef_fog_component *c, const ef_ray *r1, double a, double b, double t[3],
+                     double err[3])
+{
+    ef_tau_info info, *ip = err ? &info : NULL;
+    if (c->model->depth_only) {
+        ef_ray ra = *r1, rb = *r1;
+        ra.dist = a;
+        ra.planar = a * r1->planar;
+        rb.dist = b;
+        rb.planar = isinf(b) ? INFINITY : b * r1->planar;
+        double ta[3] = { 0, 0, 0 }, tb[3];
+        if (a > 0) {
+            ef_fog_tau(c, &ra, ta, ip);
+            for (int k = 0; err && k < 3; ++k)
+                err[k] += info.err[k];
+        }
+        ef_fog_tau(c, &rb, tb, ip);
+        for (int k = 0; k < 3; ++k)
+            t[k] = isinf(ta[k]) ? INFINITY : tb[k] - ta[k];
+    } else {
+        ef_ray seg = *r1;
+        for (int k = 0; k < 3; ++k)
+            seg.org[k] = r1->org[k] + r1->dir[k] * a;
+        seg.dist = b - a;
+        seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
+        ef_fog_tau(c, &seg, t, ip);
+    }
+    for (int k = 0; err && k < 3; ++k)
+        err[k] += info.err[k];
+    for (int k = 0; k < 3; ++k)
+        if (!(t[k] > 0))
+            t[k] = 0;
+}
+
 static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double tau[3],
                     double F[3], int *linear, double err[3])
 {
-    ef_tau_info info, *ip = err ? &info : NULL;
-    if (err)
-        err[0] = err[1] = err[2] = 0;
     double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
     tau[0] = tau[1] = tau[2] = 0;
+    if (err)
+        err[0] = err[1] = err[2] = 0;
     if (linear)
         *linear = 1;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         double t[3];
-        if (c->model->depth_only) {
-            ef_ray ra = *r1, rb = *r1;
-            ra.dist = a;
-            ra.planar = a * r1->planar;
-            rb.dist = b;
-            rb.planar = isinf(b) ? INFINITY : b * r1->planar;
-            double ta[3] = { 0, 0, 0 }, tb[3];
-            if (a > 0) {
-                ef_fog_tau(c, &ra, ta, ip);
-                for (int k = 0; err && k < 3; ++k)
-                    err[k] += info.err[k];
-            }
-            ef_fog_tau(c, &rb, tb, ip);
-            for (int k = 0; k < 3; ++k)
-                t[k] = isinf(ta[k]) ? INFINITY : tb[k] - ta[k];
-        } else {
-            ef_ray seg = *r1;
-            for (int k = 0; k < 3; ++k)
-                seg.org[k] = r1->org[k] + r1->dir[k] * a;
-            seg.dist = b - a;
-            seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
-            ef_fog_tau(c, &seg, t, ip);
-        }
-        for (int k = 0; err && k < 3; ++k)
-            err[k] += info.err[k];
+        comp_tau(c, r1, a, b, t, err);
         if (linear && c->model != &ef_fog_exp)
             *linear = 0;
         for (int k = 0; k < 3; ++k) {
-            if (!(t[k] > 0))
-                t[k] = 0;
             tau[k] += t[k];
             const double col = c->has_color ? c->color[k] : s->color[k];
             if (isinf(t[k])) {
@@ -422,12 +432,90 @@ static piece make_piece(double a, double b, const double tau[3], const double co
     return p;
 }
 
+/* A bound on what a later split of the slab [a, b) can change: the
+ * largest |tau(a, a + x h) - x tau(a, b)| over x in [0, 1] and the
+ * channels, summed over the components (h = b - a). For a density monotone
+ * along the slab that difference is convex or concave in x and zero at
+ * both ends, so it is at most twice its value at x = 1/2 (certified, from
+ * two exact optical depths); models that are not monotone (noise) bound
+ * their rate instead, |d sigma/dt| <= D on the slab giving h^2 D / 8.
+ * Models without dsigma_max are monotone between the crossings of their
+ * jump and kink features (fog.h), which fog_interval splits at first. */
+static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, double b)
+{
+    const double m = 0.5 * (a + b), h = b - a;
+    double sum = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (c->model == &ef_fog_exp)
+            continue;
+        if (c->model->dsigma_max) {
+            ef_ray seg = *r1;
+            for (int k = 0; k < 3; ++k)
+                seg.org[k] = r1->org[k] + r1->dir[k] * a;
+            seg.dist = h;
+            seg.planar = h * r1->planar;
+            sum += h * h / 8 * c->model->dsigma_max(c, &seg);
+            continue;
+        }
+        double tb[3], tm[3];
+        comp_tau(c, r1, a, b, tb, NULL);
+        comp_tau(c, r1, a, m, tm, NULL);
+        double dev = 0;
+        for (int k = 0; k < 3; ++k) {
+            if (isinf(tb[k]))
+                return INFINITY;
+            dev = fmax(dev, fabs(tm[k] - 0.5 * tb[k]));
+        }
+        sum += 2 * dev;
+    }
+    return sum;
+}
+
+/* Where along r1 (unit-distance form), strictly inside (a, b), a
+ * component's density jumps or kinks (its features of scale 0): into t,
+ * at most cap, sorted; returns how many. */
+#define FEATURE_CAP 64
+static int feature_cuts(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double *t,
+                        int cap)
+{
+    int n = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->functionals || !c->model->features)
+            continue;
+        ef_fog_functional fn[FEATURE_CAP];
+        ef_fog_feature ft[FEATURE_CAP];
+        const int nf = c->model->functionals(c, fn, FEATURE_CAP);
+        const int nt = c->model->features(c, ft, FEATURE_CAP);
+        for (int j = 0; j < nt && j < FEATURE_CAP && n < cap; ++j) {
+            if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf || ft[j].f >= FEATURE_CAP)
+                continue;
+            const ef_fog_functional *f = &fn[ft[j].f];
+            const double v0 = f->n[0] * r1->org[0] + f->n[1] * r1->org[1] + f->n[2] * r1->org[2] + f->d;
+            const double rate = f->n[0] * r1->dir[0] + f->n[1] * r1->dir[1] + f->n[2] * r1->dir[2];
+            if (rate == 0)
+                continue;
+            const double tc = (ft[j].value - v0) / rate;
+            if (tc > a && tc < b)
+                t[n++] = tc;
+        }
+    }
+    for (int i = 1; i < n; ++i)   /* a few: insertion sort */
+        for (int j = i; j > 0 && t[j - 1] > t[j]; --j) {
+            const double x = t[j];
+            t[j] = t[j - 1];
+            t[j - 1] = x;
+        }
+    return n;
+}
+
 /* The fog over [a, b) (b finite) in samples, front to back, splitting
  * where tau passes the cap or a later split's error estimate passes tol;
  * *Tf: the largest channel's transmittance from the camera to a, advanced
  * to b. */
-static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
-                        double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
+                     double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
     enum { DEPTH = 48 };
     piece stack[DEPTH + 2];
@@ -451,22 +539,13 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                         *Tf > F->tol;
         int split = can && max3(tau) > F->tau_cap;
         double tm[3], cm[3], em[3] = { 0, 0, 0 }, est = 0;
-        int have_mid = 0;
         if (!split && !linear && *Tf > F->tol && isfinite(max3(tau))) {
-            /* The split error of a slab is largest near its middle, h^2/8
-             * max|sigma'| where sigma varies linearly; 1.5 times the
-             * midpoint's deviation from the slab's rule covers curvature. */
-            seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
-            have_mid = 1;
-            double dev = 0;
-            for (int k = 0; k < 3; ++k)
-                dev = fmax(dev, fabs(tm[k] - 0.5 * tau[k]));
-            est = 1.5 * *Tf * dev;
+            /* |dT| of any later split <= T(0, a) times the slab's bound */
+            est = *Tf * split_bound(F->scene, r1, sa, sb);
             split = can && est > F->tol;
         }
         if (split) {
-            if (!have_mid)
-                seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
+            seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
             double tb[3], cb[3], eb[3] = { 0, 0, 0 };
             seg_tau(F->scene, r1, m, sb, tb, cb, NULL, ep ? eb : NULL);
             stack[sp++] = make_piece(m, sb, tb, cb, eb, depth + 1);   /* the back half after */
@@ -486,6 +565,24 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         /* the clearest channel's transmittance: exp of the smallest tau */
         const double tmin = fmin(tau[0], fmin(tau[1], tau[2]));
         *Tf *= isinf(tmin) ? 0 : exp(-tmin);
+    }
+    return 0;
+}
+
+/* The fog over [a, b) (b finite) in samples, front to back: split first
+ * where a component's density jumps or kinks (so that each piece is
+ * monotone where a model says so), then by fog_piece. */
+static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
+                        double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+{
+    double cut[FEATURE_CAP];
+    const int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, cut, FEATURE_CAP) : 0;
+    double prev = a;
+    for (int i = 0; i <= n; ++i) {
+        const double e = i < n ? cut[i] : b;
+        if (e > prev && fog_piece(L, F, r1, prev, e, Tf, fog, st))
+            return -1;
+        prev = e > prev ? e : prev;
     }
     return 0;
 }

@@ -135,6 +135,12 @@ typedef struct ef_fog_model {
      * when that work is not bounded per ray (method=exact), else 0: an
      * estimate for a warning before an extreme run, not a bound. */
     double (*work)(const ef_fog_component *c, const ef_ray *r);
+    /* Optional: a bound on |d sigma/dt| (the largest channel's) along r over
+     * [0, r->dist], for the deep split rule h^2/8 max|sigma'|. Models
+     * without it promise a density monotone along any segment between the
+     * crossings of their features of scale 0 (jumps and kinks), where the
+     * rule takes twice the midpoint's deviation instead (deep.c). */
+    double (*dsigma_max)(const ef_fog_component *c, const ef_ray *r);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

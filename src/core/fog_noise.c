@@ -3002,9 +3002,41 @@ static double work_noise(const ef_fog_component *c, const ef_ray *r)
     return evals;
 }
 
+/* A bound on |d sigma/dt| along r over [0, r->dist] (inside the box; the
+ * box's faces are jumps, which the caller splits at): sigma = rho env S,
+ * S the shape (noise: max(0, 1 + c fbm); separable: the product over m
+ * axes of such factors), so |sigma'| <= rho_max (|env'| B_S + env |S'|)
+ * with |env'| = k |hs| env, B_S the shape's bound, and |S'| at most
+ * |c| sum_i w_i l^i L / scale per factor (L: the noise's Lipschitz
+ * constant per lattice unit; the clamp only lowers it), times
+ * m (1 + |c| B)^(m - 1) for a product; env at its largest on the segment. */
+static double dsigma_noise(const ef_fog_component *c, const ef_ray *r)
+{
+    const nstate *s = state(c);
+    long double t0, t1;
+    if (!(s->rho_max > 0) || !(r->dist > 0) || !clip_box(s, r, &t0, &t1))
+        return 0;
+    double h0 = -s->base, hs = 0;
+    for (int a = 0; a < 3; ++a) {
+        h0 += s->up[a] * r->org[a];
+        hs += s->up[a] * r->dir[a];
+    }
+    const double hlo = fmin(h0 + hs * (double) t0, h0 + hs * (double) t1);
+    const double env = s->k > 0 ? exp(-s->k * hlo) : 1;
+    double rate = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i)
+        rate += s->fbm.weight[i] * s->fbm.freq[i];
+    rate *= fabs(s->contrast) * EF_NOISE_LIPSCHITZ / s->scale;
+    if (s->separable && s->naxes > 1)
+        rate *= s->naxes * pow(1 + fabs(s->contrast) * EF_NOISE_BOUND, s->naxes - 1);
+    const double d = s->rho_max * env * (s->k * fabs(hs) * shape_bound(s) + rate);
+    return d == d ? d : INFINITY;
+}
+
 const ef_fog_model ef_fog_noise = {
     .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
+    .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
 };
@@ -3012,6 +3044,7 @@ const ef_fog_model ef_fog_noise = {
 const ef_fog_model ef_fog_noise_separable = {
     .name = "noise-separable", .keys = separable_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
+    .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
 };
