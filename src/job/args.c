@@ -26,7 +26,7 @@ enum {
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_FAILED_LIST, OPT_VIEW, OPT_CAMERA_FILE,
     OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
-    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP
+    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP, OPT_DEEP_GREY
 };
 
 static const struct option long_opts[] = {
@@ -38,6 +38,7 @@ static const struct option long_opts[] = {
     { "sky", required_argument, NULL, OPT_SKY },
     { "deep", required_argument, NULL, OPT_DEEP },
     { "deep-tol", required_argument, NULL, OPT_DEEP_TOL },
+    { "deep-grey-alpha", no_argument, NULL, OPT_DEEP_GREY },
     { "fog", required_argument, NULL, OPT_FOG },
     { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
     { "scene", required_argument, NULL, OPT_SCENE },
@@ -109,6 +110,8 @@ void ef_options_usage(FILE *out)
             "                           deep element) or flatten (a flat image)\n"
             "      --deep-tol E         deep fog: |dT| bound when a fog sample is split\n"
             "                           later (default 1e-3)\n"
+            "      --deep-grey-alpha    deep output of chromatic fog for readers of A only:\n"
+            "                           every alpha the least, the rest folded into colour\n"
             "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
             "                           the flags given here override it\n"
             "      --up-axis y|z|-y|-z|auto|X,Y,Z  up for the height models (default y;\n"
@@ -323,6 +326,9 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
                 return ef_fail(err, "--deep '%s' is not samples, fog or flatten", a),
                        EF_PARSE_USAGE;
             o->deep_set = 1;
+            break;
+        case OPT_DEEP_GREY:
+            o->deep_grey = 1;
             break;
         case OPT_DEEP_TOL:
             if (ef_parse_numbers(a, &o->deep_tol, 1) || !(o->deep_tol > 0) || !(o->deep_tol < 1))

@@ -56,6 +56,7 @@ typedef struct ef_options {
     double aov_origin[3];     /* subtracted from fog_P */
     int deep_mode, deep_set;  /* --deep (EF_DEEP_MODE_*) and whether it was given */
     double deep_tol;          /* --deep-tol */
+    int deep_grey;            /* --deep-grey-alpha */
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
 

@@ -356,6 +356,39 @@ static int fog_pixel(worker *w, const ef_ray *r, int mode, double *flat, ef_err 
     return union_tidy(w, &w->tidy, &w->fog, err);
 }
 
+/* --deep-grey-alpha: the tidy list b (front to back) made exact for
+ * readers of A alone. Each sample's alphas become their least, and its
+ * colour is scaled by e^-R_k, R_k the optical depth channel k has in front
+ * beyond the least (summed over the samples in front), so that "over" with
+ * one alpha gives every channel what per-channel alphas give:
+ * c_k T_k(front) = (c_k e^-R_k) T_least(front). A later holdout or merge
+ * with another element sees the least alpha only. */
+static void grey_alpha(const ef_deep_layout *L, ef_deep_buf *b)
+{
+    double R[3] = { 0, 0, 0 };
+    for (int i = 0; i < b->n; ++i) {
+        double *s = b->v + (size_t) i * (size_t) b->stride;
+        double tau[3], lo = INFINITY;
+        for (int k = 0; k < 3; ++k) {
+            const int ai = L->argb[k] >= 0 ? L->argb[k] : L->a;
+            const double a = ai >= 0 ? s[ai] : 0;
+            tau[k] = a >= 1 ? INFINITY : -log1p(-(a > 0 ? a : 0));
+            lo = fmin(lo, tau[k]);
+        }
+        for (int k = 0; k < 3; ++k)
+            if (L->rgb[k] >= 0)
+                s[L->rgb[k]] *= isfinite(R[k]) ? exp(-R[k]) : 0;
+        const double A = isinf(lo) ? 1 : -expm1(-lo);
+        for (int k = 0; k < 3; ++k) {
+            if (L->argb[k] >= 0)
+                s[L->argb[k]] = A;
+            R[k] += isinf(lo) ? 0 : tau[k] - lo;
+        }
+        if (L->a >= 0)
+            s[L->a] = A;
+    }
+}
+
 /* Copies src into dst. */
 static int copy_buf(ef_deep_buf *dst, const ef_deep_buf *src)
 {
@@ -491,7 +524,9 @@ static void do_unit(worker *w, unit *u)
                     f[c] = S->FO.src[c] >= 0 ? o[S->FO.src[c]] : av[-1 - S->FO.src[c]];
                 continue;
             }
-            const ef_deep_buf *b = mode == EF_DEEP_MODE_FOG ? &w->fog : &w->out;
+            ef_deep_buf *b = mode == EF_DEEP_MODE_FOG ? &w->fog : &w->out;
+            if (q->grey && S->fog.chromatic)
+                grey_alpha(&P->L, b);
             w->counts[i] = (uint32_t) b->n;
             if (append_out(w, b, k, &nv)) {
                 ef_fail(&u->err, "out of memory");

@@ -36,6 +36,7 @@ typedef struct ef_deep_req {
     double aov_origin[3];
     int has_aov_origin;       /* record it (exrfog/aovOrigin), as the flat path does */
     int keep_parts;           /* EXR output: the input's other parts go beside the fogged one */
+    int grey;                 /* --deep-grey-alpha */
     const _Atomic int *cancel;
     void (*progress)(void *user, long pixels);
     void *progress_user;

@@ -394,8 +394,9 @@ static int check_deep(ef_frame *F)
         return ef_job_report(J, o->depth_file, &F->err, 1);
     }
     if (!F->deep) {
-        if (o->deep_set && !o->explain) {
-            ef_fail(&F->err, "--deep applies to deep input, and INPUT is flat (leave --deep out)");
+        if ((o->deep_set || o->deep_grey) && !o->explain) {
+            ef_fail(&F->err, "%s applies to deep input, and INPUT is flat (leave it out)",
+                    o->deep_set ? "--deep" : "--deep-grey-alpha");
             return ef_job_report(J, o->input, &F->err, 2);
         }
         return 0;
@@ -404,6 +405,9 @@ static int check_deep(ef_frame *F)
     int status = 2;
     if (F->nplans > 1)
         why = "deep input with several views is not supported (choose one with --view NAME)";
+    else if (o->deep_grey && o->deep_mode == EF_DEEP_MODE_FLATTEN)
+        why = "--deep-grey-alpha applies to deep output (--deep samples or fog): a flattened "
+              "image is exact per channel already";
     else if (F->naov && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "--aov with deep input needs --deep flatten (a deep output carries no AOVs: "
               "its fog samples are the fog)";
@@ -895,6 +899,7 @@ static int run_deep_pass(ef_frame *F)
                             .aov_origin = { o->aov_origin[0], o->aov_origin[1],
                                             o->aov_origin[2] },
                             .has_aov_origin = o->has_aov_origin,
+                            .grey = o->deep_grey,
                             .keep_parts = !F->foreign,
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
