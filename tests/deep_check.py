@@ -253,6 +253,12 @@ for name, spec_text, model in (
             cn = oiio.ImageBuf(outs[mode]).spec().channelnames
             check(all(c in cn for c in ("AR", "AG", "AB")),
                   "chromatic fog: --deep %s writes AR, AG, AB (%s)" % (mode, ",".join(cn)))
+    # every output read in full by the OpenEXR C++ library (tests/exr_parts.cpp)
+    for mode, path in outs.items():
+        if exr_parts and os.path.exists(exr_parts):
+            rb = subprocess.run([exr_parts, "read", path], capture_output=True, text=True)
+            check(rb.returncode == 0, "%s --deep %s: the OpenEXR library reads it (%s)"
+                  % (name, mode, rb.stderr.strip()))
     results = {"flatten": flat_pixels(outs["flatten"])}
     if model[0] != "exp3":
         results["samples+oiio flatten"] = flat_pixels(flat_s)
