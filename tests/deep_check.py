@@ -259,6 +259,12 @@ for name, spec_text, model in (
             rb = subprocess.run([exr_parts, "read", path], capture_output=True, text=True)
             check(rb.returncode == 0, "%s --deep %s: the OpenEXR library reads it (%s)"
                   % (name, mode, rb.stderr.strip()))
+    # exrfog/history names the mode and the tolerance, defaults included
+    hist_out = os.path.join(tmp, "deep_history.exr")
+    if name == "exp" and run([src, "--fog", spec_text, "-o", hist_out]) == 0:
+        h = oiio.ImageBuf(hist_out).spec().get_string_attribute("exrfog/history")
+        check("(deep: --deep samples --deep-tol 0.001)" in h,
+              "exrfog/history records the deep mode and tolerance (%s)" % h)
     results = {"flatten": flat_pixels(outs["flatten"])}
     if model[0] != "exp3":
         results["samples+oiio flatten"] = flat_pixels(flat_s)

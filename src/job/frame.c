@@ -874,6 +874,19 @@ static int run_deep_pass(ef_frame *F)
              : o->deep_mode == EF_DEEP_MODE_FLATTEN ? "flatten"
                                                     : "samples",
              o->deep_tol);
+    /* the history line says which mode ran, and with what tolerance, also
+     * when they were the defaults */
+    const size_t hn = strlen(F->history) + 200;
+    char *hist = malloc(hn);
+    if (!hist) {
+        ef_fail(&F->err, "out of memory");
+        return ef_job_report(J, o->output, &F->err, 1);
+    }
+    snprintf(hist, hn, "%s (deep: --deep %s --deep-tol %g%s)", F->history,
+             o->deep_mode == EF_DEEP_MODE_FOG       ? "fog"
+             : o->deep_mode == EF_DEEP_MODE_FLATTEN ? "flatten"
+                                                    : "samples",
+             o->deep_tol, o->deep_grey ? " --deep-grey-alpha" : "");
     const ef_deep_req q = { .in = &F->in,
                             .part = F->plans[0].rgb[0].part,
                             .cplan = &F->plans[0],
@@ -885,7 +898,7 @@ static int run_deep_pass(ef_frame *F)
                             .out_path = o->output,
                             /* a flattened foreign output goes through its EXR */
                             .out_fd = F->foreign ? F->mid.fd : F->out.fd,
-                            .history = F->history,
+                            .history = hist,
                             .params = params,
                             .threads = F->so.threads,
                             .zip_level = o->zip_level,
@@ -904,7 +917,9 @@ static int run_deep_pass(ef_frame *F)
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
                             .progress_user = J };
-    if (ef_deep_run(&q, &F->deep_res, &F->err))
+    const int drc = ef_deep_run(&q, &F->deep_res, &F->err);
+    free(hist);
+    if (drc)
         return ef_job_report(J, ef_job_cancelled(J) ? o->output : o->input, &F->err,
                              ef_job_cancelled(J) ? 3 : 1);
     if (ef_job_cancelled(J)) {
