@@ -453,6 +453,22 @@ if exr_parts and os.path.exists(exr_parts):
         names = [l for l in hdr.stdout.split("\n") if l.startswith("name (type string)")]
         check(hdr.returncode == 0 and len(names) == 2,
               "multi-part %s: exrheader lists both parts (%s)" % (m, names))
+    # a truncated multi-part file: refused naming it, whichever part is fogged,
+    # and nothing written
+    data = open(mixed, "rb").read()
+    trunc = os.path.join(tmp, "mixed_trunc.exr")
+    with open(trunc, "wb") as fh:
+        fh.write(data[:len(data) * 2 // 3])
+    for layer in ("part0", "part1"):
+        out = os.path.join(tmp, "mixed_trunc_out.exr")
+        if os.path.exists(out):
+            os.remove(out)
+        r = subprocess.run([exrfog, trunc, "--layer", layer, "--fog", fogs, "-o", out],
+                           capture_output=True, text=True)
+        check(r.returncode == 1 and r.stderr.startswith("exrfog: " + trunc + ": ") and
+              "truncated or corrupt" in r.stderr and not os.path.exists(out),
+              "truncated multi-part file, --layer %s: exit 1 naming it, nothing written (%d %s)"
+              % (layer, r.returncode, r.stderr.strip()))
     # two deep parts (OIIO writes those): the chosen one fogged, the other copied
     two = os.path.join(tmp, "two_deep.exr")
     check(oiiotool([src, "--attrib", "name", "left", src, "--attrib", "name", "right",

@@ -603,16 +603,23 @@ static int copy_chunk(const ef_exr_file *in, int p, exr_context_t out, int deep,
                       int tx, int ty, int y, const exr_chunk_info_t *ci, uint8_t **buf,
                       size_t *cap, uint8_t **tab, size_t *tcap, ef_err *err)
 {
-    if (ci->packed_size > (1ull << 34) || ci->sample_count_table_size > (1ull << 34))
-        return ef_fail(err, "part %d has a chunk of %llu bytes: the file is corrupt", p,
-                       (unsigned long long) ci->packed_size);
+    if (ci->packed_size > (1ull << 34) || ci->sample_count_table_size > (1ull << 34)) {
+        ef_fail(err, "part %d has a chunk of %llu bytes: the file is corrupt", p,
+                (unsigned long long) ci->packed_size);
+        err->file = in->path;
+        return -1;
+    }
     if (ef_deep_grow((void **) buf, cap, (size_t) ci->packed_size + 1) ||
         (deep && ef_deep_grow((void **) tab, tcap, (size_t) ci->sample_count_table_size + 1)))
         return ef_fail(err, "out of memory");
     exr_result_t rc = deep ? exr_read_deep_chunk(in->ctx, p, ci, *buf, *tab)
                            : exr_read_chunk(in->ctx, p, ci, *buf);
-    if (rc)
-        return ef_fail(err, "part %d: cannot read a chunk: %s", p, ef_exr_last_core_message());
+    if (rc) {
+        ef_fail(err, "part %d: cannot read a chunk (the file is truncated or corrupt): %s", p,
+                ef_exr_last_core_message());
+        err->file = in->path;
+        return -1;
+    }
     if (deep && tiled)
         rc = exr_write_deep_tile_chunk(out, p, tx, ty, 0, 0, *buf, ci->packed_size,
                                        ci->unpacked_size, *tab, ci->sample_count_table_size);
@@ -647,10 +654,12 @@ int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_
         const int64_t nx = tw ? (w + tw - 1) / tw : 0, ny = th ? (h + th - 1) / th : 0;
         for (int64_t ty = 0; ty < ny && !rc; ++ty)
             for (int64_t tx = 0; tx < nx && !rc; ++tx) {
-                if (exr_read_tile_chunk_info(in->ctx, p, (int) tx, (int) ty, 0, 0, &ci))
-                    rc = ef_fail(err, "part %d: tile (%lld, %lld) is missing or damaged: %s", p,
-                                 (long long) tx, (long long) ty, ef_exr_last_core_message());
-                else
+                if (exr_read_tile_chunk_info(in->ctx, p, (int) tx, (int) ty, 0, 0, &ci)) {
+                    rc = ef_fail(err, "part %d: tile (%lld, %lld) is missing or damaged (the file "
+                                      "is truncated or corrupt): %s", p, (long long) tx,
+                                 (long long) ty, ef_exr_last_core_message());
+                    err->file = in->path;
+                } else
                     rc = copy_chunk(in, p, out, deep, 1, (int) tx, (int) ty, 0, &ci, &buf,
                                     &cap, &tab, &tcap, err);
             }
@@ -660,10 +669,12 @@ int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_
         if (lines < 1)
             lines = 1;
         for (int64_t y = dw.min.y; y <= dw.max.y && !rc; y += lines) {
-            if (exr_read_scanline_chunk_info(in->ctx, p, (int) y, &ci))
-                rc = ef_fail(err, "part %d: the chunk of line %lld is missing or damaged: %s", p,
-                             (long long) y, ef_exr_last_core_message());
-            else
+            if (exr_read_scanline_chunk_info(in->ctx, p, (int) y, &ci)) {
+                rc = ef_fail(err, "part %d: the chunk of line %lld is missing or damaged (the "
+                                  "file is truncated or corrupt): %s", p, (long long) y,
+                             ef_exr_last_core_message());
+                err->file = in->path;
+            } else
                 rc = copy_chunk(in, p, out, deep, 0, 0, 0, (int) y, &ci, &buf, &cap, &tab,
                                 &tcap, err);
         }
