@@ -562,6 +562,13 @@ for spec_text, model, step in (
         ("height:density=2:falloff=3:base=-2", ("height", 2.0, 3.0, -2.0), 7),
         ("layered:heights=-1,0,1:densities=0.05,0.5,0.1", ("layered", [-1, 0, 1], [0.05, 0.5, 0.1]), 7),
         ("box:min=-1,-1,-1:max=1,0.5,2:density=0.6", ("box", [-1, -1, -1], [1, 0.5, 2], 0.6), 7),
+        # a profile of 100 knots going up and down (more features than fit
+        # a fixed buffer: every knot must still cut the fog)
+        ("layered:heights=%s:densities=%s" % (",".join(repr(-2 + i * 0.05) for i in range(100)),
+                                             ",".join(repr(0.3 + 0.25 * math.sin(i * 0.7))
+                                                      for i in range(100))),
+         ("layered", [-2 + i * 0.05 for i in range(100)],
+          [0.3 + 0.25 * math.sin(i * 0.7) for i in range(100)]), 29),
         ("noise:density=0.3:scale=2:octaves=2", ("noise", 0.3, 2.0, 2, 0.9), 97)):
     el = os.path.join(tmp, "deep_holdout.exr")
     check(run([src, "--fog", spec_text, "--deep", "fog", "-o", el]) == 0, "holdout element runs")
@@ -586,7 +593,7 @@ for spec_text, model, step in (
                 nsplit += 1
             T *= 1 - c[3]
     print("holdout %s: %d splits, worst T|dT| %.2e from the placement, %.2e with half alpha"
-          % (spec_text, nsplit, worst_rule, worst))
+          % (spec_text[:60], nsplit, worst_rule, worst))
     check(worst_rule <= 1e-3, "holdout splits of %s: placement within --deep-tol" % spec_text)
     # half alpha (11 bits) adds its rounding, amplified by e^(tau-1)/tau <= 1.36 at tau 2
     check(worst <= 1e-3 + 1e-3, "holdout splits of %s within --deep-tol + half rounding" % spec_text)

@@ -19,6 +19,8 @@ void ef_deep_buf_free(ef_deep_buf *b)
     free(b->bnd);
     free(b->ord);
     free(b->sv);
+    free(b->ft);
+    free(b->cut);
     const int stride = b->stride;
     memset(b, 0, sizeof *b);
     b->stride = stride;
@@ -312,6 +314,18 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
  * err, the models' error estimates summed. *linear: every component's
  * density is constant along the ray (a split of this interval is then
  * exact). */
+/* The segment [a, b) of the ray whose unit-distance form is r1 as a ray of
+ * its own: from the point at a, of length b - a (b may be INFINITY). */
+static ef_ray seg_ray(const ef_ray *r1, double a, double b)
+{
+    ef_ray seg = *r1;
+    for (int k = 0; k < 3; ++k)
+        seg.org[k] = r1->org[k] + r1->dir[k] * a;
+    seg.dist = b - a;
+    seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
+    return seg;
+}
+
 /* One component's optical depth per channel over [a, b) of the ray whose
  * unit-distance form is r1 (b may be INFINITY), into t; with ip, its error
  * estimate added to err. Depth-only models are defined from the camera, so
@@ -337,11 +351,7 @@ static void comp_tau(const ef_fog_component *c, const ef_ray *r1, double a, doub
         for (int k = 0; k < 3; ++k)
             t[k] = isinf(ta[k]) ? INFINITY : tb[k] - ta[k];
     } else {
-        ef_ray seg = *r1;
-        for (int k = 0; k < 3; ++k)
-            seg.org[k] = r1->org[k] + r1->dir[k] * a;
-        seg.dist = b - a;
-        seg.planar = isinf(b) ? INFINITY : (b - a) * r1->planar;
+        const ef_ray seg = seg_ray(r1, a, b);
         ef_fog_tau(c, &seg, t, ip);
     }
     for (int k = 0; err && k < 3; ++k)
@@ -450,11 +460,7 @@ static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, dou
         if (c->model == &ef_fog_exp)
             continue;
         if (c->model->dsigma_max) {
-            ef_ray seg = *r1;
-            for (int k = 0; k < 3; ++k)
-                seg.org[k] = r1->org[k] + r1->dir[k] * a;
-            seg.dist = h;
-            seg.planar = h * r1->planar;
+            const ef_ray seg = seg_ray(r1, a, b);
             sum += h * h / 8 * c->model->dsigma_max(c, &seg);
             continue;
         }
@@ -473,40 +479,42 @@ static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, dou
 }
 
 /* Where along r1 (unit-distance form), strictly inside (a, b), a
- * component's density jumps or kinks (its features of scale 0): into t,
- * at most cap, sorted; returns how many. */
-#define FEATURE_CAP 64
-static int feature_cuts(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double *t,
-                        int cap)
+ * component's density jumps or kinks (its features of scale 0): into
+ * fog->cut, sorted (every one of them: a layered profile may have thousands
+ * of knots, and a missed one would break the monotone promise); returns
+ * how many, or -1 when out of memory. */
+#define FUNCTIONAL_CAP 64
+static int feature_cuts(const ef_fog_scene *s, const ef_ray *r1, double a, double b,
+                        ef_deep_buf *fog)
 {
     int n = 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         if (!c->model->functionals || !c->model->features)
             continue;
-        ef_fog_functional fn[FEATURE_CAP];
-        ef_fog_feature ft[FEATURE_CAP];
-        const int nf = c->model->functionals(c, fn, FEATURE_CAP);
-        const int nt = c->model->features(c, ft, FEATURE_CAP);
-        for (int j = 0; j < nt && j < FEATURE_CAP && n < cap; ++j) {
-            if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf || ft[j].f >= FEATURE_CAP)
+        ef_fog_functional fn[FUNCTIONAL_CAP];
+        const int nf = c->model->functionals(c, fn, FUNCTIONAL_CAP);
+        const int nt = c->model->features(c, NULL, 0);
+        if (reserve(&fog->ft, &fog->ftcap, nt, sizeof(ef_fog_feature)) ||
+            reserve((void **) &fog->cut, &fog->ccap, n + nt, sizeof *fog->cut))
+            return -1;
+        ef_fog_feature *ft = fog->ft;
+        c->model->features(c, ft, nt);
+        for (int j = 0; j < nt; ++j) {
+            if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf || ft[j].f >= FUNCTIONAL_CAP)
                 continue;
             const ef_fog_functional *f = &fn[ft[j].f];
-            const double v0 = f->n[0] * r1->org[0] + f->n[1] * r1->org[1] + f->n[2] * r1->org[2] + f->d;
+            const double v0 =
+                f->n[0] * r1->org[0] + f->n[1] * r1->org[1] + f->n[2] * r1->org[2] + f->d;
             const double rate = f->n[0] * r1->dir[0] + f->n[1] * r1->dir[1] + f->n[2] * r1->dir[2];
             if (rate == 0)
                 continue;
             const double tc = (ft[j].value - v0) / rate;
             if (tc > a && tc < b)
-                t[n++] = tc;
+                fog->cut[n++] = tc;
         }
     }
-    for (int i = 1; i < n; ++i)   /* a few: insertion sort */
-        for (int j = i; j > 0 && t[j - 1] > t[j]; --j) {
-            const double x = t[j];
-            t[j] = t[j - 1];
-            t[j - 1] = x;
-        }
+    sort_nearly(fog->cut, n, sizeof *fog->cut, cmp_double);
     return n;
 }
 
@@ -575,11 +583,12 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray
 static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
                         double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
-    double cut[FEATURE_CAP];
-    const int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, cut, FEATURE_CAP) : 0;
+    const int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, fog) : 0;
+    if (n < 0)
+        return -1;
     double prev = a;
     for (int i = 0; i <= n; ++i) {
-        const double e = i < n ? cut[i] : b;
+        const double e = i < n ? fog->cut[i] : b;
         if (e > prev && fog_piece(L, F, r1, prev, e, Tf, fog, st))
             return -1;
         prev = e > prev ? e : prev;

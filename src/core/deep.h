@@ -47,6 +47,11 @@ typedef struct ef_deep_buf {
     int ocap;
     double *sv;
     int scap;
+    /* the fog pass's: a component's features, and where they cut an interval */
+    void *ft;
+    int ftcap;
+    double *cut;
+    int ccap;
 } ef_deep_buf;
 
 void ef_deep_buf_init(ef_deep_buf *b, int nch);

@@ -105,7 +105,8 @@ typedef struct ef_fog_model {
     void (*tau)(const ef_fog_component *c, const ef_ray *r, double tau[3]);
     /* For the reference integrator (NULL for models with no density of
      * position, such as OpenGL's linear and exp2). functionals() fills up to
-     * cap entries and returns how many there are; features() likewise. */
+     * cap entries and returns how many there are; features() likewise (with
+     * cap 0, out may be NULL: the count alone). */
     int (*functionals)(const ef_fog_component *c, ef_fog_functional *out, int cap);
     int (*features)(const ef_fog_component *c, ef_fog_feature *out, int cap);
     /* Density per channel at a point given by its functional values v
