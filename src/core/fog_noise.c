@@ -1046,6 +1046,242 @@ EF_MULTIVERSION static double octave_integral_env(rayc *R, int i, int n, double 
     return octave_walk(R, i, n, t0, t1, 1);
 }
 
+/* ---- the grid: end-corrected composite midpoint along an octave ---- */
+
+/* Octave noise at lattice point x and its derivative along d (d in lattice
+ * units per unit t): Perlin's formula differentiated term by term (each
+ * corner's gradient term is linear, the fades' derivative 30 t^2 (t-1)^2). */
+static double noise_dval(const double x[3], const double d[3], double *dn)
+{
+    int64_t C[3];
+    double f[3], s[3], ds[3];
+    for (int a = 0; a < 3; ++a) {
+        /* x is near the ray's start or a segment's: an int64 holds its
+         * floor */
+        const double fl = floor(x[a]);
+        f[a] = x[a] - fl;
+        C[a] = (int64_t) fl & 255;
+        s[a] = ef_noise_fade_(f[a]);
+        ds[a] = 30 * f[a] * f[a] * (f[a] - 1) * (f[a] - 1) * d[a];
+    }
+    ef_noise_cell nc;
+    ef_noise_cell_at(C[0], C[1], C[2], &nc);
+    double g[8], dg[8];
+    for (int k = 0; k < 8; ++k) {
+        const double *G = grad_vec[nc.h[k] & 15];
+        g[k] = G[0] * (f[0] - (k & 1)) + G[1] * (f[1] - ((k >> 1) & 1)) + G[2] * (f[2] - (k >> 2));
+        dg[k] = G[0] * d[0] + G[1] * d[1] + G[2] * d[2];
+    }
+    /* lerp(t, a, b) = a + t (b - a), differentiated in each argument */
+    double v4[4], dv4[4];
+    for (int k = 0; k < 4; ++k) {
+        v4[k] = g[2 * k] + s[0] * (g[2 * k + 1] - g[2 * k]);
+        dv4[k] = dg[2 * k] + ds[0] * (g[2 * k + 1] - g[2 * k]) + s[0] * (dg[2 * k + 1] - dg[2 * k]);
+    }
+    double v2[2], dv2[2];
+    for (int k = 0; k < 2; ++k) {
+        v2[k] = v4[2 * k] + s[1] * (v4[2 * k + 1] - v4[2 * k]);
+        dv2[k] = dv4[2 * k] + ds[1] * (v4[2 * k + 1] - v4[2 * k]) +
+                 s[1] * (dv4[2 * k + 1] - dv4[2 * k]);
+    }
+    *dn = dv2[0] + ds[2] * (v2[1] - v2[0]) + s[2] * (dv2[1] - dv2[0]);
+    return v2[0] + s[2] * (v2[1] - v2[0]);
+}
+
+/* Nodes per lattice unit the grid may take, and the root mean square error
+ * of its integral of one octave (amplitude 1) per square root of the
+ * lattice length: bench/grid_calibrate.c, 2,000 random lines per direction
+ * class (random, near an axis, near a diagonal) and length (2 to 128
+ * lattice units) against every cell integrated exactly; the largest rms of
+ * those, plus 10 %. Its 99.9th percentile there was 3.1 to 4.6 rms. */
+#define GRID_N 7
+static const double grid_nu[GRID_N] = { 1, 1.5, 2, 3, 4, 6, 8 };
+static const double grid_rms[GRID_N] = { 0.077, 0.023, 0.0036, 7.6e-4, 2.4e-4, 4.9e-5, 1.6e-5 };
+/* The estimate the planner and the error output use: rms times this. */
+#define GRID_SIGMAS 4.5
+#define GRID_BATCH 64
+
+/* One batch of grid nodes: fractions, cells and the corners' hashes. */
+typedef struct grid_batch {
+    float f[3][GRID_BATCH];          /* fractions in the cell */
+    int ic[3][GRID_BATCH];
+    unsigned g[GRID_BATCH];          /* the corners' gradient numbers, packed */
+    float v[GRID_BATCH];
+} grid_batch;
+
+/* The corners' gradient numbers (hash & 15) of m nodes, packed 4 bits
+ * per corner (corner k at bits 4k). Scalar on purpose: GCC turns the
+ * table reads into vector gathers, slower here than plain loads. */
+#if defined(__GNUC__) && !defined(__clang__)
+__attribute__((optimize("no-tree-vectorize")))
+#endif
+static void grid_hash(grid_batch *b, int m)
+{
+    const unsigned char *p = ef_noise_perm;
+    for (int c = 0; c < m; ++c) {
+        const int x = b->ic[0][c], y = b->ic[1][c], z = b->ic[2][c];
+        const int A = p[x] + y, AA = p[A & 255] + z, AB = p[(A + 1) & 255] + z;
+        const int B = p[(x + 1) & 255] + y, BA = p[B & 255] + z, BB = p[(B + 1) & 255] + z;
+        b->g[c] = (p[AA & 255] & 15u) | (p[BA & 255] & 15u) << 4 | (p[AB & 255] & 15u) << 8 |
+                  (p[BB & 255] & 15u) << 12 | (p[(AA + 1) & 255] & 15u) << 16 |
+                  (p[(BA + 1) & 255] & 15u) << 20 | (p[(AB + 1) & 255] & 15u) << 24 |
+                  (unsigned) (p[(BB + 1) & 255] & 15u) << 28;
+    }
+}
+
+/* The end term's noise and derivative at one end of an octave's segment,
+ * kept from the previous segment (which ended where this one starts). */
+typedef struct grid_end {
+    double t, n, dn, e;              /* e: the envelope there */
+    int valid;
+} grid_end;
+
+/* env * d/dt noise_i at t, e being the envelope e^-(kh0 + khs t) there
+ * (used when env). */
+static double grid_fprime(const rayc *R, int i, double t, int env, double e, grid_end *cache)
+{
+    double n, dn;
+    if (cache && cache->valid && cache->t == t) {
+        n = cache->n;
+        dn = cache->dn;
+    } else {
+        double x[3], d[3];
+        for (int a = 0; a < 3; ++a) {
+            const lin *u = &R->u[3 * i + a];
+            x[a] = u->bd + t * u->dd;
+            d[a] = u->dd;
+        }
+        n = noise_dval(x, d, &dn);
+        if (cache)
+            *cache = (grid_end) { t, n, dn, e, 1 };
+    }
+    return env ? e * (dn - R->khs * n) : dn;
+}
+
+/* integral of env * noise_i over [t0, t1] by the composite midpoint rule
+ * with ceil(nu * lattice length) nodes and the Euler-Maclaurin end term
+ * h^2/24 (f'(t1) - f'(t0)): no lattice walk, each node on its own (the
+ * error, calibrated by bench/grid_calibrate.c on this code, is an
+ * estimate). end: the octave's last end term (the previous segment's t1,
+ * reused at t0; t1's replaces it), or NULL. */
+EF_INLINE double grid_walk(rayc *R, int i, double nu, double t0, double t1, int env,
+                           grid_end *end)
+{
+    const lin *u = &R->u[3 * i];
+    double d[3], b[3], sp = 0;
+    for (int a = 0; a < 3; ++a) {
+        d[a] = u[a].dd;
+        sp += d[a] * d[a];
+        /* the start reduced modulo the period, so every node's cell index
+         * fits an int */
+        const double v = u[a].bd + t0 * d[a];
+        b[a] = v - 256 * floor(v * (1.0 / 256));
+    }
+    const double L = t1 - t0;
+    const long n = (long) ceil(sqrt(sp) * L * nu) > 0 ? (long) ceil(sqrt(sp) * L * nu) : 1;
+    const double h = L / (double) n;
+    const double khs = R->khs;
+    /* the envelope at t0 (kept from the previous segment where it ended
+     * here), at t1, and at the nodes: e0 rh r^j, rh = e^-(khs h / 2) */
+    double e0 = 1, e1 = 1, rh = 1;
+    /* where the envelope spans more than e^500 over the segment, products
+     * of its values could meet 0 times inf: each node's own then */
+    const int direct = env && !(fabs(khs * L) < 500);
+    if (env) {
+        e0 = end && end->valid && end->t == t0 ? end->e : ef_exp_neg(R->kh0 + khs * t0);
+        e1 = ef_exp_neg(R->kh0 + khs * t1);
+        rh = ef_exp_neg(khs * h / 2);
+    }
+    ksum acc = { 0, 0 };
+    grid_batch gb;
+    double pw[GRID_BATCH], wv[GRID_BATCH], eb = e0 * rh;
+    for (long j0 = 0; j0 < n; j0 += GRID_BATCH) {
+        const int m = n - j0 < GRID_BATCH ? (int) (n - j0) : GRID_BATCH;
+        const double o0 = ((double) j0 + 0.5) * h;
+        /* plain loops over the batch's arrays, which GCC vectorises */
+        for (int c = 0; c < m; ++c) {
+            const double o = o0 + c * h;
+            const double x = b[0] + o * d[0], y = b[1] + o * d[1], z = b[2] + o * d[2];
+            const double cx = floor(x), cy = floor(y), cz = floor(z);
+            gb.f[0][c] = (float) (x - cx);
+            gb.f[1][c] = (float) (y - cy);
+            gb.f[2][c] = (float) (z - cz);
+            gb.ic[0][c] = (int) cx & 255;
+            gb.ic[1][c] = (int) cy & 255;
+            gb.ic[2][c] = (int) cz & 255;
+        }
+        grid_hash(&gb, m);
+        /* in single precision, 8 nodes to a vector (IEEE operations in a
+         * fixed order: the same bits with or without the vector unit) */
+        for (int c = 0; c < m; ++c) {
+            const float fx = gb.f[0][c], fy = gb.f[1][c], fz = gb.f[2][c];
+            float g[8];
+            for (int k = 0; k < 8; ++k) {
+                const unsigned sh = 2 * ((gb.g[c] >> 4 * k) & 15);
+                const float gx = (float) (int) ((GRAD_X1 >> sh) & 3) - 1,
+                            gy = (float) (int) ((GRAD_Y1 >> sh) & 3) - 1,
+                            gz = (float) (int) ((GRAD_Z1 >> sh) & 3) - 1;
+                g[k] = gx * (fx - (float) (k & 1)) + gy * (fy - (float) ((k >> 1) & 1)) +
+                       gz * (fz - (float) (k >> 2));
+            }
+            const float uu = fx * fx * fx * (fx * (fx * 6 - 15) + 10),
+                        vv = fy * fy * fy * (fy * (fy * 6 - 15) + 10),
+                        ww = fz * fz * fz * (fz * (fz * 6 - 15) + 10);
+            const float a0 = g[0] + uu * (g[1] - g[0]), a1 = g[2] + uu * (g[3] - g[2]),
+                        a2 = g[4] + uu * (g[5] - g[4]), a3 = g[6] + uu * (g[7] - g[6]);
+            const float x0 = a0 + vv * (a1 - a0), x1 = a2 + vv * (a3 - a2);
+            gb.v[c] = x0 + ww * (x1 - x0);
+        }
+        double sum = 0;
+        if (env) {
+            /* r^c in doublings (each within c ulps: far below any
+             * tolerance taken here) */
+            if (j0 == 0) {
+                pw[0] = 1;
+                double rr = rh * rh;
+                for (int w = 1; w < m; w *= 2) {
+                    for (int c = 0; c < w && w + c < GRID_BATCH; ++c)
+                        pw[w + c] = pw[c] * rr;
+                    rr *= rr;
+                }
+            }
+            if (direct) {
+                for (int c = 0; c < m; ++c)
+                    wv[c] = (double) gb.v[c] * ef_exp_neg(R->kh0 + khs * (t0 + o0 + c * h));
+                for (int c = 0; c < m; ++c)
+                    sum += wv[c];
+            } else {
+                for (int c = 0; c < m; ++c)
+                    wv[c] = (double) gb.v[c] * pw[c];
+                for (int c = 0; c < m; ++c)
+                    sum += wv[c];
+                sum *= eb;
+                eb *= pw[GRID_BATCH - 1] * (rh * rh);
+            }
+        } else {
+            for (int c = 0; c < m; ++c)
+                sum += gb.v[c];
+        }
+        kadd(&acc, sum);
+    }
+    R->evals += (double) n;
+    const double fa = grid_fprime(R, i, t0, env, e0, end);
+    const double fb = grid_fprime(R, i, t1, env, e1, end);
+    return h * kval(&acc) + h * h / 24 * (fb - fa);
+}
+
+EF_MULTIVERSION static double octave_grid_env(rayc *R, int i, double nu, double t0, double t1,
+                                              grid_end *end)
+{
+    return grid_walk(R, i, nu, t0, t1, 1, end);
+}
+
+EF_MULTIVERSION static double octave_grid_flat(rayc *R, int i, double nu, double t0, double t1,
+                                               grid_end *end)
+{
+    return grid_walk(R, i, nu, t0, t1, 0, end);
+}
+
 /* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
  * n == 0 the certified pair (9 and 13 nodes, bisected to tol relative to
  * the cell's envelope bound). *err collects the certified pair's residue.
@@ -1249,23 +1485,199 @@ static inline double quad_est_s(double A, double L, double S, int q)
 }
 
 typedef struct plan {
-    int q[EF_FBM_MAX_OCTAVES];       /* 0: dropped */
+    int q[EF_FBM_MAX_OCTAVES];       /* 0: dropped; else kept (Gauss nodes per cell if walked) */
+    double nu[EF_FBM_MAX_OCTAVES];   /* > 0: integrated on the grid, nodes per lattice unit */
     double est;                      /* the error estimate, in tau of the densest channel */
     int dropped;
 } plan;
 
-/* Chooses nodes per octave for tau within tol over a stretch of length L
- * whose envelope is at most envmax. Octaves are dropped from the finest
- * while three standard deviations of their line integrals (or their hard
- * bound, if smaller) sum to at most tol/4; then nodes are added where they
- * buy the most error per evaluation until the quadrature estimates
- * (quad_est_s: 4 sigma) sum to tol/2. */
+/* The planner's cost model, in ns on the machine of bench/noise.md: a
+ * walked cell (the 3D DDA, its hashes and corner terms) and a Gauss node
+ * in it; a grid node (its hashes and value); a grid segment's end term. */
+#define COST_CELL 20.0
+#define COST_NODE 8.0
+#define COST_GRID 12.0
+#define COST_GRID_END 40.0
+#define PLAN_OPTS (9 + GRID_N)
+
+static void plan_set(plan *P, int i, int kind)
+{
+    P->q[i] = kind > 0 ? kind : 1;
+    P->nu[i] = kind > 0 ? 0 : grid_nu[-kind - 1];
+}
+
+/* Evaluations octave i's plan costs over a stretch of length L. */
+static double plan_evals(const rayc *R, const plan *P, int i, double L)
+{
+    const lin *u = &R->u[3 * i];
+    const double dx = (double) u[0].d, dy = (double) u[1].d, dz = (double) u[2].d;
+    if (!P->q[i])
+        return 0;
+    if (P->nu[i] > 0)
+        return ceil(sqrt(dx * dx + dy * dy + dz * dz) * L * P->nu[i]);
+    return P->q[i] * ((fabs(dx) + fabs(dy) + fabs(dz)) * L + 1);
+}
+
+/* The ways an octave can be integrated, per unit: integrating octave i
+ * over a stretch of length L one way costs cost[k] sp_i L ns and errs by
+ * an estimated err[k] A_i sqrt(L / sp_i) (A_i its amplitude in tau, sp_i
+ * its lattice units per unit t). The walk's cells are kappa sp_i L
+ * (kappa = the ray's |d|_1 / |d|_2, the same for every octave), with
+ * 4 e_rms[q] sqrt(2 L hbar), hbar = 1 / (kappa sp_i); the grid's nodes
+ * nu sp_i L, GRID_SIGMAS grid_rms sqrt(sp_i L) / sp_i. So one ladder
+ * serves every octave and segment of a ray: the lower convex hull of
+ * (cost, err), the cheapest first, each further step buying error at a
+ * worse rate. kind > 0: walk with kind Gauss nodes per cell (9: exact);
+ * kind < 0: the grid at grid_nu[-kind - 1]. */
+typedef struct ladder {
+    int n, kind[PLAN_OPTS];
+    double cost[PLAN_OPTS], err[PLAN_OPTS];
+} ladder;
+
+static void ladder_unit(double kappa, ladder *ld)
+{
+    int kind[PLAN_OPTS];
+    double cost[PLAN_OPTS], err[PLAN_OPTS];
+    int m = 0, a = 1, g = 0;
+    /* merge the two ladders (each rising in cost) by cost */
+    while (a <= 9 || g < GRID_N) {
+        const double ca = a <= 9 ? kappa * (COST_CELL + a * COST_NODE) : INFINITY;
+        const double cg = g < GRID_N ? grid_nu[g] * COST_GRID : INFINITY;
+        if (ca <= cg) {
+            kind[m] = a;
+            cost[m] = ca;
+            err[m++] = 4 * e_rms[a < 9 ? a : 0] * sqrt(2 / kappa) * (a < 9);
+            a++;
+        } else {
+            kind[m] = -(g + 1);
+            cost[m] = cg;
+            err[m++] = GRID_SIGMAS * grid_rms[g];
+            g++;
+        }
+    }
+    ld->n = 0;
+    for (int j = 0; j < m; ++j) {
+        if (ld->n > 0 && !(err[j] < ld->err[ld->n - 1]))
+            continue;   /* costs more and errs no less */
+        while (ld->n >= 2) {
+            const int p = ld->n - 1, q = ld->n - 2;
+            /* drop p when going straight from q to j buys error at a
+             * better rate than through p */
+            if ((ld->err[q] - ld->err[p]) * (cost[j] - ld->cost[q]) <=
+                (ld->err[q] - err[j]) * (ld->cost[p] - ld->cost[q]))
+                ld->n--;
+            else
+                break;
+        }
+        ld->kind[ld->n] = kind[j];
+        ld->cost[ld->n] = cost[j];
+        ld->err[ld->n++] = err[j];
+    }
+}
+
+/* The per-ray half of adaptive_linear's planner. */
+typedef struct seg_planner {
+    ladder ld;
+    double sp[EF_FBM_MAX_OCTAVES];     /* octave i's lattice units per unit t */
+    double isp[EF_FBM_MAX_OCTAVES];    /* 1 / sqrt(sp_i) */
+    double lrms[EF_FBM_MAX_OCTAVES];   /* 3 LINE_RMS sqrt(lambda_i): the drop rule */
+} seg_planner;
+
+/* Fills SP for ray R; 0 where the grid cannot serve it (no direction). */
+static int seg_planner_init(const rayc *R, seg_planner *SP)
+{
+    const nstate *s = R->s;
+    double kappa = 1;
+    SP->ld.n = 0;
+    for (int i = 0; i < s->fbm.octaves; ++i) {
+        const lin *u = &R->u[3 * i];
+        const double dx = u[0].dd, dy = u[1].dd, dz = u[2].dd;
+        SP->sp[i] = sqrt(dx * dx + dy * dy + dz * dz);
+        if (!(SP->sp[i] > 0) || !isfinite(SP->sp[i]))
+            return 0;
+        SP->isp[i] = 1 / sqrt(SP->sp[i]);
+        SP->lrms[i] = 3 * LINE_RMS * sqrt(s->scale / s->fbm.freq[i]);
+        if (i == 0)
+            kappa = (fabs(dx) + fabs(dy) + fabs(dz)) / SP->sp[0];
+    }
+    ladder_unit(kappa < 1 ? 1 : kappa, &SP->ld);
+    return 1;
+}
+
+/* plan_octaves for one segment of adaptive_linear, from the ray's ladder:
+ * the same drop rule, then from each kept octave's cheapest way the step
+ * that buys the most error per ns until the estimates sum to tol/2. A
+ * stretch under 2 lattice units counts as 2 (where the grid's calibration
+ * stops). */
+static void plan_segment(const rayc *R, const seg_planner *SP, double L, double envmax,
+                         double tol, plan *P)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    const double A = s->rho_max * fabs(s->contrast) * envmax, sqL = sqrt(L);
+    double drop = 0, quad = 0;
+    int kept = N;
+    P->dropped = 0;
+    for (int i = N - 1; i >= 1; --i) {
+        const double D = A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * L, SP->lrms[i] * sqL);
+        if (drop + D > tol / 4)
+            break;
+        drop += D;
+        kept = i;
+        P->dropped++;
+    }
+    const ladder *ld = &SP->ld;
+    double sc[EF_FBM_MAX_OCTAVES], cs[EF_FBM_MAX_OCTAVES];
+    int pos[EF_FBM_MAX_OCTAVES];
+    for (int i = 0; i < N; ++i) {
+        P->q[i] = 0;
+        P->nu[i] = 0;
+        if (i >= kept)
+            continue;
+        const double Le = L * SP->sp[i] < 2 ? 2 / SP->sp[i] : L;
+        sc[i] = A * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
+        cs[i] = SP->sp[i] * L;
+        pos[i] = 0;
+        plan_set(P, i, ld->kind[0]);
+        quad += sc[i] * ld->err[0];
+    }
+    while (quad > tol / 2) {
+        int best = -1;
+        double bg = 0;
+        for (int i = 0; i < kept; ++i) {
+            const int p = pos[i];
+            if (p + 1 >= ld->n)
+                continue;
+            const double gn = sc[i] * (ld->err[p] - ld->err[p + 1]) /
+                              (cs[i] * (ld->cost[p + 1] - ld->cost[p]));
+            if (best < 0 || gn > bg) {
+                best = i;
+                bg = gn;
+            }
+        }
+        if (best < 0)
+            break;
+        quad -= sc[best] * ld->err[pos[best]];
+        pos[best]++;
+        quad += sc[best] * ld->err[pos[best]];
+        plan_set(P, best, ld->kind[pos[best]]);
+    }
+    P->est = drop + (quad > 0 ? quad : 0);
+}
+
+/* Chooses how each octave is integrated for tau within tol over a stretch
+ * of length L whose envelope is at most envmax. Octaves are dropped from
+ * the finest while three standard deviations of their line integrals (or
+ * their hard bound, if smaller) sum to at most tol/4; then, from each
+ * kept octave's cheapest way, the step that buys the most error per ns
+ * is taken until the estimates (quad_est_s: 4 sigma of the walk's cells;
+ * the walk's cells) sum to tol/2. */
 static void plan_octaves(const rayc *R, double L, double envmax, double tol, plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves;
     const double A = s->rho_max * fabs(s->contrast) * envmax;
-    double drop = 0, quad = 0, ncell[EF_FBM_MAX_OCTAVES];
+    double drop = 0, quad = 0;
     int kept = N;
     P->dropped = 0;
     for (int i = N - 1; i >= 1; --i) {
@@ -1276,34 +1688,48 @@ static void plan_octaves(const rayc *R, double L, double envmax, double tol, pla
         kept = i;
         P->dropped++;
     }
-    /* S = sqrt(2 L hbar) per octave, and each octave's gain per
-     * evaluation of one more node, kept current as nodes are added. */
-    double S[EF_FBM_MAX_OCTAVES], Ai[EF_FBM_MAX_OCTAVES], gain[EF_FBM_MAX_OCTAVES];
+    ladder ld[EF_FBM_MAX_OCTAVES];
+    int pos[EF_FBM_MAX_OCTAVES];
     for (int i = 0; i < N; ++i) {
-        P->q[i] = i < kept ? 1 : 0;
+        P->q[i] = 0;
+        P->nu[i] = 0;
         if (i >= kept)
             continue;
+        const double Ai = A * s->fbm.weight[i];
+        /* the walk's ladder, q = 1..9 (9: exact), step by step */
         const lin *u = &R->u[3 * i];
-        ncell[i] = (double) ((fabsl(u[0].d) + fabsl(u[1].d) + fabsl(u[2].d)) * L) + 1;
-        S[i] = sqrt(2 * L * (L / ncell[i]));
-        Ai[i] = A * s->fbm.weight[i];
-        quad += quad_est_s(Ai[i], L, S[i], 1);
-        gain[i] = (quad_est_s(Ai[i], L, S[i], 1) - quad_est_s(Ai[i], L, S[i], 2)) / ncell[i];
+        const double ncell = (double) ((fabsl(u[0].d) + fabsl(u[1].d) + fabsl(u[2].d)) * L) + 1;
+        const double S = sqrt(2 * L * (L / ncell));
+        ld[i].n = 9;
+        for (int q = 1; q <= 9; ++q) {
+            ld[i].kind[q - 1] = q;
+            ld[i].cost[q - 1] = ncell * q;
+            ld[i].err[q - 1] = quad_est_s(Ai, L, S, q);
+        }
+        pos[i] = 0;
+        plan_set(P, i, ld[i].kind[0]);
+        quad += ld[i].err[0];
     }
     while (quad > tol / 2) {
         int best = -1;
-        for (int i = 0; i < kept; ++i)
-            if (P->q[i] < 9 && (best < 0 || gain[i] > gain[best]))
+        double bg = 0;
+        for (int i = 0; i < kept; ++i) {
+            const ladder *l = &ld[i];
+            if (pos[i] + 1 >= l->n)
+                continue;
+            const double gn = (l->err[pos[i]] - l->err[pos[i] + 1]) /
+                              (l->cost[pos[i] + 1] - l->cost[pos[i]]);
+            if (best < 0 || gn > bg) {
                 best = i;
+                bg = gn;
+            }
+        }
         if (best < 0)
             break;
-        const int q = P->q[best];
-        quad -= quad_est_s(Ai[best], L, S[best], q);
-        P->q[best] = q + 1;
-        quad += quad_est_s(Ai[best], L, S[best], q + 1);
-        if (q + 1 < 9)
-            gain[best] = (quad_est_s(Ai[best], L, S[best], q + 1) -
-                          quad_est_s(Ai[best], L, S[best], q + 2)) / ncell[best];
+        quad -= ld[best].err[pos[best]];
+        pos[best]++;
+        quad += ld[best].err[pos[best]];
+        plan_set(P, best, ld[best].kind[pos[best]]);
     }
     P->est = drop + (quad > 0 ? quad : 0);
 }
@@ -2489,6 +2915,11 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     if (Lmax < Lwalk / MAX_SEGS)
         Lmax = Lwalk / MAX_SEGS;
     ksum noise = { 0, 0 };
+    grid_end ends[EF_FBM_MAX_OCTAVES];
+    for (int i = 0; i < N; ++i)
+        ends[i].valid = 0;
+    seg_planner SP;
+    const int grid = seg_planner_init(R, &SP);
     /* E2: the sum of the segments' squared estimates (independent errors
      * of segments that share no cell add in variance); var: what is left
      * of the budget's square, (3/4 eps)^2 (ttol/4 is the stop's). */
@@ -2532,7 +2963,10 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double L = (double) (tb - t);
         const double envmax = fmax(env_d(R, (double) t), env_d(R, (double) tb));
         plan P;
-        plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+        if (grid)
+            plan_segment(R, &SP, L, envmax, s->rho_max * quota / W, &P);
+        else
+            plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
         /* An octave over the cell budget is not walked: its estimate here
          * is the drop rule's, segment by segment like any other. */
         for (int i = 0; i < N; ++i)
@@ -2545,10 +2979,10 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         /* The work bound: the finest kept octaves go first. */
         double need = 0;
         for (int i = 0; i < N; ++i)
-            need += P.q[i] * (cross[i] * L + 1);
+            need += plan_evals(R, &P, i, L);
         for (int i = N - 1; i > 0 && R->evals + need > EVAL_BUDGET; --i)
             if (P.q[i]) {
-                need -= P.q[i] * (cross[i] * L + 1);
+                need -= plan_evals(R, &P, i, L);
                 P.q[i] = 0;
                 P.est += s->rho_max * fabs(s->contrast) * envmax * s->fbm.weight[i] *
                          line_est(s, i, L, 3);
@@ -2560,8 +2994,13 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         for (int i = 0; i < N; ++i) {
             if (!P.q[i])
                 continue;
-            const double v = s->k > 0 ? octave_integral_env(R, i, P.q[i], (double) t, (double) tb)
-                                      : octave_integral_fast(R, i, P.q[i], (double) t, (double) tb);
+            double v;
+            if (P.nu[i] > 0)
+                v = s->k > 0 ? octave_grid_env(R, i, P.nu[i], (double) t, (double) tb, &ends[i])
+                             : octave_grid_flat(R, i, P.nu[i], (double) t, (double) tb, &ends[i]);
+            else
+                v = s->k > 0 ? octave_integral_env(R, i, P.q[i], (double) t, (double) tb)
+                             : octave_integral_fast(R, i, P.q[i], (double) t, (double) tb);
             kadd(&noise, s->fbm.weight[i] * v);
         }
         const double used = P.est / s->rho_max;
@@ -2577,10 +3016,15 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     if (stop) {
         /* True T_k lies in [0, T_up] with T_up = e^-(rho_k ulo): the
          * estimate (the mean fog to the end) is within it, and the error
-         * output reaches from it to T_up. Past 600 in tau above ulo, the
-         * estimate is held there: still within, and T expm1(err) stays
-         * finite in double (T would underflow, expm1 overflow). */
+         * output reaches from it to T_up. The estimate is at most T_up / 2
+         * in every channel (at least ln 2 above ulo in tau): the error
+         * output, at least T itself, then spans [0, T_up] and no more.
+         * Past 600 in tau above ulo, the estimate is held there: still
+         * within, and T expm1(err) stays finite in double (T would
+         * underflow, expm1 overflow). */
         const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
+        if (rmin * (unit - ulo) < LN2)
+            unit = ulo + LN2 / rmin;
         if (s->rho_max * (unit - ulo) > 600)
             unit = ulo + 600 / s->rho_max;
         for (int k = 0; k < 3; ++k)
@@ -2674,7 +3118,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         /* Chunk by chunk when the fog may turn opaque on the way (its upper
          * bound passes OPAQUE_TAU): past tau >= OPAQUE_TAU, computed, the
          * rest cannot show. */
-        plan P = { { 0 }, 0, 0 };
+        plan P = { { 0 }, { 0 }, 0, 0 };
         if (linear && s->method == M_ADAPTIVE) {
             plan_octaves(&R, L, envmax, tol, &P);
             info->dropped = P.dropped;
