@@ -78,6 +78,10 @@ enum { M_ADAPTIVE = 0, M_EXACT, M_STEPS, M_PREINT };
 #define DEFAULT_TOL 0x1p-12
 #define DEFAULT_TTOL 0x1p-12
 #define DEFAULT_STEPS 64
+/* RMS of integral(noise) over a straight stretch of l lattice units, per
+ * sqrt(l): 0.235-0.245 measured by the same program (noise-anchors.md has
+ * 0.23). */
+#define LINE_RMS 0.25
 #define GL_MAX 16
 #define TAB 257          /* prefix entries per octave over one period of 256 cells */
 
@@ -91,6 +95,7 @@ typedef struct nstate {
     double ttol;                     /* adaptive: |dT| allowed per channel (0: tol on tau) */
     double offset[3], velocity[3], bmin[3], bmax[3], up[3];
     double bound;                    /* the shape's bound: (1 + |c| noise bound)^m */
+    double line_rms[EF_FBM_MAX_OCTAVES];   /* LINE_RMS sqrt(lambda_i) (adaptive) */
     double fixed[3][EF_FBM_MAX_OCTAVES][2];   /* separable: the two constant noise coordinates */
     ef_fbm fbm;
     double glx[GL_MAX + 1][GL_MAX], glw[GL_MAX + 1][GL_MAX];   /* Gauss-Legendre on [-1, 1] */
@@ -333,6 +338,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     s.clamp = fabs(s.contrast) * EF_NOISE_BOUND > 1;
     s.bound = pow(1 + fabs(s.contrast) * EF_NOISE_BOUND, sep ? s.naxes : 1);
     s.scale = c->p[P_SCALE];
+    for (int i = 0; i < s.fbm.octaves; ++i)
+        s.line_rms[i] = LINE_RMS * sqrt(s.scale / s.fbm.freq[i]);
     s.seed = c->p[P_SEED];
     s.k = ef_fog_per_unit(ctx, c->p[P_FALLOFF]);
     s.base = c->p[P_BASE];
@@ -1499,10 +1506,6 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
 static const double e_max[9] = { 0, 0.66, 0.30, 0.087, 0.0173, 2.4e-3, 2.45e-4, 1.56e-5, 5.7e-7 };
 static const double e_rms[9] = { 0, 0.149, 0.034, 6.0e-3, 7.2e-4, 6.8e-5, 5.0e-6, 2.3e-7, 6.4e-9 };
 
-/* RMS of integral(noise) over a straight stretch of l lattice units, per
- * sqrt(l): 0.235-0.245 measured by the same program (noise-anchors.md has
- * 0.23). */
-#define LINE_RMS 0.25
 
 /* What octave i can add to the integral of the noise (before its weight)
  * over a stretch of length L: the hard bound, or `sigmas` standard
@@ -1561,7 +1564,7 @@ static void plan_set(plan *P, int i, int kind)
 static double plan_evals(const rayc *R, const plan *P, int i, double L)
 {
     const lin *u = &R->u[3 * i];
-    const double dx = (double) u[0].d, dy = (double) u[1].d, dz = (double) u[2].d;
+    const double dx = u[0].dd, dy = u[1].dd, dz = u[2].dd;
     if (!P->q[i])
         return 0;
     if (P->nu[i] > 0)
@@ -1583,6 +1586,7 @@ static double plan_evals(const rayc *R, const plan *P, int i, double L)
 typedef struct ladder {
     int n, kind[PLAN_OPTS];
     double cost[PLAN_OPTS], err[PLAN_OPTS];
+    double slope[PLAN_OPTS];         /* (err[k] - err[k+1]) / (cost[k+1] - cost[k]) */
 } ladder;
 
 static void ladder_unit(double kappa, ladder *ld)
@@ -1624,6 +1628,8 @@ static void ladder_unit(double kappa, ladder *ld)
         ld->cost[ld->n] = cost[j];
         ld->err[ld->n++] = err[j];
     }
+    for (int k = 0; k + 1 < ld->n; ++k)
+        ld->slope[k] = (ld->err[k] - ld->err[k + 1]) / (ld->cost[k + 1] - ld->cost[k]);
 }
 
 /* The per-ray half of adaptive_linear's planner. */
@@ -1647,7 +1653,7 @@ static int seg_planner_init(const rayc *R, seg_planner *SP)
         if (!(SP->sp[i] > 0) || !isfinite(SP->sp[i]))
             return 0;
         SP->isp[i] = 1 / sqrt(SP->sp[i]);
-        SP->lrms[i] = 3 * LINE_RMS * sqrt(s->scale / s->fbm.freq[i]);
+        SP->lrms[i] = 3 * s->line_rms[i];
         if (i == 0)
             kappa = (fabs(dx) + fabs(dy) + fabs(dz)) / SP->sp[0];
     }
@@ -1678,7 +1684,7 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
         P->dropped++;
     }
     const ladder *ld = &SP->ld;
-    double sc[EF_FBM_MAX_OCTAVES], cs[EF_FBM_MAX_OCTAVES];
+    double sc[EF_FBM_MAX_OCTAVES], rate[EF_FBM_MAX_OCTAVES];
     int pos[EF_FBM_MAX_OCTAVES];
     for (int i = 0; i < N; ++i) {
         P->q[i] = 0;
@@ -1687,7 +1693,7 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
             continue;
         const double Le = L * SP->sp[i] < 2 ? 2 / SP->sp[i] : L;
         sc[i] = A * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
-        cs[i] = SP->sp[i] * L;
+        rate[i] = sc[i] / (SP->sp[i] * L);   /* error per ns, per unit slope */
         pos[i] = 0;
         plan_set(P, i, ld->kind[0]);
         quad += sc[i] * ld->err[0];
@@ -1699,8 +1705,7 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
             const int p = pos[i];
             if (p + 1 >= ld->n)
                 continue;
-            const double gn = sc[i] * (ld->err[p] - ld->err[p + 1]) /
-                              (cs[i] * (ld->cost[p + 1] - ld->cost[p]));
+            const double gn = rate[i] * ld->slope[p];
             if (best < 0 || gn > bg) {
                 best = i;
                 bg = gn;
@@ -2892,10 +2897,10 @@ static double noise_sigma4(const rayc *R, double t0, double t1, double m)
     const nstate *s = R->s;
     const double emax = fmax(env_d(R, t0), env_d(R, t1));
     const double i2 = decay_int(emax * emax, s->k > 0 ? 2 * fabs(R->khs) : 0, t1 - t0);
+    const double si2 = sqrt(i2);
     double r = 0;
     for (int i = 0; i < s->fbm.octaves; ++i)
-        r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * m,
-                                     4 * LINE_RMS * sqrt(s->scale / s->fbm.freq[i] * i2));
+        r += s->fbm.weight[i] * fmin(EF_NOISE_BOUND * m, 4 * s->line_rms[i] * si2);
     return r;
 }
 
