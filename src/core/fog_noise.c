@@ -1340,6 +1340,15 @@ EF_MULTIVERSION static double octave_grid_flat(rayc *R, int i, double nu, double
     return grid_walk(R, i, nu, t0, t1, 0, end);
 }
 
+/* The grid over [t0, t1] given in long double (the general path's
+ * chunks), with or without the envelope. */
+static double octave_grid_any(rayc *R, int i, double nu, long double t0, long double t1,
+                              grid_end *end)
+{
+    return R->s->k > 0 ? octave_grid_env(R, i, nu, (double) t0, (double) t1, end)
+                       : octave_grid_flat(R, i, nu, (double) t0, (double) t1, end);
+}
+
 /* integral of env * noise_i over [t0, t1]: n Gauss nodes per cell, or with
  * n == 0 the certified pair (9 and 13 nodes, bisected to tol relative to
  * the cell's envelope bound). *err collects the certified pair's residue.
@@ -3175,9 +3184,19 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
          * bound passes OPAQUE_TAU): past tau >= OPAQUE_TAU, computed, the
          * rest cannot show. */
         plan P = { { 0 }, { 0 }, 0, 0 };
+        seg_planner SP;
+        grid_end ends[EF_FBM_MAX_OCTAVES];
         if (linear && s->method == M_ADAPTIVE) {
-            plan_octaves(&R, L, envmax, tol, &P);
+            /* the grid where its node indices stay small (as in
+             * adaptive_linear; the walk alone otherwise) */
+            if (isfinite(R.kh0) && isfinite(R.khs) && seg_planner_init(&R, &SP) &&
+                SP.sp[s->fbm.octaves - 1] * L < 0x1p24)
+                plan_segment(&R, &SP, L, envmax, tol, &P);
+            else
+                plan_octaves(&R, L, envmax, tol, &P);
             info->dropped = P.dropped;
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                ends[i].valid = 0;
         }
         /* The work bound: an octave whose cells along this ray number more
          * than CELL_BUDGET (a scale far below the ray's length) is not
@@ -3247,7 +3266,10 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
                     const int q = s->method == M_EXACT ? (s->k == 0 ? 9 : 0) : P.q[i];
                     if (over >> i & 1 || (probe >= 0 && i != probe))
                         continue;
-                    if (q || s->method == M_EXACT)
+                    if (s->method == M_ADAPTIVE && P.nu[i] > 0)
+                        kadd(&noise, s->fbm.weight[i] *
+                                         octave_grid_any(&R, i, P.nu[i], ca, cb, &ends[i]));
+                    else if (q || s->method == M_EXACT)
                         kadd(&noise, s->fbm.weight[i] * octave_integral(&R, i, q, ca, cb, &e));
                 }
             } else {
@@ -3270,7 +3292,10 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         if (probe >= 0 && !cut)
             for (int i = 0; i < s->fbm.octaves; ++i)
                 if (i != probe && !(over >> i & 1) && P.q[i])
-                    kadd(&noise, s->fbm.weight[i] * octave_integral(&R, i, P.q[i], t0, tend, &e));
+                    kadd(&noise, s->fbm.weight[i] *
+                                     (P.nu[i] > 0
+                                          ? octave_grid_any(&R, i, P.nu[i], t0, tend, &ends[i])
+                                          : octave_integral(&R, i, P.q[i], t0, tend, &e)));
         if (cut) {
             tend = ca;
             mean = linear ? (double) env_integral(s, R.h0, R.hs, t0, ca) - rest : 0;
