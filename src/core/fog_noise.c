@@ -2872,18 +2872,25 @@ static inline double env_d(const rayc *R, double t)
     return R->s->k > 0 ? exp(-(R->kh0 + R->khs * t)) : 1;
 }
 
-/* integral of env_d over [t0, t1], t1 finite. */
-static double env_int_d(const rayc *R, double t0, double t1)
+/* The integral of the envelope over a stretch of length L where it starts
+ * at e and decays at rate a (grows where a < 0), and its value at the end
+ * (one expm1, and an exp where the end is far below the start). */
+static double env_step(double e, double a, double L, double *e_end)
 {
-    const double a = R->s->k > 0 ? R->khs : 0;
-    return decay_int(a > 0 ? env_d(R, t0) : env_d(R, t1), fabs(a), t1 - t0);
+    const double b = a * L;
+    if (fabs(b) < 1e-8) {
+        *e_end = e;
+        return e * L;
+    }
+    const double x = expm1(-b);
+    *e_end = b > 1 ? e * exp(-b) : e * (1 + x);
+    return -e * x / a;
 }
 
-/* env_reach in double: the t past t0 where env_int_d from t0 reaches need
- * (INFINITY if it never does). */
-static double env_reach_d(const rayc *R, double t0, double need)
+/* env_reach_d with the envelope at t0 given (e0). */
+static double env_reach_e(const rayc *R, double e0, double t0, double need)
 {
-    const double e0 = env_d(R, t0), a = R->s->k > 0 ? R->khs : 0;
+    const double a = R->s->k > 0 ? R->khs : 0;
     if (!(e0 > 0))
         return INFINITY;
     if (a == 0)
@@ -2895,17 +2902,24 @@ static double env_reach_d(const rayc *R, double t0, double need)
     return t0 + log1p(need * -a / e0) / -a;
 }
 
-/* Four standard deviations of the fbm's part, integral(env fbm), over
- * [t0, t1] (m: the envelope's integral there), octave by octave: the line
+/* env_reach in double: the t past t0 where the envelope's integral from t0 reaches need
+ * (INFINITY if it never does). */
+static double env_reach_d(const rayc *R, double t0, double need)
+{
+    return env_reach_e(R, env_d(R, t0), t0, need);
+}
+
+/* Four standard deviations of the fbm's part, integral(env fbm), over a
+ * stretch of length L whose envelope is at most emax (and monotone; m:
+ * its integral there), octave by octave: the line
  * integral of octave i weighted by the envelope has a variance of about
  * LINE_RMS^2 lambda_i integral(env^2) (cells far apart are independent),
  * or its hard bound B m if smaller. Along a thinning envelope this is far
  * below the largest envelope times the flat estimate over the length. */
-static double noise_sigma4(const rayc *R, double t0, double t1, double m)
+static double noise_sigma4(const rayc *R, double emax, double L, double m)
 {
     const nstate *s = R->s;
-    const double emax = fmax(env_d(R, t0), env_d(R, t1));
-    const double i2 = decay_int(emax * emax, s->k > 0 ? 2 * fabs(R->khs) : 0, t1 - t0);
+    const double i2 = decay_int(emax * emax, s->k > 0 ? 2 * fabs(R->khs) : 0, L);
     const double si2 = sqrt(i2);
     double r = 0;
     for (int i = 0; i < s->fbm.octaves; ++i)
@@ -2991,31 +3005,42 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     double E2 = 0, var = 0.5625 * eps * eps, mean_sofar = 0;
     int stop = 0, dropped = 0;
     long double t = t0;
+    /* The envelope at the segment's start, carried from the previous
+     * segment's end, and at the end of the stretch (the planning's
+     * exponentials, one or two per segment). */
+    const double a_env = s->k > 0 ? R->khs : 0, e_tend = env_d(R, (double) tend);
+    double e_t = env_d(R, (double) t0);
     while (t < tend) {
         long double tb = t + Lmax;
-        const long double tr = env_reach_d(R, (double) t, SEG_TAU / s->rho_max);
+        const long double tr = env_reach_e(R, e_t, (double) t, SEG_TAU / s->rho_max);
         if (tr < tb)
             tb = tr;
         if (!(tb < tend) || !(tb > t))
             tb = tend;
-        const double mj = env_int_d(R, (double) t, (double) tb);
-        const double rest = env_int_d(R, (double) t, (double) tend);
+        double e_tb;
+        const double mj = env_step(e_t, a_env, (double) (tb - t), &e_tb);
+        const double rest =
+            decay_int(a_env > 0 ? e_t : e_tend, fabs(a_env), (double) (tend - t));
         const double E = sqrt(E2);
         const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
         /* lo: ulo plus the rest's lower value, its mean less four standard
          * deviations of its noise (noise_sigma4), or (1 - |c| B) times its
          * mean, whichever is larger. */
         const double lo_rest =
-            fmax(rest - fabs(s->contrast) * noise_sigma4(R, (double) t, (double) tend, rest),
+            fmax(rest - fabs(s->contrast) * noise_sigma4(R, fmax(e_t, e_tend),
+                                                         (double) (tend - t), rest),
                  (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest);
         const double lo = ulo + (lo_rest > 0 ? lo_rest : 0);
+        /* done: T_k = e^-(rho_k ulo) <= eps/4 in every channel; W: the
+         * largest rho_k e^-(rho_k lo), one exponential per distinct rho */
         int done = t > t0;
         double W = 0;
         for (int k = 0; k < 3; ++k) {
             if (!(s->rho[k] > 0))
                 continue;
-            done &= exp(-s->rho[k] * (ulo > 0 ? ulo : 0)) <= eps / 4;
-            W = fmax(W, s->rho[k] * exp(-s->rho[k] * (lo > 0 ? lo : 0)));
+            done &= s->rho[k] * (ulo > 0 ? ulo : 0) >= tau_stop;
+            if ((k < 1 || s->rho[k] != s->rho[0]) && (k < 2 || s->rho[k] != s->rho[1]))
+                W = fmax(W, s->rho[k] * exp(-s->rho[k] * (lo > 0 ? lo : 0)));
         }
         if (done) {
             stop = 1;
@@ -3026,7 +3051,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double share = vis > mj ? mj / vis : 1;
         const double quota = sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
         const double L = (double) (tb - t);
-        const double envmax = fmax(env_d(R, (double) t), env_d(R, (double) tb));
+        const double envmax = fmax(e_t, e_tb);
         plan P;
         if (grid)
             plan_segment(R, &SP, L, envmax, s->rho_max * quota / W, &P);
@@ -3073,6 +3098,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         var -= (W * used) * (W * used);
         mean_sofar += mj;
         t = tb;
+        e_t = e_tb;
     }
     info->dropped = dropped > __builtin_popcount(over) ? dropped : __builtin_popcount(over);
     const double E = sqrt(E2);
