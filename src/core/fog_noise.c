@@ -2934,8 +2934,10 @@ static double noise_sigma4(const rayc *R, double emax, double L, double m)
  * counted as over the budget (--stats). */
 #define EVAL_BUDGET 40000
 /* A segment's mean optical depth (densest channel), and its length in
- * cells of the coarsest octave, at most. */
-#define SEG_TAU 1.0
+ * cells of the coarsest octave, at most. (A depth of 3 rather than 1: a
+ * tenth faster on the horizon shot, 7 % more evaluations but fewer
+ * segments, each with its own planning and end terms.) */
+#define SEG_TAU 3.0
 #define SEG_CELLS 16.0
 /* Segments per ray, at most (they then grow past SEG_CELLS). */
 #define MAX_SEGS 256
