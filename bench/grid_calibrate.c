@@ -17,15 +17,13 @@
  * the largest rms of each column plus 10 %. Deterministic (fixed seed).
  * Calibrated on random lines, not on any scene the tests render. */
 #include "../src/core/fog_noise.c"
+#include "splitmix.h"
 
 static uint64_t rs = 0x243f6a8885a308d3ull;
 
 static double uni(void)
 {
-    uint64_t z = (rs += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return (double) ((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    return splitmix_uni(&rs);
 }
 
 /* integral of noise over b + t d, t in [0, L], cell by cell exactly */

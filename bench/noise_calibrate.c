@@ -12,6 +12,7 @@
  * It also prints the RMS of the noise's integral over straight stretches of
  * 4, 16 and 64 lattice units divided by sqrt(length) (the octave-dropping
  * rule's constant). Deterministic (fixed seed). */
+#include "splitmix.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -23,10 +24,7 @@ static uint64_t rs = 0x243f6a8885a308d3ull;
 
 static double uni(void)
 {
-    uint64_t z = (rs += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return (double) ((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    return splitmix_uni(&rs);
 }
 
 /* Gauss-Legendre nodes on [-1, 1] (Newton on the recurrence). */

@@ -13,6 +13,7 @@
  * relative error |error| / tau. src/core/fog_noise.c's estimate,
  * C d + R tau, takes C and R from here (with a margin) so that it covers
  * at least 99 % of rays. Deterministic (fixed seed). */
+#include "splitmix.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -25,10 +26,7 @@ static uint64_t rs = 0x13198a2e03707344ull;
 
 static double uni(void)
 {
-    uint64_t z = (rs += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return (double) ((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    return splitmix_uni(&rs);
 }
 
 static int cmp(const void *a, const void *b)

@@ -20,6 +20,30 @@ typedef struct ef_noise_cell {
     unsigned char h[8];    /* AA, BA, AB, BB, AA+1, BA+1, AB+1, BB+1 */
 } ef_noise_cell;
 
+/* Perlin's permutation as a list, X(v) per entry in order: one source for
+ * ef_noise_perm and the integrators' derived tables. */
+#define EF_NOISE_PERM(X) \
+    X(151) X(160) X(137) X(91) X(90) X(15) X(131) X(13) X(201) X(95) X(96) X(53) X(194) X(233) \
+    X(7) X(225) X(140) X(36) X(103) X(30) X(69) X(142) X(8) X(99) X(37) X(240) X(21) X(10) \
+    X(23) X(190) X(6) X(148) X(247) X(120) X(234) X(75) X(0) X(26) X(197) X(62) X(94) X(252) \
+    X(219) X(203) X(117) X(35) X(11) X(32) X(57) X(177) X(33) X(88) X(237) X(149) X(56) X(87) \
+    X(174) X(20) X(125) X(136) X(171) X(168) X(68) X(175) X(74) X(165) X(71) X(134) X(139) \
+    X(48) X(27) X(166) X(77) X(146) X(158) X(231) X(83) X(111) X(229) X(122) X(60) X(211) \
+    X(133) X(230) X(220) X(105) X(92) X(41) X(55) X(46) X(245) X(40) X(244) X(102) X(143) \
+    X(54) X(65) X(25) X(63) X(161) X(1) X(216) X(80) X(73) X(209) X(76) X(132) X(187) X(208) \
+    X(89) X(18) X(169) X(200) X(196) X(135) X(130) X(116) X(188) X(159) X(86) X(164) X(100) \
+    X(109) X(198) X(173) X(186) X(3) X(64) X(52) X(217) X(226) X(250) X(124) X(123) X(5) \
+    X(202) X(38) X(147) X(118) X(126) X(255) X(82) X(85) X(212) X(207) X(206) X(59) X(227) \
+    X(47) X(16) X(58) X(17) X(182) X(189) X(28) X(42) X(223) X(183) X(170) X(213) X(119) \
+    X(248) X(152) X(2) X(44) X(154) X(163) X(70) X(221) X(153) X(101) X(155) X(167) X(43) \
+    X(172) X(9) X(129) X(22) X(39) X(253) X(19) X(98) X(108) X(110) X(79) X(113) X(224) X(232) \
+    X(178) X(185) X(112) X(104) X(218) X(246) X(97) X(228) X(251) X(34) X(242) X(193) X(238) \
+    X(210) X(144) X(12) X(191) X(179) X(162) X(241) X(81) X(51) X(145) X(235) X(249) X(14) \
+    X(239) X(107) X(49) X(192) X(214) X(31) X(181) X(199) X(106) X(157) X(184) X(84) X(204) \
+    X(176) X(115) X(121) X(50) X(45) X(127) X(4) X(150) X(254) X(138) X(236) X(205) X(93) \
+    X(222) X(114) X(67) X(29) X(24) X(72) X(243) X(141) X(128) X(195) X(78) X(66) X(215) X(61) \
+    X(156) X(180)
+
 /* Perlin's permutation (his reference replicates it to 512 entries so that
  * p[A + 1] needs no mask; indexing with & 255 reads the same values). */
 extern const unsigned char ef_noise_perm[256];
