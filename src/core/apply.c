@@ -2,6 +2,7 @@
 
 #include "exact.h"
 #include "expneg.h"
+#include "lit.h"
 
 #include <float.h>
 #include <math.h>
@@ -33,6 +34,23 @@ static double aov_err(double T, double e)
         return 0.0;
     const double b = T * expm1(e);
     return b < 1.0 ? b : 1.0;   /* also when b is NaN (T = 0, e = inf) */
+}
+
+/* The lights' in-scattered light over the pixel's coverage: a S along the
+ * surface segment plus (1 - a) S along the far one (need_inf: it shows). */
+static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int need_inf,
+                       double c[3])
+{
+    double S[3], Sf[3];
+    ef_lights_inscatter(s, r, S, NULL);
+    memcpy(Sf, S, sizeof Sf);
+    if (need_inf) {
+        ef_ray far;
+        if (!ef_scene_far_ray(s, r, &far))
+            ef_lights_inscatter(s, &far, Sf, NULL);
+    }
+    for (int k = 0; k < 3; ++k)
+        c[k] += a * S[k] + (need_inf ? (1.0 - a) * Sf[k] : 0.0);
 }
 
 /* One span of a row: its rays, and where each pixel's fog is found. */
@@ -362,7 +380,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
         depth_only &= s->comp[c].model->depth_only;
     }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
-    if (!mask && !s->any_color && !want_info) {
+    if (!mask && !s->any_color && !want_info && !s->nlight) {
         fast_span sp;
         int need_dist;
         if (dist_path(s, &need_dist))
@@ -376,7 +394,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     const double *origin = aov ? aov->origin : zero3;
     /* Without info, every segment of a span is evaluated in one batch. */
     const int batch = !want_info;
-    const int need_dir = !depth_only || (mask & EF_AOV_P);
+    const int need_dir = !depth_only || (mask & EF_AOV_P) || s->nlight;
     ef_tau_info info[EF_FOG_MAX_COMPONENTS];
     /* --stats with the caller's clocks: each pixel's fog time, ns (-1: none) */
     double wall[EF_RECON_SPAN];
@@ -450,6 +468,8 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 for (int k = 0; k < 3; ++k)
                     in[k] = c[k] = rgb[k][i];
                 ef_composite(surf, inf, fog_uncovered, c, alpha ? &a : NULL);
+                if (s->nlight)
+                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c);
                 for (int k = 0; k < 3; ++k)
                     rgb[k][i] = to_float(c[k]);
                 if (alpha && !sp->bad_alpha[j])

@@ -265,7 +265,7 @@ static void list_keys(const ef_fog_model *m, char *buf, size_t len)
         strncat(buf, "distance, ", len - strlen(buf) - 1);
     if (m->uses_up)
         strncat(buf, "up, ", len - strlen(buf) - 1);
-    strncat(buf, "color", len - strlen(buf) - 1);
+    strncat(buf, "color, albedo, phase, g", len - strlen(buf) - 1);
 }
 
 static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec,
@@ -312,6 +312,34 @@ static int parse_token_inner(ef_fog_component *c, char *tok, const char *spec,
                            spec, val, EF_COLOR_MAX);
         }
         c->has_color = 1;
+        return 0;
+    }
+    if (!strcmp(key, "albedo")) {
+        if (c->has_albedo)
+            return ef_fail(err, "fog spec '%s': key 'albedo' is given twice", spec);
+        if (ef_parse_rgb(val, c->albedo) || c->albedo[0] < 0 || c->albedo[1] < 0 ||
+            c->albedo[2] < 0 || c->albedo[0] > 1 || c->albedo[1] > 1 || c->albedo[2] > 1)
+            return ef_fail(err, "fog spec '%s': albedo='%s' is not A or R,G,B from 0 to 1 (the "
+                           "scattered share of the extinction)", spec, val);
+        c->has_albedo = 1;
+        return 0;
+    }
+    if (!strcmp(key, "phase")) {
+        static const char *const names[] = { "iso", "rayleigh", "hg", "cs" };
+        for (int i = 0; i < 4; ++i)
+            if (!strcmp(val, names[i])) {
+                c->phase = i;
+                return 0;
+            }
+        return ef_fail(err, "fog spec '%s': phase='%s' is not iso, rayleigh, hg or cs", spec, val);
+    }
+    if (!strcmp(key, "g")) {
+        if (c->has_g)
+            return ef_fail(err, "fog spec '%s': key 'g' is given twice", spec);
+        if (ef_parse_numbers(val, &c->g, 1) || !(c->g > -1) || !(c->g < 1))
+            return ef_fail(err, "fog spec '%s': g='%s' is not a number between -1 and 1 "
+                           "(exclusive; > 0 scatters forward)", spec, val);
+        c->has_g = 1;
         return 0;
     }
     if (!strcmp(key, "up") && c->model->uses_up) {
@@ -431,6 +459,11 @@ int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *
     }
     if (!c->has_up)
         memcpy(c->up, ctx->up, sizeof c->up);
+    if (c->has_g && c->phase != EF_PHASE_HG && c->phase != EF_PHASE_CS) {
+        ef_fail(err, "fog spec '%s': g= applies to phase=hg or phase=cs only", c->spec);
+        ef_fog_free(c);
+        return -1;
+    }
     if (c->model->finish(c, ctx, err)) {
         ef_fog_free(c);
         return -1;

@@ -48,6 +48,10 @@ typedef struct ef_fog_component {
     int has_color, has_up;
     double color[3];                 /* color=R,G,B: this component's in-scattered colour */
     double up[3];                    /* unit up (height models): up= key, else the context's */
+    /* Single scattering under lights (light.h): albedo=, phase=, g=. Read
+     * only when the scene has lights; albedo is 1 unless has_albedo. */
+    int has_albedo, phase, has_g;
+    double albedo[3], g;
     /* The camera bound by ef_fog_bind: n.org of the first functional, as a
      * double-double, so per-pixel work skips a per-frame constant. */
     int bound;
@@ -58,6 +62,9 @@ typedef struct ef_fog_component {
     const _Atomic int *cancel;
     char spec[8192];                 /* the SPEC as written, for messages */
 } ef_fog_component;
+
+/* The phase functions of phase= (normalised over the sphere). */
+enum { EF_PHASE_ISO = 0, EF_PHASE_RAYLEIGH, EF_PHASE_HG, EF_PHASE_CS };
 
 /* A linear functional of world position, value(x) = n.x + d. Models that
  * have a density describe it through such functionals (planes, heights). */

@@ -5,28 +5,11 @@
 #include <string.h>
 
 #include "exact.h"
+#include "gk15.h"
 
 #define MAXF 64          /* functionals per density */
 #define MAX_DEPTH 48     /* bisection levels per piece */
 #define REL_TOL 1e-14L   /* per-interval |K - G| / |K| */
-
-/* Gauss-Kronrod 7/15 abscissae and weights (QUADPACK's qk15), in long double. */
-static const long double xgk[8] = {
-    0.991455371120812639206854697526329L, 0.949107912342758524526189684047851L,
-    0.864864423359769072789712788640926L, 0.741531185599394439863864773280788L,
-    0.586087235467691130294144845693013L, 0.405845151377397166906606412076961L,
-    0.207784955007898467600689403773245L, 0.000000000000000000000000000000000L,
-};
-static const long double wgk[8] = {
-    0.022935322010529224963732008058970L, 0.063092092629978553290700663189204L,
-    0.104790010322250183839876322541518L, 0.140653259715525918745189590510238L,
-    0.169004726639267902826583426598550L, 0.190350578064785409913256402421014L,
-    0.204432940075298892414161999234649L, 0.209482141084727828012999174891714L,
-};
-static const long double wg[4] = {
-    0.129484966168869693270611432679082L, 0.279705391489276667901467771423780L,
-    0.381830050505118944950369775488975L, 0.417959183673469387755102040816327L,
-};
 
 typedef struct run {
     const ef_ref_density *d;
@@ -77,7 +60,7 @@ static void gk15(run *R, const long double *vL, const long double *vR, long doub
     /* j = 0..7 walks the left half up to the centre, 8..14 mirrors it. */
     for (int j = 0; j < 15; ++j) {
         const int idx = j < 8 ? j : 14 - j;
-        const long double x = j < 8 ? -xgk[idx] : xgk[idx];
+        const long double x = j < 8 ? -ef_gk15_x[idx] : ef_gk15_x[idx];
         const long double u = h + h * x;
         if (tail)
             jac = tail_at(R, vL, u0 + u, v);
@@ -86,9 +69,9 @@ static void gk15(run *R, const long double *vL, const long double *vR, long doub
         eval(R, v, f);
         for (int k = 0; k < 3; ++k) {
             const long double g = f[k] * jac;
-            K[k] += wgk[idx] * g;
+            K[k] += ef_gk15_wk[idx] * g;
             if (idx & 1)   /* the Gauss nodes: 1, 3, 5 and the centre 7 */
-                G[k] += wg[idx / 2] * g;
+                G[k] += ef_gk15_wg[idx / 2] * g;
         }
     }
     for (int k = 0; k < 3; ++k) {
@@ -685,4 +668,276 @@ int ef_ref_tau_long(const ef_fog_component *c, const ef_ray *r, double len, doub
     free((void *) d.lat);
     free((void *) d.feat);
     return rc;
+}
+
+/* ---- lit fog: the in-scattered light, integrated on its own ---- */
+
+/* tau along org + t dir over [0, len] summed over the components: uniform
+ * exp by hand (rho len), the rest by ef_ref_tau. */
+static int lit_tau(const ef_fog_scene *s, const double org[3], const double dir[3], double len,
+                   long double tau[3])
+{
+    tau[0] = tau[1] = tau[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        long double t[3];
+        if (c->model == &ef_fog_exp) {
+            for (int k = 0; k < 3; ++k)
+                t[k] = c->p[k] == 0 ? 0 : (long double) c->p[k] * len;
+        } else {
+            const ef_ray r = { { dir[0], dir[1], dir[2] }, len, len, { org[0], org[1], org[2] } };
+            if (ef_ref_tau(c, &r, t, NULL) < 0)
+                return -1;
+        }
+        for (int k = 0; k < 3; ++k)
+            tau[k] += t[k];
+    }
+    return 0;
+}
+
+typedef struct lit_ref {
+    const ef_fog_scene *s;
+    const ef_light *l;
+    const ef_ray *r;
+    long double a, lambda;   /* the infinite tail: t = a + lambda u / (1 - u) */
+    int fail;
+} lit_ref;
+
+/* The integrand of lit.h's S at t, straight from its definition: the
+ * vector to a lamp as (lamp - camera) - t dir in long double (a world point
+ * rounded to double would carry an ulp of the ray's length into d). */
+static void lit_ref_at(lit_ref *q, long double t, long double out[3])
+{
+    const ef_ray *r = q->r;
+    const ef_light *l = q->l;
+    double x[3], ld[3], dl = INFINITY;
+    long double E[3], cthl;
+    out[0] = out[1] = out[2] = 0;
+    for (int a = 0; a < 3; ++a)
+        x[a] = (double) (r->org[a] + t * (long double) r->dir[a]);
+    if (l->kind == EF_LIGHT_SUN) {
+        for (int a = 0; a < 3; ++a)
+            ld[a] = l->dir[a];
+        for (int k = 0; k < 3; ++k)
+            E[k] = l->e[k];
+        cthl = (long double) ld[0] * r->dir[0] + (long double) ld[1] * r->dir[1] +
+               (long double) ld[2] * r->dir[2];
+    } else {
+        long double y[3], d2 = 0, yv = 0, ya = 0;
+        for (int a = 0; a < 3; ++a) {
+            y[a] = ((long double) l->pos[a] - r->org[a]) - t * r->dir[a];
+            d2 += y[a] * y[a];
+            yv += y[a] * r->dir[a];
+            ya += y[a] * l->dir[a];
+        }
+        const long double d = sqrtl(d2);
+        if (!(d > 0))
+            return;
+        dl = (double) d;
+        for (int a = 0; a < 3; ++a)
+            ld[a] = (double) (y[a] / d);
+        cthl = yv / d;
+        long double f = 1 / (d2 + (long double) l->radius * l->radius);
+        if (l->kind == EF_LIGHT_SPOT)
+            f *= ef_spot_share(l, (double) (-ya / d));
+        for (int k = 0; k < 3; ++k)
+            E[k] = l->e[k] * f;
+    }
+    if (E[0] == 0 && E[1] == 0 && E[2] == 0)
+        return;
+    const double cth = (double) cthl;
+    long double sc[3] = { 0, 0, 0 };
+    for (int i = 0; i < q->s->ncomp; ++i) {
+        const ef_fog_component *c = &q->s->comp[i];
+        long double sg[3];
+        if (c->model == &ef_fog_exp) {
+            for (int k = 0; k < 3; ++k)
+                sg[k] = c->p[k];
+        } else {
+            ef_fog_functional f[MAXF];
+            long double v[MAXF];
+            const int nf = c->model->functionals(c, f, MAXF);
+            for (int j = 0; j < nf && j < MAXF; ++j)
+                v[j] = (long double) f[j].n[0] * x[0] + (long double) f[j].n[1] * x[1] +
+                       (long double) f[j].n[2] * x[2] + f[j].d;
+            c->model->density(c, v, sg);
+        }
+        const long double p = ef_phase_eval(c->phase, c->g, cth);
+        for (int k = 0; k < 3; ++k)
+            if (sg[k] != 0)
+                sc[k] += sg[k] * (c->has_albedo ? c->albedo[k] : 1.0L) * p;
+    }
+    if (sc[0] == 0 && sc[1] == 0 && sc[2] == 0)
+        return;
+    long double tv[3], tl[3];
+    if (lit_tau(q->s, r->org, r->dir, (double) t, tv) < 0 || lit_tau(q->s, x, ld, dl, tl) < 0) {
+        q->fail = 1;
+        return;
+    }
+    for (int k = 0; k < 3; ++k)
+        out[k] = sc[k] == 0 ? 0 : sc[k] * E[k] * expl(-(tv[k] + tl[k]));
+}
+
+typedef struct lit_iv {
+    long double a, b, K[3], err;
+} lit_iv;
+
+/* One Kronrod rule over [a, b] in t, or in u on the infinite tail. */
+static void lit_gk(lit_ref *q, int tail, lit_iv *iv)
+{
+    const long double c = (iv->a + iv->b) / 2, h = (iv->b - iv->a) / 2;
+    long double K[3] = { 0, 0, 0 }, G[3] = { 0, 0, 0 };
+    for (int j = 0; j < 15; ++j) {
+        const int idx = j < 8 ? j : 14 - j;
+        const long double x = c + h * (j < 8 ? -ef_gk15_x[idx] : ef_gk15_x[idx]);
+        long double f[3], w = 1, t = x;
+        if (tail) {
+            t = q->a + q->lambda * x / (1 - x);
+            w = q->lambda / ((1 - x) * (1 - x));
+        }
+        lit_ref_at(q, t, f);
+        for (int k = 0; k < 3; ++k) {
+            K[k] += ef_gk15_wk[idx] * f[k] * w;
+            if (idx & 1)
+                G[k] += ef_gk15_wg[idx / 2] * f[k] * w;
+        }
+    }
+    iv->err = 0;
+    for (int k = 0; k < 3; ++k) {
+        iv->K[k] = K[k] * h;
+        iv->err = fmaxl(iv->err, fabsl((K[k] - G[k]) * h));
+    }
+}
+
+#define LIT_MAX_IV 4096
+
+/* Global adaptive over the pieces [cut[i], cut[i+1]] (tail: one piece
+ * u in [0, 1)) to 1e-15 of the result. */
+static void lit_adapt(lit_ref *q, const long double *cut, int ncut, int tail, long double S[3])
+{
+    lit_iv *iv = malloc(LIT_MAX_IV * sizeof *iv);
+    if (!iv) {
+        q->fail = 1;
+        return;
+    }
+    int n = 0;
+    for (int i = 0; i + 1 < ncut; ++i)
+        if (cut[i + 1] > cut[i]) {
+            iv[n] = (lit_iv) { cut[i], cut[i + 1], { 0, 0, 0 }, 0 };
+            lit_gk(q, tail, &iv[n++]);
+        }
+    for (;;) {
+        long double R[3] = { 0, 0, 0 }, E = 0;
+        int worst = -1;
+        for (int i = 0; i < n; ++i) {
+            for (int k = 0; k < 3; ++k)
+                R[k] += iv[i].K[k];
+            E += iv[i].err;
+            if (iv[i].b - iv[i].a > 1e-17L * fmaxl(fabsl(iv[i].a), fabsl(iv[i].b)) &&
+                (worst < 0 || iv[i].err > iv[worst].err))
+                worst = i;
+        }
+        const long double big = fmaxl(fabsl(R[0]), fmaxl(fabsl(R[1]), fabsl(R[2])));
+        if (E <= 1e-15L * big || worst < 0 || n + 1 >= LIT_MAX_IV || q->fail) {
+            for (int k = 0; k < 3; ++k)
+                S[k] += R[k];
+            free(iv);
+            return;
+        }
+        const long double a = iv[worst].a, b = iv[worst].b, m = (a + b) / 2;
+        iv[worst].b = m;
+        lit_gk(q, tail, &iv[worst]);
+        iv[n] = (lit_iv) { m, b, { 0, 0, 0 }, 0 };
+        lit_gk(q, tail, &iv[n++]);
+    }
+}
+
+static int cmp_ld(const void *x, const void *y)
+{
+    const long double a = *(const long double *) x, b = *(const long double *) y;
+    return (a > b) - (a < b);
+}
+
+int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, long double S[3])
+{
+    S[0] = S[1] = S[2] = 0;
+    const double D = r->dist;
+    if (!(D > 0) || s->ncomp == 0)
+        return 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_model *m = s->comp[i].model;
+        if (m != &ef_fog_exp && (!m->functionals || !m->density))
+            return -1;
+    }
+    enum { NCUT = 512 };
+    long double cut[NCUT];
+    int n = 0;
+    cut[n++] = 0;
+    /* the densities' features where the view ray crosses them */
+    for (int i = 0; i < s->ncomp && n < NCUT - 200; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (c->model == &ef_fog_exp || !c->model->features)
+            continue;
+        ef_fog_functional f[MAXF];
+        const int nf = c->model->functionals(c, f, MAXF), nt = c->model->features(c, NULL, 0);
+        ef_fog_feature *ft = malloc(((size_t) nt + 1) * sizeof *ft);
+        if (!ft || nf > MAXF) {
+            free(ft);
+            return -1;
+        }
+        c->model->features(c, ft, nt);
+        for (int j = 0; j < nt && n < NCUT - 200; ++j) {
+            const ef_fog_functional *F = &f[ft[j].f];
+            const long double v0 = (long double) F->n[0] * r->org[0] +
+                                   (long double) F->n[1] * r->org[1] +
+                                   (long double) F->n[2] * r->org[2] + F->d;
+            const long double rate = (long double) F->n[0] * r->dir[0] +
+                                     (long double) F->n[1] * r->dir[1] +
+                                     (long double) F->n[2] * r->dir[2];
+            const long double t = (ft[j].value - v0) / rate;
+            if (t > 0 && t < D)
+                cut[n++] = t;
+        }
+        free(ft);
+    }
+    /* a lamp's 1/d^2 peak: geometric steps around its closest approach */
+    if (l->kind != EF_LIGHT_SUN) {
+        long double w[3], ts = 0, ww = 0;
+        for (int a = 0; a < 3; ++a) {
+            w[a] = (long double) l->pos[a] - r->org[a];
+            ts += w[a] * r->dir[a];
+            ww += w[a] * w[a];
+        }
+        const long double hl = sqrtl(fmaxl(ww - ts * ts, 0)), h = hl + l->radius;
+        if (h == 0 && ts >= 0 && ts <= D) {
+            for (int k = 0; k < 3; ++k)
+                S[k] = l->e[k] > 0 ? INFINITY : 0;
+            return 0;
+        }
+        if (ts > 0 && ts < D)
+            cut[n++] = ts;
+        /* from the line's own distance: the phase turns over ~that */
+        for (long double st = fmaxl(hl > 0 ? hl : h, 1e-300L); st < 1e300L && n < NCUT - 2;
+             st *= 4) {
+            if (ts + st > 0 && ts + st < D)
+                cut[n++] = ts + st;
+            if (ts - st > 0 && ts - st < D)
+                cut[n++] = ts - st;
+            if (st > fabsl(ts) + (isfinite(D) ? D : 0) + 1e3L * h)
+                break;
+        }
+    }
+    qsort(cut, (size_t) n, sizeof cut[0], cmp_ld);
+    lit_ref q = { s, l, r, 0, 1, 0 };
+    if (isfinite(D)) {
+        cut[n++] = D;
+        lit_adapt(&q, cut, n, 0, S);
+    } else {
+        lit_adapt(&q, cut, n, 0, S);
+        q.a = cut[n - 1];
+        q.lambda = fmaxl(q.a, 1);
+        const long double u[2] = { 0, 1 };
+        lit_adapt(&q, u, 2, 1, S);
+    }
+    return q.fail ? -1 : 0;
 }

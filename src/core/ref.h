@@ -10,6 +10,7 @@
 #define EF_REF_H
 
 #include "fog.h"
+#include "scene.h"
 
 typedef struct ef_ref_stats {
     long pieces;      /* pieces after splitting, before adaptive bisection */
@@ -64,5 +65,17 @@ int ef_ref_tau(const ef_fog_component *c, const ef_ray *r, long double tau[3], e
  * tells how far it integrated. Returns 0, or -1 as ef_ref_tau. */
 int ef_ref_tau_long(const ef_fog_component *c, const ef_ray *r, double len, double chunk,
                     double stop, long double tau[3], double *reached, ef_ref_stats *st);
+
+/* Lit fog's in-scattered light of light l along r through s (lit.h's S),
+ * from the definition alone: adaptive Gauss-Kronrod in t (long double, to
+ * 1e-15 of the result by its Kronrod-Gauss differences), split where the
+ * view ray crosses the densities' features and at geometric steps around a
+ * lamp's closest approach; both transmittances (to the point, and from it
+ * to the light) by ef_ref_tau at every node (nested quadrature), uniform
+ * exp by hand (rho len). Infinite rays: t = a + lambda u / (1 - u) past
+ * the last split. +inf where a lamp of radius 0 lies on the segment.
+ * Returns 0, or -1 for a component without a density in space or when
+ * memory runs out. Slow by design. */
+int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, long double S[3]);
 
 #endif

@@ -4,6 +4,7 @@
 
 #include <math.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -51,6 +52,30 @@ int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err)
     return 0;
 }
 
+int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
+{
+    if (s->nlight >= EF_MAX_LIGHTS)
+        return ef_fail(err, "too many lights (at most %d)", EF_MAX_LIGHTS);
+    ef_light *l = &s->light[s->nlight];
+    if (ef_light_parse(spec, &s->ctx, l, err))
+        return -1;
+    /* the default name counts the lights of its kind before it */
+    int nth = 0;
+    for (int i = 0; i < s->nlight; ++i)
+        nth += s->light[i].kind == l->kind;
+    if (l->name[0] == '\0') {
+        static const char *const kind[] = { "sun", "point", "spot" };
+        snprintf(l->name, sizeof l->name, "%s%d", kind[l->kind], nth + 1);
+    }
+    for (int i = 0; i < s->nlight; ++i)
+        if (!strcmp(s->light[i].name, l->name))
+            return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "
+                           "tells lights apart in the light AOVs)", spec, l->name,
+                           s->light[i].spec);
+    s->nlight++;
+    return 0;
+}
+
 void ef_scene_bind(ef_fog_scene *s, const double org[3])
 {
     for (int i = 0; i < s->ncomp; ++i)
@@ -65,6 +90,8 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     dst->ctx = src->ctx;
     dst->sky = src->sky;
     dst->sky_distance = src->sky_distance;
+    dst->nlight = src->nlight;
+    memcpy(dst->light, src->light, (size_t) src->nlight * sizeof src->light[0]);
     for (int i = 0; i < src->ncomp; ++i) {
         ef_fog_component *d = &dst->comp[i];
         const ef_fog_component *c = &src->comp[i];

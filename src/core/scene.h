@@ -4,6 +4,7 @@
 #define EF_SCENE_H
 
 #include "fog.h"
+#include "light.h"
 
 #include <math.h>
 
@@ -17,6 +18,8 @@ typedef struct ef_fog_scene {
     ef_fog_context ctx;              /* up axis and units the components were finished with */
     ef_sky_mode sky;
     double sky_distance;             /* EF_SKY_DISTANCE_MODE: background at this distance */
+    ef_light light[EF_MAX_LIGHTS];   /* --light, in order (lit.h) */
+    int nlight;
 } ef_fog_scene;
 
 /* The documented default fog colour. */
@@ -29,6 +32,11 @@ void ef_scene_init(ef_fog_scene *s);
 
 /* Parses SPEC with the scene's context and appends it. Returns 0 or -1. */
 int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err);
+
+/* Parses a --light SPEC with the scene's context and appends it (the
+ * components are checked for a density in space when the frame starts:
+ * ef_lights_check). Returns 0 or -1. */
+int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err);
 
 /* Binds every component to the camera at org (ef_fog_bind): once per
  * frame, before the threads start. */

@@ -20,7 +20,7 @@
 #include "version.h"
 
 enum {
-    OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG,
+    OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG, OPT_LIGHT,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
@@ -40,6 +40,7 @@ static const struct option long_opts[] = {
     { "deep-tol", required_argument, NULL, OPT_DEEP_TOL },
     { "deep-grey-alpha", no_argument, NULL, OPT_DEEP_GREY },
     { "fog", required_argument, NULL, OPT_FOG },
+    { "light", required_argument, NULL, OPT_LIGHT },
     { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
     { "scene", required_argument, NULL, OPT_SCENE },
     { "up-axis", required_argument, NULL, OPT_UP_AXIS },
@@ -105,6 +106,11 @@ void ef_options_usage(FILE *out)
             "      --colorspace NAME    the image's working space (default: from the header,\n"
             "                           else the config's scene_linear)\n"
             "      --sky fog|keep|distance=D  background pixels (default fog)\n"
+            "      --light SPEC         light the fog (single scattering), repeatable:\n"
+            "                           sun:towards=X,Y,Z:intensity=E, point:position=X,Y,Z:\n"
+            "                           intensity=I[:radius=R], spot:position=..:aim=..:cone=DEG;\n"
+            "                           color=R,G,B, name=NAME; albedo=, phase=iso|rayleigh|\n"
+            "                           hg|cs and g= in a fog SPEC (see exrfog(1) LIGHTS)\n"
             "      --deep MODE          deep input: samples (default: the input's samples\n"
             "                           and the fog as volume samples), fog (a fog-only\n"
             "                           deep element) or flatten (a flat image)\n"
@@ -344,6 +350,12 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
                 return ef_fail(err, "too many --fog components (at most %d)", EF_FOG_MAX_COMPONENTS),
                        EF_PARSE_USAGE;
             f.specs[f.nspec++] = a;
+            break;
+        case OPT_LIGHT:
+            if (f.nlight >= EF_MAX_LIGHTS)
+                return ef_fail(err, "too many --light (at most %d)", EF_MAX_LIGHTS),
+                       EF_PARSE_USAGE;
+            f.lights[f.nlight++] = a;
             break;
         case OPT_FOG_COLOR:
             /* read once every option is known (--colorconfig) */

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "lit.h"
 #include "scene_file.h"
 
 /* The scene file's settings under the flags: colour, up, units, time, aov
@@ -114,6 +115,11 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
             r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
             break;
         }
+    for (int i = 0; r == EF_PARSE_RUN && i < d->nlight; ++i)
+        if (ef_scene_add_light(s, d->lights[i], err))
+            r = EF_PARSE_USAGE;
+    if (r == EF_PARSE_RUN && ef_lights_check(s, err))
+        r = EF_PARSE_USAGE;
 out:
     ef_scene_file_free(&sf);
     return r;

@@ -14,6 +14,8 @@ typedef struct ef_scene_desc {
     const char *scene_file;   /* or NULL */
     const char *specs[EF_FOG_MAX_COMPONENTS];
     int nspec;
+    const char *lights[EF_MAX_LIGHTS];   /* --light SPECs */
+    int nlight;
     int has_color, has_sky, has_up, has_units, has_time;
     double up[3], units, time;
     const char *color_text;   /* the fog colour as written: R,G,B, #RRGGBB, SPACE:R,G,B */

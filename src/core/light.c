@@ -1,0 +1,799 @@
+/* Lights, phase functions and the in-scattered light of lit fog (light.h,
+ * lit.h). */
+#include "light.h"
+#include "lit.h"
+#include "gk15.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PI 3.14159265358979323846
+
+/* ------------------------------------------------------------- parsing */
+
+/* Reads an R,G,B (or SPACE:R,G,B through the context) colour. */
+static int light_color(const ef_fog_context *ctx, const char *spec, const char *val,
+                       double out[3], ef_err *err)
+{
+    if (ctx->parse_color) {
+        if (ctx->parse_color(ctx->color_user, val, out, err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            return ef_fail(err, "--light '%s': color='%s': %s", spec, val, msg);
+        }
+        return 0;
+    }
+    if (ef_parse_color(val, out))
+        return ef_fail(err, "--light '%s': color='%s' is not R,G,B (numbers from 0 to %g)", spec,
+                       val, EF_COLOR_MAX);
+    return 0;
+}
+
+/* A non-zero vector made unit. */
+static int unit3(const char *val, double v[3])
+{
+    if (ef_parse_numbers(val, v, 3))
+        return -1;
+    const double n = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(n > 0) || !isfinite(n))
+        return -1;
+    for (int a = 0; a < 3; ++a)
+        v[a] /= n;
+    return 0;
+}
+
+/* The keys every kind accepts, and the ones it must have. */
+static const char *const sun_keys = "towards, color, intensity, angle, name";
+static const char *const point_keys = "position, color, intensity, radius, name";
+static const char *const spot_keys = "position, aim, cone, blend, color, intensity, radius, name";
+
+int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_err *err)
+{
+    ef_fog_context dflt;
+    if (!ctx) {
+        ef_fog_context_init(&dflt);
+        ctx = &dflt;
+    }
+    memset(l, 0, sizeof *l);
+    if (strlen(spec) >= sizeof l->spec)
+        return ef_fail(err, "--light '%.40s...' is too long", spec);
+    snprintf(l->spec, sizeof l->spec, "%s", spec);
+    char buf[sizeof l->spec];
+    snprintf(buf, sizeof buf, "%s", spec);
+    char *save = NULL, *kind = strtok_r(buf, ":", &save);
+    const char *keys;
+    if (kind && !strcmp(kind, "sun")) {
+        l->kind = EF_LIGHT_SUN;
+        keys = sun_keys;
+    } else if (kind && !strcmp(kind, "point")) {
+        l->kind = EF_LIGHT_POINT;
+        keys = point_keys;
+    } else if (kind && !strcmp(kind, "spot")) {
+        l->kind = EF_LIGHT_SPOT;
+        keys = spot_keys;
+    } else {
+        return ef_fail(err, "--light '%s': the kind is not sun, point or spot (write "
+                       "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
+    }
+    double color[3] = { 1, 1, 1 }, intensity = 1, cone = 0, blend = 0;
+    unsigned seen = 0;
+    enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
+           S_RADIUS = 128, S_BLEND = 256, S_NAME = 512 };
+    char *tok = strtok_r(NULL, ":", &save);
+    while (tok) {
+        char *next = strtok_r(NULL, ":", &save);
+        /* color=SPACE:R,G,B holds the separator (as in a fog SPEC) */
+        while (next && !strncmp(tok, "color=", 6) && !strchr(next, '=')) {
+            next[-1] = ':';
+            next = strtok_r(NULL, ":", &save);
+        }
+        char *eq = strchr(tok, '=');
+        if (!eq || !eq[1])
+            return ef_fail(err, "--light '%s': '%s' is not KEY=VALUE (keys: %s)", spec, tok, keys);
+        *eq = '\0';
+        const char *key = tok, *val = eq + 1;
+        unsigned bit = 0;
+        int ok = strstr(keys, key) != NULL;
+        if (!strcmp(key, "shadow"))
+            return ef_fail(err, "--light '%s': shadow= (a light-view depth render) is not "
+                           "supported yet: the light is unshadowed without it", spec);
+        if (!ok) {
+            bit = 0;
+        } else if (!strcmp(key, "towards") && l->kind == EF_LIGHT_SUN) {
+            bit = S_DIR;
+            if (unit3(val, l->dir))
+                return ef_fail(err, "--light '%s': towards='%s' is not X,Y,Z (a non-zero "
+                               "direction from the scene to the sun, world axes)", spec, val);
+        } else if (!strcmp(key, "position") && l->kind != EF_LIGHT_SUN) {
+            bit = S_POS;
+            if (ef_parse_numbers(val, l->pos, 3))
+                return ef_fail(err, "--light '%s': position='%s' is not X,Y,Z (world, scene "
+                               "units)", spec, val);
+        } else if (!strcmp(key, "aim") && l->kind == EF_LIGHT_SPOT) {
+            bit = S_AIM;
+            if (unit3(val, l->dir))
+                return ef_fail(err, "--light '%s': aim='%s' is not X,Y,Z (the non-zero direction "
+                               "the spot points in, world axes)", spec, val);
+        } else if (!strcmp(key, "cone") && l->kind == EF_LIGHT_SPOT) {
+            bit = S_CONE;
+            if (ef_parse_numbers(val, &cone, 1) || !(cone > 0) || !(cone <= 180))
+                return ef_fail(err, "--light '%s': cone='%s' is not a full cone angle in "
+                               "degrees, above 0 and at most 180", spec, val);
+        } else if (!strcmp(key, "blend") && l->kind == EF_LIGHT_SPOT) {
+            bit = S_BLEND;
+            if (ef_parse_numbers(val, &blend, 1) || !(blend >= 0) || !(blend <= 1))
+                return ef_fail(err, "--light '%s': blend='%s' is not a number from 0 to 1", spec,
+                               val);
+        } else if (!strcmp(key, "color")) {
+            bit = S_COLOR;
+            if (light_color(ctx, spec, val, color, err))
+                return -1;
+        } else if (!strcmp(key, "intensity")) {
+            bit = S_INT;
+            if (ef_parse_numbers(val, &intensity, 1) || !(intensity >= 0))
+                return ef_fail(err, "--light '%s': intensity='%s' is not a number >= 0 (%s)",
+                               spec, val, l->kind == EF_LIGHT_SUN
+                                              ? "the irradiance on a surface facing the sun"
+                                              : "the radiant intensity, per steradian");
+        } else if (!strcmp(key, "angle") && l->kind == EF_LIGHT_SUN) {
+            bit = S_ANGLE;
+            if (ef_parse_numbers(val, &l->angle, 1) || !(l->angle >= 0) || !(l->angle < 180))
+                return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
+                               "in degrees, from 0 to below 180", spec, val);
+            l->angle *= PI / 180;
+        } else if (!strcmp(key, "radius") && l->kind != EF_LIGHT_SUN) {
+            bit = S_RADIUS;
+            if (ef_parse_numbers(val, &l->radius, 1) || !(l->radius >= 0))
+                return ef_fail(err, "--light '%s': radius='%s' is not a number >= 0 (scene "
+                               "units)", spec, val);
+        } else if (!strcmp(key, "name")) {
+            bit = S_NAME;
+            size_t n = strlen(val);
+            int good = n > 0 && n < sizeof l->name;
+            for (size_t i = 0; good && i < n; ++i)
+                good = (val[i] >= 'a' && val[i] <= 'z') || (val[i] >= 'A' && val[i] <= 'Z') ||
+                       (val[i] >= '0' && val[i] <= '9') || val[i] == '_' || val[i] == '-';
+            if (!good)
+                return ef_fail(err, "--light '%s': name='%s' is not 1 to %d letters, digits, _ "
+                               "or - (it names the light's AOV channels)", spec, val,
+                               (int) sizeof l->name - 1);
+            snprintf(l->name, sizeof l->name, "%s", val);
+        }
+        if (!bit)
+            return ef_fail(err, "--light '%s': unknown key '%s' for a %s light (keys: %s)", spec,
+                           key, kind, keys);
+        if (seen & bit)
+            return ef_fail(err, "--light '%s': key '%s' is given twice", spec, key);
+        seen |= bit;
+        tok = next;
+    }
+    if (l->kind == EF_LIGHT_SUN && !(seen & S_DIR))
+        return ef_fail(err, "--light '%s': missing towards=X,Y,Z (from the scene to the sun)", spec);
+    if (l->kind != EF_LIGHT_SUN && !(seen & S_POS))
+        return ef_fail(err, "--light '%s': missing position=X,Y,Z", spec);
+    if (l->kind == EF_LIGHT_SPOT && (seen & (S_AIM | S_CONE)) != (S_AIM | S_CONE))
+        return ef_fail(err, "--light '%s': a spot needs aim=X,Y,Z and cone=DEG", spec);
+    /* point and spot: E = I / d_m^2 with d_m = d / U metres */
+    const double U = ctx->units_per_meter, scale = l->kind == EF_LIGHT_SUN ? 1 : U * U;
+    for (int k = 0; k < 3; ++k) {
+        l->e[k] = color[k] * intensity * scale;
+        if (!isfinite(l->e[k]))
+            return ef_fail(err, "--light '%s': color times intensity overflows", spec);
+    }
+    if (l->kind == EF_LIGHT_SPOT) {
+        l->cos_outer = cos(cone * (PI / 360));
+        l->smooth = blend * (1 - l->cos_outer);
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------- phase */
+
+double ef_phase_eval(int phase, double g, double c)
+{
+    switch (phase) {
+    case EF_PHASE_RAYLEIGH:
+        return 3 / (16 * PI) * (1 + c * c);
+    case EF_PHASE_HG:
+    case EF_PHASE_CS: {
+        /* 1 + g^2 - 2 g c without losing it where g c is near 1 */
+        const double q = g * c >= 0 ? (1 - fabs(g)) * (1 - fabs(g)) + 2 * fabs(g) * (1 - fabs(c))
+                                    : 1 + g * g - 2 * g * c;
+        const double d = q * sqrt(q);
+        if (phase == EF_PHASE_HG)
+            return (1 - g * g) / (4 * PI * d);
+        return 3 / (8 * PI) * (1 - g * g) * (1 + c * c) / ((2 + g * g) * d);
+    }
+    default:
+        return 1 / (4 * PI);
+    }
+}
+
+/* ------------------------------------------------------ the densities */
+
+/* Uniform fog of position: exp with the true (radial) distance. */
+static int is_uniform(const ef_fog_component *c)
+{
+    return c->model == &ef_fog_exp && c->distance == EF_DIST_RADIAL;
+}
+
+int ef_lights_check(const ef_fog_scene *s, ef_err *err)
+{
+    if (s->nlight == 0)
+        return 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (c->model == &ef_fog_noise || c->model == &ef_fog_noise_separable)
+            return ef_fail(err, "fog spec '%s': lit noise fog is not supported yet (light the "
+                           "other models, or drop --light)", c->spec);
+        if (is_uniform(c))
+            continue;
+        if (!c->model->functionals || !c->model->density)
+            return ef_fail(err, "fog spec '%s': %s fog is a function of the distance from the "
+                           "camera, with no density in space for light to cross (use exp, "
+                           "height, the half-spaces, layered or the volumes with --light)",
+                           c->spec, c->model->name);
+    }
+    return 0;
+}
+
+/* Extinction of component c at x per channel, from its functionals. */
+static void sigma_at(const ef_fog_component *c, const double x[3], double out[3])
+{
+    if (is_uniform(c)) {
+        for (int k = 0; k < 3; ++k)
+            out[k] = c->p[k];
+        return;
+    }
+    ef_fog_functional fs[64], *f = fs;
+    long double vs[64], *v = vs;
+    const int n = c->model->functionals(c, NULL, 0);
+    if (n > 64) {
+        f = malloc((size_t) n * sizeof *f);
+        v = malloc((size_t) n * sizeof *v);
+        if (!f || !v) {   /* no memory: no light from here (the caller's estimate) */
+            free(f);
+            free(v);
+            out[0] = out[1] = out[2] = 0;
+            return;
+        }
+    }
+    c->model->functionals(c, f, n);
+    for (int i = 0; i < n; ++i)
+        v[i] = (long double) f[i].n[0] * x[0] + (long double) f[i].n[1] * x[1] +
+               (long double) f[i].n[2] * x[2] + f[i].d;
+    long double o[3];
+    c->model->density(c, v, o);
+    for (int k = 0; k < 3; ++k)
+        out[k] = (double) o[k];
+    if (f != fs) {
+        free(f);
+        free(v);
+    }
+}
+
+/* Total optical depth per channel from p along unit d over len (may be
+ * INFINITY), from the models' closed forms. */
+static void tau_from(const ef_fog_scene *s, const double p[3], const double d[3], double len,
+                     double tau[3])
+{
+    ef_ray r = { { d[0], d[1], d[2] }, len, len, { p[0], p[1], p[2] } };
+    tau[0] = tau[1] = tau[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        double t[3];
+        s->comp[i].model->tau(&s->comp[i], &r, t);
+        for (int k = 0; k < 3; ++k)
+            tau[k] += t[k];
+    }
+}
+
+static double albedo(const ef_fog_component *c, int k)
+{
+    return c->has_albedo ? c->albedo[k] : 1.0;
+}
+
+/* ----------------------------------------------------- the quadrature */
+
+typedef void (*lit_fn)(const void *q, double u, double out[3]);
+
+typedef struct gk_iv {
+    double a, b, r[3], e[3];
+} gk_iv;
+
+/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel. */
+static void gk15(lit_fn f, const void *q, gk_iv *iv)
+{
+    const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
+    double fc[3], rk[3], rg[3];
+    f(q, c, fc);
+    for (int k = 0; k < 3; ++k) {
+        rk[k] = (double) ef_gk15_wk[7] * fc[k];
+        rg[k] = (double) ef_gk15_wg[3] * fc[k];
+    }
+    for (int j = 0; j < 7; ++j) {
+        double f1[3], f2[3];
+        const double dx = h * (double) ef_gk15_x[j];
+        f(q, c - dx, f1);
+        f(q, c + dx, f2);
+        for (int k = 0; k < 3; ++k) {
+            rk[k] += (double) ef_gk15_wk[j] * (f1[k] + f2[k]);
+            if (j & 1)
+                rg[k] += (double) ef_gk15_wg[j / 2] * (f1[k] + f2[k]);
+        }
+    }
+    for (int k = 0; k < 3; ++k) {
+        iv->r[k] = rk[k] * h;
+        iv->e[k] = fabs((rk[k] - rg[k]) * h);
+    }
+}
+
+#define GK_MAX 512
+
+/* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
+ * the summed error estimate is at most rel of the result in every channel
+ * (or GK_MAX intervals): adds the result to S and its estimate to E. */
+static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, double rel,
+                     double S[3], double E[3])
+{
+    gk_iv iv[GK_MAX];
+    int n = 0;
+    for (int i = 0; i + 1 < ncut && n < GK_MAX; ++i) {
+        if (!(cut[i + 1] > cut[i]))
+            continue;
+        iv[n].a = cut[i];
+        iv[n].b = cut[i + 1];
+        gk15(f, q, &iv[n++]);
+    }
+    for (;;) {
+        double R[3] = { 0, 0, 0 }, Er[3] = { 0, 0, 0 };
+        for (int i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k) {
+                R[k] += iv[i].r[k];
+                Er[k] += iv[i].e[k];
+            }
+        int done = 1;
+        for (int k = 0; k < 3; ++k)
+            done &= Er[k] <= rel * fabs(R[k]) || !isfinite(R[k]);
+        if (done || n + 1 >= GK_MAX) {
+            for (int k = 0; k < 3; ++k) {
+                S[k] += R[k];
+                E[k] += Er[k];
+            }
+            return;
+        }
+        /* the interval of the largest error relative to its channel's total */
+        int worst = -1;
+        double we = -1;
+        for (int i = 0; i < n; ++i) {
+            const double m = 0x1p-20 * (iv[i].b - iv[i].a) < 0x1p-52 * fmax(fabs(iv[i].a),
+                                                                            fabs(iv[i].b))
+                                 ? 0 : 1;   /* too narrow to split further */
+            for (int k = 0; k < 3; ++k) {
+                const double w = m * iv[i].e[k] / (fabs(R[k]) + 1e-300);
+                if (w > we) {
+                    we = w;
+                    worst = i;
+                }
+            }
+        }
+        if (worst < 0 || !(we > 0)) {
+            for (int k = 0; k < 3; ++k) {
+                S[k] += R[k];
+                E[k] += Er[k];
+            }
+            return;
+        }
+        const double a = iv[worst].a, b = iv[worst].b, m = 0.5 * (a + b);
+        iv[worst].b = m;
+        gk15(f, q, &iv[worst]);
+        iv[n].a = m;
+        iv[n].b = b;
+        gk15(f, q, &iv[n++]);
+    }
+}
+
+/* ------------------------------------------------------ the integrands */
+
+typedef struct lit_q {
+    const ef_fog_scene *s;
+    const ef_light *l;
+    const ef_ray *r;
+    int equi;                 /* u = xi: t = ts + hq tan(xi), E dt = e / hq dxi */
+    double ts, hq, h;         /* the lamp's closest approach along the ray, its distances */
+    double w[3], wa, va;      /* lamp - camera; w . aim and dir . aim (spots) */
+    int uniform;              /* every component uniform: sig per channel */
+    double sig[3];
+} lit_q;
+
+double ef_spot_share(const ef_light *l, double cos_alpha)
+{
+    const double t = cos_alpha - l->cos_outer;
+    if (!(t > 0))
+        return 0;
+    if (l->smooth > 0 && t < l->smooth) {
+        const double x = t / l->smooth;
+        return x * x * (3 - 2 * x);
+    }
+    return 1;
+}
+
+/* sum_c sigma_c albedo_c p_c(cos) per channel at x. */
+static void scatter_at(const ef_fog_scene *s, const double x[3], double cos_theta, double acc[3])
+{
+    acc[0] = acc[1] = acc[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        double sg[3];
+        sigma_at(c, x, sg);
+        if (sg[0] == 0 && sg[1] == 0 && sg[2] == 0)
+            continue;
+        const double p = ef_phase_eval(c->phase, c->g, cos_theta);
+        for (int k = 0; k < 3; ++k)
+            acc[k] += sg[k] == 0 ? 0 : sg[k] * albedo(c, k) * p;
+    }
+}
+
+/* The integrand at u (t or xi), light included. For a lamp, its distance
+ * and the phase's angle come from u - ts and the line's distance h (both
+ * exact at the closest approach), not from a world point rounded to
+ * double, whose rounding (an ulp of the ray's length) would be a large
+ * share of d where the lamp is near the ray. */
+static void lit_integrand(const void *qv, double u, double out[3])
+{
+    const lit_q *q = qv;
+    const ef_light *l = q->l;
+    const ef_ray *r = q->r;
+    double t = u, ur = 0, wgt = 1;
+    out[0] = out[1] = out[2] = 0;
+    if (q->equi) {
+        ur = q->hq * tan(u);
+        t = q->ts + ur;
+        wgt = 1 / q->hq;
+    } else if (l->kind != EF_LIGHT_SUN) {
+        /* a lamp's pieces in t are in u = t - ts: nodes near the lamp
+         * keep their full precision */
+        ur = u;
+        t = q->ts + u;
+        wgt = 1 / (ur * ur + q->hq * q->hq);
+    }
+    if (!(t >= 0))
+        t = 0;
+    double ld[3], dl = INFINITY, cth;
+    if (l->kind == EF_LIGHT_SUN) {
+        memcpy(ld, l->dir, sizeof ld);
+        cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
+    } else {
+        dl = sqrt(ur * ur + q->h * q->h);
+        if (!(dl > 0))
+            return;
+        cth = -ur / dl;
+        double y[3], yn = 0;
+        for (int a = 0; a < 3; ++a) {
+            y[a] = q->w[a] - t * r->dir[a];
+            yn += y[a] * y[a];
+        }
+        yn = sqrt(yn);
+        for (int a = 0; a < 3; ++a)
+            ld[a] = yn > 0 ? y[a] / yn : 0;
+        if (l->kind == EF_LIGHT_SPOT) {
+            wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
+            if (wgt == 0)
+                return;
+        }
+    }
+    if (q->uniform) {
+        /* T(0,t) T_l = e^-(sig (t + d)) */
+        for (int k = 0; k < 3; ++k) {
+            if (q->sig[k] == 0)
+                continue;
+            double a = 0;
+            for (int i = 0; i < q->s->ncomp; ++i) {
+                const ef_fog_component *c = &q->s->comp[i];
+                if (c->p[k] > 0)
+                    a += c->p[k] * albedo(c, k) * ef_phase_eval(c->phase, c->g, cth);
+            }
+            out[k] = wgt * l->e[k] * a * exp(-q->sig[k] * (t + dl));
+        }
+        return;
+    }
+    double x[3], acc[3];
+    for (int a = 0; a < 3; ++a)
+        x[a] = r->org[a] + t * r->dir[a];
+    scatter_at(q->s, x, cth, acc);
+    if (acc[0] == 0 && acc[1] == 0 && acc[2] == 0)
+        return;
+    double tv[3], tl[3];
+    tau_from(q->s, r->org, r->dir, t, tv);
+    tau_from(q->s, x, ld, dl, tl);
+    for (int k = 0; k < 3; ++k)
+        out[k] = acc[k] == 0 ? 0 : wgt * l->e[k] * acc[k] * exp(-(tv[k] + tl[k]));
+}
+
+/* ------------------------------------------------------- the closed forms */
+
+/* The sun in one exponential height fog (k > 0), with its own extinction
+ * in the fog: T_sun(x) = e^-(sigma(x) / (k l_up)), and along the view ray
+ *   S = albedo p E tau_v e^-min(A, B) phi(|B - A|),
+ *   A = sigma(C) / (k l_up), B = tau_v + sigma(P) / (k l_up),
+ * phi(x) = -expm1(-x) / x and B - A = tau_v (1 - mu / l_up) exactly (mu the
+ * view ray's up component), so no difference of large terms is formed. */
+static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+{
+    const ef_fog_component *c = &s->comp[0];
+    const double k = c->p[3];
+    const double lu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
+    const double mu = r->dir[0] * c->up[0] + r->dir[1] * c->up[1] + r->dir[2] * c->up[2];
+    S[0] = S[1] = S[2] = 0;
+    if (!(lu > 0))
+        return;   /* at or below the horizon, the sun crosses unbounded fog */
+    double tv[3], sc[3], sp[3] = { 0, 0, 0 };
+    c->model->tau(c, r, tv);
+    sigma_at(c, r->org, sc);
+    if (isfinite(r->dist)) {
+        double x[3];
+        for (int a = 0; a < 3; ++a)
+            x[a] = r->org[a] + r->dist * r->dir[a];
+        sigma_at(c, x, sp);
+    } else if (!(mu > 0)) {
+        sp[0] = sp[1] = sp[2] = INFINITY;
+    }
+    const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
+    const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - mu / lu);
+    for (int ch = 0; ch < 3; ++ch) {
+        if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
+            continue;
+        const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
+        const double x = tv[ch] * q;
+        double m;
+        if (x == 0)
+            m = tv[ch];
+        else if (x <= 1)
+            m = tv[ch] * (-expm1(-x) / x);
+        else
+            m = -expm1(-x) / q;
+        const double e = exp(-(A < B ? A : B));
+        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * m * e;
+    }
+}
+
+/* --------------------------------------------------------------- driver */
+
+#define MAX_CUTS 512
+
+static int cmp_double(const void *a, const void *b)
+{
+    const double x = *(const double *) a, y = *(const double *) b;
+    return (x > y) - (x < y);
+}
+
+/* Where the view segment [0, D) crosses the components' features (the
+ * density's jumps, kinks and fronts), appended to cut. */
+static int feature_cuts(const ef_fog_scene *s, const ef_ray *r, double D, double *cut, int n)
+{
+    for (int i = 0; i < s->ncomp && n < MAX_CUTS - 8; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->features || !c->model->functionals)
+            continue;
+        const int nf = c->model->functionals(c, NULL, 0), nt = c->model->features(c, NULL, 0);
+        if (nf <= 0 || nt <= 0 || nf > 256 || nt > 256)
+            continue;
+        ef_fog_functional f[256];
+        ef_fog_feature ft[256];
+        c->model->functionals(c, f, nf);
+        c->model->features(c, ft, nt);
+        for (int j = 0; j < nt && n < MAX_CUTS - 8; ++j) {
+            const ef_fog_functional *F = &f[ft[j].f];
+            const double v0 = F->n[0] * r->org[0] + F->n[1] * r->org[1] + F->n[2] * r->org[2] + F->d;
+            const double rate = F->n[0] * r->dir[0] + F->n[1] * r->dir[1] + F->n[2] * r->dir[2];
+            const double t = (ft[j].value - v0) / rate;
+            if (t > 0 && t < D)
+                cut[n++] = t;
+        }
+    }
+    return n;
+}
+
+/* Where the ray crosses the spot's cones cos alpha = c (c = its edge, and
+ * its blend band's inner edge), appended to cut. */
+static int cone_cuts(const ef_light *l, const ef_ray *r, double D, double *cut, int n)
+{
+    double w[3];
+    for (int a = 0; a < 3; ++a)
+        w[a] = r->org[a] - l->pos[a];   /* y(t) = w + t v, from the lamp */
+    const double a0 = w[0] * l->dir[0] + w[1] * l->dir[1] + w[2] * l->dir[2];
+    const double a1 = r->dir[0] * l->dir[0] + r->dir[1] * l->dir[1] + r->dir[2] * l->dir[2];
+    const double ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    const double wv = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+    const double cs[2] = { l->cos_outer, l->cos_outer + l->smooth };
+    for (int i = 0; i < 2; ++i) {
+        const double c = cs[i], c2 = c * c;
+        /* (a0 + a1 t)^2 = c^2 |w + t v|^2 */
+        const double A = a1 * a1 - c2, B = 2 * (a0 * a1 - c2 * wv), C = a0 * a0 - c2 * ww;
+        double roots[2];
+        int nr = 0;
+        if (fabs(A) > 1e-300) {
+            const double disc = B * B - 4 * A * C;
+            if (disc >= 0) {
+                const double sq = sqrt(disc), qq = -0.5 * (B + (B >= 0 ? sq : -sq));
+                roots[nr++] = qq / A;
+                if (qq != 0)
+                    roots[nr++] = C / qq;
+            }
+        } else if (B != 0) {
+            roots[nr++] = -C / B;
+        }
+        for (int j = 0; j < nr; ++j)
+            if (roots[j] > 0 && roots[j] < D && (a0 + a1 * roots[j]) * c >= 0 && n < MAX_CUTS)
+                cut[n++] = roots[j];
+    }
+    return n;
+}
+
+/* Relative accuracy aimed at: the uniform fog's integrand costs a few
+ * exponentials, the general one optical depths along two rays per node. */
+#define REL_UNIFORM 1e-13
+#define REL_GENERAL 1e-10
+
+void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
+                        double err[3])
+{
+    double E[3] = { 0, 0, 0 };
+    S[0] = S[1] = S[2] = 0;
+    if (err)
+        err[0] = err[1] = err[2] = 0;
+    const double D = r->dist;
+    if (s->ncomp == 0 || !(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return;
+    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 1, { 0, 0, 0 } };
+    for (int i = 0; i < s->ncomp; ++i) {
+        q.uniform &= is_uniform(&s->comp[i]);
+        for (int k = 0; k < 3 && is_uniform(&s->comp[i]); ++k)
+            q.sig[k] += s->comp[i].p[k];
+    }
+    if (l->kind == EF_LIGHT_SUN) {
+        if (q.uniform)
+            return;   /* the sun's light never crosses unbounded uniform fog */
+        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0) {
+            sun_height(s, l, r, S);
+            return;
+        }
+    }
+    double cut[MAX_CUTS];
+    int n = 0;
+    cut[n++] = 0;
+    if (!q.uniform)
+        n = feature_cuts(s, r, D, cut, n);
+    if (l->kind == EF_LIGHT_SPOT)
+        n = cone_cuts(l, r, D, cut, n);
+    if (l->kind != EF_LIGHT_SUN) {
+        /* the lamp's closest approach along the line, and its distance
+         * there from the cross product (no cancellation near the line) */
+        double *w = q.w;
+        for (int a = 0; a < 3; ++a)
+            w[a] = l->pos[a] - r->org[a];
+        q.ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+        q.wa = w[0] * l->dir[0] + w[1] * l->dir[1] + w[2] * l->dir[2];
+        q.va = r->dir[0] * l->dir[0] + r->dir[1] * l->dir[1] + r->dir[2] * l->dir[2];
+        const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
+                     cy = w[2] * r->dir[0] - w[0] * r->dir[2],
+                     cz = w[0] * r->dir[1] - w[1] * r->dir[0];
+        q.h = sqrt(cx * cx + cy * cy + cz * cz);
+        q.hq = sqrt(q.h * q.h + l->radius * l->radius);
+        if (q.hq == 0) {
+            if (q.ts >= 0 && q.ts <= D) {
+                /* a lamp of radius 0 on the segment: its 1/d^2 does not
+                 * integrate */
+                for (int k = 0; k < 3; ++k)
+                    S[k] = l->e[k] > 0 && (q.uniform ? q.sig[k] > 0 : 1) ? INFINITY : 0;
+                return;
+            }
+            /* on the line beyond an end: the substitution's hq from a
+             * billionth of its least distance, which changes 1/d^2 by
+             * (hq / d)^2 <= 1e-18 */
+            q.hq = 1e-9 * (q.ts < 0 ? -q.ts : q.ts - D);
+        }
+        q.equi = 1;
+        /* geometric steps around the closest approach from h: the phase
+         * turns from forward to back over ~h there, however wide the
+         * radius makes the 1/d^2 peak */
+        const double h0 = q.h > 0 ? q.h : q.hq;
+        for (double st = h0; n < MAX_CUTS - 4; st *= 4) {
+            if (q.ts + st > 0 && q.ts + st < D)
+                cut[n++] = q.ts + st;
+            if (q.ts - st > 0 && q.ts - st < D)
+                cut[n++] = q.ts - st;
+            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0) + 1e3 * q.hq)
+                break;
+        }
+    }
+    if (isfinite(D))
+        cut[n++] = D;
+    const double rel = q.uniform ? REL_UNIFORM : REL_GENERAL;
+    if (q.equi) {
+        /* xi = atan((t - ts) / hq) near the lamp (within W), where 1/d^2
+         * peaks; t itself farther out, where the substitution would crowd
+         * the pieces against +-pi/2 and lose them to rounding. An infinite
+         * ray's last piece stays in xi (t = inf is xi = pi/2). */
+        const double W = 16 * q.hq;
+        if (q.ts - W > 0 && q.ts - W < D)
+            cut[n++] = q.ts - W;
+        if (q.ts + W > 0 && q.ts + W < D)
+            cut[n++] = q.ts + W;
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        if (!isfinite(D))
+            cut[n++] = D;
+        double run[MAX_CUTS];
+        for (int i = 0; i + 1 < n;) {
+            const int in = !(cut[i + 1] <= q.ts - W || cut[i] >= q.ts + W) || !isfinite(cut[i + 1]);
+            int m = 0, j = i;
+            run[m++] = in ? atan((cut[i] - q.ts) / q.hq) : cut[i] - q.ts;
+            for (; j + 1 < n; ++j) {
+                const int in2 = !(cut[j + 1] <= q.ts - W || cut[j] >= q.ts + W) ||
+                                !isfinite(cut[j + 1]);
+                if (in2 != in)
+                    break;
+                run[m++] = in ? atan((cut[j + 1] - q.ts) / q.hq) : cut[j + 1] - q.ts;
+            }
+            q.equi = in;
+            gk_adapt(lit_integrand, &q, run, m, rel, S, E);
+            i = j;
+        }
+    } else if (isfinite(D)) {
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        gk_adapt(lit_integrand, &q, cut, n, rel, S, E);
+    } else {
+        /* The sun on an infinite ray: pieces doubling in length past the
+         * last cut until what is left is below the tolerance: its integral
+         * is at most max(albedo p) E T(0,t) (1 - T(t,inf)) per channel,
+         * which joins the error estimate. */
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        gk_adapt(lit_integrand, &q, cut, n, REL_GENERAL, S, E);
+        const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
+        double pmax = 0;
+        for (int i = 0; i < s->ncomp; ++i)
+            pmax = fmax(pmax, ef_phase_eval(s->comp[i].phase, s->comp[i].g, cth));
+        double a = cut[n - 1], len = fmax(a, 1.0);
+        for (int it = 0; it < 2100; ++it) {
+            double x[3], tv[3], tr[3], tail[3];
+            for (int k = 0; k < 3; ++k)
+                x[k] = r->org[k] + a * r->dir[k];
+            tau_from(s, r->org, r->dir, a, tv);
+            tau_from(s, x, r->dir, INFINITY, tr);
+            int done = 1;
+            for (int k = 0; k < 3; ++k) {
+                tail[k] = pmax * l->e[k] * exp(-tv[k]) * -expm1(-tr[k]);
+                done &= !(tail[k] > REL_GENERAL * fabs(S[k])) || tail[k] < 1e-300;
+            }
+            if (done || !(a + len < 1e300)) {
+                for (int k = 0; k < 3; ++k)
+                    E[k] += tail[k] > 0 ? tail[k] : 0;
+                break;
+            }
+            const double piece[2] = { a, a + len };
+            gk_adapt(lit_integrand, &q, piece, 2, REL_GENERAL, S, E);
+            a += len;
+            len *= 2;
+        }
+    }
+    if (err)
+        for (int k = 0; k < 3; ++k)
+            err[k] = E[k];
+}
+
+void ef_lights_inscatter(const ef_fog_scene *s, const ef_ray *r, double S[3], double err[3])
+{
+    S[0] = S[1] = S[2] = 0;
+    if (err)
+        err[0] = err[1] = err[2] = 0;
+    for (int j = 0; j < s->nlight; ++j) {
+        double one[3], e[3];
+        ef_light_inscatter(s, &s->light[j], r, one, e);
+        for (int k = 0; k < 3; ++k) {
+            S[k] += one[k];
+            if (err)
+                err[k] += e[k];
+        }
+    }
+}

@@ -1,0 +1,25 @@
+/* Lit fog over a scene: the in-scattered light of every light along a view
+ * segment (light.h gives the model and the methods). */
+#ifndef EF_LIT_H
+#define EF_LIT_H
+
+#include "scene.h"
+
+/* Whether every component of s has a density in space, so that light can
+ * be carried through it: not linear or exp2, nor exp with
+ * distance=planar (functions of the camera's distance), nor noise (not yet
+ * lit). Returns 0, or -1 with a message naming the component. */
+int ef_lights_check(const ef_fog_scene *s, ef_err *err);
+
+/* S per channel along r (its org is the camera; r->dist may be INFINITY)
+ * from light l of s, and into *err (may be NULL) an estimate of its
+ * absolute error per channel (the quadrature's Kronrod-Gauss differences;
+ * 0 for closed forms). +inf where a lamp of radius 0 lies on the
+ * segment itself. */
+void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
+                        double err[3]);
+
+/* The sum over every light of s (S = 0 when there are none). */
+void ef_lights_inscatter(const ef_fog_scene *s, const ef_ray *r, double S[3], double err[3]);
+
+#endif
