@@ -507,8 +507,12 @@ static void lit_integrand(const void *qv, double u, double out[3])
     double tv[3], tl[3];
     tau_from(q->s, r->org, r->dir, t, tv);
     tau_from(q->s, x, ld, dl, tl);
-    for (int k = 0; k < 3; ++k)
-        out[k] = acc[k] == 0 ? 0 : wgt * l->e[k] * acc[k] * exp(-(tv[k] + tl[k]));
+    /* where either leg is opaque the density may have overflowed too:
+     * no light, not inf * 0 */
+    for (int k = 0; k < 3; ++k) {
+        const double e = exp(-(tv[k] + tl[k]));
+        out[k] = acc[k] == 0 || e == 0 ? 0 : wgt * l->e[k] * acc[k] * e;
+    }
 }
 
 /* ------------------------------------------------------- the closed forms */

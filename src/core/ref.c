@@ -774,8 +774,12 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
         q->fail = 1;
         return;
     }
-    for (int k = 0; k < 3; ++k)
-        out[k] = sc[k] == 0 ? 0 : sc[k] * E[k] * expl(-(tv[k] + tl[k]));
+    /* where either leg is opaque the density may have overflowed too:
+     * no light, not inf * 0 */
+    for (int k = 0; k < 3; ++k) {
+        const long double e = expl(-(tv[k] + tl[k]));
+        out[k] = sc[k] == 0 || e == 0 ? 0 : sc[k] * E[k] * e;
+    }
 }
 
 typedef struct lit_iv {
@@ -812,7 +816,8 @@ static void lit_gk(lit_ref *q, int tail, lit_iv *iv)
 #define LIT_MAX_IV 4096
 
 /* Global adaptive over the pieces [cut[i], cut[i+1]] (tail: one piece
- * u in [0, 1)) to 1e-15 of the result. */
+ * u in [0, 1)) to 1e-14 of the result: the nested optical depths carry
+ * ~1e-15 of rounding, which a tighter target would chase. */
 static void lit_adapt(lit_ref *q, const long double *cut, int ncut, int tail, long double S[3])
 {
     lit_iv *iv = malloc(LIT_MAX_IV * sizeof *iv);
@@ -838,7 +843,7 @@ static void lit_adapt(lit_ref *q, const long double *cut, int ncut, int tail, lo
                 worst = i;
         }
         const long double big = fmaxl(fabsl(R[0]), fmaxl(fabsl(R[1]), fabsl(R[2])));
-        if (E <= 1e-15L * big || worst < 0 || n + 1 >= LIT_MAX_IV || q->fail) {
+        if (E <= 1e-14L * big || worst < 0 || n + 1 >= LIT_MAX_IV || q->fail) {
             for (int k = 0; k < 3; ++k)
                 S[k] += R[k];
             free(iv);

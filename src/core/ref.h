@@ -68,7 +68,7 @@ int ef_ref_tau_long(const ef_fog_component *c, const ef_ray *r, double len, doub
 
 /* Lit fog's in-scattered light of light l along r through s (lit.h's S),
  * from the definition alone: adaptive Gauss-Kronrod in t (long double, to
- * 1e-15 of the result by its Kronrod-Gauss differences), split where the
+ * 1e-14 of the result by its Kronrod-Gauss differences), split where the
  * view ray crosses the densities' features and at geometric steps around a
  * lamp's closest approach; both transmittances (to the point, and from it
  * to the light) by ef_ref_tau at every node (nested quadrature), uniform
