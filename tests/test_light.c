@@ -445,6 +445,35 @@ static void test_cli(void **state)
     assert_true(brighter > w * h / 2);
     free(ra);
     free(rc);
+    /* --aov light: the fog AOV is the ambient layer plus one per light */
+    char *d = tu_path("light_d.exr"), *js = tu_path("light_scene.json");
+    FILE *f = fopen(js, "w");
+    assert_non_null(f);
+    fputs("{\"fog\": [{\"model\": \"height\", \"density\": 0.05, \"falloff\": 0.3, "
+          "\"base\": 0}], \"lights\": [{\"kind\": \"sun\", \"towards\": [0, 0.3, -1], "
+          "\"intensity\": 2}, \"point:position=2,3,-20:intensity=50:name=lamp\"]}", f);
+    fclose(f);
+    assert_int_equal(tu_runf("'%s' -o '%s' --scene '%s' --aov fog,light", in, d, js), 0);
+    tu_image img;
+    assert_int_equal(tu_read_image(d, 0, &img), 0);
+    const float *fr = tu_image_f(&img, "fog.R"), *am = tu_image_f(&img, "fog_ambient.R"),
+                *l1 = tu_image_f(&img, "fog_light.sun1.R"), *l2 = tu_image_f(&img, "fog_light.lamp.R"),
+                *rd = tu_image_f(&img, "R");
+    assert_true(fr && am && l1 && l2 && rd);
+    for (int i = 0; i < img.w * img.h; ++i) {
+        const double sum = (double) am[i] + l1[i] + l2[i];
+        assert_close(fr[i], sum, 1e-6 * fabs(sum) + 1e-7);
+        assert_true(l1[i] >= 0 && l2[i] >= 0);
+    }
+    /* the same picture as the flags give */
+    float *rr = tu_read_channel(c, 0, "R", &w2, &h2);
+    assert_non_null(rr);
+    for (int i = 0; i < w * h; ++i)
+        assert_true(rr[i] == rd[i]);
+    free(rr);
+    tu_image_free(&img);
+    free(d);
+    free(js);
     /* usage errors: exit 2, a message, no output */
     remove(c);
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp2:density=0.05 --light sun:towards=0,1,0", in,
@@ -453,6 +482,8 @@ static void test_cli(void **state)
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.05 --light lamp:position=0,1,0",
                              in, c), 2);
     assert_non_null(strstr(tu_err, "not sun, point or spot"));
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.05 --aov light", in, c), 2);
+    assert_non_null(strstr(tu_err, "there is no --light"));
     assert_false(tu_exists(c));
     free(a);
     free(b);

@@ -15,6 +15,7 @@ static const struct {
     { "error", EF_AOV_ERROR, 3, { "fog_error.R", "fog_error.G", "fog_error.B" } },
     { "P", EF_AOV_P, 3, { "fog_P.X", "fog_P.Y", "fog_P.Z" } },
     { "distance", EF_AOV_DISTANCE, 1, { "fog_distance.Z" } },
+    { "light", EF_AOV_LIGHT, 3, { "fog_ambient.R", "fog_ambient.G", "fog_ambient.B" } },
 };
 #define NAOV ((int) (sizeof aovs / sizeof aovs[0]))
 
@@ -52,7 +53,7 @@ int ef_aov_parse(const char *list, unsigned *mask, const char *what, ef_err *err
     }
 }
 
-int ef_aov_channels(unsigned mask, const char **names)
+int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names)
 {
     int n = 0;
     for (int i = 0; i < NAOV; ++i)
@@ -60,6 +61,11 @@ int ef_aov_channels(unsigned mask, const char **names)
             for (int k = 0; k < aovs[i].n; ++k, ++n)
                 if (names)
                     names[n] = aovs[i].ch[k];
+    if ((mask & EF_AOV_LIGHT) && s)
+        for (int j = 0; j < s->nlight; ++j)
+            for (int k = 0; k < 3; ++k, ++n)
+                if (names)
+                    names[n] = s->light[j].aov[k];
     return n;
 }
 
@@ -77,7 +83,7 @@ void ef_aov_list(unsigned mask, char *buf, size_t len)
         }
 }
 
-void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes)
+void ef_aov_bind(ef_aov_out *out, unsigned mask, int nlight, float *const *planes)
 {
     float **slot[NAOV][4] = {
         { &out->fog[0], &out->fog[1], &out->fog[2], &out->fog[3] },
@@ -85,12 +91,16 @@ void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes)
         { &out->err[0], &out->err[1], &out->err[2], NULL },
         { &out->P[0], &out->P[1], &out->P[2], NULL },
         { &out->dist, NULL, NULL, NULL },
+        { &out->ambient[0], &out->ambient[1], &out->ambient[2], NULL },
     };
     int n = 0;
     out->mask = mask;
     for (int i = 0; i < NAOV; ++i)
         for (int k = 0; k < aovs[i].n; ++k)
             *slot[i][k] = mask & aovs[i].bit ? planes[n++] : NULL;
+    for (int j = 0; j < EF_MAX_LIGHTS; ++j)
+        for (int k = 0; k < 3; ++k)
+            out->light[j][k] = (mask & EF_AOV_LIGHT) && j < nlight ? planes[n++] : NULL;
 }
 
 /* s += v, keeping the rounding error in *lo (Neumaier), so the total does

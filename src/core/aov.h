@@ -6,12 +6,17 @@
  *   error     fog_error.R, .G, .B          bound (or estimate) of |dT|
  *   P         fog_P.X, fog_P.Y, fog_P.Z    world position minus an origin
  *   distance  fog_distance.Z               true camera distance
+ *   light     fog_ambient.R, .G, .B         the components' glow (the fog
+ *                                          without lights, out.rgb - T in.rgb)
+ *             fog_light.NAME.R, .G, .B     per --light, what it scatters in
+ *                                          (alpha S + (1 - alpha) S_far)
  * Pure C, no I/O. */
 #ifndef EF_AOV_H
 #define EF_AOV_H
 
 #include "error.h"
 #include "fog.h"
+#include "scene.h"
 
 enum {
     EF_AOV_FOG = 1u << 0,
@@ -19,13 +24,14 @@ enum {
     EF_AOV_ERROR = 1u << 2,
     EF_AOV_P = 1u << 3,
     EF_AOV_DISTANCE = 1u << 4,
+    EF_AOV_LIGHT = 1u << 5,
 };
 
 /* Channels of every AOV together. */
-#define EF_AOV_MAX_CHANNELS 14
+#define EF_AOV_MAX_CHANNELS (14 + 3 + 3 * EF_MAX_LIGHTS)
 
 /* The AOV names as users write them, in table order, comma-separated. */
-#define EF_AOV_NAMES "fog, T, error, P, distance"
+#define EF_AOV_NAMES "fog, T, error, P, distance, light"
 
 /* Adds the AOVs of a comma list ("fog,T") to *mask; duplicates merge, and
  * empty items are refused. On an unknown name returns -1 with a message
@@ -35,9 +41,11 @@ int ef_aov_parse(const char *list, unsigned *mask, const char *what, ef_err *err
 /* The AOV bit of one name, or 0 when there is none. */
 unsigned ef_aov_find(const char *name);
 
-/* The channel names of mask, in table order; returns how many (at most
+/* The channel names of mask, in table order (light's after the rest: the
+ * ambient, then one layer per light of s, whose names they point into; s
+ * may be NULL: no light layers); returns how many (at most
  * EF_AOV_MAX_CHANNELS). names may be NULL to count. */
-int ef_aov_channels(unsigned mask, const char **names);
+int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names);
 
 /* The AOV names of mask as a comma list ("fog,T"), into buf. */
 void ef_aov_list(unsigned mask, char *buf, size_t len);
@@ -48,10 +56,12 @@ typedef struct ef_aov_out {
     unsigned mask;
     double origin[3];         /* subtracted from fog_P (in double) */
     float *fog[4], *T[3], *err[3], *P[3], *dist;
+    float *ambient[3], *light[EF_MAX_LIGHTS][3];
 } ef_aov_out;
 
-/* Points out's planes at planes[i], i in the order ef_aov_channels gives. */
-void ef_aov_bind(ef_aov_out *out, unsigned mask, float *const *planes);
+/* Points out's planes at planes[i], i in the order ef_aov_channels gives
+ * (nlight: the scene's lights). */
+void ef_aov_bind(ef_aov_out *out, unsigned mask, int nlight, float *const *planes);
 
 /* Cost and error of the numerical components over many pixels (the
  * surface segment of each fogged pixel), for --stats. */

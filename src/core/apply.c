@@ -39,18 +39,27 @@ static double aov_err(double T, double e)
 /* The lights' in-scattered light over the pixel's coverage: a S along the
  * surface segment plus (1 - a) S along the far one (need_inf: it shows). */
 static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int need_inf,
-                       double c[3])
+                       double c[3], const ef_aov_out *aov, size_t i)
 {
-    double S[3], Sf[3];
-    ef_lights_inscatter(s, r, S, NULL);
-    memcpy(Sf, S, sizeof Sf);
-    if (need_inf) {
-        ef_ray far;
-        if (!ef_scene_far_ray(s, r, &far))
-            ef_lights_inscatter(s, &far, Sf, NULL);
+    ef_ray far;
+    const int other = need_inf && !ef_scene_far_ray(s, r, &far);
+    double sum[3] = { 0, 0, 0 };
+    /* light by light, summed in order as ef_lights_inscatter does */
+    for (int j = 0; j < s->nlight; ++j) {
+        double S[3], Sf[3];
+        ef_light_inscatter(s, &s->light[j], r, S, NULL);
+        memcpy(Sf, S, sizeof Sf);
+        if (other)
+            ef_light_inscatter(s, &s->light[j], &far, Sf, NULL);
+        for (int k = 0; k < 3; ++k) {
+            const double v = a * S[k] + (need_inf ? (1.0 - a) * Sf[k] : 0.0);
+            sum[k] += v;
+            if (aov && aov->light[j][k])
+                aov->light[j][k][i] = to_float(v);
+        }
     }
     for (int k = 0; k < 3; ++k)
-        c[k] += a * S[k] + (need_inf ? (1.0 - a) * Sf[k] : 0.0);
+        c[k] += sum[k];
 }
 
 /* One span of a row: its rays, and where each pixel's fog is found. */
@@ -450,6 +459,11 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                         aov->T[k][i] = 1.0f;
                     for (int k = 0; k < 3 && (mask & EF_AOV_ERROR); ++k)
                         aov->err[k][i] = 0.0f;
+                    for (int k = 0; k < 3 && (mask & EF_AOV_LIGHT); ++k) {
+                        aov->ambient[k][i] = 0.0f;
+                        for (int l = 0; l < s->nlight; ++l)
+                            aov->light[l][k][i] = 0.0f;
+                    }
                     continue;
                 }
                 ef_fog_sample one, other;
@@ -468,8 +482,12 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 for (int k = 0; k < 3; ++k)
                     in[k] = c[k] = rgb[k][i];
                 ef_composite(surf, inf, fog_uncovered, c, alpha ? &a : NULL);
+                if (mask & EF_AOV_LIGHT)
+                    for (int k = 0; k < 3; ++k)
+                        aov->ambient[k][i] =
+                            to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
                 if (s->nlight)
-                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c);
+                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i);
                 for (int k = 0; k < 3; ++k)
                     rgb[k][i] = to_float(c[k]);
                 if (alpha && !sp->bad_alpha[j])

@@ -332,8 +332,9 @@ static void gk15(lit_fn f, const void *q, gk_iv *iv)
 #define GK_MAX 512
 
 /* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
- * the summed error estimate is at most rel of the result in every channel
- * (or GK_MAX intervals): adds the result to S and its estimate to E. */
+ * the summed error estimate is at most rel of the result plus S in every
+ * channel (or GK_MAX intervals): adds the result to S and its estimate to
+ * E. */
 static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, double rel,
                      double S[3], double E[3])
 {
@@ -354,8 +355,11 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
                 Er[k] += iv[i].e[k];
             }
         int done = 1;
+        /* relative to what S already holds too: a far piece of a ray
+         * whose light was collected before need not resolve its own
+         * near-zero to 1e-13 of itself */
         for (int k = 0; k < 3; ++k)
-            done &= Er[k] <= rel * fabs(R[k]) || !isfinite(R[k]);
+            done &= Er[k] <= rel * fabs(R[k] + S[k]) || !isfinite(R[k]);
         if (done || n + 1 >= GK_MAX) {
             for (int k = 0; k < 3; ++k) {
                 S[k] += R[k];
@@ -371,7 +375,7 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
                                                                             fabs(iv[i].b))
                                  ? 0 : 1;   /* too narrow to split further */
             for (int k = 0; k < 3; ++k) {
-                const double w = m * iv[i].e[k] / (fabs(R[k]) + 1e-300);
+                const double w = m * iv[i].e[k] / (fabs(R[k] + S[k]) + 1e-300);
                 if (w > we) {
                     we = w;
                     worst = i;
@@ -400,9 +404,11 @@ typedef struct lit_q {
     const ef_fog_scene *s;
     const ef_light *l;
     const ef_ray *r;
-    int equi;                 /* u = xi: t = ts + hq tan(xi), E dt = e / hq dxi */
+    int equi;                 /* 1: u = xi, t = ts + hq tan(xi), E dt = e / hq dxi; 2: the tail v; 0: t (sun) or t - ts (lamp) */
     double ts, hq, h;         /* the lamp's closest approach along the ray, its distances */
     double w[3], wa, va;      /* lamp - camera; w . aim and dir . aim (spots) */
+    double W;                 /* xi within W of the closest approach, t beyond */
+    double ua, lam;           /* an infinite ray's tail: u = ua + lam v / (1 - v) */
     int uniform;              /* every component uniform: sig per channel */
     double sig[3];
 } lit_q;
@@ -447,10 +453,16 @@ static void lit_integrand(const void *qv, double u, double out[3])
     const ef_ray *r = q->r;
     double t = u, ur = 0, wgt = 1;
     out[0] = out[1] = out[2] = 0;
-    if (q->equi) {
+    if (q->equi == 1) {
         ur = q->hq * tan(u);
         t = q->ts + ur;
         wgt = 1 / q->hq;
+    } else if (q->equi == 2) {
+        if (!(u < 1))
+            return;
+        ur = q->ua + q->lam * u / (1 - u);
+        t = q->ts + ur;
+        wgt = q->lam / ((1 - u) * (1 - u)) / (ur * ur + q->hq * q->hq);
     } else if (l->kind != EF_LIGHT_SUN) {
         /* a lamp's pieces in t are in u = t - ts: nodes near the lamp
          * keep their full precision */
@@ -650,7 +662,7 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     const double D = r->dist;
     if (s->ncomp == 0 || !(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return;
-    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 1, { 0, 0, 0 } };
+    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
     for (int i = 0; i < s->ncomp; ++i) {
         q.uniform &= is_uniform(&s->comp[i]);
         for (int k = 0; k < 3 && is_uniform(&s->comp[i]); ++k)
@@ -699,50 +711,64 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             q.hq = 1e-9 * (q.ts < 0 ? -q.ts : q.ts - D);
         }
         q.equi = 1;
-        /* geometric steps around the closest approach from h: the phase
-         * turns from forward to back over ~h there, however wide the
-         * radius makes the 1/d^2 peak */
-        const double h0 = q.h > 0 ? q.h : q.hq;
+        /* Within W of the closest approach the substitution makes 1/d^2
+         * flat; past it, t - ts itself, in pieces of geometric length (a
+         * xi crowded against +-pi/2 would lose the pieces to rounding).
+         * The closest approach itself is a cut (where h is 0 the phase
+         * jumps there); where the radius is far wider than the line's
+         * distance h, the phase still turns from forward to back over ~h:
+         * geometric steps from h inside W too. */
+        const double W = 64 * q.hq;
+        if (q.ts > 0 && q.ts < D)
+            cut[n++] = q.ts;
+        const double h0 = q.h < q.hq / 16 ? fmax(q.h, 1e-6 * q.hq) : W;
         for (double st = h0; n < MAX_CUTS - 4; st *= 4) {
             if (q.ts + st > 0 && q.ts + st < D)
                 cut[n++] = q.ts + st;
             if (q.ts - st > 0 && q.ts - st < D)
                 cut[n++] = q.ts - st;
-            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0) + 1e3 * q.hq)
+            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0))
                 break;
         }
+        for (double st = W; h0 < W && n < MAX_CUTS - 4; st *= 4) {
+            if (q.ts + st > 0 && q.ts + st < D)
+                cut[n++] = q.ts + st;
+            if (q.ts - st > 0 && q.ts - st < D)
+                cut[n++] = q.ts - st;
+            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0))
+                break;
+        }
+        q.W = W;
     }
     if (isfinite(D))
         cut[n++] = D;
     const double rel = q.uniform ? REL_UNIFORM : REL_GENERAL;
     if (q.equi) {
-        /* xi = atan((t - ts) / hq) near the lamp (within W), where 1/d^2
-         * peaks; t itself farther out, where the substitution would crowd
-         * the pieces against +-pi/2 and lose them to rounding. An infinite
-         * ray's last piece stays in xi (t = inf is xi = pi/2). */
-        const double W = 16 * q.hq;
-        if (q.ts - W > 0 && q.ts - W < D)
-            cut[n++] = q.ts - W;
-        if (q.ts + W > 0 && q.ts + W < D)
-            cut[n++] = q.ts + W;
+        /* pieces within W of the lamp in xi = atan((t - ts) / hq), the
+         * others in u = t - ts; an infinite ray's last piece in v, u =
+         * ua + lam v / (1 - v), lam its start's distance from the lamp */
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        if (!isfinite(D))
-            cut[n++] = D;
+        const double W = q.W;
         double run[MAX_CUTS];
         for (int i = 0; i + 1 < n;) {
-            const int in = !(cut[i + 1] <= q.ts - W || cut[i] >= q.ts + W) || !isfinite(cut[i + 1]);
+            const int in = cut[i] >= q.ts - W && cut[i + 1] <= q.ts + W;
             int m = 0, j = i;
             run[m++] = in ? atan((cut[i] - q.ts) / q.hq) : cut[i] - q.ts;
             for (; j + 1 < n; ++j) {
-                const int in2 = !(cut[j + 1] <= q.ts - W || cut[j] >= q.ts + W) ||
-                                !isfinite(cut[j + 1]);
-                if (in2 != in)
+                if ((cut[j] >= q.ts - W && cut[j + 1] <= q.ts + W) != in)
                     break;
                 run[m++] = in ? atan((cut[j + 1] - q.ts) / q.hq) : cut[j + 1] - q.ts;
             }
             q.equi = in;
             gk_adapt(lit_integrand, &q, run, m, rel, S, E);
             i = j;
+        }
+        if (!isfinite(D)) {
+            q.equi = 2;
+            q.ua = cut[n - 1] - q.ts;
+            q.lam = fmax(fabs(q.ua), q.hq);
+            const double v[2] = { 0, 1 };
+            gk_adapt(lit_integrand, &q, v, 2, rel, S, E);
         }
     } else if (isfinite(D)) {
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);

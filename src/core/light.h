@@ -40,6 +40,7 @@ typedef struct ef_light {
     double radius;                   /* E = I / (d^2 + radius^2), scene units */
     double angle;                    /* sun: angular diameter, radians (kept; no shadows yet) */
     double cos_outer, smooth;        /* spot: cos(cone / 2), blend (1 - cos(cone / 2)) */
+    char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

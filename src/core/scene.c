@@ -67,6 +67,8 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
         static const char *const kind[] = { "sun", "point", "spot" };
         snprintf(l->name, sizeof l->name, "%s%d", kind[l->kind], nth + 1);
     }
+    for (int k = 0; k < 3; ++k)
+        snprintf(l->aov[k], sizeof l->aov[k], "fog_light.%s.%c", l->name, "RGB"[k]);
     for (int i = 0; i < s->nlight; ++i)
         if (!strcmp(s->light[i].name, l->name))
             return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "

@@ -24,7 +24,7 @@
 /* The longest SPEC a component can hold (ef_fog_component.spec). */
 #define EF_SPEC_MAX (sizeof(((ef_fog_component *) 0)->spec) - 1)
 
-static const char top_keys[] = "units, up, color, sky, time, aov, fog";
+static const char top_keys[] = "units, up, color, sky, time, aov, fog, lights";
 
 /* ------------------------------------------------------------ text files */
 
@@ -348,26 +348,24 @@ static int finish_spec(const spec_buf *b, const char *where, char **out, ef_err 
 }
 
 /* {"model": NAME, KEY: VALUE, ...} -> "NAME:KEY=VALUE:...". */
-static int object_spec(const json_t *o, const char *scene_path, const char *where, char **out,
-                       ef_err *err)
+static int object_spec_as(const json_t *o, const char *head, const char *heads,
+                          const char *scene_path, const char *where, char **out, ef_err *err)
 {
     spec_buf b = { .n = 0 };
-    const json_t *model = json_object_get(o, "model");
+    const json_t *model = json_object_get(o, head);
     char path[160];
     if (!model)
-        return ef_fail(err, "%s: missing \"model\" (one of linear, exp, exp2, halfspace, "
-                            "halfspace-linear, halfspace-smooth, height, layered, box, convex)",
-                       where);
-    snprintf(path, sizeof path, "%s.model", where);
+        return ef_fail(err, "%s: missing \"%s\" (one of %s)", where, head, heads);
+    snprintf(path, sizeof path, "%s.%s", where, head);
     if (!json_is_string(model))
-        return ef_json_expected(err, path, "a model name (a string)", model);
+        return ef_json_expected(err, path, "a name (a string)", model);
     if (check_word(path, json_string_value(model), err))
         return -1;
     put(&b, json_string_value(model));
     const char *key;
     json_t *v;
     json_object_foreach((json_t *) o, key, v) {
-        if (!strcmp(key, "model"))
+        if (!strcmp(key, head))
             continue;
         if (!*key || strpbrk(key, ":="))
             return ef_fail(err, "%s: key '%s' is not a key name (it cannot be empty or contain "
@@ -380,6 +378,14 @@ static int object_spec(const json_t *o, const char *scene_path, const char *wher
             return -1;
     }
     return finish_spec(&b, where, out, err);
+}
+
+static int object_spec(const json_t *o, const char *scene_path, const char *where, char **out,
+                       ef_err *err)
+{
+    return object_spec_as(o, "model", "linear, exp, exp2, halfspace, halfspace-linear, "
+                          "halfspace-smooth, height, layered, box, convex", scene_path, where,
+                          out, err);
 }
 
 /* A SPEC string as written, except that a relative file= path is taken from
@@ -562,6 +568,33 @@ static int read_fog(const json_t *v, const char *path, ef_scene_file *out, ef_er
     return 0;
 }
 
+/* "lights": [{"kind": "sun", "towards": [0, 1, 1], ...} or "sun:towards=..."]. */
+static int read_lights(const json_t *v, const char *path, ef_scene_file *out, ef_err *err)
+{
+    if (!json_is_array(v))
+        return ef_json_expected(err, "lights", "an array of lights", v);
+    if (json_array_size(v) > EF_MAX_LIGHTS)
+        return ef_fail(err, "lights: has %zu lights, at most %d are allowed", json_array_size(v),
+                       EF_MAX_LIGHTS);
+    for (size_t i = 0; i < json_array_size(v); ++i) {
+        const json_t *c = json_array_get(v, i);
+        char *where = out->lwhere[out->nlight];
+        snprintf(where, sizeof out->lwhere[0], "lights[%zu]", i);
+        char **spec = &out->lights[out->nlight];
+        if (json_is_object(c)) {
+            if (object_spec_as(c, "kind", "sun, point, spot", path, where, spec, err))
+                return -1;
+        } else if (json_is_string(c)) {
+            if (string_spec(json_string_value(c), path, where, spec, err))
+                return -1;
+        } else {
+            return ef_json_expected(err, where, "a light object or a --light SPEC string", c);
+        }
+        out->nlight++;
+    }
+    return 0;
+}
+
 static int read_root(const json_t *root, const char *path, ef_scene_file *out, ef_err *err)
 {
     if (!json_is_object(root))
@@ -585,6 +618,8 @@ static int read_root(const json_t *root, const char *path, ef_scene_file *out, e
             rc = read_time(v, out, err);
         else if (!strcmp(key, "aov"))
             rc = read_aov(v, out, err);
+        else if (!strcmp(key, "lights"))
+            rc = read_lights(v, path, out, err);
         else
             rc = ef_fail(err, "unknown key '%s' (keys: %s)", key, top_keys);
         if (rc)
@@ -628,6 +663,11 @@ void ef_scene_file_free(ef_scene_file *f)
         f->specs[i] = NULL;
     }
     f->nspec = 0;
+    for (int i = 0; i < EF_MAX_LIGHTS; ++i) {
+        free(f->lights[i]);
+        f->lights[i] = NULL;
+    }
+    f->nlight = 0;
     free(f->text);
     f->text = NULL;
 }

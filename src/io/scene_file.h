@@ -7,11 +7,15 @@
 
 #include "error.h"
 #include "fog.h"
+#include "light.h"
 
 typedef struct ef_scene_file {
     char *specs[EF_FOG_MAX_COMPONENTS];      /* malloc'd SPEC strings */
     char where[EF_FOG_MAX_COMPONENTS][64];   /* each one's path in the file, e.g. "fog[2]" */
     int nspec;
+    char *lights[EF_MAX_LIGHTS];             /* "lights": malloc'd --light SPECs */
+    char lwhere[EF_MAX_LIGHTS][64];          /* e.g. "lights[0]" */
+    int nlight;
     int has_color, has_up, has_units, has_sky, has_time;
     double color[3], up[3], units, time;
     unsigned aov;                            /* EF_AOV_* bits of "aov" (0: none) */

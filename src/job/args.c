@@ -118,8 +118,8 @@ void ef_options_usage(FILE *out)
             "                           later (default 1e-3)\n"
             "      --deep-grey-alpha    deep output of chromatic fog for readers of A only:\n"
             "                           every alpha the least, the rest folded into colour\n"
-            "      --scene FILE         JSON scene: fog, color, sky, up, units, time, aov;\n"
-            "                           the flags given here override it\n"
+            "      --scene FILE         JSON scene: fog, lights, color, sky, up, units, time,\n"
+            "                           aov; the flags given here override it\n"
             "      --up-axis y|z|-y|-z|auto|X,Y,Z  up for the height models (default y;\n"
             "                           Blender and V-Ray scenes are z-up)\n"
             "      --units-per-meter U  scene units per metre (default 1, 100 for cm);\n"
@@ -140,7 +140,8 @@ void ef_options_usage(FILE *out)
             "      --aov LIST           extra output channels, repeatable: a comma list of\n"
             "                           fog (fog.R,G,B,A), T (fog_T.R,G,B), error\n"
             "                           (fog_error.R,G,B), P (fog_P.X,Y,Z), distance\n"
-            "                           (fog_distance.Z)\n"
+            "                           (fog_distance.Z), light (fog_ambient.R,G,B and\n"
+            "                           fog_light.NAME.R,G,B per --light)\n"
             "      --aov-origin X,Y,Z   subtracted from fog_P (default 0,0,0)\n"
             "      --depth FILE         take depth from a second EXR\n"
             "      --layer NAME         colour layer (e.g. ViewLayer.Combined)\n"
@@ -631,6 +632,9 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
     o->aov |= found.aov;
     if (br != EF_PARSE_RUN)
         return br;
+    if ((o->aov & EF_AOV_LIGHT) && o->scene.nlight == 0)
+        return ef_fail(err, "--aov light: there is no --light (the light AOVs hold one layer "
+                            "per light)"), EF_PARSE_USAGE;
     if (!o->explain && o->scene.ncomp == 0)
         return ef_fail(err, "no fog given (add --fog SPEC or --scene FILE, e.g. --fog exp:density=0.02)"),
                EF_PARSE_USAGE;

@@ -107,7 +107,7 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
                 ef_colour_space(&J->colour), ef_colour_space_source(&J->colour), ef_colour_config_where(&J->colour));
     if (o->aov) {
         const char *names[EF_AOV_MAX_CHANNELS];
-        const int n = ef_aov_channels(o->aov, names);
+        const int n = ef_aov_channels(o->aov, &o->scene, names);
         fprintf(out, "aov channels (part %d):", plan ? plan->rgb[0].part : -1);
         for (int i = 0; i < n; ++i)
             fprintf(out, " %s", names[i]);
@@ -252,7 +252,7 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
         fputs("null", out);
     }
     const char *names[EF_AOV_MAX_CHANNELS];
-    const int n = ef_aov_channels(o->aov, names);
+    const int n = ef_aov_channels(o->aov, &o->scene, names);
     fputs(",\n  \"aov\": [", out);
     for (int i = 0; i < n; ++i) {
         if (i)

@@ -139,7 +139,7 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     if (ef_job_cancelled(j->J))
         return;   /* the output is thrown away: no work for it */
     ef_aov_out aov;
-    ef_aov_bind(&aov, j->aov, ck->extra);
+    ef_aov_bind(&aov, j->aov, j->pass[0].scene->nlight, ck->extra);
     memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
     /* Statistics per unit, merged once: no lock per pixel. */
     ef_tau_stats st[EF_FOG_MAX_COMPONENTS];
@@ -435,7 +435,8 @@ static void blender_aov_names(ef_frame *F)
     static const struct {
         const char *from, *to;
     } pass[] = { { "fog_distance.", "FogDistance." }, { "fog_error.", "FogError." },
-                 { "fog_T.", "FogT." }, { "fog_P.", "FogP." }, { "fog.", "Fog." } };
+                 { "fog_T.", "FogT." }, { "fog_P.", "FogP." }, { "fog.", "Fog." },
+                 { "fog_ambient.", "FogAmbient." }, { "fog_light.", "FogLight_" } };
     for (int i = 0; i < F->naov; ++i) {
         const char *n = F->aov_names[i];
         for (size_t k = 0; k < sizeof pass / sizeof pass[0]; ++k) {
@@ -1080,7 +1081,7 @@ int ef_run_frame(ef_job *J)
     F->job.J = J;
     F->job.pv_step = 1;
     pthread_mutex_init(&F->job.lock, NULL);
-    F->naov = ef_aov_channels(o->aov, F->aov_names);
+    F->naov = ef_aov_channels(o->aov, &o->scene, F->aov_names);
     F->out.fd = F->pv.fd = F->mid.fd = F->dconv.fd = F->din.fd = -1;
     F->dwa_out = -1;
     int (*const stages[])(ef_frame *) = { open_destinations, open_inputs, find_views,

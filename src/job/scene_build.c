@@ -115,6 +115,14 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
             r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
             break;
         }
+    for (int i = 0; r == EF_PARSE_RUN && i < sf.nlight; ++i)
+        if (ef_scene_add_light(s, sf.lights[i], err)) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            ef_fail(err, "%s: %s", sf.lwhere[i], msg);
+            err->file = d->scene_file;
+            r = EF_PARSE_FAIL;
+        }
     for (int i = 0; r == EF_PARSE_RUN && i < d->nlight; ++i)
         if (ef_scene_add_light(s, d->lights[i], err))
             r = EF_PARSE_USAGE;

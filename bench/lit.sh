@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# shellcheck disable=SC2016  # command lines are stored single-quoted and eval'd
+# bench/lit.sh - what lights cost: lit fog end to end on a 1920x1080 frame
+# against the same fog unlit and the `oiiotool IN -o OUT` copy, measured in
+# the same run.
+#
+# usage: bench/lit.sh [BUILD_DIR]     (default: <repo>/build, a Release build)
+#
+# Renders the 1920x1080 RGBA half + Z float ZIP frame of bench/run.sh
+# (make_sample), then times in BENCH_RUNS interleaved rounds (order rotated
+# each round; medians): the copy, exp and height fog unlit, the sun in
+# height fog (closed form), two point lamps in exp fog (equiangular
+# quadrature), a point lamp in a box volume plus height fog (the general
+# quadrature). Prints a Markdown table, also written to bench/lit.md
+# (whose sections from its first "### " heading on are kept). Nothing
+# asserts on time.
+#
+# Environment: BENCH_RUNS=3, BENCH_SIZE=1920x1080, EXRFOG_THREADS=N.
+set -uo pipefail
+
+die() { echo "lit: $*" >&2; exit 1; }
+
+here="$(cd "$(dirname "$0")" && pwd)"
+repo="$(cd "$here/.." && pwd)"
+build="${1:-$repo/build}"
+[[ -d "$build" ]] || die "no build directory $build"
+build="$(cd "$build" && pwd)"
+runs="${BENCH_RUNS:-3}"
+size="${BENCH_SIZE:-1920x1080}"
+[[ "$runs" =~ ^[1-9][0-9]*$ ]] || die "BENCH_RUNS must be a positive integer"
+[[ "$size" =~ ^[1-9][0-9]*x[1-9][0-9]*$ ]] || die "BENCH_SIZE must be WxH"
+exrfog="$build/exrfog"
+make_sample="${MAKE_SAMPLE:-$build/make_sample}"
+for b in "$exrfog" "$make_sample"; do
+    [[ -x "$b" ]] || die "$b not built (cmake --build $build)"
+done
+command -v oiiotool >/dev/null 2>&1 || die "oiiotool not found (apt-get install -y openimageio-tools)"
+
+tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-lit.XXXXXX")" || die "mktemp failed"
+trap 'rm -rf "$tmp"' EXIT
+IN="$tmp/frame.exr"
+echo "lit: rendering $size frame ..." >&2
+"$make_sample" "$IN" --size "$size" --compression zip >&2 || die "make_sample failed"
+px=$(( ${size%x*} * ${size#*x} ))
+
+threads=()
+[[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
+H='height:density=0.05:falloff=0.3:base=0'
+names=() cmds=() bases=()
+add() { names+=("$1"); bases+=("$2"); cmds+=("$3"); }
+add "oiiotool (copy)" "" 'oiiotool "$IN" -o "$OUT"'
+add "exp (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02'
+add "height (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H"'
+add "sun in height fog (closed form)" "height (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3'
+add "two point lamps in exp fog" "exp (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02 --light point:position=2,3,-20:intensity=100 --light point:position=-6,2,-60:intensity=200'
+add "point lamp, box + height (general)" "height (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H" --fog box:min=-10,0,-60:max=10,8,-10:density=0.1 --light point:position=2,3,-20:intensity=100'
+n=${#names[@]}
+declare -A times
+for ((r = 0; r < runs; ++r)); do
+    for ((k = 0; k < n; ++k)); do
+        i=$(( (k + r) % n ))
+        OUT="$tmp/out$i.exr"
+        s=$(date +%s.%N)
+        eval "${cmds[$i]}" >/dev/null 2>"$tmp/err" || die "${names[$i]} failed: $(cat "$tmp/err")"
+        e=$(date +%s.%N)
+        times[$i]+="$(echo "$e - $s" | bc) "
+        echo "lit: round $((r + 1))/$runs ${names[$i]}: $(echo "$e - $s" | bc) s" >&2
+    done
+done
+median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }'; }
+declare -A med
+for ((i = 0; i < n; ++i)); do med[$i]=$(echo "${times[$i]}" | median); done
+copy=${med[0]}
+cpu="$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -1)"
+{
+    echo "## Lit fog, end to end ($(date -u '+%Y-%m-%d %H:%M UTC'))"
+    echo
+    echo "- machine: ${cpu:-unknown CPU}, $(nproc) cores; exrfog $(git -C "$repo" rev-parse --short HEAD 2>/dev/null) ($build)"
+    echo "- input: ${size} RGBA half + Z float, ZIP (make_sample); $runs interleaved rounds, medians; threads: ${EXRFOG_THREADS:-all}"
+    echo
+    echo "| run | median s | x copy | x unlit | lights' ns per pixel |"
+    echo "|---|---:|---:|---:|---:|"
+    for ((i = 0; i < n; ++i)); do
+        b="${bases[$i]}" bm="" ns=""
+        for ((j = 0; j < n; ++j)); do [[ "${names[$j]}" == "$b" ]] && bm=${med[$j]}; done
+        if [[ -n "$bm" ]]; then
+            xb=$(awk -v a="${med[$i]}" -v b="$bm" 'BEGIN { printf "%.2f", a / b }')
+            ns=$(awk -v a="${med[$i]}" -v b="$bm" -v p="$px" 'BEGIN { printf "%.0f", (a - b) * 1e9 / p }')
+        else
+            xb="-"
+            ns="-"
+        fi
+        printf '| %s | %.3f | %.2f | %s | %s |\n' "${names[$i]}" "${med[$i]}" \
+            "$(awk -v a="${med[$i]}" -v c="$copy" 'BEGIN { print a / c }')" "$xb" "$ns"
+    done
+    echo
+    echo "ns per pixel: the lit run's wall time minus its unlit run's, over the frame's pixels (on every thread together)."
+} >"$tmp/table.md"
+cat "$tmp/table.md"
+md="$here/lit.md"
+{
+    echo "# exrfog: lit fog benchmarks (bench/lit.sh)"
+    echo
+    cat "$tmp/table.md"
+    if [[ -f "$md" ]]; then
+        echo
+        sed -n '/^### /,$p' "$md"
+    fi
+} >"$tmp/lit.md" && mv "$tmp/lit.md" "$md"
