@@ -306,26 +306,36 @@ typedef struct gk_iv {
 static void gk15(lit_fn f, const void *q, gk_iv *iv)
 {
     const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
-    double fc[3], rk[3], rg[3];
-    f(q, c, fc);
+    double fv[15][3], rk[3], rg[3];
+    f(q, c, fv[7]);
     for (int k = 0; k < 3; ++k) {
-        rk[k] = (double) ef_gk15_wk[7] * fc[k];
-        rg[k] = (double) ef_gk15_wg[3] * fc[k];
+        rk[k] = (double) ef_gk15_wk[7] * fv[7][k];
+        rg[k] = (double) ef_gk15_wg[3] * fv[7][k];
     }
     for (int j = 0; j < 7; ++j) {
-        double f1[3], f2[3];
         const double dx = h * (double) ef_gk15_x[j];
-        f(q, c - dx, f1);
-        f(q, c + dx, f2);
+        f(q, c - dx, fv[j]);
+        f(q, c + dx, fv[14 - j]);
         for (int k = 0; k < 3; ++k) {
-            rk[k] += (double) ef_gk15_wk[j] * (f1[k] + f2[k]);
+            rk[k] += (double) ef_gk15_wk[j] * (fv[j][k] + fv[14 - j][k]);
             if (j & 1)
-                rg[k] += (double) ef_gk15_wg[j / 2] * (f1[k] + f2[k]);
+                rg[k] += (double) ef_gk15_wg[j / 2] * (fv[j][k] + fv[14 - j][k]);
         }
     }
+    /* QUADPACK's qk15 estimate: |K - G| scaled by (200 |K - G| / resasc)^1.5
+     * (resasc: the integral of |f - its mean|), which on a smooth piece
+     * tracks the Kronrod rule's own error rather than the Gauss rule's */
     for (int k = 0; k < 3; ++k) {
+        const double mean = rk[k] * 0.5;
+        double asc = (double) ef_gk15_wk[7] * fabs(fv[7][k] - mean);
+        for (int j = 0; j < 7; ++j)
+            asc += (double) ef_gk15_wk[j] * (fabs(fv[j][k] - mean) + fabs(fv[14 - j][k] - mean));
+        asc *= fabs(h);
+        double e = fabs((rk[k] - rg[k]) * h);
+        if (asc != 0 && e != 0)
+            e = asc * fmin(1, pow(200 * e / asc, 1.5));
         iv->r[k] = rk[k] * h;
-        iv->e[k] = fabs((rk[k] - rg[k]) * h);
+        iv->e[k] = fmax(e, 50 * 0x1p-52 * fabs(iv->r[k]));
     }
 }
 
@@ -496,18 +506,22 @@ static void lit_integrand(const void *qv, double u, double out[3])
         }
     }
     if (q->uniform) {
-        /* T(0,t) T_l = e^-(sig (t + d)) */
-        for (int k = 0; k < 3; ++k) {
-            if (q->sig[k] == 0)
-                continue;
-            double a = 0;
-            for (int i = 0; i < q->s->ncomp; ++i) {
-                const ef_fog_component *c = &q->s->comp[i];
+        /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
+         * exponential per distinct density */
+        double a[3] = { 0, 0, 0 };
+        for (int i = 0; i < q->s->ncomp; ++i) {
+            const ef_fog_component *c = &q->s->comp[i];
+            const double p = ef_phase_eval(c->phase, c->g, cth);
+            for (int k = 0; k < 3; ++k)
                 if (c->p[k] > 0)
-                    a += c->p[k] * albedo(c, k) * ef_phase_eval(c->phase, c->g, cth);
-            }
-            out[k] = wgt * l->e[k] * a * exp(-q->sig[k] * (t + dl));
+                    a[k] += c->p[k] * albedo(c, k) * p;
         }
+        double e[3];
+        e[0] = exp(-q->sig[0] * (t + dl));
+        e[1] = q->sig[1] == q->sig[0] ? e[0] : exp(-q->sig[1] * (t + dl));
+        e[2] = q->sig[2] == q->sig[0] ? e[0] : exp(-q->sig[2] * (t + dl));
+        for (int k = 0; k < 3; ++k)
+            out[k] = q->sig[k] == 0 ? 0 : wgt * l->e[k] * a[k] * e[k];
         return;
     }
     double x[3], acc[3];
@@ -546,14 +560,19 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         return;   /* at or below the horizon, the sun crosses unbounded fog */
     double tv[3], sc[3], sp[3] = { 0, 0, 0 };
     c->model->tau(c, r, tv);
-    sigma_at(c, r->org, sc);
-    if (isfinite(r->dist)) {
-        double x[3];
-        for (int a = 0; a < 3; ++a)
-            x[a] = r->org[a] + r->dist * r->dir[a];
-        sigma_at(c, x, sp);
-    } else if (!(mu > 0)) {
-        sp[0] = sp[1] = sp[2] = INFINITY;
+    /* the densities at the ends, rho e^-(k (height - base)), in double
+     * (one exponential each: the model's own density works in long double
+     * for the reference) */
+    const double hc = c->up[0] * r->org[0] + c->up[1] * r->org[1] + c->up[2] * r->org[2] - c->p[4];
+    const double ec = exp(-k * hc);
+    double ep = 0;
+    if (isfinite(r->dist))
+        ep = exp(-k * (hc + r->dist * mu));
+    else if (!(mu > 0))
+        ep = INFINITY;
+    for (int ch = 0; ch < 3; ++ch) {
+        sc[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ec;
+        sp[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ep;
     }
     const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - mu / lu);
