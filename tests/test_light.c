@@ -257,6 +257,46 @@ static void test_by_hand(void **state)
     ef_scene_free(&s);
 }
 
+/* Extreme lights and fogs: never NaN, never negative (an infinite S only
+ * where a lamp of radius 0 sits on the segment), and an answer in bounded
+ * time. Found by a sweep of the CLI: inf * 0 of a dense fog's sigma times a
+ * near lamp's weight, and a radius whose square overflows. */
+static void test_hostile(void **state)
+{
+    (void) state;
+    const char *fogs[] = { "exp:density=1e300", "height:density=1e-300:falloff=1e300",
+                           "height:density=0.05:falloff=0.3", "exp:density=0.02",
+                           "box:min=-1e300,-1,-1e300:max=1e300,1,1e300:density=1e3",
+                           "exp:density=1e300:phase=hg:g=0.999999" };
+    const char *lights[] = { "point:position=1e300,1e300,1e300:intensity=1e300",
+                             "point:position=0,1.7,-1e-9:intensity=1e300",
+                             "point:position=0,1.7000001,0:radius=1e-300",
+                             "point:position=0,1.7,-5:radius=1e300:intensity=1e300",
+                             "point:position=0,1.7,-5:radius=1e200",
+                             "sun:towards=1e-300,1,0:intensity=1e300", "sun:towards=0,-1,0",
+                             "spot:position=0,5,-10:aim=0,-1,0:cone=1e-300",
+                             "spot:position=1e300,5,-10:aim=0,-1,0:cone=30:radius=1e308" };
+    const double org[3] = { -1.08e-9, 1.69999990512, 1.03e-8 };
+    const double dirs[][4] = { { -0.4, -0.037, -0.915, 8.5e7 }, { 0, 0.1, -1, INFINITY },
+                               { 0, -0.2, -1, 8.5 }, { 0.3, 0, 1, 1e300 } };
+    for (size_t f = 0; f < sizeof fogs / sizeof fogs[0]; ++f)
+        for (size_t l = 0; l < sizeof lights / sizeof lights[0]; ++l) {
+            const char *specs[] = { fogs[f], NULL };
+            ef_fog_scene s;
+            scene_of(&s, specs, lights[l]);
+            for (size_t d = 0; d < sizeof dirs / sizeof dirs[0]; ++d) {
+                const ef_ray r = ray_of(org, dirs[d][0], dirs[d][1], dirs[d][2], dirs[d][3]);
+                double S[3], E[3];
+                ef_light_inscatter(&s, &s.light[0], &r, S, E);
+                for (int k = 0; k < 3; ++k)
+                    if (isnan(S[k]) || S[k] < 0 || isnan(E[k]))
+                        fail_msg("%s with %s, ray %zu: S %g, estimate %g", fogs[f], lights[l], d,
+                                 S[k], E[k]);
+            }
+            ef_scene_free(&s);
+        }
+}
+
 /* ---- the fog pass ---- */
 
 #define W 6
@@ -497,6 +537,7 @@ int main(void)
         cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_general),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),
         cmocka_unit_test(test_errors),       cmocka_unit_test(test_cli),
+        cmocka_unit_test(test_hostile),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -52,7 +52,9 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
         if (other)
             ef_light_inscatter(s, &s->light[j], &far, Sf, NULL);
         for (int k = 0; k < 3; ++k) {
-            const double v = a * S[k] + (need_inf ? (1.0 - a) * Sf[k] : 0.0);
+            /* a share of 0 takes nothing, even an infinite S */
+            const double v = (a > 0.0 ? a * S[k] : 0.0) +
+                             (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
             sum[k] += v;
             if (aov && aov->light[j][k])
                 aov->light[j][k][i] = to_float(v);

@@ -4,6 +4,7 @@
 #include "lit.h"
 #include "gk15.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -520,8 +521,10 @@ static void lit_integrand(const void *qv, double u, double out[3])
         e[0] = exp(-q->sig[0] * (t + dl));
         e[1] = q->sig[1] == q->sig[0] ? e[0] : exp(-q->sig[1] * (t + dl));
         e[2] = q->sig[2] == q->sig[0] ? e[0] : exp(-q->sig[2] * (t + dl));
+        /* the transmittance first: where it is 0 a dense fog's sigma times
+         * a near lamp's weight may overflow, and inf * 0 is no answer */
         for (int k = 0; k < 3; ++k)
-            out[k] = q->sig[k] == 0 ? 0 : wgt * l->e[k] * a[k] * e[k];
+            out[k] = q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt * l->e[k];
         return;
     }
     double x[3], acc[3];
@@ -537,7 +540,7 @@ static void lit_integrand(const void *qv, double u, double out[3])
      * no light, not inf * 0 */
     for (int k = 0; k < 3; ++k) {
         const double e = exp(-(tv[k] + tl[k]));
-        out[k] = acc[k] == 0 || e == 0 ? 0 : wgt * l->e[k] * acc[k] * e;
+        out[k] = acc[k] == 0 || e == 0 ? 0 : acc[k] * e * wgt * l->e[k];
     }
 }
 
@@ -714,8 +717,10 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
                      cy = w[2] * r->dir[0] - w[0] * r->dir[2],
                      cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-        q.h = sqrt(cx * cx + cy * cy + cz * cz);
-        q.hq = sqrt(q.h * q.h + l->radius * l->radius);
+        q.h = hypot(hypot(cx, cy), cz);
+        q.hq = hypot(q.h, l->radius);
+        if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
+            return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
         if (q.hq == 0) {
             if (q.ts >= 0 && q.ts <= D) {
                 /* a lamp of radius 0 on the segment: its 1/d^2 does not
