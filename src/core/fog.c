@@ -416,6 +416,19 @@ void ef_fog_free(ef_fog_component *c)
     c->narr = 0;
 }
 
+char *ef_spec_next(const char *tok, char **save)
+{
+    char *next = strtok_r(NULL, ":", save);
+    /* color=SPACE:R,G,B holds the SPEC separator: the part after it has no
+     * '=' and belongs to the colour (strtok_r left the two tokens adjacent,
+     * so the ':' is put back). */
+    while (next && !strncmp(tok, "color=", 6) && !strchr(next, '=')) {
+        next[-1] = ':';
+        next = strtok_r(NULL, ":", save);
+    }
+    return next;
+}
+
 int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err)
 {
     char buf[sizeof c->spec];
@@ -443,14 +456,7 @@ int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *
         return ef_fail(err, "fog spec '%s': unknown model '%s' (models: %s)", spec, name, models);
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
-        char *next = strtok_r(NULL, ":", &save);
-        /* color=SPACE:R,G,B holds the SPEC separator: the part after it
-         * has no '=' and belongs to the colour (strtok_r left the two
-         * tokens adjacent, so the ':' is put back). */
-        while (next && !strncmp(tok, "color=", 6) && !strchr(next, '=')) {
-            next[-1] = ':';
-            next = strtok_r(NULL, ":", &save);
-        }
+        char *next = ef_spec_next(tok, &save);
         if (parse_token(c, tok, c->spec, ctx, err)) {
             ef_fog_free(c);
             return -1;

@@ -167,6 +167,10 @@ double ef_fog_per_unit2(const ef_fog_context *ctx, double per_meter2);
  * or key, missing value, bad number...). Release c with ef_fog_free. */
 int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err);
 
+/* The token of a SPEC (or --light SPEC) after tok, strtok_r's at ':' with
+ * save, once a color=SPACE:R,G,B split at its ':' is joined back into tok. */
+char *ef_spec_next(const char *tok, char **save);
+
 /* Precomputes the camera-dependent part of c's first functional for rays
  * starting at org (the camera). Rays from elsewhere are still exact. Call
  * before any thread evaluates c. */

@@ -84,12 +84,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512 };
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
-        char *next = strtok_r(NULL, ":", &save);
-        /* color=SPACE:R,G,B holds the separator (as in a fog SPEC) */
-        while (next && !strncmp(tok, "color=", 6) && !strchr(next, '=')) {
-            next[-1] = ':';
-            next = strtok_r(NULL, ":", &save);
-        }
+        char *next = ef_spec_next(tok, &save);
         char *eq = strchr(tok, '=');
         if (!eq || !eq[1])
             return ef_fail(err, "--light '%s': '%s' is not KEY=VALUE (keys: %s)", spec, tok, keys);
@@ -633,6 +628,20 @@ static int feature_cuts(const ef_fog_scene *s, const ef_ray *r, double D, double
     return n;
 }
 
+/* Cuts at ts +- st 4^j inside (0, D), from st until past the segment. */
+static int steps_around(double *cut, int n, double ts, double D, double st)
+{
+    for (; n < MAX_CUTS - 4; st *= 4) {
+        if (ts + st > 0 && ts + st < D)
+            cut[n++] = ts + st;
+        if (ts - st > 0 && ts - st < D)
+            cut[n++] = ts - st;
+        if (!(st < 1e300) || st > fabs(ts) + (isfinite(D) ? D : 0))
+            break;
+    }
+    return n;
+}
+
 /* Where the ray crosses the spot's cones cos alpha = c (c = its edge, and
  * its blend band's inner edge), appended to cut. */
 static int cone_cuts(const ef_light *l, const ef_ray *r, double D, double *cut, int n)
@@ -746,22 +755,9 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         if (q.ts > 0 && q.ts < D)
             cut[n++] = q.ts;
         const double h0 = q.h < q.hq / 16 ? fmax(q.h, 1e-6 * q.hq) : W;
-        for (double st = h0; n < MAX_CUTS - 4; st *= 4) {
-            if (q.ts + st > 0 && q.ts + st < D)
-                cut[n++] = q.ts + st;
-            if (q.ts - st > 0 && q.ts - st < D)
-                cut[n++] = q.ts - st;
-            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0))
-                break;
-        }
-        for (double st = W; h0 < W && n < MAX_CUTS - 4; st *= 4) {
-            if (q.ts + st > 0 && q.ts + st < D)
-                cut[n++] = q.ts + st;
-            if (q.ts - st > 0 && q.ts - st < D)
-                cut[n++] = q.ts - st;
-            if (!(st < 1e300) || st > fabs(q.ts) + (isfinite(D) ? D : 0))
-                break;
-        }
+        n = steps_around(cut, n, q.ts, D, h0);
+        if (h0 < W)
+            n = steps_around(cut, n, q.ts, D, W);
         q.W = W;
     }
     if (isfinite(D))
