@@ -144,6 +144,9 @@ static void test_sun_height(void **state)
           "sun:towards=-1,0.5,-1", { 3, 40, -2 }, { 0.1, -0.3, -1 }, 120 },
         { { "height:density=0.02:falloff=0.5:base=0:phase=rayleigh" }, "sun:towards=0,1,1",
           { 1, -6, 2 }, { 0, 0.5, -1 }, 25 },
+        /* chromatic density, a channel of albedo 0 between two that scatter */
+        { { "height:density=0.05,0.03,0.03:falloff=0.2:albedo=1,0,1" }, "sun:towards=0,0.4,-1",
+          { 0, 1.7, 0 }, { 0.1, -0.02, -1 }, 60 },
         /* densities 1e-9 and 1e3 */
         { { "height:density=1e-9:falloff=0.3:base=0:phase=hg:g=0.7" },
           "sun:towards=0,0.3,-1:intensity=5", { 0, 1.7, 0 }, { 0.3, 0.01, -1 }, INFINITY },

@@ -574,20 +574,27 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     }
     const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - mu / lu);
+    double me = 0;   /* m e^-min(A, B) of channel last (-1: none yet) */
+    int last = -1;
     for (int ch = 0; ch < 3; ++ch) {
         if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
             continue;
-        const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
-        const double x = tv[ch] * q;
-        double m;
-        if (x == 0)
-            m = tv[ch];
-        else if (x <= 1)
-            m = tv[ch] * (-expm1(-x) / x);
-        else
-            m = -expm1(-x) / q;
-        const double e = exp(-(A < B ? A : B));
-        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * m * e;
+        /* grey fog: the same densities, the same factor */
+        if (!(last >= 0 && c->p[ch] == c->p[last] && tv[ch] == tv[last])) {
+            last = ch;
+            const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
+            const double x = tv[ch] * q;
+            double m;
+            if (x == 0)
+                m = tv[ch];
+            else if (x <= 1)
+                m = tv[ch] * (-expm1(-x) / x);
+            else
+                m = -expm1(-x) / q;
+            const double e = exp(-(A < B ? A : B));
+            me = e == 0 ? 0 : m * e;
+        }
+        S[ch] = me == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * me;
     }
 }
 
