@@ -1,0 +1,84 @@
+"""Runs inside Blender (blender -b --factory-startup --python THIS -- OUT plain|fog SPP SUN):
+a tiny Cycles scene for lit fog (tests/blender_lit_run.py compares):
+emission-only surfaces (a ground plane and a ball that casts no shadow),
+a black world, a box of homogeneous fog (Volume Scatter, HG g = 0.5, plus
+Volume Absorption: sigma_t 0.08, albedo 0.75) from z = -1 to 6 around the
+camera, a sun of strength SUN, volume bounces 0 (single scattering).
+"plain" renders without the fog (with Z), "fog" with it. Writes OUT and
+OUT.json (the camera and the direction towards the sun)."""
+import json
+import math
+import sys
+
+import bpy
+
+args = sys.argv[sys.argv.index("--") + 1:]
+out, fog, spp, sun_strength = args[0], args[1] == "fog", int(args[2]), float(args[3])
+sc = bpy.context.scene
+for o in list(bpy.data.objects):
+    if o.type in ('MESH', 'LIGHT'):
+        bpy.data.objects.remove(o, do_unlink=True)
+sc.render.engine = 'CYCLES'
+sc.cycles.device = 'CPU'
+sc.cycles.samples = spp
+sc.cycles.use_denoising = False
+sc.cycles.use_adaptive_sampling = False
+sc.cycles.max_bounces = 16
+sc.cycles.volume_bounces = 0
+sc.cycles.diffuse_bounces = 0
+sc.cycles.glossy_bounces = 0
+sc.cycles.transmission_bounces = 0
+sc.cycles.transparent_max_bounces = 16
+sc.cycles.sample_clamp_direct = 0
+sc.cycles.sample_clamp_indirect = 0
+sc.cycles.seed = 7
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 64, 36, 100
+sc.render.image_settings.file_format = 'OPEN_EXR'
+sc.render.image_settings.color_depth = '32'
+sc.render.image_settings.use_zbuffer = True
+bpy.context.view_layer.use_pass_z = True
+sc.render.film_transparent = False
+w = bpy.data.worlds.new("black"); w.use_nodes = True
+w.node_tree.nodes["Background"].inputs[1].default_value = 0.0
+sc.world = w
+def emissive(name, rgb):
+    m = bpy.data.materials.new(name); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    e = nt.nodes.new('ShaderNodeEmission'); e.inputs[0].default_value = (*rgb, 1); e.inputs[1].default_value = 1.0
+    o = nt.nodes.new('ShaderNodeOutputMaterial'); nt.links.new(e.outputs[0], o.inputs[0])
+    m.cycles.sample_as_light = False   # the surfaces do not light the fog (exrfog's lights only)
+    return m
+bpy.ops.mesh.primitive_plane_add(size=40, location=(0, 0, 0))
+bpy.context.object.data.materials.append(emissive("ground", (0.3, 0.25, 0.2)))
+bpy.ops.mesh.primitive_uv_sphere_add(radius=1.5, location=(-1, 2, 1.5), segments=48, ring_count=24)
+bpy.context.object.data.materials.append(emissive("ball", (0.1, 0.4, 0.8)))
+bpy.context.object.visible_shadow = False   # no shafts: exrfog has no occluders yet
+if fog:
+    bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 2.5))
+    cube = bpy.context.object
+    cube.scale = (60, 60, 7)
+    m = bpy.data.materials.new("fog"); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    s = nt.nodes.new('ShaderNodeVolumeScatter'); s.inputs['Density'].default_value = 0.06; s.inputs['Anisotropy'].default_value = 0.5; s.inputs['Color'].default_value = (1, 1, 1, 1)
+    a = nt.nodes.new('ShaderNodeVolumeAbsorption'); a.inputs['Density'].default_value = 0.02; a.inputs['Color'].default_value = (0, 0, 0, 1)
+    add = nt.nodes.new('ShaderNodeAddShader')
+    o = nt.nodes.new('ShaderNodeOutputMaterial')
+    nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1]); nt.links.new(add.outputs[0], o.inputs['Volume'])
+    m.cycles.homogeneous_volume = True
+    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    cube.data.materials.append(m)
+    cube.visible_shadow = True
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = sun_strength; sun.angle = 0.0
+so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
+so.rotation_euler = (math.radians(60), 0, math.radians(150))
+bpy.context.view_layer.update()
+cam = sc.camera
+cam.location = (0, -14, 2.5); cam.rotation_euler = (math.radians(85), 0, 0)
+bpy.context.view_layer.update()
+sc.render.filepath = out
+bpy.ops.render.render(write_still=True)
+m = cam.matrix_world
+t = so.matrix_world.col[2]
+json.dump({"c2w": [m[i][j] for i in range(4) for j in range(4)], "fov": math.degrees(cam.data.angle_x),
+           "near": cam.data.clip_start, "far": cam.data.clip_end, "towards": [t[0], t[1], t[2]]}, open(out + ".json", "w"))
+print("blender_lit: rendered")

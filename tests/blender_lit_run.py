@@ -1,0 +1,71 @@
+"""ctest blender_lit: lit fog against Blender Cycles. Renders
+tests/blender_lit.py's scene without fog (with depth), and with the fog
+box with the sun on and off; runs exrfog on the fog-free render with the
+same camera, fog and sun, and with the sun off. Cycles lets the emissive
+surfaces light its fog too (exrfog's lights are only --light), so the
+comparison is of what the sun adds: Cycles(sun) - Cycles(no sun) against
+exrfog(lit) - exrfog(unlit), up to Cycles' own noise (256 samples per
+pixel). Exits 77 (skipped) without Blender."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+exrfog = os.environ["EXRFOG_BIN"]
+src = os.environ["EXRFOG_SOURCE_DIR"]
+blender = shutil.which("blender")
+if not blender:
+    print("blender_lit: Blender is not installed (skipped)")
+    sys.exit(77)
+import numpy as np
+import OpenImageIO as oiio
+
+
+def run(args, env=None):
+    r = subprocess.run(args, capture_output=True, text=True, env=env)
+    if r.returncode:
+        print(r.stdout[-3000:], r.stderr[-3000:], file=sys.stderr)
+        raise SystemExit("blender_lit: FAILED: " + " ".join(args[:4]))
+    return r
+
+
+def rgb(path):
+    return oiio.ImageBuf(path).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
+
+
+with tempfile.TemporaryDirectory() as d:
+    env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
+    scene = os.path.join(src, "tests", "blender_lit.py")
+    for name, mode, spp, sun in (("plain", "plain", 4, 3), ("lit", "fog", 256, 3),
+                                 ("dark", "fog", 256, 0)):
+        r = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", scene,
+                 "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)], env)
+        if "blender_lit: rendered" not in r.stdout:
+            raise SystemExit("blender_lit: FAILED: Blender did not render " + name)
+    cam = json.load(open(d + "/plain.exr.json"))
+    common = ["--camera-convention", "blender", "--camera-to-world",
+              ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]),
+              "--near", repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0",
+              "--fog", "box:min=-30,-30,-1:max=30,30,6:density=0.08:albedo=0.75:phase=hg:g=0.5"]
+    run([exrfog, d + "/plain.exr", "-o", d + "/ef_lit.exr", "--light",
+         "sun:towards=%r,%r,%r:intensity=3" % tuple(cam["towards"])] + common)
+    run([exrfog, d + "/plain.exr", "-o", d + "/ef_dark.exr"] + common)
+    cyc = rgb(d + "/lit.exr") - rgb(d + "/dark.exr")
+    ef = rgb(d + "/ef_lit.exr") - rgb(d + "/ef_dark.exr")
+    diff = cyc - ef
+    mean_rel = (cyc.mean() - ef.mean()) / ef.mean()
+    rows = np.abs(cyc.mean(axis=(1, 2)) - ef.mean(axis=(1, 2))) / ef.mean(axis=(1, 2))
+    print("blender_lit: the sun's light: Cycles mean %.5f, exrfog %.5f (%+.2f %%); row means "
+          "within %.2f %%; per pixel |diff| mean %.5f, p99.9 %.5f"
+          % (cyc.mean(), ef.mean(), 100 * mean_rel, 100 * rows.max(), np.abs(diff).mean(),
+             np.percentile(np.abs(diff), 99.9)))
+    if not (abs(mean_rel) < 0.01 and rows.max() < 0.03):
+        raise SystemExit("blender_lit: FAILED: exrfog's sun light differs from Cycles'")
+    if not ef.mean() > 0.05:
+        raise SystemExit("blender_lit: FAILED: the sun added almost nothing")
+    dark_c, dark_e = rgb(d + "/dark.exr"), rgb(d + "/ef_dark.exr")
+    print("blender_lit: unlit: Cycles mean %.5f, exrfog %.5f (the surfaces light Cycles' fog)"
+          % (dark_c.mean(), dark_e.mean()))
+    print("blender_lit: ok")
