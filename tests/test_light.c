@@ -156,6 +156,42 @@ static void test_sun_height(void **state)
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
 }
 
+/* The sun in a constant half-space fog (closed form): from inside and
+ * outside the layer, rays staying in it to infinity, leaving it, grazing
+ * its plane, a low sun, and a sun below the layer's plane (no light). */
+static void test_sun_halfspace(void **state)
+{
+    (void) state;
+    const lit_case cs[] = {
+        { { "halfspace:plane=0,1,0,-3:density=0.1" }, "sun:towards=0.2,1,-1", { 0, 1.7, 0 },
+          { 0, 0, -1 }, INFINITY },
+        { { "halfspace:plane=0,1,0,-3:density=0.1:phase=hg:g=0.7" }, "sun:towards=0.2,0.5,-1",
+          { 0, 1.7, 0 }, { 0, 0.3, -1 }, INFINITY },
+        { { "halfspace:plane=0,1,0,-3:density=0.1,0.2,0.05:albedo=0.9,0.5,1" },
+          "sun:towards=0,1,1", { 0, 8, 0 }, { 0, -0.4, -1 }, 30 },
+        { { "halfspace:plane=0,1,0,-3:density=0.1" }, "sun:towards=0,1,-1", { 0, 8, 0 },
+          { 0, -0.1, -1 }, INFINITY },
+        { { "halfspace:plane=0,1,0,-3:density=0.05:phase=cs:g=0.3" },
+          "sun:towards=0,0.00872653549837393,-0.99996192306417128", { 0, 1.7, 0 },
+          { 0, 1e-9, -1 }, 500 },
+        { { "halfspace:plane=0.3,1,0.2,-3:density=2" }, "sun:towards=1,1,0", { 0, 1.7, 0 },
+          { 0.3, 1, 0.2 }, 40 },
+        { { "halfspace:plane=0,1,0,-3:density=1e-9" }, "sun:towards=0,0.3,-1", { 0, 1.7, 0 },
+          { 0, 0.01, -1 }, 100 },
+    };
+    check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
+    /* the sun below the layer's plane: its light never leaves the fog */
+    ef_fog_scene s;
+    const char *h[] = { "halfspace:plane=0,1,0,-3:density=0.1", NULL };
+    scene_of(&s, h, "sun:towards=0,-0.2,1");
+    const double org[3] = { 0, 1.7, 0 };
+    const ef_ray r = ray_of(org, 0, 0, -1, 50);
+    double S[3];
+    ef_light_inscatter(&s, &s.light[0], &r, S, NULL);
+    assert_true(S[0] == 0 && S[1] == 0 && S[2] == 0);
+    ef_scene_free(&s);
+}
+
 static void test_point_uniform(void **state)
 {
     (void) state;
@@ -537,6 +573,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_phase),        cmocka_unit_test(test_sun_height),
+        cmocka_unit_test(test_sun_halfspace),
         cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_general),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),
         cmocka_unit_test(test_errors),       cmocka_unit_test(test_cli),

@@ -598,6 +598,50 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     }
 }
 
+/* The sun in one constant half-space fog (density rho where h = n.x + d
+ * < 0, n unit): from a point at h < 0 the sun's path in the fog is
+ * -h / (n.l), so T_sun = e^(rho h / (n.l)), and along the view ray the
+ * exponent is linear in t as in the height fog:
+ *   S = albedo p E tau_v e^max(ya, yb) phi(tau_v |1 - s / (n.l)|),
+ * ya = rho h_a / (n.l), yb = -tau_v + rho h_b / (n.l), h_a and h_b the plane
+ * values where the segment's part in the fog starts and ends (0 on the
+ * plane), s = n.u. With n.l <= 0 the sun never leaves the fog: no light. */
+static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+{
+    const ef_fog_component *c = &s->comp[0];
+    const double *n = c->p, d = c->p[3];
+    const double nl = n[0] * l->dir[0] + n[1] * l->dir[1] + n[2] * l->dir[2];
+    const double sv = n[0] * r->dir[0] + n[1] * r->dir[1] + n[2] * r->dir[2];
+    S[0] = S[1] = S[2] = 0;
+    if (!(nl > 0))
+        return;
+    double tv[3];
+    c->model->tau(c, r, tv);
+    const double h0 = n[0] * r->org[0] + n[1] * r->org[1] + n[2] * r->org[2] + d;
+    const double ha = h0 < 0 ? h0 : 0;
+    double hb = 0;
+    if (isfinite(r->dist))
+        hb = fmin(h0 + sv * r->dist, 0);
+    const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
+    const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - sv / nl);
+    for (int ch = 0; ch < 3; ++ch) {
+        const double rho = c->p[4 + ch];
+        if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
+            continue;
+        const double ya = rho * ha / nl, yb = -tv[ch] + rho * hb / nl;
+        const double x = tv[ch] * q;
+        double m;
+        if (x == 0)
+            m = tv[ch];
+        else if (x <= 1)
+            m = tv[ch] * (-expm1(-x) / x);
+        else
+            m = -expm1(-x) / q;
+        const double e = exp(ya > yb ? ya : yb);
+        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * m * e;
+    }
+}
+
 /* --------------------------------------------------------------- driver */
 
 #define MAX_CUTS 512
@@ -711,6 +755,10 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             return;   /* the sun's light never crosses unbounded uniform fog */
         if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0) {
             sun_height(s, l, r, S);
+            return;
+        }
+        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_halfspace) {
+            sun_halfspace(s, l, r, S);
             return;
         }
     }

@@ -11,7 +11,8 @@
  * (1 - a) S_far. Pure C, no I/O.
  *
  * Closed forms: the sun in one exponential height fog (Lengyel's and
- * Quilez's height fog lit with the sun's own attenuation), no light at all
+ * Quilez's height fog lit with the sun's own attenuation) or one constant
+ * half-space (Lengyel's), no light at all
  * from the sun in unbounded uniform fog (its light never arrives). Point
  * and spot lamps in uniform (exp) fog: the equiangular substitution of
  * Sun et al. (2005), whose angular integral is evaluated directly by
