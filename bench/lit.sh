@@ -8,10 +8,10 @@
 #
 # Renders the 1920x1080 RGBA half + Z float ZIP frame of bench/run.sh
 # (make_sample), then times in BENCH_RUNS interleaved rounds (order rotated
-# each round; medians): the copy, exp and height fog unlit, the sun in
-# height fog (closed form), two point lamps in exp fog (equiangular
-# quadrature), a point lamp in a box volume plus height fog (the general
-# quadrature). Prints a Markdown table, also written to bench/lit.md
+# each round; medians): the copy, exp, height and half-space fog unlit, the
+# sun in height fog and in a half-space layer (closed forms), two point
+# lamps in exp fog and one behind the camera (equiangular quadrature), a
+# point lamp in a box volume plus height fog (the general quadrature). Prints a Markdown table, also written to bench/lit.md
 # (whose sections from its first "### " heading on are kept). Nothing
 # asserts on time.
 #
@@ -51,10 +51,15 @@ add() { names+=("$1"); bases+=("$2"); cmds+=("$3"); }
 add "oiiotool (copy)" "" 'oiiotool "$IN" -o "$OUT"'
 add "exp (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02'
 add "height (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H"'
+add "halfspace (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog halfspace:plane=0,1,0,-4:density=0.05'
 add "sun in height fog (closed form)" "height (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3'
 add "two point lamps in exp fog" "exp (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02 --light point:position=2,3,-20:intensity=100 --light point:position=-6,2,-60:intensity=200'
+add "a lamp behind the camera in exp fog" "exp (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02 --light point:position=1,2.5,6:intensity=100'
+add "sun in a half-space layer (closed form)" "halfspace (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog halfspace:plane=0,1,0,-4:density=0.05 --light sun:towards=0.2,0.3,-1:intensity=3'
 add "point lamp, box + height (general)" "height (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H" --fog box:min=-10,0,-60:max=10,8,-10:density=0.1 --light point:position=2,3,-20:intensity=100'
 n=${#names[@]}

@@ -67,8 +67,12 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
         static const char *const kind[] = { "sun", "point", "spot" };
         snprintf(l->name, sizeof l->name, "%s%d", kind[l->kind], nth + 1);
     }
+    /* from a copy: the name and the channel names share the scene object,
+     * which GCC's restrict check cannot tell apart */
+    char name[sizeof l->name];
+    memcpy(name, l->name, sizeof name);
     for (int k = 0; k < 3; ++k)
-        snprintf(l->aov[k], sizeof l->aov[k], "fog_light.%s.%c", l->name, "RGB"[k]);
+        snprintf(l->aov[k], sizeof l->aov[k], "fog_light.%s.%c", name, "RGB"[k]);
     for (int i = 0; i < s->nlight; ++i)
         if (!strcmp(s->light[i].name, l->name))
             return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "
