@@ -541,6 +541,20 @@ static void lit_integrand(const void *qv, double u, double out[3])
 
 /* ------------------------------------------------------- the closed forms */
 
+/* tau phi(tau q), phi(x) = -expm1(-x) / x: the integral of e^(linear) over
+ * a segment of optical depth tau whose exponent changes by tau q, relative
+ * to its larger end. tau phi(x) while x <= 1 (x -> 0 tends to tau exactly),
+ * -expm1(-x) / q beyond (tau = inf gives 1 / q). */
+static double tau_phi(double tau, double q)
+{
+    const double x = tau * q;
+    if (x == 0)
+        return tau;
+    if (x <= 1)
+        return tau * (-expm1(-x) / x);
+    return -expm1(-x) / q;
+}
+
 /* The sun in one exponential height fog (k > 0), with its own extinction
  * in the fog: T_sun(x) = e^-(sigma(x) / (k l_up)), and along the view ray
  *   S = albedo p E tau_v e^-min(A, B) phi(|B - A|),
@@ -583,16 +597,8 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         if (!(last >= 0 && c->p[ch] == c->p[last] && tv[ch] == tv[last])) {
             last = ch;
             const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
-            const double x = tv[ch] * q;
-            double m;
-            if (x == 0)
-                m = tv[ch];
-            else if (x <= 1)
-                m = tv[ch] * (-expm1(-x) / x);
-            else
-                m = -expm1(-x) / q;
             const double e = exp(-(A < B ? A : B));
-            me = e == 0 ? 0 : m * e;
+            me = e == 0 ? 0 : tau_phi(tv[ch], q) * e;
         }
         S[ch] = me == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * me;
     }
@@ -629,16 +635,8 @@ static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray
         if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
             continue;
         const double ya = rho * ha / nl, yb = -tv[ch] + rho * hb / nl;
-        const double x = tv[ch] * q;
-        double m;
-        if (x == 0)
-            m = tv[ch];
-        else if (x <= 1)
-            m = tv[ch] * (-expm1(-x) / x);
-        else
-            m = -expm1(-x) / q;
         const double e = exp(ya > yb ? ya : yb);
-        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * m * e;
+        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * tau_phi(tv[ch], q) * e;
     }
 }
 
