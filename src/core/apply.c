@@ -44,7 +44,7 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
     ef_ray far;
     const int other = need_inf && !ef_scene_far_ray(s, r, &far);
     double sum[3] = { 0, 0, 0 };
-    /* light by light, summed in order as ef_lights_inscatter does */
+    /* light by light (each its own AOV layer), summed in the scene's order */
     for (int j = 0; j < s->nlight; ++j) {
         double S[3], Sf[3];
         ef_light_inscatter(s, &s->light[j], r, S, NULL);

@@ -366,13 +366,6 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
          * near-zero to 1e-13 of itself */
         for (int k = 0; k < 3; ++k)
             done &= Er[k] <= rel * fabs(R[k] + S[k]) || !isfinite(R[k]);
-        if (done || n + 1 >= GK_MAX) {
-            for (int k = 0; k < 3; ++k) {
-                S[k] += R[k];
-                E[k] += Er[k];
-            }
-            return;
-        }
         /* the interval of the largest error relative to its channel's total */
         int worst = -1;
         double we = -1;
@@ -388,7 +381,7 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
                 }
             }
         }
-        if (worst < 0 || !(we > 0)) {
+        if (done || n + 1 >= GK_MAX || worst < 0 || !(we > 0)) {
             for (int k = 0; k < 3; ++k) {
                 S[k] += R[k];
                 E[k] += Er[k];
@@ -883,20 +876,4 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     if (err)
         for (int k = 0; k < 3; ++k)
             err[k] = E[k];
-}
-
-void ef_lights_inscatter(const ef_fog_scene *s, const ef_ray *r, double S[3], double err[3])
-{
-    S[0] = S[1] = S[2] = 0;
-    if (err)
-        err[0] = err[1] = err[2] = 0;
-    for (int j = 0; j < s->nlight; ++j) {
-        double one[3], e[3];
-        ef_light_inscatter(s, &s->light[j], r, one, e);
-        for (int k = 0; k < 3; ++k) {
-            S[k] += one[k];
-            if (err)
-                err[k] += e[k];
-        }
-    }
 }

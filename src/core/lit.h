@@ -19,7 +19,4 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
 
-/* The sum over every light of s (S = 0 when there are none). */
-void ef_lights_inscatter(const ef_fog_scene *s, const ef_ray *r, double S[3], double err[3]);
-
 #endif
