@@ -447,7 +447,10 @@ static void test_errors(void **state)
     expect_light_error("sun:towards=0,0,0", NULL, "towards='0,0,0'");
     expect_light_error("sun:towards=0,1,0:position=1,2,3", NULL, "unknown key 'position'");
     expect_light_error("sun:towards=0,1,0:intensity=-1", NULL, "intensity='-1'");
-    expect_light_error("sun:towards=0,1,0:shadow=a.exr", NULL, "not supported yet");
+    expect_light_error("point:position=0,1,0:shadow=a.exr", NULL, "takes no shadow= map");
+    expect_light_error("sun:towards=0,1,0:bias=0.1", NULL, "need shadow=FILE.exr");
+    expect_light_error("spot:position=0,1,0:aim=0,-1,0:cone=30:outside=dark", NULL,
+                       "outside='dark' is not lit or shadow");
     expect_light_error("point:intensity=3", NULL, "missing position");
     expect_light_error("point:position=1,2", NULL, "position='1,2'");
     expect_light_error("point:position=1,2,3:radius=-1", NULL, "radius='-1'");

@@ -21,6 +21,8 @@ typedef enum ef_distance_kind { EF_DIST_RADIAL = 0, EF_DIST_PLANAR } ef_distance
 /* Scene-wide settings a component is finished against: the up axis of the
  * height models and the scene's units per metre (densities are read per
  * metre and converted to per scene unit). */
+struct ef_shadow;
+
 typedef struct ef_fog_context {
     double up[3];                    /* unit length */
     double units_per_meter;          /* > 0 */
@@ -33,6 +35,11 @@ typedef struct ef_fog_context {
      * (ef_parse_color). Returns 0, or -1 with err set. */
     int (*parse_color)(void *user, const char *text, double out[3], ef_err *err);
     void *color_user;
+    /* Reads a light-view depth render (a light's shadow= key) into a
+     * shadow map (shadow.h) with the given bias and outside rule; NULL
+     * means maps cannot be read here. Returns 0, or -1 with err set. */
+    int (*load_shadow)(const char *path, double bias, int outside_lit, struct ef_shadow **out,
+                       ef_err *err);
 } ef_fog_context;
 
 struct ef_fog_model;

@@ -3,6 +3,7 @@
 #include "light.h"
 #include "lit.h"
 #include "gk15.h"
+#include "shadow.h"
 
 #include <float.h>
 #include <math.h>
@@ -46,9 +47,60 @@ static int unit3(const char *val, double v[3])
 }
 
 /* The keys every kind accepts, and the ones it must have. */
-static const char *const sun_keys = "towards, color, intensity, angle, name";
+static const char *const sun_keys =
+    "towards, color, intensity, angle, name, shadow, bias, outside";
 static const char *const point_keys = "position, color, intensity, radius, name";
-static const char *const spot_keys = "position, aim, cone, blend, color, intensity, radius, name";
+static const char *const spot_keys =
+    "position, aim, cone, blend, color, intensity, radius, name, shadow, bias, outside";
+
+/* Reads l's shadow map through the context and checks it fits the light:
+ * a sun's map is orthographic and looks along the sunlight, a spot's is a
+ * perspective from the spot. Returns 0 or -1. */
+static int light_shadow(const ef_fog_context *ctx, const char *spec, ef_light *l, ef_err *err)
+{
+    if (!ctx->load_shadow)
+        return ef_fail(err, "--light '%s': shadow maps cannot be read here", spec);
+    if (ctx->load_shadow(l->shadow_path, l->bias, l->outside_lit, &l->shadow, err))
+        return -1;
+    const ef_shadow *m = l->shadow;
+    const char *why = NULL;
+    char detail[200] = "";
+    if (l->kind == EF_LIGHT_SUN) {
+        const double c = -(m->axis[0] * l->dir[0] + m->axis[1] * l->dir[1] +
+                           m->axis[2] * l->dir[2]);
+        if (!m->ortho)
+            why = "is a perspective render; a sun's map is orthographic (render it with an "
+                  "orthographic camera looking along the sunlight)";
+        else if (!(c >= cos(0.25 * PI / 180))) {
+            why = "looks along another direction than the sunlight (its camera's +Z must be "
+                  "-towards, within 0.25 degrees)";
+            snprintf(detail, sizeof detail, ": the map's axis is %g,%g,%g", m->axis[0],
+                     m->axis[1], m->axis[2]);
+        }
+    } else {
+        const double dx = m->org[0] - l->pos[0], dy = m->org[1] - l->pos[1],
+                     dz = m->org[2] - l->pos[2];
+        const double off = sqrt(dx * dx + dy * dy + dz * dz);
+        const double size = 1 + sqrt(l->pos[0] * l->pos[0] + l->pos[1] * l->pos[1] +
+                                     l->pos[2] * l->pos[2]);
+        if (m->ortho)
+            why = "is an orthographic render; a spot's map is a perspective render from the "
+                  "spot";
+        else if (!(off <= 1e-4 * size)) {
+            why = "was rendered from elsewhere than the spot's position";
+            snprintf(detail, sizeof detail, ": its camera is at %g,%g,%g", m->org[0], m->org[1],
+                     m->org[2]);
+        }
+    }
+    if (why) {
+        ef_fail(err, "the shadow map of --light '%s' %s%s", spec, why, detail);
+        ef_err_set_file(err, l->shadow_path);
+        ef_shadow_unref(l->shadow);
+        l->shadow = NULL;
+        return -1;
+    }
+    return 0;
+}
 
 int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_err *err)
 {
@@ -79,9 +131,11 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                        "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
     }
     double color[3] = { 1, 1, 1 }, intensity = 1, cone = 0, blend = 0;
+    l->outside_lit = 1;
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
-           S_RADIUS = 128, S_BLEND = 256, S_NAME = 512 };
+           S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
+           S_OUTSIDE = 4096 };
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);
@@ -92,9 +146,9 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         const char *key = tok, *val = eq + 1;
         unsigned bit = 0;
         int ok = strstr(keys, key) != NULL;
-        if (!strcmp(key, "shadow"))
-            return ef_fail(err, "--light '%s': shadow= (a light-view depth render) is not "
-                           "supported yet: the light is unshadowed without it", spec);
+        if (!strcmp(key, "shadow") && l->kind == EF_LIGHT_POINT)
+            return ef_fail(err, "--light '%s': a point lamp takes no shadow= map (it shines "
+                           "every way; a spot's or the sun's map covers one view)", spec);
         if (!ok) {
             bit = 0;
         } else if (!strcmp(key, "towards") && l->kind == EF_LIGHT_SUN) {
@@ -144,6 +198,25 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             if (ef_parse_numbers(val, &l->radius, 1) || !(l->radius >= 0))
                 return ef_fail(err, "--light '%s': radius='%s' is not a number >= 0 (scene "
                                "units)", spec, val);
+        } else if (!strcmp(key, "shadow")) {
+            bit = S_SHADOW;
+            if (strlen(val) >= sizeof l->shadow_path)
+                return ef_fail(err, "--light '%s': shadow= path is too long", spec);
+            snprintf(l->shadow_path, sizeof l->shadow_path, "%s", val);
+        } else if (!strcmp(key, "bias")) {
+            bit = S_BIAS;
+            if (ef_parse_numbers(val, &l->bias, 1) || !(l->bias >= 0) || !isfinite(l->bias))
+                return ef_fail(err, "--light '%s': bias='%s' is not a depth >= 0 (scene units "
+                               "added to the shadow map's depth)", spec, val);
+        } else if (!strcmp(key, "outside")) {
+            bit = S_OUTSIDE;
+            if (!strcmp(val, "lit"))
+                l->outside_lit = 1;
+            else if (!strcmp(val, "shadow"))
+                l->outside_lit = 0;
+            else
+                return ef_fail(err, "--light '%s': outside='%s' is not lit or shadow (what "
+                               "lies outside the shadow map)", spec, val);
         } else if (!strcmp(key, "name")) {
             bit = S_NAME;
             size_t n = strlen(val);
@@ -182,6 +255,10 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         l->cos_outer = cos(cone * (PI / 360));
         l->smooth = blend * (1 - l->cos_outer);
     }
+    if ((seen & (S_BIAS | S_OUTSIDE)) && !(seen & S_SHADOW))
+        return ef_fail(err, "--light '%s': bias= and outside= need shadow=FILE.exr", spec);
+    if ((seen & S_SHADOW) && light_shadow(ctx, spec, l, err))
+        return -1;
     return 0;
 }
 
@@ -645,7 +722,8 @@ static int cmp_double(const void *a, const void *b)
 
 /* Where the view segment [0, D) crosses the components' features (the
  * density's jumps, kinks and fronts), appended to cut. */
-static int feature_cuts(const ef_fog_scene *s, const ef_ray *r, double D, double *cut, int n)
+static int feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double D, double *cut,
+                        int n)
 {
     for (int i = 0; i < s->ncomp && n < MAX_CUTS - 8; ++i) {
         const ef_fog_component *c = &s->comp[i];
@@ -663,20 +741,20 @@ static int feature_cuts(const ef_fog_scene *s, const ef_ray *r, double D, double
             const double v0 = F->n[0] * r->org[0] + F->n[1] * r->org[1] + F->n[2] * r->org[2] + F->d;
             const double rate = F->n[0] * r->dir[0] + F->n[1] * r->dir[1] + F->n[2] * r->dir[2];
             const double t = (ft[j].value - v0) / rate;
-            if (t > 0 && t < D)
+            if (t > a && t < D)
                 cut[n++] = t;
         }
     }
     return n;
 }
 
-/* Cuts at ts +- st 4^j inside (0, D), from st until past the segment. */
-static int steps_around(double *cut, int n, double ts, double D, double st)
+/* Cuts at ts +- st 4^j inside (a, D), from st until past the segment. */
+static int steps_around(double *cut, int n, double ts, double a, double D, double st)
 {
     for (; n < MAX_CUTS - 4; st *= 4) {
-        if (ts + st > 0 && ts + st < D)
+        if (ts + st > a && ts + st < D)
             cut[n++] = ts + st;
-        if (ts - st > 0 && ts - st < D)
+        if (ts - st > a && ts - st < D)
             cut[n++] = ts - st;
         if (!(st < 1e300) || st > fabs(ts) + (isfinite(D) ? D : 0))
             break;
@@ -686,7 +764,7 @@ static int steps_around(double *cut, int n, double ts, double D, double st)
 
 /* Where the ray crosses the spot's cones cos alpha = c (c = its edge, and
  * its blend band's inner edge), appended to cut. */
-static int cone_cuts(const ef_light *l, const ef_ray *r, double D, double *cut, int n)
+static int cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, double *cut, int n)
 {
     double w[3];
     for (int a = 0; a < 3; ++a)
@@ -714,7 +792,7 @@ static int cone_cuts(const ef_light *l, const ef_ray *r, double D, double *cut, 
             roots[nr++] = -C / B;
         }
         for (int j = 0; j < nr; ++j)
-            if (roots[j] > 0 && roots[j] < D && (a0 + a1 * roots[j]) * c >= 0 && n < MAX_CUTS)
+            if (roots[j] > a && roots[j] < D && (a0 + a1 * roots[j]) * c >= 0 && n < MAX_CUTS)
                 cut[n++] = roots[j];
     }
     return n;
@@ -725,16 +803,34 @@ static int cone_cuts(const ef_light *l, const ef_ray *r, double D, double *cut, 
 #define REL_UNIFORM 1e-13
 #define REL_GENERAL 1e-10
 
-void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
-                        double err[3])
+/* A closed form f (over a whole ray from its origin) over [a, b] of r:
+ * T(0, a) times f along the ray from x(a). */
+static void closed_range(void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *,
+                                   double *),
+                         const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                         double b, double S[3])
 {
-    double E[3] = { 0, 0, 0 };
-    S[0] = S[1] = S[2] = 0;
-    if (err)
-        err[0] = err[1] = err[2] = 0;
-    const double D = r->dist;
-    if (s->ncomp == 0 || !(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+    if (a == 0 && b == r->dist) {
+        f(s, l, r, S);
         return;
+    }
+    ef_ray sub = *r;
+    for (int k = 0; k < 3; ++k)
+        sub.org[k] = r->org[k] + a * r->dir[k];
+    sub.dist = sub.planar = b - a;
+    double tv[3];
+    tau_from(s, r->org, r->dir, a, tv);
+    f(s, l, &sub, S);
+    for (int k = 0; k < 3; ++k)
+        S[k] = S[k] == 0 ? 0 : S[k] * exp(-tv[k]);
+}
+
+/* Adds to S the light l scatters in over [a, b] of r (0 <= a < b, b may
+ * be INFINITY), T(0, t) counted from the camera, and its error estimate
+ * to E. */
+static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                            double D, double S[3], double E[3])
+{
     lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
     for (int i = 0; i < s->ncomp; ++i) {
         q.uniform &= is_uniform(&s->comp[i]);
@@ -744,22 +840,26 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     if (l->kind == EF_LIGHT_SUN) {
         if (q.uniform)
             return;   /* the sun's light never crosses unbounded uniform fog */
-        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0) {
-            sun_height(s, l, r, S);
-            return;
-        }
-        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_halfspace) {
-            sun_halfspace(s, l, r, S);
+        void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *, double *) = NULL;
+        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0)
+            f = sun_height;
+        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_halfspace)
+            f = sun_halfspace;
+        if (f) {
+            double v[3];
+            closed_range(f, s, l, r, a, D, v);
+            for (int k = 0; k < 3; ++k)
+                S[k] += v[k];
             return;
         }
     }
     double cut[MAX_CUTS];
     int n = 0;
-    cut[n++] = 0;
+    cut[n++] = a;
     if (!q.uniform)
-        n = feature_cuts(s, r, D, cut, n);
+        n = feature_cuts(s, r, a, D, cut, n);
     if (l->kind == EF_LIGHT_SPOT)
-        n = cone_cuts(l, r, D, cut, n);
+        n = cone_cuts(l, r, a, D, cut, n);
     if (l->kind != EF_LIGHT_SUN) {
         /* the lamp's closest approach along the line, and its distance
          * there from the cross product (no cancellation near the line) */
@@ -777,17 +877,18 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
             return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
         if (q.hq == 0) {
-            if (q.ts >= 0 && q.ts <= D) {
+            if (q.ts >= a && q.ts <= D) {
                 /* a lamp of radius 0 on the segment: its 1/d^2 does not
                  * integrate */
                 for (int k = 0; k < 3; ++k)
-                    S[k] = l->e[k] > 0 && (q.uniform ? q.sig[k] > 0 : 1) ? INFINITY : 0;
+                    if (l->e[k] > 0 && (q.uniform ? q.sig[k] > 0 : 1))
+                        S[k] = INFINITY;
                 return;
             }
             /* on the line beyond an end: the substitution's hq from a
              * billionth of its least distance, which changes 1/d^2 by
              * (hq / d)^2 <= 1e-18 */
-            q.hq = 1e-9 * (q.ts < 0 ? -q.ts : q.ts - D);
+            q.hq = 1e-9 * (q.ts < a ? a - q.ts : q.ts - D);
         }
         q.equi = 1;
         /* Within W of the closest approach the substitution makes 1/d^2
@@ -798,12 +899,12 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
          * distance h, the phase still turns from forward to back over ~h:
          * geometric steps from h inside W too. */
         const double W = 64 * q.hq;
-        if (q.ts > 0 && q.ts < D)
+        if (q.ts > a && q.ts < D)
             cut[n++] = q.ts;
         const double h0 = q.h < q.hq / 16 ? fmax(q.h, 1e-6 * q.hq) : W;
-        n = steps_around(cut, n, q.ts, D, h0);
+        n = steps_around(cut, n, q.ts, a, D, h0);
         if (h0 < W)
-            n = steps_around(cut, n, q.ts, D, W);
+            n = steps_around(cut, n, q.ts, a, D, W);
         q.W = W;
     }
     if (isfinite(D))
@@ -850,27 +951,58 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         double pmax = 0;
         for (int i = 0; i < s->ncomp; ++i)
             pmax = fmax(pmax, ef_phase_eval(s->comp[i].phase, s->comp[i].g, cth));
-        double a = cut[n - 1], len = fmax(a, 1.0);
+        double ta = cut[n - 1], len = fmax(ta, 1.0);
         for (int it = 0; it < 2100; ++it) {
             double x[3], tv[3], tr[3], tail[3];
             for (int k = 0; k < 3; ++k)
-                x[k] = r->org[k] + a * r->dir[k];
-            tau_from(s, r->org, r->dir, a, tv);
+                x[k] = r->org[k] + ta * r->dir[k];
+            tau_from(s, r->org, r->dir, ta, tv);
             tau_from(s, x, r->dir, INFINITY, tr);
             int done = 1;
             for (int k = 0; k < 3; ++k) {
                 tail[k] = pmax * l->e[k] * exp(-tv[k]) * -expm1(-tr[k]);
                 done &= !(tail[k] > REL_GENERAL * fabs(S[k])) || tail[k] < 1e-300;
             }
-            if (done || !(a + len < 1e300)) {
+            if (done || !(ta + len < 1e300)) {
                 for (int k = 0; k < 3; ++k)
                     E[k] += tail[k] > 0 ? tail[k] : 0;
                 break;
             }
-            const double piece[2] = { a, a + len };
+            const double piece[2] = { ta, ta + len };
             gk_adapt(lit_integrand, &q, piece, 2, REL_GENERAL, S, E);
-            a += len;
+            ta += len;
             len *= 2;
+        }
+    }
+}
+
+/* Lit intervals a view segment can hold before the rest joins the last. */
+#define MAX_LIT 2048
+
+void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
+                        double err[3])
+{
+    double E[3] = { 0, 0, 0 };
+    S[0] = S[1] = S[2] = 0;
+    if (err)
+        err[0] = err[1] = err[2] = 0;
+    const double D = r->dist;
+    if (s->ncomp == 0 || !(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return;
+    if (!l->shadow) {
+        inscatter_range(s, l, r, 0, D, S, E);
+    } else {
+        double (*iv)[2] = malloc(MAX_LIT * sizeof *iv);
+        if (!iv) {   /* no memory: unknown, and said so through the error */
+            for (int k = 0; k < 3; ++k)
+                E[k] = INFINITY;
+        } else {
+            int n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, MAX_LIT);
+            if (n < 0)
+                n = -1 - n;
+            for (int i = 0; i < n; ++i)
+                inscatter_range(s, l, r, iv[i][0], iv[i][1], S, E);
+            free(iv);
         }
     }
     if (err)

@@ -39,15 +39,26 @@ typedef struct ef_light {
      * E = e / d^2 with d in scene units */
     double e[3];
     double radius;                   /* E = I / (d^2 + radius^2), scene units */
-    double angle;                    /* sun: angular diameter, radians (kept; no shadows yet) */
+    double angle;                    /* sun: angular diameter, radians (kept: no penumbra yet) */
     double cos_outer, smooth;        /* spot: cos(cone / 2), blend (1 - cos(cone / 2)) */
     char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
+    /* shadow=: its light-view depth render (shared, counted: copies of the
+     * scene ref it, ef_scene_free drops it), NULL without one; bias= and
+     * outside= as given */
+    struct ef_shadow *shadow;
+    double bias;
+    int outside_lit;
+    char shadow_path[256];
     char spec[512];                  /* as written, for messages */
 } ef_light;
 
 /* Parses one --light SPEC (sun:..., point:..., spot:...) with ctx's units;
  * the name stays empty unless name= gives it (the scene names it then).
- * Returns 0, or -1 with a message naming the spec and key. */
+ * A shadow= map is read through ctx->load_shadow and checked against the
+ * light (a sun's map orthographic along its direction, a spot's a
+ * perspective from its position); l then holds one reference to it.
+ * Returns 0, or -1 with a message naming the spec and key (l holds
+ * nothing then). */
 int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_err *err);
 
 /* A spot's share of its intensity at cos alpha, alpha the angle from its

@@ -863,6 +863,58 @@ static int cmp_ld(const void *x, const void *y)
     return (a > b) - (a < b);
 }
 
+/* cos alpha - c at t: the angle from a spot's aim, in long double. */
+static long double spot_cos(const ef_light *l, const ef_ray *r, long double t, long double c)
+{
+    long double y[3], d2 = 0, ya = 0;
+    for (int a = 0; a < 3; ++a) {
+        y[a] = ((long double) r->org[a] - l->pos[a]) + t * r->dir[a];
+        d2 += y[a] * y[a];
+        ya += y[a] * l->dir[a];
+    }
+    return d2 > 0 ? ya / sqrtl(d2) - c : -1;
+}
+
+/* Where the ray crosses a spot's cone edge and its blend band's inner
+ * edge, found on their own: a scan of cos alpha over t = L s / (1 - s)
+ * (the whole ray) for sign changes, each bisected to long double; the
+ * share's second derivative jumps there, which the Kronrod-Gauss
+ * difference can miss. Appends to cut (at most cap). */
+static int spot_cuts(const ef_light *l, const ef_ray *r, long double *cut, int n, int cap)
+{
+    long double ww = 0;
+    for (int a = 0; a < 3; ++a)
+        ww += ((long double) l->pos[a] - r->org[a]) * ((long double) l->pos[a] - r->org[a]);
+    const long double L = fmaxl(sqrtl(ww), 1), D = r->dist;
+    const long double lv[2] = { l->cos_outer, l->cos_outer + l->smooth };
+    enum { NS = 20000 };
+    for (int e = 0; e < 2 && (e == 0 || l->smooth > 0); ++e) {
+        long double ta = 0, fa = spot_cos(l, r, 0, lv[e]);
+        for (int i = 1; i <= NS && n < cap - 1; ++i) {
+            const long double sv = (long double) i / (NS + 1), tb = L * sv / (1 - sv);
+            const long double fb = spot_cos(l, r, tb, lv[e]);
+            if ((fa < 0) != (fb < 0)) {
+                long double lo = ta, hi = tb, flo = fa;
+                for (int it = 0; it < 200 && hi - lo > 1e-19L * hi; ++it) {
+                    const long double m = (lo + hi) / 2, fm = spot_cos(l, r, m, lv[e]);
+                    if ((fm < 0) == (flo < 0))
+                        lo = m, flo = fm;
+                    else
+                        hi = m;
+                }
+                const long double t = (lo + hi) / 2;
+                if (t > 0 && t < D)
+                    cut[n++] = t;
+            }
+            if (tb >= D)
+                break;
+            ta = tb;
+            fa = fb;
+        }
+    }
+    return n;
+}
+
 int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, long double S[3])
 {
     S[0] = S[1] = S[2] = 0;
@@ -932,6 +984,8 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
                 break;
         }
     }
+    if (l->kind == EF_LIGHT_SPOT)
+        n = spot_cuts(l, r, cut, n, NCUT);
     qsort(cut, (size_t) n, sizeof cut[0], cmp_ld);
     lit_ref q = { s, l, r, 0, 1, 0 };
     if (isfinite(D)) {

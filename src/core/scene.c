@@ -1,4 +1,5 @@
 #include "scene.h"
+#include "shadow.h"
 
 #include "expneg.h"
 
@@ -52,6 +53,8 @@ int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err)
     return 0;
 }
 
+static int ef_scene_name_light(ef_fog_scene *s, ef_light *l, const char *spec, ef_err *err);
+
 int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
 {
     if (s->nlight >= EF_MAX_LIGHTS)
@@ -59,6 +62,19 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
     ef_light *l = &s->light[s->nlight];
     if (ef_light_parse(spec, &s->ctx, l, err))
         return -1;
+    if (ef_scene_name_light(s, l, spec, err)) {
+        ef_shadow_unref(l->shadow);
+        l->shadow = NULL;
+        return -1;
+    }
+    s->nlight++;
+    return 0;
+}
+
+/* Names l (the next light of s) and its AOV channels; fails when the name
+ * is taken. */
+static int ef_scene_name_light(ef_fog_scene *s, ef_light *l, const char *spec, ef_err *err)
+{
     /* the default name counts the lights of its kind before it */
     int nth = 0;
     for (int i = 0; i < s->nlight; ++i)
@@ -78,7 +94,6 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err)
             return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "
                            "tells lights apart in the light AOVs)", spec, l->name,
                            s->light[i].spec);
-    s->nlight++;
     return 0;
 }
 
@@ -98,6 +113,8 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     dst->sky_distance = src->sky_distance;
     dst->nlight = src->nlight;
     memcpy(dst->light, src->light, (size_t) src->nlight * sizeof src->light[0]);
+    for (int j = 0; j < dst->nlight; ++j)
+        ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
     for (int i = 0; i < src->ncomp; ++i) {
         ef_fog_component *d = &dst->comp[i];
         const ef_fog_component *c = &src->comp[i];
@@ -138,7 +155,12 @@ void ef_scene_free(ef_fog_scene *s)
 {
     for (int i = 0; i < s->ncomp; ++i)
         ef_fog_free(&s->comp[i]);
+    for (int j = 0; j < s->nlight; ++j) {
+        ef_shadow_unref(s->light[j].shadow);
+        s->light[j].shadow = NULL;
+    }
     s->ncomp = 0;
+    s->nlight = 0;
     s->any_color = 0;
 }
 

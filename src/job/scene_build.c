@@ -2,6 +2,7 @@
  * file and the library all build scenes here, so they accept exactly the
  * same things. */
 #include "scene_build.h"
+#include "shadow_file.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -105,6 +106,7 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
     s->ctx.read_file = ef_read_text_file;
     s->ctx.parse_color = ef_colour_parse;
     s->ctx.color_user = colour;
+    s->ctx.load_shadow = ef_shadow_load;
     if ((r = add_file_specs(s, d, &sf, err)) != EF_PARSE_RUN)
         goto out;
     found->scene_text = sf.text;   /* kept for exrfog/history: the file is read once */
@@ -120,12 +122,13 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
             char msg[sizeof err->msg];
             snprintf(msg, sizeof msg, "%s", err->msg);
             ef_fail(err, "%s: %s", sf.lwhere[i], msg);
-            err->file = d->scene_file;
+            if (!err->file)   /* else the shadow map it names is at fault */
+                err->file = d->scene_file;
             r = EF_PARSE_FAIL;
         }
     for (int i = 0; r == EF_PARSE_RUN && i < d->nlight; ++i)
         if (ef_scene_add_light(s, d->lights[i], err))
-            r = EF_PARSE_USAGE;
+            r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;   /* a shadow map's fault: 1 */
     if (r == EF_PARSE_RUN && ef_lights_check(s, err))
         r = EF_PARSE_USAGE;
 out:
@@ -145,10 +148,12 @@ int ef_scene_rebuild(ef_fog_scene *s, const double *up, double time, ef_err *err
     ns->ctx.time = time;
     for (int i = 0; i < s->ncomp; ++i)
         if (ef_scene_add(ns, s->comp[i].spec, err)) {
+            ns->nlight = 0;   /* the lights are still s's */
             ef_scene_free(ns);
             free(ns);
             return -1;
         }
+    s->nlight = 0;   /* the lights moved to ns */
     ef_scene_free(s);
     *s = *ns;
     free(ns);

@@ -1,0 +1,78 @@
+/* Shadow maps for lit fog: a depth render from the light (shadow=FILE.exr),
+ * read as a piecewise-constant depth per texel, and the lit intervals of a
+ * view segment against it, exactly with respect to that map.
+ *
+ * The map's camera is its header's worldToCamera (the light's position and
+ * its +Z axis, OpenEXR's convention) and worldToNDC or worldToScreen (the
+ * projection: perspective for a spot, orthographic for the sun, told apart
+ * by the projection's w column). Each texel holds the planar depth (along
+ * the light's axis, scene units) of what the light sees first; a point x is
+ * lit when its own planar depth is at most the texel's plus the bias.
+ * Along a view ray both the texel coordinates (a projective map of t) and
+ * the planar depth (affine in t) are known in closed form, so the texels
+ * the segment crosses are walked exactly (a 2-D DDA in t), each texel's
+ * lit part is one interval, and a min-max mip skips runs that are wholly
+ * lit or wholly shadowed. Pure C, no I/O: the I/O layer fills
+ * ef_shadow_src. */
+#ifndef EF_SHADOW_H
+#define EF_SHADOW_H
+
+#include "error.h"
+#include "mat4.h"
+
+#include <stdatomic.h>
+
+/* What a light-view depth render holds, as read from its file. */
+typedef struct ef_shadow_src {
+    const char *path;         /* for messages */
+    int width, height;        /* data window */
+    int dw[2];                /* data window origin */
+    int disp[4];              /* display window xmin, ymin, xmax, ymax (inclusive) */
+    const float *depth;       /* width x height, rows top-down */
+    int has_w2c, has_proj;
+    ef_mat4 w2c;              /* worldToCamera (row vectors, +Z forward) */
+    ef_mat4 proj;             /* worldToNDC or worldToScreen */
+    const char *proj_name;    /* which of the two */
+} ef_shadow_src;
+
+/* A shadow map, immutable once built and shared (by reference count)
+ * between the copies of a scene. */
+typedef struct ef_shadow {
+    _Atomic int refs;
+    int w, h;                 /* texels */
+    int ortho;                /* 1: orthographic (a sun's map) */
+    /* (X, Y, W) = [x y z 1] . T (columns): the texel coordinates of world x
+     * are X / W, Y / W (0..w, 0..h over the data window, y down) */
+    double T[4][3];
+    double org[3], axis[3];   /* the light camera's position and unit +Z */
+    double bias;              /* scene units added to every texel's depth */
+    int outside_lit;          /* what lies outside the map (and behind a spot's map) */
+    int nlev;                 /* mip levels, 0 = the texels */
+    int lw[24], lh[24];       /* their sizes */
+    float *zmin[24], *zmax[24];  /* per level; level 0's zmin is the map (inf: nothing) */
+    char path[256];
+} ef_shadow;
+
+/* Builds a map from src with the given bias (scene units, >= 0) and
+ * outside rule. Returns it (one reference), or NULL with a message naming
+ * what is missing or wrong in the file and how to fix it. */
+ef_shadow *ef_shadow_build(const ef_shadow_src *src, double bias, int outside_lit, ef_err *err);
+
+/* Takes one more reference (for a copy of the scene holding it). */
+void ef_shadow_ref(ef_shadow *m);
+
+/* Drops one reference; the last frees the map. NULL is a no-op. */
+void ef_shadow_unref(ef_shadow *m);
+
+/* The lit parts of the view segment org + t dir, t in [a, b] (b may be
+ * INFINITY): sorted, disjoint, adjacent runs merged, written as pairs
+ * into iv (at most cap pairs; a segment lit in more pieces than that gets
+ * its remainder as one last piece, flagged by a return of -1 - n).
+ * Returns the number of pairs n. */
+int ef_shadow_lit(const ef_shadow *m, const double org[3], const double dir[3], double a,
+                  double b, double (*iv)[2], int cap);
+
+/* Whether world point x is lit by the map (the same rule, at one point). */
+int ef_shadow_point_lit(const ef_shadow *m, const double x[3]);
+
+#endif
