@@ -1,11 +1,14 @@
-"""Runs inside Blender (blender -b --factory-startup --python THIS -- OUT plain|fog SPP SUN):
-a tiny Cycles scene for lit fog (tests/blender_lit_run.py compares):
-emission-only surfaces (a ground plane and a ball that casts no shadow),
+"""Runs inside Blender (blender -b --factory-startup --python THIS -- OUT plain|fog|sunmap SPP
+SUN [shadow]): a tiny Cycles scene for lit fog (tests/blender_lit_run.py compares):
+emission-only surfaces (a ground plane and a ball that casts no shadow, or
+with "shadow" does: shafts),
 a black world, a box of homogeneous fog (Volume Scatter, HG g = 0.5, plus
 Volume Absorption: sigma_t 0.08, albedo 0.75) from z = -1 to 6 around the
 camera, a sun of strength SUN, volume bounces 0 (single scattering).
-"plain" renders without the fog (with Z), "fog" with it. Writes OUT and
-OUT.json (the camera and the direction towards the sun)."""
+"plain" renders without the fog (with Z), "fog" with it, "sunmap" the
+scene's depth from an orthographic camera looking along the sunlight (the
+shadow map; OUT.json then holds that camera and its ortho scale). Writes
+OUT and OUT.json (the camera and the direction towards the sun)."""
 import json
 import math
 import sys
@@ -14,6 +17,7 @@ import bpy
 
 args = sys.argv[sys.argv.index("--") + 1:]
 out, fog, spp, sun_strength = args[0], args[1] == "fog", int(args[2]), float(args[3])
+sunmap, shadows = args[1] == "sunmap", "shadow" in args[4:]
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -52,7 +56,14 @@ bpy.ops.mesh.primitive_plane_add(size=40, location=(0, 0, 0))
 bpy.context.object.data.materials.append(emissive("ground", (0.3, 0.25, 0.2)))
 bpy.ops.mesh.primitive_uv_sphere_add(radius=1.5, location=(-1, 2, 1.5), segments=48, ring_count=24)
 bpy.context.object.data.materials.append(emissive("ball", (0.1, 0.4, 0.8)))
-bpy.context.object.visible_shadow = False   # no shafts: exrfog has no occluders yet
+bpy.context.object.visible_shadow = shadows   # shafts, or none
+if shadows:
+    # a wall with a gap between the camera's fog and the (backlit) sun
+    for x0, x1 in ((-20, -1.5), (1.5, 20)):
+        bpy.ops.mesh.primitive_cube_add(size=1, location=((x0 + x1) / 2, 9, 3))
+        wall = bpy.context.object
+        wall.scale = (x1 - x0, 0.5, 6)
+        wall.data.materials.append(emissive("wall", (0.2, 0.2, 0.22)))
 if fog:
     bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 2.5))
     cube = bpy.context.object
@@ -70,15 +81,26 @@ if fog:
     cube.visible_shadow = True
 sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = sun_strength; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
-so.rotation_euler = (math.radians(60), 0, math.radians(150))
+so.rotation_euler = (math.radians(72 if shadows else 60), 0, math.radians(170 if shadows else 150))
 bpy.context.view_layer.update()
 cam = sc.camera
 cam.location = (0, -14, 2.5); cam.rotation_euler = (math.radians(85), 0, 0)
+if sunmap:
+    # the light's view: an orthographic camera looking along the sunlight
+    # from 30 units towards the sun, over the ball and the ground near it
+    t = so.matrix_world.col[2]
+    cam.location = (40 * t[0], 4 + 40 * t[1], 2 + 40 * t[2])
+    cam.rotation_euler = so.rotation_euler
+    cam.data.type = 'ORTHO'
+    cam.data.ortho_scale = 48.0
+    cam.data.clip_start, cam.data.clip_end = 0.01, 500.0
+    sc.render.resolution_x = sc.render.resolution_y = 512
 bpy.context.view_layer.update()
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
 m = cam.matrix_world
 t = so.matrix_world.col[2]
 json.dump({"c2w": [m[i][j] for i in range(4) for j in range(4)], "fov": math.degrees(cam.data.angle_x),
+           "ortho_scale": cam.data.ortho_scale if sunmap else 0,
            "near": cam.data.clip_start, "far": cam.data.clip_end, "towards": [t[0], t[1], t[2]]}, open(out + ".json", "w"))
 print("blender_lit: rendered")

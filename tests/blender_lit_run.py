@@ -5,7 +5,11 @@ same camera, fog and sun, and with the sun off. Cycles lets the emissive
 surfaces light its fog too (exrfog's lights are only --light), so the
 comparison is of what the sun adds: Cycles(sun) - Cycles(no sun) against
 exrfog(lit) - exrfog(unlit), up to Cycles' own noise (256 samples per
-pixel). Exits 77 (skipped) without Blender."""
+pixel). Then the same with shafts: the ball casts shadows in Cycles, and
+exrfog reads them from Cycles' own depth render of the scene along the
+sunlight (an orthographic second camera; its matrices written into the
+map's header here, as a renderer that exports its camera would). Exits 77
+(skipped) without Blender."""
 import json
 import os
 import shutil
@@ -38,10 +42,15 @@ def rgb(path):
 with tempfile.TemporaryDirectory() as d:
     env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
     scene = os.path.join(src, "tests", "blender_lit.py")
-    for name, mode, spp, sun in (("plain", "plain", 4, 3), ("lit", "fog", 256, 3),
-                                 ("dark", "fog", 256, 0)):
+    for name, mode, spp, sun, extra in (("plain", "plain", 4, 3, ""), ("lit", "fog", 256, 3, ""),
+                                        ("dark", "fog", 256, 0, ""),
+                                        ("plainS", "plain", 4, 3, "shadow"),
+                                        ("shafts", "fog", 256, 3, "shadow"),
+                                        ("darkS", "fog", 256, 0, "shadow"),
+                                        ("sunmap", "sunmap", 1, 3, "shadow")):
         r = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", scene,
-                 "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)], env)
+                 "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)] + ([extra] if extra else []),
+                env)
         if "blender_lit: rendered" not in r.stdout:
             raise SystemExit("blender_lit: FAILED: Blender did not render " + name)
     cam = json.load(open(d + "/plain.exr.json"))
@@ -65,6 +74,55 @@ with tempfile.TemporaryDirectory() as d:
         raise SystemExit("blender_lit: FAILED: exrfog's sun light differs from Cycles'")
     if not ef.mean() > 0.05:
         raise SystemExit("blender_lit: FAILED: the sun added almost nothing")
+    # shafts: the sun's map of the scene, with its camera in the header in
+    # OpenEXR's convention (row vectors, +Z forward): Blender's camera looks
+    # down its -Z, so the camera's Z axis is minus Blender's
+    sm = json.load(open(d + "/sunmap.exr.json"))
+    B = np.array(sm["c2w"]).reshape(4, 4)
+    c2w = np.zeros((4, 4))
+    c2w[0, :3], c2w[1, :3], c2w[2, :3], c2w[3, :3] = B[:3, 0], B[:3, 1], -B[:3, 2], B[:3, 3]
+    c2w[3, 3] = 1
+    w2c = np.linalg.inv(c2w)
+    s = 1.0 / sm["ortho_scale"]
+    c2n = np.array([[s, 0, 0, 0], [0, -s, 0, 0], [0, 0, 1e-3, 0], [0.5, 0.5, 0, 1]])
+    w2n = w2c @ c2n
+    buf = oiio.ImageBuf(d + "/sunmap.exr")
+    spec = buf.spec()
+    z = buf.get_pixels(oiio.FLOAT)[..., spec.channelindex("Z")].copy()
+    out = oiio.ImageSpec(spec.width, spec.height, 1, oiio.FLOAT)
+    out.channelnames = ("Z",)
+    out.attribute("worldToCamera", oiio.TypeDesc("matrix"), tuple(w2c.flatten()))
+    out.attribute("worldToNDC", oiio.TypeDesc("matrix"), tuple(w2n.flatten()))
+    mb = oiio.ImageBuf(out)
+    mb.set_pixels(oiio.ROI(0, spec.width, 0, spec.height, 0, 1, 0, 1), z[..., None])
+    if not mb.write(d + "/map.exr"):
+        raise SystemExit("blender_lit: FAILED: cannot write the map: " + mb.geterror())
+    camS = json.load(open(d + "/plainS.exr.json"))
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_shafts.exr", "--light",
+         "sun:towards=%r,%r,%r:intensity=3:shadow=%s/map.exr" % (tuple(camS["towards"]) + (d,))]
+        + common)
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_darkS.exr"] + common)
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_unshadowed.exr", "--light",
+         "sun:towards=%r,%r,%r:intensity=3" % tuple(camS["towards"])] + common)
+    cyc_s = rgb(d + "/shafts.exr") - rgb(d + "/darkS.exr")
+    ef_s = rgb(d + "/ef_shafts.exr") - rgb(d + "/ef_darkS.exr")
+    ef_u = rgb(d + "/ef_unshadowed.exr") - rgb(d + "/ef_darkS.exr")
+    diff = cyc_s - ef_s
+    mean_rel = (cyc_s.mean() - ef_s.mean()) / ef_s.mean()
+    rows = np.abs(cyc_s.mean(axis=(1, 2)) - ef_s.mean(axis=(1, 2))) / ef_s.mean(axis=(1, 2))
+    shade = 1 - ef_s.mean() / ef_u.mean()
+    print("blender_lit: with the ball's shafts: Cycles mean %.5f, exrfog %.5f (%+.2f %%); row "
+          "means within %.2f %%; per pixel |diff| mean %.5f, p99.9 %.5f; the shadow takes "
+          "%.1f %% of the sun's light" % (cyc_s.mean(), ef_s.mean(), 100 * mean_rel,
+                                          100 * rows.max(), np.abs(diff).mean(),
+                                          np.percentile(np.abs(diff), 99.9), 100 * shade))
+    if not (abs(mean_rel) < 0.01 and rows.max() < 0.03):
+        raise SystemExit("blender_lit: FAILED: exrfog's shafts differ from Cycles'")
+    if not shade > 0.02:
+        raise SystemExit("blender_lit: FAILED: the ball's shadow took almost nothing")
+    if os.environ.get("BLENDER_LIT_KEEP"):
+        for f in ("shafts.exr", "darkS.exr", "ef_shafts.exr", "ef_darkS.exr", "map.exr"):
+            shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)
     dark_c, dark_e = rgb(d + "/dark.exr"), rgb(d + "/ef_dark.exr")
     print("blender_lit: unlit: Cycles mean %.5f, exrfog %.5f (the surfaces light Cycles' fog)"
           % (dark_c.mean(), dark_e.mean()))

@@ -576,6 +576,142 @@ static void test_sphere_convergence(void **state)
     ef_scene_free(&s);
 }
 
+/* ---- the command line ---- */
+
+/* Writes c's map of depths z (n x n) with its camera as float matrices, as
+ * a renderer would; channel NULL: no depth channel; no_cam: no matrices. */
+static void write_map(const char *path, const lcam *c, const float *z, const char *channel,
+                      int no_cam)
+{
+    tu_part p;
+    tu_part_init(&p, c->n, c->n);
+    float *other = NULL;
+    if (channel) {
+        tu_part_add(&p, channel, EXR_PIXEL_FLOAT, z);
+    } else {
+        other = calloc((size_t) c->n * (size_t) c->n, sizeof *other);
+        tu_part_add(&p, "R", EXR_PIXEL_HALF, other);
+    }
+    if (!no_cam) {
+        ef_mat4 w2c, w2n;
+        lcam_matrices(c, &w2c, &w2n);
+        p.m44[0].name = "worldToCamera";
+        p.m44[1].name = "worldToNDC";
+        for (int i = 0; i < 16; ++i) {
+            p.m44[0].m[i] = (float) w2c.m[i];
+            p.m44[1].m[i] = (float) w2n.m[i];
+        }
+    }
+    assert_int_equal(tu_write_exr(path, &p, 1), 0);
+    free(other);
+}
+
+static int same_channel(const char *a, const char *b, const char *ch)
+{
+    int w, h, w2, h2;
+    float *x = tu_read_channel(a, 0, ch, &w, &h), *y = tu_read_channel(b, 0, ch, &w2, &h2);
+    const int same = x && y && w == w2 && h == h2 && !memcmp(x, y, (size_t) w * h * sizeof *x);
+    free(x);
+    free(y);
+    return same;
+}
+
+static void test_cli(void **state)
+{
+    (void) state;
+    char in[4096];
+    const char *src = getenv("EXRFOG_SOURCE_DIR");
+    snprintf(in, sizeof in, "%s/samples/sample.exr", src ? src : ".");
+    /* a ball over the sample's ground, seen by the sun along 0.3,1,0.2 */
+    double l[3] = { 0.3, 1, 0.2 };
+    unit(l);
+    const sph b = { { 0, 6, -12 }, 2.5 };
+    const double at[3] = { b.C[0] + 80 * l[0], b.C[1] + 80 * l[1], b.C[2] + 80 * l[2] };
+    const double fwd[3] = { -l[0], -l[1], -l[2] };
+    lcam c = lcam_make(at, fwd, 1, 6, 256);
+    float *z = sphere_map(&c, &b), *none = malloc(256 * 256 * sizeof *none);
+    for (int i = 0; i < 256 * 256; ++i)
+        none[i] = INFINITY;
+    char *map = tu_path("shadow_ball.exr"), *empty = tu_path("shadow_none.exr");
+    char *nocam = tu_path("shadow_nocam.exr"), *noz = tu_path("shadow_noz.exr");
+    char *a = tu_path("shadow_a.exr"), *bb = tu_path("shadow_b.exr"), *cc = tu_path("shadow_c.exr");
+    write_map(map, &c, z, "Z", 0);
+    write_map(empty, &c, none, "depth.Z", 0);
+    write_map(nocam, &c, z, "Z", 1);
+    write_map(noz, &c, z, NULL, 0);
+    const char *fog = "--fog height:density=0.08:falloff=0.25:base=0";
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3", in, a,
+                             fog), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                             "shadow='%s'", in, bb, fog, map), 0);
+    /* an empty map (nothing casts) changes no bit */
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                             "shadow='%s':outside=lit", in, cc, fog, empty), 0);
+    assert_true(same_channel(a, cc, "R") && same_channel(a, cc, "B"));
+    /* the ball's shadow darkens the fog, and nothing brightens */
+    int w, h;
+    float *ra = tu_read_channel(a, 0, "R", &w, &h), *rb = tu_read_channel(bb, 0, "R", &w, &h);
+    assert_true(ra && rb);
+    long darker = 0;
+    for (int i = 0; i < w * h; ++i) {
+        assert_true(rb[i] <= ra[i]);
+        darker += rb[i] < ra[i] * 0.999f;
+    }
+    assert_true(darker > w * h / 50);
+    free(ra);
+    free(rb);
+    /* outside=shadow darkens everything the map does not cover */
+    remove(cc);
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                             "shadow='%s':outside=shadow", in, cc, fog, empty), 0);
+    assert_false(same_channel(a, cc, "R"));
+    /* a scene file's light takes the same keys */
+    char *js = tu_path("shadow_scene.json");
+    FILE *f = fopen(js, "w");
+    assert_non_null(f);
+    fprintf(f, "{\"fog\": [{\"model\": \"height\", \"density\": 0.08, \"falloff\": 0.25, "
+            "\"base\": 0}], \"lights\": [{\"kind\": \"sun\", \"towards\": [0.3, 1, 0.2], "
+            "\"intensity\": 3, \"shadow\": \"%s\"}]}", map);
+    fclose(f);
+    remove(cc);
+    assert_int_equal(tu_runf("'%s' -o '%s' --scene '%s'", in, cc, js), 0);
+    assert_true(same_channel(bb, cc, "R"));
+    /* files at fault: exit 1, the file named, no output */
+    remove(cc);
+    const struct { const char *light; const char *want; } bad[] = {
+        { "sun:towards=0.3,1,0.2:shadow=/nonexistent/map.exr", "/nonexistent/map.exr" },
+        { "sun:towards=0.3,1,0.2:shadow='%s'", "worldToCamera" },
+        { "sun:towards=0.3,1,0.2:shadow='%s'", "no depth channel" },
+        { "sun:towards=0.3,1.2,0.2:shadow='%s'", "another direction" },
+        { "spot:position=0,8,0:aim=0,-1,0:cone=40:shadow='%s'", "orthographic" },
+    };
+    const char *files[] = { NULL, nocam, noz, map, map };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+        char light[1024];
+        snprintf(light, sizeof light, bad[i].light, files[i] ? files[i] : "");
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light %s", in, cc, fog, light), 1);
+        if (!strstr(tu_err, bad[i].want) || strncmp(tu_err, "exrfog: ", 8))
+            fail_msg("--light %s: '%s' lacks '%s'", light, tu_err, bad[i].want);
+        assert_false(tu_exists(cc));
+    }
+    /* usage: exit 2 */
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light point:position=0,3,-5:shadow='%s'", in, cc,
+                             fog, map), 2);
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0,1,0:bias=-1:shadow='%s'", in,
+                             cc, fog, map), 2);
+    assert_false(tu_exists(cc));
+    free(z);
+    free(none);
+    free(map);
+    free(empty);
+    free(nocam);
+    free(noz);
+    free(a);
+    free(bb);
+    free(cc);
+    free(js);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -583,6 +719,7 @@ int main(void)
         cmocka_unit_test(test_plates_perspective),
         cmocka_unit_test(test_lit_reference),
         cmocka_unit_test(test_sphere_convergence),
+        cmocka_unit_test(test_cli),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
