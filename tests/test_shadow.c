@@ -660,6 +660,40 @@ static void test_cli(void **state)
     assert_true(darker > w * h / 50);
     free(ra);
     free(rb);
+    /* --aov lit: the share of the sun's light past the ball, which is the
+     * ratio of its light layer with and without the map */
+    char *la = tu_path("shadow_la.exr"), *lb = tu_path("shadow_lb.exr");
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3 "
+                             "--aov light", in, la, fog), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                             "shadow='%s' --aov light,lit", in, lb, fog, map), 0);
+    tu_image A, B;
+    assert_int_equal(tu_read_image(la, 0, &A), 0);
+    assert_int_equal(tu_read_image(lb, 0, &B), 0);
+    const float *lit = tu_image_f(&B, "fog_lit.sun1");
+    assert_non_null(lit);
+    long partial = 0;
+    for (int i = 0; i < A.w * A.h; ++i) {
+        double un = 0, sh = 0;
+        for (int k = 0; k < 3; ++k) {
+            static const char *const ch[3] = { "fog_light.sun1.R", "fog_light.sun1.G",
+                                               "fog_light.sun1.B" };
+            un += tu_image_f(&A, ch[k])[i];
+            sh += tu_image_f(&B, ch[k])[i];
+        }
+        assert_true(lit[i] >= 0 && lit[i] <= 1);
+        if (un > 1e-6)
+            assert_close(lit[i], sh / un, 1e-5);
+        partial += lit[i] < 0.99f;
+    }
+    assert_true(partial > A.w * A.h / 50);
+    tu_image_free(&A);
+    tu_image_free(&B);
+    assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2 --aov lit", in, cc,
+                             fog), 2);
+    assert_non_null(strstr(tu_err, "no --light has a shadow= map"));
+    free(la);
+    free(lb);
     /* outside=shadow darkens everything the map does not cover */
     remove(cc);
     assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"

@@ -16,6 +16,7 @@ static const struct {
     { "P", EF_AOV_P, 3, { "fog_P.X", "fog_P.Y", "fog_P.Z" } },
     { "distance", EF_AOV_DISTANCE, 1, { "fog_distance.Z" } },
     { "light", EF_AOV_LIGHT, 3, { "fog_ambient.R", "fog_ambient.G", "fog_ambient.B" } },
+    { "lit", EF_AOV_LIT, 0, { NULL } },   /* per shadowed light only */
 };
 #define NAOV ((int) (sizeof aovs / sizeof aovs[0]))
 
@@ -66,6 +67,13 @@ int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names)
             for (int k = 0; k < 3; ++k, ++n)
                 if (names)
                     names[n] = s->light[j].aov[k];
+    if ((mask & EF_AOV_LIT) && s)
+        for (int j = 0; j < s->nlight; ++j)
+            if (s->light[j].shadow) {
+                if (names)
+                    names[n] = s->light[j].lit_aov;
+                ++n;
+            }
     return n;
 }
 
@@ -83,8 +91,9 @@ void ef_aov_list(unsigned mask, char *buf, size_t len)
         }
 }
 
-void ef_aov_bind(ef_aov_out *out, unsigned mask, int nlight, float *const *planes)
+void ef_aov_bind(ef_aov_out *out, unsigned mask, const ef_fog_scene *s, float *const *planes)
 {
+    const int nlight = s ? s->nlight : 0;
     float **slot[NAOV][4] = {
         { &out->fog[0], &out->fog[1], &out->fog[2], &out->fog[3] },
         { &out->T[0], &out->T[1], &out->T[2], NULL },
@@ -101,6 +110,8 @@ void ef_aov_bind(ef_aov_out *out, unsigned mask, int nlight, float *const *plane
     for (int j = 0; j < EF_MAX_LIGHTS; ++j)
         for (int k = 0; k < 3; ++k)
             out->light[j][k] = (mask & EF_AOV_LIGHT) && j < nlight ? planes[n++] : NULL;
+    for (int j = 0; j < EF_MAX_LIGHTS; ++j)
+        out->lit[j] = (mask & EF_AOV_LIT) && j < nlight && s->light[j].shadow ? planes[n++] : NULL;
 }
 
 /* s += v, keeping the rounding error in *lo (Neumaier), so the total does

@@ -10,6 +10,10 @@
  *                                          without lights, out.rgb - T in.rgb)
  *             fog_light.NAME.R, .G, .B     per --light, what it scatters in
  *                                          (alpha S + (1 - alpha) S_far)
+ *   lit       fog_lit.NAME                 per --light with a shadow= map, the
+ *                                          share of its light that passes the
+ *                                          occluders: sum_k S_k / sum_k S_k
+ *                                          unshadowed (1 where it adds none)
  * Pure C, no I/O. */
 #ifndef EF_AOV_H
 #define EF_AOV_H
@@ -25,13 +29,14 @@ enum {
     EF_AOV_P = 1u << 3,
     EF_AOV_DISTANCE = 1u << 4,
     EF_AOV_LIGHT = 1u << 5,
+    EF_AOV_LIT = 1u << 6,
 };
 
 /* Channels of every AOV together. */
-#define EF_AOV_MAX_CHANNELS (14 + 3 + 3 * EF_MAX_LIGHTS)
+#define EF_AOV_MAX_CHANNELS (14 + 3 + 4 * EF_MAX_LIGHTS)
 
 /* The AOV names as users write them, in table order, comma-separated. */
-#define EF_AOV_NAMES "fog, T, error, P, distance, light"
+#define EF_AOV_NAMES "fog, T, error, P, distance, light, lit"
 
 /* Adds the AOVs of a comma list ("fog,T") to *mask; duplicates merge, and
  * empty items are refused. On an unknown name returns -1 with a message
@@ -42,9 +47,10 @@ int ef_aov_parse(const char *list, unsigned *mask, const char *what, ef_err *err
 unsigned ef_aov_find(const char *name);
 
 /* The channel names of mask, in table order (light's after the rest: the
- * ambient, then one layer per light of s, whose names they point into; s
- * may be NULL: no light layers); returns how many (at most
- * EF_AOV_MAX_CHANNELS). names may be NULL to count. */
+ * ambient, then one layer per light of s, whose names they point into,
+ * then lit's one channel per light of s with a shadow map; s may be NULL:
+ * no light layers); returns how many (at most EF_AOV_MAX_CHANNELS). names
+ * may be NULL to count. */
 int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names);
 
 /* The AOV names of mask as a comma list ("fog,T"), into buf. */
@@ -57,11 +63,12 @@ typedef struct ef_aov_out {
     double origin[3];         /* subtracted from fog_P (in double) */
     float *fog[4], *T[3], *err[3], *P[3], *dist;
     float *ambient[3], *light[EF_MAX_LIGHTS][3];
+    float *lit[EF_MAX_LIGHTS];  /* NULL for a light without a shadow map */
 } ef_aov_out;
 
 /* Points out's planes at planes[i], i in the order ef_aov_channels gives
- * (nlight: the scene's lights). */
-void ef_aov_bind(ef_aov_out *out, unsigned mask, int nlight, float *const *planes);
+ * for s (NULL: a scene without lights). */
+void ef_aov_bind(ef_aov_out *out, unsigned mask, const ef_fog_scene *s, float *const *planes);
 
 /* Cost and error of the numerical components over many pixels (the
  * surface segment of each fogged pixel), for --stats. */

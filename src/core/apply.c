@@ -36,8 +36,25 @@ static double aov_err(double T, double e)
     return b < 1.0 ? b : 1.0;   /* also when b is NaN (T = 0, e = inf) */
 }
 
+/* One light's a S + (1 - a) S_far (far: the far segment when it differs
+ * from r; need_inf: the far part shows). */
+static void coverage_light(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                           const ef_ray *far, double a, int need_inf, double v[3])
+{
+    double S[3], Sf[3];
+    ef_light_inscatter(s, l, r, S, NULL);
+    memcpy(Sf, S, sizeof Sf);
+    if (far)
+        ef_light_inscatter(s, l, far, Sf, NULL);
+    for (int k = 0; k < 3; ++k)
+        /* a share of 0 takes nothing, even an infinite S */
+        v[k] = (a > 0.0 ? a * S[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+}
+
 /* The lights' in-scattered light over the pixel's coverage: a S along the
- * surface segment plus (1 - a) S along the far one (need_inf: it shows). */
+ * surface segment plus (1 - a) S along the far one (need_inf: it shows).
+ * With the lit AOV, a shadowed light's share that passes its occluders:
+ * the same sum without the map in the denominator. */
 static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int need_inf,
                        double c[3], const ef_aov_out *aov, size_t i)
 {
@@ -46,18 +63,20 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
     double sum[3] = { 0, 0, 0 };
     /* light by light (each its own AOV layer), summed in the scene's order */
     for (int j = 0; j < s->nlight; ++j) {
-        double S[3], Sf[3];
-        ef_light_inscatter(s, &s->light[j], r, S, NULL);
-        memcpy(Sf, S, sizeof Sf);
-        if (other)
-            ef_light_inscatter(s, &s->light[j], &far, Sf, NULL);
+        const int lit = aov && aov->lit[j];
+        double v[3], u[3] = { 0, 0, 0 };
+        coverage_light(s, &s->light[j], r, other ? &far : NULL, a, need_inf, v);
+        if (lit) {
+            ef_light bare = s->light[j];
+            bare.shadow = NULL;
+            coverage_light(s, &bare, r, other ? &far : NULL, a, need_inf, u);
+            const double num = v[0] + v[1] + v[2], den = u[0] + u[1] + u[2];
+            aov->lit[j][i] = den > 0 && isfinite(den) ? to_float(num / den) : 1.0f;
+        }
         for (int k = 0; k < 3; ++k) {
-            /* a share of 0 takes nothing, even an infinite S */
-            const double v = (a > 0.0 ? a * S[k] : 0.0) +
-                             (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
-            sum[k] += v;
+            sum[k] += v[k];
             if (aov && aov->light[j][k])
-                aov->light[j][k][i] = to_float(v);
+                aov->light[j][k][i] = to_float(v[k]);
         }
     }
     for (int k = 0; k < 3; ++k)
@@ -466,6 +485,9 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                         for (int l = 0; l < s->nlight; ++l)
                             aov->light[l][k][i] = 0.0f;
                     }
+                    for (int l = 0; l < s->nlight && (mask & EF_AOV_LIT); ++l)
+                        if (aov->lit[l])
+                            aov->lit[l][i] = 1.0f;   /* no fog, nothing shadowed */
                     continue;
                 }
                 ef_fog_sample one, other;

@@ -42,6 +42,7 @@ typedef struct ef_light {
     double angle;                    /* sun: angular diameter, radians (kept: no penumbra yet) */
     double cos_outer, smooth;        /* spot: cos(cone / 2), blend (1 - cos(cone / 2)) */
     char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
+    char lit_aov[80];                /* and fog_lit.NAME (with a shadow map) */
     /* shadow=: its light-view depth render (shared, counted: copies of the
      * scene ref it, ef_scene_free drops it), NULL without one; bias= and
      * outside= as given */

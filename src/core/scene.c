@@ -89,6 +89,7 @@ static int ef_scene_name_light(ef_fog_scene *s, ef_light *l, const char *spec, e
     memcpy(name, l->name, sizeof name);
     for (int k = 0; k < 3; ++k)
         snprintf(l->aov[k], sizeof l->aov[k], "fog_light.%s.%c", name, "RGB"[k]);
+    snprintf(l->lit_aov, sizeof l->lit_aov, "fog_lit.%s", name);
     for (int i = 0; i < s->nlight; ++i)
         if (!strcmp(s->light[i].name, l->name))
             return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "

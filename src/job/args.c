@@ -632,6 +632,12 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
     o->aov |= found.aov;
     if (br != EF_PARSE_RUN)
         return br;
+    int shadowed = 0;
+    for (int i = 0; i < o->scene.nlight; ++i)
+        shadowed |= o->scene.light[i].shadow != NULL;
+    if ((o->aov & EF_AOV_LIT) && !shadowed)
+        return ef_fail(err, "--aov lit: no --light has a shadow= map (the lit AOV holds one "
+                            "channel per shadowed light)"), EF_PARSE_USAGE;
     if ((o->aov & EF_AOV_LIGHT) && o->scene.nlight == 0)
         return ef_fail(err, "--aov light: there is no --light (the light AOVs hold one layer "
                             "per light)"), EF_PARSE_USAGE;

@@ -139,7 +139,7 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     if (ef_job_cancelled(j->J))
         return;   /* the output is thrown away: no work for it */
     ef_aov_out aov;
-    ef_aov_bind(&aov, j->aov, j->pass[0].scene->nlight, ck->extra);
+    ef_aov_bind(&aov, j->aov, j->pass[0].scene, ck->extra);
     memcpy(aov.origin, j->aov_origin, sizeof aov.origin);
     /* Statistics per unit, merged once: no lock per pixel. */
     ef_tau_stats st[EF_FOG_MAX_COMPONENTS];
@@ -436,7 +436,8 @@ static void blender_aov_names(ef_frame *F)
         const char *from, *to;
     } pass[] = { { "fog_distance.", "FogDistance." }, { "fog_error.", "FogError." },
                  { "fog_T.", "FogT." }, { "fog_P.", "FogP." }, { "fog.", "Fog." },
-                 { "fog_ambient.", "FogAmbient." }, { "fog_light.", "FogLight_" } };
+                 { "fog_ambient.", "FogAmbient." }, { "fog_light.", "FogLight_" },
+                 { "fog_lit.", "FogLit." } };
     for (int i = 0; i < F->naov; ++i) {
         const char *n = F->aov_names[i];
         for (size_t k = 0; k < sizeof pass / sizeof pass[0]; ++k) {

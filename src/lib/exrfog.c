@@ -343,7 +343,7 @@ static void fog_rect(const ef_fog_pass *pass, int x0, int y0, int w, int h, rect
 {
     ef_aov_out aov;
     memset(&aov, 0, sizeof aov);   /* fog_P relative to the world's origin */
-    ef_aov_bind(&aov, mask, 0, p->aov);   /* no light AOVs through the library yet */
+    ef_aov_bind(&aov, mask, NULL, p->aov);   /* no light AOVs through the library yet */
     ef_fog_block_aov(pass, x0, y0, w, h, p->rgb, p->alpha, p->depth, mask ? &aov : NULL, NULL);
 }
 
