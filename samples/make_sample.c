@@ -3,6 +3,13 @@
  *
  *   make_sample OUT.exr [--size WxH] [--compression none|rle|zips|zip|piz|pxr24|b44|b44a]
  *                       [--tiled N] [--seed S] [--check]
+ *                       [--sun-view X,Y,Z [--sun-width W] [--sun-centre X,Y,Z]]
+ *
+ * --sun-view renders the same scene from the sun instead (towards X,Y,Z):
+ * an orthographic camera looking along the sunlight, W units wide (default
+ * 240) around the centre (default 0,0,-90), Z its planar depth: a shadow
+ * map for exrfog --light sun:...:shadow=OUT.exr, whose worldToNDC is
+ * orthographic (w column 0 0 0 1).
  *
  * Output: one part, channels R,G,B,A (half) and Z (float, planar camera-space
  * depth = distance along the view axis; sky = 1e10 with A = 0, like Cycles).
@@ -100,7 +107,9 @@ typedef struct {
 typedef struct {
     int W, H;
     v3 eye, r, u, f;        /* world position; right, up, forward (unit) */
-    double sx, sy;          /* NDC scale: u = 0.5 + sx * x/z, v = 0.5 - sy * y/z */
+    double sx, sy;          /* NDC scale: u = 0.5 + sx * x/z, v = 0.5 - sy * y/z
+                             * (orthographic: x and y, not x/z and y/z) */
+    int ortho;
     float w2c[16], w2n[16]; /* exactly what goes into the header */
 } camera_t;
 
@@ -301,7 +310,19 @@ static v3 sky_colour(v3 d)
 static v3 cam_dir(const camera_t *c, double u, double v)
 {
     double xc = (u - 0.5) / c->sx, yc = -(v - 0.5) / c->sy;
+    if (c->ortho)
+        return c->f;
     return add(add(scl(c->r, xc), scl(c->u, yc)), c->f);
+}
+
+/* Where the ray for NDC (u, v) starts: the eye, or for an orthographic
+ * camera the point of its image plane. */
+static v3 cam_org(const camera_t *c, double u, double v)
+{
+    if (!c->ortho)
+        return c->eye;
+    double xc = (u - 0.5) / c->sx, yc = -(v - 0.5) / c->sy;
+    return add(c->eye, add(scl(c->r, xc), scl(c->u, yc)));
 }
 
 static void setup_camera(camera_t *c, int W, int H)
@@ -309,6 +330,7 @@ static void setup_camera(camera_t *c, int W, int H)
     const double yaw = 6.0 * PI / 180.0;     /* turned slightly right */
     const double pitch = -4.0 * PI / 180.0;  /* looking slightly down */
     c->W = W; c->H = H;
+    c->ortho = 0;
     c->eye = V(0.0, 1.7, 0.0);
     c->f = V(sin(yaw) * cos(pitch), sin(pitch), -cos(yaw) * cos(pitch));
     c->r = norm(cross(c->f, V(0, 1, 0)));
@@ -341,6 +363,41 @@ static void setup_camera(camera_t *c, int W, int H)
         }
 }
 
+/* The sun's orthographic view of the scene: looking along -towards from
+ * 1000 units towards the sun over a width x width * H / W window around
+ * centre. */
+static void setup_sun_camera(camera_t *c, int W, int H, v3 towards, v3 centre, double width)
+{
+    c->W = W; c->H = H;
+    c->ortho = 1;
+    c->f = scl(norm(towards), -1.0);
+    v3 up = fabs(c->f.y) > 0.99 ? V(0, 0, -1) : V(0, 1, 0);
+    c->r = norm(cross(c->f, up));
+    c->u = cross(c->r, c->f);
+    c->eye = add(centre, scl(norm(towards), 1000.0));
+    c->sx = 1.0 / width;
+    c->sy = 1.0 / (width * (double) H / (double) W);
+    double m[16] = { 0 };
+    v3 ax[3] = { c->r, c->u, c->f };
+    for (int j = 0; j < 3; ++j) {
+        m[0 * 4 + j] = ax[j].x; m[1 * 4 + j] = ax[j].y; m[2 * 4 + j] = ax[j].z;
+        m[3 * 4 + j] = -dot(c->eye, ax[j]);
+    }
+    m[15] = 1.0;
+    /* camera -> NDC: (x, y, z, 1) -> (sx x + 0.5, -sy y + 0.5, z / 1e4, 1) */
+    double p[16] = { c->sx, 0, 0, 0,
+                     0, -c->sy, 0, 0,
+                     0, 0, 1e-4, 0,
+                     0.5, 0.5, 0, 1 };
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            double acc = 0;
+            for (int k = 0; k < 4; ++k) acc += m[i * 4 + k] * p[k * 4 + j];
+            c->w2n[i * 4 + j] = (float) (acc + 0.0);
+            c->w2c[i * 4 + j] = (float) (m[i * 4 + j] + 0.0);
+        }
+}
+
 static void xform(const float *m, v3 p, double out[4])
 {
     for (int j = 0; j < 4; ++j)
@@ -364,7 +421,9 @@ static v3 shade_ground(const render_t *R, v3 p, double fx, double fy)
     const camera_t *c = R->c;
     v3 dx = cam_dir(c, (fx + 1.0) / c->W, fy / c->H), dy = cam_dir(c, fx / c->W, (fy + 1.0) / c->H);
     double wx = 1e3, wz = 1e3;
-    if (dx.y < 0 && dy.y < 0) {
+    if (c->ortho) {
+        wx = wz = 1.0 / (c->sx * c->W);
+    } else if (dx.y < 0 && dy.y < 0) {
         v3 px = add(c->eye, scl(dx, -c->eye.y / dx.y)), py = add(c->eye, scl(dy, -c->eye.y / dy.y));
         wx = fmax(fabs(px.x - p.x), fabs(py.x - p.x));
         wz = fmax(fabs(px.z - p.z), fabs(py.z - p.z));
@@ -378,11 +437,11 @@ static v3 shade_ground(const render_t *R, v3 p, double fx, double fy)
 static v3 sample(const render_t *R, double fx, double fy, int *covered)
 {
     const camera_t *c = R->c; const scene_t *s = R->s;
-    v3 d = cam_dir(c, fx / c->W, fy / c->H);
-    hit_t h = trace(s, c->eye, d, 1e-6);
+    v3 d = cam_dir(c, fx / c->W, fy / c->H), o0 = cam_org(c, fx / c->W, fy / c->H);
+    hit_t h = trace(s, o0, d, 1e-6);
     if (!h.kind) { *covered = 0; return sky_colour(d); }
     *covered = 1;
-    v3 p = add(c->eye, scl(d, h.t));
+    v3 p = add(o0, scl(d, h.t));
     v3 alb = h.kind == 1 ? shade_ground(R, p, fx, fy) : h.alb;
     double ndl = dot(h.n, s->sun_dir);
     double sun = 0;
@@ -415,12 +474,12 @@ static int render_region(render_t *R, int x0, int y0, int w, int h, float *pl[5]
 
             /* Depth from the pixel-centre ray: planar camera-space z (ray has z_cam = 1). */
             double u = (x + 0.5) / c->W, v = (y + 0.5) / c->H;
-            v3 d = cam_dir(c, u, v);
-            hit_t hc = trace(R->s, c->eye, d, 1e-6);
+            v3 d = cam_dir(c, u, v), o0 = cam_org(c, u, v);
+            hit_t hc = trace(R->s, o0, d, 1e-6);
             pl[4][o] = hc.kind ? (float) hc.t : SKY_Z;
 
             /* Self-check with the float matrices exactly as stored in the header. */
-            v3 p = add(c->eye, scl(d, hc.kind ? hc.t : 1000.0));
+            v3 p = add(o0, scl(d, hc.kind ? hc.t : 1000.0));
             double q[4], qc[4];
             xform(c->w2n, p, q);
             xform(c->w2c, p, qc);
@@ -460,6 +519,8 @@ typedef struct {
     exr_compression_t comp;
     uint64_t seed;
     int check;
+    int sun_view;
+    double sun[3], sun_centre[3], sun_width;
 } opts_t;
 
 static void comments_string(const opts_t *o, char *buf, size_t n)
@@ -678,7 +739,11 @@ static void usage(FILE *to)
         "  --compression C     default zip\n"
         "  --tiled N           write a tiled ONE_LEVEL file with NxN tiles (default scanline)\n"
         "  --seed S            layout of the extra spheres and sample jitter (default 1)\n"
-        "  --check             print the camera self-check and verify the written file\n");
+        "  --check             print the camera self-check and verify the written file\n"
+        "  --sun-view X,Y,Z    render the scene's depth from the sun (towards X,Y,Z) with an\n"
+        "                      orthographic camera: a shadow map for exrfog's shadow=\n"
+        "  --sun-width W       its width in scene units (default 240)\n"
+        "  --sun-centre X,Y,Z  what it looks at (default 0,0,-90)\n");
 }
 
 static int parse_int(const char *s, long lo, long hi, long *out)
@@ -699,11 +764,25 @@ static int parse_args(int argc, char **argv, opts_t *o)
     };
     memset(o, 0, sizeof *o);
     o->W = 640; o->H = 360; o->comp = EXR_COMPRESSION_ZIP; o->seed = 1;
+    o->sun_width = 240; o->sun_centre[2] = -90;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         const char *val = (i + 1 < argc) ? argv[i + 1] : NULL;
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) { usage(stdout); exit(0); }
         else if (!strcmp(a, "--check")) o->check = 1;
+        else if (!strcmp(a, "--sun-view") || !strcmp(a, "--sun-centre") || !strcmp(a, "--sun-width")) {
+            double *dst = !strcmp(a, "--sun-view") ? o->sun : !strcmp(a, "--sun-centre") ? o->sun_centre
+                                                                                     : &o->sun_width;
+            const int n = !strcmp(a, "--sun-width") ? 1 : 3;
+            char tail;
+            int got = !val ? 0 : n == 1 ? sscanf(val, "%lf%c", dst, &tail)
+                                        : sscanf(val, "%lf,%lf,%lf%c", dst, dst + 1, dst + 2, &tail);
+            if (got != n || (n == 1 && !(dst[0] > 0))) {
+                fprintf(stderr, PROG ": bad %s '%s'\n", a, val ? val : ""); return 0;
+            }
+            o->sun_view |= !strcmp(a, "--sun-view");
+            ++i;
+        }
         else if (!strcmp(a, "--size") || !strcmp(a, "--compression") || !strcmp(a, "--tiled") ||
                  !strcmp(a, "--seed")) {
             if (!val) { fprintf(stderr, PROG ": %s needs a value\n", a); return 0; }
@@ -756,7 +835,13 @@ int main(int argc, char **argv)
     camera_t cam;
     setup_camera(&cam, o.W, o.H);
     static scene_t scene;
-    build_scene(&scene, &cam, o.seed);
+    build_scene(&scene, &cam, o.seed);   /* the frame's camera places the spheres */
+    if (o.sun_view) {
+        v3 t = V(o.sun[0], o.sun[1], o.sun[2]);
+        if (!(len(t) > 0)) { fprintf(stderr, PROG ": --sun-view needs a non-zero direction\n"); return 1; }
+        setup_sun_camera(&cam, o.W, o.H, t,
+                         V(o.sun_centre[0], o.sun_centre[1], o.sun_centre[2]), o.sun_width);
+    }
     render_t R = { &scene, &cam, o.seed, 0, 0, 0, 0 };
 
     if (write_image(&o, &R)) return 1;

@@ -121,7 +121,8 @@ static double plane_of(const lcam *c, double u)
     return (2 * u / c->n - 1) * c->half;
 }
 
-static ef_shadow *lcam_build(const lcam *c, const float *depth, double bias, int outside_lit)
+static ef_shadow *lcam_build(const lcam *c, const float *depth, double bias, double slope,
+                             int outside_lit)
 {
     ef_shadow_src src;
     memset(&src, 0, sizeof src);
@@ -133,7 +134,8 @@ static ef_shadow *lcam_build(const lcam *c, const float *depth, double bias, int
     src.proj_name = "worldToNDC";
     lcam_matrices(c, &src.w2c, &src.proj);
     ef_err err;
-    ef_shadow *m = ef_shadow_build(&src, bias, outside_lit, &err);
+    const ef_shadow_opts o = { bias, slope, outside_lit };
+    ef_shadow *m = ef_shadow_build(&src, &o, &err);
     if (!m)
         fail_msg("the map did not build: %s", err.msg);
     return m;
@@ -233,7 +235,7 @@ static void check_plates(const lcam *c, double bias)
 {
     const plate p[3] = { { 10, 30, 12, 20, 60 }, { 25, 40, 15, 44, 75 }, { 50, 51, 3, 60, 40 } };
     float *z = plates_map(c, p, 3);
-    ef_shadow *m = lcam_build(c, z, bias, 1);
+    ef_shadow *m = lcam_build(c, z, bias, 1, 1);   /* flat plates: no slope bias */
     free(z);
     long compared = 0;
     for (int trial = 0; trial < 3000; ++trial) {
@@ -339,7 +341,7 @@ static void check_lit(const char *spec, const char *light, const lcam *c, double
     ef_fog_scene s;
     scene_one(&s, spec, light);
     float *z = plates_map(c, p, 2);
-    s.light[0].shadow = lcam_build(c, z, 0, 1);
+    s.light[0].shadow = lcam_build(c, z, 0, 1, 1);
     free(z);
     int shadowed = 0;
     for (int trial = 0; trial < 24; ++trial) {
@@ -539,7 +541,7 @@ static void test_sphere_convergence(void **state)
         lcam c = lcam_make(at, fwd, 1, 8, res[ri]);
         float *z = sphere_map(&c, &b);
         ef_shadow_unref(s.light[0].shadow);
-        s.light[0].shadow = lcam_build(&c, z, 0, 1);
+        s.light[0].shadow = lcam_build(&c, z, 0, 1, 1);
         free(z);
         rng = 99;
         double num = 0, den = 0;
@@ -574,6 +576,55 @@ static void test_sphere_convergence(void **state)
     assert_true(errs[2] < errs[1] / 2.5);
     assert_true(errs[2] < 2e-3);
     ef_scene_free(&s);
+}
+
+/* ---- acne: a low sun on the ground ---- */
+
+/* The ground y = 0 seen by a sun 8 degrees up: its texels' depths span
+ * width / tan(8 deg) each, so without the slope bias fog just above the
+ * ground is shadowed in stripes; with it (the default) a point a
+ * thousandth of a texel's depth span above the ground is lit everywhere,
+ * and points a texel's depth span below the ground stay shadowed (the bias
+ * lets light a texel's depth span into a surface, no deeper). */
+static void test_acne(void **state)
+{
+    (void) state;
+    const double el = 8 * PI / 180;
+    double l[3] = { 0.3 * cos(el), sin(el), -cos(el) };
+    unit(l);
+    const double at[3] = { 50 * l[0], 50 * l[1], -20 + 50 * l[2] };
+    const double fwd[3] = { -l[0], -l[1], -l[2] };
+    lcam c = lcam_make(at, fwd, 1, 10, 256);
+    float *z = malloc(256 * 256 * sizeof *z);
+    for (int j = 0; j < 256; ++j)
+        for (int i = 0; i < 256; ++i) {
+            /* the ground under the texel centre, along the axis */
+            double p[3];
+            for (int a = 0; a < 3; ++a)
+                p[a] = c.org[a] + c.X[a] * plane_of(&c, i + 0.5) - c.Y[a] * plane_of(&c, j + 0.5);
+            const double t = -p[1] / c.Z[1];
+            z[(size_t) j * 256 + (size_t) i] = t > 0 ? (float) t : INFINITY;
+        }
+    ef_shadow *plain = lcam_build(&c, z, 0, 0, 1), *sloped = lcam_build(&c, z, 0, 1, 1);
+    const double span = 2 * 10.0 / 256 / tan(el);   /* a texel's depth span */
+    int acne = 0, lit = 0, n = 0, below = 0;
+    rng = 5;
+    for (int k = 0; k < 20000; ++k) {
+        const double x[3] = { urand(-6, 6), 1e-3 * span * sin(el), -20 + urand(-6, 6) };
+        const double y[3] = { x[0], -1.5 * span * sin(el), x[2] };   /* a span down */
+        acne += !ef_shadow_point_lit(plain, x);
+        lit += ef_shadow_point_lit(sloped, x);
+        below += !ef_shadow_point_lit(sloped, y);
+        ++n;
+    }
+    print_message("low sun on the ground: %.1f %% of points just above it shadowed without the "
+                  "slope bias, %.2f %% with it\n", 100.0 * acne / n, 100.0 * (n - lit) / n);
+    assert_true(acne > n / 4);
+    assert_int_equal(lit, n);
+    assert_int_equal(below, n);
+    ef_shadow_unref(plain);
+    ef_shadow_unref(sloped);
+    free(z);
 }
 
 /* ---- the command line ---- */
@@ -753,6 +804,7 @@ int main(void)
         cmocka_unit_test(test_plates_perspective),
         cmocka_unit_test(test_lit_reference),
         cmocka_unit_test(test_sphere_convergence),
+        cmocka_unit_test(test_acne),
         cmocka_unit_test(test_cli),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -22,6 +22,7 @@ typedef enum ef_distance_kind { EF_DIST_RADIAL = 0, EF_DIST_PLANAR } ef_distance
  * height models and the scene's units per metre (densities are read per
  * metre and converted to per scene unit). */
 struct ef_shadow;
+struct ef_shadow_opts;
 
 typedef struct ef_fog_context {
     double up[3];                    /* unit length */
@@ -36,9 +37,9 @@ typedef struct ef_fog_context {
     int (*parse_color)(void *user, const char *text, double out[3], ef_err *err);
     void *color_user;
     /* Reads a light-view depth render (a light's shadow= key) into a
-     * shadow map (shadow.h) with the given bias and outside rule; NULL
-     * means maps cannot be read here. Returns 0, or -1 with err set. */
-    int (*load_shadow)(const char *path, double bias, int outside_lit, struct ef_shadow **out,
+     * shadow map (shadow.h) read as o says; NULL means maps cannot be read
+     * here. Returns 0, or -1 with err set. */
+    int (*load_shadow)(const char *path, const struct ef_shadow_opts *o, struct ef_shadow **out,
                        ef_err *err);
 } ef_fog_context;
 

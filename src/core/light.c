@@ -48,10 +48,10 @@ static int unit3(const char *val, double v[3])
 
 /* The keys every kind accepts, and the ones it must have. */
 static const char *const sun_keys =
-    "towards, color, intensity, angle, name, shadow, bias, outside";
+    "towards, color, intensity, angle, name, shadow, bias, slope, outside";
 static const char *const point_keys = "position, color, intensity, radius, name";
 static const char *const spot_keys =
-    "position, aim, cone, blend, color, intensity, radius, name, shadow, bias, outside";
+    "position, aim, cone, blend, color, intensity, radius, name, shadow, bias, slope, outside";
 
 /* Reads l's shadow map through the context and checks it fits the light:
  * a sun's map is orthographic and looks along the sunlight, a spot's is a
@@ -60,7 +60,7 @@ static int light_shadow(const ef_fog_context *ctx, const char *spec, ef_light *l
 {
     if (!ctx->load_shadow)
         return ef_fail(err, "--light '%s': shadow maps cannot be read here", spec);
-    if (ctx->load_shadow(l->shadow_path, l->bias, l->outside_lit, &l->shadow, err))
+    if (ctx->load_shadow(l->shadow_path, &l->shadow_opts, &l->shadow, err))
         return -1;
     const ef_shadow *m = l->shadow;
     const char *why = NULL;
@@ -131,11 +131,11 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                        "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
     }
     double color[3] = { 1, 1, 1 }, intensity = 1, cone = 0, blend = 0;
-    l->outside_lit = 1;
+    l->shadow_opts = (ef_shadow_opts) { 0, 1, 1 };   /* bias 0, slope 1, outside lit */
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
-           S_OUTSIDE = 4096 };
+           S_OUTSIDE = 4096, S_SLOPE = 8192 };
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);
@@ -205,15 +205,23 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             snprintf(l->shadow_path, sizeof l->shadow_path, "%s", val);
         } else if (!strcmp(key, "bias")) {
             bit = S_BIAS;
-            if (ef_parse_numbers(val, &l->bias, 1) || !(l->bias >= 0) || !isfinite(l->bias))
+            double *b = &l->shadow_opts.bias;
+            if (ef_parse_numbers(val, b, 1) || !(*b >= 0) || !isfinite(*b))
                 return ef_fail(err, "--light '%s': bias='%s' is not a depth >= 0 (scene units "
                                "added to the shadow map's depth)", spec, val);
+        } else if (!strcmp(key, "slope")) {
+            bit = S_SLOPE;
+            double *b = &l->shadow_opts.slope;
+            if (ef_parse_numbers(val, b, 1) || !(*b >= 0) || !(*b <= 100))
+                return ef_fail(err, "--light '%s': slope='%s' is not a factor from 0 to 100 (of "
+                               "the shadow map's own depth slope added as a bias; 0: none)",
+                               spec, val);
         } else if (!strcmp(key, "outside")) {
             bit = S_OUTSIDE;
             if (!strcmp(val, "lit"))
-                l->outside_lit = 1;
+                l->shadow_opts.outside_lit = 1;
             else if (!strcmp(val, "shadow"))
-                l->outside_lit = 0;
+                l->shadow_opts.outside_lit = 0;
             else
                 return ef_fail(err, "--light '%s': outside='%s' is not lit or shadow (what "
                                "lies outside the shadow map)", spec, val);
@@ -255,8 +263,8 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         l->cos_outer = cos(cone * (PI / 360));
         l->smooth = blend * (1 - l->cos_outer);
     }
-    if ((seen & (S_BIAS | S_OUTSIDE)) && !(seen & S_SHADOW))
-        return ef_fail(err, "--light '%s': bias= and outside= need shadow=FILE.exr", spec);
+    if ((seen & (S_BIAS | S_OUTSIDE | S_SLOPE)) && !(seen & S_SHADOW))
+        return ef_fail(err, "--light '%s': bias=, slope= and outside= need shadow=FILE.exr", spec);
     if ((seen & S_SHADOW) && light_shadow(ctx, spec, l, err))
         return -1;
     return 0;

@@ -23,6 +23,7 @@
 #define EF_LIGHT_H
 
 #include "fog.h"
+#include "shadow.h"
 
 /* The most lights a scene holds. */
 #define EF_MAX_LIGHTS 32
@@ -44,11 +45,10 @@ typedef struct ef_light {
     char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
     char lit_aov[80];                /* and fog_lit.NAME (with a shadow map) */
     /* shadow=: its light-view depth render (shared, counted: copies of the
-     * scene ref it, ef_scene_free drops it), NULL without one; bias= and
-     * outside= as given */
+     * scene ref it, ef_scene_free drops it), NULL without one; bias=,
+     * slope= and outside= as given */
     struct ef_shadow *shadow;
-    double bias;
-    int outside_lit;
+    ef_shadow_opts shadow_opts;
     char shadow_path[256];
     char spec[512];                  /* as written, for messages */
 } ef_light;

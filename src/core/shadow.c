@@ -59,7 +59,40 @@ static int build_mip(ef_shadow *m)
     return 0;
 }
 
-ef_shadow *ef_shadow_build(const ef_shadow_src *src, double bias, int outside_lit, ef_err *err)
+/* The smaller one-sided depth difference at v between its neighbours a
+ * and b (either may be missing: inf), 0 where neither is finite. */
+static double one_sided(float a, float v, float b)
+{
+    const double da = isfinite(a) ? fabs((double) v - a) : INFINITY;
+    const double db = isfinite(b) ? fabs((double) b - v) : INFINITY;
+    const double d = da < db ? da : db;
+    return isfinite(d) ? d : 0;
+}
+
+/* The greatest lit depth of every texel of z (w x h, inf: nothing) into
+ * out: z plus the constant bias plus the slope bias (shadow.h). */
+static void biased(const float *z, int w, int h, const ef_shadow_opts *o, float *out)
+{
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const size_t i = (size_t) y * (size_t) w + (size_t) x;
+            const float v = z[i];
+            if (!isfinite(v)) {
+                out[i] = INFINITY;
+                continue;
+            }
+            double s = 0;
+            if (o->slope > 0) {
+                const float l = x > 0 ? z[i - 1] : INFINITY, r = x + 1 < w ? z[i + 1] : INFINITY;
+                const float u = y > 0 ? z[i - (size_t) w] : INFINITY,
+                            d = y + 1 < h ? z[i + (size_t) w] : INFINITY;
+                s = o->slope * 0.5 * (one_sided(l, v, r) + one_sided(u, v, d));
+            }
+            out[i] = (float) (v + o->bias + s);
+        }
+}
+
+ef_shadow *ef_shadow_build(const ef_shadow_src *src, const ef_shadow_opts *o, ef_err *err)
 {
     const char *path = src->path ? src->path : "the shadow map";
     if (!src->has_w2c || !src->has_proj) {
@@ -105,8 +138,8 @@ ef_shadow *ef_shadow_build(const ef_shadow_src *src, double bias, int outside_li
     atomic_init(&m->refs, 1);
     snprintf(m->path, sizeof m->path, "%s", path);
     m->ortho = ortho;
-    m->bias = bias;
-    m->outside_lit = outside_lit;
+    m->opts = *o;
+    m->outside_lit = o->outside_lit;
     m->w = src->width;
     m->h = src->height;
     double an = 0;
@@ -169,10 +202,18 @@ ef_shadow *ef_shadow_build(const ef_shadow_src *src, double bias, int outside_li
         return NULL;
     }
     /* nothing there (sky, no sample, nonsense): nothing to cast a shadow */
+    float *z = malloc(n * sizeof *z);
+    if (!z) {
+        ef_shadow_unref(m);
+        ef_fail(err, "out of memory for the shadow map (%d x %d)", src->width, src->height);
+        return NULL;
+    }
     for (size_t i = 0; i < n; ++i) {
         const float v = src->depth[i];
-        m->zmin[0][i] = v > 0 && v < 1e9f ? v : INFINITY;
+        z[i] = v > 0 && v < 1e9f ? v : INFINITY;
     }
+    biased(z, m->w, m->h, o, m->zmin[0]);
+    free(z);
     if (build_mip(m)) {
         ef_shadow_unref(m);
         ef_fail(err, "out of memory for the shadow map's mip levels");
@@ -258,7 +299,7 @@ static void cell(sh_q *q, int lev, int ix, int iy, double t0, double t1)
 {
     const ef_shadow *m = q->m;
     const size_t i = (size_t) iy * (size_t) m->lw[lev] + (size_t) ix;
-    const double zn = m->zmin[lev][i] + m->bias, zx = m->zmax[lev][i] + m->bias;
+    const double zn = m->zmin[lev][i], zx = m->zmax[lev][i];
     const double da = depth_at(q, t0), db = depth_at(q, t1);
     const double lo = da < db ? da : db, hi = da < db ? db : da;
     if (hi <= zn) {
@@ -430,6 +471,6 @@ int ef_shadow_point_lit(const ef_shadow *m, const double x[3])
     if (!(px >= 0 && px < m->w && py >= 0 && py < m->h))
         return m->outside_lit;
     const size_t i = (size_t) py * (size_t) m->w + (size_t) px;
-    return d <= m->zmin[0][i] + m->bias;
+    return d <= m->zmin[0][i];
 }
 

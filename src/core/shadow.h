@@ -7,13 +7,22 @@
  * projection: perspective for a spot, orthographic for the sun, told apart
  * by the projection's w column). Each texel holds the planar depth (along
  * the light's axis, scene units) of what the light sees first; a point x is
- * lit when its own planar depth is at most the texel's plus the bias.
+ * lit when its own planar depth is at most the texel's plus the biases.
  * Along a view ray both the texel coordinates (a projective map of t) and
  * the planar depth (affine in t) are known in closed form, so the texels
  * the segment crosses are walked exactly (a 2-D DDA in t), each texel's
  * lit part is one interval, and a min-max mip skips runs that are wholly
  * lit or wholly shadowed. Pure C, no I/O: the I/O layer fills
- * ef_shadow_src. */
+ * ef_shadow_src.
+ *
+ * A texel holds one depth where the surface it saw spans a range of them:
+ * lit by the sun at a low angle, a ground texel's depth varies by the
+ * texel's width over the tangent of the angle, and fog just above the
+ * ground would be shadowed in stripes (acne). The slope bias adds, per
+ * texel, slope times half the sum over x and y of the smaller one-sided
+ * depth difference to its neighbours: a plane's variation across the
+ * texel, and nothing where one side is flat (so silhouettes keep their
+ * shadow). */
 #ifndef EF_SHADOW_H
 #define EF_SHADOW_H
 
@@ -35,6 +44,13 @@ typedef struct ef_shadow_src {
     const char *proj_name;    /* which of the two */
 } ef_shadow_src;
 
+/* How a map is read: the constant bias (scene units, >= 0), the slope
+ * bias's factor (>= 0; 0: none) and what lies outside the map. */
+typedef struct ef_shadow_opts {
+    double bias, slope;
+    int outside_lit;
+} ef_shadow_opts;
+
 /* A shadow map, immutable once built and shared (by reference count)
  * between the copies of a scene. */
 typedef struct ef_shadow {
@@ -45,18 +61,20 @@ typedef struct ef_shadow {
      * are X / W, Y / W (0..w, 0..h over the data window, y down) */
     double T[4][3];
     double org[3], axis[3];   /* the light camera's position and unit +Z */
-    double bias;              /* scene units added to every texel's depth */
+    ef_shadow_opts opts;      /* as built (the biases are in zmin and zmax) */
     int outside_lit;          /* what lies outside the map (and behind a spot's map) */
     int nlev;                 /* mip levels, 0 = the texels */
     int lw[24], lh[24];       /* their sizes */
-    float *zmin[24], *zmax[24];  /* per level; level 0's zmin is the map (inf: nothing) */
+    /* per level; level 0's zmin is the map's depth plus its biases, the
+     * greatest depth still lit (inf: nothing there) */
+    float *zmin[24], *zmax[24];
     char path[256];
 } ef_shadow;
 
-/* Builds a map from src with the given bias (scene units, >= 0) and
- * outside rule. Returns it (one reference), or NULL with a message naming
- * what is missing or wrong in the file and how to fix it. */
-ef_shadow *ef_shadow_build(const ef_shadow_src *src, double bias, int outside_lit, ef_err *err);
+/* Builds a map from src read as o says. Returns it (one reference), or
+ * NULL with a message naming what is missing or wrong in the file and how
+ * to fix it. */
+ef_shadow *ef_shadow_build(const ef_shadow_src *src, const ef_shadow_opts *o, ef_err *err);
 
 /* Takes one more reference (for a copy of the scene holding it). */
 void ef_shadow_ref(ef_shadow *m);

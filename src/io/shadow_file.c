@@ -29,7 +29,7 @@ static int depth_channel(const ef_exr_file *f, int p)
     return -1;
 }
 
-int ef_shadow_load(const char *path, double bias, int outside_lit, struct ef_shadow **out,
+int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_shadow **out,
                    ef_err *err)
 {
     ef_exr_file f;
@@ -74,7 +74,7 @@ int ef_shadow_load(const char *path, double bias, int outside_lit, struct ef_sha
             src.has_proj = scr || meta.w2ndc.set;
             src.proj = scr ? meta.w2screen.v : meta.w2ndc.v;
             src.proj_name = scr ? "worldToScreen" : "worldToNDC";
-            *out = ef_shadow_build(&src, bias, outside_lit, err);
+            *out = ef_shadow_build(&src, o, err);
             rc = *out ? 0 : -1;
         }
     }
