@@ -11,7 +11,10 @@
 # each round; medians): the copy, exp, height and half-space fog unlit, the
 # sun in height fog and in a half-space layer (closed forms), two point
 # lamps in exp fog and one behind the camera (equiangular quadrature), a
-# point lamp in a box volume plus height fog (the general quadrature). Prints a Markdown table, also written to bench/lit.md
+# point lamp in a box volume plus height fog (the general quadrature), and
+# the sun in height fog through shadow maps of the same scene (make_sample
+# --sun-view) of 512^2, 2048^2 and 4096^2 texels (the walk of the map's
+# texels, and how it grows with the map). Prints a Markdown table, also written to bench/lit.md
 # (whose sections from its first "### " heading on are kept). Nothing
 # asserts on time.
 #
@@ -42,6 +45,9 @@ IN="$tmp/frame.exr"
 echo "lit: rendering $size frame ..." >&2
 "$make_sample" "$IN" --size "$size" --compression zip >&2 || die "make_sample failed"
 px=$(( ${size%x*} * ${size#*x} ))
+for r in 512 2048 4096; do
+    "$make_sample" "$tmp/map$r.exr" --sun-view 0.2,0.3,-1 --size "${r}x$r" >&2 || die "make_sample --sun-view failed"
+done
 
 threads=()
 [[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
@@ -62,6 +68,10 @@ add "sun in a half-space layer (closed form)" "halfspace (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog halfspace:plane=0,1,0,-4:density=0.05 --light sun:towards=0.2,0.3,-1:intensity=3'
 add "point lamp, box + height (general)" "height (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H" --fog box:min=-10,0,-60:max=10,8,-10:density=0.1 --light point:position=2,3,-20:intensity=100'
+for r in 512 2048 4096; do
+    add "sun in height fog, ${r}^2 shadow map" "height (unlit)" \
+        '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3:shadow="$tmp/map'"$r"'.exr"'
+done
 n=${#names[@]}
 declare -A times
 for ((r = 0; r < runs; ++r)); do

@@ -331,7 +331,7 @@ static void cell(sh_q *q, int lev, int ix, int iy, double t0, double t1)
  * but never loop or skip a cell. */
 static void walk(sh_q *q, int lev, double ta, double tb, int x0, int x1, int y0, int y1)
 {
-    const double s = ldexp(1.0, lev);   /* texels per cell */
+    const double s = (double) (1L << lev);   /* texels per cell (lev < 24) */
     const double W = q->W0 + ta * q->Wu;
     const double px = (q->X0 + ta * q->Xu) / W / s, py = (q->Y0 + ta * q->Yu) / W / s;
     int ix = q->sx < 0 ? (int) ceil(px) - 1 : (int) floor(px);
