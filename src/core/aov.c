@@ -1,4 +1,5 @@
 #include "aov.h"
+#include "sky_light.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -67,6 +68,10 @@ int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names)
             for (int k = 0; k < 3; ++k, ++n)
                 if (names)
                     names[n] = s->light[j].aov[k];
+    if ((mask & EF_AOV_LIGHT) && s && s->sky_light)
+        for (int k = 0; k < 3; ++k, ++n)
+            if (names)
+                names[n] = s->sky_light->aov[k];
     if ((mask & EF_AOV_LIT) && s)
         for (int j = 0; j < s->nlight; ++j)
             if (s->light[j].shadow) {
@@ -110,6 +115,8 @@ void ef_aov_bind(ef_aov_out *out, unsigned mask, const ef_fog_scene *s, float *c
     for (int j = 0; j < EF_MAX_LIGHTS; ++j)
         for (int k = 0; k < 3; ++k)
             out->light[j][k] = (mask & EF_AOV_LIGHT) && j < nlight ? planes[n++] : NULL;
+    for (int k = 0; k < 3; ++k)
+        out->sky[k] = (mask & EF_AOV_LIGHT) && s && s->sky_light ? planes[n++] : NULL;
     for (int j = 0; j < EF_MAX_LIGHTS; ++j)
         out->lit[j] = (mask & EF_AOV_LIT) && j < nlight && s->light[j].shadow ? planes[n++] : NULL;
 }

@@ -10,6 +10,7 @@
  *                                          without lights, out.rgb - T in.rgb)
  *             fog_light.NAME.R, .G, .B     per --light, what it scatters in
  *                                          (alpha S + (1 - alpha) S_far)
+ *             fog_light.sky.R, .G, .B      --sky-light's, likewise
  *   lit       fog_lit.NAME                 per --light with a shadow= map, the
  *                                          share of its light that passes the
  *                                          occluders: sum_k S_k / sum_k S_k
@@ -33,7 +34,7 @@ enum {
 };
 
 /* Channels of every AOV together. */
-#define EF_AOV_MAX_CHANNELS (14 + 3 + 4 * EF_MAX_LIGHTS)
+#define EF_AOV_MAX_CHANNELS (14 + 3 + 4 * EF_MAX_LIGHTS + 3)
 
 /* The AOV names as users write them, in table order, comma-separated. */
 #define EF_AOV_NAMES "fog, T, error, P, distance, light, lit"
@@ -64,6 +65,7 @@ typedef struct ef_aov_out {
     float *fog[4], *T[3], *err[3], *P[3], *dist;
     float *ambient[3], *light[EF_MAX_LIGHTS][3];
     float *lit[EF_MAX_LIGHTS];  /* NULL for a light without a shadow map */
+    float *sky[3];              /* fog_light.sky (--sky-light), or NULL */
 } ef_aov_out;
 
 /* Points out's planes at planes[i], i in the order ef_aov_channels gives

@@ -1,4 +1,5 @@
 #include "apply.h"
+#include "sky_light.h"
 
 #include "exact.h"
 #include "expneg.h"
@@ -81,6 +82,71 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
     }
     for (int k = 0; k < 3; ++k)
         c[k] += sum[k];
+}
+
+/* The sky light scattered in along a segment of direction r->dir whose
+ * transmittance is T (r: for the components' optical depths when they
+ * scatter differently): sum_c albedo_c C_c(u) (share_c of 1 - T). */
+static void sky_segment(const ef_fog_scene *s, const ef_ray *r, const double T[3], double out[3])
+{
+    const double *up = s->ctx.up;
+    out[0] = out[1] = out[2] = 0;
+    int same = 1;
+    for (int c = 1; c < s->ncomp; ++c) {
+        const ef_fog_component *a = &s->comp[0], *b = &s->comp[c];
+        same &= a->phase == b->phase && a->g == b->g && a->has_albedo == b->has_albedo &&
+                (!a->has_albedo || !memcmp(a->albedo, b->albedo, sizeof a->albedo));
+    }
+    double tau[EF_FOG_MAX_COMPONENTS][3], tot[3] = { 0, 0, 0 };
+    if (!same)
+        for (int c = 0; c < s->ncomp; ++c) {
+            s->comp[c].model->tau(&s->comp[c], r, tau[c]);
+            for (int k = 0; k < 3; ++k)
+                tot[k] += tau[c][k];
+        }
+    for (int c = 0; c < (same ? 1 : s->ncomp); ++c) {
+        const ef_fog_component *m = &s->comp[c];
+        double C[3];
+        ef_sky_light_eval(s->sky_light, m->phase, m->g, up, r->dir, C);
+        for (int k = 0; k < 3; ++k) {
+            const double a = m->has_albedo ? m->albedo[k] : 1.0, e = 1.0 - T[k];
+            double share = e;
+            if (!same)   /* by optical depth; among the opaque ones where it is infinite */
+                share = isinf(tot[k]) ? (isinf(tau[c][k]) ? e : 0.0)
+                        : tot[k] > 0  ? e * tau[c][k] / tot[k] : 0.0;
+            out[k] += a * C[k] * share;
+        }
+    }
+    if (!same)
+        for (int k = 0; k < 3; ++k) {
+            int ninf = 0;
+            for (int c = 0; c < s->ncomp; ++c)
+                ninf += isinf(tau[c][k]);
+            if (ninf > 1)
+                out[k] /= ninf;
+        }
+}
+
+/* The sky light over the pixel's coverage: a S along the surface segment
+ * (transmittance surf->T) plus (1 - a) S along the far one (inf->T). */
+static void add_sky(const ef_fog_scene *s, const ef_ray *r, const ef_fog_sample *surf,
+                    const ef_fog_sample *inf, double a, int need_inf, double c[3],
+                    const ef_aov_out *aov, size_t i)
+{
+    double S[3], Sf[3] = { 0, 0, 0 };
+    ef_ray far;
+    sky_segment(s, r, surf->T, S);
+    if (need_inf && a < 1.0) {
+        if (ef_scene_far_ray(s, r, &far))
+            far = *r;
+        sky_segment(s, &far, inf->T, Sf);
+    }
+    for (int k = 0; k < 3; ++k) {
+        const double v = (a > 0.0 ? a * S[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+        c[k] += v;
+        if (aov && aov->sky[k])
+            aov->sky[k][i] = to_float(v);
+    }
 }
 
 /* One span of a row: its rays, and where each pixel's fog is found. */
@@ -410,7 +476,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
         depth_only &= s->comp[c].model->depth_only;
     }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
-    if (!mask && !s->any_color && !want_info && !s->nlight) {
+    if (!mask && !s->any_color && !want_info && !ef_scene_lit(s)) {
         fast_span sp;
         int need_dist;
         if (dist_path(s, &need_dist))
@@ -424,7 +490,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     const double *origin = aov ? aov->origin : zero3;
     /* Without info, every segment of a span is evaluated in one batch. */
     const int batch = !want_info;
-    const int need_dir = !depth_only || (mask & EF_AOV_P) || s->nlight;
+    const int need_dir = !depth_only || (mask & EF_AOV_P) || ef_scene_lit(s);
     ef_tau_info info[EF_FOG_MAX_COMPONENTS];
     /* --stats with the caller's clocks: each pixel's fog time, ns (-1: none) */
     double wall[EF_RECON_SPAN];
@@ -484,6 +550,8 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                         aov->ambient[k][i] = 0.0f;
                         for (int l = 0; l < s->nlight; ++l)
                             aov->light[l][k][i] = 0.0f;
+                        if (aov->sky[k])
+                            aov->sky[k][i] = 0.0f;
                     }
                     for (int l = 0; l < s->nlight && (mask & EF_AOV_LIT); ++l)
                         if (aov->lit[l])
@@ -512,6 +580,8 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                             to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
                 if (s->nlight)
                     add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i);
+                if (s->sky_light)
+                    add_sky(s, &sp->r[j], surf, inf, a_in, sp->need_inf[j], c, aov, i);
                 for (int k = 0; k < 3; ++k)
                     rgb[k][i] = to_float(c[k]);
                 if (alpha && !sp->bad_alpha[j])

@@ -23,6 +23,7 @@ typedef enum ef_distance_kind { EF_DIST_RADIAL = 0, EF_DIST_PLANAR } ef_distance
  * metre and converted to per scene unit). */
 struct ef_shadow;
 struct ef_shadow_opts;
+struct ef_sky_light;
 
 typedef struct ef_fog_context {
     double up[3];                    /* unit length */
@@ -41,6 +42,12 @@ typedef struct ef_fog_context {
      * here. Returns 0, or -1 with err set. */
     int (*load_shadow)(const char *path, const struct ef_shadow_opts *o, struct ef_shadow **out,
                        ef_err *err);
+    /* Reads a lat-long environment (--sky-light) and convolves it with the
+     * n phase functions (phases[i], g[i]) into a sky light (sky_light.h);
+     * NULL means environments cannot be read here. Returns 0, or -1 with
+     * err set. */
+    int (*load_sky)(const char *path, double rotate_deg, double intensity, const int *phases,
+                    const double *g, int n, struct ef_sky_light **out, ef_err *err);
 } ef_fog_context;
 
 struct ef_fog_model;

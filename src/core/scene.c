@@ -1,5 +1,6 @@
 #include "scene.h"
 #include "shadow.h"
+#include "sky_light.h"
 
 #include "expneg.h"
 
@@ -90,6 +91,9 @@ static int ef_scene_name_light(ef_fog_scene *s, ef_light *l, const char *spec, e
     for (int k = 0; k < 3; ++k)
         snprintf(l->aov[k], sizeof l->aov[k], "fog_light.%s.%c", name, "RGB"[k]);
     snprintf(l->lit_aov, sizeof l->lit_aov, "fog_lit.%s", name);
+    if (!strcmp(l->name, "sky"))
+        return ef_fail(err, "--light '%s': the name 'sky' is --sky-light's (its AOV layer is "
+                       "fog_light.sky); give another name=", spec);
     for (int i = 0; i < s->nlight; ++i)
         if (!strcmp(s->light[i].name, l->name))
             return ef_fail(err, "--light '%s': the name '%s' is taken by '%s' (name=NAME "
@@ -116,6 +120,9 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     memcpy(dst->light, src->light, (size_t) src->nlight * sizeof src->light[0]);
     for (int j = 0; j < dst->nlight; ++j)
         ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
+    dst->sky_light = src->sky_light;
+    ef_sky_light_ref(dst->sky_light);
+    memcpy(dst->sky_light_spec, src->sky_light_spec, sizeof dst->sky_light_spec);
     for (int i = 0; i < src->ncomp; ++i) {
         ef_fog_component *d = &dst->comp[i];
         const ef_fog_component *c = &src->comp[i];
@@ -160,9 +167,62 @@ void ef_scene_free(ef_fog_scene *s)
         ef_shadow_unref(s->light[j].shadow);
         s->light[j].shadow = NULL;
     }
+    ef_sky_light_unref(s->sky_light);
+    s->sky_light = NULL;
     s->ncomp = 0;
     s->nlight = 0;
     s->any_color = 0;
+}
+
+int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
+{
+    if (strlen(spec) >= sizeof s->sky_light_spec)
+        return ef_fail(err, "--sky-light '%.40s...' is too long", spec);
+    char buf[sizeof s->sky_light_spec];
+    snprintf(buf, sizeof buf, "%s", spec);
+    char *save = NULL, *path = strtok_r(buf, ":", &save);
+    if (!path || !path[0])
+        return ef_fail(err, "--sky-light '%s': no file (write --sky-light ENV.exr[:rotate=DEG]"
+                       "[:intensity=K])", spec);
+    double rotate = 0, intensity = 1;
+    unsigned seen = 0;
+    for (char *tok = strtok_r(NULL, ":", &save); tok; tok = strtok_r(NULL, ":", &save)) {
+        char *eq = strchr(tok, '=');
+        double *dst = NULL;
+        unsigned bit = 0;
+        if (eq) {
+            *eq = '\0';
+            if (!strcmp(tok, "rotate"))
+                dst = &rotate, bit = 1;
+            else if (!strcmp(tok, "intensity"))
+                dst = &intensity, bit = 2;
+        }
+        if (!dst)
+            return ef_fail(err, "--sky-light '%s': '%s' is not rotate=DEG or intensity=K", spec,
+                           tok);
+        if (seen & bit)
+            return ef_fail(err, "--sky-light '%s': key '%s' is given twice", spec, tok);
+        seen |= bit;
+        if (ef_parse_numbers(eq + 1, dst, 1) || !isfinite(*dst) || (bit == 2 && !(*dst >= 0)))
+            return ef_fail(err, "--sky-light '%s': %s='%s' is not %s", spec, tok, eq + 1,
+                           bit == 1 ? "an angle in degrees" : "a number >= 0");
+    }
+    if (!s->ctx.load_sky)
+        return ef_fail(err, "--sky-light '%s': environments cannot be read here", spec);
+    int phases[EF_FOG_MAX_COMPONENTS];
+    double g[EF_FOG_MAX_COMPONENTS];
+    int n = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        phases[n] = s->comp[i].phase;
+        g[n++] = s->comp[i].g;
+    }
+    struct ef_sky_light *k = NULL;
+    if (s->ctx.load_sky(path, rotate, intensity, phases, g, n, &k, err))
+        return -1;
+    ef_sky_light_unref(s->sky_light);
+    s->sky_light = k;
+    snprintf(s->sky_light_spec, sizeof s->sky_light_spec, "%s", spec);
+    return 0;
 }
 
 /* With an infinite optical depth, the light that reaches the camera comes

@@ -20,6 +20,10 @@ typedef struct ef_fog_scene {
     double sky_distance;             /* EF_SKY_DISTANCE_MODE: background at this distance */
     ef_light light[EF_MAX_LIGHTS];   /* --light, in order (lit.h) */
     int nlight;
+    /* --sky-light (sky_light.h; shared, counted like the shadow maps), or
+     * NULL, and its SPEC */
+    struct ef_sky_light *sky_light;
+    char sky_light_spec[512];
 } ef_fog_scene;
 
 /* The documented default fog colour. */
@@ -37,6 +41,18 @@ int ef_scene_add(ef_fog_scene *s, const char *spec, ef_err *err);
  * components are checked for a density in space when the frame starts:
  * ef_lights_check). Returns 0 or -1. */
 int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err);
+
+/* Reads --sky-light FILE.exr[:rotate=DEG][:intensity=K] through the
+ * context's load_sky, convolved with the phase functions of the
+ * components already added (add the components first). Returns 0, or -1
+ * with a message (err->file naming the map when it is at fault). */
+int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err);
+
+/* Whether the scene has any light (--light or --sky-light). */
+static inline int ef_scene_lit(const ef_fog_scene *s)
+{
+    return s->nlight > 0 || s->sky_light != NULL;
+}
 
 /* Binds every component to the camera at org (ef_fog_bind): once per
  * frame, before the threads start. */

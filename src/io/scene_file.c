@@ -24,7 +24,7 @@
 /* The longest SPEC a component can hold (ef_fog_component.spec). */
 #define EF_SPEC_MAX (sizeof(((ef_fog_component *) 0)->spec) - 1)
 
-static const char top_keys[] = "units, up, color, sky, time, aov, fog, lights";
+static const char top_keys[] = "units, up, color, sky, time, aov, fog, lights, sky_light";
 
 /* ------------------------------------------------------------ text files */
 
@@ -620,6 +620,12 @@ static int read_root(const json_t *root, const char *path, ef_scene_file *out, e
             rc = read_aov(v, out, err);
         else if (!strcmp(key, "lights"))
             rc = read_lights(v, path, out, err);
+        else if (!strcmp(key, "sky_light"))
+            rc = !json_is_string(v)
+                     ? ef_json_expected(err, "sky_light", "a --sky-light SPEC string "
+                                        "(\"env.exr:rotate=90\")", v)
+                     : (out->sky_light = strdup(json_string_value(v))) ? 0
+                     : ef_fail(err, "out of memory");
         else
             rc = ef_fail(err, "unknown key '%s' (keys: %s)", key, top_keys);
         if (rc)
@@ -668,6 +674,8 @@ void ef_scene_file_free(ef_scene_file *f)
         f->lights[i] = NULL;
     }
     f->nlight = 0;
+    free(f->sky_light);
+    f->sky_light = NULL;
     free(f->text);
     f->text = NULL;
 }

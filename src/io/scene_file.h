@@ -20,6 +20,7 @@ typedef struct ef_scene_file {
     double color[3], up[3], units, time;
     unsigned aov;                            /* EF_AOV_* bits of "aov" (0: none) */
     char sky[64];                            /* as --sky takes it: fog, keep, distance=D */
+    char *sky_light;                         /* "sky_light": a --sky-light SPEC (malloc'd), or NULL */
     char *text;                              /* the file as read, for provenance */
 } ef_scene_file;
 

@@ -20,7 +20,7 @@
 #include "version.h"
 
 enum {
-    OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG, OPT_LIGHT,
+    OPT_DEPTH = 256, OPT_LAYER, OPT_DEPTH_CHANNEL, OPT_DEPTH_MODE, OPT_SKY, OPT_FOG, OPT_LIGHT, OPT_SKY_LIGHT,
     OPT_FOG_COLOR, OPT_W2C, OPT_C2W, OPT_FOV, OPT_NEAR, OPT_FAR, OPT_COMPRESSION,
     OPT_THREADS, OPT_PREVIEW, OPT_EXPLAIN, OPT_STATS, OPT_VERSION, OPT_SCENE, OPT_UP_AXIS,
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
@@ -41,6 +41,7 @@ static const struct option long_opts[] = {
     { "deep-grey-alpha", no_argument, NULL, OPT_DEEP_GREY },
     { "fog", required_argument, NULL, OPT_FOG },
     { "light", required_argument, NULL, OPT_LIGHT },
+    { "sky-light", required_argument, NULL, OPT_SKY_LIGHT },
     { "fog-color", required_argument, NULL, OPT_FOG_COLOR },
     { "scene", required_argument, NULL, OPT_SCENE },
     { "up-axis", required_argument, NULL, OPT_UP_AXIS },
@@ -113,6 +114,8 @@ void ef_options_usage(FILE *out)
             "                           (a depth render from the light), bias=, slope=,\n"
             "                           outside=lit|shadow; albedo=, phase=iso|rayleigh|\n"
             "                           hg|cs and g= in a fog SPEC (see exrfog(1) LIGHTS)\n"
+            "      --sky-light ENV.exr[:rotate=DEG][:intensity=K]  light the fog with a\n"
+            "                           lat-long environment (its phase-convolved light)\n"
             "      --deep MODE          deep input: samples (default: the input's samples\n"
             "                           and the fog as volume samples), fog (a fog-only\n"
             "                           deep element) or flatten (a flat image)\n"
@@ -360,6 +363,12 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
                 return ef_fail(err, "too many --light (at most %d)", EF_MAX_LIGHTS),
                        EF_PARSE_USAGE;
             f.lights[f.nlight++] = a;
+            break;
+        case OPT_SKY_LIGHT:
+            if (f.sky_light)
+                return ef_fail(err, "--sky-light is given twice (one environment lights the "
+                                    "fog)"), EF_PARSE_USAGE;
+            f.sky_light = a;
             break;
         case OPT_FOG_COLOR:
             /* read once every option is known (--colorconfig) */
@@ -641,7 +650,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
     if ((o->aov & EF_AOV_LIT) && !shadowed)
         return ef_fail(err, "--aov lit: no --light has a shadow= map (the lit AOV holds one "
                             "channel per shadowed light)"), EF_PARSE_USAGE;
-    if ((o->aov & EF_AOV_LIGHT) && o->scene.nlight == 0)
+    if ((o->aov & EF_AOV_LIGHT) && !ef_scene_lit(&o->scene))
         return ef_fail(err, "--aov light: there is no --light (the light AOVs hold one layer "
                             "per light)"), EF_PARSE_USAGE;
     if (!o->explain && o->scene.ncomp == 0)

@@ -712,8 +712,8 @@ static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_e
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
-    if (q->scene->nlight)
-        return ef_fail(err, "lit fog (--light) on deep images is not supported yet: the "
+    if (ef_scene_lit(q->scene))
+        return ef_fail(err, "lit fog (--light, --sky-light) on deep images is not supported yet: the "
                             "in-scattered light would have to be split into the fog's deep "
                             "samples; flatten the image first, or drop --light");
     ef_deep_in d;

@@ -2,6 +2,7 @@
  * file and the library all build scenes here, so they accept exactly the
  * same things. */
 #include "scene_build.h"
+#include "env_file.h"
 #include "shadow_file.h"
 
 #include <stdlib.h>
@@ -107,6 +108,7 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
     s->ctx.parse_color = ef_colour_parse;
     s->ctx.color_user = colour;
     s->ctx.load_shadow = ef_shadow_load;
+    s->ctx.load_sky = ef_sky_load;
     if ((r = add_file_specs(s, d, &sf, err)) != EF_PARSE_RUN)
         goto out;
     found->scene_text = sf.text;   /* kept for exrfog/history: the file is read once */
@@ -131,6 +133,18 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
             r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;   /* a shadow map's fault: 1 */
     if (r == EF_PARSE_RUN && ef_lights_check(s, err))
         r = EF_PARSE_USAGE;
+    /* after the components: the sky light is convolved with their phases */
+    const char *sky_light = d->sky_light ? d->sky_light : sf.sky_light;
+    if (r == EF_PARSE_RUN && sky_light && ef_scene_set_sky_light(s, sky_light, err)) {
+        r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;
+        if (!d->sky_light && !err->file) {
+            char msg[sizeof err->msg];
+            snprintf(msg, sizeof msg, "%s", err->msg);
+            ef_fail(err, "sky_light: %s", msg);
+            err->file = d->scene_file;
+            r = EF_PARSE_FAIL;
+        }
+    }
 out:
     ef_scene_file_free(&sf);
     return r;
@@ -149,11 +163,13 @@ int ef_scene_rebuild(ef_fog_scene *s, const double *up, double time, ef_err *err
     for (int i = 0; i < s->ncomp; ++i)
         if (ef_scene_add(ns, s->comp[i].spec, err)) {
             ns->nlight = 0;   /* the lights are still s's */
+            ns->sky_light = NULL;
             ef_scene_free(ns);
             free(ns);
             return -1;
         }
     s->nlight = 0;   /* the lights moved to ns */
+    s->sky_light = NULL;
     ef_scene_free(s);
     *s = *ns;
     free(ns);

@@ -16,6 +16,7 @@ typedef struct ef_scene_desc {
     int nspec;
     const char *lights[EF_MAX_LIGHTS];   /* --light SPECs */
     int nlight;
+    const char *sky_light;    /* --sky-light SPEC, or NULL */
     int has_color, has_sky, has_up, has_units, has_time;
     double up[3], units, time;
     const char *color_text;   /* the fog colour as written: R,G,B, #RRGGBB, SPACE:R,G,B */
