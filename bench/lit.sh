@@ -14,7 +14,8 @@
 # point lamp in a box volume plus height fog (the general quadrature), and
 # the sun in height fog through shadow maps of the same scene (make_sample
 # --sun-view) of 512^2, 2048^2 and 4096^2 texels (the walk of the map's
-# texels, and how it grows with the map). Prints a Markdown table, also written to bench/lit.md
+# texels, and how it grows with the map), and --sky-light with a 2048x1024
+# environment (iso, and hg g = 0.9: its convolution included). Prints a Markdown table, also written to bench/lit.md
 # (whose sections from its first "### " heading on are kept). Nothing
 # asserts on time.
 #
@@ -45,6 +46,23 @@ IN="$tmp/frame.exr"
 echo "lit: rendering $size frame ..." >&2
 "$make_sample" "$IN" --size "$size" --compression zip >&2 || die "make_sample failed"
 px=$(( ${size%x*} * ${size#*x} ))
+# a 2048x1024 lat-long environment: a sky gradient and a sun-like lobe
+"${PYTHON:-/usr/bin/python3}" - "$tmp/env.exr" <<'PY' >&2 || die "writing the environment failed (python3 with numpy and OpenImageIO)"
+import sys
+import numpy as np
+import OpenImageIO as oiio
+W, H = 2048, 1024
+y, x = np.mgrid[0:H, 0:W]
+th, ph = np.pi * (y + 0.5) / H, np.pi - 2 * np.pi * (x + 0.5) / W
+d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+up = np.clip(d[..., 2], 0, 1)[..., None]
+img = np.where(up > 0, np.array([0.3, 0.45, 0.8]) + 0.5 * up, 0.1)
+s = np.array([np.cos(0.3), 0, np.sin(0.3)])
+img = img + (50 * np.exp(-(1 - d @ s) / 0.002))[..., None] * np.array([1, 0.8, 0.5])
+b = oiio.ImageBuf(oiio.ImageSpec(W, H, 3, oiio.HALF))
+b.set_pixels(oiio.ROI(0, W, 0, H, 0, 1, 0, 3), img.astype(np.float32))
+b.write(sys.argv[1]) or sys.exit(b.geterror())
+PY
 for r in 512 2048 4096; do
     "$make_sample" "$tmp/map$r.exr" --sun-view 0.2,0.3,-1 --size "${r}x$r" >&2 || die "make_sample --sun-view failed"
 done
@@ -68,6 +86,10 @@ add "sun in a half-space layer (closed form)" "halfspace (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog halfspace:plane=0,1,0,-4:density=0.05 --light sun:towards=0.2,0.3,-1:intensity=3'
 add "point lamp, box + height (general)" "height (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H" --fog box:min=-10,0,-60:max=10,8,-10:density=0.1 --light point:position=2,3,-20:intensity=100'
+add "sky light, iso, exp fog" "exp (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02 --sky-light "$tmp/env.exr"'
+add "sky light, hg g=0.9, exp fog" "exp (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02:phase=hg:g=0.9 --sky-light "$tmp/env.exr"'
 for r in 512 2048 4096; do
     add "sun in height fog, ${r}^2 shadow map" "height (unlit)" \
         '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3:shadow="$tmp/map'"$r"'.exr"'

@@ -24,8 +24,8 @@
  * Blender's -Y as +Z.
  *
  * The convolution runs on a grid of the map averaged down to 2N x N texels
- * (N from the phase's sharpness: 3 pi / N at most a third of 1 - |g|,
- * from 32 to 256; 1 x 1 for iso, the mean): for each pair of rows the
+ * (N from the phase's sharpness: 3 pi / N at most 1.35 (1 - |g|), from 64
+ * to 256; 1 x 1 for iso, the mean): for each pair of rows the
  * phase depends on the azimuth difference only, so each output row is a
  * sum of circular convolutions, done by FFT. Lookups are bilinear. Pure
  * C, no I/O. */
