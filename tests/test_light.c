@@ -218,6 +218,21 @@ static void test_point_uniform(void **state)
           { 0, 1.7, 0 }, { 0, 0.01, -1 }, 50 },
         { { "exp:density=0.01,0.02,0.04:albedo=0.5,0.7,0.9", "exp:density=0.03:phase=hg:g=0.4" },
           "point:position=-4,2,-30:intensity=50", { 0, 1.7, 0 }, { -0.1, 0, -1 }, 45 },
+        /* the isotropic closed form (Sun et al., radius 0): a lamp 1e-7
+         * off the ray, far behind the camera, densities 1e-9 and chromatic,
+         * short segments far from the lamp (the ends cancel: integrated) */
+        { { "exp:density=0.02" }, "point:position=0,1.7000001,-20:intensity=100",
+          { 0, 1.7, 0 }, { 0, 0, -1 }, INFINITY },
+        { { "exp:density=0.05" }, "point:position=0.5,1,4000:intensity=1e6", { 0, 1.7, 0 },
+          { 0, 0.01, -1 }, INFINITY },
+        { { "exp:density=1e-9" }, "point:position=3,1.7,-5:intensity=100", { 0, 1.7, 0 },
+          { 0, 0.01, -1 }, 50 },
+        { { "exp:density=0.01,0.02,0.04:albedo=0.5,0.7,0.9", "exp:density=0.03" },
+          "point:position=-4,2,-30:intensity=50", { 0, 1.7, 0 }, { -0.1, 0, -1 }, 45 },
+        { { "exp:density=0.02" }, "point:position=2,3,-200:intensity=100", { 0, 1.7, 0 },
+          { 0, -0.2, -1 }, 0.5 },
+        { { "exp:density=3" }, "point:position=0.3,2,-1:intensity=100", { 0, 1.7, 0 },
+          { 0, 0.3, -1 }, INFINITY },
         /* a spot in uniform fog, its cone crossing the ray */
         { { "exp:density=0.03" },
           "spot:position=0,6,-20:aim=0,-1,0:cone=40:blend=0.2:intensity=100", { 0, 1.7, 0 },

@@ -5,6 +5,7 @@
 #include "gk15.h"
 #include "shadow.h"
 
+#include <complex.h>
 #include <float.h>
 #include <math.h>
 #include <stdio.h>
@@ -718,6 +719,118 @@ static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray
     }
 }
 
+/* ------------------------------------------ a point lamp in uniform fog */
+
+/* G(z) = e^z E1(z) for Re z >= 0, z != 0, to about 1e-16 of |G|: the
+ * series -gamma - ln z - sum (-z)^k / (k k!) (times e^z) for |z| < 1.5,
+ * else the continued fraction 1/(z + 1 - 1/(z + 3 - 4/(z + 5 - ...)))
+ * by the modified Lentz method. Returns 0, or -1 when it did not converge
+ * (the caller integrates instead). */
+/* sqrt(x^2 + y^2): hypot's care only where the squares could overflow
+ * or underflow (hypot costs several times more). */
+static double len2(double x, double y)
+{
+    const double m = fmax(fabs(x), fabs(y));
+    if (m < 1e150 && m > 1e-150)
+        return sqrt(x * x + y * y);
+    return hypot(x, y);
+}
+
+/* |z|^2, without hypot's care for overflow (the arguments here are far
+ * from it) */
+static double norm2(double complex z)
+{
+    return creal(z) * creal(z) + cimag(z) * cimag(z);
+}
+
+static int g_e1(double complex z, double complex *out)
+{
+    if (norm2(z) < 1.5 * 1.5) {
+        double complex term = 1, sum = 0;
+        for (int k = 1; k < 200; ++k) {
+            term *= -z / k;
+            const double complex add = term / k;
+            sum += add;
+            if (norm2(add) < 1e-36 * norm2(sum) + 1e-300)
+                break;
+        }
+        *out = cexp(z) * (-0.57721566490153286061 - clog(z) - sum);
+        return 0;
+    }
+    const double tiny = 1e-300;
+    double complex f = z + 1, C = f, D = 0;
+    for (int j = 1; j < 2000; ++j) {
+        const double complex b = z + (2.0 * j + 1), a = -(double) j * j;
+        D = b + a * D;
+        if (D == 0)
+            D = tiny;
+        C = b + a / C;
+        if (C == 0)
+            C = tiny;
+        D = 1 / D;
+        const double complex delta = C * D;
+        f *= delta;
+        if (norm2(delta - 1) < 1e-32) {
+            *out = 1 / f;
+            return 0;
+        }
+    }
+    return -1;
+}
+
+/* Sun, Ramamoorthi, Narasimhan and Nayar's closed form for a point lamp
+ * of radius 0 in uniform fog with the isotropic phase, over [a, D]:
+ *   int e^-(sigma (t + d)) / d^2 dt = (2 / h) Im[F(w_a) - F(w_D)],
+ *   F(w) = e^-(sigma (t + d)) G(sigma (t - ts + d) - i sigma h),
+ * with w = tan(xi) + sec(xi) = (t - ts + d) / h (the equiangular xi in
+ * the half angle: 2 int e^-(A w) / (1 + w^2) dw, A = sigma h) and the
+ * exponential integral of the complex argument in place of their table.
+ * t - ts + d is formed as h^2 / (d - (t - ts)) behind the lamp (no
+ * cancellation). Adds to S per channel scat[k] e[k] times it, and to E
+ * the rounding of the two ends (2e-15 of their magnitudes); returns 0,
+ * or -1 (nothing added) where G does not converge or the two ends cancel
+ * to more than a tenth of the result's digits at 1e-13 (short segments,
+ * a lamp far off the segment's end): the caller integrates then. */
+static int lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
+                       double h, double a, double D, double S[3], double E[3])
+{
+    double out[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
+    for (int k = 0; k < 3; ++k) {
+        if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0)
+            continue;
+        if (k > 0 && sig[k] == sig[k - 1] && scat[k - 1] != 0 && e[k - 1] != 0) {
+            out[k] = out[k - 1] / (scat[k - 1] * e[k - 1]) * scat[k] * e[k];
+            err[k] = err[k - 1] / (scat[k - 1] * e[k - 1]) * scat[k] * e[k];
+            continue;
+        }
+        double v[2] = { 0, 0 }, mag = 0;
+        const double ends[2] = { a, D };
+        for (int i = 0; i < 2; ++i) {
+            const double t = ends[i];
+            if (!isfinite(t))
+                continue;   /* F(inf) = 0 */
+            const double u = t - ts, d = len2(u, h);
+            const double w = u >= 0 ? u + d : h * h / (d - u);   /* h w, really */
+            double complex G;
+            if (g_e1(sig[k] * w - I * (sig[k] * h), &G))
+                return -1;
+            const double x = exp(-sig[k] * (t + d));
+            v[i] = x == 0 ? 0 : x * cimag(G);
+            mag += x == 0 ? 0 : x * sqrt(norm2(G));
+        }
+        const double r = 2 / h * (v[0] - v[1]);
+        if (!(2 / h * mag * 2e-15 <= 1e-13 * fabs(r)) || !isfinite(r))
+            return -1;
+        out[k] = r * scat[k] * e[k];
+        err[k] = 2 / h * mag * 2e-15 * scat[k] * e[k];   /* the ends' rounding */
+    }
+    for (int k = 0; k < 3; ++k) {
+        S[k] += out[k];
+        E[k] += err[k];
+    }
+    return 0;
+}
+
 /* --------------------------------------------------------------- driver */
 
 #define MAX_CUTS 512
@@ -880,8 +993,8 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
         const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
                      cy = w[2] * r->dir[0] - w[0] * r->dir[2],
                      cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-        q.h = hypot(hypot(cx, cy), cz);
-        q.hq = hypot(q.h, l->radius);
+        q.h = len2(len2(cx, cy), cz);
+        q.hq = len2(q.h, l->radius);
         if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
             return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
         if (q.hq == 0) {
@@ -897,6 +1010,18 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
              * billionth of its least distance, which changes 1/d^2 by
              * (hq / d)^2 <= 1e-18 */
             q.hq = 1e-9 * (q.ts < a ? a - q.ts : q.ts - D);
+        }
+        int iso = 1;
+        for (int i = 0; i < s->ncomp; ++i)
+            iso &= s->comp[i].phase == EF_PHASE_ISO;
+        if (l->kind == EF_LIGHT_POINT && q.uniform && iso && l->radius == 0 && q.h > 0) {
+            double scat[3] = { 0, 0, 0 };
+            for (int i = 0; i < s->ncomp; ++i)
+                for (int k = 0; k < 3; ++k)
+                    if (s->comp[i].p[k] > 0)
+                        scat[k] += s->comp[i].p[k] * albedo(&s->comp[i], k) / (4 * PI);
+            if (lamp_closed(q.sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)
+                return;
         }
         q.equi = 1;
         /* Within W of the closest approach the substitution makes 1/d^2
