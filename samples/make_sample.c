@@ -325,6 +325,28 @@ static v3 cam_org(const camera_t *c, double u, double v)
     return add(c->eye, add(scl(c->r, xc), scl(c->u, yc)));
 }
 
+/* worldToCamera from the camera's axes and eye, and worldToNDC as it times
+ * the camera-to-NDC matrix p, both as floats exactly as the header holds
+ * them. */
+static void store_matrices(camera_t *c, const double p[16])
+{
+    /* worldToCamera (row vectors): columns = camera axes (right, up, forward) in world. */
+    double m[16] = { 0 };
+    v3 ax[3] = { c->r, c->u, c->f };
+    for (int j = 0; j < 3; ++j) {
+        m[0 * 4 + j] = ax[j].x; m[1 * 4 + j] = ax[j].y; m[2 * 4 + j] = ax[j].z;
+        m[3 * 4 + j] = -dot(c->eye, ax[j]);
+    }
+    m[15] = 1.0;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            double acc = 0;
+            for (int k = 0; k < 4; ++k) acc += m[i * 4 + k] * p[k * 4 + j];
+            c->w2n[i * 4 + j] = (float) (acc + 0.0);          /* + 0.0: no "-0" */
+            c->w2c[i * 4 + j] = (float) (m[i * 4 + j] + 0.0);
+        }
+}
+
 static void setup_camera(camera_t *c, int W, int H)
 {
     const double yaw = 6.0 * PI / 180.0;     /* turned slightly right */
@@ -340,27 +362,13 @@ static void setup_camera(camera_t *c, int W, int H)
     c->sx = 0.5 / tan_h;
     c->sy = 0.5 / tan_v;
 
-    /* worldToCamera (row vectors): columns = camera axes (right, up, forward) in world. */
-    double m[16] = { 0 };
-    v3 ax[3] = { c->r, c->u, c->f };
-    for (int j = 0; j < 3; ++j) {
-        m[0 * 4 + j] = ax[j].x; m[1 * 4 + j] = ax[j].y; m[2 * 4 + j] = ax[j].z;
-        m[3 * 4 + j] = -dot(c->eye, ax[j]);
-    }
-    m[15] = 1.0;
     /* camera -> NDC: (x, y, z, 1) -> (sx x + 0.5 z, -sy y + 0.5 z, A z + B, z). */
     double A = FAR_CLIP / (FAR_CLIP - NEAR_CLIP), B = -NEAR_CLIP * FAR_CLIP / (FAR_CLIP - NEAR_CLIP);
-    double p[16] = { c->sx, 0, 0, 0,
-                     0, -c->sy, 0, 0,
-                     0.5, 0.5, A, 1,
-                     0, 0, B, 0 };
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) {
-            double acc = 0;
-            for (int k = 0; k < 4; ++k) acc += m[i * 4 + k] * p[k * 4 + j];
-            c->w2n[i * 4 + j] = (float) (acc + 0.0);          /* + 0.0: no "-0" */
-            c->w2c[i * 4 + j] = (float) (m[i * 4 + j] + 0.0);
-        }
+    const double p[16] = { c->sx, 0, 0, 0,
+                           0, -c->sy, 0, 0,
+                           0.5, 0.5, A, 1,
+                           0, 0, B, 0 };
+    store_matrices(c, p);
 }
 
 /* The sun's orthographic view of the scene: looking along -towards from
@@ -377,25 +385,12 @@ static void setup_sun_camera(camera_t *c, int W, int H, v3 towards, v3 centre, d
     c->eye = add(centre, scl(norm(towards), 1000.0));
     c->sx = 1.0 / width;
     c->sy = 1.0 / (width * (double) H / (double) W);
-    double m[16] = { 0 };
-    v3 ax[3] = { c->r, c->u, c->f };
-    for (int j = 0; j < 3; ++j) {
-        m[0 * 4 + j] = ax[j].x; m[1 * 4 + j] = ax[j].y; m[2 * 4 + j] = ax[j].z;
-        m[3 * 4 + j] = -dot(c->eye, ax[j]);
-    }
-    m[15] = 1.0;
     /* camera -> NDC: (x, y, z, 1) -> (sx x + 0.5, -sy y + 0.5, z / 1e4, 1) */
-    double p[16] = { c->sx, 0, 0, 0,
-                     0, -c->sy, 0, 0,
-                     0, 0, 1e-4, 0,
-                     0.5, 0.5, 0, 1 };
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) {
-            double acc = 0;
-            for (int k = 0; k < 4; ++k) acc += m[i * 4 + k] * p[k * 4 + j];
-            c->w2n[i * 4 + j] = (float) (acc + 0.0);
-            c->w2c[i * 4 + j] = (float) (m[i * 4 + j] + 0.0);
-        }
+    const double p[16] = { c->sx, 0, 0, 0,
+                           0, -c->sy, 0, 0,
+                           0, 0, 1e-4, 0,
+                           0.5, 0.5, 0, 1 };
+    store_matrices(c, p);
 }
 
 static void xform(const float *m, v3 p, double out[4])

@@ -176,6 +176,28 @@ static void slab(double c0, double c1, double *lo, double *hi)
         *hi = fmin(*hi, r);
 }
 
+/* The lit intervals of [0, D]: the complement of the union of the ns
+ * shadowed intervals sh (sorted here). Returns their count. */
+static int complement(double (*sh)[2], int ns, double D, double (*iv)[2])
+{
+    for (int i = 1; i < ns; ++i)
+        for (int j = i; j > 0 && sh[j][0] < sh[j - 1][0]; --j) {
+            double t0 = sh[j][0], t1 = sh[j][1];
+            sh[j][0] = sh[j - 1][0], sh[j][1] = sh[j - 1][1];
+            sh[j - 1][0] = t0, sh[j - 1][1] = t1;
+        }
+    int n = 0;
+    double t = 0;
+    for (int i = 0; i < ns; ++i) {
+        if (sh[i][0] > t)
+            iv[n][0] = t, iv[n][1] = sh[i][0], ++n;
+        t = fmax(t, sh[i][1]);
+    }
+    if (D > t)
+        iv[n][0] = t, iv[n][1] = D, ++n;
+    return n;
+}
+
 /* The lit intervals of [0, D] in a world of plates: a point is shadowed
  * when it lies behind a plate (depth beyond it) within its footprint,
  * found with slabs in camera space (perspective: X - u Z >= 0 for Z > 0).
@@ -202,23 +224,7 @@ static int plates_lit(const lcam *c, const plate *p, int np, double bias, const 
         if (lo < hi)
             sh[ns][0] = lo, sh[ns][1] = hi, ++ns;
     }
-    /* the complement of the union */
-    for (int i = 1; i < ns; ++i)
-        for (int j = i; j > 0 && sh[j][0] < sh[j - 1][0]; --j) {
-            double t0 = sh[j][0], t1 = sh[j][1];
-            sh[j][0] = sh[j - 1][0], sh[j][1] = sh[j - 1][1];
-            sh[j - 1][0] = t0, sh[j - 1][1] = t1;
-        }
-    int n = 0;
-    double t = 0;
-    for (int i = 0; i < ns; ++i) {
-        if (sh[i][0] > t)
-            iv[n][0] = t, iv[n][1] = sh[i][0], ++n;
-        t = fmax(t, sh[i][1]);
-    }
-    if (D > t)
-        iv[n][0] = t, iv[n][1] = D, ++n;
-    return n;
+    return complement(sh, ns, D, iv);
 }
 
 static uint32_t rng = 12345;
@@ -466,21 +472,7 @@ static int sphere_lit(const sph *b, const double l[3], const double org[3], cons
         if (lo < hi)
             sh[ns][0] = lo, sh[ns][1] = hi, ++ns;
     }
-    if (ns == 2 && sh[1][0] < sh[0][0]) {
-        double a = sh[0][0], bb = sh[0][1];
-        sh[0][0] = sh[1][0], sh[0][1] = sh[1][1];
-        sh[1][0] = a, sh[1][1] = bb;
-    }
-    int n = 0;
-    double t = 0;
-    for (int i = 0; i < ns; ++i) {
-        if (sh[i][0] > t)
-            iv[n][0] = t, iv[n][1] = sh[i][0], ++n;
-        t = fmax(t, sh[i][1]);
-    }
-    if (D > t)
-        iv[n][0] = t, iv[n][1] = D, ++n;
-    return n;
+    return complement(sh, ns, D, iv);
 }
 
 /* The sun in height fog over [a, b]: the test's own adaptive Simpson of
