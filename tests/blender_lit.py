@@ -18,6 +18,11 @@ import bpy
 args = sys.argv[sys.argv.index("--") + 1:]
 out, fog, spp, sun_strength = args[0], args[1] == "fog", int(args[2]), float(args[3])
 sunmap, shadows = args[1] == "sunmap", "shadow" in args[4:]
+# "lamp": a point lamp of power SUN watts (radius 0) in place of the sun;
+# "calib": no fog, black surfaces and a white diffuse plane 2 units behind
+# the lamp, facing the camera, to read the lamp's radiant intensity off
+lamp, calib = "lamp" in args[4:], "calib" in args[4:]
+LAMP = (1.5, 4.0, 2.0)
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -48,7 +53,7 @@ sc.world = w
 def emissive(name, rgb):
     m = bpy.data.materials.new(name); m.use_nodes = True
     nt = m.node_tree; nt.nodes.clear()
-    e = nt.nodes.new('ShaderNodeEmission'); e.inputs[0].default_value = (*rgb, 1); e.inputs[1].default_value = 1.0
+    e = nt.nodes.new('ShaderNodeEmission'); e.inputs[0].default_value = (*rgb, 1); e.inputs[1].default_value = 0.0 if calib else 1.0
     o = nt.nodes.new('ShaderNodeOutputMaterial'); nt.links.new(e.outputs[0], o.inputs[0])
     m.cycles.sample_as_light = False   # the surfaces do not light the fog (exrfog's lights only)
     return m
@@ -79,7 +84,19 @@ if fog:
     m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
     cube.data.materials.append(m)
     cube.visible_shadow = True
-sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = sun_strength; sun.angle = 0.0
+if calib:
+    bpy.ops.mesh.primitive_plane_add(size=4, location=(LAMP[0], LAMP[1] + 2, LAMP[2]),
+                                     rotation=(math.radians(90), 0, 0))
+    m = bpy.data.materials.new("white"); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    dfs = nt.nodes.new('ShaderNodeBsdfDiffuse'); dfs.inputs[0].default_value = (1, 1, 1, 1)
+    o = nt.nodes.new('ShaderNodeOutputMaterial'); nt.links.new(dfs.outputs[0], o.inputs[0])
+    bpy.context.object.data.materials.append(m)
+if lamp or calib:
+    pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = sun_strength; pl.shadow_soft_size = 0.0
+    plo = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(plo)
+    plo.location = LAMP
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if (lamp or calib) else sun_strength; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(72 if shadows else 60), 0, math.radians(170 if shadows else 150))
 bpy.context.view_layer.update()

@@ -9,7 +9,9 @@ pixel). Then the same with shafts: the ball casts shadows in Cycles, and
 exrfog reads them from Cycles' own depth render of the scene along the
 sunlight (an orthographic second camera; its matrices written into the
 map's header here, as a renderer that exports its camera would). Exits 77
-(skipped) without Blender."""
+(skipped) without Blender. And a point lamp, its radiant intensity read
+off Cycles' render of a white Lambertian plane (Blender's watts are not
+W/sr: the plane measures the factor), compared the same way."""
 import json
 import os
 import shutil
@@ -47,7 +49,9 @@ with tempfile.TemporaryDirectory() as d:
                                         ("plainS", "plain", 4, 3, "shadow"),
                                         ("shafts", "fog", 256, 3, "shadow"),
                                         ("darkS", "fog", 256, 0, "shadow"),
-                                        ("sunmap", "sunmap", 1, 3, "shadow")):
+                                        ("sunmap", "sunmap", 1, 3, "shadow"),
+                                        ("lampfog", "fog", 256, 300, "lamp"),
+                                        ("calib", "plain", 16, 300, "calib")):
         r = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", scene,
                  "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)] + ([extra] if extra else []),
                 env)
@@ -120,6 +124,45 @@ with tempfile.TemporaryDirectory() as d:
         raise SystemExit("blender_lit: FAILED: exrfog's shafts differ from Cycles'")
     if not shade > 0.02:
         raise SystemExit("blender_lit: FAILED: the ball's shadow took almost nothing")
+    # a point lamp: its radiant intensity read off Cycles' own render of a
+    # white Lambertian plane 2 units behind it (radiance I / (pi d^2) at the
+    # foot of the perpendicular), then what it adds to the fog, as for the sun
+    # Blender's point lamp of P watts is I = P / (4 pi) W/sr; the plane checks it
+    cal = rgb(d + "/calib.exr")
+    measured = np.pi * 2.0 ** 2 * cal.max(axis=(0, 1))[1]
+    inten = 300 / (4 * np.pi)
+    if not abs(measured / inten - 1) < 0.02:
+        raise SystemExit("blender_lit: FAILED: Cycles' lamp is %.3f W/sr by its own plane, "
+                         "not P / (4 pi) = %.3f" % (measured, inten))
+    run([exrfog, d + "/plain.exr", "-o", d + "/ef_lamp.exr", "--light",
+         "point:position=1.5,4,2:intensity=%r" % inten] + common)
+    cyc_l = rgb(d + "/lampfog.exr") - rgb(d + "/dark.exr")
+    ef_l = rgb(d + "/ef_lamp.exr") - rgb(d + "/ef_dark.exr")
+    # within 3 pixels of the lamp's image the halo changes across a pixel
+    # far more than Cycles' pixel filter leaves as it is: compared apart
+    py, px = np.unravel_index(np.argmax(ef_l[..., 1]), ef_l.shape[:2])
+    yy, xx = np.mgrid[0:ef_l.shape[0], 0:ef_l.shape[1]]
+    keep = (yy - py) ** 2 + (xx - px) ** 2 > 9
+    c_k, e_k = np.where(keep[..., None], cyc_l, 0), np.where(keep[..., None], ef_l, 0)
+    mean_rel = (cyc_l.mean() - ef_l.mean()) / ef_l.mean()
+    # Cycles' volume sampling of a point lamp is noisy at 256 samples (a few
+    # fireflies per row): bands of 4 rows
+    cb = c_k.sum(axis=(1, 2)).reshape(-1, 4).sum(axis=1)
+    eb = e_k.sum(axis=(1, 2)).reshape(-1, 4).sum(axis=1)
+    rows = np.abs(cb - eb) / eb
+    diff = (cyc_l - ef_l)[keep]
+    print("blender_lit: a point lamp of 300 W (I = P/(4 pi) = %.3f W/sr; Cycles' white plane "
+          "reads %.3f): Cycles mean %.5f, exrfog %.5f (%+.2f %%); away from its image, bands "
+          "of 4 rows within %.2f %%, per pixel |diff| mean %.5f, p99.9 %.5f; within 3 pixels "
+          "of it (Cycles' pixel filter spreads the peak) Cycles %.4f, exrfog %.4f"
+          % (inten, measured, cyc_l.mean(), ef_l.mean(), 100 * mean_rel, 100 * rows.max(),
+             np.abs(diff).mean(), np.percentile(np.abs(diff), 99.9), cyc_l[~keep].mean(),
+             ef_l[~keep].mean()))
+    if os.environ.get("BLENDER_LIT_KEEP"):
+        for f in ("lampfog.exr", "dark.exr", "ef_lamp.exr", "ef_dark.exr", "calib.exr"):
+            shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)
+    if not (abs(mean_rel) < 0.01 and rows.max() < 0.06):
+        raise SystemExit("blender_lit: FAILED: exrfog's point lamp differs from Cycles'")
     if os.environ.get("BLENDER_LIT_KEEP"):
         for f in ("shafts.exr", "darkS.exr", "ef_shafts.exr", "ef_darkS.exr", "map.exr"):
             shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)
