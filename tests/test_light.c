@@ -241,6 +241,39 @@ static void test_point_uniform(void **state)
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
 }
 
+/* The sun in one constant convex volume (closed form per piece of the
+ * sun's exit path): from outside through the box, from inside, a low sun,
+ * a sun along a face (n.l = 0), a view ray along a face, a sliver, a
+ * rotated convex volume (a wedge), chromatic density and albedo, the sun
+ * below every face facing it (none: no light). */
+static void test_sun_convex(void **state)
+{
+    (void) state;
+    const lit_case cs[] = {
+        { { "box:min=-10,0,-60:max=10,8,-10:density=0.1:phase=hg:g=0.5" },
+          "sun:towards=0.2,1,-1:intensity=1", { 0, 1.7, 0 }, { 0, 0, -1 }, INFINITY },
+        { { "box:min=-10,0,-60:max=10,8,-10:density=0.1" }, "sun:towards=0.2,1,-1",
+          { 0, 1.7, 0 }, { 0.1, 0.05, -1 }, 40 },
+        { { "box:min=-10,0,-60:max=10,8,10:density=0.05:phase=cs:g=0.7" },
+          "sun:towards=0.3,0.02,-1", { 0, 1.7, 0 }, { 0.2, -0.03, -1 }, INFINITY },
+        { { "box:min=-10,0,-60:max=10,8,10:density=0.05" }, "sun:towards=1,0,0",
+          { 0, 1.7, 0 }, { 0.3, 0.1, -1 }, INFINITY },
+        { { "box:min=-10,0,-60:max=10,8,-10:density=0.2" }, "sun:towards=0.2,1,0.3",
+          { 0, 8, 0 }, { 0, 0, -1 }, 100 },
+        { { "box:min=-10,0,-60:max=10,8,-10:density=0.2" }, "sun:towards=-0.4,1,0.3",
+          { 0, 1.7, 0 }, { 0, 6.2999, -10 }, INFINITY },
+        { { "convex:planes=0,1,0,-6,0.6,-0.8,0,-2,-0.6,-0.8,0,-2,0,0,1,10,0,0,-1,-60:"
+            "density=0.08,0.05,0.02:albedo=0.9,0.8,0.5:phase=hg:g=0.3" },
+          "sun:towards=0.3,1,-0.5:intensity=2:color=1,0.9,0.8", { 0, 1.7, 0 },
+          { 0.05, 0.03, -1 }, INFINITY },
+        { { "box:min=-10,0,-60:max=10,8,-10:density=1000" }, "sun:towards=0.2,1,-1",
+          { 0, 1.7, 0 }, { 0, 0, -1 }, INFINITY },
+        { { "box:min=-10,0,-60:max=10,8,-10:density=1e-9" }, "sun:towards=0.2,1,-1",
+          { 0, 1.7, 0 }, { 0, 0, -1 }, INFINITY },
+    };
+    check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
+}
+
 static void test_general(void **state)
 {
     (void) state;
@@ -593,6 +626,7 @@ int main(void)
         cmocka_unit_test(test_phase),        cmocka_unit_test(test_sun_height),
         cmocka_unit_test(test_sun_halfspace),
         cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_general),
+        cmocka_unit_test(test_sun_convex),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),
         cmocka_unit_test(test_errors),       cmocka_unit_test(test_cli),
         cmocka_unit_test(test_hostile),

@@ -11,12 +11,14 @@
  * (1 - a) S_far. Pure C, no I/O.
  *
  * Closed forms: the sun in one exponential height fog (Lengyel's and
- * Quilez's height fog lit with the sun's own attenuation) or one constant
- * half-space (Lengyel's), no light at all
- * from the sun in unbounded uniform fog (its light never arrives). Point
- * and spot lamps in uniform (exp) fog: the equiangular substitution of
- * Sun et al. (2005), whose angular integral is evaluated directly by
- * adaptive Gauss-Kronrod, to 1e-13. Everything else: the same quadrature
+ * Quilez's height fog lit with the sun's own attenuation), one constant
+ * half-space (Lengyel's) or one constant box or convex volume; no light
+ * at all from the sun in unbounded uniform fog (its light never arrives);
+ * a point lamp of radius 0 in isotropic uniform fog (Sun et al. 2005, the
+ * exponential integral of a complex argument in place of their table).
+ * Other point and spot lamps in uniform (exp) fog: their equiangular
+ * substitution, whose angular integral is evaluated directly by adaptive
+ * Gauss-Kronrod, to 1e-13. Everything else: the same quadrature
  * of the formula above over the models' closed-form optical depths, split
  * at the densities' features and the spots' cone crossings, to 1e-10. */
 #ifndef EF_LIGHT_H
