@@ -106,8 +106,10 @@ typedef struct exrfog_scene exrfog_scene;
 /* Parses a fog scene: the SPECs of --fog (MODEL[:KEY=VALUE]...) and/or a
  * scene file (JSON, as --scene; NULL for none), with the fog colour R,G,B
  * in the working space (NULL: the default 0.7,0.75,0.8). Nothing but the
- * scene file (and profile files it names) is read: this validates a scene
- * with no image at hand. */
+ * scene file and the files it names (profiles, its lights' shadow maps,
+ * its sky_light's environment) is read: this validates a scene with no
+ * image at hand. Lights light exrfog_fog_pixels' fog; their AOV layers
+ * are written by exrfog_run only. */
 EXRFOG_API exrfog_result exrfog_scene_create(exrfog_context *ctx, const char *const *specs,
                                              int nspecs, const char *scene_file,
                                              const double *color, exrfog_scene **out);
