@@ -163,6 +163,17 @@ static void test_sun_halfspace(void **state)
 {
     (void) state;
     const lit_case cs[] = {
+        /* the linear (Lengyel) and smooth (Walker) densities: the same form */
+        { { "halfspace-linear:plane=0,1,0,-6:slope=0.02" }, "sun:towards=0.2,1,-1",
+          { 0, 1.7, 0 }, { 0.1, -0.05, -1 }, 60 },
+        { { "halfspace-linear:plane=0,1,0,-6:slope=0.02:phase=hg:g=0.6" },
+          "sun:towards=0.3,0.02,-1:intensity=3", { 0, 1.7, 0 }, { 0.3, 0.015, -1 }, INFINITY },
+        { { "halfspace-linear:plane=0,1,0,-6:slope=0.02" }, "sun:towards=0,0.3,-1",
+          { 0, 10, 0 }, { 0, -0.3, -1 }, INFINITY },
+        { { "halfspace-smooth:plane=0,1,0,-6:density=0.08:sharpness=0.05" },
+          "sun:towards=0.2,1,-1:color=1,0.8,0.6", { 0, 1.7, 0 }, { 0.1, -0.02, -1 }, 80 },
+        { { "halfspace-smooth:plane=0.1,1,0.2,-4:density=0.08:sharpness=0.3:phase=cs:g=0.5" },
+          "sun:towards=-0.5,0.4,-1", { 0, 1.7, 0 }, { -0.2, 0.01, -1 }, INFINITY },
         { { "halfspace:plane=0,1,0,-3:density=0.1" }, "sun:towards=0.2,1,-1", { 0, 1.7, 0 },
           { 0, 0, -1 }, INFINITY },
         { { "halfspace:plane=0,1,0,-3:density=0.1:phase=hg:g=0.7" }, "sun:towards=0.2,0.5,-1",

@@ -683,37 +683,44 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     }
 }
 
-/* The sun in one constant half-space fog (density rho where h = n.x + d
- * < 0, n unit): from a point at h < 0 the sun's path in the fog is
- * -h / (n.l), so T_sun = e^(rho h / (n.l)), and along the view ray the
- * exponent is linear in t as in the height fog:
- *   S = albedo p E tau_v e^max(ya, yb) phi(tau_v |1 - s / (n.l)|),
- * ya = rho h_a / (n.l), yb = -tau_v + rho h_b / (n.l), h_a and h_b the plane
- * values where the segment's part in the fog starts and ends (0 on the
- * plane), s = n.u. With n.l <= 0 the sun never leaves the fog: no light. */
+/* The sun in one half-space fog of any of the three densities sigma(X) of
+ * the depth X = -h below the plane (h = n.x + d, n unit, fog where h < 0:
+ * constant, linear, Walker's smooth): from x the sun's path in the fog has
+ * optical depth tau_sun(x) = Sigma(X) / (n.l), Sigma the density's
+ * integral from the plane down, so along the view ray the exponent
+ * E(t) = -(tau_v(0, t) + tau_sun(x(t))) has dE/dt = -sigma (1 - s / (n.l))
+ * (s = n.u) wherever there is fog, and 0 where there is none:
+ *   S = albedo p E int sigma e^E dt = albedo p E (e^E(0) - e^E(D)) / q,
+ * q = 1 - s / (n.l), written as tau_v e^max(E(0), E(D)) phi(tau_v |q|)
+ * (no difference of large terms; q -> 0 tends to tau_v e^E). Both ends'
+ * E come from the model's own closed-form optical depths (the view
+ * segment, and the sun's ray from each end). With n.l <= 0 the sun never
+ * leaves the fog: no light. */
 static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
 {
     const ef_fog_component *c = &s->comp[0];
-    const double *n = c->p, d = c->p[3];
+    const double *n = c->p;
     const double nl = n[0] * l->dir[0] + n[1] * l->dir[1] + n[2] * l->dir[2];
     const double sv = n[0] * r->dir[0] + n[1] * r->dir[1] + n[2] * r->dir[2];
     S[0] = S[1] = S[2] = 0;
     if (!(nl > 0))
         return;
-    double tv[3];
+    double tv[3], ta[3], tb[3] = { 0, 0, 0 };
     c->model->tau(c, r, tv);
-    const double h0 = n[0] * r->org[0] + n[1] * r->org[1] + n[2] * r->org[2] + d;
-    const double ha = h0 < 0 ? h0 : 0;
-    double hb = 0;
-    if (isfinite(r->dist))
-        hb = fmin(h0 + sv * r->dist, 0);
+    ef_ray sun = { { l->dir[0], l->dir[1], l->dir[2] }, INFINITY, INFINITY,
+                   { r->org[0], r->org[1], r->org[2] } };
+    c->model->tau(c, &sun, ta);
+    if (isfinite(r->dist)) {
+        for (int k = 0; k < 3; ++k)
+            sun.org[k] = r->org[k] + r->dist * r->dir[k];
+        c->model->tau(c, &sun, tb);
+    }
     const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - sv / nl);
     for (int ch = 0; ch < 3; ++ch) {
-        const double rho = c->p[4 + ch];
         if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
             continue;
-        const double ya = rho * ha / nl, yb = -tv[ch] + rho * hb / nl;
+        const double ya = -ta[ch], yb = -tv[ch] - tb[ch];
         const double e = exp(ya > yb ? ya : yb);
         S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * tau_phi(tv[ch], q) * e;
     }
@@ -1064,7 +1071,9 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
         void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *, double *) = NULL;
         if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0)
             f = sun_height;
-        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_halfspace)
+        if (s->ncomp == 1 && (s->comp[0].model == &ef_fog_halfspace ||
+                              s->comp[0].model == &ef_fog_halfspace_linear ||
+                              s->comp[0].model == &ef_fog_halfspace_smooth))
             f = sun_halfspace;
         if (s->ncomp == 1 && (s->comp[0].model == &ef_fog_box ||
                               s->comp[0].model == &ef_fog_convex) && s->comp[0].p[9] <= 64)

@@ -11,8 +11,9 @@
  * (1 - a) S_far. Pure C, no I/O.
  *
  * Closed forms: the sun in one exponential height fog (Lengyel's and
- * Quilez's height fog lit with the sun's own attenuation), one constant
- * half-space (Lengyel's) or one constant box or convex volume; no light
+ * Quilez's height fog lit with the sun's own attenuation), one half-space
+ * (Lengyel's constant and linear, Walker's smooth) or one constant box or
+ * convex volume; no light
  * at all from the sun in unbounded uniform fog (its light never arrives);
  * a point lamp of radius 0 in isotropic uniform fog (Sun et al. 2005, the
  * exponential integral of a complex argument in place of their table).
