@@ -443,7 +443,7 @@ static void test_error_messages_exact(void **state)
 
     p = write_text("e.json", "{\"units\": 1, \"colour\": [1, 1, 1]}");
     assert_int_equal(ef_scene_file_read(p.s, &sf, &err), -1);
-    assert_string_equal(err.msg, "unknown key 'colour' (keys: units, up, color, sky, time, aov, fog, lights)");
+    assert_string_equal(err.msg, "unknown key 'colour' (keys: units, up, color, sky, time, aov, fog, lights, sky_light)");
 
     p = write_text("e.json", "{\"units\": 0}");
     assert_int_equal(ef_scene_file_read(p.s, &sf, &err), -1);
