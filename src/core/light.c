@@ -707,13 +707,23 @@ static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray
         return;
     double tv[3], ta[3], tb[3] = { 0, 0, 0 };
     c->model->tau(c, r, tv);
-    ef_ray sun = { { l->dir[0], l->dir[1], l->dir[2] }, INFINITY, INFINITY,
-                   { r->org[0], r->org[1], r->org[2] } };
-    c->model->tau(c, &sun, ta);
-    if (isfinite(r->dist)) {
-        for (int k = 0; k < 3; ++k)
-            sun.org[k] = r->org[k] + r->dist * r->dir[k];
-        c->model->tau(c, &sun, tb);
+    if (c->model == &ef_fog_halfspace) {
+        /* constant: Sigma(X) = rho X, from the plane values at the ends */
+        const double h0 = n[0] * r->org[0] + n[1] * r->org[1] + n[2] * r->org[2] + n[3];
+        const double hb = isfinite(r->dist) ? h0 + sv * r->dist : 0;
+        for (int ch = 0; ch < 3; ++ch) {
+            ta[ch] = h0 < 0 ? c->p[4 + ch] * -h0 / nl : 0;
+            tb[ch] = hb < 0 ? c->p[4 + ch] * -hb / nl : 0;
+        }
+    } else {
+        ef_ray sun = { { l->dir[0], l->dir[1], l->dir[2] }, INFINITY, INFINITY,
+                       { r->org[0], r->org[1], r->org[2] } };
+        c->model->tau(c, &sun, ta);
+        if (isfinite(r->dist)) {
+            for (int k = 0; k < 3; ++k)
+                sun.org[k] = r->org[k] + r->dist * r->dir[k];
+            c->model->tau(c, &sun, tb);
+        }
     }
     const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - sv / nl);
