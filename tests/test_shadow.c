@@ -771,6 +771,66 @@ static void test_cli(void **state)
             fail_msg("--light %s: '%s' lacks '%s'", light, tu_err, bad[i].want);
         assert_false(tu_exists(cc));
     }
+    /* --explain names each light's map and how it reads it */
+    assert_int_equal(tu_runf("'%s' --explain --json %s --light sun:towards=0.3,1,0.2:"
+                             "shadow='%s':slope=0.5", in, fog, map), 0);
+    assert_non_null(strstr(tu_out, "\"projection\": \"orthographic\""));
+    assert_non_null(strstr(tu_out, "\"slope\": 0.5"));
+    /* hostile maps: a map of NaN depths casts nothing (no bit changes), a
+     * 1 x 1 map and a map whose camera is not finite or singular are read
+     * or refused, never crash; a truncated map is refused */
+    {
+        lcam c1 = lcam_make(at, fwd, 1, 6, 1);
+        float one = 5.0f, *nans = malloc(256 * 256 * sizeof *nans);
+        for (int i = 0; i < 256 * 256; ++i)
+            nans[i] = NAN;
+        char *m1 = tu_path("shadow_1x1.exr"), *mn = tu_path("shadow_nan.exr");
+        char *mt = tu_path("shadow_trunc.exr");
+        write_map(m1, &c1, &one, "Z", 0);
+        write_map(mn, &c, nans, "Z", 0);
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "shadow='%s'", in, cc, fog, mn), 0);
+        assert_true(same_channel(a, cc, "R"));
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "shadow='%s'", in, cc, fog, m1), 0);
+        /* the first 300 bytes of a map */
+        FILE *src_f = fopen(map, "rb");
+        assert_non_null(src_f);
+        char head[300];
+        assert_int_equal(fread(head, 1, sizeof head, src_f), sizeof head);
+        fclose(src_f);
+        assert_int_equal(tu_write_bytes(mt, head, sizeof head), 0);
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:shadow='%s'", in,
+                                 cc, fog, mt), 1);
+        assert_non_null(strstr(tu_err, mt));
+        assert_false(tu_exists(cc));
+        /* a singular and a non-finite camera */
+        tu_part p;
+        tu_part_init(&p, 256, 256);
+        tu_part_add(&p, "Z", EXR_PIXEL_FLOAT, z);
+        p.m44[0].name = "worldToCamera";
+        p.m44[1].name = "worldToNDC";
+        for (int bad = 0; bad < 2; ++bad) {
+            memset(p.m44[0].m, 0, sizeof p.m44[0].m);
+            memset(p.m44[1].m, 0, sizeof p.m44[1].m);
+            if (bad)
+                for (int i = 0; i < 16; ++i)
+                    p.m44[0].m[i] = p.m44[1].m[i] = i % 5 == 0 ? INFINITY : 0.0f;
+            assert_int_equal(tu_write_exr(mt, &p, 1), 0);
+            assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:"
+                                     "shadow='%s'", in, cc, fog, mt), 1);
+            if (!strstr(tu_err, bad ? "not finite" : "singular"))
+                fail_msg("a %s camera: '%s'", bad ? "non-finite" : "singular", tu_err);
+            assert_false(tu_exists(cc));
+        }
+        free(nans);
+        free(m1);
+        free(mn);
+        free(mt);
+    }
     /* usage: exit 2 */
     assert_int_equal(tu_runf("'%s' -o '%s' %s --light point:position=0,3,-5:shadow='%s'", in, cc,
                              fog, map), 2);

@@ -324,6 +324,33 @@ static void test_cli(void **state)
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light '%s' --light "
                              "sun:towards=0,1,0:name=sky", in, out2, envp), 2);
     assert_false(tu_exists(out2));
+    /* hostile environments: 1 x 1 is refused; NaN, inf and negative
+     * texels count as 0 (nothing to scatter), never a NaN in the output */
+    {
+        env t = env_make(1, 1);
+        char *tp = tu_path("sky_tiny.exr");
+        write_env(tp, &t);
+        env_free(&t);
+        assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light '%s'", in,
+                                 out2, tp), 1);
+        assert_non_null(strstr(tu_err, "too small"));
+        env b = env_make(64, 32);
+        for (int i = 0; i < 64 * 32; ++i)
+            for (int c = 0; c < 3; ++c)
+                b.p[c][i] = i % 7 == 0 ? NAN : i % 7 == 1 ? INFINITY : i % 7 == 2 ? -5.0f : 1.0f;
+        write_env(tp, &b);
+        env_free(&b);
+        assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02:phase=hg:g=0.5 "
+                                 "--sky-light '%s' -d float", in, out2, tp), 0);
+        int w, h;
+        float *R = tu_read_channel(out2, 0, "R", &w, &h);
+        assert_non_null(R);
+        for (int i = 0; i < w * h; ++i)
+            assert_true(isfinite(R[i]) && R[i] >= 0);
+        free(R);
+        remove(out2);
+        free(tp);
+    }
     free(envp);
     free(out);
     free(out2);

@@ -68,7 +68,7 @@ static int average_to(const ef_env_src *src, int w, int h, float *out[3])
                 const double wt = overlap(i, a, b);
                 for (int c = 0; c < 3; ++c) {
                     const float v = src->rgb[c][(size_t) y * (size_t) src->w + (size_t) i];
-                    acc[c] += wt * (isfinite(v) ? v : 0);
+                    acc[c] += wt * (isfinite(v) && v > 0 ? v : 0);   /* not light: 0 */
                 }
             }
             for (int c = 0; c < 3; ++c)

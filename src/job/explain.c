@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "sky_light.h"
 #include "aov.h"
 #include "job_impl.h"
 #include "version.h"
@@ -96,6 +97,19 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
                o->scene.sky_distance, o->scene.sky_distance);
     for (int i = 0; i < o->scene.ncomp; ++i)
         fprintf(out, "fog: %s\n", o->scene.comp[i].spec);
+    for (int i = 0; i < o->scene.nlight; ++i) {
+        const ef_light *l = &o->scene.light[i];
+        fprintf(out, "light %s: %s\n", l->name, l->spec);
+        if (l->shadow)
+            fprintf(out, "  shadow map %s: %d x %d, %s, bias %g, slope %g, outside %s\n",
+                    l->shadow_path, l->shadow->w, l->shadow->h,
+                    l->shadow->ortho ? "orthographic" : "perspective", l->shadow_opts.bias,
+                    l->shadow_opts.slope, l->shadow_opts.outside_lit ? "lit" : "shadow");
+    }
+    if (o->scene.sky_light)
+        fprintf(out, "sky light: %s (%d x %d; %d phase convolution%s)\n", o->scene.sky_light_spec,
+                o->scene.sky_light->src_w, o->scene.sky_light->src_h, o->scene.sky_light->nconv,
+                o->scene.sky_light->nconv == 1 ? "" : "s");
     fprintf(out, "fog colour: %g, %g, %g (working space)\n", o->scene.color[0], o->scene.color[1],
            o->scene.color[2]);
     fprintf(out, "up axis: %g, %g, %g; %g scene units per metre%s%s\n", o->scene.ctx.up[0],
@@ -231,7 +245,35 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
             fputs(", ", out);
         json_str(out, o->scene.comp[i].spec);
     }
-    fputs("],\n  \"fog_colour\": ", out);
+    fputs("],\n  \"lights\": [", out);
+    for (int i = 0; i < o->scene.nlight; ++i) {
+        const ef_light *l = &o->scene.light[i];
+        fputs(i ? ", {\"name\": " : "{\"name\": ", out);
+        json_str(out, l->name);
+        fputs(", \"spec\": ", out);
+        json_str(out, l->spec);
+        fputs(", \"shadow\": ", out);
+        if (l->shadow) {
+            fputs("{\"path\": ", out);
+            json_str(out, l->shadow_path);
+            fprintf(out, ", \"width\": %d, \"height\": %d, \"projection\": ", l->shadow->w,
+                    l->shadow->h);
+            json_str(out, l->shadow->ortho ? "orthographic" : "perspective");
+            fputs(", \"bias\": ", out);
+            json_num(out, l->shadow_opts.bias);
+            fputs(", \"slope\": ", out);
+            json_num(out, l->shadow_opts.slope);
+            fputs(", \"outside\": ", out);
+            json_str(out, l->shadow_opts.outside_lit ? "lit" : "shadow");
+            fputc('}', out);
+        } else {
+            fputs("null", out);
+        }
+        fputc('}', out);
+    }
+    fputs("], \"sky_light\": ", out);
+    json_str(out, o->scene.sky_light ? o->scene.sky_light_spec : NULL);
+    fputs(",\n  \"fog_colour\": ", out);
     json_vec(out, o->scene.color, 3);
     fputs(", \"up\": ", out);
     json_vec(out, o->scene.ctx.up, 3);
