@@ -23,6 +23,11 @@ sunmap, shadows = args[1] == "sunmap", "shadow" in args[4:]
 # the lamp, facing the camera, to read the lamp's radiant intensity off
 lamp, calib = "lamp" in args[4:], "calib" in args[4:]
 LAMP = (1.5, 4.0, 2.0)
+# "spot": a spot of power SUN watts (radius 0, cone 70 deg, no blend) over
+# the ball, aimed straight down; mode "spotmap" renders the depth from it
+# with a perspective camera of 90 deg
+spot, spotmap = "spot" in args[4:], args[1] == "spotmap"
+SPOT = (-1.0, 2.0, 5.5)
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -96,7 +101,12 @@ if lamp or calib:
     pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = sun_strength; pl.shadow_soft_size = 0.0
     plo = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(plo)
     plo.location = LAMP
-sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if (lamp or calib) else sun_strength; sun.angle = 0.0
+if spot:
+    sp = bpy.data.lights.new("spot", 'SPOT'); sp.energy = sun_strength; sp.shadow_soft_size = 0.0
+    sp.spot_size = math.radians(70); sp.spot_blend = 0.0
+    spo = bpy.data.objects.new("spot", sp); sc.collection.objects.link(spo)
+    spo.location = SPOT
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if (lamp or calib or spot) else sun_strength; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(72 if shadows else 60), 0, math.radians(170 if shadows else 150))
 bpy.context.view_layer.update()
@@ -110,6 +120,14 @@ if sunmap:
     cam.rotation_euler = so.rotation_euler
     cam.data.type = 'ORTHO'
     cam.data.ortho_scale = 48.0
+    cam.data.clip_start, cam.data.clip_end = 0.01, 500.0
+    sc.render.resolution_x = sc.render.resolution_y = 512
+if spotmap:
+    cam.location = SPOT
+    cam.rotation_euler = (0, 0, 0)   # down -Z, as the spot
+    cam.data.type = 'PERSP'
+    cam.data.sensor_fit = 'HORIZONTAL'
+    cam.data.angle = math.radians(90)
     cam.data.clip_start, cam.data.clip_end = 0.01, 500.0
     sc.render.resolution_x = sc.render.resolution_y = 512
 bpy.context.view_layer.update()

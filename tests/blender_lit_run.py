@@ -9,7 +9,9 @@ pixel). Then the same with shafts: the ball casts shadows in Cycles, and
 exrfog reads them from Cycles' own depth render of the scene along the
 sunlight (an orthographic second camera; its matrices written into the
 map's header here, as a renderer that exports its camera would). Exits 77
-(skipped) without Blender. And a point lamp, its radiant intensity read
+(skipped) without Blender. A spot (cosine=1: Cycles 3.x's spots fall as
+cos alpha inside the cone) whose shadow map is Cycles' own perspective
+depth render from the spot. And a point lamp, its radiant intensity read
 off Cycles' render of a white Lambertian plane (Blender's watts are not
 W/sr: the plane measures the factor), compared the same way."""
 import json
@@ -51,9 +53,11 @@ with tempfile.TemporaryDirectory() as d:
                                         ("darkS", "fog", 256, 0, "shadow"),
                                         ("sunmap", "sunmap", 1, 3, "shadow"),
                                         ("lampfog", "fog", 256, 300, "lamp"),
-                                        ("calib", "plain", 16, 300, "calib")):
+                                        ("calib", "plain", 16, 300, "calib"),
+                                        ("spotfog", "fog", 256, 40000, "spot shadow"),
+                                        ("spotmap", "spotmap", 1, 40000, "shadow")):
         r = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", scene,
-                 "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)] + ([extra] if extra else []),
+                 "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)] + extra.split(),
                 env)
         if "blender_lit: rendered" not in r.stdout:
             raise SystemExit("blender_lit: FAILED: Blender did not render " + name)
@@ -158,6 +162,53 @@ with tempfile.TemporaryDirectory() as d:
           % (inten, measured, cyc_l.mean(), ef_l.mean(), 100 * mean_rel, 100 * rows.max(),
              np.abs(diff).mean(), np.percentile(np.abs(diff), 99.9), cyc_l[~keep].mean(),
              ef_l[~keep].mean()))
+    # a spot with a perspective shadow map: the ball's shadow under it, from
+    # Cycles' own depth render by a camera at the spot (its matrices in the
+    # map's header, as for the sun; NDC y down, w = the camera's z)
+    sm = json.load(open(d + "/spotmap.exr.json"))
+    B = np.array(sm["c2w"]).reshape(4, 4)
+    c2w = np.zeros((4, 4))
+    c2w[0, :3], c2w[1, :3], c2w[2, :3], c2w[3, :3] = B[:3, 0], B[:3, 1], -B[:3, 2], B[:3, 3]
+    c2w[3, 3] = 1
+    w2c = np.linalg.inv(c2w)
+    k = 0.5 / np.tan(np.radians(sm["fov"]) / 2)
+    c2n = np.array([[k, 0, 0, 0], [0, -k, 0, 0], [0.5, 0.5, 1, 1], [0, 0, -0.01, 0]])
+    buf = oiio.ImageBuf(d + "/spotmap.exr")
+    spec = buf.spec()
+    z = buf.get_pixels(oiio.FLOAT)[..., spec.channelindex("Z")].copy()
+    out = oiio.ImageSpec(spec.width, spec.height, 1, oiio.FLOAT)
+    out.channelnames = ("Z",)
+    out.attribute("worldToCamera", oiio.TypeDesc("matrix"), tuple(w2c.flatten()))
+    out.attribute("worldToNDC", oiio.TypeDesc("matrix"), tuple((w2c @ c2n).flatten()))
+    mb = oiio.ImageBuf(out)
+    mb.set_pixels(oiio.ROI(0, spec.width, 0, spec.height, 0, 1, 0, 1), z[..., None])
+    if not mb.write(d + "/spotmap_h.exr"):
+        raise SystemExit("blender_lit: FAILED: cannot write the spot's map: " + mb.geterror())
+    # cosine=1: Cycles 3.x spots fall as cos alpha inside the cone too
+    spot = "spot:position=-1,2,5.5:aim=0,0,-1:cone=70:cosine=1:intensity=%r" % (40000 / (4 * np.pi))
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_spot.exr", "--light",
+         spot + ":shadow=%s/spotmap_h.exr" % d] + common)
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_spot_un.exr", "--light", spot] + common)
+    cyc_p = rgb(d + "/spotfog.exr") - rgb(d + "/darkS.exr")
+    ef_p = rgb(d + "/ef_spot.exr") - rgb(d + "/ef_darkS.exr")
+    ef_pu = rgb(d + "/ef_spot_un.exr") - rgb(d + "/ef_darkS.exr")
+    mean_rel = (cyc_p.mean() - ef_p.mean()) / ef_p.mean()
+    cb = cyc_p.sum(axis=(1, 2)).reshape(-1, 4).sum(axis=1)
+    eb = ef_p.sum(axis=(1, 2)).reshape(-1, 4).sum(axis=1)
+    lit_rows = eb > 0.1 * eb.max()   # the bands the cone lights
+    rows = np.abs(cb - eb)[lit_rows] / eb[lit_rows]
+    shade = 1 - ef_p.mean() / ef_pu.mean()
+    print("blender_lit: a 40 kW spot with a perspective shadow map: Cycles mean %.5f, exrfog "
+          "%.5f (%+.2f %%); lit bands of 4 rows within %.2f %%; per pixel |diff| mean %.5f, p99.9 "
+          "%.5f; the ball's shadow takes %.1f %% of the spot's light"
+          % (cyc_p.mean(), ef_p.mean(), 100 * mean_rel, 100 * rows.max(),
+             np.abs(cyc_p - ef_p).mean(), np.percentile(np.abs(cyc_p - ef_p), 99.9),
+             100 * shade))
+    if os.environ.get("BLENDER_LIT_KEEP"):
+        for f in ("spotfog.exr", "darkS.exr", "ef_spot.exr", "ef_darkS.exr", "spotmap_h.exr"):
+            shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)
+    if not (abs(mean_rel) < 0.02 and rows.max() < 0.06 and shade > 0.03):
+        raise SystemExit("blender_lit: FAILED: exrfog's shadowed spot differs from Cycles'")
     if os.environ.get("BLENDER_LIT_KEEP"):
         for f in ("lampfog.exr", "dark.exr", "ef_lamp.exr", "ef_dark.exr", "calib.exr"):
             shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)

@@ -508,6 +508,9 @@ static void test_errors(void **state)
     expect_light_error("sun:towards=0,1,0:intensity=-1", NULL, "intensity='-1'");
     expect_light_error("point:position=0,1,0:shadow=a.exr", NULL, "takes no shadow= map");
     expect_light_error("sun:towards=0,1,0:bias=0.1", NULL, "need shadow=FILE.exr");
+    expect_light_error("spot:position=0,1,0:aim=0,-1,0:cone=30:cosine=2", NULL,
+                       "cosine='2' is not 0 or 1");
+    expect_light_error("point:position=0,1,0:cosine=1", NULL, "unknown key 'cosine'");
     expect_light_error("spot:position=0,1,0:aim=0,-1,0:cone=30:outside=dark", NULL,
                        "outside='dark' is not lit or shadow");
     expect_light_error("point:intensity=3", NULL, "missing position");

@@ -52,7 +52,8 @@ static const char *const sun_keys =
     "towards, color, intensity, angle, name, shadow, bias, slope, outside";
 static const char *const point_keys = "position, color, intensity, radius, name";
 static const char *const spot_keys =
-    "position, aim, cone, blend, color, intensity, radius, name, shadow, bias, slope, outside";
+    "position, aim, cone, blend, cosine, color, intensity, radius, name, shadow, bias, slope, "
+    "outside";
 
 /* Reads l's shadow map through the context and checks it fits the light:
  * a sun's map is orthographic and looks along the sunlight, a spot's is a
@@ -136,7 +137,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
-           S_OUTSIDE = 4096, S_SLOPE = 8192 };
+           S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384 };
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);
@@ -177,6 +178,14 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             if (ef_parse_numbers(val, &blend, 1) || !(blend >= 0) || !(blend <= 1))
                 return ef_fail(err, "--light '%s': blend='%s' is not a number from 0 to 1", spec,
                                val);
+        } else if (!strcmp(key, "cosine") && l->kind == EF_LIGHT_SPOT) {
+            bit = S_COSINE;
+            if (!strcmp(val, "0") || !strcmp(val, "1"))
+                l->cosine = val[0] == '1';
+            else
+                return ef_fail(err, "--light '%s': cosine='%s' is not 0 or 1 (1: the spot's "
+                               "intensity also falls as cos alpha inside the cone, as Cycles' "
+                               "spots do)", spec, val);
         } else if (!strcmp(key, "color")) {
             bit = S_COLOR;
             if (light_color(ctx, spec, val, color, err))
@@ -503,11 +512,12 @@ double ef_spot_share(const ef_light *l, double cos_alpha)
     const double t = cos_alpha - l->cos_outer;
     if (!(t > 0))
         return 0;
+    const double c = l->cosine ? cos_alpha : 1;
     if (l->smooth > 0 && t < l->smooth) {
         const double x = t / l->smooth;
-        return x * x * (3 - 2 * x);
+        return c * x * x * (3 - 2 * x);
     }
-    return 1;
+    return c;
 }
 
 /* sum_c sigma_c albedo_c p_c(cos) per channel at x. */

@@ -45,6 +45,7 @@ typedef struct ef_light {
     double radius;                   /* E = I / (d^2 + radius^2), scene units */
     double angle;                    /* sun: angular diameter, radians (kept: no penumbra yet) */
     double cos_outer, smooth;        /* spot: cos(cone / 2), blend (1 - cos(cone / 2)) */
+    int cosine;                      /* spot: cosine=1, Cycles' extra cos alpha */
     char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
     char lit_aov[80];                /* and fog_lit.NAME (with a shadow map) */
     /* shadow=: its light-view depth render (shared, counted: copies of the
@@ -68,7 +69,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
 /* A spot's share of its intensity at cos alpha, alpha the angle from its
  * aim: 0 outside the cone, 1 inside the blend band, smoothstep across it
  * (x^2 (3 - 2x), x = (cos alpha - cos(cone/2)) / smooth; Blender's
- * spot_blend without its extra cosine). */
+ * spot_blend), times cos alpha with cosine=1 (Cycles 3.x's spot). */
 double ef_spot_share(const ef_light *l, double cos_alpha);
 
 /* The phase function of c at cos theta = l . u (l towards the light, u the
