@@ -570,6 +570,49 @@ static void test_sphere_convergence(void **state)
     ef_scene_free(&s);
 }
 
+/* ---- a fence: more lit intervals than the stack holds ---- */
+
+/* A map whose every other texel column is a post (an orthographic sun
+ * straight down): a ray under the posts along the fence is lit in 512
+ * pieces, past the 256 kept on the stack. Its light in a half-space fog
+ * equals the reference summed over the analytic gaps. */
+static void test_fence(void **state)
+{
+    (void) state;
+    const double at[3] = { 0, 100, 0 }, fwd[3] = { 0, -1, 0 };
+    lcam c = lcam_make(at, fwd, 1, 51.2, 1024);   /* 0.1 units per texel */
+    float *z = malloc((size_t) 1024 * 1024 * sizeof *z);
+    for (int j = 0; j < 1024; ++j)
+        for (int i = 0; i < 1024; ++i)
+            z[(size_t) j * 1024 + i] = i % 2 == 0 ? 10.0f : INFINITY;   /* posts at y = 90 */
+    ef_fog_scene s;
+    scene_one(&s, "halfspace:density=0.02:plane=0,1,0,-95", "sun:towards=0,1,0:intensity=2");
+    s.light[0].shadow = lcam_build(&c, z, 0, 0, 1);
+    free(z);
+    /* along the map's x axis (which lcam_make set), under the posts */
+    const double org[3] = { -51.2 * c.X[0], 50, -51.2 * c.X[2] + 0.05 * c.Y[2] };
+    const double dir[3] = { c.X[0], 0, c.X[2] };
+    const double D = 102.4;
+    double iv[600][2];
+    int n = 0;
+    for (int i = 1; i < 1024; i += 2) {
+        /* the gap between post columns i - 1 and i + 1 */
+        iv[n][0] = i * 0.1;
+        iv[n][1] = (i + 1) * 0.1;
+        ++n;
+    }
+    double got[256][2];
+    assert_true(ef_shadow_lit(s.light[0].shadow, org, dir, 0, D, got, 256) < 0);
+    ef_ray r = { { dir[0], dir[1], dir[2] }, D, D, { org[0], org[1], org[2] } };
+    ef_scene_bind(&s, r.org);
+    double S[3], E[3];
+    long double R[3];
+    ef_light_inscatter(&s, &s.light[0], &r, S, E);
+    ref_lit(&s, &s.light[0], &r, iv, n, R);
+    assert_true(fabs(S[0] - (double) R[0]) <= 1e-9 * fabsl(R[0]));
+    ef_scene_free(&s);
+}
+
 /* ---- acne: a low sun on the ground ---- */
 
 /* The ground y = 0 seen by a sun 8 degrees up: its texels' depths span
@@ -856,6 +899,7 @@ int main(void)
         cmocka_unit_test(test_plates_perspective),
         cmocka_unit_test(test_lit_reference),
         cmocka_unit_test(test_sphere_convergence),
+        cmocka_unit_test(test_fence),
         cmocka_unit_test(test_acne),
         cmocka_unit_test(test_cli),
     };

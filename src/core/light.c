@@ -1241,8 +1241,11 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
     }
 }
 
-/* Lit intervals a view segment can hold before the rest joins the last. */
-#define MAX_LIT 2048
+/* Lit intervals a view segment holds on the stack; more (foliage, a
+ * fence) go to the heap, up to MAX_LIT, beyond which the rest joins the
+ * last (shadow.h). */
+#define LIT_STACK 256
+#define MAX_LIT 65536
 
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3])
@@ -1257,18 +1260,24 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     if (!l->shadow) {
         inscatter_range(s, l, r, 0, D, S, E);
     } else {
-        double (*iv)[2] = malloc(MAX_LIT * sizeof *iv);
-        if (!iv) {   /* no memory: unknown, and said so through the error */
-            for (int k = 0; k < 3; ++k)
-                E[k] = INFINITY;
-        } else {
-            int n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, MAX_LIT);
-            if (n < 0)
-                n = -1 - n;
-            for (int i = 0; i < n; ++i)
-                inscatter_range(s, l, r, iv[i][0], iv[i][1], S, E);
-            free(iv);
+        double stack[LIT_STACK][2], (*iv)[2] = stack;
+        int n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, LIT_STACK);
+        if (n < 0) {
+            double (*heap)[2] = malloc(MAX_LIT * sizeof *heap);
+            if (heap) {
+                iv = heap;
+                n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, MAX_LIT);
+            } else {   /* no memory: what fitted, and the estimate says so */
+                for (int k = 0; k < 3; ++k)
+                    E[k] = INFINITY;
+            }
         }
+        if (n < 0)
+            n = -1 - n;
+        for (int i = 0; i < n; ++i)
+            inscatter_range(s, l, r, iv[i][0], iv[i][1], S, E);
+        if (iv != stack)
+            free(iv);
     }
     if (err)
         for (int k = 0; k < 3; ++k)
