@@ -252,6 +252,8 @@ typedef struct sh_q {
     int n, cap, over;
 } sh_q;
 
+/* Appends the lit interval [a, b] (merged with the last when they touch;
+ * past cap the last absorbs it, flagged in q->over). */
 static void emit(sh_q *q, double a, double b)
 {
     if (!(b > a))
@@ -271,6 +273,7 @@ static void emit(sh_q *q, double a, double b)
     q->iv[q->n - 1][1] = b;
 }
 
+/* The planar depth at t, its limit at t = inf. */
 static double depth_at(const sh_q *q, double t)
 {
     if (isinf(t))
