@@ -39,6 +39,29 @@ def run(args, env=None):
     return r
 
 
+def write_map(src, dst, cam, c2n):
+    """Cycles' depth render src with its camera (cam: Blender's camera to
+    world) written into dst's header in OpenEXR's convention (row vectors,
+    +Z forward: Blender's camera looks down its -Z), worldToNDC = worldToCamera
+    times c2n: what a renderer that exports its camera writes."""
+    B = np.array(cam["c2w"]).reshape(4, 4)
+    c2w = np.zeros((4, 4))
+    c2w[0, :3], c2w[1, :3], c2w[2, :3], c2w[3, :3] = B[:3, 0], B[:3, 1], -B[:3, 2], B[:3, 3]
+    c2w[3, 3] = 1
+    w2c = np.linalg.inv(c2w)
+    buf = oiio.ImageBuf(src)
+    spec = buf.spec()
+    z = buf.get_pixels(oiio.FLOAT)[..., spec.channelindex("Z")].copy()
+    out = oiio.ImageSpec(spec.width, spec.height, 1, oiio.FLOAT)
+    out.channelnames = ("Z",)
+    out.attribute("worldToCamera", oiio.TypeDesc("matrix"), tuple(w2c.flatten()))
+    out.attribute("worldToNDC", oiio.TypeDesc("matrix"), tuple((w2c @ c2n).flatten()))
+    mb = oiio.ImageBuf(out)
+    mb.set_pixels(oiio.ROI(0, spec.width, 0, spec.height, 0, 1, 0, 1), z[..., None])
+    if not mb.write(dst):
+        raise SystemExit("blender_lit: FAILED: cannot write the map: " + mb.geterror())
+
+
 def rgb(path):
     return oiio.ImageBuf(path).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
 
@@ -82,29 +105,11 @@ with tempfile.TemporaryDirectory() as d:
         raise SystemExit("blender_lit: FAILED: exrfog's sun light differs from Cycles'")
     if not ef.mean() > 0.05:
         raise SystemExit("blender_lit: FAILED: the sun added almost nothing")
-    # shafts: the sun's map of the scene, with its camera in the header in
-    # OpenEXR's convention (row vectors, +Z forward): Blender's camera looks
-    # down its -Z, so the camera's Z axis is minus Blender's
+    # shafts: the sun's map of the scene (orthographic, NDC y down)
     sm = json.load(open(d + "/sunmap.exr.json"))
-    B = np.array(sm["c2w"]).reshape(4, 4)
-    c2w = np.zeros((4, 4))
-    c2w[0, :3], c2w[1, :3], c2w[2, :3], c2w[3, :3] = B[:3, 0], B[:3, 1], -B[:3, 2], B[:3, 3]
-    c2w[3, 3] = 1
-    w2c = np.linalg.inv(c2w)
     s = 1.0 / sm["ortho_scale"]
-    c2n = np.array([[s, 0, 0, 0], [0, -s, 0, 0], [0, 0, 1e-3, 0], [0.5, 0.5, 0, 1]])
-    w2n = w2c @ c2n
-    buf = oiio.ImageBuf(d + "/sunmap.exr")
-    spec = buf.spec()
-    z = buf.get_pixels(oiio.FLOAT)[..., spec.channelindex("Z")].copy()
-    out = oiio.ImageSpec(spec.width, spec.height, 1, oiio.FLOAT)
-    out.channelnames = ("Z",)
-    out.attribute("worldToCamera", oiio.TypeDesc("matrix"), tuple(w2c.flatten()))
-    out.attribute("worldToNDC", oiio.TypeDesc("matrix"), tuple(w2n.flatten()))
-    mb = oiio.ImageBuf(out)
-    mb.set_pixels(oiio.ROI(0, spec.width, 0, spec.height, 0, 1, 0, 1), z[..., None])
-    if not mb.write(d + "/map.exr"):
-        raise SystemExit("blender_lit: FAILED: cannot write the map: " + mb.geterror())
+    write_map(d + "/sunmap.exr", d + "/map.exr", sm,
+              np.array([[s, 0, 0, 0], [0, -s, 0, 0], [0, 0, 1e-3, 0], [0.5, 0.5, 0, 1]]))
     camS = json.load(open(d + "/plainS.exr.json"))
     run([exrfog, d + "/plainS.exr", "-o", d + "/ef_shafts.exr", "--light",
          "sun:towards=%r,%r,%r:intensity=3:shadow=%s/map.exr" % (tuple(camS["towards"]) + (d,))]
@@ -166,24 +171,9 @@ with tempfile.TemporaryDirectory() as d:
     # Cycles' own depth render by a camera at the spot (its matrices in the
     # map's header, as for the sun; NDC y down, w = the camera's z)
     sm = json.load(open(d + "/spotmap.exr.json"))
-    B = np.array(sm["c2w"]).reshape(4, 4)
-    c2w = np.zeros((4, 4))
-    c2w[0, :3], c2w[1, :3], c2w[2, :3], c2w[3, :3] = B[:3, 0], B[:3, 1], -B[:3, 2], B[:3, 3]
-    c2w[3, 3] = 1
-    w2c = np.linalg.inv(c2w)
     k = 0.5 / np.tan(np.radians(sm["fov"]) / 2)
-    c2n = np.array([[k, 0, 0, 0], [0, -k, 0, 0], [0.5, 0.5, 1, 1], [0, 0, -0.01, 0]])
-    buf = oiio.ImageBuf(d + "/spotmap.exr")
-    spec = buf.spec()
-    z = buf.get_pixels(oiio.FLOAT)[..., spec.channelindex("Z")].copy()
-    out = oiio.ImageSpec(spec.width, spec.height, 1, oiio.FLOAT)
-    out.channelnames = ("Z",)
-    out.attribute("worldToCamera", oiio.TypeDesc("matrix"), tuple(w2c.flatten()))
-    out.attribute("worldToNDC", oiio.TypeDesc("matrix"), tuple((w2c @ c2n).flatten()))
-    mb = oiio.ImageBuf(out)
-    mb.set_pixels(oiio.ROI(0, spec.width, 0, spec.height, 0, 1, 0, 1), z[..., None])
-    if not mb.write(d + "/spotmap_h.exr"):
-        raise SystemExit("blender_lit: FAILED: cannot write the spot's map: " + mb.geterror())
+    write_map(d + "/spotmap.exr", d + "/spotmap_h.exr", sm,
+              np.array([[k, 0, 0, 0], [0, -k, 0, 0], [0.5, 0.5, 1, 1], [0, 0, -0.01, 0]]))
     # cosine=1: Cycles 3.x spots fall as cos alpha inside the cone too
     spot = "spot:position=-1,2,5.5:aim=0,0,-1:cone=70:cosine=1:intensity=%r" % (40000 / (4 * np.pi))
     run([exrfog, d + "/plainS.exr", "-o", d + "/ef_spot.exr", "--light",
