@@ -58,6 +58,22 @@ static void env_free(env *e)
         free(e->p[c]);
 }
 
+/* A 512 x 256 y-up map whose channel c is c0[c] + k[c] v, v = 1 + l.a the
+ * dipole (l the texel's direction). */
+static env env_dipole(const double a[3], const double k[3], const double c0[3])
+{
+    env e = env_make(512, 256);
+    for (int y = 0; y < e.h; ++y)
+        for (int x = 0; x < e.w; ++x) {
+            double d[3];
+            map_dir(0, x + 0.5, y + 0.5, e.w, e.h, 0, d);
+            const double v = 1 + a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+            for (int c = 0; c < 3; ++c)
+                e.p[c][(size_t) y * e.w + x] = (float) (c0[c] + k[c] * v);
+        }
+    return e;
+}
+
 static ef_sky_light *build(const env *e, int phase, double g, double rot)
 {
     ef_env_src src = { "synthetic", e->w, e->h, { e->p[0], e->p[1], e->p[2] } };
@@ -100,16 +116,8 @@ static void test_known_transforms(void **state)
         { EF_PHASE_HG, 0.8, 3e-3 },    { EF_PHASE_HG, -0.6, 6e-3 },    { EF_PHASE_CS, 0.7, 3e-3 },
         { EF_PHASE_HG, 0.95, 1e-2 },
     };
-    env e = env_make(512, 256);
-    for (int y = 0; y < e.h; ++y)
-        for (int x = 0; x < e.w; ++x) {
-            double d[3];
-            map_dir(0, x + 0.5, y + 0.5, e.w, e.h, 0, d);
-            const double v = 1 + a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
-            e.p[0][(size_t) y * e.w + x] = (float) v;
-            e.p[1][(size_t) y * e.w + x] = 2.0f;
-            e.p[2][(size_t) y * e.w + x] = (float) (2 * v);
-        }
+    const double k[3] = { 1, 0, 2 }, c0[3] = { 0, 2, 0 };   /* R = v, G = 2, B = 2 v */
+    env e = env_dipole(a, k, c0);
     for (size_t i = 0; i < sizeof ph / sizeof ph[0]; ++i) {
         ef_sky_light *k = build(&e, ph[i].phase, ph[i].g, 0);
         double worst = 0;
@@ -244,15 +252,8 @@ static void test_cli(void **state)
     snprintf(in, sizeof in, "%s/samples/sample.exr", src ? src : ".");
     /* the dipole 1 + l.a (y up), so that C = 1 + g u.a exactly */
     const double a[3] = { 0.2, 0.6, -0.5 };
-    env e = env_make(512, 256);
-    for (int y = 0; y < e.h; ++y)
-        for (int x = 0; x < e.w; ++x) {
-            double d[3];
-            map_dir(0, x + 0.5, y + 0.5, e.w, e.h, 0, d);
-            const double v = 1 + a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
-            for (int c = 0; c < 3; ++c)
-                e.p[c][(size_t) y * e.w + x] = (float) (v * (c + 1));
-        }
+    const double k[3] = { 1, 2, 3 }, c0[3] = { 0, 0, 0 };
+    env e = env_dipole(a, k, c0);
     char *envp = tu_path("sky_env.exr"), *out = tu_path("sky_out.exr");
     char *out2 = tu_path("sky_out2.exr");
     write_env(envp, &e);
