@@ -100,6 +100,7 @@ typedef struct nstate {
     ef_fbm fbm;
     double glx[GL_MAX + 1][GL_MAX], glw[GL_MAX + 1][GL_MAX];   /* Gauss-Legendre on [-1, 1] */
     int tab_off;                     /* separable: index in arr of the prefix tables, or 0 */
+    int hash_off;                    /* index in arr of the grid's hash tables (grid_tables) */
     /* preintegrated with an integer lacunarity: per axis one table of the
      * whole fbm factor over its period 256, piece by piece (merged.c below) */
     int merged, mpa[3];              /* pieces per period, per axis */
@@ -275,6 +276,10 @@ static void gauss_legendre(int n, double *x, double *w)
 }
 
 static void build_tables(nstate *s, double *tab);
+/* The grid's hash tables: 256 x 256 packed second-level hashes, then 512
+ * gradient-number pairs (grid_hash). */
+#define GRID_HASH_WORDS (65536 + 512)
+static void grid_tables(uint32_t *t);
 static int build_merged(const nstate *s, int a, double *tab, int cap, double *total);
 
 static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
@@ -400,7 +405,9 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     /* Else per-octave prefix tables (only the preintegrated method reads them). */
     const size_t ntab = sep && method == M_PREINT && !mp ? (size_t) 3 * (size_t) octaves * TAB : 0;
     const size_t nmerged = mp ? (size_t) s.naxes * MERGED_SIZE(mp) : 0;
-    double *arr = calloc(head + ntab + nmerged, sizeof *arr);
+    /* the grid's hash tables (uint32 each) */
+    const size_t nhash = GRID_HASH_WORDS / 2;
+    double *arr = calloc(head + ntab + nmerged + nhash, sizeof *arr);
     if (!arr)
         return ef_fail(err, "fog spec '%s': out of memory", c->spec);
     s.tab_off = ntab ? (int) head : 0;
@@ -422,10 +429,14 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
             at += MERGED_SIZE(mp);
         }
     }
+    if (nhash) {
+        s.hash_off = (int) (head + ntab + nmerged);
+        grid_tables((uint32_t *) (void *) (arr + s.hash_off));
+    }
     memcpy(arr, &s, sizeof s);
     free(c->arr);
     c->arr = arr;
-    c->narr = (int) (head + ntab + nmerged);
+    c->narr = (int) (head + ntab + nmerged + nhash);
     return 0;
 }
 
@@ -1125,22 +1136,46 @@ static const unsigned char grad2[512] = { EF_NOISE_PERM(EF_PERM_GRAD) EF_NOISE_P
 #undef EF_PERM_ID
 #undef EF_PERM_GRAD
 
+/* Fills the grid's hash tables: t[256 x + y] packs Perlin's four
+ * second-level hashes of column (x, y), p[p[x] + y], p[p[x] + y + 1],
+ * p[p[x + 1] + y], p[p[x + 1] + y + 1], a byte each; t[65536 + i] holds
+ * the gradient numbers of i and i + 1 in its two halves. One word and four
+ * pair reads then give a node's eight corners, where the permutation alone
+ * takes fourteen reads (the same numbers: ef_noise_cell_at's). */
+static void grid_tables(uint32_t *t)
+{
+    const unsigned char *p = perm2, *g = grad2;
+    for (int x = 0; x < 256; ++x)
+        for (int y = 0; y < 256; ++y) {
+            const int A = p[x] + y, B = p[x + 1] + y;
+            t[256 * x + y] = (uint32_t) p[A] | (uint32_t) p[A + 1] << 8 |
+                             (uint32_t) p[B] << 16 | (uint32_t) p[B + 1] << 24;
+        }
+    for (int i = 0; i < 512; ++i)
+        t[65536 + i] = (uint32_t) g[i] | (uint32_t) (i + 1 < 512 ? g[i + 1] : 0) << 16;
+}
+
+/* A component's grid hash tables (the state heads its arr). */
+static inline const uint32_t *grid_hash_table(const nstate *s)
+{
+    return (const uint32_t *) (const void *) ((const double *) (const void *) s + s->hash_off);
+}
+
 /* The corners' gradient numbers (hash & 15) of m nodes, packed 4 bits
- * per corner (corner k at bits 4k). Scalar on purpose: GCC turns the
- * table reads into vector gathers, slower here than plain loads. */
+ * per corner (corner k at bits 4k), from grid_tables' t. Scalar on
+ * purpose: GCC turns the table reads into vector gathers, slower here
+ * than plain loads. */
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((optimize("no-tree-vectorize")))
 #endif
-static void grid_hash(grid_batch *b, int m)
+static void grid_hash(const uint32_t *t, grid_batch *b, int m)
 {
-    const unsigned char *p = perm2, *g = grad2;
+    const uint32_t *gp = t + 65536;
     for (int c = 0; c < m; ++c) {
-        const int x = b->ic[0][c], y = b->ic[1][c], z = b->ic[2][c];
-        const int A = p[x] + y, AA = p[A] + z, AB = p[A + 1] + z;
-        const int B = p[x + 1] + y, BA = p[B] + z, BB = p[B + 1] + z;
-        b->g[c] = g[AA] | (unsigned) g[BA] << 4 | (unsigned) g[AB] << 8 | (unsigned) g[BB] << 12 |
-                  (unsigned) g[AA + 1] << 16 | (unsigned) g[BA + 1] << 20 |
-                  (unsigned) g[AB + 1] << 24 | (unsigned) g[BB + 1] << 28;
+        const int z = b->ic[2][c];
+        const uint32_t q = t[b->ic[0][c] << 8 | b->ic[1][c]];
+        b->g[c] = gp[(q & 255) + z] | gp[(q >> 16 & 255) + z] << 4 | gp[(q >> 8 & 255) + z] << 8 |
+                  gp[(q >> 24) + z] << 12;
     }
 }
 
@@ -1225,7 +1260,7 @@ EF_INLINE double grid_walk(rayc *R, int i, double nu, double t0, double t1, int 
             gb.ic[1][c] = (int) cy & 255;
             gb.ic[2][c] = (int) cz & 255;
         }
-        grid_hash(&gb, m);
+        grid_hash(grid_hash_table(R->s), &gb, m);
         /* in single precision, 8 nodes to a vector (IEEE operations in a
          * fixed order: the same bits with or without the vector unit) */
         for (int c = 0; c < m; ++c) {
