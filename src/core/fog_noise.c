@@ -1588,6 +1588,7 @@ typedef struct ladder {
     int n, kind[PLAN_OPTS];
     double cost[PLAN_OPTS], err[PLAN_OPTS];
     double slope[PLAN_OPTS];         /* (err[k] - err[k+1]) / (cost[k+1] - cost[k]) */
+    double slope2[PLAN_OPTS];        /* the same for err^2 */
 } ladder;
 
 static void ladder_unit(double kappa, ladder *ld)
@@ -1629,8 +1630,11 @@ static void ladder_unit(double kappa, ladder *ld)
         ld->cost[ld->n] = cost[j];
         ld->err[ld->n++] = err[j];
     }
-    for (int k = 0; k + 1 < ld->n; ++k)
+    for (int k = 0; k + 1 < ld->n; ++k) {
         ld->slope[k] = (ld->err[k] - ld->err[k + 1]) / (ld->cost[k + 1] - ld->cost[k]);
+        ld->slope2[k] = (ld->err[k] * ld->err[k] - ld->err[k + 1] * ld->err[k + 1]) /
+                        (ld->cost[k + 1] - ld->cost[k]);
+    }
 }
 
 /* The per-ray half of adaptive_linear's planner. */
@@ -1662,25 +1666,37 @@ static int seg_planner_init(const rayc *R, seg_planner *SP)
     return 1;
 }
 
-/* plan_octaves for one segment of adaptive_linear, from the ray's ladder:
- * the same drop rule, then from each kept octave's cheapest way the step
- * that buys the most error per ns until the estimates sum to tol/2. A
- * stretch under 2 lattice units counts as 2 (where the grid's calibration
- * stops). */
-static void plan_segment(const rayc *R, const seg_planner *SP, double L, double envmax,
-                         double tol, plan *P)
+/* plan_octaves for one segment of adaptive_linear, from the ray's ladder.
+ * Every estimate here is statistical (k standard deviations of an error
+ * that is a sum over many cells, or the hard bound where smaller), and
+ * the octaves' errors are independent (each its own lattice), so they add
+ * in variance: the segment's estimate is the root sum of squares of the
+ * dropped octaves' (three standard deviations of their line integrals, or
+ * their hard bound; at most tol/2 in all) and the kept ones' quadrature
+ * estimates, and it stays within tol. The envelope enters as it weighs
+ * the noise: a sum of independent errors weighted by env has the variance
+ * of the unweighted one times the mean of env^2 (emsq), a hard bound
+ * scales with the mean of env (emean); the largest value would overstate
+ * both where the envelope falls tenfold over a segment. From each kept
+ * octave's cheapest way, the step that buys the most variance per ns is
+ * taken until the sum fits. A stretch under 2 lattice units counts as 2
+ * (where the grid's calibration stops). */
+static void plan_segment(const rayc *R, const seg_planner *SP, double L, double emean,
+                         double emsq, double tol, plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves;
-    const double A = s->rho_max * fabs(s->contrast) * envmax, sqL = sqrt(L);
-    double drop = 0, quad = 0;
+    const double A = s->rho_max * fabs(s->contrast), erms = sqrt(emsq), sqL = sqrt(L);
+    const double tol2 = tol * tol;
+    double drop2 = 0, quad2 = 0;
     int kept = N;
     P->dropped = 0;
     for (int i = N - 1; i >= 1; --i) {
-        const double D = A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * L, SP->lrms[i] * sqL);
-        if (drop + D > tol / 4)
+        const double D =
+            A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * emean * L, SP->lrms[i] * erms * sqL);
+        if (drop2 + D * D > tol2 / 4)
             break;
-        drop += D;
+        drop2 += D * D;
         kept = i;
         P->dropped++;
     }
@@ -1693,20 +1709,21 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
         if (i >= kept)
             continue;
         const double Le = L * SP->sp[i] < 2 ? 2 / SP->sp[i] : L;
-        sc[i] = A * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
-        rate[i] = sc[i] / (SP->sp[i] * L);   /* error per ns, per unit slope */
+        sc[i] = A * erms * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
+        rate[i] = sc[i] * sc[i] / (SP->sp[i] * L);   /* variance per ns, per unit */
         pos[i] = 0;
         plan_set(P, i, ld->kind[0]);
-        quad += sc[i] * ld->err[0];
+        quad2 += sc[i] * sc[i] * ld->err[0] * ld->err[0];
     }
-    while (quad > tol / 2) {
+    const double room = tol2 - drop2;
+    while (quad2 > room) {
         int best = -1;
         double bg = 0;
         for (int i = 0; i < kept; ++i) {
             const int p = pos[i];
             if (p + 1 >= ld->n)
                 continue;
-            const double gn = rate[i] * ld->slope[p];
+            const double gn = rate[i] * ld->slope2[p];
             if (best < 0 || gn > bg) {
                 best = i;
                 bg = gn;
@@ -1714,12 +1731,12 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
         }
         if (best < 0)
             break;
-        quad -= sc[best] * ld->err[pos[best]];
+        const double e0 = ld->err[pos[best]], e1 = ld->err[pos[best] + 1];
+        quad2 -= sc[best] * sc[best] * (e0 * e0 - e1 * e1);
         pos[best]++;
-        quad += sc[best] * ld->err[pos[best]];
         plan_set(P, best, ld->kind[pos[best]]);
     }
-    P->est = drop + (quad > 0 ? quad : 0);
+    P->est = sqrt(drop2 + (quad2 > 0 ? quad2 : 0));
 }
 
 /* Chooses how each octave is integrated for tau within tol over a stretch
@@ -3048,7 +3065,9 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double envmax = fmax(e_t, e_tb);
         plan P;
         if (grid)
-            plan_segment(R, &SP, L, envmax, s->rho_max * quota / W, &P);
+            plan_segment(R, &SP, L, mj / L,
+                         decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
+                         s->rho_max * quota / W, &P);
         else
             plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
         /* An octave over the cell budget is not walked: its estimate here
@@ -3211,7 +3230,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
              * adaptive_linear; the walk alone otherwise) */
             if (isfinite(R.kh0) && isfinite(R.khs) && seg_planner_init(&R, &SP) &&
                 SP.sp[s->fbm.octaves - 1] * L < 0x1p24)
-                plan_segment(&R, &SP, L, envmax, tol, &P);
+                plan_segment(&R, &SP, L, envmax, envmax * envmax, tol, &P);
             else
                 plan_octaves(&R, L, envmax, tol, &P);
             info->dropped = P.dropped;
