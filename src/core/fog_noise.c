@@ -101,6 +101,7 @@ typedef struct nstate {
     double glx[GL_MAX + 1][GL_MAX], glw[GL_MAX + 1][GL_MAX];   /* Gauss-Legendre on [-1, 1] */
     int tab_off;                     /* separable: index in arr of the prefix tables, or 0 */
     int hash_off;                    /* index in arr of the grid's hash tables (grid_tables) */
+    int ladder_off;                  /* index in arr of the planner's ladders (ladders_fill) */
     /* preintegrated with an integer lacunarity: per axis one table of the
      * whole fbm factor over its period 256, piece by piece (merged.c below) */
     int merged, mpa[3];              /* pieces per period, per axis */
@@ -116,6 +117,8 @@ typedef struct nstate {
      * octave's reduced coordinate there, per axis (rays from cam_org). */
     double cam_org[3];
     long double cam_b[3][EF_FBM_MAX_OCTAVES];
+    /* each octave's noise and gradient there (the grid's end terms at t = 0) */
+    double cam_n[EF_FBM_MAX_OCTAVES], cam_g[EF_FBM_MAX_OCTAVES][3];
     struct mpoint { double k, y, I; int p; } cam_pt[3];
 } nstate;
 
@@ -280,6 +283,8 @@ static void build_tables(nstate *s, double *tab);
  * gradient-number pairs (grid_hash). */
 #define GRID_HASH_WORDS (65536 + 512)
 static void grid_tables(uint32_t *t);
+static size_t ladders_words(void);
+static void ladders_fill(double *at);
 static int build_merged(const nstate *s, int a, double *tab, int cap, double *total);
 
 static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *err)
@@ -405,8 +410,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     /* Else per-octave prefix tables (only the preintegrated method reads them). */
     const size_t ntab = sep && method == M_PREINT && !mp ? (size_t) 3 * (size_t) octaves * TAB : 0;
     const size_t nmerged = mp ? (size_t) s.naxes * MERGED_SIZE(mp) : 0;
-    /* the grid's hash tables (uint32 each) */
-    const size_t nhash = GRID_HASH_WORDS / 2;
+    /* the grid's hash tables (uint32 each) and the planner's ladders */
+    const size_t nhash = GRID_HASH_WORDS / 2 + ladders_words();
     double *arr = calloc(head + ntab + nmerged + nhash, sizeof *arr);
     if (!arr)
         return ef_fail(err, "fog spec '%s': out of memory", c->spec);
@@ -432,6 +437,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     if (nhash) {
         s.hash_off = (int) (head + ntab + nmerged);
         grid_tables((uint32_t *) (void *) (arr + s.hash_off));
+        s.ladder_off = s.hash_off + GRID_HASH_WORDS / 2;
+        ladders_fill(arr + s.ladder_off);
     }
     memcpy(arr, &s, sizeof s);
     free(c->arr);
@@ -637,6 +644,7 @@ typedef struct rayc {
     double kh0, khs;                 /* k h0 and k hs: the envelope is e^-(kh0 + khs t) */
     lin u[MAXLIN];                   /* noise: octave i axis a at 3 i + a; separable: a * N + i */
     double evals, cells;
+    int cam;                         /* starts at the bound camera (its lines, cam_n, cam_g) */
 } rayc;
 
 static long double env_at(const rayc *R, long double t)
@@ -676,6 +684,7 @@ static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
 {
     R->s = s;
     R->evals = R->cells = 0;
+    R->cam = 0;
     const ef_fog_functional up = { { s->up[0], s->up[1], s->up[2] }, -s->base };
     const ef_dd h0 = ef_dd_dot3(up.n, r->org, up.d), hs = ef_dd_dot3(up.n, r->dir, 0.0);
     R->h0 = (long double) h0.hi + h0.lo;
@@ -687,6 +696,7 @@ static void ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     const int N = s->fbm.octaves;
     const int hit = s->cam_lines && r->org[0] == s->cam_org[0] && r->org[1] == s->cam_org[1] &&
                     r->org[2] == s->cam_org[2];
+    R->cam = hit;
     for (int a = 0; a < 3; ++a) {
         long double q0 = 0, dq;
         if (hit)
@@ -1069,24 +1079,27 @@ EF_MULTIVERSION static double octave_integral_env(rayc *R, int i, int n, double 
 /* Octave noise at lattice point x and its derivative along d (d in lattice
  * units per unit t): Perlin's formula differentiated term by term (each
  * corner's gradient term is linear, the fades' derivative 30 t^2 (t-1)^2). */
-static double noise_dval(const double x[3], const double d[3], double *dn)
+static double noise_dval(const uint32_t *tab, const double x[3], const double d[3], double *dn)
 {
-    int64_t C[3];
+    int C[3];
     double f[3], s[3], ds[3];
     for (int a = 0; a < 3; ++a) {
         /* x is near the ray's start or a segment's: an int64 holds its
          * floor */
         const double fl = floor(x[a]);
         f[a] = x[a] - fl;
-        C[a] = (int64_t) fl & 255;
+        C[a] = (int) ((int64_t) fl & 255);
         s[a] = ef_noise_fade_(f[a]);
         ds[a] = 30 * f[a] * f[a] * (f[a] - 1) * (f[a] - 1) * d[a];
     }
-    ef_noise_cell nc;
-    ef_noise_cell_at(C[0], C[1], C[2], &nc);
+    /* the corners' gradient numbers from the grid's tables (grid_hash) */
+    const uint32_t *gp = tab + 65536, q = tab[C[0] << 8 | C[1]];
+    const uint32_t c0 = gp[(q & 255) + C[2]], c1 = gp[(q >> 16 & 255) + C[2]],
+                   c2 = gp[(q >> 8 & 255) + C[2]], c3 = gp[(q >> 24) + C[2]];
+    const unsigned h[8] = { c0 & 15, c1 & 15, c2 & 15, c3 & 15, c0 >> 16, c1 >> 16, c2 >> 16, c3 >> 16 };
     double g[8], dg[8];
     for (int k = 0; k < 8; ++k) {
-        const double *G = grad_vec[nc.h[k] & 15];
+        const double *G = grad_vec[h[k]];
         g[k] = G[0] * (f[0] - (k & 1)) + G[1] * (f[1] - ((k >> 1) & 1)) + G[2] * (f[2] - (k >> 2));
         dg[k] = G[0] * d[0] + G[1] * d[1] + G[2] * d[2];
     }
@@ -1194,6 +1207,12 @@ static double grid_fprime(const rayc *R, int i, double t, int env, double e, gri
     if (cache && cache->valid && cache->t == t) {
         n = cache->n;
         dn = cache->dn;
+    } else if (t == 0 && R->cam) {
+        /* at the camera: its noise and gradient, bound once per frame */
+        const lin *u = &R->u[3 * i];
+        const double *g = R->s->cam_g[i];
+        n = R->s->cam_n[i];
+        dn = g[0] * u[0].dd + g[1] * u[1].dd + g[2] * u[2].dd;
     } else {
         double x[3], d[3];
         for (int a = 0; a < 3; ++a) {
@@ -1201,7 +1220,7 @@ static double grid_fprime(const rayc *R, int i, double t, int env, double e, gri
             x[a] = u->bd + t * u->dd;
             d[a] = u->dd;
         }
-        n = noise_dval(x, d, &dn);
+        n = noise_dval(grid_hash_table(R->s), x, d, &dn);
         if (cache)
             *cache = (grid_end) { t, n, dn, e, 1 };
     }
@@ -1637,9 +1656,28 @@ static void ladder_unit(double kappa, ladder *ld)
     }
 }
 
+/* The ladders for kappa in [1, sqrt 3] (every direction's |d|_1 / |d|_2),
+ * at LADDER_BINS + 1 evenly spaced values: a ray takes the one at or
+ * below its kappa, whose walk costs no more and errs no less than its own
+ * (the estimates stay on the safe side; only the choice may differ). */
+#define LADDER_BINS 32
+#define LADDER_WORDS ((sizeof(ladder) + sizeof(double) - 1) / sizeof(double))
+#define KAPPA_SPAN 0.7320508075688772   /* sqrt 3 - 1 */
+
+static size_t ladders_words(void)
+{
+    return (LADDER_BINS + 1) * LADDER_WORDS;
+}
+
+static void ladders_fill(double *at)
+{
+    for (int j = 0; j <= LADDER_BINS; ++j)
+        ladder_unit(1 + KAPPA_SPAN * j / LADDER_BINS, (ladder *) (void *) (at + j * LADDER_WORDS));
+}
+
 /* The per-ray half of adaptive_linear's planner. */
 typedef struct seg_planner {
-    ladder ld;
+    const ladder *ld;
     double sp[EF_FBM_MAX_OCTAVES];     /* octave i's lattice units per unit t */
     double isp[EF_FBM_MAX_OCTAVES];    /* 1 / sqrt(sp_i) */
     double lrms[EF_FBM_MAX_OCTAVES];   /* 3 LINE_RMS sqrt(lambda_i): the drop rule */
@@ -1650,7 +1688,7 @@ static int seg_planner_init(const rayc *R, seg_planner *SP)
 {
     const nstate *s = R->s;
     double kappa = 1;
-    SP->ld.n = 0;
+    SP->ld = NULL;
     for (int i = 0; i < s->fbm.octaves; ++i) {
         const lin *u = &R->u[3 * i];
         const double dx = u[0].dd, dy = u[1].dd, dz = u[2].dd;
@@ -1662,7 +1700,10 @@ static int seg_planner_init(const rayc *R, seg_planner *SP)
         if (i == 0)
             kappa = (fabs(dx) + fabs(dy) + fabs(dz)) / SP->sp[0];
     }
-    ladder_unit(kappa < 1 ? 1 : kappa, &SP->ld);
+    int bin = (int) ((kappa - 1) * (LADDER_BINS / KAPPA_SPAN));
+    bin = bin < 0 ? 0 : bin > LADDER_BINS ? LADDER_BINS : bin;
+    SP->ld = (const ladder *) (const void *) ((const double *) (const void *) s + s->ladder_off +
+                                              (size_t) bin * LADDER_WORDS);
     return 1;
 }
 
@@ -1700,7 +1741,7 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
         kept = i;
         P->dropped++;
     }
-    const ladder *ld = &SP->ld;
+    const ladder *ld = SP->ld;
     double sc[EF_FBM_MAX_OCTAVES], rate[EF_FBM_MAX_OCTAVES];
     int pos[EF_FBM_MAX_OCTAVES];
     for (int i = 0; i < N; ++i) {
@@ -2404,6 +2445,14 @@ static void bind_noise(ef_fog_component *c, const double org[3])
             for (int i = 0; i < s->fbm.octaves; ++i)
                 s->cam_b[a][i] = octave_line(s, i, q0, dq, a).b;
             s->cam_org[a] = org[a];
+        }
+        for (int i = 0; i < s->fbm.octaves; ++i) {
+            const double x[3] = { (double) s->cam_b[0][i], (double) s->cam_b[1][i],
+                                  (double) s->cam_b[2][i] };
+            for (int a = 0; a < 3; ++a) {
+                const double e[3] = { a == 0, a == 1, a == 2 };
+                s->cam_n[i] = noise_dval(grid_hash_table(s), x, e, &s->cam_g[i][a]);
+            }
         }
         s->cam_lines = 1;
         return;
