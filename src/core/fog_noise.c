@@ -1266,41 +1266,47 @@ EF_INLINE double grid_walk(rayc *R, int i, double nu, double t0, double t1, int 
     double pw[GRID_BATCH], wv[GRID_BATCH], eb = e0 * rh;
     for (long j0 = 0; j0 < n; j0 += GRID_BATCH) {
         const int m = n - j0 < GRID_BATCH ? (int) (n - j0) : GRID_BATCH;
+        /* whole vectors of 8 (the nodes past m lie on the same line, their
+         * values unused): no scalar tails, which cost more than the nodes
+         * on the short rays of a near frame */
+        const int mv = (m + 7) & ~7;
         const double o0 = ((double) j0 + 0.5) * h;
         /* plain loops over the batch's arrays, which GCC vectorises */
-        for (int c = 0; c < m; ++c) {
-            const double o = o0 + c * h;
-            const double x = b[0] + o * d[0], y = b[1] + o * d[1], z = b[2] + o * d[2];
-            const double cx = floor(x), cy = floor(y), cz = floor(z);
-            gb.f[0][c] = (float) (x - cx);
-            gb.f[1][c] = (float) (y - cy);
-            gb.f[2][c] = (float) (z - cz);
-            gb.ic[0][c] = (int) cx & 255;
-            gb.ic[1][c] = (int) cy & 255;
-            gb.ic[2][c] = (int) cz & 255;
-        }
-        grid_hash(grid_hash_table(R->s), &gb, m);
+        for (int c8 = 0; c8 < mv; c8 += 8)
+            for (int c = c8; c < c8 + 8; ++c) {
+                const double o = o0 + c * h;
+                const double x = b[0] + o * d[0], y = b[1] + o * d[1], z = b[2] + o * d[2];
+                const double cx = floor(x), cy = floor(y), cz = floor(z);
+                gb.f[0][c] = (float) (x - cx);
+                gb.f[1][c] = (float) (y - cy);
+                gb.f[2][c] = (float) (z - cz);
+                gb.ic[0][c] = (int) cx & 255;
+                gb.ic[1][c] = (int) cy & 255;
+                gb.ic[2][c] = (int) cz & 255;
+            }
+        grid_hash(grid_hash_table(R->s), &gb, mv);
         /* in single precision, 8 nodes to a vector (IEEE operations in a
          * fixed order: the same bits with or without the vector unit) */
-        for (int c = 0; c < m; ++c) {
-            const float fx = gb.f[0][c], fy = gb.f[1][c], fz = gb.f[2][c];
-            float g[8];
-            for (int k = 0; k < 8; ++k) {
-                const unsigned sh = 2 * ((gb.g[c] >> 4 * k) & 15);
-                const float gx = (float) (int) ((GRAD_X1 >> sh) & 3) - 1,
-                            gy = (float) (int) ((GRAD_Y1 >> sh) & 3) - 1,
-                            gz = (float) (int) ((GRAD_Z1 >> sh) & 3) - 1;
-                g[k] = gx * (fx - (float) (k & 1)) + gy * (fy - (float) ((k >> 1) & 1)) +
-                       gz * (fz - (float) (k >> 2));
+        for (int c8 = 0; c8 < mv; c8 += 8)
+            for (int c = c8; c < c8 + 8; ++c) {
+                const float fx = gb.f[0][c], fy = gb.f[1][c], fz = gb.f[2][c];
+                float g[8];
+                for (int k = 0; k < 8; ++k) {
+                    const unsigned sh = 2 * ((gb.g[c] >> 4 * k) & 15);
+                    const float gx = (float) (int) ((GRAD_X1 >> sh) & 3) - 1,
+                                gy = (float) (int) ((GRAD_Y1 >> sh) & 3) - 1,
+                                gz = (float) (int) ((GRAD_Z1 >> sh) & 3) - 1;
+                    g[k] = gx * (fx - (float) (k & 1)) + gy * (fy - (float) ((k >> 1) & 1)) +
+                           gz * (fz - (float) (k >> 2));
+                }
+                const float uu = fx * fx * fx * (fx * (fx * 6 - 15) + 10),
+                            vv = fy * fy * fy * (fy * (fy * 6 - 15) + 10),
+                            ww = fz * fz * fz * (fz * (fz * 6 - 15) + 10);
+                const float a0 = g[0] + uu * (g[1] - g[0]), a1 = g[2] + uu * (g[3] - g[2]),
+                            a2 = g[4] + uu * (g[5] - g[4]), a3 = g[6] + uu * (g[7] - g[6]);
+                const float x0 = a0 + vv * (a1 - a0), x1 = a2 + vv * (a3 - a2);
+                gb.v[c] = x0 + ww * (x1 - x0);
             }
-            const float uu = fx * fx * fx * (fx * (fx * 6 - 15) + 10),
-                        vv = fy * fy * fy * (fy * (fy * 6 - 15) + 10),
-                        ww = fz * fz * fz * (fz * (fz * 6 - 15) + 10);
-            const float a0 = g[0] + uu * (g[1] - g[0]), a1 = g[2] + uu * (g[3] - g[2]),
-                        a2 = g[4] + uu * (g[5] - g[4]), a3 = g[6] + uu * (g[7] - g[6]);
-            const float x0 = a0 + vv * (a1 - a0), x1 = a2 + vv * (a3 - a2);
-            gb.v[c] = x0 + ww * (x1 - x0);
-        }
         double sum = 0;
         if (env) {
             /* r^c in doublings (each within c ulps: far below any
