@@ -3242,17 +3242,12 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
             tend = tail_end(&R, t0, 1e-16, 0);
         else
             tend = tail_end(&R, t0, 1e-6, 0);
-        const long double a = s->k * R.hs;
-        tail = (double) (shape_bound(s) * env_at(&R, tend) / a);
+        const long double a = s->k * R.hs, e_end = env_at(&R, tend);
+        tail = (double) (shape_bound(s) * e_end / a);
         if (linear)
-            tail -= (double) (env_at(&R, tend) / a);   /* the mean part is exact to infinity */
+            tail -= (double) (e_end / a);   /* the mean part is exact to infinity */
     }
     const int opaque = opaque_cut(&R, t0, &tend);
-    const double L = (double) (tend - t0);
-    const double envmax = (double) fmaxl(env_at(&R, t0), env_at(&R, tend));
-    double mean = 0;
-    if (linear)
-        mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
     /* The segment walk plans in double: not where k h0 or k hs overflow (a
      * falloff near DBL_MAX), which the general path below handles. */
     if (linear && s->method == M_ADAPTIVE && s->ttol > 0 &&
@@ -3269,6 +3264,11 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
         info->cells = R.cells;
         return;
     }
+    const double L = (double) (tend - t0);
+    const double envmax = (double) fmaxl(env_at(&R, t0), env_at(&R, tend));
+    double mean = 0;
+    if (linear)
+        mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
     const double tol = s->ttol > 0 && s->method == M_ADAPTIVE
                            ? ttol_budget(&R, t0, tend, L, envmax, linear) : s->tol;
     switch (s->method) {
