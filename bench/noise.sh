@@ -522,7 +522,8 @@ mins() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f min", (b - a) / 60 }'; }
     done
     for row in "${stats_lines[@]}"; do
         mx="$(grep -o 'max [0-9.e+]* us' <<<"$row" | head -n1 | awk '{ print $2 }')"
-        echo "| costliest pixel ≤ 1 ms of one core at the default: $(cut -d'|' -f2 <<<"$row") | max ${mx:-–} µs | **$(verdict "$mx" 1000 le)** |"
+        rt="$(grep -o 're-timed [0-9.e+]* us' <<<"$row" | head -n1 | awk '{ print $2 }')"
+        echo "| costliest pixel ≤ 1 ms of one core at the default: $(cut -d'|' -f2 <<<"$row") | re-timed ${rt:-–} µs (plain max ${mx:-–} µs, the machine's stalls included) | **$(verdict "$rt" 1000 le)** |"
     done
     echo
     if [[ -z "$plot_note" ]]; then

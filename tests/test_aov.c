@@ -752,6 +752,17 @@ static void test_stats(void **state)
     assert_run(0, "'%s' -o '%s' --fog %s --stats", in, out, noise);
     snprintf(want, sizeof want, "fog[0] %s: %d pixels;", noise, W * H);
     assert_contains(tu_err, want);
+    /* The costliest pixel re-timed: measured, and no more than the
+     * slowest single timing it was taken from allows (its least of three
+     * is at most that one; the plain maximum caps a pixel by its span's
+     * CPU time, so allow a factor for that cap). */
+    const char *rt = strstr(tu_err, "costliest pixel re-timed ");
+    assert_non_null(rt);
+    const char *mx = strstr(tu_err, "us, max ");
+    assert_non_null(mx);
+    const double retimed = atof(rt + strlen("costliest pixel re-timed ")),
+                 plain = atof(mx + strlen("us, max "));
+    assert_true(retimed > 0 && retimed <= 2 * plain);
     free(in);
     free(out);
 }

@@ -190,6 +190,12 @@ void ef_tau_stats_time(ef_tau_stats *s, double ns, int clean)
     s->time_hist[ef_stats_bin(ns)]++;
 }
 
+void ef_tau_stats_retimed(ef_tau_stats *s, double ns)
+{
+    if (ns > s->time_max_retimed)
+        s->time_max_retimed = ns;
+}
+
 void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
 {
     a->pixels += b->pixels;
@@ -204,6 +210,7 @@ void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
     a->time_sum += b->time_sum;
     a->time_max = fmax(a->time_max, b->time_max);
     a->time_max_clean = fmax(a->time_max_clean, b->time_max_clean);
+    a->time_max_retimed = fmax(a->time_max_retimed, b->time_max_retimed);
     for (int i = 0; i < EF_STATS_BINS; ++i) {
         a->evals_hist[i] += b->evals_hist[i];
         a->time_hist[i] += b->time_hist[i];

@@ -89,6 +89,7 @@ typedef struct ef_tau_stats {
     unsigned evals_hist[EF_STATS_BINS], time_hist[EF_STATS_BINS];
     double time_sum, time_max, timed;
     double time_max_clean;    /* the max over spans whose CPU time covers their wall time */
+    double time_max_retimed;  /* the max of re-timed costliest pixels (ef_tau_stats_retimed) */
     /* The caller's monotonic clock and its thread's CPU clock, in ns, or
      * NULL: no timing (the core reads no clock of its own). A pixel's time
      * is its wall time, capped by the CPU time of its span of pixels (so
@@ -103,6 +104,9 @@ void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T)
 /* Adds one pixel's fog time (ns) to s; clean: its span was not
  * descheduled (its wall time is CPU time). */
 void ef_tau_stats_time(ef_tau_stats *s, double ns, int clean);
+/* Records the re-timed cost (ns, the least of several timings) of a
+ * pixel that was the slowest of its span. */
+void ef_tau_stats_retimed(ef_tau_stats *s, double ns);
 /* Adds the totals of b to a. */
 void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b);
 /* The bin of value v >= 0: 8 per power of two of v + 1 (a value is within

@@ -1738,7 +1738,7 @@ static void plan_segment(const rayc *R, const seg_planner *SP, double L, double 
     double drop2 = 0, quad2 = 0;
     int kept = N;
     P->dropped = 0;
-    for (int i = N - 1; i >= 1; --i) {
+    for (int i = N - 1; i >= 0; --i) {
         const double D =
             A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * emean * L, SP->lrms[i] * erms * sqL);
         if (drop2 + D * D > tol2 / 4)
@@ -3076,15 +3076,8 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
      * exponentials, one or two per segment). */
     const double a_env = s->k > 0 ? R->khs : 0, e_tend = env_d(R, (double) tend);
     double e_t = env_d(R, (double) t0);
+    int rest_try = 0;   /* the last segment dropped every octave */
     while (t < tend) {
-        long double tb = t + Lmax;
-        const long double tr = env_reach_e(R, e_t, (double) t, SEG_TAU / s->rho_max);
-        if (tr < tb)
-            tb = tr;
-        if (!(tb < tend) || !(tb > t))
-            tb = tend;
-        double e_tb;
-        const double mj = env_step(e_t, a_env, (double) (tb - t), &e_tb);
         const double rest =
             decay_int(a_env > 0 ? e_t : e_tend, fabs(a_env), (double) (tend - t));
         const double E = sqrt(E2);
@@ -3113,18 +3106,44 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
             break;
         }
         const double togo = (tau_stop - rmin * ulo) / rmin;
-        const double vis = fmin(rest, 2 * fmax(togo, mj));
-        const double share = vis > mj ? mj / vis : 1;
-        const double quota = sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
-        const double L = (double) (tb - t);
-        const double envmax = fmax(e_t, e_tb);
+        /* Where the last segment dropped every octave and the envelope
+         * only thins from here, the whole rest is tried as one segment
+         * first, up to where the mean fog would take the ray twice past
+         * its stop (which the next step then finds): if its noise fits the
+         * budget too, a sky ray's long tail costs one plan, not a segment
+         * per stretch. */
+        long double tb;
+        double e_tb, mj, L, envmax;
         plan P;
-        if (grid)
-            plan_segment(R, &SP, L, mj / L,
-                         decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
-                         s->rho_max * quota / W, &P);
-        else
-            plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+        for (int whole = rest_try && a_env >= 0;; whole = 0) {
+            tb = t + Lmax;
+            const long double tr = env_reach_e(R, e_t, (double) t, SEG_TAU / s->rho_max);
+            if (tr < tb)
+                tb = tr;
+            if (whole) {
+                tb = env_reach_e(R, e_t, (double) t, 2 * togo);
+                if (!(tb > t + Lmax))
+                    tb = t + Lmax;
+            }
+            if (!(tb < tend) || !(tb > t))
+                tb = tend;
+            mj = env_step(e_t, a_env, (double) (tb - t), &e_tb);
+            const double vis = fmin(rest, 2 * fmax(togo, mj));
+            const double share = vis > mj ? mj / vis : 1;
+            const double quota =
+                sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
+            L = (double) (tb - t);
+            envmax = fmax(e_t, e_tb);
+            if (grid)
+                plan_segment(R, &SP, L, mj / L,
+                             decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
+                             s->rho_max * quota / W, &P);
+            else
+                plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+            if (!whole || P.dropped == N)
+                break;
+        }
+        rest_try = P.dropped == N;
         /* An octave over the cell budget is not walked: its estimate here
          * is the drop rule's, segment by segment like any other. */
         for (int i = 0; i < N; ++i)
@@ -3149,6 +3168,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
             }
         if (P.dropped > dropped)
             dropped = P.dropped;
+
         for (int i = 0; i < N; ++i) {
             if (!P.q[i])
                 continue;

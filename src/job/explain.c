@@ -319,10 +319,11 @@ void ef_print_tau_stats(ef_job *J, const ef_fog_scene *s, const ef_tau_stats *st
         fprintf(J->msg,
                 "exrfog: stats: fog time per pixel (every component, one core): mean %.2f "
                 "us, p99.9 %.3g us, max %.3g us (%.3g us where the thread was not "
-                "descheduled)\n",
+                "descheduled; costliest pixel re-timed %.3g us)\n",
                 st[0].time_sum / st[0].timed / 1e3,
                 ef_stats_quantile(st[0].time_hist, st[0].timed, 0.999) / 1e3,
-                st[0].time_max / 1e3, st[0].time_max_clean / 1e3);
+                st[0].time_max / 1e3, st[0].time_max_clean / 1e3,
+                st[0].time_max_retimed / 1e3);
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         if (!c->model->tau_info)
