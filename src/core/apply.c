@@ -38,18 +38,23 @@ static double aov_err(double T, double e)
 }
 
 /* One light's a S + (1 - a) S_far (far: the far segment when it differs
- * from r; need_inf: the far part shows). */
+ * from r; need_inf: the far part shows), and the same sum of their error
+ * estimates in ve (NULL: not wanted). */
 static void coverage_light(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
-                           const ef_ray *far, double a, int need_inf, double v[3])
+                           const ef_ray *far, double a, int need_inf, double v[3], double ve[3])
 {
-    double S[3], Sf[3];
-    ef_light_inscatter(s, l, r, S, NULL);
+    double S[3], Sf[3], E[3], Ef[3];
+    ef_light_inscatter(s, l, r, S, E);
     memcpy(Sf, S, sizeof Sf);
+    memcpy(Ef, E, sizeof Ef);
     if (far)
-        ef_light_inscatter(s, l, far, Sf, NULL);
-    for (int k = 0; k < 3; ++k)
+        ef_light_inscatter(s, l, far, Sf, Ef);
+    for (int k = 0; k < 3; ++k) {
         /* a share of 0 takes nothing, even an infinite S */
         v[k] = (a > 0.0 ? a * S[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+        if (ve)
+            ve[k] = (a > 0.0 ? a * E[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Ef[k] : 0.0);
+    }
 }
 
 /* The lights' in-scattered light over the pixel's coverage: a S along the
@@ -57,7 +62,7 @@ static void coverage_light(const ef_fog_scene *s, const ef_light *l, const ef_ra
  * With the lit AOV, a shadowed light's share that passes its occluders:
  * the same sum without the map in the denominator. */
 static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int need_inf,
-                       double c[3], const ef_aov_out *aov, size_t i)
+                       double c[3], const ef_aov_out *aov, size_t i, double lerr[3])
 {
     ef_ray far;
     const int other = need_inf && !ef_scene_far_ray(s, r, &far);
@@ -65,12 +70,14 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
     /* light by light (each its own AOV layer), summed in the scene's order */
     for (int j = 0; j < s->nlight; ++j) {
         const int lit = aov && aov->lit[j];
-        double v[3], u[3] = { 0, 0, 0 };
-        coverage_light(s, &s->light[j], r, other ? &far : NULL, a, need_inf, v);
+        double v[3], ve[3], u[3] = { 0, 0, 0 };
+        coverage_light(s, &s->light[j], r, other ? &far : NULL, a, need_inf, v, ve);
+        for (int k = 0; k < 3; ++k)
+            lerr[k] += ve[k];
         if (lit) {
             ef_light bare = s->light[j];
             bare.shadow = NULL;
-            coverage_light(s, &bare, r, other ? &far : NULL, a, need_inf, u);
+            coverage_light(s, &bare, r, other ? &far : NULL, a, need_inf, u, NULL);
             const double num = v[0] + v[1] + v[2], den = u[0] + u[1] + u[2];
             aov->lit[j][i] = den > 0 && isfinite(den) ? to_float(num / den) : 1.0f;
         }
@@ -578,8 +585,9 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                     for (int k = 0; k < 3; ++k)
                         aov->ambient[k][i] =
                             to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
+                double lerr[3] = { 0, 0, 0 };
                 if (s->nlight)
-                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i);
+                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i, lerr);
                 if (s->sky_light)
                     add_sky(s, &sp->r[j], surf, inf, a_in, sp->need_inf[j], c, aov, i);
                 for (int k = 0; k < 3; ++k)
@@ -600,8 +608,11 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                     for (int nn = 0; want_info && nn < s->ncomp; ++nn)
                         for (int k = 0; k < 3; ++k)
                             e[k] += info[nn].err[k];
+                    /* the lights' in-scatter estimates add in the image's
+                     * units: the composite moves by |dT| |surface - fog|
+                     * plus them */
                     for (int k = 0; k < 3; ++k)
-                        aov->err[k][i] = to_float(aov_err(surf->T[k], e[k]));
+                        aov->err[k][i] = to_float(aov_err(surf->T[k], e[k]) + lerr[k]);
                 }
                 if (stats && want_info)
                     for (int nn = 0; nn < s->ncomp; ++nn)
