@@ -201,6 +201,9 @@ typedef struct fast_span {
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
     unsigned char sky[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
+    /* a sun's light (fast_block with sun): along r[j], along q[m], and
+     * what each pixel adds over its coverage */
+    double S[3][EF_RECON_SPAN], Sq[3][EF_RECON_SPAN], add[3][EF_RECON_SPAN];
 } fast_span;
 
 /* Sums the components' taus along r[0..n) into acc (from 0, in component
@@ -301,12 +304,14 @@ static int dist_path(const ef_fog_scene *s, int *need_dist)
 /* One channel of a pixel: ef_composite's value, or the input where the
  * pixel is kept. omTi = 1 - Ti, the far segment's. */
 static inline float span_channel(double c, double t, double a, double omTi, double f, int keep,
-                                 int keep_sky)
+                                 int keep_sky, int lit, double add)
 {
     const double tc = t * c;   /* unconditional: the select vectorises */
     double v = (t > 0.0 ? tc : 0.0) + (1.0 - t) * a * f;
     if (!keep_sky)
         v = v + (1.0 - a) * omTi * f;
+    if (lit)   /* the light after the composite, as add_lights adds it */
+        v = v + add;
     return to_float_sel(keep ? c : v);
 }
 
@@ -321,7 +326,9 @@ static inline void span_composite_loop(const double *restrict T0, const double *
                                        int n, float *restrict pr, float *restrict pg,
                                        float *restrict pb, float *restrict pa,
                                        const unsigned char *restrict sky, int has_alpha,
-                                       int keep_sky, int const_ti)
+                                       int keep_sky, int const_ti, const double *restrict A0,
+                                       const double *restrict A1, const double *restrict A2,
+                                       int lit)
 {
     const double f0 = F[0], f1 = F[1], f2 = F[2];
     for (int j = 0; j < n; ++j) {
@@ -332,9 +339,9 @@ static inline void span_composite_loop(const double *restrict T0, const double *
         const double o0 = const_ti ? omTi[0] : 1.0 - Ti0[j];
         const double o1 = const_ti ? omTi[1] : 1.0 - Ti1[j];
         const double o2 = const_ti ? omTi[2] : 1.0 - Ti2[j];
-        pr[j] = span_channel(pr[j], T0[j], a, o0, f0, keep, keep_sky);
-        pg[j] = span_channel(pg[j], T1[j], a, o1, f1, keep, keep_sky);
-        pb[j] = span_channel(pb[j], T2[j], a, o2, f2, keep, keep_sky);
+        pr[j] = span_channel(pr[j], T0[j], a, o0, f0, keep, keep_sky, lit, lit ? A0[j] : 0.0);
+        pg[j] = span_channel(pg[j], T1[j], a, o1, f1, keep, keep_sky, lit, lit ? A1[j] : 0.0);
+        pb[j] = span_channel(pb[j], T2[j], a, o2, f2, keep, keep_sky, lit, lit ? A2[j] : 0.0);
         if (has_alpha) {
             const double cover =
                 const_ti ? cover_c : (3.0 - Ti0[j] - Ti1[j] - Ti2[j]) / 3.0;
@@ -347,32 +354,57 @@ static inline void span_composite_loop(const double *restrict T0, const double *
 /* Composites one span in place, from the floats to the floats: ef_composite
  * per pixel (T[k] to the surface, the far segment's Ti[k] or, when Ti is
  * NULL, one far T per frame given as omTi = 1 - Ti and the alpha's cover),
- * then pixels kept (sky with --sky keep) and damaged alphas written back as
+ * plus add[k][j] where add is given (a sun's light: add_lights' sum), then
+ * pixels kept (sky with --sky keep) and damaged alphas written back as
  * they were. The same operations in the same order: the same bits. */
 EF_MULTIVERSION static void span_composite(const double *const T[3], const double *const Ti[3],
                                            const double omTi[3], double cover, const double F[3],
                                            int n, float *pr, float *pg, float *pb, float *pa,
-                                           const unsigned char *sky, int keep_sky)
+                                           const unsigned char *sky, int keep_sky,
+                                           double (*add)[EF_RECON_SPAN])
 {
-#define SPAN_COMPOSITE(has_alpha, keep, const_ti)                                            \
+#define SPAN_COMPOSITE(has_alpha, keep, const_ti, lit)                                       \
     span_composite_loop(T[0], T[1], T[2], Ti ? Ti[0] : NULL, Ti ? Ti[1] : NULL,             \
                         Ti ? Ti[2] : NULL, omTi, cover, F, n, pr, pg, pb, pa, sky, has_alpha, \
-                        keep, const_ti)
+                        keep, const_ti, add ? add[0] : NULL, add ? add[1] : NULL,            \
+                        add ? add[2] : NULL, lit)
+#define SPAN_LIT(has_alpha, keep)                                                            \
+    (add ? (ct ? SPAN_COMPOSITE(has_alpha, keep, 1, 1) : SPAN_COMPOSITE(has_alpha, keep, 0, 1)) \
+         : (ct ? SPAN_COMPOSITE(has_alpha, keep, 1, 0) : SPAN_COMPOSITE(has_alpha, keep, 0, 0)))
     const int ct = Ti == NULL;
     if (pa && keep_sky)
-        ct ? SPAN_COMPOSITE(1, 1, 1) : SPAN_COMPOSITE(1, 1, 0);
+        SPAN_LIT(1, 1);
     else if (pa)
-        ct ? SPAN_COMPOSITE(1, 0, 1) : SPAN_COMPOSITE(1, 0, 0);
+        SPAN_LIT(1, 0);
     else if (keep_sky)
-        ct ? SPAN_COMPOSITE(0, 1, 1) : SPAN_COMPOSITE(0, 1, 0);
+        SPAN_LIT(0, 1);
     else
-        ct ? SPAN_COMPOSITE(0, 0, 1) : SPAN_COMPOSITE(0, 0, 0);
+        SPAN_LIT(0, 0);
+#undef SPAN_LIT
 #undef SPAN_COMPOSITE
 }
 
+/* The sun's light along r[0..n) into S[k][j], from the optical depths of
+ * the last fast_tau_transmit (tau[k][j]). */
+static void sun_rays(const ef_fog_scene *s, const ef_light *sun, const ef_ray *r, int n,
+                     double (*tau)[EF_RECON_SPAN], double (*S)[EF_RECON_SPAN])
+{
+    for (int j = 0; j < n; ++j) {
+        const double tv[3] = { tau[0][j], tau[1][j], tau[2][j] };
+        double v[3];
+        ef_light_sun_span_eval(s, sun, &r[j], tv, v);
+        for (int k = 0; k < 3; ++k)
+            S[k][j] = v[k];
+    }
+}
+
+/* The span path of the unlit scenes and of one sun in one height fog
+ * (sun: ef_light_sun_span; NULL: none): reconstruction, the components'
+ * optical depths, T, the sun's closed form from those depths, and
+ * span_composite, with add_lights' and ef_composite's operations. */
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
                                        float *const rgb[3], float *alpha, const float *depth,
-                                       int depth_only, fast_span *sp)
+                                       int depth_only, const ef_light *sun, fast_span *sp)
 {
     const ef_fog_scene *s = pass->scene;
     const int fog_uncovered = s->sky != EF_SKY_KEEP, keep_sky = s->sky == EF_SKY_KEEP;
@@ -406,6 +438,8 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             const int colour = fast_tau_transmit(s, sp->r, n, sp, sp->T, 0);
             const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
             const double *Ti[3] = { T[0], T[1], T[2] };
+            if (sun)
+                sun_rays(s, sun, sp->r, n, sp->tau, sp->S);
             int nq = 0;
             for (int j = 0; ninf && j < n; ++j) {
                 if (!sp->need_inf[j])
@@ -419,6 +453,8 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 /* Ti: T, then the far segments' T where they differ. */
                 double Tq[3][EF_RECON_SPAN];
                 fast_tau_transmit(s, sp->q, nq, sp, Tq, 1);
+                if (sun)
+                    sun_rays(s, sun, sp->q, nq, sp->tau, sp->Sq);
                 for (int k = 0; k < 3; ++k) {
                     memcpy(sp->Ti[k], T[k], (size_t) n * sizeof sp->Ti[k][0]);
                     for (int m = 0; m < nq; ++m)
@@ -426,9 +462,32 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                     Ti[k] = sp->Ti[k];
                 }
             }
+            if (sun) {
+                /* add_lights: a S + (1 - a) S_far where the far part shows
+                 * (a: the pixel's alpha, 1 where damaged; S_far: S where
+                 * the far segment is the pixel's own, which covers every
+                 * pixel whose far part shows but was not gathered above:
+                 * a ray infinite both ways) */
+                for (int k = 0; k < 3; ++k)
+                    for (int j = 0; j < n; ++j)
+                        sp->add[k][j] = sp->S[k][j];   /* S_far for now */
+                for (int m = 0; m < nq; ++m)
+                    for (int k = 0; k < 3; ++k)
+                        sp->add[k][sp->qj[m]] = sp->Sq[k][m];
+                for (int j = 0; j < n; ++j) {
+                    const double ain = pa ? pa[j] : 1.0, a = isfinite(ain) ? ain : 1.0;
+                    const int shows = fog_uncovered && !(a == 1.0 && isfinite(sp->r[j].dist));
+                    for (int k = 0; k < 3; ++k) {
+                        const double Sf = sp->add[k][j];
+                        sp->add[k][j] = (a > 0.0 ? a * sp->S[k][j] : 0.0) +
+                                        (shows && a < 1.0 ? (1.0 - a) * Sf : 0.0);
+                    }
+                }
+            }
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
-            span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky);
+            span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky,
+                           sun ? sp->add : NULL);
         }
     }
 }
@@ -465,7 +524,7 @@ EF_MULTIVERSION static void dist_block(const ef_fog_pass *pass, int x0, int y0, 
             const int colour = fast_transmit(sp->tau, n, sp->T, 0);
             const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
             span_composite(T, NULL, omTi, cover, s->color, n, rgb[0] + i0, rgb[1] + i0,
-                           rgb[2] + i0, alpha ? alpha + i0 : NULL, sp->sky, keep_sky);
+                           rgb[2] + i0, alpha ? alpha + i0 : NULL, sp->sky, keep_sky, NULL);
         }
     }
 }
@@ -483,13 +542,16 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
         depth_only &= s->comp[c].model->depth_only;
     }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
-    if (!mask && !s->any_color && !want_info && !ef_scene_lit(s)) {
+    /* one sun in one height fog: its closed form in the span path too */
+    const ef_light *sun = s->nlight == 1 && !s->sky_light && ef_light_sun_span(s, &s->light[0])
+                              ? &s->light[0] : NULL;
+    if (!mask && !s->any_color && !want_info && (!ef_scene_lit(s) || sun)) {
         fast_span sp;
         int need_dist;
-        if (dist_path(s, &need_dist))
+        if (!sun && dist_path(s, &need_dist))
             dist_block(pass, x0, y0, w, h, rgb, alpha, depth, need_dist, &sp);
         else
-            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only, &sp);
+            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only && !sun, sun, &sp);
         return;
     }
     const int fog_uncovered = s->sky != EF_SKY_KEEP;

@@ -650,7 +650,8 @@ static double tau_phi(double tau, double q)
  *   A = sigma(C) / (k l_up), B = tau_v + sigma(P) / (k l_up),
  * phi(x) = -expm1(-x) / x and B - A = tau_v (1 - mu / l_up) exactly (mu the
  * view ray's up component), so no difference of large terms is formed. */
-static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+static void sun_height_tau(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                           const double tv[3], double S[3])
 {
     const ef_fog_component *c = &s->comp[0];
     const double k = c->p[3];
@@ -659,8 +660,7 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     S[0] = S[1] = S[2] = 0;
     if (!(lu > 0))
         return;   /* at or below the horizon, the sun crosses unbounded fog */
-    double tv[3], sc[3], sp[3] = { 0, 0, 0 };
-    c->model->tau(c, r, tv);
+    double sc[3], sp[3] = { 0, 0, 0 };
     /* the densities at the ends, rho e^-(k (height - base)), in double
      * (one exponential each: the model's own density works in long double
      * for the reference) */
@@ -691,6 +691,30 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         }
         S[ch] = me == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * me;
     }
+}
+
+/* sun_height with the view segment's optical depth from the model. */
+static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+{
+    double tv[3];
+    s->comp[0].model->tau(&s->comp[0], r, tv);
+    sun_height_tau(s, l, r, tv, S);
+}
+
+int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l)
+{
+    return l->kind == EF_LIGHT_SUN && !l->shadow && s->ncomp == 1 &&
+           s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0;
+}
+
+void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                            const double tv[3], double S[3])
+{
+    S[0] = S[1] = S[2] = 0;
+    /* as ef_light_inscatter: no segment, no light */
+    if (!(r->dist > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return;
+    sun_height_tau(s, l, r, tv, S);
 }
 
 /* The sun in one half-space fog of any of the three densities sigma(X) of

@@ -72,6 +72,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
  * spot_blend), times cos alpha with cosine=1 (Cycles 3.x's spot). */
 double ef_spot_share(const ef_light *l, double cos_alpha);
 
+
 /* The phase function of c at cos theta = l . u (l towards the light, u the
  * view direction away from the camera: g > 0 scatters forward). */
 double ef_phase_eval(int phase, double g, double cos_theta);

@@ -19,4 +19,13 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
 
+/* Whether l's light in scene s is the closed form of the sun in one
+ * exponential height fog, without a shadow map: what the span path of
+ * apply.c computes from the optical depths it already has. */
+int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l);
+/* That light along r (ef_light_inscatter's S for such a sun), given the
+ * segment's optical depth tv per channel as the model computes it. */
+void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                            const double tv[3], double S[3]);
+
 #endif
