@@ -434,12 +434,10 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
             at += MERGED_SIZE(mp);
         }
     }
-    if (nhash) {
-        s.hash_off = (int) (head + ntab + nmerged);
-        grid_tables((uint32_t *) (void *) (arr + s.hash_off));
-        s.ladder_off = s.hash_off + GRID_HASH_WORDS / 2;
-        ladders_fill(arr + s.ladder_off);
-    }
+    s.hash_off = (int) (head + ntab + nmerged);
+    grid_tables((uint32_t *) (void *) (arr + s.hash_off));
+    s.ladder_off = s.hash_off + GRID_HASH_WORDS / 2;
+    ladders_fill(arr + s.ladder_off);
     memcpy(arr, &s, sizeof s);
     free(c->arr);
     c->arr = arr;
@@ -1612,8 +1610,7 @@ static double plan_evals(const rayc *R, const plan *P, int i, double L)
 typedef struct ladder {
     int n, kind[PLAN_OPTS];
     double cost[PLAN_OPTS], err[PLAN_OPTS];
-    double slope[PLAN_OPTS];         /* (err[k] - err[k+1]) / (cost[k+1] - cost[k]) */
-    double slope2[PLAN_OPTS];        /* the same for err^2 */
+    double slope2[PLAN_OPTS];        /* (err[k]^2 - err[k+1]^2) / (cost[k+1] - cost[k]) */
 } ladder;
 
 static void ladder_unit(double kappa, ladder *ld)
@@ -1655,11 +1652,9 @@ static void ladder_unit(double kappa, ladder *ld)
         ld->cost[ld->n] = cost[j];
         ld->err[ld->n++] = err[j];
     }
-    for (int k = 0; k + 1 < ld->n; ++k) {
-        ld->slope[k] = (ld->err[k] - ld->err[k + 1]) / (ld->cost[k + 1] - ld->cost[k]);
+    for (int k = 0; k + 1 < ld->n; ++k)
         ld->slope2[k] = (ld->err[k] * ld->err[k] - ld->err[k + 1] * ld->err[k + 1]) /
                         (ld->cost[k + 1] - ld->cost[k]);
-    }
 }
 
 /* The ladders for kappa in [1, sqrt 3] (every direction's |d|_1 / |d|_2),
