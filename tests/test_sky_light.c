@@ -313,6 +313,29 @@ static void test_cli(void **state)
     assert_memory_equal(x, y, (size_t) w1 * h1 * sizeof *x);
     free(x);
     free(y);
+    /* Without lights or AOVs the sky light runs in the span path (its term
+     * from the span's T); an AOV takes the per-pixel path checked above.
+     * The same bits, alpha edges, kept sky and a sky shell included. */
+    static const char *const skies[] = { "", "--sky keep", "--sky distance=500" };
+    char *fast = tu_path("sky_fast.exr"), *slow = tu_path("sky_slow.exr");
+    for (int m = 0; m < 3; ++m) {
+        assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=%g:phase=hg:g=%g:albedo=%g "
+                                 "--sky-light '%s' %s", in, fast, rho, g, alb, envp, skies[m]), 0);
+        assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=%g:phase=hg:g=%g:albedo=%g "
+                                 "--sky-light '%s' %s --aov T", in, slow, rho, g, alb, envp,
+                                 skies[m]), 0);
+        for (int c = 0; c < 4; ++c) {
+            const char *ch = (const char *[]) { "R", "G", "B", "A" }[c];
+            x = tu_read_channel(fast, 0, ch, &w1, &h1);
+            y = tu_read_channel(slow, 0, ch, &w2, &h2);
+            assert_true(x && y && w1 == w2 && h1 == h2);
+            assert_memory_equal(x, y, (size_t) w1 * h1 * sizeof *x);
+            free(x);
+            free(y);
+        }
+    }
+    free(fast);
+    free(slow);
     /* errors: a missing map (exit 1, named), bad keys (exit 2), twice */
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light /nonexistent/e.exr",
                              in, out2), 1);

@@ -398,13 +398,16 @@ static void sun_rays(const ef_fog_scene *s, const ef_light *sun, const ef_ray *r
     }
 }
 
-/* The span path of the unlit scenes and of one sun in one height fog
- * (sun: ef_light_sun_span; NULL: none): reconstruction, the components'
- * optical depths, T, the sun's closed form from those depths, and
- * span_composite, with add_lights' and ef_composite's operations. */
+/* The span path of the unlit scenes, of one sun in one height fog (sun:
+ * ef_light_sun_span; NULL: none) and of the sky light without lights
+ * (sky): reconstruction, the components' optical depths, T, the light
+ * (the sun's closed form from those depths, or sky_segment from T), and
+ * span_composite, with add_lights', add_sky's and ef_composite's
+ * operations in their order: the per-pixel path's bits. */
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
                                        float *const rgb[3], float *alpha, const float *depth,
-                                       int depth_only, const ef_light *sun, fast_span *sp)
+                                       int depth_only, const ef_light *sun, int sky,
+                                       fast_span *sp)
 {
     const ef_fog_scene *s = pass->scene;
     const int fog_uncovered = s->sky != EF_SKY_KEEP, keep_sky = s->sky == EF_SKY_KEEP;
@@ -483,11 +486,31 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                                         (shows && a < 1.0 ? (1.0 - a) * Sf : 0.0);
                     }
                 }
+            } else if (sky) {
+                /* add_sky: sky_segment along the surface segment with its T,
+                 * and where the far part shows along the far one with Ti */
+                for (int j = 0; j < n; ++j) {
+                    const double ain = pa ? pa[j] : 1.0, a = isfinite(ain) ? ain : 1.0;
+                    const int shows = fog_uncovered && !(a == 1.0 && isfinite(sp->r[j].dist));
+                    const double Tj[3] = { T[0][j], T[1][j], T[2][j] };
+                    double S[3], Sf[3] = { 0, 0, 0 };
+                    sky_segment(s, &sp->r[j], Tj, S);
+                    if (shows && a < 1.0) {
+                        ef_ray far;
+                        if (ef_scene_far_ray(s, &sp->r[j], &far))
+                            far = sp->r[j];
+                        const double Tf[3] = { Ti[0][j], Ti[1][j], Ti[2][j] };
+                        sky_segment(s, &far, Tf, Sf);
+                    }
+                    for (int k = 0; k < 3; ++k)
+                        sp->add[k][j] = (a > 0.0 ? a * S[k] : 0.0) +
+                                        (shows && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+                }
             }
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
             span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky,
-                           sun ? sp->add : NULL);
+                           sun || sky ? sp->add : NULL);
         }
     }
 }
@@ -545,13 +568,16 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     /* one sun in one height fog: its closed form in the span path too */
     const ef_light *sun = s->nlight == 1 && !s->sky_light && ef_light_sun_span(s, &s->light[0])
                               ? &s->light[0] : NULL;
-    if (!mask && !s->any_color && !want_info && (!ef_scene_lit(s) || sun)) {
+    /* the sky light without lights: its term from T alone, in the span too */
+    const int sky_only = s->nlight == 0 && s->sky_light != NULL;
+    if (!mask && !s->any_color && !want_info && (!ef_scene_lit(s) || sun || sky_only)) {
         fast_span sp;
         int need_dist;
-        if (!sun && dist_path(s, &need_dist))
+        if (!sun && !sky_only && dist_path(s, &need_dist))
             dist_block(pass, x0, y0, w, h, rgb, alpha, depth, need_dist, &sp);
         else
-            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only && !sun, sun, &sp);
+            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only && !sun && !sky_only,
+                       sun, sky_only, &sp);
         return;
     }
     const int fog_uncovered = s->sky != EF_SKY_KEEP;
