@@ -201,8 +201,8 @@ typedef struct fast_span {
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
     unsigned char sky[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
-    /* a sun's light (fast_block with sun): along r[j], along q[m], and
-     * what each pixel adds over its coverage */
+    /* a sun's light (fast_block with sun): along r[j], along q[m]; and
+     * what each pixel adds over its coverage (the sun's or the sky's) */
     double S[3][EF_RECON_SPAN], Sq[3][EF_RECON_SPAN], add[3][EF_RECON_SPAN];
 } fast_span;
 
@@ -354,7 +354,8 @@ static inline void span_composite_loop(const double *restrict T0, const double *
 /* Composites one span in place, from the floats to the floats: ef_composite
  * per pixel (T[k] to the surface, the far segment's Ti[k] or, when Ti is
  * NULL, one far T per frame given as omTi = 1 - Ti and the alpha's cover),
- * plus add[k][j] where add is given (a sun's light: add_lights' sum), then
+ * plus add[k][j] where add is given (a sun's or the sky light's term, as
+ * add_lights or add_sky adds it), then
  * pixels kept (sky with --sky keep) and damaged alphas written back as
  * they were. The same operations in the same order: the same bits. */
 EF_MULTIVERSION static void span_composite(const double *const T[3], const double *const Ti[3],
