@@ -37,6 +37,15 @@ static double aov_err(double T, double e)
     return b < 1.0 ? b : 1.0;   /* also when b is NaN (T = 0, e = inf) */
 }
 
+/* A light's share over a pixel's coverage: a S along the surface segment
+ * plus (1 - a) S_far along the far one where it shows (a share of 0 takes
+ * nothing, even an infinite S). One expression for every path, so the
+ * span path and the per-pixel path give the same bits. */
+static inline double coverage_sum(double a, int shows, double S, double Sf)
+{
+    return (a > 0.0 ? a * S : 0.0) + (shows && a < 1.0 ? (1.0 - a) * Sf : 0.0);
+}
+
 /* One light's a S + (1 - a) S_far (far: the far segment when it differs
  * from r; need_inf: the far part shows), and the same sum of their error
  * estimates in ve (NULL: not wanted). */
@@ -50,10 +59,9 @@ static void coverage_light(const ef_fog_scene *s, const ef_light *l, const ef_ra
     if (far)
         ef_light_inscatter(s, l, far, Sf, Ef);
     for (int k = 0; k < 3; ++k) {
-        /* a share of 0 takes nothing, even an infinite S */
-        v[k] = (a > 0.0 ? a * S[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+        v[k] = coverage_sum(a, need_inf, S[k], Sf[k]);
         if (ve)
-            ve[k] = (a > 0.0 ? a * E[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Ef[k] : 0.0);
+            ve[k] = coverage_sum(a, need_inf, E[k], Ef[k]);
     }
 }
 
@@ -149,7 +157,7 @@ static void add_sky(const ef_fog_scene *s, const ef_ray *r, const ef_fog_sample 
         sky_segment(s, &far, inf->T, Sf);
     }
     for (int k = 0; k < 3; ++k) {
-        const double v = (a > 0.0 ? a * S[k] : 0.0) + (need_inf && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+        const double v = coverage_sum(a, need_inf, S[k], Sf[k]);
         c[k] += v;
         if (aov && aov->sky[k])
             aov->sky[k][i] = to_float(v);
@@ -204,6 +212,8 @@ typedef struct fast_span {
     /* a sun's light (fast_block with sun): along r[j], along q[m]; and
      * what each pixel adds over its coverage (the sun's or the sky's) */
     double S[3][EF_RECON_SPAN], Sq[3][EF_RECON_SPAN], add[3][EF_RECON_SPAN];
+    double a[EF_RECON_SPAN];             /* alpha as fogged, and whether the far */
+    unsigned char shows[EF_RECON_SPAN];  /* part shows (lit spans only) */
 } fast_span;
 
 /* Sums the components' taus along r[0..n) into acc (from 0, in component
@@ -466,33 +476,35 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                     Ti[k] = sp->Ti[k];
                 }
             }
+            /* the pixel's alpha as fogged (1 where damaged) and whether its
+             * far part shows: add_lights' and add_sky's a and need_inf */
+            for (int j = 0; (sun || sky) && j < n; ++j) {
+                const double ain = pa ? pa[j] : 1.0;
+                sp->a[j] = isfinite(ain) ? ain : 1.0;
+                sp->shows[j] = (unsigned char) (fog_uncovered &&
+                                                !(sp->a[j] == 1.0 && isfinite(sp->r[j].dist)));
+            }
             if (sun) {
-                /* add_lights: a S + (1 - a) S_far where the far part shows
-                 * (a: the pixel's alpha, 1 where damaged; S_far: S where
-                 * the far segment is the pixel's own, which covers every
-                 * pixel whose far part shows but was not gathered above:
-                 * a ray infinite both ways) */
+                /* add_lights: a S + (1 - a) S_far, S_far being S where the
+                 * far segment is the pixel's own, which covers every pixel
+                 * whose far part shows but was not gathered above (a ray
+                 * infinite both ways) */
                 for (int k = 0; k < 3; ++k)
                     for (int j = 0; j < n; ++j)
                         sp->add[k][j] = sp->S[k][j];   /* S_far for now */
                 for (int m = 0; m < nq; ++m)
                     for (int k = 0; k < 3; ++k)
                         sp->add[k][sp->qj[m]] = sp->Sq[k][m];
-                for (int j = 0; j < n; ++j) {
-                    const double ain = pa ? pa[j] : 1.0, a = isfinite(ain) ? ain : 1.0;
-                    const int shows = fog_uncovered && !(a == 1.0 && isfinite(sp->r[j].dist));
-                    for (int k = 0; k < 3; ++k) {
-                        const double Sf = sp->add[k][j];
-                        sp->add[k][j] = (a > 0.0 ? a * sp->S[k][j] : 0.0) +
-                                        (shows && a < 1.0 ? (1.0 - a) * Sf : 0.0);
-                    }
-                }
+                for (int j = 0; j < n; ++j)
+                    for (int k = 0; k < 3; ++k)
+                        sp->add[k][j] = coverage_sum(sp->a[j], sp->shows[j], sp->S[k][j],
+                                                     sp->add[k][j]);
             } else if (sky) {
                 /* add_sky: sky_segment along the surface segment with its T,
                  * and where the far part shows along the far one with Ti */
                 for (int j = 0; j < n; ++j) {
-                    const double ain = pa ? pa[j] : 1.0, a = isfinite(ain) ? ain : 1.0;
-                    const int shows = fog_uncovered && !(a == 1.0 && isfinite(sp->r[j].dist));
+                    const double a = sp->a[j];
+                    const int shows = sp->shows[j];
                     const double Tj[3] = { T[0][j], T[1][j], T[2][j] };
                     double S[3], Sf[3] = { 0, 0, 0 };
                     sky_segment(s, &sp->r[j], Tj, S);
@@ -504,8 +516,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                         sky_segment(s, &far, Tf, Sf);
                     }
                     for (int k = 0; k < 3; ++k)
-                        sp->add[k][j] = (a > 0.0 ? a * S[k] : 0.0) +
-                                        (shows && a < 1.0 ? (1.0 - a) * Sf[k] : 0.0);
+                        sp->add[k][j] = coverage_sum(a, shows, S[k], Sf[k]);
                 }
             }
             /* Pixels kept as they are (--sky keep) were evaluated too, and
