@@ -118,12 +118,62 @@ def fog_tau(model, o, d, a, b):
     return e0 * (fa - fb) / (kf * dy)
 
 
-def reference(model, x, y, samples, what="all", fog_on=True):
+GL8 = [(-0.9602898564975363, 0.1012285362903763), (-0.7966664774136267, 0.2223810344533745),
+       (-0.5255324099163290, 0.3137066458778873), (-0.1834346424956498, 0.3626837833783620),
+       (0.1834346424956498, 0.3626837833783620), (0.5255324099163290, 0.3137066458778873),
+       (0.7966664774136267, 0.2223810344533745), (0.9602898564975363, 0.1012285362903763)]
+
+
+def lamp_term(lamp, d, a, b, kappa):
+    """A point lamp's single scattering in exp fog over distances [a, b)
+    of the pixel's ray (b may be inf): int e^-(kappa (t - a)) sigma p I
+    e^-(sigma r) / r^2 dt, r the distance to the lamp, p = 1/(4 pi) (iso,
+    albedo 1), kappa the extinction of everything there (fog and input
+    media). Gauss-Legendre (8 nodes) on pieces bisected until each is at
+    most half its least distance to the lamp (the integrand's poles are
+    that far off the real axis); an infinite end in doubling pieces until
+    what is left is below 1e-14 of the sum."""
+    sig, pos, inten = lamp
+    w = [pos[k] - org[k] for k in range(3)]
+    ts = sum(w[k] * d[k] for k in range(3))
+    h2 = max(0.0, sum(v * v for v in w) - ts * ts)
+
+    def f(t):
+        r2 = (t - ts) ** 2 + h2
+        r = math.sqrt(r2)
+        return math.exp(-kappa * (t - a) - sig * r) * sig * inten / (4 * math.pi) / r2
+
+    def dmin(t0, t1):
+        u = min(max(ts, t0), t1) - ts
+        return math.sqrt(u * u + h2)
+
+    def piece(t0, t1):
+        if t1 - t0 > 0.5 * dmin(t0, t1):
+            m = 0.5 * (t0 + t1)
+            return piece(t0, m) + piece(m, t1)
+        c, hw = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
+        return hw * sum(wt * f(c + hw * xx) for xx, wt in GL8)
+
+    if b < math.inf:
+        return piece(a, b)
+    tot, t0, step = 0.0, a, max(1.0, abs(ts - a))
+    while True:
+        v = piece(t0, t0 + step)
+        tot += v
+        t0 += step
+        step *= 2
+        if t0 > ts and v <= 1e-14 * tot:
+            return tot
+
+
+def reference(model, x, y, samples, what="all", fog_on=True, lamp=None):
     """Flat RGBA of pixel (x, y): samples = [(z, zb, rgba)] in file Z.
     what: "all" (the fogged flatten), "in" (only the input's light, as the
     fog attenuates it: the fog's own source left out), "cov" (the input's
     coverage as the fog attenuates it: every input sample's source 1, so a
-    point sample adds its alpha); fog_on=False: no fog at all."""
+    point sample adds its alpha); fog_on=False: no fog at all. lamp: (sigma,
+    position, intensity) of a point lamp lighting an exp fog of that
+    density (lamp_term), white."""
     d, k = pixel_ray(x, y)
     pts, vols, bounds = [], [], {0.0}
     for z, zb, c in samples:
@@ -153,18 +203,20 @@ def reference(model, x, y, samples, what="all", fog_on=True):
             if tt <= 0:
                 continue
             em = 1 - math.exp(-tt) if tt < math.inf else 1.0
+            lt = lamp_term(lamp, d, sa, sb, tt / (sb - sa)) if lamp and what == "all" else 0.0
             for ch in range(3):
                 srcw = tf * FOG_COLOR[ch] if what == "all" else 0.0
                 for kap, c in media:
                     srcw += kap * (sb - sa) * (1.0 if what == "cov" else
                                                c[ch] / c[3] if c[3] > 0 else 0)
-                L[ch] += T * em * srcw / tt
+                L[ch] += T * (em * srcw / tt + lt)
             T *= 1 - em
     # the tail: fog alone to infinity
     tf = fog_tau(model, org, d, bounds[-1], math.inf) if fog_on else 0.0
     em = 1 - math.exp(-tf) if tf < math.inf else 1.0
+    lt = lamp_term(lamp, d, bounds[-1], math.inf, lamp[0]) if lamp and what == "all" else 0.0
     for ch in range(3):
-        L[ch] += T * em * FOG_COLOR[ch] if what == "all" else 0.0
+        L[ch] += T * (em * FOG_COLOR[ch] + lt) if what == "all" else 0.0
     T *= 1 - em
     return L + [1 - T]
 
@@ -500,11 +552,6 @@ import random
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import perlin_ref
 
-GL8 = [(-0.9602898564975363, 0.1012285362903763), (-0.7966664774136267, 0.2223810344533745),
-       (-0.5255324099163290, 0.3137066458778873), (-0.1834346424956498, 0.3626837833783620),
-       (0.1834346424956498, 0.3626837833783620), (0.5255324099163290, 0.3137066458778873),
-       (0.7966664774136267, 0.2223810344533745), (0.9602898564975363, 0.1012285362903763)]
-
 
 def tau_exact(model, d, a, b):
     """The fog's optical depth over distances [a, b) of direction d."""
@@ -598,6 +645,110 @@ for spec_text, model, step in (
     # half alpha (11 bits) adds its rounding, amplified by e^(tau-1)/tau <= 1.36 at tau 2
     check(worst <= 1e-3 + 1e-3, "holdout splits of %s within --deep-tol + half rounding" % spec_text)
 
+# Lit fog in every deep mode (issue 25): a white point lamp of 5 W/sr in
+# front of the Arnold frame's objects (camera at z 7.26, objects about the
+# origin) lights exp fog of density 0.05. Every mode's flatten against the
+# reference, whose fog source adds the lamp's single scattering
+# integrated here (lamp_term), every 5th pixel each way. Then the holdout
+# property for colour: a fog sample of the --deep fog element split at a
+# random fraction x by the deep rule, c (1 - (1 - alpha)^x) / alpha,
+# against the exact colour of that part of the ray (the ambient share and
+# the lamp's light over it, seen from the sample's front), weighted by T
+# from the camera: within --deep-tol (1e-3) of the pixel's light (the
+# lamp's over the whole ray), the placement alone (exact alpha and colour
+# of the sample, computed here) and as stored (half: plus 2^-9 of the
+# sample's colour).
+SIG_LIT = 0.05
+LAMP = (SIG_LIT, (1.5, 1.0, 3.0), 5.0)
+lit_args = ["--fog", "exp:density=0.05", "--light", "point:position=1.5,1,3:intensity=5"]
+louts = {}
+for mode in ("samples", "fog", "flatten"):
+    louts[mode] = os.path.join(tmp, "deep_lit_%s.exr" % mode)
+    check(run([src] + lit_args + ["--deep", mode, "-o", louts[mode]]) == 0,
+          "lit --deep %s runs" % mode)
+lflat_s = os.path.join(tmp, "deep_lit_samples_flat.exr")
+lflat_m = os.path.join(tmp, "deep_lit_merge_flat.exr")
+check(oiiotool([louts["samples"], "--flatten", "-o", lflat_s]) == 0, "oiiotool flattens lit samples")
+check(oiiotool([src, louts["fog"], "--deepmerge", "--flatten", "-o", lflat_m]) == 0,
+      "oiiotool deep-merges the lit fog element")
+lres = {"flatten": flat_pixels(louts["flatten"]), "samples+oiio flatten": flat_pixels(lflat_s),
+        "fog element+oiio deepmerge": flat_pixels(lflat_m)}
+unlit = flat_pixels(os.path.join(tmp, "deep_exp_flatten.exr"))
+worst = {k: 0.0 for k in lres}
+n, lamp_share = 0, 0.0
+for y in range(0, H, 5):
+    for x in range(0, W, 5):
+        p = y * W + x
+        ref = reference(("exp", SIG_LIT), x, y, input_samples[p], lamp=LAMP)
+        n += 1
+        lamp_share = max(lamp_share, (lres["flatten"][p][0] - unlit[p][0]) / max(1e-3, ref[0]))
+        for k, got in lres.items():
+            for ch in range(4):
+                e = abs(got[p][ch] - ref[ch]) / (1e-3 + abs(ref[ch]))
+                worst[k] = max(worst[k], e)
+for k, e in worst.items():
+    print("lit exp: %s: worst relative error %.2e over %d pixels" % (k, e, n))
+    check(e < 4e-3, "lit exp: %s within 4e-3 of the reference (%.2e)" % (k, e))
+print("lit exp: the lamp's light is up to %.0f %% of a pixel" % (100 * lamp_share))
+check(lamp_share > 0.3, "lit exp: the lamp lights the fog (%.2f of a pixel at most)" % lamp_share)
+
+lfs = samples_of(oiio.ImageBuf(louts["fog"]))
+worst_rule, worst_half, nsplit = 0.0, 0.0, 0
+for p in range(0, W * H, 13):
+    x, y = p % W, p // W
+    d, k = pixel_ray(x, y)
+    scale = lamp_term(LAMP, d, 0.0, math.inf, SIG_LIT)
+    T = 1.0
+    for z, zb, c in lfs[p]:
+        a_, b_ = z * k, zb * k
+        # (the last sample carries the fog to infinity: alpha 1, not split)
+        if c[3] >= 1 or b_ <= a_ or T < 1e-3:
+            break
+        tau = SIG_LIT * (b_ - a_)
+        al = -math.expm1(-tau)
+        c_exact = FOG_COLOR[0] * al + lamp_term(LAMP, d, a_, b_, SIG_LIT)
+        for _ in range(3):
+            f = rnd.random()
+            part = (FOG_COLOR[0] * -math.expm1(-f * tau) +
+                    lamp_term(LAMP, d, a_, a_ + f * (b_ - a_), SIG_LIT))
+            worst_rule = max(worst_rule, T * abs(c_exact * -math.expm1(-f * tau) / al - part) / scale)
+            # (the rule for a sample whose alpha is 0: its colour times x)
+            rule = c[0] * (1 - (1 - c[3]) ** f) / c[3] if c[3] > 0 else c[0] * f
+            # stored: the tolerance plus half's rounding of the colour and
+            # alpha (2^-11 each, the ratio's doubled): a ratio to that sum
+            worst_half = max(worst_half, T * abs(rule - part) /
+                             (1e-3 * scale + 2 ** -9 * T * abs(c[0])))
+            nsplit += 1
+        T *= 1 - c[3]
+print("lit holdout: %d splits, worst T|dC| / the pixel's light %.2e from the placement; "
+      "as stored (half), T|dC| at most %.2f of the tolerance plus half's rounding"
+      % (nsplit, worst_rule, worst_half))
+check(nsplit > 1000, "lit holdout: splits tried (%d)" % nsplit)
+check(worst_rule <= 1e-3, "lit holdout: placement within --deep-tol (%.2e)" % worst_rule)
+check(worst_half <= 1, "lit holdout: as stored within --deep-tol + half rounding (%.2f)"
+      % worst_half)
+
+# The sky light on deep input: a constant environment K scatters K albedo
+# per unit alpha into every fog sample whatever the phase (the phase
+# integrates to 1), so --sky-light of it must equal fog whose colour is the
+# default plus K (half outputs: the same halves, or one ulp apart).
+env = os.path.join(tmp, "deep_env.exr")
+K = (0.2, 0.3, 0.4)
+eb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
+oiio.ImageBufAlgo.fill(eb, K)
+check(eb.write(env), "constant environment written")
+sky_a = os.path.join(tmp, "deep_sky_a.exr")
+sky_b = os.path.join(tmp, "deep_sky_b.exr")
+check(run([src, "--fog", "exp:density=0.05:phase=hg:g=0.7", "--sky-light", env, "--deep",
+           "flatten", "-o", sky_a]) == 0, "deep --sky-light runs")
+check(run([src, "--fog", "exp:density=0.05:color=%s" %
+           ",".join(repr(FOG_COLOR[i] + K[i]) for i in range(3)), "--deep", "flatten",
+           "-o", sky_b]) == 0, "deep with the sky's colour runs")
+pa, pb = flat_pixels(sky_a), flat_pixels(sky_b)
+dsky = max(abs(u - v) / (1e-3 + abs(v)) for ra, rb in zip(pa, pb) for u, v in zip(ra, rb))
+print("deep sky light: constant environment against its colour, worst %.2e" % dsky)
+check(dsky <= 2 ** -10, "deep sky light equals the colour it adds (%.2e)" % dsky)
+
 # Deep tiled input (RenderMan writes it by default): the same file tiled by
 # OpenImageIO (tiles of 32 x 32, and 64 x 20 whose height is not a chunk's)
 # gives exactly the scanline input's results, flat and deep.
@@ -628,7 +779,9 @@ for tw, th in ((32, 32), (64, 20)):
 # Usage: what deep input does not take is refused (exit 2), never ignored.
 flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
 for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
-                   ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2)):
+                   ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2),
+                   ([src, "--deep", "flatten", "--aov", "light", "--light",
+                     "point:position=1,1,3:intensity=1"], 2)):
     r = subprocess.run([exrfog] + args + ["--fog", "exp:density=0.1", "-o",
                                           os.path.join(tmp, "u.exr")], capture_output=True, text=True)
     check(r.returncode == want and r.stderr.startswith("exrfog: ") and

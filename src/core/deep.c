@@ -2,6 +2,9 @@
  * as volume samples whose alpha and colour are exact integrals. */
 #include "deep.h"
 
+#include "lit.h"
+#include "sky_light.h"
+
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
@@ -361,9 +364,18 @@ static void comp_tau(const ef_fog_component *c, const ef_ray *r1, double a, doub
             t[k] = 0;
 }
 
-static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double tau[3],
-                    double F[3], int *linear, double err[3])
+/* A pixel's light sources for its fog samples' colours. */
+typedef struct px_lit {
+    int lights;                                 /* --light: each sample's in-scatter */
+    int sky;                                    /* --sky-light: sky_c joins the colours */
+    double sky_c[EF_FOG_MAX_COMPONENTS][3];     /* albedo_c C_c(u), u the pixel's direction */
+    double scale;   /* the lights' in-scatter along the pixel's visible ray: the colour unit */
+} px_lit;
+
+static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, double a, double b,
+                    double tau[3], double F[3], int *linear, double err[3])
 {
+    const int sky = lt && lt->sky;
     double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
     tau[0] = tau[1] = tau[2] = 0;
@@ -379,7 +391,8 @@ static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b,
             *linear = 0;
         for (int k = 0; k < 3; ++k) {
             tau[k] += t[k];
-            const double col = c->has_color ? c->color[k] : s->color[k];
+            const double col =
+                (c->has_color ? c->color[k] : s->color[k]) + (sky ? lt->sky_c[i][k] : 0.0);
             if (isinf(t[k])) {
                 ninf[k]++;
                 winf[k] += col;
@@ -389,16 +402,18 @@ static void seg_tau(const ef_fog_scene *s, const ef_ray *r1, double a, double b,
         }
     }
     for (int k = 0; k < 3; ++k) {
-        if (!s->any_color || tau[k] == 0)
-            F[k] = s->color[k];
+        if ((!s->any_color && !sky) || tau[k] == 0)
+            F[k] = s->color[k] + (sky ? lt->sky_c[0][k] : 0.0);
         else
             F[k] = ninf[k] ? winf[k] / ninf[k] : wc[k] / tau[k];
     }
 }
 
-/* Appends one fog sample over [a, b) with optical depths tau. */
+/* Appends one fog sample over [a, b) with optical depths tau: colour col
+ * per unit alpha (the ambient and the sky light) plus the lights' own
+ * in-scatter S over it. */
 static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog, double a, double b,
-                const double tau[3], const double col[3])
+                const double tau[3], const double col[3], const double S[3])
 {
     double *d = ef_deep_buf_push(fog);
     if (!d)
@@ -412,7 +427,7 @@ static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog,
      * layout has AR/AG/AB, else A alone, the mean */
     for (int k = 0; k < 3; ++k) {
         if (L->rgb[k] >= 0)
-            d[L->rgb[k]] = col[k] * al[k];
+            d[L->rgb[k]] = col[k] * al[k] + S[k];
         if (L->argb[k] >= 0 && L->argb[k] != L->a)
             d[L->argb[k]] = F->chromatic ? al[k] : mean;
     }
@@ -428,17 +443,40 @@ static double max3(const double v[3])
     return fmax(v[0], fmax(v[1], v[2]));
 }
 
-/* An interval of the fog waiting to be emitted or split. */
+/* An interval of the fog waiting to be emitted or split: its optical
+ * depths, colour per unit alpha and their error estimates, and the
+ * lights' in-scatter over it (from its front) with theirs. */
 typedef struct piece {
-    double a, b, tau[3], col[3], err[3];
+    double a, b, tau[3], col[3], err[3], S[3], Se[3];
     int depth;
 } piece;
 
-static piece make_piece(double a, double b, const double tau[3], const double col[3],
-                        const double err[3], int depth)
+/* The lights' in-scatter over [a, b) of r1 (b may be INFINITY), seen from
+ * a (T counted from there), summed over the scene's lights, into S, and
+ * their error estimates into E. */
+static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double S[3],
+                      double E[3])
 {
-    piece p = { a, b, { tau[0], tau[1], tau[2] }, { col[0], col[1], col[2] },
-                { err[0], err[1], err[2] }, depth };
+    S[0] = S[1] = S[2] = E[0] = E[1] = E[2] = 0;
+    const ef_ray seg = seg_ray(r1, a, b);
+    for (int j = 0; j < s->nlight; ++j) {
+        double v[3], e[3];
+        ef_light_inscatter(s, &s->light[j], &seg, v, e);
+        for (int k = 0; k < 3; ++k) {
+            S[k] += v[k];
+            E[k] += e[k];
+        }
+    }
+}
+
+/* The piece [a, b) of r1 with every value computed. */
+static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1, double a,
+                        double b, int depth, int *linear)
+{
+    piece p = { .a = a, .b = b, .depth = depth };
+    seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, linear, F->want_err ? p.err : NULL);
+    if (lt->lights)
+        seg_light(F->scene, r1, a, b, p.S, p.Se);
     return p;
 }
 
@@ -518,46 +556,65 @@ static int feature_cuts(const ef_fog_scene *s, const ef_ray *r1, double a, doubl
     return n;
 }
 
+/* The split rule's colour error at the piece's middle, relative to the
+ * pixel's light: |S(a, m) - S(a, b) alpha(a, m) / alpha(a, b)| per
+ * channel, the lights' in-scatter over the front half against what the
+ * rule gives it, twice (as split_bound's midpoint, for a deviation that
+ * is zero at both ends and turns once: light cuts keep the source
+ * monotone within a piece), times T(0, a). */
+static double color_est(const piece *p, const piece *front, double Tf, double scale)
+{
+    double dev = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double al = isinf(p->tau[k]) ? 1.0 : -expm1(-p->tau[k]);
+        const double af = isinf(front->tau[k]) ? 1.0 : -expm1(-front->tau[k]);
+        const double pred = al > 0 ? p->S[k] * (af / al) : 0.0;
+        dev = fmax(dev, fabs(front->S[k] - pred));
+    }
+    return Tf * 2 * dev / scale;
+}
+
 /* The fog over [a, b) (b finite) in samples, front to back, splitting
- * where tau passes the cap or a later split's error estimate passes tol;
- * *Tf: the largest channel's transmittance from the camera to a, advanced
- * to b. */
-static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
-                     double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+ * where tau passes the cap or a later split's error estimate (of T, or of
+ * the lit colour relative to the pixel's light) passes tol; *Tf: the
+ * largest channel's transmittance from the camera to a, advanced to b. */
+static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit *lt,
+                     const ef_ray *r1, double a, double b, double *Tf, ef_deep_buf *fog,
+                     ef_deep_stats *st)
 {
     enum { DEPTH = 48 };
     piece stack[DEPTH + 2];
     int linear;
-    double t0[3], c0[3], e0[3] = { 0, 0, 0 }, *const ep = F->want_err ? e0 : NULL;
-    seg_tau(F->scene, r1, a, b, t0, c0, &linear, ep);
-    stack[0] = make_piece(a, b, t0, c0, e0, 0);
+    stack[0] = make_piece(F, lt, r1, a, b, 0, &linear);
     int sp = 1;
     while (sp > 0) {
-        const double sa = stack[sp - 1].a, sb = stack[sp - 1].b;
-        double tau[3], col[3], perr[3];
-        memcpy(tau, stack[sp - 1].tau, sizeof tau);
-        memcpy(col, stack[sp - 1].col, sizeof col);
-        memcpy(perr, stack[sp - 1].err, sizeof perr);
-        const int depth = stack[sp - 1].depth;
-        --sp;
-        const double m = 0.5 * (sa + sb);
+        const piece p = stack[--sp];
+        const double sa = p.a, sb = p.b, m = 0.5 * (sa + sb);
         /* Behind T < tol nothing a later split or alpha's rounding does
          * can show: one sample takes the rest. */
-        const int can = depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples &&
+        const int can = p.depth < DEPTH && m > sa && m < sb && fog->n < F->max_samples &&
                         *Tf > F->tol;
-        int split = can && max3(tau) > F->tau_cap;
-        double tm[3], cm[3], em[3] = { 0, 0, 0 }, est = 0;
-        if (!split && !linear && *Tf > F->tol && isfinite(max3(tau))) {
+        int split = can && max3(p.tau) > F->tau_cap;
+        double est = 0;
+        if (!split && !linear && *Tf > F->tol && isfinite(max3(p.tau))) {
             /* |dT| of any later split <= T(0, a) times the slab's bound */
             est = *Tf * split_bound(F->scene, r1, sa, sb);
             split = can && est > F->tol;
         }
+        piece front;
+        int have_front = 0;
+        if (!split && can && lt->lights && lt->scale > 0 && isfinite(max3(p.S))) {
+            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL);
+            have_front = 1;
+            const double ec = color_est(&p, &front, *Tf, lt->scale);
+            est = fmax(est, ec);
+            split = ec > F->tol;
+        }
         if (split) {
-            seg_tau(F->scene, r1, sa, m, tm, cm, NULL, ep ? em : NULL);
-            double tb[3], cb[3], eb[3] = { 0, 0, 0 };
-            seg_tau(F->scene, r1, m, sb, tb, cb, NULL, ep ? eb : NULL);
-            stack[sp++] = make_piece(m, sb, tb, cb, eb, depth + 1);   /* the back half after */
-            stack[sp++] = make_piece(sa, m, tm, cm, em, depth + 1);
+            if (!have_front)
+                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL);
+            stack[sp++] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL);   /* the back half after */
+            stack[sp++] = front;
             continue;
         }
         if (st) {
@@ -566,12 +623,14 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray
             if (fog->n >= F->max_samples)
                 st->capped = 1;
         }
-        if (emit(L, F, fog, sa, sb, tau, col))
+        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S))
             return -1;
-        for (int k = 0; st && k < 3; ++k)
-            st->pix_err[k] += perr[k];
+        for (int k = 0; st && k < 3; ++k) {
+            st->pix_err[k] += p.err[k];
+            st->pix_light_err[k] += *Tf * p.Se[k];
+        }
         /* the clearest channel's transmittance: exp of the smallest tau */
-        const double tmin = fmin(tau[0], fmin(tau[1], tau[2]));
+        const double tmin = fmin(p.tau[0], fmin(p.tau[1], p.tau[2]));
         *Tf *= isinf(tmin) ? 0 : exp(-tmin);
     }
     return 0;
@@ -579,17 +638,28 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray
 
 /* The fog over [a, b) (b finite) in samples, front to back: split first
  * where a component's density jumps or kinks (so that each piece is
- * monotone where a model says so), then by fog_piece. */
-static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
-                        double b, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+ * monotone where a model says so) and where a light's source does
+ * (ef_light_cuts), then by fog_piece. */
+static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit *lt,
+                        const ef_ray *r1, double a, double b, double *Tf, ef_deep_buf *fog,
+                        ef_deep_stats *st)
 {
-    const int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, fog) : 0;
+    int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, fog) : 0;
     if (n < 0)
         return -1;
+    if (lt->lights) {
+        enum { LIGHT_CUTS = 256 };
+        const ef_fog_scene *s = F->scene;
+        if (reserve((void **) &fog->cut, &fog->ccap, n + s->nlight * LIGHT_CUTS, sizeof *fog->cut))
+            return -1;
+        for (int j = 0; j < s->nlight; ++j)
+            n += ef_light_cuts(&s->light[j], r1, a, b, fog->cut + n, LIGHT_CUTS);
+        sort_nearly(fog->cut, n, sizeof *fog->cut, cmp_double);
+    }
     double prev = a;
     for (int i = 0; i <= n; ++i) {
         const double e = i < n ? fog->cut[i] : b;
-        if (e > prev && fog_piece(L, F, r1, prev, e, Tf, fog, st))
+        if (e > prev && fog_piece(L, F, lt, r1, prev, e, Tf, fog, st))
             return -1;
         prev = e > prev ? e : prev;
     }
@@ -598,12 +668,12 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
 
 /* Behind the last boundary a to infinity: samples out to where what is
  * left of the fog changes T by at most tol, the last one carrying the
- * optical depth to infinity (so the flatten is exact). */
-static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r1, double a,
-                    double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
+ * optical depth (and the light) to infinity, so the flatten is exact. */
+static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit *lt,
+                    const ef_ray *r1, double a, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
     double tinf[3], cinf[3];
-    seg_tau(F->scene, r1, a, INFINITY, tinf, cinf, NULL, NULL);
+    seg_tau(F->scene, lt, r1, a, INFINITY, tinf, cinf, NULL, NULL);
     if (!(max3(tinf) > 0))
         return 0;
     double Tinf = 0;
@@ -613,7 +683,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray 
     for (int i = 0; i < 400; ++i) {
         double t[3], c[3], T = 0;
         end = a + h;
-        seg_tau(F->scene, r1, a, end, t, c, NULL, NULL);
+        seg_tau(F->scene, lt, r1, a, end, t, c, NULL, NULL);
         for (int k = 0; k < 3; ++k)
             T = fmax(T, isinf(t[k]) ? 0 : exp(-t[k]));
         if (*Tf * (T - Tinf) <= F->tol || !isfinite(a + 2 * h))
@@ -621,20 +691,26 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray 
         h *= 2;
     }
     const int first = fog->n;
-    if (fog_interval(L, F, r1, a, end, Tf, fog, st))
+    const double T0 = *Tf;
+    if (fog_interval(L, F, lt, r1, a, end, Tf, fog, st))
         return -1;
     if (fog->n > first) {
         /* the last sample takes everything behind its front */
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
         const double za = d[L->nch], zb = d[L->nch + 1];
-        double t[3], c[3], e[3];
+        double t[3], c[3], e[3], S[3] = { 0, 0, 0 }, Se[3] = { 0, 0, 0 };
         /* (its error replaces nothing: the piece it extends stays counted,
          * an over-estimate) */
-        seg_tau(F->scene, r1, za, INFINITY, t, c, NULL, F->want_err ? e : NULL);
-        for (int k = 0; st && F->want_err && k < 3; ++k)
-            st->pix_err[k] += e[k];
+        seg_tau(F->scene, lt, r1, za, INFINITY, t, c, NULL, F->want_err ? e : NULL);
+        if (lt->lights)
+            seg_light(F->scene, r1, za, INFINITY, S, Se);
+        for (int k = 0; st && k < 3; ++k) {
+            if (F->want_err)
+                st->pix_err[k] += e[k];
+            st->pix_light_err[k] += T0 * Se[k];
+        }
         fog->n--;
-        if (emit(L, F, fog, za, zb, t, c))
+        if (emit(L, F, fog, za, zb, t, c, S))
             return -1;
     }
     return 0;
@@ -663,7 +739,8 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
     const int nch = L->nch;
     fog->n = 0;
     if (st)
-        st->pix_err[0] = st->pix_err[1] = st->pix_err[2] = 0;
+        for (int k = 0; k < 3; ++k)
+            st->pix_err[k] = st->pix_light_err[k] = 0;
     ef_ray r1 = *r;
     r1.dist = 1;
     if (!(r->planar > 0) || !isfinite(r->planar) || !isfinite(r->dist) || !(r->dist > 0))
@@ -683,23 +760,43 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
     if (nb < 0)
         return -1;
     const double *B = fog->bnd;
+    const ef_fog_scene *s = F->scene;
+    px_lit lt = { .lights = s->nlight > 0, .sky = s->sky_light != NULL };
+    for (int i = 0; lt.sky && i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        ef_sky_light_eval(s->sky_light, c->phase, c->g, s->ctx.up, r1.dir, lt.sky_c[i]);
+        for (int k = 0; k < 3; ++k)
+            lt.sky_c[i][k] *= c->has_albedo ? c->albedo[k] : 1.0;
+    }
+    if (lt.lights) {
+        /* the colour contract's unit: the lights' in-scatter along what
+         * the pixel shows of its ray */
+        const double last = nb > 0 ? B[nb - 1] : 0;
+        const double end = isfinite(cut) ? cut
+                           : s->sky == EF_SKY_FOG ? INFINITY
+                           : s->sky == EF_SKY_DISTANCE_MODE ? fmax(last, s->sky_distance) : last;
+        double S[3], E[3];
+        if (end > 0) {
+            seg_light(s, &r1, 0, end, S, E);
+            lt.scale = max3(S);
+        }
+    }
     double Tf = 1, prev = 0;
     int rc = 0;
     for (int j = 0; j < nb && !rc; ++j) {
         const double b = B[j] < cut ? B[j] : cut;
         if (b > prev)
-            rc = fog_interval(L, F, &r1, prev, b, &Tf, fog, st);
+            rc = fog_interval(L, F, &lt, &r1, prev, b, &Tf, fog, st);
         if (b > prev)
             prev = b;
         if (B[j] >= cut)
             break;
     }
     if (!rc && isinf(cut)) {
-        const ef_fog_scene *s = F->scene;
         if (s->sky == EF_SKY_FOG)
-            rc = fog_tail(L, F, &r1, prev, &Tf, fog, st);
+            rc = fog_tail(L, F, &lt, &r1, prev, &Tf, fog, st);
         else if (s->sky == EF_SKY_DISTANCE_MODE && s->sky_distance > prev)
-            rc = fog_interval(L, F, &r1, prev, s->sky_distance, &Tf, fog, st);
+            rc = fog_interval(L, F, &lt, &r1, prev, s->sky_distance, &Tf, fog, st);
     }
     if (st) {
         st->fog_samples += fog->n;

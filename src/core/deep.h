@@ -64,7 +64,9 @@ double *ef_deep_buf_push_raw(ef_deep_buf *b);
 /* What the fog pass needs per pixel. */
 typedef struct ef_deep_fog {
     const ef_fog_scene *scene;
-    double tol;               /* --deep-tol: bound on |dT| when a fog sample is split later */
+    /* --deep-tol: bound on |dT| when a fog sample is split later, and on
+     * the lit colour's change relative to the pixel's light (estimated) */
+    double tol;
     double tau_cap;           /* largest optical depth per fog sample (alpha precision) */
     int max_samples;          /* fog samples per pixel, at most */
     int chromatic;            /* write each channel's alpha (AR/AG/AB) */
@@ -78,6 +80,9 @@ typedef struct ef_deep_stats {
     /* The last pixel's (reset by each ef_deep_fog_samples, filled when
      * want_err): the fog's tau error estimates summed over its samples. */
     double pix_err[3];
+    /* and its lights' in-scatter error estimates, T(0, front) times each
+     * sample's, summed (image units; always filled) */
+    double pix_light_err[3];
 } ef_deep_stats;
 
 /* Tidies in (n samples, front/back set) into out: every volume split at
@@ -91,9 +96,13 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
  * fog: between 0 and every boundary of the tidy samples in tidy, and
  * behind the last per the scene's sky policy, up to the first sample that
  * is opaque in every fog channel when stop_at_opaque. Each sample's alpha
- * and colour are the exact integrals over its interval; boundaries are
- * added where an optical depth passes tau_cap or where the estimated error
- * of a later split passes tol. Returns 0, or -1 when out of memory. */
+ * and colour are the exact integrals over its interval (the scene's lights
+ * and sky light included: the colour is the ambient and sky share of its
+ * alpha plus the lights' in-scatter over it); boundaries are added where
+ * an optical depth passes tau_cap, where a light's source jumps or turns
+ * (ef_light_cuts), or where the estimated error of a later split passes
+ * tol: |dT|, and the lit colour's change over the lights' in-scatter along
+ * the pixel's visible ray. Returns 0, or -1 when out of memory. */
 int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_ray *r,
                         const ef_deep_buf *tidy, int stop_at_opaque, ef_deep_buf *fog,
                         ef_deep_stats *st);

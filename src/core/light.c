@@ -1265,6 +1265,47 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
     }
 }
 
+int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double *cut, int cap)
+{
+    double c[MAX_CUTS];
+    int n = 0;
+    if (l->kind != EF_LIGHT_SUN) {
+        double w[3];
+        for (int k = 0; k < 3; ++k)
+            w[k] = l->pos[k] - r->org[k];
+        const double ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+        const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
+                     cy = w[2] * r->dir[0] - w[0] * r->dir[2],
+                     cz = w[0] * r->dir[1] - w[1] * r->dir[0];
+        const double hq = len2(len2(len2(cx, cy), cz), l->radius);
+        if (isfinite(ts) && isfinite(hq)) {
+            if (ts > a && ts < b)
+                c[n++] = ts;
+            /* 1 / d^2 halves its slope each doubling of the distance from
+             * the closest approach: geometric cuts from there */
+            n = steps_around(c, n, ts, a, b, hq > 0 ? hq : 1e-9 * fmax(fabs(ts), 1));
+        }
+        if (l->kind == EF_LIGHT_SPOT)
+            n = cone_cuts(l, r, a, b, c, n);
+    }
+    if (l->shadow && n < MAX_CUTS - 2) {
+        double iv[64][2];
+        int m = ef_shadow_lit(l->shadow, r->org, r->dir, a, b, iv, 64);
+        if (m < 0)
+            m = -1 - m;
+        for (int i = 0; i < m && n < MAX_CUTS - 2; ++i)
+            for (int e = 0; e < 2; ++e)
+                if (iv[i][e] > a && iv[i][e] < b)
+                    c[n++] = iv[i][e];
+    }
+    qsort(c, (size_t) n, sizeof c[0], cmp_double);
+    int m = 0;
+    for (int i = 0; i < n && m < cap; ++i)
+        if (m == 0 || c[i] > cut[m - 1])
+            cut[m++] = c[i];
+    return m;
+}
+
 /* Lit intervals a view segment holds on the stack; more (foliage, a
  * fence) go to the heap, up to MAX_LIT, beyond which the rest joins the
  * last (shadow.h). */

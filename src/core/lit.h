@@ -19,6 +19,14 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
 
+/* Where along r (org the camera, dir unit), strictly inside (a, b), light
+ * l's in-scatter per unit optical depth jumps or turns fast: a lamp's
+ * closest approach and points 4^j times its distance from the line either
+ * side of it, a spot's cone crossings, a shadow map's lit-interval ends (the
+ * first 64 intervals). Sorted and distinct into cut (at most cap); returns
+ * how many. Deep fog samples are cut there, so that the split rule's
+ * colour error can be estimated from one midpoint per sample. */
+int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double *cut, int cap);
 /* Whether l's light in scene s is the closed form of the sun in one
  * exponential height fog, without a shadow map: what the span path of
  * apply.c computes from the optical depths it already has. */

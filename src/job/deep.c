@@ -414,7 +414,8 @@ static int copy_buf(ef_deep_buf *dst, const ef_deep_buf *src)
  *             where the input covers nothing, the fog's own transmittance
  *             (1 without fog behind, as a sky pixel under --sky keep)
  *   error     T expm1(e), e the models' tau error estimates summed along
- *             the pixel's fog samples (at most 1)
+ *             the pixel's fog samples (at most 1), plus the lights'
+ *             in-scatter error estimates (each sample's times T to it)
  *   P, distance  the nearest sample's front (inf where there is none),
  *             as the flattened Z
  * For a pixel of one opaque point sample these are the flat image's AOVs. */
@@ -458,7 +459,7 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
         aov[n++] = T[k];
     for (int k = 0; k < 3 && (S->aov & EF_AOV_ERROR); ++k) {
         const double e = w->st.pix_err[k], b = e > 0 ? T[k] * expm1(e) : 0;
-        aov[n++] = b < 1 ? b : 1;
+        aov[n++] = (b < 1 ? b : 1) + w->st.pix_light_err[k];
     }
     for (int k = 0; k < 3 && (S->aov & EF_AOV_P); ++k)
         aov[n++] = isfinite(front) ? (r->org[k] - S->q->aov_origin[k]) + r->dir[k] * front
@@ -712,10 +713,8 @@ static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_e
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
-    if (ef_scene_lit(q->scene))
-        return ef_fail(err, "lit fog (--light, --sky-light) on deep images is not supported yet: the "
-                            "in-scattered light would have to be split into the fog's deep "
-                            "samples; flatten the image first, or drop --light");
+    if (q->naov && (q->aov & (EF_AOV_LIGHT | EF_AOV_LIT)))   /* (the CLI refuses them first) */
+        return ef_fail(err, "--aov light and lit are written for flat input only");
     ef_deep_in d;
     if (ef_deep_in_open(q->in, q->part, &d, err))
         return -1;

@@ -411,6 +411,9 @@ static int check_deep(ef_frame *F)
     else if (F->naov && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "--aov with deep input needs --deep flatten (a deep output carries no AOVs: "
               "its fog samples are the fog)";
+    else if (F->naov && (o->aov & (EF_AOV_LIGHT | EF_AOV_LIT)))
+        why = "--aov light and lit are written for flat input only (deep input takes fog, T, "
+              "error, P and distance): flatten the image first for the light layers";
     else if (F->foreign && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "a deep output is EXR (--deep flatten writes other formats)";
     else if (o->preview)
