@@ -108,12 +108,23 @@ typedef struct exrfog_scene exrfog_scene;
  * in the working space (NULL: the default 0.7,0.75,0.8). Nothing but the
  * scene file and the files it names (profiles, its lights' shadow maps,
  * its sky_light's environment) is read: this validates a scene with no
- * image at hand. Lights light exrfog_fog_pixels' fog; their AOV layers
- * are written by exrfog_run only. */
+ * image at hand. Lights light exrfog_fog_pixels' fog, which writes their
+ * AOV layers too (exrfog_image's light members). */
 EXRFOG_API exrfog_result exrfog_scene_create(exrfog_context *ctx, const char *const *specs,
                                              int nspecs, const char *scene_file,
                                              const double *color, exrfog_scene **out);
 EXRFOG_API void exrfog_scene_destroy(exrfog_scene *scene);
+/* How many lights the scene has (--light SPECs and a scene file's
+ * "lights", in that order), 0 for NULL. */
+EXRFOG_API int exrfog_scene_light_count(const exrfog_scene *scene);
+/* Light i's name (0 <= i < the count), as its AOV layer fog_light.NAME
+ * has it, and into *shadowed (may be NULL) whether it has a shadow map
+ * (then it has a fog_lit.NAME layer); NULL when i is out of range. The
+ * string lives as long as the scene. */
+EXRFOG_API const char *exrfog_scene_light_name(const exrfog_scene *scene, int i, int *shadowed);
+/* Whether the scene has a sky light (--sky-light, a scene file's
+ * "sky_light"): then exrfog_image's sky planes are written. */
+EXRFOG_API int exrfog_scene_has_sky_light(const exrfog_scene *scene);
 
 /* --------------------------------------------------------------- cameras */
 
@@ -145,8 +156,23 @@ EXRFOG_API void exrfog_camera_destroy(exrfog_camera *cam);
  * unless depth_mode says otherwise (the names of --depth-mode). The
  * optional AOV planes (NULL: not wanted) get the transmittance fog_T, its
  * error bound fog_error and the world position fog_P, as the command line
- * writes them; a group may give some of its three planes only. The
- * rectangle's pixel coordinates must stay within an int. */
+ * writes them; a group may give some of its three planes only. With
+ * lights, the layers of --aov light and lit may be asked for too (below).
+ * The rectangle's pixel coordinates must stay within an int.
+ *
+ * The light layers (members added after P: a caller built against a
+ * header without them passes the smaller size and gets none). Wanting any
+ * of ambient, light or sky writes them all, as --aov light does (the
+ * planes not given are computed and dropped); they need a scene with
+ * lights or a sky light (EXRFOG_USAGE otherwise):
+ *   ambient  fog_ambient.R/G/B, the fog's own colour (today's fog term)
+ *   light    3 planes per light (R, G, B), light i's at light[3 i ..
+ *            3 i + 2] in exrfog_scene_light_name's order:
+ *            fog_light.NAME.R/G/B; NULL entries are not wanted
+ *   sky      the sky light's layer (ignored without one)
+ *   lit      1 plane per light, the lit fraction fog_lit.NAME of a light
+ *            with a shadow map (entries of the others are ignored)
+ * The fog's colour is their sum: ambient + the lights + sky. */
 typedef struct exrfog_image {
     size_t size;                 /* sizeof(exrfog_image): the ABI check */
     int x0, y0, width, height;   /* absolute pixels, as in the display window */
@@ -158,6 +184,10 @@ typedef struct exrfog_image {
     float *T[3];                 /* optional AOVs */
     float *error[3];
     float *P[3];
+    float *ambient[3];           /* the light layers (above) */
+    float *const *light;         /* 3 per light, or NULL */
+    float *sky[3];
+    float *const *lit;           /* 1 per light, or NULL */
 } exrfog_image;
 
 /* Fogs img in place with scene seen from cam. The scene is bound to the

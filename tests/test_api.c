@@ -878,6 +878,145 @@ static void test_bounds_and_partial_aovs(void **state)
     exrfog_context_destroy(ctx);
 }
 
+/* The light layers through exrfog_fog_pixels (issue 25): a 40 x 8
+ * rectangle of the sample frame in height fog lit by a sun with a shadow
+ * map (make_sample --sun-view: the frame's own depth from the sun) and a
+ * point lamp. Their values are the core's, checked against the reference
+ * integrator in test_light and test_shadow; here the library's plumbing
+ * is: the layers equal those exrfog_run writes for the same pixels (--aov
+ * light,lit, float), the layers sum to the fog the call adds to a black
+ * input, a caller built before the light members (size up to P) gets the
+ * same pixels and no layers, and an unlit scene refuses them. */
+static void test_light_layers(void **state)
+{
+    (void) state;
+    const char *mk = getenv("EXRFOG_MAKE_SAMPLE");
+    if (!mk)
+        skip();
+    char cmd[3000], map[1200], scene_path[1200], out[1200];
+    snprintf(map, sizeof map, "%s", path_in("sunmap.exr"));
+    snprintf(scene_path, sizeof scene_path, "%s", path_in("lights.json"));
+    snprintf(out, sizeof out, "%s", path_in("lit_layers.exr"));
+    snprintf(cmd, sizeof cmd, "'%s' '%s' --sun-view 0.2,0.3,-1 --size 256x256 >/dev/null 2>&1", mk,
+             map);
+    assert_int_equal(system(cmd), 0);
+    FILE *f = fopen(scene_path, "w");
+    assert_non_null(f);
+    fprintf(f, "{\"lights\": [\"sun:towards=0.2,0.3,-1:intensity=3:name=key:shadow=%s\",\n"
+               "            \"point:position=1,2,-8:intensity=40:name=lamp\"]}\n", map);
+    fclose(f);
+    const char *fog = "height:density=0.3:falloff=0.5:base=0:phase=hg:g=0.5";
+    exrfog_context *ctx = exrfog_context_create();
+    const char *argv[] = { "exrfog", sample(), "--fog", fog, "--scene", scene_path, "--aov",
+                           "light,lit", "-d", "float", "-o", out };
+    assert_int_equal(exrfog_run(ctx, 12, argv), EXRFOG_OK);
+    exrfog_scene *sc = NULL;
+    exrfog_camera *cam = NULL;
+    assert_int_equal(exrfog_scene_create(ctx, &fog, 1, scene_path, NULL, &sc), EXRFOG_OK);
+    assert_int_equal(exrfog_camera_from_file(ctx, sample(), &cam), EXRFOG_OK);
+    assert_int_equal(exrfog_scene_light_count(sc), 2);
+    int sh = -1;
+    assert_string_equal(exrfog_scene_light_name(sc, 0, &sh), "key");
+    assert_int_equal(sh, 1);
+    assert_string_equal(exrfog_scene_light_name(sc, 1, &sh), "lamp");
+    assert_int_equal(sh, 0);
+    assert_null(exrfog_scene_light_name(sc, 2, &sh));
+    /* the input's pixels, and the file's layers */
+    enum { X0 = 360, Y0 = 240, W = 40, H = 8, N = W * H };
+    static const char *const in_names[5] = { "R", "G", "B", "A", "Z" };
+    static const char *const layer[12] = {
+        "fog_ambient.R", "fog_ambient.G", "fog_ambient.B", "fog_light.key.R", "fog_light.key.G",
+        "fog_light.key.B", "fog_light.lamp.R", "fog_light.lamp.G", "fog_light.lamp.B",
+        "fog_lit.key", "R", "G"
+    };
+    float in[5][N], want[12][N];
+    int w = 0, h = 0;
+    for (int c = 0; c < 17; ++c) {
+        float *v = tu_read_channel(c < 5 ? sample() : out, 0, c < 5 ? in_names[c] : layer[c - 5],
+                                   &w, &h);
+        assert_non_null(v);
+        for (int j = 0; j < H; ++j)
+            for (int i = 0; i < W; ++i)
+                (c < 5 ? in[c] : want[c - 5])[j * W + i] = v[(Y0 + j) * w + X0 + i];
+        free(v);
+    }
+    float R[N], G[N], B[N], A[N], L[10][N];
+    for (int pass = 0; pass < 2; ++pass) {
+        /* pass 0: the input as it is; 1: black (the layers' sum is the fog) */
+        for (int i = 0; i < N; ++i) {
+            R[i] = pass ? 0 : in[0][i];
+            G[i] = pass ? 0 : in[1][i];
+            B[i] = pass ? 0 : in[2][i];
+            A[i] = in[3][i];
+        }
+        float *const lp[6] = { L[3], L[4], L[5], L[6], L[7], L[8] };
+        float *const litp[2] = { L[9], NULL };
+        exrfog_image img = { .size = sizeof img, .x0 = X0, .y0 = Y0, .width = W, .height = H,
+                             .stride = W, .rgb = { R, G, B }, .alpha = A, .depth = in[4],
+                             .ambient = { L[0], L[1], L[2] }, .light = lp, .lit = litp };
+        assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &img), EXRFOG_OK);
+        double worst = 0, wsum = 0;
+        for (int i = 0; i < N; ++i) {
+            for (int c = 0; c < 10; ++c)
+                worst = fmax(worst, fabs(L[c][i] - want[c][i]) / (1e-6 + fabs(want[c][i])));
+            if (pass == 0)
+                continue;
+            const float *chan[3] = { R, G, B };
+            for (int k = 0; k < 3; ++k) {
+                const double sum = (double) L[k][i] + L[3 + k][i] + L[6 + k][i];
+                wsum = fmax(wsum, fabs(chan[k][i] - sum) / (1e-6 + fabs(sum)));
+            }
+        }
+        /* float layers: the same core on the same pixels, to float rounding */
+        assert_true(worst <= 1e-6);
+        if (pass == 1)
+            assert_true(wsum <= 1e-6);
+        if (pass == 0)
+            for (int i = 0; i < N; ++i) {
+                assert_true(fabs(R[i] - want[10][i]) <= 1e-6 * (1e-6 + fabs(want[10][i])));
+                assert_true(fabs(G[i] - want[11][i]) <= 1e-6 * (1e-6 + fabs(want[11][i])));
+            }
+    }
+    /* the lamp and the sun both show in the rectangle, the map shades some */
+    double lamp = 0, key = 0, litmin = 1;
+    for (int i = 0; i < N; ++i) {
+        lamp = fmax(lamp, want[6][i]);
+        key = fmax(key, want[3][i]);
+        litmin = fmin(litmin, want[9][i]);
+    }
+    assert_true(lamp > 0 && key > 0 && litmin < 0.9);
+    /* a caller built before the light members: the same pixels, no layers */
+    float R2[N], G2[N], B2[N];
+    for (int i = 0; i < N; ++i) {
+        R2[i] = in[0][i];
+        G2[i] = in[1][i];
+        B2[i] = in[2][i];
+    }
+    exrfog_image old = { .size = offsetof(exrfog_image, ambient), .x0 = X0, .y0 = Y0,
+                         .width = W, .height = H, .stride = W, .rgb = { R2, G2, B2 },
+                         .alpha = A, .depth = in[4] };
+    assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &old), EXRFOG_OK);
+    for (int i = 0; i < N; ++i)
+        assert_true(fabs(R2[i] - want[10][i]) <= 1e-6 * (1e-6 + fabs(want[10][i])));
+    old.size = offsetof(exrfog_image, P);
+    assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &old), EXRFOG_USAGE);
+    /* an unlit scene has no layers to give */
+    exrfog_scene *bare = NULL;
+    assert_int_equal(exrfog_scene_create(ctx, &fog, 1, NULL, NULL, &bare), EXRFOG_OK);
+    assert_int_equal(exrfog_scene_light_count(bare), 0);
+    exrfog_image img = { .size = sizeof img, .x0 = X0, .y0 = Y0, .width = W, .height = H,
+                         .stride = W, .rgb = { R2, G2, B2 }, .depth = in[4],
+                         .ambient = { L[0], NULL, NULL } };
+    assert_int_equal(exrfog_fog_pixels(ctx, bare, cam, &img), EXRFOG_USAGE);
+    assert_non_null(strstr(exrfog_error(ctx), "lights"));
+    printf("light layers: 40x8 pixels as exrfog_run writes them; lamp up to %.3g, sun %.3g, "
+           "lit fraction down to %.2f\n", lamp, key, litmin);
+    exrfog_scene_destroy(bare);
+    exrfog_scene_destroy(sc);
+    exrfog_camera_destroy(cam);
+    exrfog_context_destroy(ctx);
+}
+
 /* ------------------------------------------------ fault injection */
 
 /* Fails allocation N of fn for every N up to the count of a clean call:
@@ -996,6 +1135,7 @@ int main(void)
         cmocka_unit_test(test_context_cache),
         cmocka_unit_test(test_null_arguments),
         cmocka_unit_test(test_bounds_and_partial_aovs),
+        cmocka_unit_test(test_light_layers),
         cmocka_unit_test(test_fault_injection),
     };
     /* EF_API_TESTS=a,b: only those (the ThreadSanitizer build runs the

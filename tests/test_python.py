@@ -182,6 +182,42 @@ if np is not None:
     res = exrfog.fog_pixels(np.full((1, 1, 3), 0.5), None, np.full((1, 1), 5.0), SAMPLE,
                             "exp:density=0.1", origin=(320, 180))
     check(0 < res["T"][0, 0, 0] < 1, "a camera from the sample's header")
+    # layers=True: a white point lamp of 2 W/sr at (0.3, 0.2, 1) in exp fog of
+    # density 0.1, the same 4 x 2 pixels over black: the lamp's layer by hand
+    # (Simpson's rule, 4000 steps, of int e^-(0.1 t) 0.1 / (4 pi) 2 e^-(0.1 r)
+    # / r^2 dt along each ray), and ambient + the lamp = the fog's colour
+    import json
+    import tempfile
+    with tempfile.TemporaryDirectory() as td:
+        sf = os.path.join(td, "lamp.json")
+        with open(sf, "w") as f:
+            json.dump({"lights": ["point:position=0.3,0.2,1:intensity=2:name=bulb"]}, f)
+        res = exrfog.fog_pixels(np.zeros((h, w, 3), np.float32), None, depth, cam,
+                                {"fog": ["exp:density=0.1"], "scene": sf}, color=(1, 1, 1),
+                                layers=True)
+    check(list(res["lights"]) == ["bulb"] and res["lit"] == {} and "sky" not in res,
+          "fog_pixels layers: one light named bulb, no shadow, no sky (%s)" % list(res))
+    worst = 0.0
+    for y in range(h):
+        for x in range(w):
+            dx = 2 * (x + 0.5) / w - 1
+            dy = (1 - 2 * (y + 0.5) / h) * h / w
+            n = math.sqrt(dx * dx + dy * dy + 1)
+            u = (dx / n, dy / n, 1 / n)
+            D, steps = 2 * n, 4000
+            acc = 0.0
+            for i in range(steps + 1):
+                t = D * i / steps
+                r = math.dist((t * u[0], t * u[1], t * u[2]), (0.3, 0.2, 1.0))
+                f = math.exp(-0.1 * t) * 0.1 / (4 * math.pi) * 2 * math.exp(-0.1 * r) / (r * r)
+                acc += f * (1 if i in (0, steps) else 4 if i % 2 else 2)
+            want = acc * D / steps / 3
+            got = float(res["lights"]["bulb"][y, x, 1])
+            worst = max(worst, abs(got - want) / want)
+            tot = float(res["ambient"][y, x, 1]) + got
+            check(abs(float(res["rgb"][y, x, 1]) - tot) <= 1e-6 * tot,
+                  "fog_pixels layers sum to the fog's colour")
+    check(worst < 1e-5, "fog_pixels lamp layer by hand (worst %.2e)" % worst)
 
 # Ctrl-C during a slow call raises KeyboardInterrupt within a second and
 # leaves no output and no temporary file (a child interpreter, SIGINT after

@@ -98,6 +98,10 @@ _lib.exrfog_camera_from_matrix.argtypes = [_ctx_p, ctypes.POINTER(ctypes.c_doubl
 _lib.exrfog_camera_from_file.argtypes = [_ctx_p, ctypes.c_char_p, ctypes.POINTER(_ctx_p)]
 _lib.exrfog_camera_destroy.argtypes = [_ctx_p]
 _lib.exrfog_fog_pixels.argtypes = [_ctx_p, _ctx_p, _ctx_p, ctypes.c_void_p]
+_lib.exrfog_scene_light_count.argtypes = [_ctx_p]
+_lib.exrfog_scene_light_name.argtypes = [_ctx_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
+_lib.exrfog_scene_light_name.restype = ctypes.c_char_p
+_lib.exrfog_scene_has_sky_light.argtypes = [_ctx_p]
 
 
 def library_version():
@@ -250,10 +254,13 @@ class _Image(ctypes.Structure):
                 ("rgb", ctypes.c_void_p * 3), ("alpha", ctypes.c_void_p),
                 ("depth", ctypes.c_void_p), ("depth_mode", ctypes.c_char_p),
                 ("T", ctypes.c_void_p * 3), ("error", ctypes.c_void_p * 3),
-                ("P", ctypes.c_void_p * 3)]
+                ("P", ctypes.c_void_p * 3), ("ambient", ctypes.c_void_p * 3),
+                ("light", ctypes.POINTER(ctypes.c_void_p)), ("sky", ctypes.c_void_p * 3),
+                ("lit", ctypes.POINTER(ctypes.c_void_p))]
 
 
-def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, origin=(0, 0)):
+def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, origin=(0, 0),
+               layers=False):
     """Fogs pixels in memory (numpy arrays), no file involved.
 
     rgb: H x W x 3, alpha: H x W or None, depth: H x W (planar camera depth
@@ -264,7 +271,11 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
     xmax, ymax; default the array's size at origin). scene: a SPEC or a
     list of them, or a dict {"fog": [...], "scene": path}. origin: the
     absolute (x, y) of pixel [0, 0]. Returns a dict of float32 arrays:
-    rgb, alpha, T (transmittance), error (its bound), P (world position)."""
+    rgb, alpha, T (transmittance), error (its bound), P (world position).
+    layers=True (a scene with lights): also "ambient" (H x W x 3), "lights"
+    {NAME: H x W x 3} per light, "sky" (H x W x 3, with a sky light) and
+    "lit" {NAME: H x W} per shadowed light, as --aov light,lit writes them;
+    ambient, the lights and sky sum to the fog's colour."""
     import numpy as np
     rgb = np.array(rgb, dtype=np.float32, copy=True, order="C")
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -323,9 +334,36 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
             img.alpha = a.ctypes.data if a is not None else None
             img.depth = d.ctypes.data
             img.depth_mode = depth_mode.encode() if depth_mode else None
+            extra = {}
+            if layers:
+                nl = _lib.exrfog_scene_light_count(sc)
+                names, shadowed = [], []
+                for j in range(nl):
+                    sh = ctypes.c_int(0)
+                    names.append(_lib.exrfog_scene_light_name(sc, j, ctypes.byref(sh)).decode())
+                    shadowed.append(sh.value != 0)
+                amb = [np.zeros((h, w), np.float32) for _ in range(3)]
+                lp = [[np.zeros((h, w), np.float32) for _ in range(3)] for _ in range(nl)]
+                lit = [np.ones((h, w), np.float32) if shadowed[j] else None for j in range(nl)]
+                sky = [np.zeros((h, w), np.float32) for _ in range(3)]
+                larr = (ctypes.c_void_p * max(1, 3 * nl))(
+                    *[lp[j][k].ctypes.data for j in range(nl) for k in range(3)])
+                tarr = (ctypes.c_void_p * max(1, nl))(
+                    *[lit[j].ctypes.data if shadowed[j] else None for j in range(nl)])
+                for k in range(3):
+                    img.ambient[k] = amb[k].ctypes.data
+                    img.sky[k] = sky[k].ctypes.data
+                img.light = ctypes.cast(larr, ctypes.POINTER(ctypes.c_void_p))
+                img.lit = ctypes.cast(tarr, ctypes.POINTER(ctypes.c_void_p))
             ctx.check(_lib.exrfog_fog_pixels(ctx.p, sc, cam, ctypes.byref(img)))
+            if layers:
+                extra = {"ambient": np.stack(amb, axis=2),
+                         "lights": {names[j]: np.stack(lp[j], axis=2) for j in range(nl)},
+                         "lit": {names[j]: lit[j] for j in range(nl) if shadowed[j]}}
+                if _lib.exrfog_scene_has_sky_light(sc):
+                    extra["sky"] = np.stack(sky, axis=2)
         finally:
             _lib.exrfog_camera_destroy(cam)
             _lib.exrfog_scene_destroy(sc)
-    return {"rgb": np.stack(planes, axis=2), "alpha": a, "T": np.stack(T, axis=2),
-            "error": np.stack(E, axis=2), "P": np.stack(P, axis=2)}
+    return dict({"rgb": np.stack(planes, axis=2), "alpha": a, "T": np.stack(T, axis=2),
+                 "error": np.stack(E, axis=2), "P": np.stack(P, axis=2)}, **extra)

@@ -208,6 +208,27 @@ void exrfog_scene_destroy(exrfog_scene *scene)
     free(scene);
 }
 
+int exrfog_scene_light_count(const exrfog_scene *scene)
+{
+    return scene ? scene->s.nlight : 0;
+}
+
+int exrfog_scene_has_sky_light(const exrfog_scene *scene)
+{
+    return scene && scene->s.sky_light != NULL;
+}
+
+const char *exrfog_scene_light_name(const exrfog_scene *scene, int i, int *shadowed)
+{
+    if (shadowed)
+        *shadowed = 0;
+    if (!scene || i < 0 || i >= scene->s.nlight)
+        return NULL;
+    if (shadowed)
+        *shadowed = scene->s.light[i].shadow != NULL;
+    return scene->s.light[i].name;
+}
+
 /* Whether a display window is non-empty and its size fits an int. */
 static int window_ok(const int w[4])
 {
@@ -327,7 +348,7 @@ static exrfog_result check_image(exrfog_context *ctx, const exrfog_image *img)
 typedef struct rect_planes {
     float *rgb[3], *alpha;
     const float *depth;
-    float *aov[9];
+    float *aov[EF_AOV_MAX_CHANNELS];
     int naov;
 } rect_planes;
 
@@ -343,7 +364,7 @@ static void fog_rect(const ef_fog_pass *pass, int x0, int y0, int w, int h, rect
 {
     ef_aov_out aov;
     memset(&aov, 0, sizeof aov);   /* fog_P relative to the world's origin */
-    ef_aov_bind(&aov, mask, NULL, p->aov);   /* no light AOVs through the library yet */
+    ef_aov_bind(&aov, mask, pass->scene, p->aov);
     ef_fog_block_aov(pass, x0, y0, w, h, p->rgb, p->alpha, p->depth, mask ? &aov : NULL, NULL);
 }
 
@@ -351,9 +372,9 @@ static void fog_rect(const ef_fog_pass *pass, int x0, int y0, int w, int h, rect
  * contiguous planes (one call to the core instead of one per row, whose
  * set-up would cost more than a small rectangle's pixels), a big one goes
  * row by row. */
-static exrfog_result fog_rows(exrfog_context *ctx, const ef_fog_pass *pass, exrfog_image *img,
-                              float *const aov_in[9], const int aov_given[9], int naov,
-                              unsigned mask)
+static exrfog_result fog_rows(exrfog_context *ctx, const ef_fog_pass *pass,
+                              const exrfog_image *img, float *const *aov_in, const int *aov_given,
+                              int naov, unsigned mask)
 {
     const int w = img->width, h = img->height;
     const size_t n = (size_t) w * (size_t) h;
@@ -417,10 +438,19 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     err.file = NULL;
     err.msg[0] = '\0';
     ctx->error[0] = '\0';
-    if (!img || img->size < sizeof *img) {
+    /* A caller built before the light layers passes the size up to P:
+     * the members past its size read as NULL. */
+    const size_t base = offsetof(exrfog_image, ambient);
+    if (!img || img->size < base) {
         ef_fail(&err, "exrfog_image.size is %zu, not %zu: the caller was built against another "
                       "exrfog.h", img ? img->size : (size_t) 0, sizeof *img);
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
+    }
+    exrfog_image im;
+    if (img->size < sizeof im) {
+        memset(&im, 0, sizeof im);
+        memcpy(&im, img, img->size);
+        img = &im;
     }
     exrfog_result r = check_image(ctx, img);
     if (r != EXRFOG_OK)
@@ -438,18 +468,49 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
      * a wanted group writes to scratch, one row long. */
     float *const *groups[3] = { img->T, img->error, img->P };
     static const unsigned bits[3] = { EF_AOV_T, EF_AOV_ERROR, EF_AOV_P };
-    float *aov_in[9];
-    int aov_given[9], naov = 0;
+    float *aov_in[EF_AOV_MAX_CHANNELS];
+    int aov_given[EF_AOV_MAX_CHANNELS], naov = 0;
     unsigned mask = 0;
+#define PUSH_PLANE(p) (aov_given[naov] = (p) != NULL, aov_in[naov++] = (p))
     for (int g = 0; g < 3; ++g) {
         if (!groups[g][0] && !groups[g][1] && !groups[g][2])
             continue;
         mask |= bits[g];
-        for (int k = 0; k < 3; ++k) {
-            aov_given[naov] = groups[g][k] != NULL;
-            aov_in[naov++] = groups[g][k];
-        }
+        for (int k = 0; k < 3; ++k)
+            PUSH_PLANE(groups[g][k]);
     }
+    /* the light layers, in ef_aov_channels' order: ambient, each light's,
+     * the sky light's, then the shadowed lights' lit fractions */
+    const ef_fog_scene *sc = &scene->s;
+    int want_light = 0, want_lit = 0;
+    for (int k = 0; k < 3; ++k)
+        want_light |= img->ambient[k] != NULL || img->sky[k] != NULL;
+    for (int j = 0; j < sc->nlight; ++j) {
+        for (int k = 0; img->light && k < 3; ++k)
+            want_light |= img->light[3 * j + k] != NULL;
+        want_lit |= img->lit && img->lit[j] && sc->light[j].shadow;
+    }
+    if ((want_light || (img->lit && !want_lit)) && !ef_scene_lit(sc)) {
+        ef_fail(&err, "the light layers need a scene with lights (a --light SPEC or a sky light)");
+        return fail(ctx, &err, NULL, EXRFOG_USAGE);
+    }
+    if (want_light) {
+        mask |= EF_AOV_LIGHT;
+        for (int k = 0; k < 3; ++k)
+            PUSH_PLANE(img->ambient[k]);
+        for (int j = 0; j < sc->nlight; ++j)
+            for (int k = 0; k < 3; ++k)
+                PUSH_PLANE(img->light ? img->light[3 * j + k] : NULL);
+        for (int k = 0; sc->sky_light && k < 3; ++k)
+            PUSH_PLANE(img->sky[k]);
+    }
+    if (want_lit) {
+        mask |= EF_AOV_LIT;
+        for (int j = 0; j < sc->nlight; ++j)
+            if (sc->light[j].shadow)
+                PUSH_PLANE(img->lit[j]);
+    }
+#undef PUSH_PLANE
     int need_scratch = 0;
     for (int k = 0; k < naov; ++k)
         need_scratch |= !aov_given[k];
