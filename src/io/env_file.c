@@ -64,8 +64,8 @@ int ef_sky_load(const char *path, double rotate_deg, double intensity, const int
     } else if (exr_get_data_window(f.ctx, part, &dw) == EXR_ERR_SUCCESS) {
         const int h = dw.max.y - dw.min.y + 1;
         int w = 0, ok = (ys = malloc((size_t) h * sizeof *ys)) != NULL;
-        for (int c = 0; ok && c < 3; ++c)
-            ok = ef_exr_sample_rows(&f, part, idx[c], h, &rgb[c], &w, ys) == h;
+        /* the three channels from one decode of the file */
+        ok = ok && ef_exr_sample_rows_n(&f, part, idx, 3, h, rgb, &w, ys) == h;
         if (!ok) {
             ef_fail(err, "cannot read the environment's colour (damaged or out of memory)");
         } else {

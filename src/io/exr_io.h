@@ -177,6 +177,10 @@ int ef_exr_has_attr(const ef_exr_file *f, int part, const char *name);
  * pass (a sample of the depth). Returns the rows read, or -1. */
 int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
                        int *ys);
+/* The same for nchan (1 to 8) channels chans of part, from one decode of
+ * each chunk: out[c] for chans[c]. */
+int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
+                         float **out, int *width, int *ys);
 
 /* Whether -d half must leave channel name in float: depth (Z, *.Z,
  * *.ZBack, depth...), positions (P.*, position.*, fog_P.*), ids (id.*,

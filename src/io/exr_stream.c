@@ -361,7 +361,10 @@ typedef struct depth_reader {
     half_scratch hs;
 } depth_reader;
 
-static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
+/* Copies channel r->chan of the rectangle into out (rows w long); with
+ * more (nmore channels, their outputs), those too from the same chunks. */
+static int depth_read_n(depth_reader *r, int x0, int y0, int w, int h, float *out,
+                        const int *more, float *const *more_out, int nmore)
 {
     for (int y = y0; y < y0 + h;) {
         int next_y = y0 + h;
@@ -393,17 +396,25 @@ static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
             }
             int xe = r->cx + r->cw < x0 + w ? r->cx + r->cw : x0 + w;
             int ye = r->cy + r->ch < y0 + h ? r->cy + r->ch : y0 + h;
-            const float *src = r->planes[r->chan];
-            for (int yy = y; yy < ye; ++yy)
-                memcpy(out + (size_t) (yy - y0) * w + (x - x0),
-                       src + (size_t) (yy - r->cy) * r->cw + (x - r->cx),
-                       sizeof(float) * (size_t) (xe - x));
+            for (int m = -1; m < nmore; ++m) {
+                const float *src = r->planes[m < 0 ? r->chan : more[m]];
+                float *dst = m < 0 ? out : more_out[m];
+                for (int yy = y; yy < ye; ++yy)
+                    memcpy(dst + (size_t) (yy - y0) * w + (x - x0),
+                           src + (size_t) (yy - r->cy) * r->cw + (x - r->cx),
+                           sizeof(float) * (size_t) (xe - x));
+            }
             next_y = ye;
             x = xe;
         }
         y = next_y;
     }
     return 0;
+}
+
+static int depth_read(depth_reader *r, int x0, int y0, int w, int h, float *out)
+{
+    return depth_read_n(r, x0, y0, w, h, out, NULL, NULL, 0);
 }
 
 static void depth_reader_free(depth_reader *r)
@@ -417,19 +428,23 @@ static void depth_reader_free(depth_reader *r)
     free(r->hs.buf);
 }
 
-int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
-                       int *ys)
+int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
+                         float **out, int *width, int *ys)
 {
     depth_reader r;
     memset(&r, 0, sizeof r);
-    *out = NULL;
+    for (int c = 0; c < nchan; ++c)
+        out[c] = NULL;
     const exr_attr_chlist_t *cl;
-    if (exr_get_channels(f->ctx, part, &cl) || chan < 0 || chan >= cl->num_channels ||
+    if (nchan < 1 || nchan > 8 || exr_get_channels(f->ctx, part, &cl) ||
         geom_init(f->ctx, part, 1, &r.g) || nrows < 1)
         return -1;
+    for (int c = 0; c < nchan; ++c)
+        if (chans[c] < 0 || chans[c] >= cl->num_channels)
+            return -1;
     r.ctx = f->ctx;
     r.part = part;
-    r.chan = chan;
+    r.chan = chans[0];
     r.nch = cl->num_channels;
     r.codec = EF_CODEC_LIBDEFLATE;
     r.hs.fast = ef_half_fast();
@@ -437,22 +452,36 @@ int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, floa
     if (nrows > h)
         nrows = h;
     int ok = (r.planes = calloc((size_t) r.nch, sizeof *r.planes)) != NULL &&
-             (r.as_float = calloc((size_t) r.nch, 1)) != NULL &&
-             (*out = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
-    if (ok)
-        r.as_float[chan] = 1;
+             (r.as_float = calloc((size_t) r.nch, 1)) != NULL;
+    for (int c = 0; ok && c < nchan; ++c) {
+        ok = (out[c] = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
+        if (ok)
+            r.as_float[chans[c]] = 1;
+    }
     for (int i = 0; ok && i < nrows; ++i) {
         ys[i] = r.g.dw.min.y + (int) (((long) (2 * i + 1) * h) / (2 * nrows));
-        ok = depth_read(&r, r.g.dw.min.x, ys[i], w, 1, *out + (size_t) i * (size_t) w) == 0;
+        float *more[8];
+        for (int c = 1; c < nchan; ++c)
+            more[c - 1] = out[c] + (size_t) i * (size_t) w;
+        ok = depth_read_n(&r, r.g.dw.min.x, ys[i], w, 1, out[0] + (size_t) i * (size_t) w,
+                          chans + 1, more, nchan - 1) == 0;
     }
     depth_reader_free(&r);
     if (!ok) {
-        free(*out);
-        *out = NULL;
+        for (int c = 0; c < nchan; ++c) {
+            free(out[c]);
+            out[c] = NULL;
+        }
         return -1;
     }
     *width = w;
     return nrows;
+}
+
+int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
+                       int *ys)
+{
+    return ef_exr_sample_rows_n(f, part, &chan, 1, nrows, out, width, ys);
 }
 
 /* Shared state of one part's parallel pass. */
