@@ -18,6 +18,7 @@
 #include <cmocka.h>
 
 #include "apply.h"
+#include "chapman.h"
 #include "lit.h"
 #include "ref.h"
 #include "tassert.h"
@@ -154,6 +155,94 @@ static void test_sun_height(void **state)
           { 0, 12, 0 }, { 0, -0.2, -1 }, 50 },
     };
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
+}
+
+/* A low sun over a planet (planet=): Chapman's function against its
+ * asymptotic series at the horizon, Ch(X, 90 deg) = X e^X K1(X) =
+ * sqrt(pi X / 2) (1 + 3/(8X) - 15/(128 X^2) + 105/(1024 X^3) - ...), and
+ * overhead (1); the lit fog against the reference, which integrates the
+ * sun's path through the sphere's heights itself (nested, long double), to
+ * the general quadrature's 1e-10: suns 0.5 deg up, at the horizon and 0.02
+ * deg below it (light the flat model has not), one below the planet's limb
+ * (none), a huge planet equal to the flat closed form. */
+static void test_sun_planet(void **state)
+{
+    (void) state;
+    const double X[3] = { 1e4, 1e5, 6.4e7 };
+    for (int i = 0; i < 3; ++i) {
+        const double x = X[i];
+        const double want = sqrt(PI * x / 2) *
+                            (1 + 3 / (8 * x) - 15 / (128 * x * x) + 105 / (1024 * x * x * x));
+        const double got = ef_chapman(x, 0);
+        if (!(fabs(got - want) <= 1e-13 * want))
+            fail_msg("Ch(%g, 0) = %.17g, series %.17g", x, got, want);
+        assert_true(ef_chapman(x, 1) == 1);
+        /* far above the horizon the flat model's 1 / mu, less O(1/X) */
+        assert_true(fabs(ef_chapman(x, 0.5) - 2) < 10 / x);
+    }
+    /* sin(0.5 deg), cos; sin(0.02 deg) */
+    const double s05 = 0.0087265354983739347, c05 = 0.99996192306417128;
+    const double s002 = 3.4906585032932658e-4, c002 = 0.99999993907651005;
+    char up05[128], horizon[128], below[128], limb[128];
+    snprintf(up05, sizeof up05, "sun:towards=0,%.17g,%.17g:intensity=5:planet=earth", s05, -c05);
+    snprintf(horizon, sizeof horizon, "sun:towards=0.3,0,-1:intensity=5:planet=earth");
+    snprintf(below, sizeof below, "sun:towards=0,%.17g,%.17g:intensity=5:planet=earth", -s002,
+             -c002);
+    snprintf(limb, sizeof limb, "sun:towards=0,-0.01,-1:planet=earth");
+    const lit_case cs[] = {
+        { { "height:density=0.05:falloff=0.3:base=0" }, up05, { 0, 1.7, 0 }, { 0, -0.05, -1 },
+          34 },
+        { { "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.8" }, up05, { 0, 1.7, 0 },
+          { 0, 0.01, -1 }, INFINITY },
+        { { "height:density=0.02:falloff=0.1:base=0:albedo=0.9,0.8,0.7" }, horizon,
+          { 0, 3, 0 }, { 0.2, -0.02, -1 }, 150 },
+        { { "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.6" }, below, { 0, 1.7, 0 },
+          { 0, 0, -1 }, 400 },
+        { { "height:density=0.05:falloff=0.3:base=0" }, below, { 0, 40, 0 }, { 0, -0.3, -1 },
+          INFINITY },
+    };
+    check_cases(cs, sizeof cs / sizeof cs[0], 1e-10);
+    /* light the flat model has not: the sun just below the horizon */
+    ef_fog_scene s, f;
+    const char *hf[] = { "height:density=0.05:falloff=0.3:base=0", NULL };
+    double S[3], E[3], F[3];
+    scene_of(&s, hf, below);
+    const ef_ray r = ray_of((double[3]) { 0, 1.7, 0 }, 0, 0, -1, 400);
+    ef_scene_bind(&s, r.org);
+    ef_light_inscatter(&s, &s.light[0], &r, S, E);
+    assert_true(S[0] > 0);
+    ef_scene_free(&s);
+    /* the frame's Chebyshev table of Ch gives what ef_chapman gives */
+    scene_of(&s, hf, up05);
+    const ef_ray r3 = ray_of((double[3]) { 0, 1.7, 0 }, 0.2, -0.01, -1, INFINITY);
+    ef_scene_bind(&s, r3.org);
+    assert_int_equal(s.light[0].ch_ok, 1);
+    ef_light_inscatter(&s, &s.light[0], &r3, S, E);
+    s.light[0].ch_ok = 0;
+    ef_light_inscatter(&s, &s.light[0], &r3, F, E);
+    for (int k = 0; k < 3; ++k)
+        if (!(fabs(S[k] - F[k]) <= 1e-13 * F[k]))
+            fail_msg("table %.17g, direct %.17g", S[k], F[k]);
+    ef_scene_free(&s);
+    /* past the limb the planet itself shades every point of the ray */
+    scene_of(&s, hf, limb);
+    ef_scene_bind(&s, r.org);
+    ef_light_inscatter(&s, &s.light[0], &r, S, E);
+    assert_true(S[0] == 0 && S[1] == 0 && S[2] == 0);
+    ef_scene_free(&s);
+    /* a planet of 1e13 units 8 deg up: the flat closed form to 1e-9 */
+    scene_of(&s, hf, "sun:towards=0,0.14054083470239145,-0.99007484:intensity=5:planet=1e13");
+    scene_of(&f, hf, "sun:towards=0,0.14054083470239145,-0.99007484:intensity=5");
+    const ef_ray r2 = ray_of((double[3]) { 0, 1.7, 0 }, 0.1, -0.01, -1, 200);
+    ef_scene_bind(&s, r2.org);
+    ef_scene_bind(&f, r2.org);
+    ef_light_inscatter(&s, &s.light[0], &r2, S, E);
+    ef_light_inscatter(&f, &f.light[0], &r2, F, E);
+    for (int k = 0; k < 3; ++k)
+        if (!(fabs(S[k] - F[k]) <= 1e-9 * F[k]))
+            fail_msg("huge planet %.17g, flat %.17g", S[k], F[k]);
+    ef_scene_free(&s);
+    ef_scene_free(&f);
 }
 
 /* The sun in a constant half-space fog (closed form): from inside and
@@ -530,6 +619,11 @@ static void test_errors(void **state)
     expect_light_error(NULL, "exp:density=0.1:phase=mie", "phase='mie'");
     expect_light_error(NULL, "exp:density=0.1:phase=hg:g=1", "g='1'");
     expect_light_error(NULL, "exp:density=0.1:albedo=1.5", "albedo='1.5'");
+    expect_light_error("sun:towards=0,0.1,-1:planet=-5", "height:density=0.1:falloff=0.2",
+                       "planet='-5'");
+    expect_light_error("sun:towards=0,0.1,-1:planet=earth", "exp:density=0.1",
+                       "one exponential height fog");
+    expect_light_error("point:position=1,2,3:planet=earth", NULL, "unknown key 'planet'");
     /* two lights of one name */
     ef_fog_scene s;
     ef_err err;
@@ -668,7 +762,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_phase),        cmocka_unit_test(test_sun_height),
-        cmocka_unit_test(test_sun_halfspace),
+        cmocka_unit_test(test_sun_halfspace), cmocka_unit_test(test_sun_planet),
         cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_general),
         cmocka_unit_test(test_sun_convex),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),

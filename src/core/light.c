@@ -1,6 +1,7 @@
 /* Lights, phase functions and the in-scattered light of lit fog (light.h,
  * lit.h). */
 #include "light.h"
+#include "chapman.h"
 #include "lit.h"
 #include "gk15.h"
 #include "shadow.h"
@@ -49,7 +50,7 @@ static int unit3(const char *val, double v[3])
 
 /* The keys every kind accepts, and the ones it must have. */
 static const char *const sun_keys =
-    "towards, color, intensity, angle, name, shadow, bias, slope, outside";
+    "towards, color, intensity, angle, planet, name, shadow, bias, slope, outside";
 static const char *const point_keys = "position, color, intensity, radius, name";
 static const char *const spot_keys =
     "position, aim, cone, blend, cosine, color, intensity, radius, name, shadow, bias, slope, "
@@ -137,7 +138,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
-           S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384 };
+           S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384, S_PLANET = 32768 };
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);
@@ -203,6 +204,15 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                 return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
                                "in degrees, from 0 to below 180", spec, val);
             l->angle *= PI / 180;
+        } else if (!strcmp(key, "planet") && l->kind == EF_LIGHT_SUN) {
+            bit = S_PLANET;
+            /* earth: 6371 km, in scene units */
+            if (!strcmp(val, "earth"))
+                l->planet = 6371000.0 * ctx->units_per_meter;
+            else if (ef_parse_numbers(val, &l->planet, 1) || !(l->planet > 0) ||
+                     !(l->planet < 1e300))
+                return ef_fail(err, "--light '%s': planet='%s' is not a radius > 0 in scene "
+                               "units, or earth", spec, val);
         } else if (!strcmp(key, "radius") && l->kind != EF_LIGHT_SUN) {
             bit = S_RADIUS;
             if (ef_parse_numbers(val, &l->radius, 1) || !(l->radius >= 0))
@@ -314,6 +324,13 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err)
 {
     if (s->nlight == 0)
         return 0;
+    const int one_height = s->ncomp == 1 && s->comp[0].model == &ef_fog_height &&
+                           s->comp[0].p[3] > 0;
+    for (int j = 0; j < s->nlight; ++j)
+        if (s->light[j].planet > 0 && !one_height)
+            return ef_fail(err, "--light '%s': planet= takes one exponential height fog "
+                           "(height with falloff > 0: the fog a planet's atmosphere "
+                           "stratifies)", s->light[j].spec);
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         if (c->model == &ef_fog_noise || c->model == &ef_fog_noise_separable)
@@ -378,6 +395,84 @@ static void tau_from(const ef_fog_scene *s, const double p[3], const double d[3]
         for (int k = 0; k < 3; ++k)
             tau[k] += t[k];
     }
+}
+
+/* Ch of a planet sun at height y: from the light's table where it holds
+ * y, else ef_chapman (mu clamped to [-1, 1]). */
+static double planet_ch(const ef_light *l, double k, double mu, double y)
+{
+    if (l->ch_ok && y >= l->ch_y0 && y <= l->ch_y1) {
+        /* Clenshaw on u in [-1, 1] */
+        const double u = (2 * y - l->ch_y0 - l->ch_y1) / (l->ch_y1 - l->ch_y0);
+        double b1 = 0, b2 = 0;
+        for (int j = EF_CH_TERMS - 1; j >= 1; --j) {
+            const double b0 = 2 * u * b1 - b2 + l->ch_c[j];
+            b2 = b1;
+            b1 = b0;
+        }
+        return u * b1 - b2 + l->ch_c[0];
+    }
+    return ef_chapman(k * (l->planet + y), mu > 1 ? 1 : mu < -1 ? -1 : mu);
+}
+
+void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y)
+{
+    l->ch_ok = 0;
+    if (!(l->kind == EF_LIGHT_SUN && l->planet > 0) || c->model != &ef_fog_height ||
+        !(c->p[3] > 0))
+        return;
+    const double k = c->p[3], base = c->p[4];
+    const double mu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
+    const double y0 = fmin(cam_y, base) - 200 / k, y1 = fmax(cam_y, base) + 60 / k;
+    if (!(l->planet + y0 > 0) || !isfinite(y1))
+        return;
+    enum { N = EF_CH_TERMS };
+    double f[N];
+    l->ch_y0 = y0;
+    l->ch_y1 = y1;
+    for (int i = 0; i < N; ++i) {
+        const double u = cos(PI * (i + 0.5) / N);
+        f[i] = ef_chapman(k * (l->planet + 0.5 * (y0 + y1) + 0.5 * (y1 - y0) * u), mu);
+        if (!isfinite(f[i]))
+            return;
+    }
+    for (int j = 0; j < N; ++j) {
+        double sum = 0;
+        for (int i = 0; i < N; ++i)
+            sum += f[i] * cos(PI * j * (i + 0.5) / N);
+        l->ch_c[j] = (j == 0 ? 1.0 : 2.0) * sum / N;
+    }
+    l->ch_ok = 1;
+    for (int i = 0; i < 40; ++i) {
+        const double y = y0 + (y1 - y0) * (i + 0.37) / 40;
+        const double want = ef_chapman(k * (l->planet + y), mu), got = planet_ch(l, k, mu, y);
+        if (!(fabs(got - want) <= 1e-14 * want)) {
+            l->ch_ok = 0;
+            return;
+        }
+    }
+}
+
+/* The sun's optical depth from x over a planet of radius l->planet (the
+ * scene's one height fog stratified over a sphere whose surface lies at
+ * height 0 below x, its centre on x's vertical): sigma(x) H Ch(X, mu), H =
+ * 1/k, X = (R + height) / H, mu = l . up; +inf where the planet itself
+ * stands between x and the sun (its tangent point below the surface). */
+static void sun_planet_tau(const ef_fog_scene *s, const ef_light *l, const double x[3],
+                           double tau[3])
+{
+    const ef_fog_component *c = &s->comp[0];
+    const double k = c->p[3], R = l->planet;
+    const double y = c->up[0] * x[0] + c->up[1] * x[1] + c->up[2] * x[2];
+    const double mu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
+    const double r0 = R + y;
+    tau[0] = tau[1] = tau[2] = INFINITY;
+    if (!(r0 > 0) || (mu < 0 && r0 * sqrt((1 - mu) * (1 + mu)) < R))
+        return;
+    const double ch = planet_ch(l, k, mu, y);
+    const double e = exp(-k * (y - c->p[4]));
+    for (int ch3 = 0; ch3 < 3; ++ch3)
+        tau[ch3] = c->p[ch3] == 0 ? 0 : c->p[ch3] * e / k * ch;
 }
 
 static double albedo(const ef_fog_component *c, int k)
@@ -619,7 +714,10 @@ static void lit_integrand(const void *qv, double u, double out[3])
         return;
     double tv[3], tl[3];
     tau_from(q->s, r->org, r->dir, t, tv);
-    tau_from(q->s, x, ld, dl, tl);
+    if (l->kind == EF_LIGHT_SUN && l->planet > 0)
+        sun_planet_tau(q->s, l, x, tl);
+    else
+        tau_from(q->s, x, ld, dl, tl);
     /* where either leg is opaque the density may have overflowed too:
      * no light, not inf * 0 */
     for (int k = 0; k < 3; ++k) {
@@ -703,7 +801,7 @@ static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 
 int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l)
 {
-    return l->kind == EF_LIGHT_SUN && !l->shadow && s->ncomp == 1 &&
+    return l->kind == EF_LIGHT_SUN && !l->shadow && !(l->planet > 0) && s->ncomp == 1 &&
            s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0;
 }
 
@@ -1113,7 +1211,8 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
         if (q.uniform)
             return;   /* the sun's light never crosses unbounded uniform fog */
         void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *, double *) = NULL;
-        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0)
+        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0 &&
+            !(l->planet > 0))
             f = sun_height;
         if (s->ncomp == 1 && (s->comp[0].model == &ef_fog_halfspace ||
                               s->comp[0].model == &ef_fog_halfspace_linear ||

@@ -28,6 +28,8 @@
 #include "fog.h"
 #include "shadow.h"
 
+/* Chebyshev terms of a planet sun's table. */
+#define EF_CH_TERMS 20
 /* The most lights a scene holds. */
 #define EF_MAX_LIGHTS 32
 
@@ -44,6 +46,12 @@ typedef struct ef_light {
     double e[3];
     double radius;                   /* E = I / (d^2 + radius^2), scene units */
     double angle;                    /* sun: angular diameter, radians (kept: no penumbra yet) */
+    double planet;                   /* sun: planet radius, scene units (0: flat; ef_chapman) */
+    /* planet=: Ch(k (R + y), l . up) over heights y in [ch_y0, ch_y1] as a
+     * Chebyshev series (ef_light_bind), verified off its nodes; ch_ok 0:
+     * none (each point evaluates ef_chapman) */
+    double ch_y0, ch_y1, ch_c[EF_CH_TERMS];
+    int ch_ok;
     double cos_outer, smooth;        /* spot: cos(cone / 2), blend (1 - cos(cone / 2)) */
     int cosine;                      /* spot: cosine=1, Cycles' extra cos alpha */
     char aov[3][80];                 /* its AOV channels, fog_light.NAME.R/G/B */
@@ -66,6 +74,13 @@ typedef struct ef_light {
  * nothing then). */
 int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_err *err);
 
+/* Makes light l ready for fog c seen from a camera at height cam_y (up
+ * the fog's up axis): a planet sun's Chebyshev table of Ch over the
+ * heights its rays cross with any weight (from 200 / k below the lower of
+ * the camera and the fog's base to 60 / k above the higher), kept only
+ * where it matches ef_chapman to 1e-14 at 40 heights between its nodes.
+ * Nothing for other lights. */
+void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y);
 /* A spot's share of its intensity at cos alpha, alpha the angle from its
  * aim: 0 outside the cone, 1 inside the blend band, smoothstep across it
  * (x^2 (3 - 2x), x = (cos alpha - cos(cone/2)) / smooth; Blender's

@@ -695,6 +695,92 @@ static int lit_tau(const ef_fog_scene *s, const double org[3], const double dir[
     return 0;
 }
 
+/* The sun's optical depth from x over a planet (lit.h's planet=), from its
+ * definition: the height fog's density at the heights h(s) = |x' + s l| - R
+ * of the straight ray, x' = x placed at radius R + y over the centre below
+ * it (y its height), integrated by adaptive Gauss-Kronrod in long double
+ * over s, in pieces from the tangent point (where the ray dips) doubling
+ * until what is left is below 1e-20 of the sum. +inf where the ray meets
+ * the planet. */
+typedef struct planet_ray {
+    long double r0, mu, R, k;
+} planet_ray;
+
+static long double planet_dens(const planet_ray *p, long double s)
+{
+    /* h = (s^2 + 2 r0 s mu + r0^2 - R^2) / (|x' + s l| + R), r0^2 - R^2
+     * = y (2R + y): no difference of radii */
+    const long double y = p->r0 - p->R;
+    const long double q = s * s + 2 * p->r0 * s * p->mu + y * (2 * p->R + y);
+    const long double h = q / (sqrtl(p->r0 * p->r0 + s * s + 2 * p->r0 * s * p->mu) + p->R);
+    return expl(-p->k * (h - y));
+}
+
+static long double planet_gk(const planet_ray *p, long double a, long double b, long double *e)
+{
+    const long double c = (a + b) / 2, h = (b - a) / 2;
+    long double K = ef_gk15_wk[7] * planet_dens(p, c), G = ef_gk15_wg[3] * planet_dens(p, c);
+    for (int j = 0; j < 7; ++j) {
+        const long double f = planet_dens(p, c - h * ef_gk15_x[j]) + planet_dens(p, c + h * ef_gk15_x[j]);
+        K += ef_gk15_wk[j] * f;
+        if (j & 1)
+            G += ef_gk15_wg[j / 2] * f;
+    }
+    *e = fabsl((K - G) * h);
+    return K * h;
+}
+
+static long double planet_adapt(const planet_ray *p, long double a, long double b, long double tol,
+                                int depth)
+{
+    long double e;
+    const long double r = planet_gk(p, a, b, &e);
+    if (e <= tol || e <= 1e-18L * fabsl(r) || depth >= 30)
+        return r;
+    const long double m = (a + b) / 2;
+    return planet_adapt(p, a, m, tol, depth + 1) + planet_adapt(p, m, b, tol, depth + 1);
+}
+
+/* int_0^inf e^-(k (h(s) - y)) ds for the sun ray from x (the integral
+ * relative to x's own density), or +inf where the ray meets the planet. */
+static long double planet_path(const ef_fog_scene *sc, const ef_light *l, const double x[3])
+{
+    const ef_fog_component *c = &sc->comp[0];
+    planet_ray p;
+    const long double y = (long double) c->up[0] * x[0] + (long double) c->up[1] * x[1] +
+                          (long double) c->up[2] * x[2];
+    p.R = l->planet;
+    p.r0 = p.R + y;
+    p.k = c->p[3];
+    p.mu = (long double) l->dir[0] * c->up[0] + (long double) l->dir[1] * c->up[1] +
+           (long double) l->dir[2] * c->up[2];
+    if (!(p.r0 > 0) || (p.mu < 0 && p.r0 * sqrtl(1 - p.mu * p.mu) < p.R))
+        return INFINITY;
+    /* pieces: to the tangent point (where the ray dips), then doubling from
+     * a length on the fog's own scale */
+    long double a = 0, len = 1 / (8 * p.k), total = 0;
+    if (p.mu < 0) {
+        const long double st = -p.r0 * p.mu;
+        for (long double b = 0; b < st;) {
+            const long double e = b + len < st ? b + len : st;
+            total += planet_adapt(&p, b, e, 1e-20L * len, 0);
+            b = e;
+            len *= 2;
+        }
+        a = st;
+        len = 1 / (8 * p.k);
+    }
+    for (int i = 0; i < 4000; ++i) {
+        const long double v = planet_adapt(&p, a, a + len, 1e-20L * (total > len ? total : len), 0);
+        total += v;
+        a += len;
+        len *= 2;
+        if (v <= 1e-20L * total && planet_dens(&p, a) <= 1e-20L)
+            break;
+    }
+    return total;
+}
+
 typedef struct lit_ref {
     const ef_fog_scene *s;
     const ef_light *l;
@@ -770,9 +856,19 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
     if (sc[0] == 0 && sc[1] == 0 && sc[2] == 0)
         return;
     long double tv[3], tl[3];
-    if (lit_tau(q->s, r->org, r->dir, (double) t, tv) < 0 || lit_tau(q->s, x, ld, dl, tl) < 0) {
+    if (lit_tau(q->s, r->org, r->dir, (double) t, tv) < 0 ||
+        (!(l->kind == EF_LIGHT_SUN && l->planet > 0) && lit_tau(q->s, x, ld, dl, tl) < 0)) {
         q->fail = 1;
         return;
+    }
+    if (l->kind == EF_LIGHT_SUN && l->planet > 0) {
+        /* sigma(x) times the path integral: the density's own form */
+        const long double path = planet_path(q->s, l, x);
+        const ef_fog_component *c = &q->s->comp[0];
+        const long double y = (long double) c->up[0] * x[0] + (long double) c->up[1] * x[1] +
+                              (long double) c->up[2] * x[2];
+        for (int k = 0; k < 3; ++k)
+            tl[k] = c->p[k] == 0 ? 0 : c->p[k] * expl(-(long double) c->p[3] * (y - c->p[4])) * path;
     }
     /* where either leg is opaque the density may have overflowed too:
      * no light, not inf * 0 */

@@ -100,6 +100,9 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
     for (int i = 0; i < o->scene.nlight; ++i) {
         const ef_light *l = &o->scene.light[i];
         fprintf(out, "light %s: %s\n", l->name, l->spec);
+        if (l->planet > 0)
+            fprintf(out, "  over a planet of radius %g scene units (the sun's path by Chapman's "
+                         "function; general quadrature)\n", l->planet);
         if (l->shadow)
             fprintf(out, "  shadow map %s: %d x %d, %s, bias %g, slope %g, outside %s\n",
                     l->shadow_path, l->shadow->w, l->shadow->h,
@@ -252,6 +255,11 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
         json_str(out, l->name);
         fputs(", \"spec\": ", out);
         json_str(out, l->spec);
+        fputs(", \"planet\": ", out);
+        if (l->planet > 0)
+            json_num(out, l->planet);
+        else
+            fputs("null", out);
         fputs(", \"shadow\": ", out);
         if (l->shadow) {
             fputs("{\"path\": ", out);
