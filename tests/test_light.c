@@ -339,6 +339,25 @@ static void test_point_uniform(void **state)
           { 0, 0, -1 }, 100 },
     };
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-12);
+    /* Random isotropic lamps of radius 0 (the closed form's series pair
+     * where both ends lie within |z| < 1.5, its continued fraction, and the
+     * integration where they cancel): segments from 0.01 to 80 units, lamps
+     * up to 60 away on either side of the camera, densities 1e-4 to 0.5 */
+    unsigned seed = 2511;
+    for (int i = 0; i < 60; ++i) {
+        double v[8];
+        for (int j = 0; j < 8; ++j) {
+            seed = seed * 1103515245u + 12345u;
+            v[j] = (double) ((seed >> 8) & 0xffffff) / 16777216.0;
+        }
+        char spec[64], light[128];
+        snprintf(spec, sizeof spec, "exp:density=%.6g", 1e-4 * pow(5000, v[0]));
+        snprintf(light, sizeof light, "point:position=%.6g,%.6g,%.6g:intensity=100",
+                 40 * v[1] - 20, 10 * v[2] - 2, -80 * v[3] + 20);
+        const lit_case c = { { spec }, light, { 0, 1.7, 0 }, { 0.6 * v[4] - 0.3, 0.4 * v[5] - 0.2, -1 },
+                             0.01 * pow(8000, v[6]) };
+        check_cases(&c, 1, 1e-12);
+    }
 }
 
 /* The sun in one constant convex volume (closed form per piece of the
