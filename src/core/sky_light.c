@@ -51,48 +51,48 @@ static double overlap(int i, double a, double b)
     return hi > lo ? (hi - lo) / (b - a) : 0;
 }
 
-/* src averaged to w x h, rows weighted by their solid angle (sin theta at
- * the source row's centre): out[3][w * h]. Returns 0, or -1 out of memory. */
-static int average_to(const ef_env_src *src, int w, int h, float *out[3])
+/* One source row (src_w texels per channel) reduced to w columns by box
+ * overlap, into rows[c * src_h + y][0..w) (non-light values count 0). */
+static void horiz_row(const float *const row[3], int src_w, int src_h, int y, int w,
+                      double *rows)
 {
-    double *rows = malloc((size_t) w * (size_t) src->h * 3 * sizeof *rows);
-    if (!rows)
-        return -1;
-    /* horizontally: every source row to w columns */
-    const double sx = (double) src->w / w, sy = (double) src->h / h;
-    for (int y = 0; y < src->h; ++y)
-        for (int X = 0; X < w; ++X) {
-            const double a = X * sx, b = (X + 1) * sx;
-            double acc[3] = { 0, 0, 0 };
-            for (int i = (int) floor(a); i < (int) ceil(b) && i < src->w; ++i) {
-                const double wt = overlap(i, a, b);
-                for (int c = 0; c < 3; ++c) {
-                    const float v = src->rgb[c][(size_t) y * (size_t) src->w + (size_t) i];
-                    acc[c] += wt * (isfinite(v) && v > 0 ? v : 0);   /* not light: 0 */
-                }
+    const double sx = (double) src_w / w;
+    for (int X = 0; X < w; ++X) {
+        const double a = X * sx, b = (X + 1) * sx;
+        double acc[3] = { 0, 0, 0 };
+        for (int i = (int) floor(a); i < (int) ceil(b) && i < src_w; ++i) {
+            const double wt = overlap(i, a, b);
+            for (int c = 0; c < 3; ++c) {
+                const float v = row[c][i];
+                acc[c] += wt * (isfinite(v) && v > 0 ? v : 0);   /* not light: 0 */
             }
-            for (int c = 0; c < 3; ++c)
-                rows[((size_t) c * (size_t) src->h + (size_t) y) * (size_t) w + (size_t) X] =
-                    acc[c];
         }
-    /* vertically, by solid angle */
+        for (int c = 0; c < 3; ++c)
+            rows[((size_t) c * (size_t) src_h + (size_t) y) * (size_t) w + (size_t) X] = acc[c];
+    }
+}
+
+/* The reduced rows (horiz_row's, src_h of them) averaged to h rows,
+ * weighted by their solid angle (sin theta at the source row's centre):
+ * out[3][w * h]. */
+static void vert_rows(const double *rows, int src_h, int w, int h, float *out[3])
+{
+    const double sy = (double) src_h / h;
     for (int Y = 0; Y < h; ++Y) {
         const double a = Y * sy, b = (Y + 1) * sy;
         for (int X = 0; X < w; ++X) {
             double acc[3] = { 0, 0, 0 }, ws = 0;
-            for (int i = (int) floor(a); i < (int) ceil(b) && i < src->h; ++i) {
-                const double wt = overlap(i, a, b) * sin(PI * (i + 0.5) / src->h);
+            for (int i = (int) floor(a); i < (int) ceil(b) && i < src_h; ++i) {
+                const double wt = overlap(i, a, b) * sin(PI * (i + 0.5) / src_h);
                 ws += wt;
                 for (int c = 0; c < 3; ++c)
-                    acc[c] += wt * rows[((size_t) c * (size_t) src->h + (size_t) i) * (size_t) w +
+                    acc[c] += wt * rows[((size_t) c * (size_t) src_h + (size_t) i) * (size_t) w +
                                         (size_t) X];
             }
             for (int c = 0; c < 3; ++c)
                 out[c][(size_t) Y * (size_t) w + (size_t) X] = (float) (ws > 0 ? acc[c] / ws : 0);
         }
     }
-    free(rows);
-    return 0;
 }
 
 /* ------------------------------------------------------------------ FFT */
@@ -254,6 +254,7 @@ ef_sky_light *ef_sky_light_build(const ef_env_src *src, double rotate_deg, doubl
     k->src_h = src->h;
     for (int c = 0; c < 3; ++c)
         snprintf(k->aov[c], sizeof k->aov[c], "fog_light.sky.%c", "RGB"[c]);
+    /* the distinct phases, and each one's grid */
     for (int i = 0; i < n && k->nconv < EF_SKY_MAX_PHASES; ++i) {
         int seen = 0;
         for (int j = 0; j < k->nconv; ++j)
@@ -266,12 +267,42 @@ ef_sky_light *ef_sky_light_build(const ef_env_src *src, double rotate_deg, doubl
         const int N = grid_for(phases[i], g[i]);
         cv->h = N;
         cv->w = N == 1 ? 1 : 2 * N;
+    }
+    /* One pass over the source's rows (a file streams them): each row
+     * reduced to every grid's columns, then each grid's rows averaged. */
+    double *rows[EF_SKY_MAX_PHASES] = { NULL };
+    float *line = NULL;
+    int bad = 0, failed_row = 0;
+    for (int j = 0; j < k->nconv; ++j)
+        bad |= !(rows[j] = malloc((size_t) k->conv[j].w * (size_t) src->h * 3 * sizeof **rows));
+    if (!src->rgb[0])
+        bad |= !(line = malloc((size_t) src->w * 3 * sizeof *line));
+    for (int y = 0; !bad && y < src->h; ++y) {
+        const float *row[3];
+        if (src->rgb[0]) {
+            for (int c = 0; c < 3; ++c)
+                row[c] = src->rgb[c] + (size_t) y * (size_t) src->w;
+        } else {
+            float *const out[3] = { line, line + src->w, line + 2 * (size_t) src->w };
+            if (src->row(src->user, y, out)) {
+                bad = failed_row = 1;
+                break;
+            }
+            for (int c = 0; c < 3; ++c)
+                row[c] = out[c];
+        }
+        for (int j = 0; j < k->nconv; ++j)
+            horiz_row(row, src->w, src->h, y, k->conv[j].w, rows[j]);
+    }
+    free(line);
+    for (int j = 0; !bad && j < k->nconv; ++j) {
+        ef_sky_conv *cv = &k->conv[j];
         float *avg[3] = { NULL, NULL, NULL };
-        int bad = 0;
         for (int c = 0; c < 3; ++c)
             bad |= !(avg[c] = malloc((size_t) cv->w * (size_t) cv->h * sizeof(float)));
-        bad = bad || average_to(src, cv->w, cv->h, avg);
-        if (!bad && N == 1) {
+        if (!bad)
+            vert_rows(rows[j], src->h, cv->w, cv->h, avg);
+        if (!bad && cv->h == 1) {
             /* iso: 1 / (4 pi) times the integral, which the average
              * weighted by solid angle is over 4 pi */
             for (int c = 0; c < 3; ++c) {
@@ -285,11 +316,16 @@ ef_sky_light *ef_sky_light_build(const ef_env_src *src, double rotate_deg, doubl
         }
         for (int c = 0; c < 3; ++c)
             free(avg[c]);
-        if (bad) {
-            ef_sky_light_unref(k);
+    }
+    for (int j = 0; j < k->nconv; ++j)
+        free(rows[j]);
+    if (bad) {
+        ef_sky_light_unref(k);
+        if (failed_row)
+            ef_fail(err, "cannot read the environment's colour (damaged or out of memory)");
+        else
             ef_fail(err, "out of memory for the sky light's convolution");
-            return NULL;
-        }
+        return NULL;
     }
     return k;
 }

@@ -43,7 +43,11 @@
 typedef struct ef_env_src {
     const char *path;
     int w, h;
-    const float *rgb[3];
+    const float *rgb[3];      /* the whole map's planes, or NULL: */
+    /* row y (0 = top) of each channel into out[c][0..w), front to back
+     * once each (a reader that streams the file); returns 0 or -1 */
+    int (*row)(void *user, int y, float *const out[3]);
+    void *user;
 } ef_env_src;
 
 /* One phase function's convolved environment. */

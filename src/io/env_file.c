@@ -42,6 +42,12 @@ static int rgb_channels(const ef_exr_file *f, int p, int idx[3])
     return -1;
 }
 
+/* ef_env_src's row reader over an ef_exr_rows. */
+static int env_row(void *user, int y, float *const out[3])
+{
+    return ef_exr_rows_read(user, y, out);
+}
+
 int ef_sky_load(const char *path, double rotate_deg, double intensity, const int *phases,
                 const double *g, int n, struct ef_sky_light **out, ef_err *err)
 {
@@ -55,28 +61,23 @@ int ef_sky_load(const char *path, double rotate_deg, double intensity, const int
     for (int p = 0; p < f.nparts && part < 0; ++p)
         if (rgb_channels(&f, p, idx) == 0)
             part = p;
-    float *rgb[3] = { NULL, NULL, NULL };
-    int *ys = NULL, rc = -1;
-    exr_attr_box2i_t dw;
+    int rc = -1;
     if (part < 0) {
         ef_fail(err, "no R, G, B channels in the sky light's environment (a lat-long "
                 "RGB EXR, as the lighter's HDRI)");
-    } else if (exr_get_data_window(f.ctx, part, &dw) == EXR_ERR_SUCCESS) {
-        const int h = dw.max.y - dw.min.y + 1;
-        int w = 0, ok = (ys = malloc((size_t) h * sizeof *ys)) != NULL;
-        /* the three channels from one decode of the file */
-        ok = ok && ef_exr_sample_rows_n(&f, part, idx, 3, h, rgb, &w, ys) == h;
-        if (!ok) {
+    } else {
+        /* streamed: each row is reduced as it is read (no whole planes) */
+        int w = 0, h = 0;
+        ef_exr_rows *R = ef_exr_rows_open(&f, part, idx, 3, &w, &h);
+        if (!R) {
             ef_fail(err, "cannot read the environment's colour (damaged or out of memory)");
         } else {
-            ef_env_src src = { path, w, h, { rgb[0], rgb[1], rgb[2] } };
+            ef_env_src src = { path, w, h, { NULL, NULL, NULL }, env_row, R };
             *out = ef_sky_light_build(&src, rotate_deg, intensity, phases, g, n, err);
             rc = *out ? 0 : -1;
+            ef_exr_rows_close(R);
         }
     }
-    for (int c = 0; c < 3; ++c)
-        free(rgb[c]);
-    free(ys);
     ef_exr_close(&f);
     if (rc)
         ef_err_set_file(err, path);

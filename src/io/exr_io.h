@@ -182,6 +182,18 @@ int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, floa
 int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
                          float **out, int *width, int *ys);
 
+/* Whole rows of channels chans (1 to 8) of part as float, one at a time,
+ * each chunk decoded once for all of them (the last one kept: read rows in
+ * order). NULL when the part or a channel is not there, or out of memory;
+ * *width, *height: the data window's size. */
+typedef struct ef_exr_rows ef_exr_rows;
+ef_exr_rows *ef_exr_rows_open(const ef_exr_file *f, int part, const int *chans, int nchan,
+                              int *width, int *height);
+/* Row y (0: the data window's top) into out[c][0..width) for chans[c].
+ * Returns 0, or -1 (damaged, out of memory, y out of range). */
+int ef_exr_rows_read(ef_exr_rows *r, int y, float *const *out);
+void ef_exr_rows_close(ef_exr_rows *r);
+
 /* Whether -d half must leave channel name in float: depth (Z, *.Z,
  * *.ZBack, depth...), positions (P.*, position.*, fog_P.*), ids (id.*,
  * *Id.*, Cryptomatte). */

@@ -428,45 +428,84 @@ static void depth_reader_free(depth_reader *r)
     free(r->hs.buf);
 }
 
+struct ef_exr_rows {
+    depth_reader r;
+    int chans[8], nchan;
+};
+
+ef_exr_rows *ef_exr_rows_open(const ef_exr_file *f, int part, const int *chans, int nchan,
+                              int *width, int *height)
+{
+    const exr_attr_chlist_t *cl;
+    if (nchan < 1 || nchan > 8 || exr_get_channels(f->ctx, part, &cl))
+        return NULL;
+    for (int c = 0; c < nchan; ++c)
+        if (chans[c] < 0 || chans[c] >= cl->num_channels)
+            return NULL;
+    ef_exr_rows *R = calloc(1, sizeof *R);
+    if (!R)
+        return NULL;
+    depth_reader *r = &R->r;
+    r->ctx = f->ctx;
+    r->part = part;
+    r->chan = chans[0];
+    r->nch = cl->num_channels;
+    r->codec = EF_CODEC_LIBDEFLATE;
+    r->hs.fast = ef_half_fast();
+    memcpy(R->chans, chans, (size_t) nchan * sizeof *chans);
+    R->nchan = nchan;
+    if (geom_init(f->ctx, part, 1, &r->g) || !(r->planes = calloc((size_t) r->nch, sizeof *r->planes)) ||
+        !(r->as_float = calloc((size_t) r->nch, 1))) {
+        ef_exr_rows_close(R);
+        return NULL;
+    }
+    for (int c = 0; c < nchan; ++c)
+        r->as_float[chans[c]] = 1;
+    *width = r->g.width;
+    *height = r->g.height;
+    return R;
+}
+
+int ef_exr_rows_read(ef_exr_rows *R, int y, float *const *out)
+{
+    depth_reader *r = &R->r;
+    if (y < 0 || y >= r->g.height)
+        return -1;
+    return depth_read_n(r, r->g.dw.min.x, r->g.dw.min.y + y, r->g.width, 1, out[0], R->chans + 1,
+                        out + 1, R->nchan - 1);
+}
+
+void ef_exr_rows_close(ef_exr_rows *R)
+{
+    if (!R)
+        return;
+    depth_reader_free(&R->r);
+    free(R);
+}
+
 int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
                          float **out, int *width, int *ys)
 {
-    depth_reader r;
-    memset(&r, 0, sizeof r);
-    for (int c = 0; c < nchan; ++c)
+    for (int c = 0; c < nchan && c < 8; ++c)
         out[c] = NULL;
-    const exr_attr_chlist_t *cl;
-    if (nchan < 1 || nchan > 8 || exr_get_channels(f->ctx, part, &cl) ||
-        geom_init(f->ctx, part, 1, &r.g) || nrows < 1)
+    int w = 0, h = 0;
+    ef_exr_rows *R = nrows >= 1 ? ef_exr_rows_open(f, part, chans, nchan, &w, &h) : NULL;
+    if (!R)
         return -1;
-    for (int c = 0; c < nchan; ++c)
-        if (chans[c] < 0 || chans[c] >= cl->num_channels)
-            return -1;
-    r.ctx = f->ctx;
-    r.part = part;
-    r.chan = chans[0];
-    r.nch = cl->num_channels;
-    r.codec = EF_CODEC_LIBDEFLATE;
-    r.hs.fast = ef_half_fast();
-    const int w = r.g.width, h = r.g.height;
     if (nrows > h)
         nrows = h;
-    int ok = (r.planes = calloc((size_t) r.nch, sizeof *r.planes)) != NULL &&
-             (r.as_float = calloc((size_t) r.nch, 1)) != NULL;
-    for (int c = 0; ok && c < nchan; ++c) {
+    int ok = 1;
+    for (int c = 0; ok && c < nchan; ++c)
         ok = (out[c] = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
-        if (ok)
-            r.as_float[chans[c]] = 1;
-    }
     for (int i = 0; ok && i < nrows; ++i) {
-        ys[i] = r.g.dw.min.y + (int) (((long) (2 * i + 1) * h) / (2 * nrows));
-        float *more[8];
-        for (int c = 1; c < nchan; ++c)
-            more[c - 1] = out[c] + (size_t) i * (size_t) w;
-        ok = depth_read_n(&r, r.g.dw.min.x, ys[i], w, 1, out[0] + (size_t) i * (size_t) w,
-                          chans + 1, more, nchan - 1) == 0;
+        const int y = (int) (((long) (2 * i + 1) * h) / (2 * nrows));
+        ys[i] = R->r.g.dw.min.y + y;
+        float *row[8];
+        for (int c = 0; c < nchan; ++c)
+            row[c] = out[c] + (size_t) i * (size_t) w;
+        ok = ef_exr_rows_read(R, y, row) == 0;
     }
-    depth_reader_free(&r);
+    ef_exr_rows_close(R);
     if (!ok) {
         for (int c = 0; c < nchan; ++c) {
             free(out[c]);
