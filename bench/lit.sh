@@ -11,7 +11,9 @@
 # each round; medians): the copy, exp, height and half-space fog unlit, the
 # sun in height fog and in a half-space layer (closed forms), two point
 # lamps in exp fog and one behind the camera (equiangular quadrature), a
-# point lamp in a box volume plus height fog (the general quadrature), and
+# point lamp in a box volume plus height fog (the general quadrature), a
+# sun 0.3 degrees up over the earth (planet=: Chapman's function in the
+# general quadrature), and
 # the sun in height fog through shadow maps of the same scene (make_sample
 # --sun-view) of 512^2, 2048^2 and 4096^2 texels (the walk of the map's
 # texels, and how it grows with the map), and --sky-light with a 2048x1024
@@ -86,6 +88,8 @@ add "sun in a half-space layer (closed form)" "halfspace (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog halfspace:plane=0,1,0,-4:density=0.05 --light sun:towards=0.2,0.3,-1:intensity=3'
 add "point lamp, box + height (general)" "height (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H" --fog box:min=-10,0,-60:max=10,8,-10:density=0.1 --light point:position=2,3,-20:intensity=100'
+add "sun 0.3 deg up over a planet (Chapman; general)" "height (unlit)" \
+    '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.0053,-1:intensity=3:planet=earth'
 add "sky light, iso, exp fog" "exp (unlit)" \
     '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02 --sky-light "$tmp/env.exr"'
 add "sky light, hg g=0.9, exp fog" "exp (unlit)" \

@@ -613,7 +613,8 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
         if (split) {
             if (!have_front)
                 front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL);
-            stack[sp++] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL);   /* the back half after */
+            /* the back half after */
+            stack[sp++] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL);
             stack[sp++] = front;
             continue;
         }

@@ -721,7 +721,8 @@ static long double planet_gk(const planet_ray *p, long double a, long double b, 
     const long double c = (a + b) / 2, h = (b - a) / 2;
     long double K = ef_gk15_wk[7] * planet_dens(p, c), G = ef_gk15_wg[3] * planet_dens(p, c);
     for (int j = 0; j < 7; ++j) {
-        const long double f = planet_dens(p, c - h * ef_gk15_x[j]) + planet_dens(p, c + h * ef_gk15_x[j]);
+        const long double dx = h * ef_gk15_x[j];
+        const long double f = planet_dens(p, c - dx) + planet_dens(p, c + dx);
         K += ef_gk15_wk[j] * f;
         if (j & 1)
             G += ef_gk15_wg[j / 2] * f;
@@ -868,7 +869,8 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
         const long double y = (long double) c->up[0] * x[0] + (long double) c->up[1] * x[1] +
                               (long double) c->up[2] * x[2];
         for (int k = 0; k < 3; ++k)
-            tl[k] = c->p[k] == 0 ? 0 : c->p[k] * expl(-(long double) c->p[3] * (y - c->p[4])) * path;
+            tl[k] = c->p[k] == 0 ? 0
+                                 : c->p[k] * expl(-(long double) c->p[3] * (y - c->p[4])) * path;
     }
     /* where either leg is opaque the density may have overflowed too:
      * no light, not inf * 0 */

@@ -454,7 +454,8 @@ ef_exr_rows *ef_exr_rows_open(const ef_exr_file *f, int part, const int *chans, 
     r->hs.fast = ef_half_fast();
     memcpy(R->chans, chans, (size_t) nchan * sizeof *chans);
     R->nchan = nchan;
-    if (geom_init(f->ctx, part, 1, &r->g) || !(r->planes = calloc((size_t) r->nch, sizeof *r->planes)) ||
+    if (geom_init(f->ctx, part, 1, &r->g) ||
+        !(r->planes = calloc((size_t) r->nch, sizeof *r->planes)) ||
         !(r->as_float = calloc((size_t) r->nch, 1))) {
         ef_exr_rows_close(R);
         return NULL;
