@@ -728,6 +728,49 @@ check(worst_rule <= 1e-3, "lit holdout: placement within --deep-tol (%.2e)" % wo
 check(worst_half <= 1, "lit holdout: as stored within --deep-tol + half rounding (%.2f)"
       % worst_half)
 
+# Lit deep fog with shafts: the sample frame (a 200 x 100 crop) deepened by
+# OpenImageIO (one opaque point sample per pixel; the sky an alpha-0 sample
+# far away), a sun through make_sample's own depth render from the sun as
+# its shadow map, and a lamp. The flat image's run (float) is held to the
+# reference in test_light and test_shadow; the deep runs must give its
+# pixels: --deep flatten, and --deep samples flattened by OpenImageIO, whose
+# fog samples are cut at the lit intervals' ends and split for the colour
+# contract (within 1e-6: float rounding of the summed samples).
+sample_exr = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "samples", "sample.exr")
+make_sample = os.path.join(os.path.dirname(os.path.abspath(exrfog)), "make_sample")
+if os.path.exists(sample_exr) and os.path.exists(make_sample):
+    cflat, cdeep = os.path.join(tmp, "lit_crop.exr"), os.path.join(tmp, "lit_crop_deep.exr")
+    smap = os.path.join(tmp, "lit_sunmap.exr")
+    check(oiiotool([sample_exr, "--crop", "200x100+220+200", "-o", cflat]) == 0 and
+          oiiotool([sample_exr, "--crop", "200x100+220+200", "--deepen", "-o", cdeep]) == 0,
+          "oiiotool crops and deepens the sample")
+    check(subprocess.run([make_sample, smap, "--sun-view", "0.2,0.3,-1", "--size", "256x256"],
+                         capture_output=True).returncode == 0, "make_sample --sun-view")
+    for what, lit in (("sun with a shadow map", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:shadow=" + smap]),
+                      ("lamp", ["--light", "point:position=1,2,-9:intensity=40"])):
+        fogl = ["--fog", "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.6"] + lit
+        if what == "lamp":
+            fogl[1] = "exp:density=0.05"
+        o_flat = os.path.join(tmp, "lit_crop_flat.exr")
+        o_df = os.path.join(tmp, "lit_crop_df.exr")
+        o_ds = os.path.join(tmp, "lit_crop_ds.exr")
+        o_dsf = os.path.join(tmp, "lit_crop_dsf.exr")
+        ok = (run([cflat, "-o", o_flat, "-d", "float"] + fogl) == 0 and
+              run([cdeep, "-o", o_df, "--deep", "flatten"] + fogl) == 0 and
+              run([cdeep, "-o", o_ds, "--deep", "samples"] + fogl) == 0 and
+              oiiotool([o_ds, "--flatten", "-o", o_dsf]) == 0)
+        check(ok, "lit crop (%s): flat and deep runs" % what)
+        if ok:
+            want = flat_pixels_any(o_flat)
+            for name, path in (("--deep flatten", o_df), ("--deep samples + OIIO flatten", o_dsf)):
+                got = flat_pixels_any(path)
+                e = max(abs(u - v) / (1e-3 + abs(v)) for ra, rb in zip(got, want)
+                        for u, v in zip(ra, rb))
+                print("lit crop, %s: %s against the flat run, worst %.2e" % (what, name, e))
+                check(e <= 1e-6, "lit crop (%s): %s equals the flat run (%.2e)" % (what, name, e))
+else:
+    print("no sample or make_sample: the lit crop skipped")
+
 # The sky light on deep input: a constant environment K scatters K albedo
 # per unit alpha into every fog sample whatever the phase (the phase
 # integrates to 1), so --sky-light of it must equal fog whose colour is the

@@ -648,7 +648,7 @@ static int fog_interval(const ef_deep_layout *L, const ef_deep_fog *F, const px_
     int n = F->tau_cap < INFINITY ? feature_cuts(F->scene, r1, a, b, fog) : 0;
     if (n < 0)
         return -1;
-    if (lt->lights) {
+    if (lt->lights && F->tau_cap < INFINITY) {   /* (a flatten splits nothing) */
         enum { LIGHT_CUTS = 256 };
         const ef_fog_scene *s = F->scene;
         if (reserve((void **) &fog->cut, &fog->ccap, n + s->nlight * LIGHT_CUTS, sizeof *fog->cut))
@@ -693,8 +693,17 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
     }
     const int first = fog->n;
     const double T0 = *Tf;
-    if (fog_interval(L, F, lt, r1, a, end, Tf, fog, st))
+    if (!(F->tau_cap < INFINITY)) {
+        /* a flatten splits nothing: one sample from a takes it all (what
+         * the pieces below would come to, without computing them first) */
+        double *d = ef_deep_buf_push(fog);
+        if (!d)
+            return -1;
+        d[L->nch] = a;
+        d[L->nch + 1] = end;
+    } else if (fog_interval(L, F, lt, r1, a, end, Tf, fog, st)) {
         return -1;
+    }
     if (fog->n > first) {
         /* the last sample takes everything behind its front */
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
@@ -769,9 +778,9 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         for (int k = 0; k < 3; ++k)
             lt.sky_c[i][k] *= c->has_albedo ? c->albedo[k] : 1.0;
     }
-    if (lt.lights) {
+    if (lt.lights && F->tau_cap < INFINITY) {
         /* the colour contract's unit: the lights' in-scatter along what
-         * the pixel shows of its ray */
+         * the pixel shows of its ray (a flatten splits nothing: none) */
         const double last = nb > 0 ? B[nb - 1] : 0;
         const double end = isfinite(cut) ? cut
                            : s->sky == EF_SKY_FOG ? INFINITY
