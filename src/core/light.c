@@ -1069,7 +1069,8 @@ static int lamp_series_pair(double sg, double ts, double h, double pa, double pD
             P = zd * P + dz * Z;
         }
         fact *= k;
-        const double complex add = sign * P / (k * fact);
+        const double wk = sign / (k * fact);   /* (-1)^k / (k k!), real */
+        const double complex add = wk * P;
         sign = -sign;
         sum += add;
         if (norm2(add) <= 1e-36 * (norm2(sum) + lr * lr + li * li))
