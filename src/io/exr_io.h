@@ -177,10 +177,6 @@ int ef_exr_has_attr(const ef_exr_file *f, int part, const char *name);
  * pass (a sample of the depth). Returns the rows read, or -1. */
 int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
                        int *ys);
-/* The same for nchan (1 to 8) channels chans of part, from one decode of
- * each chunk: out[c] for chans[c]. */
-int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
-                         float **out, int *width, int *ys);
 
 /* Whole rows of channels chans (1 to 8) of part as float, one at a time,
  * each chunk decoded once for all of them (the last one kept: read rows in

@@ -484,44 +484,31 @@ void ef_exr_rows_close(ef_exr_rows *R)
     free(R);
 }
 
-int ef_exr_sample_rows_n(const ef_exr_file *f, int part, const int *chans, int nchan, int nrows,
-                         float **out, int *width, int *ys)
+int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
+                       int *ys)
 {
-    for (int c = 0; c < nchan && c < 8; ++c)
-        out[c] = NULL;
+    *out = NULL;
     int w = 0, h = 0;
-    ef_exr_rows *R = nrows >= 1 ? ef_exr_rows_open(f, part, chans, nchan, &w, &h) : NULL;
+    ef_exr_rows *R = nrows >= 1 ? ef_exr_rows_open(f, part, &chan, 1, &w, &h) : NULL;
     if (!R)
         return -1;
     if (nrows > h)
         nrows = h;
-    int ok = 1;
-    for (int c = 0; ok && c < nchan; ++c)
-        ok = (out[c] = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
+    int ok = (*out = malloc((size_t) nrows * (size_t) w * sizeof **out)) != NULL;
     for (int i = 0; ok && i < nrows; ++i) {
         const int y = (int) (((long) (2 * i + 1) * h) / (2 * nrows));
         ys[i] = R->r.g.dw.min.y + y;
-        float *row[8];
-        for (int c = 0; c < nchan; ++c)
-            row[c] = out[c] + (size_t) i * (size_t) w;
-        ok = ef_exr_rows_read(R, y, row) == 0;
+        float *row = *out + (size_t) i * (size_t) w;
+        ok = ef_exr_rows_read(R, y, &row) == 0;
     }
     ef_exr_rows_close(R);
     if (!ok) {
-        for (int c = 0; c < nchan; ++c) {
-            free(out[c]);
-            out[c] = NULL;
-        }
+        free(*out);
+        *out = NULL;
         return -1;
     }
     *width = w;
     return nrows;
-}
-
-int ef_exr_sample_rows(const ef_exr_file *f, int part, int chan, int nrows, float **out, int *width,
-                       int *ys)
-{
-    return ef_exr_sample_rows_n(f, part, &chan, 1, nrows, out, width, ys);
 }
 
 /* Shared state of one part's parallel pass. */
