@@ -633,7 +633,6 @@ static void test_errors(void **state)
     expect_light_error("point:position=1,2,3", "linear:start=1:end=9", "function of the distance");
     expect_light_error("point:position=1,2,3", "exp:density=0.1:distance=planar",
                        "function of the distance");
-    expect_light_error("point:position=1,2,3", "noise:density=0.1:scale=4", "not supported yet");
     expect_light_error(NULL, "exp:density=0.1:g=0.5", "phase=hg or phase=cs only");
     expect_light_error(NULL, "exp:density=0.1:phase=mie", "phase='mie'");
     expect_light_error(NULL, "exp:density=0.1:phase=hg:g=1", "g='1'");

@@ -138,6 +138,9 @@ typedef struct ef_fog_model {
      * and cost; NULL for the exact ones. tau must give the same values. */
     void (*tau_info)(const ef_fog_component *c, const ef_ray *r, double tau[3],
                      ef_tau_info *info);
+    /* Optional, models whose tau is not a closed form: the relative
+     * accuracy lit fog aims at through this component (light.c). */
+    double (*lit_tol)(const ef_fog_component *c);
     /* Periodic seams for the reference integrator (NULL: none), like
      * functionals(): fills up to cap, returns how many there are. */
     int (*lattices)(const ef_fog_component *c, ef_fog_lattice *out, int cap);

@@ -3667,12 +3667,24 @@ static double dsigma_noise(const ef_fog_component *c, const ef_ray *r)
     return d == d ? d : INFINITY;
 }
 
+/* The relative accuracy of lit fog through this noise: the adaptive
+ * method's tol (its tau's error, i.e. T's relative one), 1e-8 for exact
+ * (its tau is exact; lit fog's quadrature still converges only so fast),
+ * the default tol for the approximations (steps, preintegrated), whose own
+ * error the error AOV reports beside it. */
+static double lit_tol_noise(const ef_fog_component *c)
+{
+    const nstate *s = state(c);
+    return s->method == M_ADAPTIVE ? s->tol : s->method == M_EXACT ? 1e-8 : DEFAULT_TOL;
+}
+
 const ef_fog_model ef_fog_noise = {
     .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
+    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
+    .uses_up = 1
 };
 
 const ef_fog_model ef_fog_noise_separable = {
@@ -3680,5 +3692,6 @@ const ef_fog_model ef_fog_noise_separable = {
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
-    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .uses_up = 1
+    .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
+    .uses_up = 1
 };

@@ -1055,6 +1055,54 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
         }
         free(ft);
     }
+    /* a noise lattice's faces where the view ray crosses them (the noise
+     * is a polynomial between them, so the rule converges there), while
+     * they fit: a long ray integrates without them, only slower */
+    long double Dl = D;   /* a sky ray: to its last feature (a box's far face) */
+    if (!isfinite(D)) {
+        Dl = 0;
+        for (int i = 1; i < n; ++i)
+            Dl = fmaxl(Dl, cut[i]);
+    }
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->lattices || !(Dl > 0))
+            continue;
+        ef_fog_functional f[MAXF];
+        const int nf = c->model->functionals(c, f, MAXF), nl = c->model->lattices(c, NULL, 0);
+        ef_fog_lattice lt[64];
+        if (nf > MAXF || nl > 64)
+            continue;
+        c->model->lattices(c, lt, nl);
+        long double extra = 0;
+        for (int j = 0; j < nl; ++j) {
+            const ef_fog_functional *F = &f[lt[j].f];
+            const long double rate = (long double) F->n[0] * r->dir[0] +
+                                     (long double) F->n[1] * r->dir[1] +
+                                     (long double) F->n[2] * r->dir[2];
+            extra += fabsl(rate) * Dl / lt[j].period + 2;
+        }
+        if (n + extra > NCUT - 220)
+            continue;
+        for (int j = 0; j < nl; ++j) {
+            const ef_fog_functional *F = &f[lt[j].f];
+            const long double v0 = (long double) F->n[0] * r->org[0] +
+                                   (long double) F->n[1] * r->org[1] +
+                                   (long double) F->n[2] * r->org[2] + F->d;
+            const long double rate = (long double) F->n[0] * r->dir[0] +
+                                     (long double) F->n[1] * r->dir[1] +
+                                     (long double) F->n[2] * r->dir[2];
+            if (rate == 0)
+                continue;
+            const long double v1 = v0 + rate * Dl, lo = fminl(v0, v1), hi = fmaxl(v0, v1);
+            for (long double k = ceill((lo - lt[j].phase) / lt[j].period);
+                 lt[j].phase + k * lt[j].period < hi && n < NCUT - 220; k += 1) {
+                const long double t = (lt[j].phase + k * lt[j].period - v0) / rate;
+                if (t > 0 && t < Dl)
+                    cut[n++] = t;
+            }
+        }
+    }
     /* a lamp's 1/d^2 peak: geometric steps around its closest approach */
     if (l->kind != EF_LIGHT_SUN) {
         long double w[3], ts = 0, ww = 0;
