@@ -760,6 +760,19 @@ static void test_cli(void **state)
             free(y);
         }
     }
+    /* many lights, every AOV: 35 channels beside the colour (the writer
+     * once took 16 and failed with an internal error) */
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --light point:position=1,2,-5 "
+                             "--light point:position=-1,2,-9 --light point:position=3,1,-14 "
+                             "--light point:position=0,3,-20 --light point:position=2,2,-30 "
+                             "--light point:position=-3,1,-40:name=far "
+                             "--aov fog,T,error,P,distance,light -d float", in, c), 0);
+    tu_image many;
+    assert_int_equal(tu_read_image(c, 0, &many), 0);
+    assert_non_null(tu_image_f(&many, "fog_light.far.B"));
+    assert_non_null(tu_image_f(&many, "fog_light.point1.R"));
+    assert_non_null(tu_image_f(&many, "fog_distance.Z"));
+    tu_image_free(&many);
     /* usage errors: exit 2, a message, no output */
     remove(c);
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp2:density=0.05 --light sun:towards=0,1,0", in,

@@ -141,6 +141,10 @@ typedef struct ef_fog_model {
     /* Optional, models whose tau is not a closed form: the relative
      * accuracy lit fog aims at through this component (light.c). */
     double (*lit_tol)(const ef_fog_component *c);
+    /* Optional, the same models: tau_info at an absolute tolerance tol on
+     * tau where the method has one (others ignore tol). */
+    void (*tau_tol)(const ef_fog_component *c, const ef_ray *r, double tol, double tau[3],
+                    ef_tau_info *info);
     /* Periodic seams for the reference integrator (NULL: none), like
      * functionals(): fills up to cap, returns how many there are. */
     int (*lattices)(const ef_fog_component *c, ef_fog_lattice *out, int cap);

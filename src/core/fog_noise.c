@@ -3213,10 +3213,13 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     return unit;
 }
 
-static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double tau[3],
-                           ef_tau_info *info)
+/* tau along r with its error and cost; tol_over > 0 replaces the
+ * adaptive method's tolerance on tau (tol= or ttol=) for this call. */
+static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[3],
+                         ef_tau_info *info, double tol_over)
 {
     const nstate *s = state(c);
+    const double stol = tol_over > 0 ? tol_over : s->tol;
     ef_tau_info dummy;
     tau[0] = tau[1] = tau[2] = 0;
     if (s->method == M_PREINT && s->merged) {
@@ -3252,7 +3255,7 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     long double tend = t1;
     if (sky) {
         if (s->method == M_ADAPTIVE)
-            tend = tail_end(&R, t0, 0, s->tol / 8);
+            tend = tail_end(&R, t0, 0, stol / 8);
         else if (s->method == M_EXACT)
             tend = tail_end(&R, t0, 1e-16, 0);
         else
@@ -3284,8 +3287,8 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     double mean = 0;
     if (linear)
         mean = (double) env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
-    const double tol = s->ttol > 0 && s->method == M_ADAPTIVE
-                           ? ttol_budget(&R, t0, tend, L, envmax, linear) : s->tol;
+    const double tol = s->ttol > 0 && s->method == M_ADAPTIVE && !(tol_over > 0)
+                           ? ttol_budget(&R, t0, tend, L, envmax, linear) : stol;
     switch (s->method) {
     case M_EXACT:
     case M_ADAPTIVE: {
@@ -3451,6 +3454,19 @@ static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double ta
     }
     info->evals = R.evals;
     info->cells = R.cells;
+}
+
+static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double tau[3],
+                           ef_tau_info *info)
+{
+    tau_noise_at(c, r, tau, info, 0);
+}
+
+/* The model's tau_tol: tau at an absolute tolerance of its own. */
+static void tau_tol_noise(const ef_fog_component *c, const ef_ray *r, double tol, double tau[3],
+                          ef_tau_info *info)
+{
+    tau_noise_at(c, r, tau, info, tol);
 }
 
 static void tau_noise(const ef_fog_component *c, const ef_ray *r, double tau[3])
@@ -3684,7 +3700,7 @@ const ef_fog_model ef_fog_noise = {
     .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
-    .uses_up = 1
+    .tau_tol = tau_tol_noise, .uses_up = 1
 };
 
 const ef_fog_model ef_fog_noise_separable = {
@@ -3693,5 +3709,5 @@ const ef_fog_model ef_fog_noise_separable = {
     .dsigma_max = dsigma_noise,
     .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
-    .uses_up = 1
+    .tau_tol = tau_tol_noise, .uses_up = 1
 };

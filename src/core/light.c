@@ -1304,7 +1304,10 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
 }
 
 /* Optical depth of each component over [t0, t1] of r into tau (ncomp x
- * 3), the noise methods' error estimates summed into *err. */
+ * 3), the noise methods' error estimates summed into *err. The view ray's
+ * pieces go at 1/16 of each model's tolerance: their errors add up along
+ * the ray in T(0, t) (over ~100 steps, to ~10 tol at the model's own),
+ * where the light paths' errors are independent and average out. */
 static void nz_taus(const ef_fog_scene *s, const ef_ray *r, double t0, double t1,
                     double (*tau)[3], double *err)
 {
@@ -1314,7 +1317,11 @@ static void nz_taus(const ef_fog_scene *s, const ef_ray *r, double t0, double t1
     sub.dist = sub.planar = t1 - t0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
-        if (c->model->tau_info) {
+        if (c->model->tau_tol && c->model->lit_tol) {
+            ef_tau_info in;
+            c->model->tau_tol(c, &sub, c->model->lit_tol(c) / 16, tau[i], &in);
+            *err += fmax(in.err[0], fmax(in.err[1], in.err[2]));
+        } else if (c->model->tau_info) {
             ef_tau_info in;
             c->model->tau_info(c, &sub, tau[i], &in);
             *err += fmax(in.err[0], fmax(in.err[1], in.err[2]));
@@ -1409,12 +1416,14 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     if (isfinite(D))
         cut[n++] = D;
     qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-    /* Steps of at most the rough components' coarsest lattice cell: the
-     * light's transmittance varies over that scale (the sun's path
-     * crosses the same features as the point moves), and Richardson's
-     * estimate only sees what a step's five points resolve; the finer
-     * octaves' variation averages out along the ray (measured against
-     * tight tolerances: tests/test_lit_noise.c, docs/tests.md). */
+    /* Steps of at most a quarter of the rough components' coarsest
+     * lattice cell at the default tol (the whole cell from 16 times it,
+     * a sixteenth from 1/16 of it): the light's transmittance varies over
+     * the noise's own scales (the light's path crosses other features as
+     * the point moves), and Richardson's estimate only sees what a step's
+     * five points resolve. Measured against the reference and tight-tol
+     * runs (tests/test_lit_noise.c; a quarter cell: within 5e-5 on a
+     * 10-unit ray at the ground where the whole cell was 0.4 % off). */
     double cap = INFINITY;
     for (int i = 0; i < nc; ++i) {
         const ef_fog_component *c = &s->comp[i];
@@ -1426,7 +1435,7 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         for (int j = 0; j < nl && j < 64; ++j)
             big = fmax(big, lt[j].period);
         if (big > 0)
-            cap = fmin(cap, big);
+            cap = fmin(cap, big * fmin(1, fmax(0.0625, 0.25 * sqrt(rel / 0x1p-12))));
     }
     double Sum[3] = { 0, 0, 0 }, rest[3] = { 0, 0, 0 };
     double last_mass = INFINITY;   /* the last step's share of extinction */

@@ -122,7 +122,9 @@ static int check_part(const ef_exr_file *f, int p, ef_err *err)
     }
     if (uh > H)
         uh = H;
-    const uint64_t bytes = uw * uh * ((uint64_t) cl->num_channels + EF_MAX_EXTRA_CHANNELS + 1) * 4 * 2;
+    /* with the AOVs a run commonly adds (16): a header check, not a
+     * budget of the run */
+    const uint64_t bytes = uw * uh * ((uint64_t) cl->num_channels + 16 + 1) * 4 * 2;
     if (bytes > EF_WORKER_BYTES)
         return ef_fail(err, "part %d would need %.1f GiB per worker for one %s of %llu x %llu "
                             "pixels and %d channels, over exrfog's limit of %.0f GiB per worker "

@@ -93,7 +93,9 @@ int ef_find_view_channels(const ef_exr_file *f, const ef_exr_file *depth_file, c
 int ef_exr_named_type(const char *const *names, const int *types, int n, const char *name, int t);
 
 /* Channels the stream can add to the colour part (ef_stream_opts.extra). */
-#define EF_MAX_EXTRA_CHANNELS 16
+/* Channels a run adds per part (the AOVs: every light's layers included,
+ * aov.h's EF_AOV_MAX_CHANNELS) */
+#define EF_MAX_EXTRA_CHANNELS 160
 
 /* One work unit of the colour part, decoded to float: a rectangle of
  * absolute pixels, rows of w floats. alpha is NULL without alpha. extra[i]

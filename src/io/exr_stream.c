@@ -1249,7 +1249,7 @@ int64_t ef_exr_sink_write(exr_const_context_t ctx, void *user, const void *buf, 
  * there, in plan order (run_part finds target t's at t * nextra).
  * Returns how many. */
 static int part_extras(const ef_channel_plan *plan, int nplans, int p,
-                       const char *xname[][EF_MAX_EXTRA_CHANNELS], int nextra,
+                       const char *(*xname)[EF_MAX_EXTRA_CHANNELS], int nextra,
                        const char **out)
 {
     int n = 0;
@@ -1260,12 +1260,16 @@ static int part_extras(const ef_channel_plan *plan, int nplans, int p,
     return n;
 }
 
+static int stream_named(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
+                        int nplans, char (*names)[EF_MAX_EXTRA_CHANNELS][192],
+                        const char *(*xname)[EF_MAX_EXTRA_CHANNELS], const char *out_path,
+                        int out_fd, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
+                        ef_stream_stats *stats, double t0, ef_err *err);
+
 int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
                   const char *out_path, int out_fd, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
                   ef_stream_stats *stats, ef_err *err)
 {
-    exr_context_initializer_t init;
-    exr_context_t out = NULL;
     double t0 = ef_now();
     memset(stats, 0, sizeof *stats);
     const int nplans = o->nplans > 0 ? o->nplans : 1;
@@ -1275,9 +1279,31 @@ int ef_exr_stream(const ef_exr_file *in, const ef_exr_file *df, const ef_channel
         return ef_fail(err, "internal error: %d extra channels (at most %d)", o->nextra,
                        EF_MAX_EXTRA_CHANNELS);
     /* Each plan's extra channels, named with its view where the file
-     * names a view's channels that way (fog.R -> fog.left.R). */
-    char names[EF_MAX_VIEWS][EF_MAX_EXTRA_CHANNELS][192];
-    const char *xname[EF_MAX_VIEWS][EF_MAX_EXTRA_CHANNELS];
+     * names a view's channels that way (fog.R -> fog.left.R); on the heap
+     * (a light's layers make many). */
+    char(*names)[EF_MAX_EXTRA_CHANNELS][192] = calloc((size_t) nplans, sizeof *names);
+    const char *(*xname)[EF_MAX_EXTRA_CHANNELS] = calloc((size_t) nplans, sizeof *xname);
+    if (!names || !xname) {
+        free(names);
+        free(xname);
+        return ef_fail(err, "out of memory");
+    }
+    int rc = stream_named(in, df, plan, nplans, names, xname, out_path, out_fd, o, fn, user, stats,
+                          t0, err);
+    free(names);
+    free(xname);
+    return rc;
+}
+
+/* ef_exr_stream with the extra channels' name tables allocated. */
+static int stream_named(const ef_exr_file *in, const ef_exr_file *df, const ef_channel_plan *plan,
+                        int nplans, char (*names)[EF_MAX_EXTRA_CHANNELS][192],
+                        const char *(*xname)[EF_MAX_EXTRA_CHANNELS], const char *out_path,
+                        int out_fd, const ef_stream_opts *o, ef_chunk_fn fn, void *user,
+                        ef_stream_stats *stats, double t0, ef_err *err)
+{
+    exr_context_initializer_t init;
+    exr_context_t out = NULL;
     for (int k = 0; k < nplans; ++k) {
         if (check_depth_window(in, df, &plan[k], err))
             return -1;

@@ -25,6 +25,9 @@
 #include "preview.h"
 #include "scene_build.h"
 
+_Static_assert(EF_AOV_MAX_CHANNELS <= EF_MAX_EXTRA_CHANNELS,
+               "the writer takes every AOV channel a scene can ask for");
+
 #define FRAME_DONE (-1)
 
 /* What the workers share read-only during the pass, except the statistics,
