@@ -72,8 +72,8 @@ done
 threads=()
 [[ -n "${EXRFOG_THREADS:-}" ]] && threads=(--threads "$EXRFOG_THREADS")
 H='height:density=0.05:falloff=0.3:base=0'
-names=() cmds=() bases=()
-add() { names+=("$1"); bases+=("$2"); cmds+=("$3"); }
+names=() cmds=() bases=() pxs=()
+add() { names+=("$1"); bases+=("$2"); cmds+=("$3"); pxs+=("${4:-$px}"); }
 add "oiiotool (copy)" "" 'oiiotool "$IN" -o "$OUT"'
 add "exp (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog exp:density=0.02'
 add "height (unlit)" "" '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H"'
@@ -98,6 +98,19 @@ for r in 512 2048 4096; do
     add "sun in height fog, ${r}^2 shadow map" "height (unlit)" \
         '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3:shadow="$tmp/map'"$r"'.exr"'
 done
+# Lit noise fog costs milliseconds per pixel: its rows run on a 240x135
+# frame of the same scene (the horizon scene of bench/noise.sh), against
+# the same noise unlit on it.
+SMALL="$tmp/small.exr"
+"$make_sample" "$SMALL" --size 240x135 --compression zip >&2 || die "make_sample (small) failed"
+N='noise:density=0.05:scale=10:octaves=4:falloff=0.1:base=0'
+add "noise with falloff (unlit), 240x135" "" '"$exrfog" "${threads[@]}" "$SMALL" -o "$OUT" --fog "$N"' 32400
+add "sun in noise, 240x135" "noise with falloff (unlit), 240x135" \
+    '"$exrfog" "${threads[@]}" "$SMALL" -o "$OUT" --fog "$N" --light sun:towards=0.3,0.4,-1:intensity=3' 32400
+add "point lamp in noise, 240x135" "noise with falloff (unlit), 240x135" \
+    '"$exrfog" "${threads[@]}" "$SMALL" -o "$OUT" --fog "$N" --light point:position=4,2,-30:intensity=200' 32400
+add "sun in noise, tol=2^-8, 240x135" "noise with falloff (unlit), 240x135" \
+    '"$exrfog" "${threads[@]}" "$SMALL" -o "$OUT" --fog "$N:tol=0.00390625" --light sun:towards=0.3,0.4,-1:intensity=3' 32400
 n=${#names[@]}
 declare -A times
 for ((r = 0; r < runs; ++r)); do
@@ -120,7 +133,7 @@ cpu="$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -1)"
     echo "## Lit fog, end to end ($(date -u '+%Y-%m-%d %H:%M UTC'))"
     echo
     echo "- machine: ${cpu:-unknown CPU}, $(nproc) cores; exrfog $(git -C "$repo" rev-parse --short HEAD 2>/dev/null) ($build)"
-    echo "- input: ${size} RGBA half + Z float, ZIP (make_sample); $runs interleaved rounds, medians; threads: ${EXRFOG_THREADS:-all}"
+    echo "- input: ${size} RGBA half + Z float, ZIP (make_sample; the noise rows: 240x135); $runs interleaved rounds, medians; threads: ${EXRFOG_THREADS:-all}"
     echo
     echo "| run | median s | x copy | x unlit | lights' ns per pixel |"
     echo "|---|---:|---:|---:|---:|"
@@ -129,7 +142,7 @@ cpu="$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -1)"
         for ((j = 0; j < n; ++j)); do [[ "${names[$j]}" == "$b" ]] && bm=${med[$j]}; done
         if [[ -n "$bm" ]]; then
             xb=$(awk -v a="${med[$i]}" -v b="$bm" 'BEGIN { printf "%.2f", a / b }')
-            ns=$(awk -v a="${med[$i]}" -v b="$bm" -v p="$px" 'BEGIN { printf "%.0f", (a - b) * 1e9 / p }')
+            ns=$(awk -v a="${med[$i]}" -v b="$bm" -v p="${pxs[$i]}" 'BEGIN { printf "%.0f", (a - b) * 1e9 / p }')
         else
             xb="-"
             ns="-"
