@@ -768,6 +768,34 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
                         for u, v in zip(ra, rb))
                 print("lit crop, %s: %s against the flat run, worst %.2e" % (what, name, e))
                 check(e <= 1e-6, "lit crop (%s): %s equals the flat run (%.2e)" % (what, name, e))
+    # Lit noise fog on deep input (a 40 x 20 crop: a few ms a pixel): the
+    # flatten's one fog piece per pixel is the flat run's ray (the same
+    # pixels), and --deep samples cuts the fog into samples whose light is
+    # integrated over each on its own, at the noise's tolerance (2^-12 of
+    # the light; the pixel within 2e-4 of it).
+    nflat, ndeep = os.path.join(tmp, "noise_crop.exr"), os.path.join(tmp, "noise_crop_deep.exr")
+    check(oiiotool([sample_exr, "--crop", "40x20+300+250", "-o", nflat]) == 0 and
+          oiiotool([sample_exr, "--crop", "40x20+300+250", "--deepen", "-o", ndeep]) == 0,
+          "oiiotool crops and deepens the sample (noise)")
+    fogn = ["--fog", "noise:density=0.05:scale=10:octaves=4:falloff=0.1:base=0",
+            "--light", "sun:towards=0.3,0.4,-1:intensity=3"]
+    o_flat, o_df = os.path.join(tmp, "noise_flat.exr"), os.path.join(tmp, "noise_df.exr")
+    o_ds, o_dsf = os.path.join(tmp, "noise_ds.exr"), os.path.join(tmp, "noise_dsf.exr")
+    ok = (run([nflat, "-o", o_flat, "-d", "float"] + fogn) == 0 and
+          run([ndeep, "-o", o_df, "--deep", "flatten"] + fogn) == 0 and
+          run([ndeep, "-o", o_ds, "--deep", "samples"] + fogn) == 0 and
+          oiiotool([o_ds, "--flatten", "-o", o_dsf]) == 0)
+    check(ok, "lit noise crop: flat and deep runs")
+    if ok:
+        want = flat_pixels_any(o_flat)
+        for name, path, lim in (("--deep flatten", o_df, 1e-6),
+                                ("--deep samples + OIIO flatten", o_dsf, 2e-4)):
+            got = flat_pixels_any(path)
+            e = max(abs(u - v) / (1e-3 + abs(v)) for ra, rb in zip(got, want)
+                    for u, v in zip(ra, rb))
+            print("lit noise crop: %s against the flat run, worst %.2e" % (name, e))
+            check(e <= lim, "lit noise crop: %s within %.0e of the flat run (%.2e)"
+                  % (name, lim, e))
 else:
     print("no sample or make_sample: the lit crop skipped")
 

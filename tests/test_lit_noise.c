@@ -25,27 +25,8 @@
 #include "lit.h"
 #include "ref.h"
 #include "tassert.h"
+#include "tlit.h"
 #include "testutil.h"
-
-static void scene_of(ef_fog_scene *s, const char *const *specs, const char *light)
-{
-    ef_err err;
-    ef_scene_init(s);
-    for (int i = 0; specs[i]; ++i)
-        if (ef_scene_add(s, specs[i], &err))
-            fail_msg("'%s' did not parse: %s", specs[i], err.msg);
-    if (light && ef_scene_add_light(s, light, &err))
-        fail_msg("'%s' did not parse: %s", light, err.msg);
-    if (ef_lights_check(s, &err))
-        fail_msg("scene refused: %s", err.msg);
-}
-
-static ef_ray ray_of(const double org[3], double dx, double dy, double dz, double dist)
-{
-    const double n = sqrt(dx * dx + dy * dy + dz * dz);
-    ef_ray r = { { dx / n, dy / n, dz / n }, dist, dist, { org[0], org[1], org[2] } };
-    return r;
-}
 
 typedef struct lcase {
     const char *fog, *fog2, *light;

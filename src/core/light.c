@@ -984,6 +984,20 @@ static double len2(double x, double y)
 
 /* |z|^2, without hypot's care for overflow (the arguments here are far
  * from it) */
+/* Where lamp l comes closest to the line of r: its parameter *ts along
+ * r->dir, and its distance *h from the line by the cross product (no
+ * cancellation near the line); w gets lamp - origin. */
+static void lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *ts, double *h)
+{
+    for (int k = 0; k < 3; ++k)
+        w[k] = l->pos[k] - r->org[k];
+    *ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+    const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
+                 cy = w[2] * r->dir[0] - w[0] * r->dir[2],
+                 cz = w[0] * r->dir[1] - w[1] * r->dir[0];
+    *h = len2(len2(cx, cy), cz);
+}
+
 static double norm2(double complex z)
 {
     return creal(z) * creal(z) + cimag(z) * cimag(z);
@@ -1389,14 +1403,9 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     }
     double emax = fmax(l->e[0], fmax(l->e[1], l->e[2]));
     if (l->kind != EF_LIGHT_SUN) {
-        double w[3];
-        for (int k = 0; k < 3; ++k)
-            w[k] = l->pos[k] - r->org[k];
-        const double ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
-        const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
-                     cy = w[2] * r->dir[0] - w[0] * r->dir[2],
-                     cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-        const double h = len2(len2(cx, cy), cz), hq = len2(h, l->radius);
+        double w[3], ts, h;
+        lamp_line(l, r, w, &ts, &h);
+        const double hq = len2(h, l->radius);
         if (!isfinite(ts) || !(hq <= DBL_MAX / 64))
             return;
         if (hq == 0 && ts >= a && ts <= D) {
@@ -1674,15 +1683,9 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
         /* the lamp's closest approach along the line, and its distance
          * there from the cross product (no cancellation near the line) */
         double *w = q.w;
-        for (int a = 0; a < 3; ++a)
-            w[a] = l->pos[a] - r->org[a];
-        q.ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+        lamp_line(l, r, w, &q.ts, &q.h);
         q.wa = w[0] * l->dir[0] + w[1] * l->dir[1] + w[2] * l->dir[2];
         q.va = r->dir[0] * l->dir[0] + r->dir[1] * l->dir[1] + r->dir[2] * l->dir[2];
-        const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
-                     cy = w[2] * r->dir[0] - w[0] * r->dir[2],
-                     cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-        q.h = len2(len2(cx, cy), cz);
         q.hq = len2(q.h, l->radius);
         if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
             return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
@@ -1821,14 +1824,9 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
     double c[MAX_CUTS];
     int n = 0;
     if (l->kind != EF_LIGHT_SUN) {
-        double w[3];
-        for (int k = 0; k < 3; ++k)
-            w[k] = l->pos[k] - r->org[k];
-        const double ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
-        const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
-                     cy = w[2] * r->dir[0] - w[0] * r->dir[2],
-                     cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-        const double hq = len2(len2(len2(cx, cy), cz), l->radius);
+        double w[3], ts, h;
+        lamp_line(l, r, w, &ts, &h);
+        const double hq = len2(h, l->radius);
         if (isfinite(ts) && isfinite(hq)) {
             if (ts > a && ts < b)
                 c[n++] = ts;

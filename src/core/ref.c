@@ -1013,6 +1013,17 @@ static int spot_cuts(const ef_light *l, const ef_ray *r, long double *cut, int n
     return n;
 }
 
+/* Functional F along r in long double: its value at the origin and its
+ * rate per unit t. */
+static void line_of(const ef_fog_functional *F, const ef_ray *r, long double *v0,
+                    long double *rate)
+{
+    *v0 = (long double) F->n[0] * r->org[0] + (long double) F->n[1] * r->org[1] +
+          (long double) F->n[2] * r->org[2] + F->d;
+    *rate = (long double) F->n[0] * r->dir[0] + (long double) F->n[1] * r->dir[1] +
+            (long double) F->n[2] * r->dir[2];
+}
+
 int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, long double S[3])
 {
     S[0] = S[1] = S[2] = 0;
@@ -1042,13 +1053,8 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
         }
         c->model->features(c, ft, nt);
         for (int j = 0; j < nt && n < NCUT - 200; ++j) {
-            const ef_fog_functional *F = &f[ft[j].f];
-            const long double v0 = (long double) F->n[0] * r->org[0] +
-                                   (long double) F->n[1] * r->org[1] +
-                                   (long double) F->n[2] * r->org[2] + F->d;
-            const long double rate = (long double) F->n[0] * r->dir[0] +
-                                     (long double) F->n[1] * r->dir[1] +
-                                     (long double) F->n[2] * r->dir[2];
+            long double v0, rate;
+            line_of(&f[ft[j].f], r, &v0, &rate);
             const long double t = (ft[j].value - v0) / rate;
             if (t > 0 && t < D)
                 cut[n++] = t;
@@ -1076,22 +1082,15 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
         c->model->lattices(c, lt, nl);
         long double extra = 0;
         for (int j = 0; j < nl; ++j) {
-            const ef_fog_functional *F = &f[lt[j].f];
-            const long double rate = (long double) F->n[0] * r->dir[0] +
-                                     (long double) F->n[1] * r->dir[1] +
-                                     (long double) F->n[2] * r->dir[2];
+            long double v0, rate;
+            line_of(&f[lt[j].f], r, &v0, &rate);
             extra += fabsl(rate) * Dl / lt[j].period + 2;
         }
         if (n + extra > NCUT - 220)
             continue;
         for (int j = 0; j < nl; ++j) {
-            const ef_fog_functional *F = &f[lt[j].f];
-            const long double v0 = (long double) F->n[0] * r->org[0] +
-                                   (long double) F->n[1] * r->org[1] +
-                                   (long double) F->n[2] * r->org[2] + F->d;
-            const long double rate = (long double) F->n[0] * r->dir[0] +
-                                     (long double) F->n[1] * r->dir[1] +
-                                     (long double) F->n[2] * r->dir[2];
+            long double v0, rate;
+            line_of(&f[lt[j].f], r, &v0, &rate);
             if (rate == 0)
                 continue;
             const long double v1 = v0 + rate * Dl, lo = fminl(v0, v1), hi = fmaxl(v0, v1);
