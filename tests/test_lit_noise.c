@@ -84,6 +84,11 @@ static const lcase cases[] = {
     /* a sky ray up through the falloff, out of a box: the infinite tail */
     { "noise:density=0.1:scale=6:octaves=2:falloff=0.3:base=0:min=-30,-30,-30:max=30,12,30", NULL,
       "sun:towards=0.3,0.5,-0.4:color=1,1,1:intensity=1", { 0, 1, 0 }, { 1, 0.4, 0.1 }, INFINITY, 0 },
+    /* a box far down the ray: a long empty stretch (where the steps grow
+     * freely), then the cap again from the box's face */
+    { "noise:density=0.3:scale=5:octaves=2:min=-20,-5,-130:max=20,8,-100", NULL,
+      "sun:towards=0.3,0.6,0.4:color=1,1,1:intensity=2", { 0, 1, 0 }, { 0.05, 0.01, -1 }, 135,
+      0 },
     /* tighter: tol 1e-7, and the exact method */
     { "noise:density=0.08:scale=6:octaves=2:falloff=0.15:base=0:tol=1e-7", NULL,
       "sun:towards=0.4,0.6,0.2:color=1,0.9,0.8:intensity=3", { 0, 2, 0 }, { 1, -0.05, 0.3 }, 25,

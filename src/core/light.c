@@ -1460,6 +1460,7 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             continue;
         double t = c0;
         dt = dt > 0 ? fmin(dt, c1 - c0) : isfinite(c1) ? c1 - c0 : fmax(c0, 1);
+        last_mass = INFINITY;   /* past a cut (a box's face) the cap holds again */
         while (t < c1 && steps < NZ_STEPS) {
             /* what is left cannot show: T(0, t) times the bound on h */
             double T0max = 0;
@@ -1502,7 +1503,7 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             }
             /* where a step can no longer matter, the cap is lifted */
             const double smax_ = fmax(Sum[0], fmax(Sum[1], Sum[2]));
-            double b = t + (hb * last_mass < 0x1p-6 * rel * smax_ ? dt : fmin(dt, cap));
+            double b = t + (hb * last_mass <= 0x1p-6 * rel * smax_ ? dt : fmin(dt, cap));
             if (!(b < c1) || c1 - b < 1e-3 * dt)
                 b = c1;
             ++steps;
