@@ -7,14 +7,16 @@
 
 /* Whether every component of s has a density in space, so that light can
  * be carried through it: not linear or exp2, nor exp with
- * distance=planar (functions of the camera's distance), nor noise (not yet
- * lit). Returns 0, or -1 with a message naming the component. */
+ * distance=planar (functions of the camera's distance); a planet sun takes
+ * one exponential height fog. Returns 0, or -1 with a message naming the
+ * component. */
 int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 
 /* S per channel along r (its org is the camera; r->dist may be INFINITY)
  * from light l of s, and into *err (may be NULL) an estimate of its
- * absolute error per channel (the quadrature's Kronrod-Gauss differences;
- * 0 for closed forms). +inf where a lamp of radius 0 lies on the
+ * absolute error per channel (the quadrature's Kronrod-Gauss differences,
+ * with noise fog the steps' Richardson differences and the noise calls'
+ * estimates; 0 for closed forms). +inf where a lamp of radius 0 lies on the
  * segment itself. */
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
