@@ -692,6 +692,40 @@ for k, e in worst.items():
 print("lit exp: the lamp's light is up to %.0f %% of a pixel" % (100 * lamp_share))
 check(lamp_share > 0.3, "lit exp: the lamp lights the fog (%.2f of a pixel at most)" % lamp_share)
 
+# --deep flatten --aov light: the lamp's layer against the reference's own
+# lamp term (the reference with the lamp less the reference without), and
+# the ambient layer against the reference without it less the input as the
+# fog attenuates it (the fog AOV of the unlit run): the layers through the
+# interleaved media of the Arnold frame.
+lay = os.path.join(tmp, "deep_lit_layers.exr")
+check(run([src] + lit_args + ["--deep", "flatten", "--aov", "fog,light", "-d", "float", "-o", lay])
+      == 0, "lit --deep flatten --aov light runs")
+lb = oiio.ImageBuf(lay)
+lch = lb.spec().channelnames
+lpx = lb.get_pixels(oiio.FLOAT)
+check(run([src, "--fog", "exp:density=0.05", "--deep", "flatten", "--aov", "fog", "-d", "float",
+           "-o", os.path.join(tmp, "deep_unlit_fog_aov.exr")]) == 0, "unlit --deep flatten --aov fog runs")
+upx = oiio.ImageBuf(os.path.join(tmp, "deep_unlit_fog_aov.exr")).get_pixels(oiio.FLOAT)
+uch = oiio.ImageBuf(os.path.join(tmp, "deep_unlit_fog_aov.exr")).spec().channelnames
+wl, wa, nl = 0.0, 0.0, 0
+for y in range(0, H, 7):
+    for x in range(0, W, 7):
+        p = y * W + x
+        with_l = reference(("exp", SIG_LIT), x, y, input_samples[p], lamp=LAMP)
+        without = reference(("exp", SIG_LIT), x, y, input_samples[p])
+        for ch, c in enumerate("RGB"):
+            want = with_l[ch] - without[ch]
+            got = float(lpx[y, x, lch.index("fog_light.point1." + c)])
+            wl = max(wl, abs(got - want) / (1e-3 + abs(with_l[ch])))
+            amb = float(lpx[y, x, lch.index("fog_ambient." + c)])
+            wa = max(wa, abs(amb - float(upx[y, x, uch.index("fog." + c)])) /
+                     (1e-3 + abs(with_l[ch])))
+        nl += 1
+print("lit exp, --aov light on deep input: the lamp's layer within %.2e of the reference's lamp "
+      "term, the ambient within %.2e of the unlit run's fog, %d pixels" % (wl, wa, nl))
+check(wl < 4e-3, "deep --aov light: the lamp's layer against the reference (%.2e)" % wl)
+check(wa < 1e-6, "deep --aov light: the ambient equals the unlit fog (%.2e)" % wa)
+
 lfs = samples_of(oiio.ImageBuf(louts["fog"]))
 worst_rule, worst_half, nsplit = 0.0, 0.0, 0
 for p in range(0, W * H, 13):
@@ -851,8 +885,10 @@ for tw, th in ((32, 32), (64, 20)):
 flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
 for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
                    ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2),
+                   ([src, "--deep", "samples", "--aov", "light", "--light",
+                     "point:position=1,1,3:intensity=1"], 2),
                    ([src, "--deep", "flatten", "--aov", "light", "--light",
-                     "point:position=1,1,3:intensity=1"], 2)):
+                     "point:position=1,1,3:intensity=1", "--sky-light", env], 2)):
     r = subprocess.run([exrfog] + args + ["--fog", "exp:density=0.1", "-o",
                                           os.path.join(tmp, "u.exr")], capture_output=True, text=True)
     check(r.returncode == want and r.stderr.startswith("exrfog: ") and

@@ -24,6 +24,7 @@ void ef_deep_buf_free(ef_deep_buf *b)
     free(b->sv);
     free(b->ft);
     free(b->cut);
+    free(b->lv);
     const int stride = b->stride;
     memset(b, 0, sizeof *b);
     b->stride = stride;
@@ -413,11 +414,20 @@ static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, d
  * per unit alpha (the ambient and the sky light) plus the lights' own
  * in-scatter S over it. */
 static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog, double a, double b,
-                const double tau[3], const double col[3], const double S[3])
+                const double tau[3], const double col[3], const double S[3],
+                const double (*Sl)[3])
 {
     double *d = ef_deep_buf_push(fog);
     if (!d)
         return -1;
+    if (F->per_light) {
+        const int nl = F->scene->nlight, at = (fog->n - 1) * 3 * nl;
+        if (reserve((void **) &fog->lv, &fog->lvcap, at + 3 * nl, sizeof *fog->lv))
+            return -1;
+        for (int j = 0; j < nl; ++j)
+            for (int k = 0; k < 3; ++k)
+                fog->lv[at + 3 * j + k] = Sl ? Sl[j][k] : 0;
+    }
     double al[3], mean = 0;
     for (int k = 0; k < 3; ++k) {
         al[k] = k && tau[k] == tau[k - 1] ? al[k - 1] : isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
@@ -448,6 +458,7 @@ static double max3(const double v[3])
  * lights' in-scatter over it (from its front) with theirs. */
 typedef struct piece {
     double a, b, tau[3], col[3], err[3], S[3], Se[3];
+    double Sl[EF_MAX_LIGHTS][3];   /* S per light, with F->per_light */
     int depth;
 } piece;
 
@@ -455,7 +466,7 @@ typedef struct piece {
  * a (T counted from there), summed over the scene's lights, into S, and
  * their error estimates into E. */
 static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double S[3],
-                      double E[3])
+                      double E[3], double (*per)[3])
 {
     S[0] = S[1] = S[2] = E[0] = E[1] = E[2] = 0;
     const ef_ray seg = seg_ray(r1, a, b);
@@ -465,6 +476,8 @@ static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double 
         for (int k = 0; k < 3; ++k) {
             S[k] += v[k];
             E[k] += e[k];
+            if (per)
+                per[j][k] = v[k];
         }
     }
 }
@@ -476,7 +489,7 @@ static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1
     piece p = { .a = a, .b = b, .depth = depth };
     seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, linear, F->want_err ? p.err : NULL);
     if (lt->lights)
-        seg_light(F->scene, r1, a, b, p.S, p.Se);
+        seg_light(F->scene, r1, a, b, p.S, p.Se, F->per_light ? p.Sl : NULL);
     return p;
 }
 
@@ -624,7 +637,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
             if (fog->n >= F->max_samples)
                 st->capped = 1;
         }
-        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S))
+        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S, p.Sl))
             return -1;
         for (int k = 0; st && k < 3; ++k) {
             st->pix_err[k] += p.err[k];
@@ -709,18 +722,19 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
         const double za = d[L->nch], zb = d[L->nch + 1];
         double t[3], c[3], e[3], S[3] = { 0, 0, 0 }, Se[3] = { 0, 0, 0 };
+        double Sl[EF_MAX_LIGHTS][3] = { { 0 } };
         /* (its error replaces nothing: the piece it extends stays counted,
          * an over-estimate) */
         seg_tau(F->scene, lt, r1, za, INFINITY, t, c, NULL, F->want_err ? e : NULL);
         if (lt->lights)
-            seg_light(F->scene, r1, za, INFINITY, S, Se);
+            seg_light(F->scene, r1, za, INFINITY, S, Se, F->per_light ? Sl : NULL);
         for (int k = 0; st && k < 3; ++k) {
             if (F->want_err)
                 st->pix_err[k] += e[k];
             st->pix_light_err[k] += T0 * Se[k];
         }
         fog->n--;
-        if (emit(L, F, fog, za, zb, t, c, S))
+        if (emit(L, F, fog, za, zb, t, c, S, Sl))
             return -1;
     }
     return 0;
@@ -787,7 +801,7 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                            : s->sky == EF_SKY_DISTANCE_MODE ? fmax(last, s->sky_distance) : last;
         double S[3], E[3];
         if (end > 0) {
-            seg_light(s, &r1, 0, end, S, E);
+            seg_light(s, &r1, 0, end, S, E, NULL);
             lt.scale = max3(S);
         }
     }

@@ -52,6 +52,10 @@ typedef struct ef_deep_buf {
     int ftcap;
     double *cut;
     int ccap;
+    /* with ef_deep_fog.per_light: each fog sample's in-scatter per light
+     * (3 per light of the scene, in sample order, image units) */
+    double *lv;
+    int lvcap;
 } ef_deep_buf;
 
 void ef_deep_buf_init(ef_deep_buf *b, int nch);
@@ -71,6 +75,7 @@ typedef struct ef_deep_fog {
     int max_samples;          /* fog samples per pixel, at most */
     int chromatic;            /* write each channel's alpha (AR/AG/AB) */
     int want_err;             /* sum the models' tau error estimates (ef_deep_stats.pix_err) */
+    int per_light;            /* keep each sample's light per light (ef_deep_buf.lv) */
 } ef_deep_fog;
 
 /* Counters a pixel adds to (the caller sums them). */

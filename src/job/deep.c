@@ -466,6 +466,39 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
                    : r->dir[k] == 0 ? 0 : r->dir[k] > 0 ? INFINITY : -INFINITY;
     if (S->aov & EF_AOV_DISTANCE)
         aov[n++] = front;
+    if (S->aov & EF_AOV_LIGHT) {
+        /* each light's layer: the flatten of the input with its colour
+         * zeroed and the fog samples with that light's in-scatter as
+         * theirs; the ambient what the fog adds beyond them */
+        const int nl = S->q->scene->nlight;
+        double lay[EF_MAX_LIGHTS][3], o[EF_DEEP_MAX_CH];
+        if (copy_buf(&w->ta, &w->tidy))
+            return ef_fail(err, "out of memory");
+        for (int i = 0; i < w->ta.n; ++i)
+            for (int k = 0; k < 3; ++k)
+                w->ta.v[(size_t) i * (size_t) w->ta.stride + (size_t) L->rgb[k]] = 0;
+        for (int j = 0; j < nl; ++j) {
+            if (copy_buf(&w->tb, &w->fog))
+                return ef_fail(err, "out of memory");
+            for (int i = 0; i < w->tb.n; ++i)
+                for (int k = 0; k < 3; ++k)
+                    w->tb.v[(size_t) i * (size_t) w->tb.stride + (size_t) L->rgb[k]] =
+                        w->fog.lv[(size_t) i * 3 * (size_t) nl + 3 * (size_t) j + (size_t) k];
+            if (flatten_union(w, &w->ta, &w->tb, o, err))
+                return -1;
+            for (int k = 0; k < 3; ++k)
+                lay[j][k] = o[L->rgb[k]];
+        }
+        for (int k = 0; k < 3; ++k) {
+            double amb = flat[L->rgb[k]] - att[L->rgb[k]];
+            for (int j = 0; j < nl; ++j)
+                amb -= lay[j][k];
+            aov[n++] = amb;
+        }
+        for (int j = 0; j < nl; ++j)
+            for (int k = 0; k < 3; ++k)
+                aov[n++] = lay[j][k];
+    }
     return 0;
 }
 
@@ -713,8 +746,12 @@ static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_e
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
-    if (q->naov && (q->aov & (EF_AOV_LIGHT | EF_AOV_LIT)))   /* (the CLI refuses them first) */
-        return ef_fail(err, "--aov light and lit are written for flat input only");
+    if (q->naov && (q->aov & EF_AOV_LIT))   /* (the CLI refuses these first) */
+        return ef_fail(err, "--aov lit is written for flat input only");
+    if (q->naov && (q->aov & EF_AOV_LIGHT) &&
+        (q->mode != EF_DEEP_MODE_FLATTEN || q->scene->sky_light || q->scene->nlight == 0))
+        return ef_fail(err, "--aov light on deep input takes --deep flatten and --light, "
+                            "without --sky-light");
     ef_deep_in d;
     if (ef_deep_in_open(q->in, q->part, &d, err))
         return -1;
@@ -753,6 +790,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     S.fog.chromatic = chromatic;
     S.aov = q->mode == EF_DEEP_MODE_FLATTEN && q->naov ? q->aov : 0;
     S.fog.want_err = (S.aov & EF_AOV_ERROR) != 0;
+    S.fog.per_light = (S.aov & EF_AOV_LIGHT) != 0;
     if (!rc)
         rc = make_flat_out(q, P, &S.FO, err);
     res->tau_cap = S.fog.tau_cap;
