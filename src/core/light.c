@@ -1388,7 +1388,8 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         for (int i = 0; i < nc; ++i)
             cum[i][0] = cum[i][1] = cum[i][2] = 0;
     }
-    /* the lamp's geometry: cuts around its closest approach */
+    /* the cuts: the densities' features, and a lamp's closest approach
+     * with geometric steps around it (and a spot's cone); hb bounds h / T */
     double cut[MAX_CUTS];
     int n = 0;
     cut[n++] = a;
