@@ -802,6 +802,27 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
                         for u, v in zip(ra, rb))
                 print("lit crop, %s: %s against the flat run, worst %.2e" % (what, name, e))
                 check(e <= 1e-6, "lit crop (%s): %s equals the flat run (%.2e)" % (what, name, e))
+        # the light layers and lit fractions of --deep flatten: at one opaque
+        # sample a pixel, the flat run's (held to the references in
+        # test_light and test_shadow)
+        aovs = ["--aov", "fog,light" + (",lit" if what != "lamp" else ""), "-d", "float"]
+        a_flat, a_deep = os.path.join(tmp, "lit_crop_aovf.exr"), os.path.join(tmp, "lit_crop_aovd.exr")
+        ok = (run([cflat, "-o", a_flat] + fogl + aovs) == 0 and
+              run([cdeep, "-o", a_deep, "--deep", "flatten"] + fogl + aovs) == 0)
+        check(ok, "lit crop (%s): --aov light,lit runs, flat and deep" % what)
+        if ok:
+            fa, fb = oiio.ImageBuf(a_flat), oiio.ImageBuf(a_deep)
+            na, nb = fa.spec().channelnames, fb.spec().channelnames
+            pa, pb = fa.get_pixels(oiio.FLOAT), fb.get_pixels(oiio.FLOAT)
+            names = [c for c in na if c.startswith(("fog_light.", "fog_lit.", "fog_ambient."))]
+            check(len(names) >= 6 and all(c in nb for c in names),
+                  "lit crop (%s): the deep run writes the flat run's layers (%s)" % (what, names))
+            e = max(float(abs(pa[..., na.index(c)] - pb[..., nb.index(c)]).max()) for c in names
+                    if c in nb)
+            print("lit crop, %s: --deep flatten's %d light channels against the flat run's, "
+                  "worst %.2e" % (what, len(names), e))
+            check(e <= 1e-6, "lit crop (%s): deep light layers equal the flat run's (%.2e)"
+                  % (what, e))
     # Lit noise fog on deep input (a 40 x 20 crop: a few ms a pixel): the
     # flatten's one fog piece per pixel is the flat run's ray (the same
     # pixels), and --deep samples cuts the fog into samples whose light is
@@ -886,6 +907,8 @@ flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
 for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
                    ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2),
                    ([src, "--deep", "samples", "--aov", "light", "--light",
+                     "point:position=1,1,3:intensity=1"], 2),
+                   ([src, "--deep", "flatten", "--aov", "lit", "--light",
                      "point:position=1,1,3:intensity=1"], 2),
                    ([src, "--deep", "flatten", "--aov", "light", "--light",
                      "point:position=1,1,3:intensity=1", "--sky-light", env], 2)):

@@ -213,6 +213,7 @@ typedef struct shared {
     flat_out FO;
     unsigned aov;             /* AOVs of the flat output (0: none) */
     ef_deep_fog fog;
+    ef_deep_fog bare;         /* --aov lit: the fog with every shadow map left out */
     unit *units;
     int nunits;
     _Atomic int next;
@@ -227,6 +228,7 @@ typedef struct worker {
     ef_deep_rows rows;
     ef_deep_buf in, tidy, fog, all, out;
     ef_deep_buf ta, tb;       /* --aov: the input's and the fog's samples, recoloured */
+    ef_deep_buf bare;         /* --aov lit: the fog samples without shadow maps */
     double *flat;
     size_t flatcap;           /* bytes */
     uint32_t *counts;
@@ -402,6 +404,27 @@ static int copy_buf(ef_deep_buf *dst, const ef_deep_buf *src)
     return 0;
 }
 
+/* Light j's layer of one pixel: the flatten of w->ta (the input, its
+ * colour zeroed) with the fog samples of fog carrying light j's
+ * in-scatter (fog->lv) as their colour. */
+static int light_layer(worker *w, const ef_deep_buf *fog, int j, double out[3], ef_err *err)
+{
+    const ef_deep_layout *L = &w->S->P->L;
+    const int nl = w->S->q->scene->nlight;
+    double o[EF_DEEP_MAX_CH];
+    if (copy_buf(&w->tb, fog))
+        return ef_fail(err, "out of memory");
+    for (int i = 0; i < w->tb.n; ++i)
+        for (int k = 0; k < 3; ++k)
+            w->tb.v[(size_t) i * (size_t) w->tb.stride + (size_t) L->rgb[k]] =
+                fog->lv[(size_t) i * 3 * (size_t) nl + 3 * (size_t) j + (size_t) k];
+    if (flatten_union(w, &w->ta, &w->tb, o, err))
+        return -1;
+    for (int k = 0; k < 3; ++k)
+        out[k] = o[L->rgb[k]];
+    return 0;
+}
+
 /* The AOVs of one flattened pixel (--deep flatten --aov), in
  * ef_aov_channels order, from its tidy input, its fog samples and its
  * flatten (distances, before Z goes back to the file's depth):
@@ -466,29 +489,22 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
                    : r->dir[k] == 0 ? 0 : r->dir[k] > 0 ? INFINITY : -INFINITY;
     if (S->aov & EF_AOV_DISTANCE)
         aov[n++] = front;
+    if (!(S->aov & (EF_AOV_LIGHT | EF_AOV_LIT)))
+        return 0;
+    /* each light's layer: the flatten of the input with its colour zeroed
+     * and the fog samples with that light's in-scatter as theirs; the
+     * ambient what the fog adds beyond them */
+    const int nl = S->q->scene->nlight;
+    double lay[EF_MAX_LIGHTS][3];
+    if (copy_buf(&w->ta, &w->tidy))
+        return ef_fail(err, "out of memory");
+    for (int i = 0; i < w->ta.n; ++i)
+        for (int k = 0; k < 3; ++k)
+            w->ta.v[(size_t) i * (size_t) w->ta.stride + (size_t) L->rgb[k]] = 0;
+    for (int j = 0; j < nl; ++j)
+        if (light_layer(w, &w->fog, j, lay[j], err))
+            return -1;
     if (S->aov & EF_AOV_LIGHT) {
-        /* each light's layer: the flatten of the input with its colour
-         * zeroed and the fog samples with that light's in-scatter as
-         * theirs; the ambient what the fog adds beyond them */
-        const int nl = S->q->scene->nlight;
-        double lay[EF_MAX_LIGHTS][3], o[EF_DEEP_MAX_CH];
-        if (copy_buf(&w->ta, &w->tidy))
-            return ef_fail(err, "out of memory");
-        for (int i = 0; i < w->ta.n; ++i)
-            for (int k = 0; k < 3; ++k)
-                w->ta.v[(size_t) i * (size_t) w->ta.stride + (size_t) L->rgb[k]] = 0;
-        for (int j = 0; j < nl; ++j) {
-            if (copy_buf(&w->tb, &w->fog))
-                return ef_fail(err, "out of memory");
-            for (int i = 0; i < w->tb.n; ++i)
-                for (int k = 0; k < 3; ++k)
-                    w->tb.v[(size_t) i * (size_t) w->tb.stride + (size_t) L->rgb[k]] =
-                        w->fog.lv[(size_t) i * 3 * (size_t) nl + 3 * (size_t) j + (size_t) k];
-            if (flatten_union(w, &w->ta, &w->tb, o, err))
-                return -1;
-            for (int k = 0; k < 3; ++k)
-                lay[j][k] = o[L->rgb[k]];
-        }
         for (int k = 0; k < 3; ++k) {
             double amb = flat[L->rgb[k]] - att[L->rgb[k]];
             for (int j = 0; j < nl; ++j)
@@ -498,6 +514,22 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
         for (int j = 0; j < nl; ++j)
             for (int k = 0; k < 3; ++k)
                 aov[n++] = lay[j][k];
+    }
+    if (S->aov & EF_AOV_LIT) {
+        /* a shadowed light's share past its occluders: its layer's
+         * channel sum over the same from the fog without the maps (the
+         * flat path's definition) */
+        if (ef_deep_fog_samples(L, &S->bare, r, &w->tidy, 1, &w->bare, NULL))
+            return ef_fail(err, "out of memory");
+        for (int j = 0; j < nl; ++j) {
+            if (!S->q->scene->light[j].shadow)
+                continue;
+            double u[3];
+            if (light_layer(w, &w->bare, j, u, err))
+                return -1;
+            const double num = lay[j][0] + lay[j][1] + lay[j][2], den = u[0] + u[1] + u[2];
+            aov[n++] = den > 0 && isfinite(den) ? num / den : 1.0;
+        }
     }
     return 0;
 }
@@ -617,6 +649,7 @@ static void worker_free(worker *w)
     ef_deep_buf_free(&w->out);
     ef_deep_buf_free(&w->ta);
     ef_deep_buf_free(&w->tb);
+    ef_deep_buf_free(&w->bare);
     free(w->flat);
     free(w->counts);
     free(w->ov);
@@ -746,12 +779,11 @@ static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_e
 int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
-    if (q->naov && (q->aov & EF_AOV_LIT))   /* (the CLI refuses these first) */
-        return ef_fail(err, "--aov lit is written for flat input only");
-    if (q->naov && (q->aov & EF_AOV_LIGHT) &&
-        (q->mode != EF_DEEP_MODE_FLATTEN || q->scene->sky_light || q->scene->nlight == 0))
-        return ef_fail(err, "--aov light on deep input takes --deep flatten and --light, "
-                            "without --sky-light");
+    if (q->naov && (q->aov & (EF_AOV_LIGHT | EF_AOV_LIT)) &&   /* (the CLI refuses these first) */
+        (q->mode != EF_DEEP_MODE_FLATTEN || q->scene->nlight == 0 ||
+         ((q->aov & EF_AOV_LIGHT) && q->scene->sky_light)))
+        return ef_fail(err, "--aov light and lit on deep input take --deep flatten and --light "
+                            "(light without --sky-light)");
     ef_deep_in d;
     if (ef_deep_in_open(q->in, q->part, &d, err))
         return -1;
@@ -790,7 +822,21 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     S.fog.chromatic = chromatic;
     S.aov = q->mode == EF_DEEP_MODE_FLATTEN && q->naov ? q->aov : 0;
     S.fog.want_err = (S.aov & EF_AOV_ERROR) != 0;
-    S.fog.per_light = (S.aov & EF_AOV_LIGHT) != 0;
+    S.fog.per_light = (S.aov & (EF_AOV_LIGHT | EF_AOV_LIT)) != 0;
+    ef_fog_scene *bare = NULL;
+    if (!rc && (S.aov & EF_AOV_LIT)) {
+        /* the same scene without its shadow maps (a shallow copy: the
+         * components and maps stay the scene's, read only) */
+        if (!(bare = malloc(sizeof *bare))) {
+            rc = ef_fail(err, "out of memory");
+        } else {
+            memcpy(bare, q->scene, sizeof *bare);
+            for (int j = 0; j < bare->nlight; ++j)
+                bare->light[j].shadow = NULL;
+            S.bare = S.fog;
+            S.bare.scene = bare;
+        }
+    }
     if (!rc)
         rc = make_flat_out(q, P, &S.FO, err);
     res->tau_cap = S.fog.tau_cap;
@@ -828,6 +874,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         ef_deep_buf_init(&W[t].out, P->L.nch);
         ef_deep_buf_init(&W[t].ta, P->L.nch);
         ef_deep_buf_init(&W[t].tb, P->L.nch);
+        ef_deep_buf_init(&W[t].bare, P->L.nch);
     }
     const int urows = d.tiled && d.th % UNIT_ROWS == 0 && d.th <= UNIT_MAX ? d.th : UNIT_ROWS;
     for (int y0 = d.y0; !rc && y0 < d.y0 + d.h;) {
@@ -891,6 +938,7 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
     for (int k = 0; k < 3; ++k)
         free(P->own[k]);
     free(P);
+    free(bare);
     return rc;
 }
 
