@@ -458,7 +458,6 @@ static double max3(const double v[3])
  * lights' in-scatter over it (from its front) with theirs. */
 typedef struct piece {
     double a, b, tau[3], col[3], err[3], S[3], Se[3];
-    double Sl[EF_MAX_LIGHTS][3];   /* S per light, with F->per_light */
     int depth;
 } piece;
 
@@ -484,12 +483,12 @@ static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double 
 
 /* The piece [a, b) of r1 with every value computed. */
 static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1, double a,
-                        double b, int depth, int *linear)
+                        double b, int depth, int *linear, double (*per)[3])
 {
     piece p = { .a = a, .b = b, .depth = depth };
     seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, linear, F->want_err ? p.err : NULL);
     if (lt->lights)
-        seg_light(F->scene, r1, a, b, p.S, p.Se, F->per_light ? p.Sl : NULL);
+        seg_light(F->scene, r1, a, b, p.S, p.Se, per);
     return p;
 }
 
@@ -597,8 +596,12 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
 {
     enum { DEPTH = 48 };
     piece stack[DEPTH + 2];
+    /* with F->per_light, stack entry i's light per light, kept beside the
+     * stack (not in each piece, which is copied as it moves) */
+    double sl[DEPTH + 2][EF_MAX_LIGHTS][3];
+#define PER(i) (F->per_light ? sl[(i)] : NULL)
     int linear;
-    stack[0] = make_piece(F, lt, r1, a, b, 0, &linear);
+    stack[0] = make_piece(F, lt, r1, a, b, 0, &linear, PER(0));
     int sp = 1;
     while (sp > 0) {
         const piece p = stack[--sp];
@@ -617,17 +620,18 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
         piece front;
         int have_front = 0;
         if (!split && can && lt->lights && lt->scale > 0 && isfinite(max3(p.S))) {
-            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL);
+            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1));
             have_front = 1;
             const double ec = color_est(&p, &front, *Tf, lt->scale);
             est = fmax(est, ec);
             split = ec > F->tol;
         }
         if (split) {
+            /* the back half after: in p's slot, the front above it */
             if (!have_front)
-                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL);
-            /* the back half after */
-            stack[sp++] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL);
+                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1));
+            stack[sp] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL, PER(sp));
+            ++sp;
             stack[sp++] = front;
             continue;
         }
@@ -637,7 +641,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
             if (fog->n >= F->max_samples)
                 st->capped = 1;
         }
-        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S, p.Sl))
+        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S, PER(sp)))
             return -1;
         for (int k = 0; st && k < 3; ++k) {
             st->pix_err[k] += p.err[k];
@@ -649,6 +653,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
     }
     return 0;
 }
+#undef PER
 
 /* The fog over [a, b) (b finite) in samples, front to back: split first
  * where a component's density jumps or kinks (so that each piece is
