@@ -570,6 +570,161 @@ static void test_sphere_convergence(void **state)
     ef_scene_free(&s);
 }
 
+/* ---- penumbrae from the sun's disc (filtered, against the true disc) ---- */
+
+/* The overlap of two discs of radii a and b whose centres lie d apart. */
+static double disc_overlap(double a, double b, double d)
+{
+    if (d >= a + b)
+        return 0;
+    if (d <= fabs(a - b))
+        return PI * fmin(a, b) * fmin(a, b);
+    const double ca = (d * d + a * a - b * b) / (2 * d * a),
+                 cb = (d * d + b * b - a * a) / (2 * d * b);
+    return a * a * acos(ca) + b * b * acos(cb) -
+           0.5 * sqrt((-d + a + b) * (d + a - b) * (d - a + b) * (d + a + b));
+}
+
+/* The fraction of a sun disc of angular radius rho about l that the
+ * sphere leaves visible from x (the two discs as cones about x, their
+ * overlap in the tangent plane: small angles), 0 inside the ball. */
+static double sphere_vis(const sph *b, const double l[3], double rho, const double x[3])
+{
+    const double v[3] = { b->C[0] - x[0], b->C[1] - x[1], b->C[2] - x[2] };
+    const double dist = sqrt(dot3(v, v));
+    if (dist <= b->R)
+        return 0;
+    const double beta = asin(b->R / dist);
+    const double delta = acos(fmax(-1, fmin(1, dot3(v, l) / dist)));
+    return 1 - disc_overlap(rho, beta, delta) / (PI * rho * rho);
+}
+
+/* The sun in height fog times the true visibility along the ray: the
+ * test's own Simpson over 4000 pieces (V is continuous). */
+static double soft_integral(const hf *q, const sph *b, const double l[3], double rho, double D)
+{
+    const int n = 4000;
+    double sum = 0;
+    for (int i = 0; i <= 2 * n; ++i) {
+        const double t = D * i / (2 * n);
+        double x[3];
+        for (int a = 0; a < 3; ++a)
+            x[a] = q->o[a] + t * q->u[a];
+        const double wgt = i == 0 || i == 2 * n ? 1 : i % 2 ? 4 : 2;
+        sum += wgt * hf_f(q, t) * sphere_vis(b, l, rho, x);
+    }
+    return sum * D / (6 * n);
+}
+
+/* angle= with a shadow map: the copies' visibility against the fraction
+ * of the sun's disc a sphere truly leaves, point by point and along rays
+ * in height fog; more directions, closer; and the hard map's error
+ * against the same soft truth, for scale. A sloped ground under the sun
+ * stays lit just above it (the copies' resampling keeps its plane). */
+static void test_penumbra(void **state)
+{
+    (void) state;
+    double l[3] = { 0.3, 1, 0.2 };
+    unit(l);
+    const sph b = { { 0, 6, -20 }, 3 };
+    const double angle = 4 * PI / 180, rho = angle / 2;
+    const double at[3] = { b.C[0] + 60 * l[0], b.C[1] + 60 * l[1], b.C[2] + 60 * l[2] };
+    const double fwd[3] = { -l[0], -l[1], -l[2] };
+    lcam c = lcam_make(at, fwd, 1, 8, 1024);
+    float *z = sphere_map(&c, &b);
+    const int dirs[3] = { 0, 16, 64 };
+    double perr[3], rerr[3];
+    for (int di = 0; di < 3; ++di) {
+        ef_shadow *m = lcam_build(&c, z, 0, 1, 1);
+        ef_err err;
+        if (dirs[di])
+            assert_int_equal(ef_shadow_soften(m, angle, dirs[di], &err), 0);
+        /* points behind the ball across its penumbra: 4 to 30 units past
+         * its centre plane, within the disc's reach of its silhouette */
+        rng = 7;
+        double num = 0;
+        int npts = 0;
+        for (int trial = 0; trial < 3000; ++trial) {
+            const double s = urand(4, 30), ph = urand(0, 2 * PI);
+            const double rr = b.R / cos(rho) + urand(-1.2, 1.2) * s * tan(rho);
+            double x[3];
+            for (int a = 0; a < 3; ++a)
+                x[a] = b.C[a] - s * l[a] + rr * (cos(ph) * c.X[a] + sin(ph) * c.Y[a]);
+            const double want = sphere_vis(&b, l, rho, x), got = ef_shadow_point_vis(m, x);
+            num += fabs(got - want);
+            ++npts;
+        }
+        perr[di] = num / npts;
+        /* rays from a camera under the ball through its penumbra */
+        ef_fog_scene sc;
+        scene_one(&sc, "height:density=0.05:falloff=0.15:base=0",
+                  "sun:towards=0.3,1,0.2:intensity=1");
+        sc.light[0].shadow = m;
+        double rnum = 0, rden = 0;
+        for (int trial = 0; trial < 60; ++trial) {
+            double org[3] = { urand(-2, 2), 1.7, urand(-8, -4) }, dir[3];
+            const double g[3] = { urand(-8, 8), 0, urand(-34, -26) };
+            for (int a = 0; a < 3; ++a)
+                dir[a] = g[a] - org[a];
+            unit(dir);
+            const double D = -org[1] / dir[1];
+            ef_ray r = { { dir[0], dir[1], dir[2] }, D, D, { org[0], org[1], org[2] } };
+            ef_scene_bind(&sc, r.org);
+            double S[3], E[3];
+            ef_light_inscatter(&sc, &sc.light[0], &r, S, E);
+            hf q = { 0.05, 0.15, 1, 1 / (4 * PI), l[1], { org[0], org[1], org[2] },
+                     { dir[0], dir[1], dir[2] } };
+            const double want = soft_integral(&q, &b, l, rho, D);
+            rnum += fabs(S[1] - want);
+            rden += want;
+        }
+        rerr[di] = rnum / rden;
+        print_message("penumbra, %2d directions (0: hard): mean |V - disc| %.4f over %d points; "
+                      "light along 60 rays: mean |S - exact| / mean S = %.3g\n",
+                      dirs[di], perr[di], npts, rerr[di]);
+        ef_scene_free(&sc);   /* drops m */
+    }
+    free(z);
+    /* the hard map is off by the penumbra itself; the copies approach the
+     * disc as the directions grow */
+    assert_true(perr[1] < perr[0] / 3);
+    assert_true(perr[2] < perr[1]);
+    assert_true(perr[2] < 0.02);
+    assert_true(rerr[1] < rerr[0] / 3);
+    assert_true(rerr[2] < 3e-4);
+
+    /* a ground plane under a sun 20 degrees up, and points just above it:
+     * lit in every copy */
+    double l2[3] = { 0, sin(20 * PI / 180), cos(20 * PI / 180) };
+    const double at2[3] = { 80 * l2[0], 80 * l2[1], 80 * l2[2] };
+    const double fwd2[3] = { -l2[0], -l2[1], -l2[2] };
+    lcam g = lcam_make(at2, fwd2, 1, 20, 512);
+    float *zg = malloc((size_t) g.n * (size_t) g.n * sizeof *zg);
+    for (int j = 0; j < g.n; ++j)
+        for (int i = 0; i < g.n; ++i) {
+            /* the texel centre's line along the axis meets y = 0 */
+            double o[3];
+            const double x = plane_of(&g, i + 0.5), y = -plane_of(&g, j + 0.5);
+            for (int a = 0; a < 3; ++a)
+                o[a] = g.org[a] + x * g.X[a] + y * g.Y[a];
+            zg[(size_t) j * (size_t) g.n + (size_t) i] = (float) (-o[1] / g.Z[1]);
+        }
+    ef_shadow *mg = lcam_build(&g, zg, 0, 1, 1);
+    ef_err err;
+    assert_int_equal(ef_shadow_soften(mg, 0.53 * PI / 180, 16, &err), 0);
+    rng = 3;
+    int dark = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const double x[3] = { urand(-10, 10), urand(0.02, 0.5), urand(-10, 10) };
+        dark += ef_shadow_point_vis(mg, x) < 1;
+    }
+    print_message("penumbra over a ground 20 degrees to the sun: %d of 20000 points just "
+                  "above it not fully lit\n", dark);
+    assert_int_equal(dark, 0);
+    ef_shadow_unref(mg);
+    free(zg);
+}
+
 /* ---- a fence: more lit intervals than the stack holds ---- */
 
 /* A map whose every other texel column is a post (an orthographic sun
@@ -780,6 +935,53 @@ static void test_cli(void **state)
     assert_non_null(strstr(tu_err, "no --light has a shadow= map"));
     free(la);
     free(lb);
+    /* angle= softens the ball's shadow (16 directions by default): never
+     * brighter than no map, unlike the hard shadow in places, and its lit
+     * fraction in [0, 1]; penumbra=0 is the hard shadow bit for bit */
+    {
+        char *sa = tu_path("shadow_soft.exr"), *s0 = tu_path("shadow_soft0.exr");
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "angle=3:shadow='%s' --aov lit", in, sa, fog, map), 0);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "angle=3:penumbra=0:shadow='%s'", in, s0, fog, map), 0);
+        assert_true(same_channel(bb, s0, "R") && same_channel(bb, s0, "B"));
+        float *ua = tu_read_channel(a, 0, "R", &w, &h), *uh = tu_read_channel(bb, 0, "R", &w, &h);
+        float *us = tu_read_channel(sa, 0, "R", &w, &h);
+        float *ul = tu_read_channel(sa, 0, "fog_lit.sun1", &w, &h);
+        assert_true(ua && uh && us && ul);
+        long differ = 0;
+        for (int i = 0; i < w * h; ++i) {
+            assert_true(us[i] <= ua[i] * 1.0001f + 1e-6f);
+            assert_true(ul[i] >= 0 && ul[i] <= 1);
+            differ += fabsf(us[i] - uh[i]) > 1e-4f * ua[i];
+        }
+        assert_true(differ > w * h / 200);
+        free(ua);
+        free(uh);
+        free(us);
+        free(ul);
+        assert_int_equal(tu_runf("'%s' --explain %s --light sun:towards=0.3,1,0.2:angle=3:"
+                                 "penumbra=8:shadow='%s'", in, fog, map), 0);
+        assert_non_null(strstr(tu_out, "penumbra: 8 directions"));
+        /* penumbra= without angle= or a map, out of range, on a lamp: usage */
+        const char *const usage[] = {
+            "sun:towards=0.3,1,0.2:penumbra=8:shadow='%s'",
+            "sun:towards=0.3,1,0.2:angle=1:penumbra=8",
+            "sun:towards=0.3,1,0.2:angle=1:penumbra=65:shadow='%s'",
+            "sun:towards=0.3,1,0.2:angle=1:penumbra=2.5:shadow='%s'",
+            "point:position=0,8,0:penumbra=8",
+        };
+        remove(cc);
+        for (size_t i = 0; i < sizeof usage / sizeof usage[0]; ++i) {
+            char light[1024];
+            snprintf(light, sizeof light, usage[i], map);
+            assert_int_equal(tu_runf("'%s' -o '%s' %s --light %s", in, cc, fog, light), 2);
+            assert_non_null(strstr(tu_err, "penumbra"));
+            assert_false(tu_exists(cc));
+        }
+        free(sa);
+        free(s0);
+    }
     /* outside=shadow darkens everything the map does not cover */
     remove(cc);
     assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
@@ -819,6 +1021,7 @@ static void test_cli(void **state)
                              "shadow='%s':slope=0.5", in, fog, map), 0);
     assert_non_null(strstr(tu_out, "\"projection\": \"orthographic\""));
     assert_non_null(strstr(tu_out, "\"slope\": 0.5"));
+    assert_non_null(strstr(tu_out, "\"penumbra\": 0"));
     /* hostile maps: a map of NaN depths casts nothing (no bit changes), a
      * 1 x 1 map and a map whose camera is not finite or singular are read
      * or refused, never crash; a truncated map is refused */
@@ -899,6 +1102,7 @@ int main(void)
         cmocka_unit_test(test_plates_perspective),
         cmocka_unit_test(test_lit_reference),
         cmocka_unit_test(test_sphere_convergence),
+        cmocka_unit_test(test_penumbra),
         cmocka_unit_test(test_fence),
         cmocka_unit_test(test_acne),
         cmocka_unit_test(test_cli),

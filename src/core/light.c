@@ -50,7 +50,7 @@ static int unit3(const char *val, double v[3])
 
 /* The keys every kind accepts, and the ones it must have. */
 static const char *const sun_keys =
-    "towards, color, intensity, angle, planet, name, shadow, bias, slope, outside";
+    "towards, color, intensity, angle, planet, name, shadow, bias, slope, outside, penumbra";
 static const char *const point_keys = "position, color, intensity, radius, name";
 static const char *const spot_keys =
     "position, aim, cone, blend, cosine, color, intensity, radius, name, shadow, bias, slope, "
@@ -138,7 +138,9 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
-           S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384, S_PLANET = 32768 };
+           S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384, S_PLANET = 32768,
+           S_PENUMBRA = 65536 };
+    double penumbra = 16;   /* directions over the sun's disc, with angle= and shadow= */
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);
@@ -204,6 +206,13 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                 return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
                                "in degrees, from 0 to below 180", spec, val);
             l->angle *= PI / 180;
+        } else if (!strcmp(key, "penumbra") && l->kind == EF_LIGHT_SUN) {
+            bit = S_PENUMBRA;
+            if (ef_parse_numbers(val, &penumbra, 1) || !(penumbra >= 0) ||
+                !(penumbra <= EF_PENUMBRA_MAX) || penumbra != floor(penumbra))
+                return ef_fail(err, "--light '%s': penumbra='%s' is not a whole number of "
+                               "directions over the sun's disc from 0 (hard shadows) to %d",
+                               spec, val, EF_PENUMBRA_MAX);
         } else if (!strcmp(key, "planet") && l->kind == EF_LIGHT_SUN) {
             bit = S_PLANET;
             /* earth: 6371 km, in scene units */
@@ -285,8 +294,18 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     }
     if ((seen & (S_BIAS | S_OUTSIDE | S_SLOPE)) && !(seen & S_SHADOW))
         return ef_fail(err, "--light '%s': bias=, slope= and outside= need shadow=FILE.exr", spec);
+    if ((seen & S_PENUMBRA) && (!(seen & S_SHADOW) || !(l->angle > 0)))
+        return ef_fail(err, "--light '%s': penumbra= needs shadow=FILE.exr and the sun's "
+                       "angle=DEG (its angular diameter, e.g. 0.53)", spec);
     if ((seen & S_SHADOW) && light_shadow(ctx, spec, l, err))
         return -1;
+    if (l->shadow && l->angle > 0 && penumbra > 0 &&
+        ef_shadow_soften(l->shadow, l->angle, (int) penumbra, err)) {
+        ef_err_set_file(err, l->shadow_path);
+        ef_shadow_unref(l->shadow);
+        l->shadow = NULL;
+        return -1;
+    }
     return 0;
 }
 
@@ -1840,8 +1859,8 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
             n = cone_cuts(l, r, a, b, c, n);
     }
     if (l->shadow && n < MAX_CUTS - 2) {
-        double iv[64][2];
-        int m = ef_shadow_lit(l->shadow, r->org, r->dir, a, b, iv, 64);
+        double iv[64][3];
+        int m = ef_shadow_pieces(l->shadow, r->org, r->dir, a, b, iv, 64);
         if (m < 0)
             m = -1 - m;
         for (int i = 0; i < m && n < MAX_CUTS - 2; ++i)
@@ -1876,13 +1895,14 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     if (!l->shadow) {
         inscatter_range(s, l, r, 0, D, S, E);
     } else {
-        double stack[LIT_STACK][2], (*iv)[2] = stack;
-        int n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, LIT_STACK);
+        /* each lit piece at its visibility (1: hard shadows) */
+        double stack[LIT_STACK][3], (*iv)[3] = stack;
+        int n = ef_shadow_pieces(l->shadow, r->org, r->dir, 0, D, iv, LIT_STACK);
         if (n < 0) {
-            double (*heap)[2] = malloc(MAX_LIT * sizeof *heap);
+            double (*heap)[3] = malloc(MAX_LIT * sizeof *heap);
             if (heap) {
                 iv = heap;
-                n = ef_shadow_lit(l->shadow, r->org, r->dir, 0, D, iv, MAX_LIT);
+                n = ef_shadow_pieces(l->shadow, r->org, r->dir, 0, D, iv, MAX_LIT);
             } else {   /* no memory: what fitted, and the estimate says so */
                 for (int k = 0; k < 3; ++k)
                     E[k] = INFINITY;
@@ -1890,8 +1910,18 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         }
         if (n < 0)
             n = -1 - n;
-        for (int i = 0; i < n; ++i)
-            inscatter_range(s, l, r, iv[i][0], iv[i][1], S, E);
+        for (int i = 0; i < n; ++i) {
+            if (iv[i][2] == 1) {
+                inscatter_range(s, l, r, iv[i][0], iv[i][1], S, E);
+                continue;
+            }
+            double Sp[3] = { 0, 0, 0 }, Ep[3] = { 0, 0, 0 };
+            inscatter_range(s, l, r, iv[i][0], iv[i][1], Sp, Ep);
+            for (int k = 0; k < 3; ++k) {
+                S[k] += iv[i][2] * Sp[k];
+                E[k] += iv[i][2] * Ep[k];
+            }
+        }
         if (iv != stack)
             free(iv);
     }

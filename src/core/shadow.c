@@ -232,6 +232,10 @@ void ef_shadow_unref(ef_shadow *m)
 {
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
+    for (int k = 0; k < m->ntilt; ++k)
+        ef_shadow_unref(m->tilt[k]);
+    free(m->tilt);
+    ef_shadow_unref(m->env);
     for (int l = 0; l < 24; ++l) {
         if (m->zmax[l] != m->zmin[l])
             free(m->zmax[l]);
@@ -475,5 +479,450 @@ int ef_shadow_point_lit(const ef_shadow *m, const double x[3])
         return m->outside_lit;
     const size_t i = (size_t) py * (size_t) m->w + (size_t) px;
     return d <= m->zmin[0][i];
+}
+
+
+/* ------------------------------------------------------------ penumbra */
+
+/* A map with m's camera and outside rule whose level 0 is z (taken over,
+ * w x h of m), its mip built; NULL out of memory (z freed). */
+static ef_shadow *sibling(const ef_shadow *m, float *z)
+{
+    ef_shadow *t = calloc(1, sizeof *t);
+    if (!t) {
+        free(z);
+        return NULL;
+    }
+    atomic_init(&t->refs, 1);
+    t->w = m->w;
+    t->h = m->h;
+    t->ortho = m->ortho;
+    t->opts = m->opts;
+    t->outside_lit = m->outside_lit;
+    memcpy(t->T, m->T, sizeof t->T);
+    memcpy(t->org, m->org, sizeof t->org);
+    memcpy(t->axis, m->axis, sizeof t->axis);
+    snprintf(t->path, sizeof t->path, "%s", m->path);
+    t->zmin[0] = z;
+    t->lw[0] = m->w;
+    t->lh[0] = m->h;
+    t->nlev = 1;
+    if (build_mip(t)) {
+        ef_shadow_unref(t);
+        return NULL;
+    }
+    return t;
+}
+
+/* a[i * stride] for i < n replaced by the least (most, with hi) of it
+ * within r places either side, in O(n) (van Herk / Gil-Werman: running
+ * extremes within blocks of 2r + 1 from both ends, over the row padded by
+ * r neutral values each side); f and g: n + 2r floats each. */
+static void slide(float *a, size_t stride, int n, int r, int hi, float *f, float *g)
+{
+    const int k = 2 * r + 1, m = n + 2 * r;
+    const float none = hi ? -INFINITY : INFINITY;
+#define AT(i) ((i) < r || (i) >= n + r ? none : a[(size_t) ((i) - r) * stride])
+    for (int i = 0; i < m; ++i) {
+        const float v = AT(i);
+        f[i] = i % k == 0 ? v : hi ? fmaxf(f[i - 1], v) : fminf(f[i - 1], v);
+    }
+    for (int i = m - 1; i >= 0; --i) {
+        const float v = AT(i);
+        g[i] = i % k == k - 1 || i == m - 1 ? v : hi ? fmaxf(g[i + 1], v) : fminf(g[i + 1], v);
+    }
+#undef AT
+    /* padded index i + r holds a[i]: its window is [i, i + 2r] */
+    for (int i = 0; i < n; ++i)
+        a[(size_t) i * stride] = hi ? fmaxf(g[i], f[i + 2 * r]) : fminf(g[i], f[i + 2 * r]);
+}
+
+/* z (w x h) replaced by its least (most) over the square of radius r
+ * about each texel. Returns 0, or -1 out of memory. */
+static int dilate(float *z, int w, int h, int r, int hi)
+{
+    const size_t n = (size_t) (w > h ? w : h) + 2 * (size_t) r;
+    float *f = malloc(2 * n * sizeof *f);
+    if (!f)
+        return -1;
+    for (int y = 0; y < h; ++y)
+        slide(z + (size_t) y * (size_t) w, 1, w, r, hi, f, f + n);
+    for (int x = 0; x < w; ++x)
+        slide(z + x, (size_t) w, h, r, hi, f, f + n);
+    free(f);
+    return 0;
+}
+
+/* The copy of m (level 0: z, biased depths) seen along the direction that
+ * moves a point cx, cy texels per unit of depth: the texel coordinates of
+ * x become those of x's projection along it onto the plane of depth zref
+ * (the middle of the map's depths, so that little leaves the map), for
+ * points (T, through the shear) and plates alike. NULL out of memory. */
+static ef_shadow *tilted(const ef_shadow *m, double cx, double cy, double zref)
+{
+    const int w = m->w, h = m->h;
+    const size_t n = (size_t) w * (size_t) h;
+    float *out = malloc(n * sizeof *out);
+    if (!out)
+        return NULL;
+    for (size_t i = 0; i < n; ++i)
+        out[i] = INFINITY;
+    const double W = m->T[3][2];
+    const float *z = m->zmin[0];
+    /* neighbours within 16 texel widths in depth are one surface */
+    const double cont_x = 16 * fabs(W) / hypot(hypot(m->T[0][0], m->T[1][0]), m->T[2][0]),
+                 cont_y = 16 * fabs(W) / hypot(hypot(m->T[0][1], m->T[1][1]), m->T[2][1]);
+    for (int j = 0; j < h; ++j)
+        for (int i = 0; i < w; ++i) {
+            const size_t at = (size_t) j * (size_t) w + (size_t) i;
+            const double d = z[at];
+            if (!isfinite(d))
+                continue;
+            double x0 = i + cx * (d - zref), x1 = x0 + 1, y0 = j + cy * (d - zref), y1 = y0 + 1;
+            const double px = x0 + 0.5, py = y0 + 0.5;
+            /* the surface's slope per texel from the neighbours of the same
+             * surface: a centre the plate covers off its own takes the
+             * plane's depth there (no acne from the resampling) */
+            const int l = i > 0 && fabs(z[at - 1] - d) <= cont_x,
+                      r = i + 1 < w && fabs(z[at + 1] - d) <= cont_x,
+                      u = j > 0 && fabs(z[at - (size_t) w] - d) <= cont_y,
+                      b = j + 1 < h && fabs(z[at + (size_t) w] - d) <= cont_y;
+            const double sx = l && r ? 0.5 * (z[at + 1] - z[at - 1]) : l ? d - z[at - 1]
+                              : r ? z[at + 1] - d : 0;
+            const double sy = u && b ? 0.5 * (z[at + (size_t) w] - z[at - (size_t) w])
+                              : u ? d - z[at - (size_t) w] : b ? z[at + (size_t) w] - d : 0;
+            /* a gap to a neighbour of the same surface: close it */
+            if (l)
+                x0 -= fmax(0, cx * (d - z[at - 1]));
+            if (r)
+                x1 += fmax(0, cx * (z[at + 1] - d));
+            if (u)
+                y0 -= fmax(0, cy * (d - z[at - (size_t) w]));
+            if (b)
+                y1 += fmax(0, cy * (z[at + (size_t) w] - d));
+            /* the texel centres c + 0.5 in [x0, x1) x [y0, y1) */
+            const double ca = ceil(x0 - 0.5), cb = ceil(x1 - 0.5) - 1;
+            const double ra = ceil(y0 - 0.5), rb = ceil(y1 - 0.5) - 1;
+            if (cb < 0 || ca > w - 1 || rb < 0 || ra > h - 1)
+                continue;
+            const int xa = ca < 0 ? 0 : (int) ca, xb = cb > w - 1 ? w - 1 : (int) cb;
+            const int ya = ra < 0 ? 0 : (int) ra, yb = rb > h - 1 ? h - 1 : (int) rb;
+            for (int y = ya; y <= yb; ++y)
+                for (int x = xa; x <= xb; ++x) {
+                    const float v = (float) (d + sx * (x + 0.5 - px) + sy * (y + 0.5 - py));
+                    float *o = &out[(size_t) y * (size_t) w + (size_t) x];
+                    if (v < *o)
+                        *o = v;
+                }
+        }
+    ef_shadow *t = sibling(m, out);
+    if (!t)
+        return NULL;
+    double oa = zref;
+    for (int i = 0; i < 3; ++i)
+        oa += m->org[i] * m->axis[i];
+    for (int i = 0; i < 4; ++i) {
+        const double ax = i < 3 ? m->axis[i] : -oa;
+        t->T[i][0] = m->T[i][0] + cx * W * ax;
+        t->T[i][1] = m->T[i][1] + cy * W * ax;
+    }
+    return t;
+}
+
+int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
+{
+    if (!m->ortho)
+        return ef_fail(err, "a penumbra needs an orthographic (sun's) shadow map");
+    if (!(angle > 0) || !(angle < 3.14159265358979) || n < 1 || n > EF_PENUMBRA_MAX)
+        return ef_fail(err, "a penumbra needs an angle in (0, 180) degrees and 1 to %d "
+                       "directions", EF_PENUMBRA_MAX);
+    const int w = m->w, h = m->h;
+    const size_t npx = (size_t) w * (size_t) h;
+    const float *z = m->zmin[0];
+    double zlo = INFINITY, zhi = -INFINITY;
+    for (size_t i = 0; i < npx; ++i)
+        if (isfinite(z[i])) {
+            zlo = fmin(zlo, z[i]);
+            zhi = fmax(zhi, z[i]);
+        }
+    if (!isfinite(zlo))
+        zlo = zhi = 0;   /* nothing casts a shadow: every copy is empty */
+    const double zref = 0.5 * (zlo + zhi);
+    /* the map's x axis and, across it, its y axis, as world unit vectors
+     * (the tilts); their texel rates give the shear per unit of depth */
+    const double W = m->T[3][2];
+    double gx[3], gy[3], ex[3], ey[3], nx = 0;
+    for (int i = 0; i < 3; ++i) {
+        gx[i] = m->T[i][0] / W;
+        gy[i] = m->T[i][1] / W;
+        nx += gx[i] * gx[i];
+    }
+    nx = sqrt(nx);
+    for (int i = 0; i < 3; ++i)
+        ex[i] = gx[i] / nx;
+    ey[0] = m->axis[1] * ex[2] - m->axis[2] * ex[1];
+    ey[1] = m->axis[2] * ex[0] - m->axis[0] * ex[2];
+    ey[2] = m->axis[0] * ex[1] - m->axis[1] * ex[0];
+    ef_shadow **tilt = calloc((size_t) n, sizeof *tilt);
+    if (!tilt)
+        return ef_fail(err, "out of memory for the shadow map's penumbra");
+    double rmax = 0;   /* the largest shear, texels per unit of depth */
+    int k = 0;
+    for (; k < n; ++k) {
+        /* equal areas of the disc: radius sqrt((k + 1/2) / n), golden angle */
+        const double r = tan(0.5 * angle * sqrt((k + 0.5) / n)), phi = 2.39996322972865332 * k;
+        double v[3], cx = 0, cy = 0;
+        for (int i = 0; i < 3; ++i) {
+            v[i] = r * (cos(phi) * ex[i] + sin(phi) * ey[i]);
+            cx += v[i] * gx[i];
+            cy += v[i] * gy[i];
+        }
+        rmax = fmax(rmax, hypot(cx, cy));
+        if (!(tilt[k] = tilted(m, cx, cy, zref)))
+            break;
+    }
+    /* Where the copies can differ from the map: a copy shears a plate at
+     * depth z_q by at most rmax (d - z_q) texels against a point of depth
+     * d, and only a plate next to a depth jump (or the sky, or the border)
+     * leaves a penumbra where it moves; elsewhere the copies show the same
+     * surfaces as the map, at most resampled. So a point at texel p is in
+     * no penumbra where d < z_e + max(0, |p - e| - c) / rmax for every
+     * edge texel e (chessboard distance; c: a plate's width, the texel's
+     * rounding and what closing a gap adds): env is that cone-shaped lower
+     * envelope (a square minimum of radius c, then a chamfer pass of slope
+     * 1 / rmax per texel), and below it the map decides alone. */
+    const double twx = 1 / nx, twy = 1 / sqrt(gy[0] * gy[0] + gy[1] * gy[1] + gy[2] * gy[2]);
+    const int c = (int) floor(1.5 + rmax * 16 * fmax(twx, twy));
+    float *e = k == n ? malloc(npx * sizeof *e) : NULL;
+    int ok = e != NULL;
+    if (ok) {
+        const double cont_x = 16 * twx, cont_y = 16 * twy;
+        for (int j = 0; j < h; ++j)
+            for (int i = 0; i < w; ++i) {
+                const size_t at = (size_t) j * (size_t) w + (size_t) i;
+                const float d = z[at];
+                int edge = 0;
+                if (isfinite(d))
+                    edge = i == 0 || j == 0 || i == w - 1 || j == h - 1 ||
+                           !(fabs(z[at - 1] - d) <= cont_x) || !(fabs(z[at + 1] - d) <= cont_x) ||
+                           !(fabs(z[at - (size_t) w] - d) <= cont_y) ||
+                           !(fabs(z[at + (size_t) w] - d) <= cont_y);
+                e[at] = edge ? d : INFINITY;
+            }
+        ok = dilate(e, w, h, c, 0) == 0;
+    }
+    if (ok) {
+        /* the chamfer cone: two passes over the 8 neighbours */
+        const float st = rmax > 0 ? (float) (1 / rmax) : INFINITY;
+        for (int j = 0; j < h; ++j)
+            for (int i = 0; i < w; ++i) {
+                float *v = &e[(size_t) j * (size_t) w + (size_t) i];
+                if (i > 0)
+                    *v = fminf(*v, v[-1] + st);
+                if (j > 0) {
+                    const float *u = v - w;
+                    *v = fminf(*v, u[0] + st);
+                    if (i > 0)
+                        *v = fminf(*v, u[-1] + st);
+                    if (i + 1 < w)
+                        *v = fminf(*v, u[1] + st);
+                }
+            }
+        for (int j = h - 1; j >= 0; --j)
+            for (int i = w - 1; i >= 0; --i) {
+                float *v = &e[(size_t) j * (size_t) w + (size_t) i];
+                if (i + 1 < w)
+                    *v = fminf(*v, v[1] + st);
+                if (j + 1 < h) {
+                    const float *u = v + w;
+                    *v = fminf(*v, u[0] + st);
+                    if (i > 0)
+                        *v = fminf(*v, u[-1] + st);
+                    if (i + 1 < w)
+                        *v = fminf(*v, u[1] + st);
+                }
+            }
+        /* below it strictly, whatever the sums' rounding */
+        for (size_t i = 0; i < npx; ++i)
+            e[i] = nextafterf(nextafterf(e[i], -INFINITY), -INFINITY);
+    }
+    ef_shadow *env = ok ? sibling(m, e) : (free(e), NULL);
+    if (!env) {
+        for (int j = 0; j < k; ++j)
+            ef_shadow_unref(tilt[j]);
+        free(tilt);
+        return ef_fail(err, "out of memory for the shadow map's penumbra (%d copies of "
+                       "%d x %d)", n, w, h);
+    }
+    /* outside the map the copies decide (a point may shear into it) */
+    env->outside_lit = 0;
+    m->tilt = tilt;
+    m->ntilt = n;
+    m->angle = angle;
+    m->env = env;
+    return 0;
+}
+
+double ef_shadow_point_vis(const ef_shadow *m, const double x[3])
+{
+    if (!m->ntilt)
+        return ef_shadow_point_lit(m, x);
+    int lit = 0;
+    for (int k = 0; k < m->ntilt; ++k)
+        lit += ef_shadow_point_lit(m->tilt[k], x);
+    return (double) lit / m->ntilt;
+}
+
+/* One end of a copy's lit interval: where the count of copies lighting
+ * the ray steps up (+1) or down (-1). */
+typedef struct sh_ev {
+    double t;
+    int step;
+} sh_ev;
+
+static int cmp_ev(const void *a, const void *b)
+{
+    const sh_ev *x = a, *y = b;
+    return (x->t > y->t) - (x->t < y->t);
+}
+
+/* Lit intervals a copy keeps on the stack per call; more go to the heap. */
+#define PIECE_STACK 256
+
+/* m's lit intervals into *lit (lcap of them, the stack's at first); past
+ * that, once into a heap buffer of cap (*lit then points to it, owned by
+ * the caller). Returns ef_shadow_lit's count (negative: still over). */
+static int copy_lit(const ef_shadow *m, const double org[3], const double dir[3], double a,
+                    double b, double (**lit)[2], int *lcap, int cap)
+{
+    int k = ef_shadow_lit(m, org, dir, a, b, *lit, *lcap);
+    if (k >= 0 || *lcap >= cap)
+        return k;
+    double (*heap)[2] = malloc((size_t) cap * sizeof *heap);
+    if (!heap)
+        return k;
+    *lit = heap;
+    *lcap = cap;
+    return ef_shadow_lit(m, org, dir, a, b, *lit, *lcap);
+}
+
+int ef_shadow_pieces(const ef_shadow *m, const double org[3], const double dir[3], double a,
+                     double b, double (*iv)[3], int cap)
+{
+    double stack[PIECE_STACK][2], (*lit)[2] = stack;
+    int lcap = PIECE_STACK, over = 0, n = 0;
+    if (!m->ntilt) {
+        int k = copy_lit(m, org, dir, a, b, &lit, &lcap, cap);
+        if (k < 0) {
+            over = 1;
+            k = -1 - k;
+        }
+        for (int i = 0; i < k && n < cap; ++i) {
+            iv[n][0] = lit[i][0];
+            iv[n][1] = lit[i][1];
+            iv[n][2] = 1;
+            ++n;
+        }
+        over |= k > cap;
+        if (lit != stack)
+            free(lit);
+        return over ? -1 - n : n;
+    }
+    /* Below env (Q) the map decides alone: its lit runs there count all
+     * ntilt copies (events +-ntilt); the rest of [a, b] is walked copy by
+     * copy (events +-1). */
+    double hst[PIECE_STACK][2], (*H)[2] = hst, qst[PIECE_STACK][2], (*Q)[2] = qst;
+    int hc = PIECE_STACK, qc = PIECE_STACK;
+    int nh = copy_lit(m, org, dir, a, b, &H, &hc, cap);
+    int nq = copy_lit(m->env, org, dir, a, b, &Q, &qc, cap);
+    if (nh < 0 || nq < 0)
+        over = 1;
+    nh = nh < 0 ? -1 - nh : nh;
+    nq = nq < 0 ? -1 - nq : nq;
+    sh_ev evs[2 * PIECE_STACK], *ev = evs;
+    int nev = 0, evcap = 2 * PIECE_STACK;
+    if (2 * (nh + nq) > evcap) {
+        if (!(ev = malloc(2 * (size_t) (nh + nq) * sizeof *ev))) {
+            ev = evs;
+            over = 1;
+            goto swept;
+        }
+        evcap = 2 * (nh + nq);
+    }
+    /* H within Q */
+    for (int i = 0, j = 0; i < nh && j < nq;) {
+        const double lo = fmax(H[i][0], Q[j][0]), hi = fmin(H[i][1], Q[j][1]);
+        if (lo < hi) {
+            ev[nev++] = (sh_ev) { lo, m->ntilt };
+            ev[nev++] = (sh_ev) { hi, -m->ntilt };
+        }
+        if (H[i][1] < Q[j][1])
+            ++i;
+        else
+            ++j;
+    }
+    /* the gaps of Q in [a, b], copy by copy */
+    for (int j = 0; j <= nq; ++j) {
+        const double u0 = j == 0 ? a : Q[j - 1][1], u1 = j == nq ? b : Q[j][0];
+        if (!(u1 > u0))
+            continue;
+        for (int c = 0; c < m->ntilt; ++c) {
+            int k = copy_lit(m->tilt[c], org, dir, u0, u1, &lit, &lcap, cap);
+            if (k < 0) {
+                over = 1;
+                k = -1 - k;
+            }
+            if (nev + 2 * k > evcap) {
+                int ncap = evcap;
+                while (nev + 2 * k > ncap)
+                    ncap *= 2;
+                sh_ev *g = ev == evs ? malloc((size_t) ncap * sizeof *ev)
+                                     : realloc(ev, (size_t) ncap * sizeof *ev);
+                if (!g) {   /* no memory: what fitted, flagged */
+                    over = 1;
+                    goto swept;
+                }
+                if (ev == evs)
+                    memcpy(g, evs, (size_t) nev * sizeof *ev);
+                ev = g;
+                evcap = ncap;
+            }
+            for (int e = 0; e < k; ++e) {
+                ev[nev++] = (sh_ev) { lit[e][0], 1 };
+                ev[nev++] = (sh_ev) { lit[e][1], -1 };
+            }
+        }
+    }
+swept:
+    qsort(ev, (size_t) nev, sizeof *ev, cmp_ev);
+    int count = 0;
+    for (int i = 0; i < nev;) {
+        const double t = ev[i].t;
+        for (; i < nev && ev[i].t == t; ++i)
+            count += ev[i].step;
+        if (i == nev || count <= 0)
+            continue;
+        const double t1 = ev[i].t, v = fmin(1.0, (double) count / m->ntilt);
+        if (n > 0 && iv[n - 1][1] == t && iv[n - 1][2] == v) {
+            iv[n - 1][1] = t1;
+        } else if (n < cap) {
+            iv[n][0] = t;
+            iv[n][1] = t1;
+            iv[n][2] = v;
+            ++n;
+        } else {   /* the last absorbs the rest */
+            over = 1;
+            iv[n - 1][1] = t1;
+        }
+    }
+    if (ev != evs)
+        free(ev);
+    if (lit != stack)
+        free(lit);
+    if (H != hst)
+        free(H);
+    if (Q != qst)
+        free(Q);
+    return over ? -1 - n : n;
 }
 

@@ -69,6 +69,15 @@ typedef struct ef_shadow {
      * greatest depth still lit (inf: nothing there) */
     float *zmin[24], *zmax[24];
     char path[256];
+    /* a penumbra (ef_shadow_soften): ntilt orthographic maps of the same
+     * occluders seen along directions spread over the sun's disc, owned
+     * by this one; 0: hard shadows */
+    int ntilt;
+    struct ef_shadow **tilt;
+    double angle;             /* the disc's angular diameter, radians */
+    /* where no copy can differ from the map (ef_shadow_soften): a point
+     * whose depth is below env's at its texel is in no penumbra */
+    struct ef_shadow *env;
 } ef_shadow;
 
 /* Builds a map from src read as o says. Returns it (one reference), or
@@ -92,5 +101,32 @@ int ef_shadow_lit(const ef_shadow *m, const double org[3], const double dir[3], 
 
 /* Whether world point x is lit by the map (the same rule, at one point). */
 int ef_shadow_point_lit(const ef_shadow *m, const double x[3]);
+
+/* Penumbrae from a sun of angular diameter angle (radians, > 0) for an
+ * orthographic map: n tilted copies of the map (1 <= n <= EF_PENUMBRA_MAX),
+ * one per direction of a golden-angle spiral that covers the sun's disc
+ * evenly. Each copy re-projects the map's texels, taken as thin plates at
+ * their depths, along its direction (a plate covers the texel centres its
+ * shifted square holds; the sub-texel gaps that opening a continuous
+ * surface would leave, between neighbours less than 16 texel widths apart
+ * in depth, are closed). A point's visibility is the fraction of the
+ * copies that see it lit: a filtered penumbra (exact with respect to the
+ * copies, not to the scene: what the map does not hold cannot be seen
+ * round). Costs n times the map's memory. Returns 0, or -1 with a message
+ * (m unchanged). */
+#define EF_PENUMBRA_MAX 64
+int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err);
+
+/* The lit parts of [a, b] along org + t dir with their visibility (the
+ * fraction of the sun's disc that lights them, 1 for a hard map): sorted,
+ * disjoint triples (t0, t1, v > 0), adjacent runs of one visibility merged,
+ * at most cap of them (more: the rest joins the last, flagged by a return
+ * of -1 - n). Returns the number n. */
+int ef_shadow_pieces(const ef_shadow *m, const double org[3], const double dir[3], double a,
+                     double b, double (*iv)[3], int cap);
+
+/* The visibility of world point x: ef_shadow_point_lit's for a hard map,
+ * the fraction of its tilted copies that light x for a soft one. */
+double ef_shadow_point_vis(const ef_shadow *m, const double x[3]);
 
 #endif

@@ -108,6 +108,10 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
                     l->shadow_path, l->shadow->w, l->shadow->h,
                     l->shadow->ortho ? "orthographic" : "perspective", l->shadow_opts.bias,
                     l->shadow_opts.slope, l->shadow_opts.outside_lit ? "lit" : "shadow");
+        if (l->shadow && l->shadow->ntilt)
+            fprintf(out, "  penumbra: %d directions over the sun's disc of %g degrees (filtered, "
+                         "not exact)\n",
+                    l->shadow->ntilt, l->shadow->angle * 180 / 3.14159265358979);
     }
     if (o->scene.sky_light)
         fprintf(out, "sky light: %s (%d x %d; %d phase convolution%s)\n", o->scene.sky_light_spec,
@@ -273,6 +277,7 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
             json_num(out, l->shadow_opts.slope);
             fputs(", \"outside\": ", out);
             json_str(out, l->shadow_opts.outside_lit ? "lit" : "shadow");
+            fprintf(out, ", \"penumbra\": %d", l->shadow->ntilt);
             fputc('}', out);
         } else {
             fputs("null", out);
