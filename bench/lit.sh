@@ -16,7 +16,8 @@
 # general quadrature), and
 # the sun in height fog through shadow maps of the same scene (make_sample
 # --sun-view) of 512^2, 2048^2 and 4096^2 texels (the walk of the map's
-# texels, and how it grows with the map), and --sky-light with a 2048x1024
+# texels, and how it grows with the map), its penumbrae from angle= (16
+# tilted copies of the 2048^2 map), and --sky-light with a 2048x1024
 # environment (iso, and hg g = 0.9: its convolution included). Prints a Markdown table, also written to bench/lit.md
 # (whose sections from its first "### " heading on are kept). Nothing
 # asserts on time.
@@ -97,6 +98,13 @@ add "sky light, hg g=0.9, exp fog" "exp (unlit)" \
 for r in 512 2048 4096; do
     add "sun in height fog, ${r}^2 shadow map" "height (unlit)" \
         '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3:shadow="$tmp/map'"$r"'.exr"'
+done
+# penumbrae: the sun's disc (0.53 and 2 degrees) through 16 tilted copies
+# of the 2048^2 map (filtered; the scene's sun is 17 degrees up, so most
+# of its long shadows lie within a penumbra's reach)
+for a in 0.53 2; do
+    add "sun in height fog, 2048^2 map, angle=$a (penumbra, 16 directions)" "height (unlit)" \
+        '"$exrfog" "${threads[@]}" "$IN" -o "$OUT" --fog "$H:phase=hg:g=0.6" --light sun:towards=0.2,0.3,-1:intensity=3:angle='"$a"':shadow="$tmp/map2048.exr"'
 done
 # Lit noise fog costs milliseconds per pixel: its rows run on a 240x135
 # frame of the same scene (the horizon scene of bench/noise.sh), against

@@ -30,6 +30,7 @@ import subprocess
 import sys
 
 try:
+    import numpy as np
     import OpenImageIO as oiio
 except ImportError:
     print("OpenImageIO python module missing: skipped")
@@ -780,11 +781,24 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
           "oiiotool crops and deepens the sample")
     check(subprocess.run([make_sample, smap, "--sun-view", "0.2,0.3,-1", "--size", "256x256"],
                          capture_output=True).returncode == 0, "make_sample --sun-view")
+    # a sky for the sky light's layer: a gradient and a bright lobe
+    genv = os.path.join(tmp, "lit_crop_env.exr")
+    gy, gx = np.mgrid[0:32, 0:64]
+    th, ph = np.pi * (gy + 0.5) / 32, np.pi - 2 * np.pi * (gx + 0.5) / 64
+    up = np.cos(th)[..., None]
+    lobe = np.exp(-(1 - np.sin(th) * np.cos(ph)) / 0.05)[..., None]
+    gimg = (np.where(up > 0, 0.3 + 0.6 * up, 0.05) * np.array([0.6, 0.8, 1.0]) +
+            4 * lobe * np.array([1, 0.8, 0.5])).astype(np.float32)
+    gb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
+    gb.set_pixels(oiio.ROI(0, 64, 0, 32, 0, 1, 0, 3), gimg)
+    check(gb.write(genv), "gradient environment written")
     for what, lit in (("sun with a shadow map", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:shadow=" + smap]),
-                      ("lamp", ["--light", "point:position=1,2,-9:intensity=40"])):
+                      ("lamp", ["--light", "point:position=1,2,-9:intensity=40"]),
+                      ("lamp and sky light", ["--light", "point:position=1,2,-9:intensity=40",
+                                              "--sky-light", genv])):
         fogl = ["--fog", "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.6"] + lit
-        if what == "lamp":
-            fogl[1] = "exp:density=0.05"
+        if what.startswith("lamp"):
+            fogl[1] = "exp:density=0.05:phase=hg:g=0.5"
         o_flat = os.path.join(tmp, "lit_crop_flat.exr")
         o_df = os.path.join(tmp, "lit_crop_df.exr")
         o_ds = os.path.join(tmp, "lit_crop_ds.exr")
@@ -805,7 +819,8 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
         # the light layers and lit fractions of --deep flatten: at one opaque
         # sample a pixel, the flat run's (held to the references in
         # test_light and test_shadow)
-        aovs = ["--aov", "fog,light" + (",lit" if what != "lamp" else ""), "-d", "float"]
+        aovs = ["--aov", "fog,light" + (",lit" if not what.startswith("lamp") else ""), "-d",
+                "float"]
         a_flat, a_deep = os.path.join(tmp, "lit_crop_aovf.exr"), os.path.join(tmp, "lit_crop_aovd.exr")
         ok = (run([cflat, "-o", a_flat] + fogl + aovs) == 0 and
               run([cdeep, "-o", a_deep, "--deep", "flatten"] + fogl + aovs) == 0)
@@ -815,7 +830,8 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
             na, nb = fa.spec().channelnames, fb.spec().channelnames
             pa, pb = fa.get_pixels(oiio.FLOAT), fb.get_pixels(oiio.FLOAT)
             names = [c for c in na if c.startswith(("fog_light.", "fog_lit.", "fog_ambient."))]
-            check(len(names) >= 6 and all(c in nb for c in names),
+            check(len(names) >= 6 and all(c in nb for c in names) and
+                  ("sky" not in what or "fog_light.sky.R" in names),
                   "lit crop (%s): the deep run writes the flat run's layers (%s)" % (what, names))
             e = max(float(abs(pa[..., na.index(c)] - pb[..., nb.index(c)]).max()) for c in names
                     if c in nb)
@@ -910,8 +926,7 @@ for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
                      "point:position=1,1,3:intensity=1"], 2),
                    ([src, "--deep", "flatten", "--aov", "lit", "--light",
                      "point:position=1,1,3:intensity=1"], 2),
-                   ([src, "--deep", "flatten", "--aov", "light", "--light",
-                     "point:position=1,1,3:intensity=1", "--sky-light", env], 2)):
+                   ([src, "--deep", "flatten", "--aov", "lit", "--sky-light", env], 2)):
     r = subprocess.run([exrfog] + args + ["--fog", "exp:density=0.1", "-o",
                                           os.path.join(tmp, "u.exr")], capture_output=True, text=True)
     check(r.returncode == want and r.stderr.startswith("exrfog: ") and

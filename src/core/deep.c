@@ -374,10 +374,10 @@ typedef struct px_lit {
 } px_lit;
 
 static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, double a, double b,
-                    double tau[3], double F[3], int *linear, double err[3])
+                    double tau[3], double F[3], double Fsky[3], int *linear, double err[3])
 {
     const int sky = lt && lt->sky;
-    double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 };
+    double wc[3] = { 0, 0, 0 }, winf[3] = { 0, 0, 0 }, ws[3] = { 0, 0, 0 }, wsi[3] = { 0, 0, 0 };
     int ninf[3] = { 0, 0, 0 };
     tau[0] = tau[1] = tau[2] = 0;
     if (err)
@@ -394,19 +394,28 @@ static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, d
             tau[k] += t[k];
             const double col =
                 (c->has_color ? c->color[k] : s->color[k]) + (sky ? lt->sky_c[i][k] : 0.0);
+            const double sc = sky ? lt->sky_c[i][k] : 0.0;
             if (isinf(t[k])) {
                 ninf[k]++;
                 winf[k] += col;
+                wsi[k] += sc;
             } else {
                 wc[k] += t[k] * col;
+                ws[k] += t[k] * sc;
             }
         }
     }
     for (int k = 0; k < 3; ++k) {
-        if ((!s->any_color && !sky) || tau[k] == 0)
+        const int first = (!s->any_color && !sky) || tau[k] == 0;
+        if (first)
             F[k] = s->color[k] + (sky ? lt->sky_c[0][k] : 0.0);
         else
             F[k] = ninf[k] ? winf[k] / ninf[k] : wc[k] / tau[k];
+        /* the sky light's share of it, weighted alike */
+        if (Fsky)
+            Fsky[k] = !sky ? 0.0
+                      : first ? lt->sky_c[0][k]
+                      : ninf[k] ? wsi[k] / ninf[k] : ws[k] / tau[k];
     }
 }
 
@@ -414,24 +423,26 @@ static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, d
  * per unit alpha (the ambient and the sky light) plus the lights' own
  * in-scatter S over it. */
 static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog, double a, double b,
-                const double tau[3], const double col[3], const double S[3],
-                const double (*Sl)[3])
+                const double tau[3], const double col[3], const double csky[3],
+                const double S[3], const double (*Sl)[3])
 {
     double *d = ef_deep_buf_push(fog);
     if (!d)
         return -1;
-    if (F->per_light) {
-        const int nl = F->scene->nlight, at = (fog->n - 1) * 3 * nl;
-        if (reserve((void **) &fog->lv, &fog->lvcap, at + 3 * nl, sizeof *fog->lv))
-            return -1;
-        for (int j = 0; j < nl; ++j)
-            for (int k = 0; k < 3; ++k)
-                fog->lv[at + 3 * j + k] = Sl ? Sl[j][k] : 0;
-    }
     double al[3], mean = 0;
     for (int k = 0; k < 3; ++k) {
         al[k] = k && tau[k] == tau[k - 1] ? al[k - 1] : isinf(tau[k]) ? 1.0 : -expm1(-tau[k]);
         mean += al[k] / 3;
+    }
+    if (F->per_light) {
+        const int nl = F->scene->nlight, nv = EF_DEEP_LV(F->scene), at = (fog->n - 1) * nv;
+        if (reserve((void **) &fog->lv, &fog->lvcap, at + nv, sizeof *fog->lv))
+            return -1;
+        for (int j = 0; j < nl; ++j)
+            for (int k = 0; k < 3; ++k)
+                fog->lv[at + 3 * j + k] = Sl ? Sl[j][k] : 0;
+        for (int k = 0; k < 3 && F->scene->sky_light; ++k)
+            fog->lv[at + 3 * nl + k] = csky[k] * al[k];
     }
     /* colour per channel always (exact); alpha per channel where the
      * layout has AR/AG/AB, else A alone, the mean */
@@ -457,7 +468,7 @@ static double max3(const double v[3])
  * depths, colour per unit alpha and their error estimates, and the
  * lights' in-scatter over it (from its front) with theirs. */
 typedef struct piece {
-    double a, b, tau[3], col[3], err[3], S[3], Se[3];
+    double a, b, tau[3], col[3], csky[3], err[3], S[3], Se[3];
     int depth;
 } piece;
 
@@ -486,7 +497,7 @@ static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1
                         double b, int depth, int *linear, double (*per)[3])
 {
     piece p = { .a = a, .b = b, .depth = depth };
-    seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, linear, F->want_err ? p.err : NULL);
+    seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, p.csky, linear, F->want_err ? p.err : NULL);
     if (lt->lights)
         seg_light(F->scene, r1, a, b, p.S, p.Se, per);
     return p;
@@ -641,7 +652,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
             if (fog->n >= F->max_samples)
                 st->capped = 1;
         }
-        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.S, PER(sp)))
+        if (emit(L, F, fog, sa, sb, p.tau, p.col, p.csky, p.S, PER(sp)))
             return -1;
         for (int k = 0; st && k < 3; ++k) {
             st->pix_err[k] += p.err[k];
@@ -692,7 +703,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
                     const ef_ray *r1, double a, double *Tf, ef_deep_buf *fog, ef_deep_stats *st)
 {
     double tinf[3], cinf[3];
-    seg_tau(F->scene, lt, r1, a, INFINITY, tinf, cinf, NULL, NULL);
+    seg_tau(F->scene, lt, r1, a, INFINITY, tinf, cinf, NULL, NULL, NULL);
     if (!(max3(tinf) > 0))
         return 0;
     double Tinf = 0;
@@ -702,7 +713,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
     for (int i = 0; i < 400; ++i) {
         double t[3], c[3], T = 0;
         end = a + h;
-        seg_tau(F->scene, lt, r1, a, end, t, c, NULL, NULL);
+        seg_tau(F->scene, lt, r1, a, end, t, c, NULL, NULL, NULL);
         for (int k = 0; k < 3; ++k)
             T = fmax(T, isinf(t[k]) ? 0 : exp(-t[k]));
         if (*Tf * (T - Tinf) <= F->tol || !isfinite(a + 2 * h))
@@ -726,11 +737,11 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
         /* the last sample takes everything behind its front */
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
         const double za = d[L->nch], zb = d[L->nch + 1];
-        double t[3], c[3], e[3], S[3] = { 0, 0, 0 }, Se[3] = { 0, 0, 0 };
+        double t[3], c[3], cs[3], e[3], S[3] = { 0, 0, 0 }, Se[3] = { 0, 0, 0 };
         double Sl[EF_MAX_LIGHTS][3] = { { 0 } };
         /* (its error replaces nothing: the piece it extends stays counted,
          * an over-estimate) */
-        seg_tau(F->scene, lt, r1, za, INFINITY, t, c, NULL, F->want_err ? e : NULL);
+        seg_tau(F->scene, lt, r1, za, INFINITY, t, c, cs, NULL, F->want_err ? e : NULL);
         if (lt->lights)
             seg_light(F->scene, r1, za, INFINITY, S, Se, F->per_light ? Sl : NULL);
         for (int k = 0; st && k < 3; ++k) {
@@ -739,7 +750,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
             st->pix_light_err[k] += T0 * Se[k];
         }
         fog->n--;
-        if (emit(L, F, fog, za, zb, t, c, S, Sl))
+        if (emit(L, F, fog, za, zb, t, c, cs, S, Sl))
             return -1;
     }
     return 0;

@@ -53,10 +53,15 @@ typedef struct ef_deep_buf {
     double *cut;
     int ccap;
     /* with ef_deep_fog.per_light: each fog sample's in-scatter per light
-     * (3 per light of the scene, in sample order, image units) */
+     * (3 per light of the scene, then 3 for the sky light's share of its
+     * colour when the scene has one: EF_DEEP_LV(scene) per sample, in
+     * sample order, image units) */
     double *lv;
     int lvcap;
 } ef_deep_buf;
+
+/* The values ef_deep_buf.lv keeps per sample for a scene. */
+#define EF_DEEP_LV(scene) (3 * ((scene)->nlight + ((scene)->sky_light != NULL)))
 
 void ef_deep_buf_init(ef_deep_buf *b, int nch);
 void ef_deep_buf_free(ef_deep_buf *b);

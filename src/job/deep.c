@@ -406,18 +406,18 @@ static int copy_buf(ef_deep_buf *dst, const ef_deep_buf *src)
 
 /* Light j's layer of one pixel: the flatten of w->ta (the input, its
  * colour zeroed) with the fog samples of fog carrying light j's
- * in-scatter (fog->lv) as their colour. */
+ * in-scatter (fog->lv) as their colour; j = nlight: the sky light's. */
 static int light_layer(worker *w, const ef_deep_buf *fog, int j, double out[3], ef_err *err)
 {
     const ef_deep_layout *L = &w->S->P->L;
-    const int nl = w->S->q->scene->nlight;
+    const int nv = EF_DEEP_LV(w->S->q->scene);
     double o[EF_DEEP_MAX_CH];
     if (copy_buf(&w->tb, fog))
         return ef_fail(err, "out of memory");
     for (int i = 0; i < w->tb.n; ++i)
         for (int k = 0; k < 3; ++k)
             w->tb.v[(size_t) i * (size_t) w->tb.stride + (size_t) L->rgb[k]] =
-                fog->lv[(size_t) i * 3 * (size_t) nl + 3 * (size_t) j + (size_t) k];
+                fog->lv[(size_t) i * (size_t) nv + 3 * (size_t) j + (size_t) k];
     if (flatten_union(w, &w->ta, &w->tb, o, err))
         return -1;
     for (int k = 0; k < 3; ++k)
@@ -495,23 +495,26 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
      * and the fog samples with that light's in-scatter as theirs; the
      * ambient what the fog adds beyond them */
     const int nl = S->q->scene->nlight;
-    double lay[EF_MAX_LIGHTS][3];
+    /* the lights' layers, then the sky light's (its share of the samples'
+     * colour) */
+    const int sky = (S->aov & EF_AOV_LIGHT) && S->q->scene->sky_light;
+    double lay[EF_MAX_LIGHTS + 1][3];
     if (copy_buf(&w->ta, &w->tidy))
         return ef_fail(err, "out of memory");
     for (int i = 0; i < w->ta.n; ++i)
         for (int k = 0; k < 3; ++k)
             w->ta.v[(size_t) i * (size_t) w->ta.stride + (size_t) L->rgb[k]] = 0;
-    for (int j = 0; j < nl; ++j)
+    for (int j = 0; j < nl + sky; ++j)
         if (light_layer(w, &w->fog, j, lay[j], err))
             return -1;
     if (S->aov & EF_AOV_LIGHT) {
         for (int k = 0; k < 3; ++k) {
             double amb = flat[L->rgb[k]] - att[L->rgb[k]];
-            for (int j = 0; j < nl; ++j)
+            for (int j = 0; j < nl + sky; ++j)
                 amb -= lay[j][k];
             aov[n++] = amb;
         }
-        for (int j = 0; j < nl; ++j)
+        for (int j = 0; j < nl + sky; ++j)
             for (int k = 0; k < 3; ++k)
                 aov[n++] = lay[j][k];
     }
@@ -780,10 +783,10 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
 {
     memset(res, 0, sizeof *res);
     if (q->naov && (q->aov & (EF_AOV_LIGHT | EF_AOV_LIT)) &&   /* (the CLI refuses these first) */
-        (q->mode != EF_DEEP_MODE_FLATTEN || q->scene->nlight == 0 ||
-         ((q->aov & EF_AOV_LIGHT) && q->scene->sky_light)))
+        (q->mode != EF_DEEP_MODE_FLATTEN ||
+         (q->scene->nlight == 0 && ((q->aov & EF_AOV_LIT) || !q->scene->sky_light))))
         return ef_fail(err, "--aov light and lit on deep input take --deep flatten and --light "
-                            "(light without --sky-light)");
+                            "(light: or --sky-light)");
     ef_deep_in d;
     if (ef_deep_in_open(q->in, q->part, &d, err))
         return -1;

@@ -414,9 +414,6 @@ static int check_deep(ef_frame *F)
     else if (F->naov && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "--aov with deep input needs --deep flatten (a deep output carries no AOVs: "
               "its fog samples are the fog)";
-    else if (F->naov && (o->aov & EF_AOV_LIGHT) && o->scene.sky_light)
-        why = "--aov light on deep input takes --light only, not --sky-light (the sky's share "
-              "is folded into each fog sample's colour): flatten the image first";
     else if (F->foreign && o->deep_mode != EF_DEEP_MODE_FLATTEN)
         why = "a deep output is EXR (--deep flatten writes other formats)";
     else if (o->preview)
