@@ -1022,35 +1022,67 @@ static double norm2(double complex z)
     return creal(z) * creal(z) + cimag(z) * cimag(z);
 }
 
+/* (-1)^k / (k k!), k = 0..21 (0 at k = 0): the series of E1's entire
+ * part, sum_k w_k z^k = -sum (-z)^k / (k k!) ... with its sign folded in */
+static const double lamp_w[22] = {
+    0, -1, 0.25, -0.055555555555555552, 0.010416666666666666, -0.0016666666666666668,
+    0.00023148148148148149, -2.834467120181406e-05, 3.1001984126984127e-06,
+    -3.0619243582206544e-07, 2.7557319223985891e-08, -2.27746439867652e-09,
+    1.7397297489890083e-10, -1.2353110643708935e-11, 8.1933897126640886e-13,
+    -5.0981091545465446e-14, 2.9871733327421158e-15, -1.6537983849091297e-16,
+    8.6773372047701253e-18, -4.326650129802279e-19, 2.0551588116560825e-20,
+    -9.3204481254244102e-22,
+};
+
+/* The terms of lamp_w that reach 1e-17 of the series for |z|^2 <= r2
+ * <= 2.25: r^n / (n + 1)! below it. */
+static int lamp_terms(double r2)
+{
+    return r2 <= 0.0625 ? 12 : r2 <= 0.25 ? 15 : r2 <= 0.5625 ? 17 : r2 <= 1 ? 18
+           : r2 <= 1.5625 ? 20 : 21;
+}
+
 static int g_e1(double complex z, double complex *out)
 {
-    if (norm2(z) < 1.5 * 1.5) {
-        double complex term = 1, sum = 0;
-        for (int k = 1; k < 200; ++k) {
-            term *= -z / k;
-            const double complex add = term / k;
-            sum += add;
-            if (norm2(add) < 1e-36 * norm2(sum) + 1e-300)
-                break;
+    const double zr = creal(z), zi = cimag(z), r2 = zr * zr + zi * zi;
+    if (r2 < 1.5 * 1.5) {
+        /* Horner: sum_k w_k z^k = z (w_1 + z (w_2 + ...)) */
+        const int n = lamp_terms(r2);
+        double sr = lamp_w[n], si = 0;
+        for (int k = n - 1; k >= 1; --k) {
+            const double tr = lamp_w[k] + zr * sr - zi * si;
+            si = zr * si + zi * sr;
+            sr = tr;
         }
+        const double complex sum = (zr * sr - zi * si) + I * (zr * si + zi * sr);
         *out = cexp(z) * (-0.57721566490153286061 - clog(z) - sum);
         return 0;
     }
+    /* the continued fraction, its divisions written out (|C|, |D| stay
+     * near |z| >= 1.5: no overflow to guard) */
     const double tiny = 1e-300;
-    double complex f = z + 1, C = f, D = 0;
+    double fr = zr + 1, fi = zi, Cr = fr, Ci = fi, Dr = 0, Di = 0;
     for (int j = 1; j < 2000; ++j) {
-        const double complex b = z + (2.0 * j + 1), a = -(double) j * j;
-        D = b + a * D;
-        if (D == 0)
-            D = tiny;
-        C = b + a / C;
-        if (C == 0)
-            C = tiny;
-        D = 1 / D;
-        const double complex delta = C * D;
-        f *= delta;
-        if (norm2(delta - 1) < 1e-32) {
-            *out = 1 / f;
+        const double br = zr + (2.0 * j + 1), a = -(double) j * j;
+        Dr = br + a * Dr;
+        Di = zi + a * Di;
+        if (Dr == 0 && Di == 0)
+            Dr = tiny;
+        const double cn = Cr * Cr + Ci * Ci;
+        Cr = br + a * Cr / cn;
+        Ci = zi - a * Ci / cn;
+        if (Cr == 0 && Ci == 0)
+            Cr = tiny;
+        const double dn = Dr * Dr + Di * Di;
+        Dr = Dr / dn;
+        Di = -Di / dn;
+        const double er = Cr * Dr - Ci * Di, ei = Cr * Di + Ci * Dr;
+        const double nfr = fr * er - fi * ei;
+        fi = fr * ei + fi * er;
+        fr = nfr;
+        if ((er - 1) * (er - 1) + ei * ei < 1e-32) {
+            const double fn = fr * fr + fi * fi;
+            *out = fr / fn - I * (fi / fn);
             return 0;
         }
     }
@@ -1090,23 +1122,19 @@ static int lamp_series_pair(double sg, double ts, double h, double pa, double pD
         return -1;
     const double lr = 0.5 * log1p(dz * (ar + dr) / na);
     const double li = atan2(-zi * dz, ar * dr + zi * zi);
-    const double complex za = ar + I * zi, zd = dr + I * zi;
-    double complex P = dz, Z = 1, sum = 0;
-    double fact = 1, sign = -1;
-    for (int k = 1; k < 80; ++k) {
-        if (k > 1) {
-            Z *= za;
-            P = zd * P + dz * Z;
-        }
-        fact *= k;
-        const double wk = sign / (k * fact);   /* (-1)^k / (k k!), real */
-        const double complex add = wk * P;
-        sign = -sign;
-        sum += add;
-        if (norm2(add) <= 1e-36 * (norm2(sum) + lr * lr + li * li))
-            break;
+    /* Horner at z_D with the divided difference (p(z_D) - p(z_a)) / dz
+     * alongside: q <- b + z_a q, b <- w_k + z_D b */
+    const int n = lamp_terms(fmax(na, nd));
+    double br = lamp_w[n], bi = 0, qr = 0, qi = 0;
+    for (int k = n - 1; k >= 0; --k) {
+        const double nqr = br + ar * qr - zi * qi, nqi = bi + ar * qi + zi * qr;
+        const double nbr = lamp_w[k] + dr * br - zi * bi, nbi = dr * bi + zi * br;
+        qr = nqr;
+        qi = nqi;
+        br = nbr;
+        bi = nbi;
     }
-    const double complex V = lr + I * li + sum;
+    const double complex V = (lr + dz * qr) + I * (li + dz * qi);
     const double c = cos(sg * h), sn = sin(sg * h), f = 2 / h * exp(-sg * ts);
     *r = f * (c * cimag(V) - sn * creal(V));
     *err = f * sqrt(norm2(V)) * 1e-15;
