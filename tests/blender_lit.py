@@ -106,7 +106,9 @@ if spot:
     sp.spot_size = math.radians(70); sp.spot_blend = 0.0
     spo = bpy.data.objects.new("spot", sp); sc.collection.objects.link(spo)
     spo.location = SPOT
-sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if (lamp or calib or spot) else sun_strength; sun.angle = 0.0
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if (lamp or calib or spot) else sun_strength
+# "soft": the sun's disc 3 degrees wide (penumbrae), else a point
+sun.angle = math.radians(3.0) if "soft" in args[4:] else 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(72 if shadows else 60), 0, math.radians(170 if shadows else 150))
 bpy.context.view_layer.update()
