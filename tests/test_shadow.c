@@ -1041,6 +1041,24 @@ static void test_cli(void **state)
         remove(cc);
         assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
                                  "shadow='%s'", in, cc, fog, m1), 0);
+        /* the same with penumbrae: the NaN map still casts nothing, a 1 x 1
+         * map and a disc 170 degrees wide (a shear past the map) run */
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "angle=2:shadow='%s'", in, cc, fog, mn), 0);
+        assert_true(same_channel(a, cc, "R"));
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "angle=2:penumbra=64:shadow='%s'", in, cc, fog, m1), 0);
+        remove(cc);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s --light sun:towards=0.3,1,0.2:intensity=3:"
+                                 "angle=170:penumbra=3:shadow='%s' --aov lit", in, cc, fog, map),
+                         0);
+        float *lw = tu_read_channel(cc, 0, "fog_lit.sun1", &w, &h);
+        assert_non_null(lw);
+        for (int i = 0; i < w * h; ++i)
+            assert_true(lw[i] >= 0 && lw[i] <= 1);
+        free(lw);
         /* the first 300 bytes of a map */
         FILE *src_f = fopen(map, "rb");
         assert_non_null(src_f);
