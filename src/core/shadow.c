@@ -570,7 +570,52 @@ static int ceil_in(double v, int n)
  * x become those of x's projection along it onto the plane of depth zref
  * (the middle of the map's depths, so that little leaves the map), for
  * points (T, through the shear) and plates alike. NULL out of memory. */
-static ef_shadow *tilted(const ef_shadow *m, double cx, double cy, double zref)
+/* Per texel of a map, what every tilted copy needs of its neighbours:
+ * which of them (left, right, up, down: bits 1, 2, 4, 8) lie on the same
+ * surface (within 16 texel widths in depth) and the surface's slope per
+ * texel in x and y from them (0 without). */
+typedef struct sh_nb {
+    unsigned char *same;
+    float *sx, *sy;
+} sh_nb;
+
+/* Fills nb for m; 0, or -1 out of memory (nb empty). */
+static int neighbours(const ef_shadow *m, sh_nb *nb)
+{
+    const int w = m->w, h = m->h;
+    const size_t n = (size_t) w * (size_t) h;
+    const double W = m->T[3][2];
+    const double cont_x = 16 * fabs(W) / hypot(hypot(m->T[0][0], m->T[1][0]), m->T[2][0]),
+                 cont_y = 16 * fabs(W) / hypot(hypot(m->T[0][1], m->T[1][1]), m->T[2][1]);
+    nb->same = malloc(n);
+    nb->sx = malloc(n * sizeof *nb->sx);
+    nb->sy = malloc(n * sizeof *nb->sy);
+    if (!nb->same || !nb->sx || !nb->sy) {
+        free(nb->same);
+        free(nb->sx);
+        free(nb->sy);
+        memset(nb, 0, sizeof *nb);
+        return -1;
+    }
+    const float *z = m->zmin[0];
+    for (int j = 0; j < h; ++j)
+        for (int i = 0; i < w; ++i) {
+            const size_t at = (size_t) j * (size_t) w + (size_t) i;
+            const double d = z[at];
+            const int l = i > 0 && fabs(z[at - 1] - d) <= cont_x,
+                      r = i + 1 < w && fabs(z[at + 1] - d) <= cont_x,
+                      u = j > 0 && fabs(z[at - (size_t) w] - d) <= cont_y,
+                      b = j + 1 < h && fabs(z[at + (size_t) w] - d) <= cont_y;
+            nb->same[at] = (unsigned char) (l | r << 1 | u << 2 | b << 3);
+            nb->sx[at] = (float) (l && r ? 0.5 * (z[at + 1] - z[at - 1]) : l ? d - z[at - 1]
+                                  : r ? z[at + 1] - d : 0);
+            nb->sy[at] = (float) (u && b ? 0.5 * (z[at + (size_t) w] - z[at - (size_t) w])
+                                  : u ? d - z[at - (size_t) w] : b ? z[at + (size_t) w] - d : 0);
+        }
+    return 0;
+}
+
+static ef_shadow *tilted(const ef_shadow *m, const sh_nb *nb, double cx, double cy, double zref)
 {
     const int w = m->w, h = m->h;
     const size_t n = (size_t) w * (size_t) h;
@@ -581,9 +626,6 @@ static ef_shadow *tilted(const ef_shadow *m, double cx, double cy, double zref)
         out[i] = INFINITY;
     const double W = m->T[3][2];
     const float *z = m->zmin[0];
-    /* neighbours within 16 texel widths in depth are one surface */
-    const double cont_x = 16 * fabs(W) / hypot(hypot(m->T[0][0], m->T[1][0]), m->T[2][0]),
-                 cont_y = 16 * fabs(W) / hypot(hypot(m->T[0][1], m->T[1][1]), m->T[2][1]);
     for (int j = 0; j < h; ++j)
         for (int i = 0; i < w; ++i) {
             const size_t at = (size_t) j * (size_t) w + (size_t) i;
@@ -592,25 +634,18 @@ static ef_shadow *tilted(const ef_shadow *m, double cx, double cy, double zref)
                 continue;
             double x0 = i + cx * (d - zref), x1 = x0 + 1, y0 = j + cy * (d - zref), y1 = y0 + 1;
             const double px = x0 + 0.5, py = y0 + 0.5;
-            /* the surface's slope per texel from the neighbours of the same
-             * surface: a centre the plate covers off its own takes the
-             * plane's depth there (no acne from the resampling) */
-            const int l = i > 0 && fabs(z[at - 1] - d) <= cont_x,
-                      r = i + 1 < w && fabs(z[at + 1] - d) <= cont_x,
-                      u = j > 0 && fabs(z[at - (size_t) w] - d) <= cont_y,
-                      b = j + 1 < h && fabs(z[at + (size_t) w] - d) <= cont_y;
-            const double sx = l && r ? 0.5 * (z[at + 1] - z[at - 1]) : l ? d - z[at - 1]
-                              : r ? z[at + 1] - d : 0;
-            const double sy = u && b ? 0.5 * (z[at + (size_t) w] - z[at - (size_t) w])
-                              : u ? d - z[at - (size_t) w] : b ? z[at + (size_t) w] - d : 0;
-            /* a gap to a neighbour of the same surface: close it */
-            if (l)
+            /* a centre the plate covers off its own takes the plane's
+             * depth there (no acne from the resampling); a gap to a
+             * neighbour of the same surface is closed */
+            const double sx = nb->sx[at], sy = nb->sy[at];
+            const unsigned same = nb->same[at];
+            if (same & 1)
                 x0 -= fmax(0, cx * (d - z[at - 1]));
-            if (r)
+            if (same & 2)
                 x1 += fmax(0, cx * (z[at + 1] - d));
-            if (u)
+            if (same & 4)
                 y0 -= fmax(0, cy * (d - z[at - (size_t) w]));
-            if (b)
+            if (same & 8)
                 y1 += fmax(0, cy * (z[at + (size_t) w] - d));
             /* the texel centres c + 0.5 in [x0, x1) x [y0, y1) */
             if (!(x1 > 0.5 && x0 < w - 0.5 && y1 > 0.5 && y0 < h - 0.5))
@@ -680,7 +715,10 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
         return ef_fail(err, "out of memory for the shadow map's penumbra");
     double rmax = 0;   /* the largest shear, texels per unit of depth */
     int k = 0;
-    for (; k < n; ++k) {
+    sh_nb nb;
+    if (neighbours(m, &nb))
+        k = -1;   /* out of memory: below */
+    for (; k >= 0 && k < n; ++k) {
         /* equal areas of the disc: radius sqrt((k + 1/2) / n), golden angle */
         const double r = tan(0.5 * angle * sqrt((k + 0.5) / n)), phi = 2.39996322972865332 * k;
         double v[3], cx = 0, cy = 0;
@@ -690,9 +728,13 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
             cy += v[i] * gy[i];
         }
         rmax = fmax(rmax, hypot(cx, cy));
-        if (!(tilt[k] = tilted(m, cx, cy, zref)))
+        if (!(tilt[k] = tilted(m, &nb, cx, cy, zref)))
             break;
     }
+    free(nb.sx);
+    free(nb.sy);
+    if (k < 0)
+        k = 0;
     /* Where the copies can differ from the map: a copy shears a plate at
      * depth z_q by at most rmax (d - z_q) texels against a point of depth
      * d, and only a plate next to a depth jump (or the sky, or the border)
@@ -708,17 +750,13 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
     float *e = k == n ? malloc(npx * sizeof *e) : NULL;
     int ok = e != NULL;
     if (ok) {
-        const double cont_x = 16 * twx, cont_y = 16 * twy;
         for (int j = 0; j < h; ++j)
             for (int i = 0; i < w; ++i) {
                 const size_t at = (size_t) j * (size_t) w + (size_t) i;
                 const float d = z[at];
-                int edge = 0;
-                if (isfinite(d))
-                    edge = i == 0 || j == 0 || i == w - 1 || j == h - 1 ||
-                           !(fabs(z[at - 1] - d) <= cont_x) || !(fabs(z[at + 1] - d) <= cont_x) ||
-                           !(fabs(z[at - (size_t) w] - d) <= cont_y) ||
-                           !(fabs(z[at + (size_t) w] - d) <= cont_y);
+                /* a texel with a neighbour off its surface (a depth jump,
+                 * the sky) or on the border */
+                const int edge = isfinite(d) && nb.same[at] != 15;
                 e[at] = edge ? d : INFINITY;
             }
         ok = dilate(e, w, h, c, 0) == 0;
@@ -758,6 +796,7 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
         for (size_t i = 0; i < npx; ++i)
             e[i] = nextafterf(nextafterf(e[i], -INFINITY), -INFINITY);
     }
+    free(nb.same);
     ef_shadow *env = ok ? sibling(m, e) : (free(e), NULL);
     if (!env) {
         for (int j = 0; j < k; ++j)
