@@ -481,7 +481,6 @@ int ef_shadow_point_lit(const ef_shadow *m, const double x[3])
     return d <= m->zmin[0][i];
 }
 
-
 /* ------------------------------------------------------------ penumbra */
 
 /* A map with m's camera and outside rule whose level 0 is z (taken over,
@@ -514,41 +513,36 @@ static ef_shadow *sibling(const ef_shadow *m, float *z)
     return t;
 }
 
-/* a[i * stride] for i < n replaced by the least (most, with hi) of it
- * within r places either side, in O(n) (van Herk / Gil-Werman: running
- * extremes within blocks of 2r + 1 from both ends, over the row padded by
- * r neutral values each side); f and g: n + 2r floats each. */
-static void slide(float *a, size_t stride, int n, int r, int hi, float *f, float *g)
+/* a[i * stride] for i < n replaced by the least of it within r places
+ * either side, in O(n) (van Herk / Gil-Werman: running minima within
+ * blocks of 2r + 1 from both ends, over the row padded by r infinities
+ * each side); f and g: n + 2r floats each. */
+static void slide(float *a, size_t stride, int n, int r, float *f, float *g)
 {
     const int k = 2 * r + 1, m = n + 2 * r;
-    const float none = hi ? -INFINITY : INFINITY;
-#define AT(i) ((i) < r || (i) >= n + r ? none : a[(size_t) ((i) - r) * stride])
-    for (int i = 0; i < m; ++i) {
-        const float v = AT(i);
-        f[i] = i % k == 0 ? v : hi ? fmaxf(f[i - 1], v) : fminf(f[i - 1], v);
-    }
-    for (int i = m - 1; i >= 0; --i) {
-        const float v = AT(i);
-        g[i] = i % k == k - 1 || i == m - 1 ? v : hi ? fmaxf(g[i + 1], v) : fminf(g[i + 1], v);
-    }
+#define AT(i) ((i) < r || (i) >= n + r ? INFINITY : a[(size_t) ((i) - r) * stride])
+    for (int i = 0; i < m; ++i)
+        f[i] = i % k == 0 ? AT(i) : fminf(f[i - 1], AT(i));
+    for (int i = m - 1; i >= 0; --i)
+        g[i] = i % k == k - 1 || i == m - 1 ? AT(i) : fminf(g[i + 1], AT(i));
 #undef AT
     /* padded index i + r holds a[i]: its window is [i, i + 2r] */
     for (int i = 0; i < n; ++i)
-        a[(size_t) i * stride] = hi ? fmaxf(g[i], f[i + 2 * r]) : fminf(g[i], f[i + 2 * r]);
+        a[(size_t) i * stride] = fminf(g[i], f[i + 2 * r]);
 }
 
-/* z (w x h) replaced by its least (most) over the square of radius r
- * about each texel. Returns 0, or -1 out of memory. */
-static int dilate(float *z, int w, int h, int r, int hi)
+/* z (w x h) replaced by its least over the square of radius r about each
+ * texel. Returns 0, or -1 out of memory. */
+static int square_min(float *z, int w, int h, int r)
 {
     const size_t n = (size_t) (w > h ? w : h) + 2 * (size_t) r;
     float *f = malloc(2 * n * sizeof *f);
     if (!f)
         return -1;
     for (int y = 0; y < h; ++y)
-        slide(z + (size_t) y * (size_t) w, 1, w, r, hi, f, f + n);
+        slide(z + (size_t) y * (size_t) w, 1, w, r, f, f + n);
     for (int x = 0; x < w; ++x)
-        slide(z + x, (size_t) w, h, r, hi, f, f + n);
+        slide(z + x, (size_t) w, h, r, f, f + n);
     free(f);
     return 0;
 }
@@ -759,7 +753,7 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
                 const int edge = isfinite(d) && nb.same[at] != 15;
                 e[at] = edge ? d : INFINITY;
             }
-        ok = dilate(e, w, h, c, 0) == 0;
+        ok = square_min(e, w, h, c) == 0;
     }
     if (ok) {
         /* the chamfer cone: two passes over the 8 neighbours */
