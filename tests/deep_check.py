@@ -793,6 +793,8 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
     gb.set_pixels(oiio.ROI(0, 64, 0, 32, 0, 1, 0, 3), gimg)
     check(gb.write(genv), "gradient environment written")
     for what, lit in (("sun with a shadow map", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:shadow=" + smap]),
+                      ("sun with penumbrae", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:angle=6:"
+                                              "penumbra=8:shadow=" + smap]),
                       ("lamp", ["--light", "point:position=1,2,-9:intensity=40"]),
                       ("lamp and sky light", ["--light", "point:position=1,2,-9:intensity=40",
                                               "--sky-light", genv])):
@@ -810,6 +812,15 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
         check(ok, "lit crop (%s): flat and deep runs" % what)
         if ok:
             want = flat_pixels_any(o_flat)
+            if what == "sun with a shadow map":
+                hard_flat = want
+            elif what == "sun with penumbrae":
+                # (the crop's rays do cross penumbrae: else this proves nothing)
+                moved = sum(1 for ra, rb in zip(want, hard_flat) for u, v in zip(ra, rb)
+                            if abs(u - v) > 1e-4)
+                print("lit crop, sun with penumbrae: %d values differ from the hard shadow's"
+                      % moved)
+                check(moved > 50, "lit crop: the penumbrae change the crop (%d values)" % moved)
             for name, path in (("--deep flatten", o_df), ("--deep samples + OIIO flatten", o_dsf)):
                 got = flat_pixels_any(path)
                 e = max(abs(u - v) / (1e-3 + abs(v)) for ra, rb in zip(got, want)

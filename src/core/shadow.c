@@ -725,8 +725,6 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
         if (!(tilt[k] = tilted(m, &nb, cx, cy, zref)))
             break;
     }
-    free(nb.sx);
-    free(nb.sy);
     if (k < 0)
         k = 0;
     /* Where the copies can differ from the map: a copy shears a plate at
@@ -735,12 +733,14 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
      * leaves a penumbra where it moves; elsewhere the copies show the same
      * surfaces as the map, at most resampled. So a point at texel p is in
      * no penumbra where d < z_e + max(0, |p - e| - c) / rmax for every
-     * edge texel e (chessboard distance; c: a plate's width, the texel's
-     * rounding and what closing a gap adds): env is that cone-shaped lower
+     * edge texel e (chessboard distance; c: a plate's width and a half,
+     * the texel's rounding, and what closing a gap adds; z_e lowered by
+     * the plate's slope over as far): env is that cone-shaped lower
      * envelope (a square minimum of radius c, then a chamfer pass of slope
      * 1 / rmax per texel), and below it the map decides alone. */
     const double twx = 1 / nx, twy = 1 / sqrt(gy[0] * gy[0] + gy[1] * gy[1] + gy[2] * gy[2]);
-    const int c = (int) floor(1.5 + rmax * 16 * fmax(twx, twy));
+    const double ext = rmax * 16 * fmax(twx, twy);   /* a closed gap, texels */
+    const int c = (int) ceil(1.5 + ext);
     float *e = k == n ? malloc(npx * sizeof *e) : NULL;
     int ok = e != NULL;
     if (ok) {
@@ -751,7 +751,10 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
                 /* a texel with a neighbour off its surface (a depth jump,
                  * the sky) or on the border */
                 const int edge = isfinite(d) && nb.same[at] != 15;
-                e[at] = edge ? d : INFINITY;
+                /* (a copy takes the plate's plane up to 1 + ext texels
+                 * off its centre: as low as that) */
+                e[at] = edge ? (float) (d - (fabs(nb.sx[at]) + fabs(nb.sy[at])) * (1 + ext))
+                             : INFINITY;
             }
         ok = square_min(e, w, h, c) == 0;
     }
@@ -791,6 +794,8 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
             e[i] = nextafterf(nextafterf(e[i], -INFINITY), -INFINITY);
     }
     free(nb.same);
+    free(nb.sx);
+    free(nb.sy);
     ef_shadow *env = ok ? sibling(m, e) : (free(e), NULL);
     if (!env) {
         for (int j = 0; j < k; ++j)
