@@ -986,11 +986,6 @@ static void sun_convex(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 
 /* ------------------------------------------ a point lamp in uniform fog */
 
-/* G(z) = e^z E1(z) for Re z >= 0, z != 0, to about 1e-16 of |G|: the
- * series -gamma - ln z - sum (-z)^k / (k k!) (times e^z) for |z| < 1.5,
- * else the continued fraction 1/(z + 1 - 1/(z + 3 - 4/(z + 5 - ...)))
- * by the modified Lentz method. Returns 0, or -1 when it did not converge
- * (the caller integrates instead). */
 /* sqrt(x^2 + y^2): hypot's care only where the squares could overflow
  * or underflow (hypot costs several times more). */
 static double len2(double x, double y)
@@ -1001,8 +996,6 @@ static double len2(double x, double y)
     return hypot(x, y);
 }
 
-/* |z|^2, without hypot's care for overflow (the arguments here are far
- * from it) */
 /* Where lamp l comes closest to the line of r: its parameter *ts along
  * r->dir, and its distance *h from the line by the cross product (no
  * cancellation near the line); w gets lamp - origin. */
@@ -1017,13 +1010,15 @@ static void lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *t
     *h = len2(len2(cx, cy), cz);
 }
 
+/* |z|^2, without hypot's care for overflow (the arguments here are far
+ * from it) */
 static double norm2(double complex z)
 {
     return creal(z) * creal(z) + cimag(z) * cimag(z);
 }
 
-/* (-1)^k / (k k!), k = 0..21 (0 at k = 0): the series of E1's entire
- * part, sum_k w_k z^k = -sum (-z)^k / (k k!) ... with its sign folded in */
+/* w_k = (-1)^k / (k k!), k = 0..21 (w_0 = 0): sum_k w_k z^k is the sum
+ * (-z)^k / (k k!) in E1(z) = -gamma - ln z - sum. */
 static const double lamp_w[22] = {
     0, -1, 0.25, -0.055555555555555552, 0.010416666666666666, -0.0016666666666666668,
     0.00023148148148148149, -2.834467120181406e-05, 3.1001984126984127e-06,
@@ -1042,6 +1037,11 @@ static int lamp_terms(double r2)
            : r2 <= 1.5625 ? 20 : 21;
 }
 
+/* G(z) = e^z E1(z) for Re z >= 0, z != 0, to about 1e-16 of |G|: the
+ * series -gamma - ln z - sum (-z)^k / (k k!) (times e^z) for |z| < 1.5,
+ * else the continued fraction 1/(z + 1 - 1/(z + 3 - 4/(z + 5 - ...)))
+ * by the modified Lentz method. Returns 0, or -1 when it did not converge
+ * (the caller integrates instead). */
 static int g_e1(double complex z, double complex *out)
 {
     const double zr = creal(z), zi = cimag(z), r2 = zr * zr + zi * zi;
