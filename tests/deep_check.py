@@ -797,9 +797,10 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
                                               "penumbra=8:shadow=" + smap]),
                       ("lamp", ["--light", "point:position=1,2,-9:intensity=40"]),
                       ("lamp and sky light", ["--light", "point:position=1,2,-9:intensity=40",
-                                              "--sky-light", genv])):
+                                              "--sky-light", genv]),
+                      ("sky light alone", ["--sky-light", genv])):
         fogl = ["--fog", "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.6"] + lit
-        if what.startswith("lamp"):
+        if what.startswith(("lamp", "sky")):
             fogl[1] = "exp:density=0.05:phase=hg:g=0.5"
         o_flat = os.path.join(tmp, "lit_crop_flat.exr")
         o_df = os.path.join(tmp, "lit_crop_df.exr")
@@ -830,7 +831,7 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
         # the light layers and lit fractions of --deep flatten: at one opaque
         # sample a pixel, the flat run's (held to the references in
         # test_light and test_shadow)
-        aovs = ["--aov", "fog,light" + (",lit" if not what.startswith("lamp") else ""), "-d",
+        aovs = ["--aov", "fog,light" + (",lit" if what.startswith("sun") else ""), "-d",
                 "float"]
         a_flat, a_deep = os.path.join(tmp, "lit_crop_aovf.exr"), os.path.join(tmp, "lit_crop_aovd.exr")
         ok = (run([cflat, "-o", a_flat] + fogl + aovs) == 0 and

@@ -993,7 +993,7 @@ static double len2(double x, double y)
     const double m = fmax(fabs(x), fabs(y));
     if (m < 1e150 && m > 1e-150)
         return sqrt(x * x + y * y);
-    return hypot(x, y);
+    return m == 0 ? 0 : hypot(x, y);
 }
 
 /* Where lamp l comes closest to the line of r: its parameter *ts along
@@ -1145,12 +1145,16 @@ static int lamp_closed(const double sig[3], const double scat[3], const double e
                        double h, double a, double D, double S[3], double E[3])
 {
     double out[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
+    /* the integral per unit of scat e, and its rounding, at sig[have]:
+     * channels of the same sigma take it (grey fog, coloured lamps) */
+    double unit = 0, unit_e = 0;
+    int have = -1;
     for (int k = 0; k < 3; ++k) {
         if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0)
             continue;
-        if (k > 0 && sig[k] == sig[k - 1] && scat[k - 1] != 0 && e[k - 1] != 0) {
-            out[k] = out[k - 1] / (scat[k - 1] * e[k - 1]) * scat[k] * e[k];
-            err[k] = err[k - 1] / (scat[k - 1] * e[k - 1]) * scat[k] * e[k];
+        if (have >= 0 && sig[k] == sig[have]) {
+            out[k] = unit * scat[k] * e[k];
+            err[k] = unit_e * scat[k] * e[k];
             continue;
         }
         if (isfinite(D)) {
@@ -1162,6 +1166,9 @@ static int lamp_closed(const double sig[3], const double scat[3], const double e
             if (lamp_series_pair(sig[k], ts, h, pa, pD, (D - a) * (pa + pD) / (da + dD), &r,
                                  &re) == 0 &&
                 re <= 1e-13 * fabs(r)) {
+                unit = r;
+                unit_e = re;
+                have = k;
                 out[k] = r * scat[k] * e[k];
                 err[k] = re * scat[k] * e[k];
                 continue;
@@ -1185,8 +1192,11 @@ static int lamp_closed(const double sig[3], const double scat[3], const double e
         const double r = 2 / h * (v[0] - v[1]);
         if (!(2 / h * mag * 2e-15 <= 1e-13 * fabs(r)) || !isfinite(r))
             return -1;
+        unit = r;
+        unit_e = 2 / h * mag * 2e-15;   /* the ends' rounding */
+        have = k;
         out[k] = r * scat[k] * e[k];
-        err[k] = 2 / h * mag * 2e-15 * scat[k] * e[k];   /* the ends' rounding */
+        err[k] = unit_e * scat[k] * e[k];
     }
     for (int k = 0; k < 3; ++k) {
         S[k] += out[k];
