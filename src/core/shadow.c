@@ -7,6 +7,18 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The lesser and greater of two depths (never NaN here: a map holds finite
+ * depths or inf), inline where libm's fminf and fmaxf are calls. */
+static inline float lessf(float a, float b)
+{
+    return b < a ? b : a;
+}
+
+static inline float greaterf(float a, float b)
+{
+    return b > a ? b : a;
+}
+
 /* Whether an entry of the camera-to-clip matrix is rounding only: small
  * against the largest rounding any entry could carry (|C2W| . |M|, whose
  * float32 headers leave ~1e-7 of it where the projection has zeros). */
@@ -47,8 +59,8 @@ static int build_mip(ef_shadow *m)
                         if (cx >= pw || cy >= ph)
                             continue;
                         const size_t i = (size_t) cy * (size_t) pw + (size_t) cx;
-                        a = fminf(a, m->zmin[l][i]);
-                        b = fmaxf(b, m->zmax[l][i]);
+                        a = lessf(a, m->zmin[l][i]);
+                        b = greaterf(b, m->zmax[l][i]);
                     }
                 mn[(size_t) y * (size_t) w + (size_t) x] = a;
                 mx[(size_t) y * (size_t) w + (size_t) x] = b;
@@ -522,13 +534,13 @@ static void slide(float *a, size_t stride, int n, int r, float *f, float *g)
     const int k = 2 * r + 1, m = n + 2 * r;
 #define AT(i) ((i) < r || (i) >= n + r ? INFINITY : a[(size_t) ((i) - r) * stride])
     for (int i = 0; i < m; ++i)
-        f[i] = i % k == 0 ? AT(i) : fminf(f[i - 1], AT(i));
+        f[i] = i % k == 0 ? AT(i) : lessf(f[i - 1], AT(i));
     for (int i = m - 1; i >= 0; --i)
-        g[i] = i % k == k - 1 || i == m - 1 ? AT(i) : fminf(g[i + 1], AT(i));
+        g[i] = i % k == k - 1 || i == m - 1 ? AT(i) : lessf(g[i + 1], AT(i));
 #undef AT
     /* padded index i + r holds a[i]: its window is [i, i + 2r] */
     for (int i = 0; i < n; ++i)
-        a[(size_t) i * stride] = fminf(g[i], f[i + 2 * r]);
+        a[(size_t) i * stride] = lessf(g[i], f[i + 2 * r]);
 }
 
 /* z (w x h) replaced by its least over the square of radius r about each
@@ -633,14 +645,14 @@ static ef_shadow *tilted(const ef_shadow *m, const sh_nb *nb, double cx, double 
              * neighbour of the same surface is closed */
             const double sx = nb->sx[at], sy = nb->sy[at];
             const unsigned same = nb->same[at];
-            if (same & 1)
-                x0 -= fmax(0, cx * (d - z[at - 1]));
-            if (same & 2)
-                x1 += fmax(0, cx * (z[at + 1] - d));
-            if (same & 4)
-                y0 -= fmax(0, cy * (d - z[at - (size_t) w]));
-            if (same & 8)
-                y1 += fmax(0, cy * (z[at + (size_t) w] - d));
+            const double gl = same & 1 ? cx * (d - z[at - 1]) : 0,
+                         gr = same & 2 ? cx * (z[at + 1] - d) : 0,
+                         gu = same & 4 ? cy * (d - z[at - (size_t) w]) : 0,
+                         gb = same & 8 ? cy * (z[at + (size_t) w] - d) : 0;
+            x0 -= gl > 0 ? gl : 0;
+            x1 += gr > 0 ? gr : 0;
+            y0 -= gu > 0 ? gu : 0;
+            y1 += gb > 0 ? gb : 0;
             /* the texel centres c + 0.5 in [x0, x1) x [y0, y1) */
             if (!(x1 > 0.5 && x0 < w - 0.5 && y1 > 0.5 && y0 < h - 0.5))
                 continue;   /* (also what a NaN would give) */
@@ -765,28 +777,28 @@ int ef_shadow_soften(ef_shadow *m, double angle, int n, ef_err *err)
             for (int i = 0; i < w; ++i) {
                 float *v = &e[(size_t) j * (size_t) w + (size_t) i];
                 if (i > 0)
-                    *v = fminf(*v, v[-1] + st);
+                    *v = lessf(*v, v[-1] + st);
                 if (j > 0) {
                     const float *u = v - w;
-                    *v = fminf(*v, u[0] + st);
+                    *v = lessf(*v, u[0] + st);
                     if (i > 0)
-                        *v = fminf(*v, u[-1] + st);
+                        *v = lessf(*v, u[-1] + st);
                     if (i + 1 < w)
-                        *v = fminf(*v, u[1] + st);
+                        *v = lessf(*v, u[1] + st);
                 }
             }
         for (int j = h - 1; j >= 0; --j)
             for (int i = w - 1; i >= 0; --i) {
                 float *v = &e[(size_t) j * (size_t) w + (size_t) i];
                 if (i + 1 < w)
-                    *v = fminf(*v, v[1] + st);
+                    *v = lessf(*v, v[1] + st);
                 if (j + 1 < h) {
                     const float *u = v + w;
-                    *v = fminf(*v, u[0] + st);
+                    *v = lessf(*v, u[0] + st);
                     if (i > 0)
-                        *v = fminf(*v, u[-1] + st);
+                        *v = lessf(*v, u[-1] + st);
                     if (i + 1 < w)
-                        *v = fminf(*v, u[1] + st);
+                        *v = lessf(*v, u[1] + st);
                 }
             }
         /* below it strictly, whatever the sums' rounding */
