@@ -990,7 +990,7 @@ static void sun_convex(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
  * or underflow (hypot costs several times more). */
 static double len2(double x, double y)
 {
-    const double m = fmax(fabs(x), fabs(y));
+    const double ax = fabs(x), ay = fabs(y), m = ax > ay ? ax : ay;   /* (NaN: NaN below) */
     if (m < 1e150 && m > 1e-150)
         return sqrt(x * x + y * y);
     return m == 0 ? 0 : hypot(x, y);
@@ -1124,7 +1124,7 @@ static int lamp_series_pair(double sg, double ts, double h, double pa, double pD
     const double li = atan2(-zi * dz, ar * dr + zi * zi);
     /* Horner at z_D with the divided difference (p(z_D) - p(z_a)) / dz
      * alongside: q <- b + z_a q, b <- w_k + z_D b */
-    const int n = lamp_terms(fmax(na, nd));
+    const int n = lamp_terms(na > nd ? na : nd);
     double br = lamp_w[n], bi = 0, qr = 0, qi = 0;
     for (int k = n - 1; k >= 0; --k) {
         const double nqr = br + ar * qr - zi * qi, nqi = bi + ar * qi + zi * qr;
