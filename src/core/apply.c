@@ -209,9 +209,11 @@ typedef struct fast_span {
     int qj[EF_RECON_SPAN];               /* pixel of q[m] */
     unsigned char sky[EF_RECON_SPAN];
     unsigned char need_inf[EF_RECON_SPAN];
-    /* a sun's light (fast_block with sun): along r[j], along q[m]; and
-     * what each pixel adds over its coverage (the sun's or the sky's) */
-    double S[3][EF_RECON_SPAN], Sq[3][EF_RECON_SPAN], add[3][EF_RECON_SPAN];
+    /* a light's (fast_block with lit): along r[j], along q[m], along the
+     * far segments; the surface rays' tau; and what each pixel adds over
+     * its coverage (the lights' or the sky's) */
+    double S[3][EF_RECON_SPAN], Sq[3][EF_RECON_SPAN], Sf[3][EF_RECON_SPAN];
+    double taur[3][EF_RECON_SPAN], add[3][EF_RECON_SPAN];
     double a[EF_RECON_SPAN];             /* alpha as fogged, and whether the far */
     unsigned char shows[EF_RECON_SPAN];  /* part shows (lit spans only) */
 } fast_span;
@@ -395,29 +397,37 @@ EF_MULTIVERSION static void span_composite(const double *const T[3], const doubl
 #undef SPAN_COMPOSITE
 }
 
-/* The sun's light along r[0..n) into S[k][j], from the optical depths of
- * the last fast_tau_transmit (tau[k][j]). */
-static void sun_rays(const ef_fog_scene *s, const ef_light *sun, const ef_ray *r, int n,
-                     double (*tau)[EF_RECON_SPAN], double (*S)[EF_RECON_SPAN])
+/* Light l along r[0..n) into S[k][j]: a sun in one height fog from the
+ * optical depths tau[k][j] the span computed (ef_light_sun_span_eval),
+ * any other light by ef_light_rays; either is ef_light_inscatter's S, the
+ * same bits. */
+static void light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int n,
+                       double (*tau)[EF_RECON_SPAN], double (*S)[EF_RECON_SPAN])
 {
+    if (!ef_light_sun_span(s, l)) {
+        double *const Sk[3] = { S[0], S[1], S[2] };
+        ef_light_rays(s, l, r, n, Sk, NULL);
+        return;
+    }
     for (int j = 0; j < n; ++j) {
         const double tv[3] = { tau[0][j], tau[1][j], tau[2][j] };
         double v[3];
-        ef_light_sun_span_eval(s, sun, &r[j], tv, v);
+        ef_light_sun_span_eval(s, l, &r[j], tv, v);
         for (int k = 0; k < 3; ++k)
             S[k][j] = v[k];
     }
 }
 
-/* The span path of the unlit scenes, of one sun in one height fog (sun:
- * ef_light_sun_span; NULL: none) and of the sky light without lights
- * (sky): reconstruction, the components' optical depths, T, the light
- * (the sun's closed form from those depths, or sky_segment from T), and
+/* The span path of the unlit scenes, of lights without the sky light
+ * (lit: light_rays per light, a sun in one height fog from the span's
+ * optical depths) and of the sky light without lights (sky):
+ * reconstruction, the components' optical depths, T, the light (or
+ * sky_segment from T), and
  * span_composite, with add_lights', add_sky's and ef_composite's
  * operations in their order: the per-pixel path's bits. */
 EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, int w, int h,
                                        float *const rgb[3], float *alpha, const float *depth,
-                                       int depth_only, const ef_light *sun, int sky,
+                                       int depth_only, int lit, int sky,
                                        fast_span *sp)
 {
     const ef_fog_scene *s = pass->scene;
@@ -452,8 +462,8 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             const int colour = fast_tau_transmit(s, sp->r, n, sp, sp->T, 0);
             const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
             const double *Ti[3] = { T[0], T[1], T[2] };
-            if (sun)
-                sun_rays(s, sun, sp->r, n, sp->tau, sp->S);
+            if (lit)   /* the surface rays' depths, for a sun's closed form */
+                memcpy(sp->taur, sp->tau, sizeof sp->taur);
             int nq = 0;
             for (int j = 0; ninf && j < n; ++j) {
                 if (!sp->need_inf[j])
@@ -467,8 +477,6 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 /* Ti: T, then the far segments' T where they differ. */
                 double Tq[3][EF_RECON_SPAN];
                 fast_tau_transmit(s, sp->q, nq, sp, Tq, 1);
-                if (sun)
-                    sun_rays(s, sun, sp->q, nq, sp->tau, sp->Sq);
                 for (int k = 0; k < 3; ++k) {
                     memcpy(sp->Ti[k], T[k], (size_t) n * sizeof sp->Ti[k][0]);
                     for (int m = 0; m < nq; ++m)
@@ -478,27 +486,36 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             }
             /* the pixel's alpha as fogged (1 where damaged) and whether its
              * far part shows: add_lights' and add_sky's a and need_inf */
-            for (int j = 0; (sun || sky) && j < n; ++j) {
+            for (int j = 0; (lit || sky) && j < n; ++j) {
                 const double ain = pa ? pa[j] : 1.0;
                 sp->a[j] = isfinite(ain) ? ain : 1.0;
                 sp->shows[j] = (unsigned char) (fog_uncovered &&
                                                 !(sp->a[j] == 1.0 && isfinite(sp->r[j].dist)));
             }
-            if (sun) {
-                /* add_lights: a S + (1 - a) S_far, S_far being S where the
-                 * far segment is the pixel's own, which covers every pixel
-                 * whose far part shows but was not gathered above (a ray
-                 * infinite both ways) */
+            if (lit) {
+                /* add_lights: per light in the scene's order, from 0, a S +
+                 * (1 - a) S_far, S_far being S where the far segment is
+                 * the pixel's own, which covers every pixel whose far part
+                 * shows but was not gathered above (a ray infinite both
+                 * ways) */
                 for (int k = 0; k < 3; ++k)
                     for (int j = 0; j < n; ++j)
-                        sp->add[k][j] = sp->S[k][j];   /* S_far for now */
-                for (int m = 0; m < nq; ++m)
+                        sp->add[k][j] = 0.0;
+                for (int l = 0; l < s->nlight; ++l) {
+                    light_rays(s, &s->light[l], sp->r, n, sp->taur, sp->S);
                     for (int k = 0; k < 3; ++k)
-                        sp->add[k][sp->qj[m]] = sp->Sq[k][m];
-                for (int j = 0; j < n; ++j)
-                    for (int k = 0; k < 3; ++k)
-                        sp->add[k][j] = coverage_sum(sp->a[j], sp->shows[j], sp->S[k][j],
-                                                     sp->add[k][j]);
+                        memcpy(sp->Sf[k], sp->S[k], (size_t) n * sizeof sp->Sf[k][0]);
+                    if (nq) {
+                        light_rays(s, &s->light[l], sp->q, nq, sp->tau, sp->Sq);
+                        for (int m = 0; m < nq; ++m)
+                            for (int k = 0; k < 3; ++k)
+                                sp->Sf[k][sp->qj[m]] = sp->Sq[k][m];
+                    }
+                    for (int j = 0; j < n; ++j)
+                        for (int k = 0; k < 3; ++k)
+                            sp->add[k][j] += coverage_sum(sp->a[j], sp->shows[j], sp->S[k][j],
+                                                          sp->Sf[k][j]);
+                }
             } else if (sky) {
                 /* add_sky: sky_segment along the surface segment with its T,
                  * and where the far part shows along the far one with Ti */
@@ -522,7 +539,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             /* Pixels kept as they are (--sky keep) were evaluated too, and
              * are not written back. */
             span_composite(T, Ti, NULL, 0.0, s->color, n, pr, pg, pb, pa, sp->sky, keep_sky,
-                           sun || sky ? sp->add : NULL);
+                           lit || sky ? sp->add : NULL);
         }
     }
 }
@@ -577,19 +594,18 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
         depth_only &= s->comp[c].model->depth_only;
     }
     const int want_info = any_info && (stats || (mask & EF_AOV_ERROR));
-    /* one sun in one height fog: its closed form in the span path too */
-    const ef_light *sun = s->nlight == 1 && !s->sky_light && ef_light_sun_span(s, &s->light[0])
-                              ? &s->light[0] : NULL;
+    /* lights without the sky light: light_rays in the span path too */
+    const int lit = s->nlight > 0 && !s->sky_light;
     /* the sky light without lights: its term from T alone, in the span too */
     const int sky_only = s->nlight == 0 && s->sky_light != NULL;
-    if (!mask && !s->any_color && !want_info && (!ef_scene_lit(s) || sun || sky_only)) {
+    if (!mask && !s->any_color && !want_info && (!ef_scene_lit(s) || lit || sky_only)) {
         fast_span sp;
         int need_dist;
-        if (!sun && !sky_only && dist_path(s, &need_dist))
+        if (!lit && !sky_only && dist_path(s, &need_dist))
             dist_block(pass, x0, y0, w, h, rgb, alpha, depth, need_dist, &sp);
         else
-            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only && !sun && !sky_only,
-                       sun, sky_only, &sp);
+            fast_block(pass, x0, y0, w, h, rgb, alpha, depth, depth_only && !lit && !sky_only,
+                       lit, sky_only, &sp);
         return;
     }
     const int fog_uncovered = s->sky != EF_SKY_KEEP;

@@ -5,6 +5,7 @@
 #include "lit.h"
 #include "gk15.h"
 #include "shadow.h"
+#include "vmath.h"
 
 #include <complex.h>
 #include <float.h>
@@ -1141,68 +1142,369 @@ static int lamp_series_pair(double sg, double ts, double h, double pa, double pD
     return isfinite(*r) ? 0 : -1;
 }
 
-static int lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
-                       double h, double a, double D, double S[3], double E[3])
+/* One channel of lamp_closed for one segment: the integral per unit of
+ * scat e over [a, D] into *r and its rounding into *re, by the series pair
+ * where both ends lie in its circle and its rounding allows, else from
+ * the two ends' G (series or continued fraction). Returns 0, or -1 where
+ * G does not converge or the ends cancel (the caller integrates). The
+ * scalar form, for the segments lamp_kernel leaves. */
+static int lamp_unit1(double sg, double ts, double h, double a, double D, double *r, double *re)
 {
-    double out[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
+    if (isfinite(D)) {
+        /* both ends near the lamp's scale: the series pair */
+        const double ua = a - ts, uD = D - ts, da = len2(ua, h), dD = len2(uD, h);
+        const double pa = ua >= 0 ? ua + da : h * h / (da - ua);
+        const double pD = uD >= 0 ? uD + dD : h * h / (dD - uD);
+        if (lamp_series_pair(sg, ts, h, pa, pD, (D - a) * (pa + pD) / (da + dD), r, re) == 0 &&
+            *re <= 1e-13 * fabs(*r))
+            return 0;
+    }
+    double v[2] = { 0, 0 }, mag = 0;
+    const double ends[2] = { a, D };
+    for (int i = 0; i < 2; ++i) {
+        const double t = ends[i];
+        if (!isfinite(t))
+            continue;   /* F(inf) = 0 */
+        const double u = t - ts, d = len2(u, h);
+        const double w = u >= 0 ? u + d : h * h / (d - u);   /* h w, really */
+        double complex G;
+        if (g_e1(sg * w - I * (sg * h), &G))
+            return -1;
+        const double x = exp(-sg * (t + d));
+        v[i] = x == 0 ? 0 : x * cimag(G);
+        mag += x == 0 ? 0 : x * sqrt(norm2(G));
+    }
+    *r = 2 / h * (v[0] - v[1]);
+    *re = 2 / h * mag * 2e-15;   /* the ends' rounding */
+    return *re <= 1e-13 * fabs(*r) && isfinite(*r) ? 0 : -1;
+}
+
+/* Four segments of one lamp at once: their ts, h (> 0) and ends a < D
+ * (D may be infinite), one sigma. */
+typedef struct lamp4 {
+    double ts[4], h[4], a[4], D[4];
+} lamp4;
+
+/* Horner over lamp_w for four lanes of n[i] terms each (the loop runs to
+ * the largest; a lane starts at its own n, as lamp_series_pair and g_e1
+ * do: its value is the same whatever its neighbours), at z = (zr, zi),
+ * with (pair) the divided difference from za = (ar, zi) alongside into
+ * (qr, qi). Pair: b <- w_k + z b, q <- b + za q for k = n - 1 .. 0 from
+ * b = w_n; series: b <- w_k + z b for k = n - 1 .. 1. */
+EF_INLINE void lamp_horner4(const v4di *n, const v4d *zr, const v4d *zi, const v4d *ar, int pair,
+                            v4d *br, v4d *bi, v4d *qr, v4d *qi)
+{
+    const v4d zero = { 0, 0, 0, 0 };
+    int top = 0, low = 64;
+    for (int i = 0; i < 4; ++i) {
+        top = (*n)[i] > top ? (int) (*n)[i] : top;
+        low = (*n)[i] < low ? (int) (*n)[i] : low;
+    }
+    *br = *bi = *qr = *qi = zero;
+    const int end = pair ? 0 : 1;
+    int k = top;
+    /* down to the lowest start, each lane held at zero above its own */
+    for (; k >= low && k >= end; --k) {
+        const v4d nqr = *br + *ar * *qr - *zi * *qi, nqi = *bi + *ar * *qi + *zi * *qr;
+        const v4d nbr = lamp_w[k] + *zr * *br - *zi * *bi, nbi = *zr * *bi + *zi * *br;
+        const v4di below = *n > k, start = *n == k;
+        const v4d wk = { lamp_w[k], lamp_w[k], lamp_w[k], lamp_w[k] };
+        v_sel(br, &below, &nbr, &zero);
+        v_sel(br, &start, &wk, br);
+        v_sel(bi, &below, &nbi, &zero);
+        if (pair) {
+            v_sel(qr, &below, &nqr, &zero);
+            v_sel(qi, &below, &nqi, &zero);
+        }
+    }
+    /* then every lane under way */
+    for (; k >= end; --k) {
+        const v4d nqr = *br + *ar * *qr - *zi * *qi, nqi = *bi + *ar * *qi + *zi * *qr;
+        const v4d nbr = lamp_w[k] + *zr * *br - *zi * *bi, nbi = *zr * *bi + *zi * *br;
+        *br = nbr;
+        *bi = nbi;
+        if (pair) {
+            *qr = nqr;
+            *qi = nqi;
+        }
+    }
+}
+
+/* lamp_terms per lane, on vectors (each comparison true is -1) */
+EF_INLINE void lamp_terms4(const v4d *r2, v4di *n)
+{
+    *n = 12 - 3 * (*r2 > 0.0625) - 2 * (*r2 > 0.25) - (*r2 > 0.5625) - (*r2 > 1.0) -
+         2 * (*r2 > 1.5625);
+}
+
+/* sqrt(x^2 + y^2) per lane, and in ok whether len2 takes that form (its
+ * magnitudes within 1e-150 .. 1e150), so that the value is len2's. */
+EF_INLINE void len2_4(const v4d *x, const v4d *y, v4d *o, v4di *ok)
+{
+    const v4d s = *x * *x + *y * *y;
+    for (int i = 0; i < 4; ++i) {
+        const double ax = fabs((*x)[i]), ay = fabs((*y)[i]), m = ax > ay ? ax : ay;
+        (*o)[i] = sqrt(s[i]);
+        (*ok)[i] = m < 1e150 && m > 1e-150 ? -1 : 0;
+    }
+}
+
+/* g_e1's continued fraction for the lanes of live (|z| >= 1.5), each
+ * lane's iterations stopping at its own convergence (its value is the
+ * same whatever its neighbours): G into (Gr, Gi), and in conv whether it
+ * converged within 2000 terms. */
+EF_INLINE void lamp_cf4(const v4d *zr, const v4d *zi, const v4di *live_in, v4d *Gr, v4d *Gi,
+                        v4di *conv)
+{
+    const v4d tiny = { 1e-300, 1e-300, 1e-300, 1e-300 };
+    v4d fr = *zr + 1.0, fi = *zi, Cr = fr, Ci = fi, Dr = fr * 0.0, Di = Dr;
+    v4di live = *live_in;
+    *conv = live & 0;
+    for (int j = 1; j < 2000 && v_any(&live); ++j) {
+        const v4d br = *zr + (2.0 * j + 1);
+        const double a = -(double) j * j;
+        v4d nDr = br + a * Dr, nDi = *zi + a * Di;
+        const v4di dz = (nDr == 0.0) & (nDi == 0.0);
+        v_sel(&nDr, &dz, &tiny, &nDr);
+        const v4d cn = Cr * Cr + Ci * Ci;
+        v4d nCr = br + a * Cr / cn;
+        const v4d nCi = *zi - a * Ci / cn;
+        const v4di cz = (nCr == 0.0) & (nCi == 0.0);
+        v_sel(&nCr, &cz, &tiny, &nCr);
+        const v4d dn = nDr * nDr + nDi * nDi;
+        nDr = nDr / dn;
+        nDi = -nDi / dn;
+        const v4d er = nCr * nDr - nCi * nDi, ei = nCr * nDi + nCi * nDr;
+        const v4d nfr = fr * er - fi * ei, nfi = fr * ei + fi * er;
+        v_sel(&Dr, &live, &nDr, &Dr);
+        v_sel(&Di, &live, &nDi, &Di);
+        v_sel(&Cr, &live, &nCr, &Cr);
+        v_sel(&Ci, &live, &nCi, &Ci);
+        v_sel(&fr, &live, &nfr, &fr);
+        v_sel(&fi, &live, &nfi, &fi);
+        const v4di done = live & ((er - 1.0) * (er - 1.0) + ei * ei < 1e-32);
+        *conv |= done;
+        live &= ~done;
+    }
+    const v4d fn = fr * fr + fi * fi;
+    *Gr = fr / fn;
+    *Gi = -(fi / fn);
+}
+
+/* lamp_unit1 for four lanes on vectors: the series pair as
+ * lamp_series_pair computes it; where that is not taken, the two ends'
+ * F = e^-(sg ts) e^-(i sg h) E1(z) (x e^z = e^-(sg ts) at every end: one
+ * exp and one sincos per segment, E1 = -gamma - log z - series), each end
+ * inside the series' circle. st[i]: 1 done (r, re), -1 the ends cancel
+ * (the caller integrates), 0 left to lamp_unit1 (an end outside the
+ * circle, or a value beyond vmath.h's ranges). */
+EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4], int st[4])
+{
+    v4d ts, h, a, D;
+    memcpy(&ts, in->ts, sizeof ts);
+    memcpy(&h, in->h, sizeof h);
+    memcpy(&a, in->a, sizeof a);
+    memcpy(&D, in->D, sizeof D);
+    const v4di finD = D < INFINITY;
+    const v4d zero = { 0, 0, 0, 0 }, ua = a - ts, uD0 = D - ts;
+    v4d uD;
+    v_sel(&uD, &finD, &uD0, &zero);   /* no inf - inf below */
+    v4d da, dD;
+    v4di okA, okD;
+    len2_4(&ua, &h, &da, &okA);
+    len2_4(&uD, &h, &dD, &okD);
+    const v4d h2 = h * h, paf = ua + da, pab = h2 / (da - ua), pDf = uD + dD,
+              pDb = h2 / (dD - uD);
+    v4d pa, pD;
+    const v4di fa = ua >= 0.0, fD = uD >= 0.0;
+    v_sel(&pa, &fa, &paf, &pab);
+    v_sel(&pD, &fD, &pDf, &pDb);
+    const v4d dp = (D - a) * (pa + pD) / (da + dD);
+    const v4d ar = sg * pa, dr = sg * pD, zi = -sg * h, dz = sg * dp;
+    const v4d na = ar * ar + zi * zi, nd = dr * dr + zi * zi, sts = sg * ts;
+    /* the vector functions' ranges: exp's argument, log's normal inputs;
+     * each end by the series inside its circle, else by the continued
+     * fraction with e^-(sg (t + d)) */
+    const v4di sts_ok = (sts > -700.0) & (sts < 700.0);
+    const v4di ser_a = (na > 1e-200) & (na < 2.25), ser_D = (nd > 1e-200) & (nd < 2.25);
+    const v4d xa_arg = sg * (a + da), xD_arg = sg * (D + dD);
+    const v4di cf_a = (na >= 2.25) & (na < 1e300) & (xa_arg < 700.0);
+    const v4di cf_D = (nd >= 2.25) & (nd < 1e300) & (xD_arg < 700.0);
+    const v4di pair = okA & okD & finD & sts_ok & ser_a & ser_D;
+    const v4di ends = okA & ((ser_a & sts_ok) | cf_a) &
+                      (~finD | (okD & ((ser_D & sts_ok) | cf_D)));
+    const v4d msts = -sts, sgh = sg * h;
+    v4d E, sn, cs;
+    v_exp(&msts, &E);
+    v_sincos(&sgh, &sn, &cs);
+    const v4d f = 2.0 / h * E;
+    v4di nl, nla, nld;
+    lamp_terms4(&na, &nla);
+    lamp_terms4(&nd, &nld);
+    const v4di dbig = nld > nla;
+    nl = (nld & dbig) | (nla & ~dbig);
+    v4d rp = zero, rpe = zero;
+    v4di done = { 0, 0, 0, 0 };
+    if (v_any(&pair)) {
+        const v4d x1 = dz * (ar + dr) / na, y = -zi * dz, x = ar * dr + zi * zi;
+        v4d lr, li, br, bi, qr, qi;
+        v_log1p(&x1, &lr);
+        lr = lr * 0.5;
+        v_atan2(&y, &x, &li);
+        lamp_horner4(&nl, &dr, &zi, &ar, 1, &br, &bi, &qr, &qi);
+        const v4d Vr = lr + dz * qr, Vi = li + dz * qi;
+        rp = f * (cs * Vi - sn * Vr);
+        v4d m2 = Vr * Vr + Vi * Vi;
+        for (int i = 0; i < 4; ++i)
+            m2[i] = sqrt(m2[i]);
+        rpe = f * m2 * 1e-15;
+        const v4d arp = (v4d) ((v4di) rp & 0x7fffffffffffffffLL);
+        done = pair & (arp < INFINITY) & (rpe <= 1e-13 * arp);
+    }
+    v4d re2 = zero, ree = zero;
+    const v4di need = ends & ~done;
+    v4di bad = { 0, 0, 0, 0 };   /* a continued fraction that did not converge */
+    if (v_any(&need)) {
+        /* Im F and |F| at each end (D's where finite), then their
+         * difference and sum */
+        v4d V = zero, mag = zero;
+        for (int e = 0; e < 2; ++e) {
+            const v4d zr = e ? dr : ar, r2 = e ? nd : na, xarg = e ? xD_arg : xa_arg;
+            const v4di ser = (e ? ser_D : ser_a) & need, cf = (e ? cf_D : cf_a) & need;
+            v4d vi = zero, m = zero;
+            if (v_any(&ser)) {
+                v4di ne;
+                lamp_terms4(&r2, &ne);
+                v4d lg, th, sr, si, dummy_r, dummy_i;
+                v_log(&r2, &lg);
+                v_atan2(&zi, &zr, &th);
+                lamp_horner4(&ne, &zr, &zi, &zr, 0, &sr, &si, &dummy_r, &dummy_i);
+                const v4d sumr = zr * sr - zi * si, sumi = zr * si + zi * sr;
+                const v4d Er = (-0.57721566490153286061 - 0.5 * lg) - sumr, Ei = -th - sumi;
+                v4d m2 = Er * Er + Ei * Ei;
+                for (int i = 0; i < 4; ++i)
+                    m2[i] = sqrt(m2[i]);
+                const v4d svi = E * (cs * Ei - sn * Er), sm = E * m2;
+                v_sel(&vi, &ser, &svi, &vi);
+                v_sel(&m, &ser, &sm, &m);
+            }
+            if (v_any(&cf)) {
+                v4d Gr, Gi, x;
+                v4di conv;
+                lamp_cf4(&zr, &zi, &cf, &Gr, &Gi, &conv);
+                bad |= cf & ~conv;
+                const v4d mx = -xarg;
+                v_exp(&mx, &x);
+                v4d m2 = Gr * Gr + Gi * Gi;
+                for (int i = 0; i < 4; ++i)
+                    m2[i] = sqrt(m2[i]);
+                const v4d cvi = x * Gi, cm = x * m2;
+                v_sel(&vi, &cf, &cvi, &vi);
+                v_sel(&m, &cf, &cm, &m);
+            }
+            if (e == 0) {
+                V = vi;
+                mag = m;
+            } else {
+                const v4d dV = V - vi, dm = mag + m;
+                v_sel(&V, &finD, &dV, &V);
+                v_sel(&mag, &finD, &dm, &mag);
+            }
+        }
+        const v4d h2h = 2.0 / h;
+        re2 = h2h * V;
+        ree = h2h * mag * 2e-15;
+    }
+    for (int i = 0; i < 4; ++i) {
+        if (done[i]) {
+            r[i] = rp[i];
+            re[i] = rpe[i];
+            st[i] = 1;
+        } else if (need[i]) {
+            r[i] = re2[i];
+            re[i] = ree[i];
+            st[i] = !bad[i] && ree[i] <= 1e-13 * fabs(re2[i]) && isfinite(re2[i]) ? 1 : -1;
+        } else {
+            st[i] = 0;
+        }
+    }
+}
+
+/* lamp_kernel's lanes, with lamp_unit1 for those it leaves: per lane 0 with
+ * r and re, or -1 (the caller integrates). */
+EF_MULTIVERSION static void lamp_unit4(double sg, const lamp4 *in, double r[4], double re[4],
+                                       int st[4])
+{
+    lamp_kernel(sg, in, r, re, st);
+    for (int i = 0; i < 4; ++i)
+        st[i] = st[i] == 1 ? 0
+                : st[i] == -1 ? -1
+                              : lamp_unit1(sg, in->ts[i], in->h[i], in->a[i], in->D[i], &r[i],
+                                           &re[i]);
+}
+
+/* lamp_closed for four segments of one medium (sig, scat) and lamp (e):
+ * per lane S and E added to, and st[i] 0, or -1 with nothing added where
+ * a channel's closed form does not hold. */
+static void lamp_closed4(const double sig[3], const double scat[3], const double e[3],
+                         const lamp4 *in, double S[4][3], double E[4][3], int st[4])
+{
+    double out[4][3] = { { 0 } }, err[4][3] = { { 0 } };
     /* the integral per unit of scat e, and its rounding, at sig[have]:
      * channels of the same sigma take it (grey fog, coloured lamps) */
-    double unit = 0, unit_e = 0;
+    double unit[4] = { 0 }, unit_e[4] = { 0 };
     int have = -1;
+    st[0] = st[1] = st[2] = st[3] = 0;
     for (int k = 0; k < 3; ++k) {
         if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0)
             continue;
-        if (have >= 0 && sig[k] == sig[have]) {
-            out[k] = unit * scat[k] * e[k];
-            err[k] = unit_e * scat[k] * e[k];
-            continue;
+        if (have < 0 || sig[k] != sig[have]) {
+            int ust[4];
+            lamp_unit4(sig[k], in, unit, unit_e, ust);
+            for (int i = 0; i < 4; ++i)
+                st[i] |= ust[i];
+            have = k;
         }
-        if (isfinite(D)) {
-            /* both ends near the lamp's scale: the series pair */
-            const double ua = a - ts, uD = D - ts, da = len2(ua, h), dD = len2(uD, h);
-            const double pa = ua >= 0 ? ua + da : h * h / (da - ua);
-            const double pD = uD >= 0 ? uD + dD : h * h / (dD - uD);
-            double r, re;
-            if (lamp_series_pair(sig[k], ts, h, pa, pD, (D - a) * (pa + pD) / (da + dD), &r,
-                                 &re) == 0 &&
-                re <= 1e-13 * fabs(r)) {
-                unit = r;
-                unit_e = re;
-                have = k;
-                out[k] = r * scat[k] * e[k];
-                err[k] = re * scat[k] * e[k];
-                continue;
-            }
+        for (int i = 0; i < 4; ++i) {
+            out[i][k] = unit[i] * scat[k] * e[k];
+            err[i][k] = unit_e[i] * scat[k] * e[k];
         }
-        double v[2] = { 0, 0 }, mag = 0;
-        const double ends[2] = { a, D };
-        for (int i = 0; i < 2; ++i) {
-            const double t = ends[i];
-            if (!isfinite(t))
-                continue;   /* F(inf) = 0 */
-            const double u = t - ts, d = len2(u, h);
-            const double w = u >= 0 ? u + d : h * h / (d - u);   /* h w, really */
-            double complex G;
-            if (g_e1(sig[k] * w - I * (sig[k] * h), &G))
-                return -1;
-            const double x = exp(-sig[k] * (t + d));
-            v[i] = x == 0 ? 0 : x * cimag(G);
-            mag += x == 0 ? 0 : x * sqrt(norm2(G));
-        }
-        const double r = 2 / h * (v[0] - v[1]);
-        if (!(2 / h * mag * 2e-15 <= 1e-13 * fabs(r)) || !isfinite(r))
-            return -1;
-        unit = r;
-        unit_e = 2 / h * mag * 2e-15;   /* the ends' rounding */
-        have = k;
-        out[k] = r * scat[k] * e[k];
-        err[k] = unit_e * scat[k] * e[k];
     }
-    for (int k = 0; k < 3; ++k) {
-        S[k] += out[k];
-        E[k] += err[k];
-    }
-    return 0;
+    for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 3 && st[i] == 0; ++k) {
+            S[i][k] += out[i][k];
+            E[i][k] += err[i][k];
+        }
+}
+
+/* The uniform fog's extinction sig (its components' sum, in their order)
+ * and isotropic scattering scat per channel, as inscatter_range gives
+ * them to lamp_closed. */
+static void lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3])
+{
+    for (int k = 0; k < 3; ++k)
+        sig[k] = scat[k] = 0;
+    for (int i = 0; i < s->ncomp; ++i)
+        for (int k = 0; k < 3; ++k) {
+            sig[k] += s->comp[i].p[k];
+            if (s->comp[i].p[k] > 0)
+                scat[k] += s->comp[i].p[k] * albedo(&s->comp[i], k) / (4 * PI);
+        }
+}
+
+/* lamp_closed4 for one segment (its lanes all alike): the same bits as
+ * the segment in any lane of a span's batch. Returns 0, or -1 with
+ * nothing added. */
+static int lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
+                       double h, double a, double D, double S[3], double E[3])
+{
+    const lamp4 in = { { ts, ts, ts, ts }, { h, h, h, h }, { a, a, a, a }, { D, D, D, D } };
+    double S4[4][3] = { { S[0], S[1], S[2] } }, E4[4][3] = { { E[0], E[1], E[2] } };
+    int st[4];
+    lamp_closed4(sig, scat, e, &in, S4, E4, st);
+    memcpy(S, S4[0], 3 * sizeof S[0]);
+    memcpy(E, E4[0], 3 * sizeof E[0]);
+    return st[0];
 }
 
 /* --------------------------------------------------------------- driver */
@@ -1766,12 +2068,9 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
         for (int i = 0; i < s->ncomp; ++i)
             iso &= s->comp[i].phase == EF_PHASE_ISO;
         if (l->kind == EF_LIGHT_POINT && q.uniform && iso && l->radius == 0 && q.h > 0) {
-            double scat[3] = { 0, 0, 0 };
-            for (int i = 0; i < s->ncomp; ++i)
-                for (int k = 0; k < 3; ++k)
-                    if (s->comp[i].p[k] > 0)
-                        scat[k] += s->comp[i].p[k] * albedo(&s->comp[i], k) / (4 * PI);
-            if (lamp_closed(q.sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)
+            double sig[3], scat[3];
+            lamp_medium(s, sig, scat);
+            if (lamp_closed(sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)
                 return;
             /* The two ends cancelled: a segment short beside its distance
              * from the lamp, where the integrand is smooth in t. One
@@ -1919,6 +2218,103 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
  * last (shadow.h). */
 #define LIT_STACK 256
 #define MAX_LIT 65536
+
+/* lamp_line's ts and h for the n rays r[j] (h < 0: the ray's magnitudes
+ * leave len2's plain form, so lamp_line gives it), in a loop the compiler
+ * vectorises: the same operations, the same bits. */
+EF_MULTIVERSION static void lamp_lines(const ef_light *l, const ef_ray *r, int n, double *ts,
+                                       double *h)
+{
+    double F[8][EF_SPAN];
+    rays_soa(r, n, F);
+    const double px = l->pos[0], py = l->pos[1], pz = l->pos[2];
+    for (int j = 0; j < n; ++j) {
+        const double dx = F[EF_F_DIR][j], dy = F[EF_F_DIR + 1][j], dz = F[EF_F_DIR + 2][j];
+        const double wx = px - F[EF_F_ORG][j], wy = py - F[EF_F_ORG + 1][j],
+                     wz = pz - F[EF_F_ORG + 2][j];
+        ts[j] = wx * dx + wy * dy + wz * dz;
+        const double cx = wy * dz - wz * dy, cy = wz * dx - wx * dz, cz = wx * dy - wy * dx;
+        const double ax = fabs(cx), ay = fabs(cy), az = fabs(cz);
+        const double m1 = ax > ay ? ax : ay, xy = sqrt(cx * cx + cy * cy);
+        const double m2 = xy > az ? xy : az, v = sqrt(xy * xy + cz * cz);
+        const int plain = m1 < 1e150 && m1 > 1e-150 && m2 < 1e150 && m2 > 1e-150;
+        h[j] = plain ? v : -1.0;
+    }
+}
+
+/* Whether ef_light_inscatter takes l's light in s from lamp_closed
+ * wherever a ray passes beside the lamp: a point lamp of radius 0, no
+ * shadow, in fog that is uniform and isotropic throughout. */
+static int lamp_batch(const ef_fog_scene *s, const ef_light *l)
+{
+    if (l->kind != EF_LIGHT_POINT || l->radius != 0 || l->shadow || s->ncomp == 0)
+        return 0;
+    for (int i = 0; i < s->ncomp; ++i)
+        if (s->comp[i].model->tau_info || !is_uniform(&s->comp[i]) ||
+            s->comp[i].phase != EF_PHASE_ISO)
+            return 0;
+    return 1;
+}
+
+void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int n,
+                   double *const S[3], double *const E[3])
+{
+    double sig[3], scat[3];
+    const int batch = lamp_batch(s, l) && (l->e[0] != 0 || l->e[1] != 0 || l->e[2] != 0);
+    if (batch)
+        lamp_medium(s, sig, scat);
+    int idx[4], m = 0;
+    lamp4 in;
+    double tsv[EF_SPAN], hv[EF_SPAN];
+    for (int j = 0; j <= n; ++j) {
+        if (batch && j % EF_SPAN == 0 && j < n)
+            lamp_lines(l, r + j, n - j < EF_SPAN ? n - j : EF_SPAN, tsv, hv);
+        if (j < n) {
+            double w[3], ts = tsv[j % EF_SPAN], h = hv[j % EF_SPAN];
+            const int beside = batch && r[j].dist > 0;
+            if (beside && !(h >= 0))
+                lamp_line(l, &r[j], w, &ts, &h);
+            if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
+                double v[3], ve[3];
+                ef_light_inscatter(s, l, &r[j], v, ve);
+                for (int k = 0; k < 3; ++k) {
+                    S[k][j] = v[k];
+                    if (E)
+                        E[k][j] = ve[k];
+                }
+                continue;
+            }
+            in.ts[m] = ts;
+            in.h[m] = h;
+            in.a[m] = 0;
+            in.D[m] = r[j].dist;
+            idx[m++] = j;
+        }
+        if (m == 4 || (j == n && m > 0)) {
+            for (int i = m; i < 4; ++i) {   /* the last batch: its last ray again */
+                in.ts[i] = in.ts[m - 1];
+                in.h[i] = in.h[m - 1];
+                in.a[i] = in.a[m - 1];
+                in.D[i] = in.D[m - 1];
+            }
+            double S4[4][3] = { { 0 } }, E4[4][3] = { { 0 } };
+            int st[4];
+            lamp_closed4(sig, scat, l->e, &in, S4, E4, st);
+            for (int i = 0; i < m; ++i) {
+                const int jj = idx[i];
+                if (st[i]) {   /* the ends cancel: ef_light_inscatter integrates */
+                    ef_light_inscatter(s, l, &r[jj], S4[i], E4[i]);
+                }
+                for (int k = 0; k < 3; ++k) {
+                    S[k][jj] = S4[i][k];
+                    if (E)
+                        E[k][jj] = E4[i][k];
+                }
+            }
+            m = 0;
+        }
+    }
+}
 
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3])

@@ -21,6 +21,12 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
 
+/* ef_light_inscatter for each of the n rays r[j]: S[k][j] and, where E is
+ * not NULL, the estimate E[k][j], the same bits. A point lamp in uniform
+ * isotropic fog takes its closed form four rays at a time (on vectors). */
+void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int n,
+                   double *const S[3], double *const E[3]);
+
 /* Where along r (org the camera, dir unit), strictly inside (a, b), light
  * l's in-scatter per unit optical depth jumps or turns fast: a lamp's
  * closest approach and points 4^j times its distance from the line either
