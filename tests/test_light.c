@@ -341,6 +341,84 @@ static void test_point_uniform(void **state)
     }
 }
 
+/* ef_light_rays against ef_light_inscatter ray by ray: the same bits, S
+ * and E, for rays batched four at a time on vectors whatever their
+ * neighbours (shuffled, and a batch left partial), among them rays the
+ * batch leaves to the scalar path (through the lamp, of length 0) and
+ * every method of the closed form (the series pair, the ends' series, the
+ * continued fraction at far ends, a lamp behind the camera, ends that
+ * cancel and are integrated). The values themselves are
+ * test_point_uniform's (ef_light_inscatter against the reference). */
+static void test_rays_batch(void **state)
+{
+    (void) state;
+    static const char *const fogs[][3] = {
+        { "exp:density=0.02" },
+        { "exp:density=0.01,0.02,0.04:albedo=0.5,0.7,0.9", "exp:density=0.03" },
+        { "exp:density=1e-9" },
+        { "exp:density=3" },
+    };
+    static const char *const lamps[] = { "point:position=2,3,-20:intensity=100",
+                                         "point:position=0.5,1,40:intensity=1e4" };
+    unsigned seed = 99;
+    for (size_t f = 0; f < sizeof fogs / sizeof fogs[0]; ++f)
+        for (size_t l = 0; l < 2; ++l) {
+            ef_fog_scene s;
+            scene_of(&s, fogs[f], lamps[l]);
+            const double org[3] = { 0, 1.7, 0 };
+            ef_scene_bind(&s, org);
+            ef_ray r[EF_RECON_SPAN];
+            for (int j = 0; j < EF_RECON_SPAN; ++j) {
+                double v[4];
+                for (int i = 0; i < 4; ++i) {
+                    seed = seed * 1103515245u + 12345u;
+                    v[i] = (double) ((seed >> 8) & 0xffffff) / 16777216.0;
+                }
+                const double dists[] = { INFINITY, 0.01 + 0.5 * v[3], 5 + 40 * v[3],
+                                         300 + 2000 * v[3], 0 };
+                r[j] = ray_of(org, 0.8 * v[0] - 0.4, 0.4 * v[1] - 0.2, -1 + 2 * (v[2] < 0.1),
+                              dists[(int) (v[3] * 4.999)]);
+            }
+            /* a ray through the lamp itself (h = 0: the scalar path) */
+            const ef_light *lp = &s.light[0];
+            r[7] = ray_of(org, lp->pos[0] - org[0], lp->pos[1] - org[1], lp->pos[2] - org[2],
+                          INFINITY);
+            for (int n = EF_RECON_SPAN; n >= 13; n -= EF_RECON_SPAN - 13) {
+                double Sv[3][EF_RECON_SPAN], Ev[3][EF_RECON_SPAN];
+                double *const Sk[3] = { Sv[0], Sv[1], Sv[2] }, *const Ek[3] = { Ev[0], Ev[1], Ev[2] };
+                ef_light_rays(&s, lp, r, n, Sk, Ek);
+                for (int j = 0; j < n; ++j) {
+                    double S[3], E[3];
+                    ef_light_inscatter(&s, lp, &r[j], S, E);
+                    for (int k = 0; k < 3; ++k) {
+                        assert_memory_equal(&S[k], &Sv[k][j], sizeof S[k]);
+                        assert_memory_equal(&E[k], &Ev[k][j], sizeof E[k]);
+                    }
+                }
+                /* shuffled: each ray's bits whatever its neighbours */
+                for (int j = n - 1; j > 0; --j) {
+                    seed = seed * 1103515245u + 12345u;
+                    const int i = (int) ((seed >> 8) % (unsigned) (j + 1));
+                    const ef_ray t = r[i];
+                    r[i] = r[j];
+                    r[j] = t;
+                }
+                double S2[3][EF_RECON_SPAN], E2[3][EF_RECON_SPAN];
+                double *const S2k[3] = { S2[0], S2[1], S2[2] }, *const E2k[3] = { E2[0], E2[1], E2[2] };
+                ef_light_rays(&s, lp, r, n, S2k, E2k);
+                for (int j = 0; j < n; ++j) {
+                    double S[3], E[3];
+                    ef_light_inscatter(&s, lp, &r[j], S, E);
+                    for (int k = 0; k < 3; ++k) {
+                        assert_memory_equal(&S[k], &S2[k][j], sizeof S[k]);
+                        assert_memory_equal(&E[k], &E2[k][j], sizeof E[k]);
+                    }
+                }
+            }
+            ef_scene_free(&s);
+        }
+}
+
 /* The sun in one constant convex volume (closed form per piece of the
  * sun's exit path): from outside through the box, from inside, a low sun,
  * a sun along a face (n.l = 0), a view ray along a face, a sliver, a
@@ -724,13 +802,29 @@ static void test_cli(void **state)
      * from the optical depths the span already has); any AOV takes the
      * per-pixel path, which the reference comparisons above check. Both
      * give the same bits, alpha edges, kept sky and a sky shell included. */
+    /* So do every other light without the sky light (ef_light_rays per
+     * light, point lamps in uniform isotropic fog four rays at a time on
+     * vectors, the rest ray by ray): two lamps in chromatic fog, a
+     * lamp behind the camera with a spot, a lamp in height fog beside a
+     * sun (the general quadrature). */
     static const char *const skies[] = { "", "--sky keep", "--sky distance=500" };
-    for (int k = 0; k < 3; ++k) {
-        const char *fog = "--fog height:density=0.05,0.06,0.08:falloff=0.3:base=0:phase=hg:g=0.6:"
-                          "albedo=0.9,0.8,0.7 --light sun:towards=0.2,0.3,-1:intensity=3:"
-                          "color=1,0.9,0.8";
-        assert_int_equal(tu_runf("'%s' -o '%s' %s %s", in, a, fog, skies[k]), 0);
-        assert_int_equal(tu_runf("'%s' -o '%s' %s %s --aov T", in, b, fog, skies[k]), 0);
+    static const char *const fogs[] = {
+        "--fog height:density=0.05,0.06,0.08:falloff=0.3:base=0:phase=hg:g=0.6:"
+        "albedo=0.9,0.8,0.7 --light sun:towards=0.2,0.3,-1:intensity=3:color=1,0.9,0.8",
+        "--fog exp:density=0.02,0.03,0.05:albedo=0.9,0.8,0.7 --fog exp:density=0.01 "
+        "--light point:position=2,3,-20:intensity=100 "
+        "--light point:position=-6,2,-60:intensity=200:color=1,0.5,0.2",
+        "--fog exp:density=0.04 --light point:position=1,2.5,6:intensity=100 "
+        "--light spot:position=0,6,-20:aim=0,-1,0:cone=40:blend=0.2:intensity=300",
+        "--fog height:density=0.05:falloff=0.3:base=0 --light point:position=2,3,-20:"
+        "intensity=50 --light sun:towards=0,0.3,-1:intensity=2",
+    };
+    for (int k = 0; k < 12; ++k) {
+        const char *fog = fogs[k / 3];
+        if (k / 3 == 3 && k % 3)   /* the quadrature's scene once */
+            continue;
+        assert_int_equal(tu_runf("'%s' -o '%s' %s %s", in, a, fog, skies[k % 3]), 0);
+        assert_int_equal(tu_runf("'%s' -o '%s' %s %s --aov T", in, b, fog, skies[k % 3]), 0);
         for (int ch = 0; ch < 4; ++ch) {
             const char *name = (const char *[]) { "R", "G", "B", "A" }[ch];
             float *x = tu_read_channel(a, 0, name, &w, &h), *y = tu_read_channel(b, 0, name, &w2, &h2);
@@ -775,7 +869,8 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_phase),        cmocka_unit_test(test_sun_height),
         cmocka_unit_test(test_sun_halfspace), cmocka_unit_test(test_sun_planet),
-        cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_general),
+        cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_rays_batch),
+        cmocka_unit_test(test_general),
         cmocka_unit_test(test_sun_convex),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),
         cmocka_unit_test(test_errors),       cmocka_unit_test(test_cli),
