@@ -7,6 +7,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* double -> float without the undefined behaviour of an out-of-range cast. */
@@ -65,34 +66,83 @@ static void coverage_light(const ef_fog_scene *s, const ef_light *l, const ef_ra
     }
 }
 
+/* Every light's S and E along a span's rays and along their far segments
+ * (Sf, Ef: S and E where the far segment is the ray's own), from
+ * ef_light_rays: coverage_light's values, the same bits. */
+typedef struct light_cache {
+    double S[3][EF_RECON_SPAN], E[3][EF_RECON_SPAN], Sf[3][EF_RECON_SPAN], Ef[3][EF_RECON_SPAN];
+} light_cache;
+
+/* Fills lc[l] for every light over r[0..n) (need_inf[j]: pixel j's far
+ * part shows; skip[j]: a kept pixel, not evaluated). */
+static void light_cache_fill(const ef_fog_scene *s, const ef_ray *r, int n,
+                             const unsigned char *need_inf, const unsigned char *skip,
+                             light_cache *lc)
+{
+    ef_ray far[EF_RECON_SPAN];
+    int fj[EF_RECON_SPAN], nf = 0;
+    for (int j = 0; j < n; ++j)
+        if (!skip[j] && need_inf[j] && !ef_scene_far_ray(s, &r[j], &far[nf]))
+            fj[nf++] = j;
+    for (int l = 0; l < s->nlight; ++l) {
+        light_cache *c = &lc[l];
+        double *const S[3] = { c->S[0], c->S[1], c->S[2] }, *const E[3] = { c->E[0], c->E[1], c->E[2] };
+        ef_light_rays(s, &s->light[l], r, n, S, E);
+        for (int k = 0; k < 3; ++k) {
+            memcpy(c->Sf[k], c->S[k], (size_t) n * sizeof c->S[k][0]);
+            memcpy(c->Ef[k], c->E[k], (size_t) n * sizeof c->E[k][0]);
+        }
+        if (nf) {
+            double Sq[3][EF_RECON_SPAN], Eq[3][EF_RECON_SPAN];
+            double *const Sqk[3] = { Sq[0], Sq[1], Sq[2] }, *const Eqk[3] = { Eq[0], Eq[1], Eq[2] };
+            ef_light_rays(s, &s->light[l], far, nf, Sqk, Eqk);
+            for (int m = 0; m < nf; ++m)
+                for (int k = 0; k < 3; ++k) {
+                    c->Sf[k][fj[m]] = Sq[k][m];
+                    c->Ef[k][fj[m]] = Eq[k][m];
+                }
+        }
+    }
+}
+
 /* The lights' in-scattered light over the pixel's coverage: a S along the
- * surface segment plus (1 - a) S along the far one (need_inf: it shows).
- * With the lit AOV, a shadowed light's share that passes its occluders:
- * the same sum without the map in the denominator. */
+ * surface segment plus (1 - a) S along the far one (need_inf: it shows),
+ * from lc (pixel j of the span) where given. With the lit AOV, a shadowed
+ * light's share that passes its occluders: the same sum without the map
+ * in the denominator. */
 static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int need_inf,
-                       double c[3], const ef_aov_out *aov, size_t i, double lerr[3])
+                       double c[3], const ef_aov_out *aov, size_t i, double lerr[3],
+                       const light_cache *lc, int j)
 {
     ef_ray far;
-    const int other = need_inf && !ef_scene_far_ray(s, r, &far);
+    const int other = !lc && need_inf && !ef_scene_far_ray(s, r, &far);
     double sum[3] = { 0, 0, 0 };
     /* light by light (each its own AOV layer), summed in the scene's order */
-    for (int j = 0; j < s->nlight; ++j) {
-        const int lit = aov && aov->lit[j];
+    for (int l = 0; l < s->nlight; ++l) {
+        const int lit = aov && aov->lit[l];
         double v[3], ve[3], u[3] = { 0, 0, 0 };
-        coverage_light(s, &s->light[j], r, other ? &far : NULL, a, need_inf, v, ve);
+        if (lc)
+            for (int k = 0; k < 3; ++k) {
+                v[k] = coverage_sum(a, need_inf, lc[l].S[k][j], lc[l].Sf[k][j]);
+                ve[k] = coverage_sum(a, need_inf, lc[l].E[k][j], lc[l].Ef[k][j]);
+            }
+        else
+            coverage_light(s, &s->light[l], r, other ? &far : NULL, a, need_inf, v, ve);
         for (int k = 0; k < 3; ++k)
             lerr[k] += ve[k];
         if (lit) {
-            ef_light bare = s->light[j];
+            ef_light bare = s->light[l];
             bare.shadow = NULL;
-            coverage_light(s, &bare, r, other ? &far : NULL, a, need_inf, u, NULL);
+            ef_ray f2;
+            const int o2 = need_inf && !ef_scene_far_ray(s, r, &f2);
+            coverage_light(s, &bare, r, o2 ? &f2 : NULL, a, need_inf, u, NULL);
             const double num = v[0] + v[1] + v[2], den = u[0] + u[1] + u[2];
-            aov->lit[j][i] = den > 0 && isfinite(den) ? to_float(num / den) : 1.0f;
+            aov->lit[l][i] = den > 0 && isfinite(den) ? to_float(num / den) : 1.0f;
         }
         for (int k = 0; k < 3; ++k) {
             sum[k] += v[k];
-            if (aov && aov->light[j][k])
-                aov->light[j][k][i] = to_float(v[k]);
+            if (aov && aov->light[l][k])
+                aov->light[l][k][i] = to_float(v[k]);
         }
     }
     for (int k = 0; k < 3; ++k)
@@ -620,6 +670,9 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
     double (*const clk)(void) = stats && !batch ? stats[0].clock_ns : NULL;
     double (*const cpu)(void) = clk ? stats[0].cpu_ns : NULL;
     span *sp = &(span) { .nq = 0 };
+    /* the lights along each span at once (ef_light_rays: lamps on
+     * vectors); without the memory, pixel by pixel, the same bits */
+    light_cache *lc = s->nlight ? malloc((size_t) s->nlight * sizeof *lc) : NULL;
     for (int yy = 0; yy < h; ++yy) {
         const int y = y0 + yy;
         for (int xs = 0; xs < w; xs += EF_RECON_SPAN) {
@@ -656,6 +709,12 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                  * segment each here, no branch per pixel. */
                 ef_scene_eval_rays(s, sp->r, n, sp->surf);
                 ef_scene_eval_rays(s, sp->q, sp->nq, sp->far);
+            }
+            if (lc) {
+                unsigned char skip[EF_RECON_SPAN];
+                for (int j = 0; j < n; ++j)
+                    skip[j] = sp->sky[j] && s->sky == EF_SKY_KEEP;
+                light_cache_fill(s, sp->r, n, sp->need_inf, skip, lc);
             }
             const double cpu0 = cpu ? cpu() : 0;
             for (int j = 0; j < n; ++j)
@@ -703,7 +762,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                             to_float(c[k] - (surf->T[k] > 0.0 ? surf->T[k] * in[k] : 0.0));
                 double lerr[3] = { 0, 0, 0 };
                 if (s->nlight)
-                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i, lerr);
+                    add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i, lerr, lc, j);
                 if (s->sky_light)
                     add_sky(s, &sp->r[j], surf, inf, a_in, sp->need_inf[j], c, aov, i);
                 for (int k = 0; k < 3; ++k)
@@ -773,6 +832,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
             }
         }
     }
+    free(lc);
 }
 
 void ef_fog_block(const ef_fog_pass *pass, int x0, int y0, int w, int h, float *const rgb[3],
