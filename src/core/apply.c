@@ -553,18 +553,20 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                         sp->add[k][j] = 0.0;
                 for (int l = 0; l < s->nlight; ++l) {
                     light_rays(s, &s->light[l], sp->r, n, sp->taur, sp->S);
-                    for (int k = 0; k < 3; ++k)
-                        memcpy(sp->Sf[k], sp->S[k], (size_t) n * sizeof sp->Sf[k][0]);
+                    double (*Sf)[EF_RECON_SPAN] = sp->S;
                     if (nq) {
+                        Sf = sp->Sf;
+                        for (int k = 0; k < 3; ++k)
+                            memcpy(Sf[k], sp->S[k], (size_t) n * sizeof Sf[k][0]);
                         light_rays(s, &s->light[l], sp->q, nq, sp->tau, sp->Sq);
                         for (int m = 0; m < nq; ++m)
                             for (int k = 0; k < 3; ++k)
-                                sp->Sf[k][sp->qj[m]] = sp->Sq[k][m];
+                                Sf[k][sp->qj[m]] = sp->Sq[k][m];
                     }
-                    for (int j = 0; j < n; ++j)
-                        for (int k = 0; k < 3; ++k)
+                    for (int k = 0; k < 3; ++k)
+                        for (int j = 0; j < n; ++j)
                             sp->add[k][j] += coverage_sum(sp->a[j], sp->shows[j], sp->S[k][j],
-                                                          sp->Sf[k][j]);
+                                                          Sf[k][j]);
                 }
             } else if (sky) {
                 /* add_sky: sky_segment along the surface segment with its T,

@@ -1185,56 +1185,44 @@ typedef struct lamp4 {
     double ts[4], h[4], a[4], D[4];
 } lamp4;
 
-/* Horner over lamp_w for four lanes of n[i] terms each (the loop runs to
- * the largest; a lane starts at its own n, as lamp_series_pair and g_e1
- * do: its value is the same whatever its neighbours), at z = (zr, zi),
- * with (pair) the divided difference from za = (ar, zi) alongside into
- * (qr, qi). Pair: b <- w_k + z b, q <- b + za q for k = n - 1 .. 0 from
- * b = w_n; series: b <- w_k + z b for k = n - 1 .. 1. */
-EF_INLINE void lamp_horner4(const v4di *n, const v4d *zr, const v4d *zi, const v4d *ar, int pair,
-                            v4d *br, v4d *bi, v4d *qr, v4d *qi)
+/* sum_k w_k z^k over all of lamp_w (21 terms: 1e-17 at |z| = 1.5, more
+ * than needed nearer 0, so that a lane's value never depends on its
+ * neighbours) as E(u) + z O(u), u = z^2, E and O over the even and odd
+ * weights: two independent chains of ten steps (the dependent chain of
+ * one Horner over 21 is what bounds its time). With pair, also the
+ * divided differences [E](uD, ua) and [O](uD, ua) (q <- b + ua q beside
+ * b <- w + uD b), u = (ur, ui) the far end's and ua the near one's. */
+EF_INLINE void lamp_eo4(const v4d *ur, const v4d *ui, const v4d *uar, const v4d *uai, int pair,
+                        v4d *Er, v4d *Ei, v4d *Or, v4d *Oi, v4d *qEr, v4d *qEi, v4d *qOr,
+                        v4d *qOi)
 {
     const v4d zero = { 0, 0, 0, 0 };
-    int top = 0, low = 64;
-    for (int i = 0; i < 4; ++i) {
-        top = (*n)[i] > top ? (int) (*n)[i] : top;
-        low = (*n)[i] < low ? (int) (*n)[i] : low;
-    }
-    *br = *bi = *qr = *qi = zero;
-    const int end = pair ? 0 : 1;
-    int k = top;
-    /* down to the lowest start, each lane held at zero above its own */
-    for (; k >= low && k >= end; --k) {
-        const v4d nqr = *br + *ar * *qr - *zi * *qi, nqi = *bi + *ar * *qi + *zi * *qr;
-        const v4d nbr = lamp_w[k] + *zr * *br - *zi * *bi, nbi = *zr * *bi + *zi * *br;
-        const v4di below = *n > k, start = *n == k;
-        const v4d wk = { lamp_w[k], lamp_w[k], lamp_w[k], lamp_w[k] };
-        v_sel(br, &below, &nbr, &zero);
-        v_sel(br, &start, &wk, br);
-        v_sel(bi, &below, &nbi, &zero);
+    v4d er = zero + lamp_w[20], ei = zero, orr = zero + lamp_w[21], oi = zero;
+    v4d qer = zero, qei = zero, qor = zero, qoi = zero;
+    for (int m = 9; m >= 0; --m) {
         if (pair) {
-            v_sel(qr, &below, &nqr, &zero);
-            v_sel(qi, &below, &nqi, &zero);
+            const v4d nqer = er + *uar * qer - *uai * qei, nqei = ei + *uar * qei + *uai * qer;
+            const v4d nqor = orr + *uar * qor - *uai * qoi, nqoi = oi + *uar * qoi + *uai * qor;
+            qer = nqer;
+            qei = nqei;
+            qor = nqor;
+            qoi = nqoi;
         }
+        const v4d ner = lamp_w[2 * m] + *ur * er - *ui * ei, nei = *ur * ei + *ui * er;
+        const v4d nor = lamp_w[2 * m + 1] + *ur * orr - *ui * oi, noi = *ur * oi + *ui * orr;
+        er = ner;
+        ei = nei;
+        orr = nor;
+        oi = noi;
     }
-    /* then every lane under way */
-    for (; k >= end; --k) {
-        const v4d nqr = *br + *ar * *qr - *zi * *qi, nqi = *bi + *ar * *qi + *zi * *qr;
-        const v4d nbr = lamp_w[k] + *zr * *br - *zi * *bi, nbi = *zr * *bi + *zi * *br;
-        *br = nbr;
-        *bi = nbi;
-        if (pair) {
-            *qr = nqr;
-            *qi = nqi;
-        }
-    }
-}
-
-/* lamp_terms per lane, on vectors (each comparison true is -1) */
-EF_INLINE void lamp_terms4(const v4d *r2, v4di *n)
-{
-    *n = 12 - 3 * (*r2 > 0.0625) - 2 * (*r2 > 0.25) - (*r2 > 0.5625) - (*r2 > 1.0) -
-         2 * (*r2 > 1.5625);
+    *Er = er;
+    *Ei = ei;
+    *Or = orr;
+    *Oi = oi;
+    *qEr = qer;
+    *qEi = qei;
+    *qOr = qor;
+    *qOi = qoi;
 }
 
 /* sqrt(x^2 + y^2) per lane, and in ok whether len2 takes that form (its
@@ -1338,20 +1326,23 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
     v_exp(&msts, &E);
     v_sincos(&sgh, &sn, &cs);
     const v4d f = 2.0 / h * E;
-    v4di nl, nla, nld;
-    lamp_terms4(&na, &nla);
-    lamp_terms4(&nd, &nld);
-    const v4di dbig = nld > nla;
-    nl = (nld & dbig) | (nla & ~dbig);
     v4d rp = zero, rpe = zero;
     v4di done = { 0, 0, 0, 0 };
     if (v_any(&pair)) {
         const v4d x1 = dz * (ar + dr) / na, y = -zi * dz, x = ar * dr + zi * zi;
-        v4d lr, li, br, bi, qr, qi;
+        v4d lr, li;
         v_log1p(&x1, &lr);
         lr = lr * 0.5;
         v_atan2(&y, &x, &li);
-        lamp_horner4(&nl, &dr, &zi, &ar, 1, &br, &bi, &qr, &qi);
+        /* [P](z_D, z_a) = [E](uD, ua) s + O(uD) + z_a [O](uD, ua) s,
+         * s = z_D + z_a, P(z) = E(z^2) + z O(z^2) */
+        const v4d uDr = dr * dr - zi * zi, uDi = 2.0 * dr * zi;
+        const v4d uar = ar * ar - zi * zi, uai = 2.0 * ar * zi;
+        v4d Er, Ei, Or, Oi, qEr, qEi, qOr, qOi;
+        lamp_eo4(&uDr, &uDi, &uar, &uai, 1, &Er, &Ei, &Or, &Oi, &qEr, &qEi, &qOr, &qOi);
+        const v4d sr = ar + dr, si = 2.0 * zi;
+        const v4d tr = qEr + (ar * qOr - zi * qOi), ti = qEi + (ar * qOi + zi * qOr);
+        const v4d qr = (tr * sr - ti * si) + Or, qi = (tr * si + ti * sr) + Oi;
         const v4d Vr = lr + dz * qr, Vi = li + dz * qi;
         rp = f * (cs * Vi - sn * Vr);
         v4d m2 = Vr * Vr + Vi * Vi;
@@ -1373,13 +1364,14 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
             const v4di ser = (e ? ser_D : ser_a) & need, cf = (e ? cf_D : cf_a) & need;
             v4d vi = zero, m = zero;
             if (v_any(&ser)) {
-                v4di ne;
-                lamp_terms4(&r2, &ne);
-                v4d lg, th, sr, si, dummy_r, dummy_i;
+                v4d lg, th;
                 v_log(&r2, &lg);
                 v_atan2(&zi, &zr, &th);
-                lamp_horner4(&ne, &zr, &zi, &zr, 0, &sr, &si, &dummy_r, &dummy_i);
-                const v4d sumr = zr * sr - zi * si, sumi = zr * si + zi * sr;
+                /* sum = E(u) + z O(u) (w_0 = 0), u = z^2 */
+                const v4d ur = zr * zr - zi * zi, ui = 2.0 * zr * zi;
+                v4d Sr, Si, Or, Oi, d0, d1, d2, d3;
+                lamp_eo4(&ur, &ui, &ur, &ui, 0, &Sr, &Si, &Or, &Oi, &d0, &d1, &d2, &d3);
+                const v4d sumr = Sr + (zr * Or - zi * Oi), sumi = Si + (zr * Oi + zi * Or);
                 const v4d Er = (-0.57721566490153286061 - 0.5 * lg) - sumr, Ei = -th - sumi;
                 v4d m2 = Er * Er + Ei * Ei;
                 for (int i = 0; i < 4; ++i)
