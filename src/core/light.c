@@ -1422,51 +1422,51 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
     }
 }
 
-/* lamp_kernel's lanes, with lamp_unit1 for those it leaves: per lane 0 with
- * r and re, or -1 (the caller integrates). */
-EF_MULTIVERSION static void lamp_unit4(double sg, const lamp4 *in, double r[4], double re[4],
+/* lamp_closed for four segments of one medium (sig, scat) and lamp (e),
+ * lamp_kernel's lanes with lamp_unit1 for those it leaves: for each lane
+ * i < m whose every channel holds (st[i] 0), S[k][idx[i]] and (E not
+ * NULL) E[k][idx[i]] set to the sums from 0 that ef_light_inscatter forms;
+ * st[i] -1 and nothing written where a channel's closed form does not
+ * hold (the caller integrates). */
+EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3],
+                                       const double e[3], const lamp4 *in, int m,
+                                       const int *idx, double *const S[3], double *const E[3],
                                        int st[4])
 {
-    lamp_kernel(sg, in, r, re, st);
-    for (int i = 0; i < 4; ++i)
-        st[i] = st[i] == 1 ? 0
-                : st[i] == -1 ? -1
-                              : lamp_unit1(sg, in->ts[i], in->h[i], in->a[i], in->D[i], &r[i],
-                                           &re[i]);
-}
-
-/* lamp_closed for four segments of one medium (sig, scat) and lamp (e):
- * per lane S and E added to, and st[i] 0, or -1 with nothing added where
- * a channel's closed form does not hold. */
-static void lamp_closed4(const double sig[3], const double scat[3], const double e[3],
-                         const lamp4 *in, double S[4][3], double E[4][3], int st[4])
-{
-    double out[4][3] = { { 0 } }, err[4][3] = { { 0 } };
+    double out[3][4], err[3][4];
     /* the integral per unit of scat e, and its rounding, at sig[have]:
      * channels of the same sigma take it (grey fog, coloured lamps) */
     double unit[4] = { 0 }, unit_e[4] = { 0 };
     int have = -1;
     st[0] = st[1] = st[2] = st[3] = 0;
     for (int k = 0; k < 3; ++k) {
-        if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0)
+        if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0) {
+            for (int i = 0; i < 4; ++i)
+                out[k][i] = err[k][i] = 0;
             continue;
+        }
         if (have < 0 || sig[k] != sig[have]) {
             int ust[4];
-            lamp_unit4(sig[k], in, unit, unit_e, ust);
+            lamp_kernel(sig[k], in, unit, unit_e, ust);
             for (int i = 0; i < 4; ++i)
-                st[i] |= ust[i];
+                st[i] |= ust[i] == 1    ? 0
+                         : ust[i] == -1 ? -1
+                                        : lamp_unit1(sig[k], in->ts[i], in->h[i], in->a[i],
+                                                     in->D[i], &unit[i], &unit_e[i]);
             have = k;
         }
         for (int i = 0; i < 4; ++i) {
-            out[i][k] = unit[i] * scat[k] * e[k];
-            err[i][k] = unit_e[i] * scat[k] * e[k];
+            out[k][i] = unit[i] * scat[k] * e[k];
+            err[k][i] = unit_e[i] * scat[k] * e[k];
         }
     }
-    for (int i = 0; i < 4; ++i)
-        for (int k = 0; k < 3 && st[i] == 0; ++k) {
-            S[i][k] += out[i][k];
-            E[i][k] += err[i][k];
-        }
+    for (int i = 0; i < m; ++i)
+        if (st[i] == 0)
+            for (int k = 0; k < 3; ++k) {
+                S[k][idx[i]] = 0.0 + out[k][i];
+                if (E)
+                    E[k][idx[i]] = 0.0 + err[k][i];
+            }
 }
 
 /* The uniform fog's extinction sig (its components' sum, in their order)
@@ -1484,19 +1484,25 @@ static void lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3])
         }
 }
 
-/* lamp_closed4 for one segment (its lanes all alike): the same bits as
- * the segment in any lane of a span's batch. Returns 0, or -1 with
- * nothing added. */
+/* lamp_rays4 for one segment (its lanes all alike): the same bits as the
+ * segment in any lane of a span's batch, added to S and E (0 here: a
+ * point lamp's one lit range). Returns 0, or -1 with nothing added. */
 static int lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
                        double h, double a, double D, double S[3], double E[3])
 {
     const lamp4 in = { { ts, ts, ts, ts }, { h, h, h, h }, { a, a, a, a }, { D, D, D, D } };
-    double S4[4][3] = { { S[0], S[1], S[2] } }, E4[4][3] = { { E[0], E[1], E[2] } };
+    double Sv[3], Ev[3];
+    double *const Sk[3] = { &Sv[0], &Sv[1], &Sv[2] }, *const Ek[3] = { &Ev[0], &Ev[1], &Ev[2] };
+    const int idx = 0;
     int st[4];
-    lamp_closed4(sig, scat, e, &in, S4, E4, st);
-    memcpy(S, S4[0], 3 * sizeof S[0]);
-    memcpy(E, E4[0], 3 * sizeof E[0]);
-    return st[0];
+    lamp_rays4(sig, scat, e, &in, 1, &idx, Sk, Ek, st);
+    if (st[0])
+        return -1;
+    for (int k = 0; k < 3; ++k) {
+        S[k] += Sv[k];
+        E[k] += Ev[k];
+    }
+    return 0;
 }
 
 /* --------------------------------------------------------------- driver */
@@ -2289,20 +2295,19 @@ void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, in
                 in.a[i] = in.a[m - 1];
                 in.D[i] = in.D[m - 1];
             }
-            double S4[4][3] = { { 0 } }, E4[4][3] = { { 0 } };
             int st[4];
-            lamp_closed4(sig, scat, l->e, &in, S4, E4, st);
-            for (int i = 0; i < m; ++i) {
-                const int jj = idx[i];
+            lamp_rays4(sig, scat, l->e, &in, m, idx, S, E, st);
+            for (int i = 0; i < m; ++i)
                 if (st[i]) {   /* the ends cancel: ef_light_inscatter integrates */
-                    ef_light_inscatter(s, l, &r[jj], S4[i], E4[i]);
+                    const int jj = idx[i];
+                    double v[3], ve[3];
+                    ef_light_inscatter(s, l, &r[jj], v, ve);
+                    for (int k = 0; k < 3; ++k) {
+                        S[k][jj] = v[k];
+                        if (E)
+                            E[k][jj] = ve[k];
+                    }
                 }
-                for (int k = 0; k < 3; ++k) {
-                    S[k][jj] = S4[i][k];
-                    if (E)
-                        E[k][jj] = E4[i][k];
-                }
-            }
             m = 0;
         }
     }
