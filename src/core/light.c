@@ -1229,12 +1229,15 @@ EF_INLINE void lamp_eo4(const v4d *ur, const v4d *ui, const v4d *uar, const v4d 
  * magnitudes within 1e-150 .. 1e150), so that the value is len2's. */
 EF_INLINE void len2_4(const v4d *x, const v4d *y, v4d *o, v4di *ok)
 {
+    const v4di absm = { 0x7fffffffffffffffLL, 0x7fffffffffffffffLL, 0x7fffffffffffffffLL,
+                        0x7fffffffffffffffLL };
+    const v4d ax = (v4d) ((v4di) *x & absm), ay = (v4d) ((v4di) *y & absm);
+    const v4di xbig = ax > ay;
+    v4d m;
+    v_sel(&m, &xbig, &ax, &ay);   /* NaN: ay, which fails below as len2's does */
     const v4d s = *x * *x + *y * *y;
-    for (int i = 0; i < 4; ++i) {
-        const double ax = fabs((*x)[i]), ay = fabs((*y)[i]), m = ax > ay ? ax : ay;
-        (*o)[i] = sqrt(s[i]);
-        (*ok)[i] = m < 1e150 && m > 1e-150 ? -1 : 0;
-    }
+    v_sqrt(&s, o);
+    *ok = (m < 1e150) & (m > 1e-150);
 }
 
 /* g_e1's continued fraction for the lanes of live (|z| >= 1.5), each
@@ -1346,8 +1349,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         const v4d Vr = lr + dz * qr, Vi = li + dz * qi;
         rp = f * (cs * Vi - sn * Vr);
         v4d m2 = Vr * Vr + Vi * Vi;
-        for (int i = 0; i < 4; ++i)
-            m2[i] = sqrt(m2[i]);
+        v_sqrt(&m2, &m2);
         rpe = f * m2 * 1e-15;
         const v4d arp = (v4d) ((v4di) rp & 0x7fffffffffffffffLL);
         done = pair & (arp < INFINITY) & (rpe <= 1e-13 * arp);
@@ -1361,7 +1363,9 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         v4d V = zero, mag = zero;
         for (int e = 0; e < 2; ++e) {
             const v4d zr = e ? dr : ar, r2 = e ? nd : na, xarg = e ? xD_arg : xa_arg;
-            const v4di ser = (e ? ser_D : ser_a) & need, cf = (e ? cf_D : cf_a) & need;
+            /* (the far end only where it is finite) */
+            const v4di ser = (e ? ser_D & finD : ser_a) & need,
+                       cf = (e ? cf_D & finD : cf_a) & need;
             v4d vi = zero, m = zero;
             if (v_any(&ser)) {
                 v4d lg, th;
@@ -1374,8 +1378,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
                 const v4d sumr = Sr + (zr * Or - zi * Oi), sumi = Si + (zr * Oi + zi * Or);
                 const v4d Er = (-0.57721566490153286061 - 0.5 * lg) - sumr, Ei = -th - sumi;
                 v4d m2 = Er * Er + Ei * Ei;
-                for (int i = 0; i < 4; ++i)
-                    m2[i] = sqrt(m2[i]);
+                v_sqrt(&m2, &m2);
                 const v4d svi = E * (cs * Ei - sn * Er), sm = E * m2;
                 v_sel(&vi, &ser, &svi, &vi);
                 v_sel(&m, &ser, &sm, &m);
@@ -1388,8 +1391,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
                 const v4d mx = -xarg;
                 v_exp(&mx, &x);
                 v4d m2 = Gr * Gr + Gi * Gi;
-                for (int i = 0; i < 4; ++i)
-                    m2[i] = sqrt(m2[i]);
+                v_sqrt(&m2, &m2);
                 const v4d cvi = x * Gi, cm = x * m2;
                 v_sel(&vi, &cf, &cvi, &vi);
                 v_sel(&m, &cf, &cm, &m);

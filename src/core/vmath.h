@@ -32,6 +32,21 @@ EF_INLINE int v_any(const v4di *m)
     return ((*m)[0] | (*m)[1] | (*m)[2] | (*m)[3]) != 0;
 }
 
+/* sqrt per lane, correctly rounded as sqrt() is: SSE2's sqrtpd on two
+ * halves where the baseline ISA has it (in every clone), else sqrt(). */
+EF_INLINE void v_sqrt(const v4d *x, v4d *o)
+{
+#if defined(__SSE2__) && defined(__GNUC__) && !defined(__clang__)
+    typedef double v2d __attribute__((vector_size(16)));
+    const v2d lo = __builtin_ia32_sqrtpd(__builtin_shufflevector(*x, *x, 0, 1));
+    const v2d hi = __builtin_ia32_sqrtpd(__builtin_shufflevector(*x, *x, 2, 3));
+    *o = __builtin_shufflevector(lo, hi, 0, 1, 2, 3);
+#else
+    for (int i = 0; i < 4; ++i)
+        (*o)[i] = sqrt((*x)[i]);
+#endif
+}
+
 /* 2^52 + 2^51: adding it rounds a double below 2^51 in magnitude to an
  * integer, which then sits in the low bits of the sum's representation. */
 #define EF_V_MAGIC 0x1.8p52
