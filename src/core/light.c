@@ -1328,7 +1328,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
     v4d E, sn, cs;
     v_exp(&msts, &E);
     v_sincos(&sgh, &sn, &cs);
-    const v4d f = 2.0 / h * E;
+    const v4d h2h = 2.0 / h, f = h2h * E;
     v4d rp = zero, rpe = zero;
     v4di done = { 0, 0, 0, 0 };
     if (v_any(&pair)) {
@@ -1405,7 +1405,6 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
                 v_sel(&mag, &finD, &dm, &mag);
             }
         }
-        const v4d h2h = 2.0 / h;
         re2 = h2h * V;
         ree = h2h * mag * 2e-15;
     }
