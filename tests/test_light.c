@@ -341,6 +341,23 @@ static void test_point_uniform(void **state)
     }
 }
 
+/* ef_light_rays over r[0..n) equals ef_light_inscatter ray by ray, S and
+ * E bit for bit. */
+static void rays_match(const ef_fog_scene *s, const ef_light *lp, const ef_ray *r, int n)
+{
+    double Sv[3][EF_RECON_SPAN], Ev[3][EF_RECON_SPAN];
+    double *const Sk[3] = { Sv[0], Sv[1], Sv[2] }, *const Ek[3] = { Ev[0], Ev[1], Ev[2] };
+    ef_light_rays(s, lp, r, n, Sk, Ek);
+    for (int j = 0; j < n; ++j) {
+        double S[3], E[3];
+        ef_light_inscatter(s, lp, &r[j], S, E);
+        for (int k = 0; k < 3; ++k) {
+            assert_memory_equal(&S[k], &Sv[k][j], sizeof S[k]);
+            assert_memory_equal(&E[k], &Ev[k][j], sizeof E[k]);
+        }
+    }
+}
+
 /* ef_light_rays against ef_light_inscatter ray by ray: the same bits, S
  * and E, for rays batched four at a time on vectors whatever their
  * neighbours (shuffled, and a batch left partial), among them rays the
@@ -384,17 +401,7 @@ static void test_rays_batch(void **state)
             r[7] = ray_of(org, lp->pos[0] - org[0], lp->pos[1] - org[1], lp->pos[2] - org[2],
                           INFINITY);
             for (int n = EF_RECON_SPAN; n >= 13; n -= EF_RECON_SPAN - 13) {
-                double Sv[3][EF_RECON_SPAN], Ev[3][EF_RECON_SPAN];
-                double *const Sk[3] = { Sv[0], Sv[1], Sv[2] }, *const Ek[3] = { Ev[0], Ev[1], Ev[2] };
-                ef_light_rays(&s, lp, r, n, Sk, Ek);
-                for (int j = 0; j < n; ++j) {
-                    double S[3], E[3];
-                    ef_light_inscatter(&s, lp, &r[j], S, E);
-                    for (int k = 0; k < 3; ++k) {
-                        assert_memory_equal(&S[k], &Sv[k][j], sizeof S[k]);
-                        assert_memory_equal(&E[k], &Ev[k][j], sizeof E[k]);
-                    }
-                }
+                rays_match(&s, lp, r, n);
                 /* shuffled: each ray's bits whatever its neighbours */
                 for (int j = n - 1; j > 0; --j) {
                     seed = seed * 1103515245u + 12345u;
@@ -403,17 +410,7 @@ static void test_rays_batch(void **state)
                     r[i] = r[j];
                     r[j] = t;
                 }
-                double S2[3][EF_RECON_SPAN], E2[3][EF_RECON_SPAN];
-                double *const S2k[3] = { S2[0], S2[1], S2[2] }, *const E2k[3] = { E2[0], E2[1], E2[2] };
-                ef_light_rays(&s, lp, r, n, S2k, E2k);
-                for (int j = 0; j < n; ++j) {
-                    double S[3], E[3];
-                    ef_light_inscatter(&s, lp, &r[j], S, E);
-                    for (int k = 0; k < 3; ++k) {
-                        assert_memory_equal(&S[k], &S2[k][j], sizeof S[k]);
-                        assert_memory_equal(&E[k], &E2[k][j], sizeof E[k]);
-                    }
-                }
+                rays_match(&s, lp, r, n);
             }
             ef_scene_free(&s);
         }

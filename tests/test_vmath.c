@@ -54,31 +54,18 @@ static double l_atan2(double x, double y)
 {
     return atan2(y, x);
 }
-static double l_exp(double x, double y)
-{
-    (void) y;
-    return exp(x);
-}
-static double l_log(double x, double y)
-{
-    (void) y;
-    return log(x);
-}
-static double l_log1p(double x, double y)
-{
-    (void) y;
-    return log1p(x);
-}
-static double l_sin(double x, double y)
-{
-    (void) y;
-    return sin(x);
-}
-static double l_cos(double x, double y)
-{
-    (void) y;
-    return cos(x);
-}
+/* libm's one-argument functions in the two-argument form */
+#define LIBM1(f)                                                                                  \
+    static double l_##f(double x, double y)                                                     \
+    {                                                                                            \
+        (void) y;                                                                                \
+        return f(x);                                                                             \
+    }
+LIBM1(exp)
+LIBM1(log)
+LIBM1(log1p)
+LIBM1(sin)
+LIBM1(cos)
 
 static uint64_t rng = 88172645463325252ull;
 static double uniform(void)

@@ -2255,6 +2255,19 @@ static int lamp_batch(const ef_fog_scene *s, const ef_light *l)
     return 1;
 }
 
+/* ef_light_inscatter for ray j into S[k][j] and (E not NULL) E[k][j]. */
+static void one_ray(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int j,
+                    double *const S[3], double *const E[3])
+{
+    double v[3], ve[3];
+    ef_light_inscatter(s, l, &r[j], v, ve);
+    for (int k = 0; k < 3; ++k) {
+        S[k][j] = v[k];
+        if (E)
+            E[k][j] = ve[k];
+    }
+}
+
 void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int n,
                    double *const S[3], double *const E[3])
 {
@@ -2274,13 +2287,7 @@ void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, in
             if (beside && !(h >= 0))
                 lamp_line(l, &r[j], w, &ts, &h);
             if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
-                double v[3], ve[3];
-                ef_light_inscatter(s, l, &r[j], v, ve);
-                for (int k = 0; k < 3; ++k) {
-                    S[k][j] = v[k];
-                    if (E)
-                        E[k][j] = ve[k];
-                }
+                one_ray(s, l, r, j, S, E);
                 continue;
             }
             in.ts[m] = ts;
@@ -2299,16 +2306,8 @@ void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, in
             int st[4];
             lamp_rays4(sig, scat, l->e, &in, m, idx, S, E, st);
             for (int i = 0; i < m; ++i)
-                if (st[i]) {   /* the ends cancel: ef_light_inscatter integrates */
-                    const int jj = idx[i];
-                    double v[3], ve[3];
-                    ef_light_inscatter(s, l, &r[jj], v, ve);
-                    for (int k = 0; k < 3; ++k) {
-                        S[k][jj] = v[k];
-                        if (E)
-                            E[k][jj] = ve[k];
-                    }
-                }
+                if (st[i])   /* the ends cancel: ef_light_inscatter integrates */
+                    one_ray(s, l, r, idx[i], S, E);
             m = 0;
         }
     }
