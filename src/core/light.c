@@ -1038,6 +1038,48 @@ static int lamp_terms(double r2)
            : r2 <= 1.5625 ? 20 : 21;
 }
 
+/* g_e1's continued fraction for the lanes of live (|z| >= 1.5), each
+ * lane's iterations stopping at its own convergence (its value is the
+ * same whatever its neighbours): G into (Gr, Gi), and in conv whether it
+ * converged within 2000 terms. */
+EF_INLINE void lamp_cf4(const v4d *zr, const v4d *zi, const v4di *live_in, v4d *Gr, v4d *Gi,
+                        v4di *conv)
+{
+    const v4d tiny = { 1e-300, 1e-300, 1e-300, 1e-300 };
+    v4d fr = *zr + 1.0, fi = *zi, Cr = fr, Ci = fi, Dr = fr * 0.0, Di = Dr;
+    v4di live = *live_in;
+    *conv = live & 0;
+    for (int j = 1; j < 2000 && v_any(&live); ++j) {
+        const v4d br = *zr + (2.0 * j + 1);
+        const double a = -(double) j * j;
+        v4d nDr = br + a * Dr, nDi = *zi + a * Di;
+        const v4di dz = (nDr == 0.0) & (nDi == 0.0);
+        v_sel(&nDr, &dz, &tiny, &nDr);
+        const v4d cn = Cr * Cr + Ci * Ci;
+        v4d nCr = br + a * Cr / cn;
+        const v4d nCi = *zi - a * Ci / cn;
+        const v4di cz = (nCr == 0.0) & (nCi == 0.0);
+        v_sel(&nCr, &cz, &tiny, &nCr);
+        const v4d dn = nDr * nDr + nDi * nDi;
+        nDr = nDr / dn;
+        nDi = -nDi / dn;
+        const v4d er = nCr * nDr - nCi * nDi, ei = nCr * nDi + nCi * nDr;
+        const v4d nfr = fr * er - fi * ei, nfi = fr * ei + fi * er;
+        v_sel(&Dr, &live, &nDr, &Dr);
+        v_sel(&Di, &live, &nDi, &Di);
+        v_sel(&Cr, &live, &nCr, &Cr);
+        v_sel(&Ci, &live, &nCi, &Ci);
+        v_sel(&fr, &live, &nfr, &fr);
+        v_sel(&fi, &live, &nfi, &fi);
+        const v4di done = live & ((er - 1.0) * (er - 1.0) + ei * ei < 1e-32);
+        *conv |= done;
+        live &= ~done;
+    }
+    const v4d fn = fr * fr + fi * fi;
+    *Gr = fr / fn;
+    *Gi = -(fi / fn);
+}
+
 /* G(z) = e^z E1(z) for Re z >= 0, z != 0, to about 1e-16 of |G|: the
  * series -gamma - ln z - sum (-z)^k / (k k!) (times e^z) for |z| < 1.5,
  * else the continued fraction 1/(z + 1 - 1/(z + 3 - 4/(z + 5 - ...)))
@@ -1059,35 +1101,16 @@ static int g_e1(double complex z, double complex *out)
         *out = cexp(z) * (-0.57721566490153286061 - clog(z) - sum);
         return 0;
     }
-    /* the continued fraction, its divisions written out (|C|, |D| stay
-     * near |z| >= 1.5: no overflow to guard) */
-    const double tiny = 1e-300;
-    double fr = zr + 1, fi = zi, Cr = fr, Ci = fi, Dr = 0, Di = 0;
-    for (int j = 1; j < 2000; ++j) {
-        const double br = zr + (2.0 * j + 1), a = -(double) j * j;
-        Dr = br + a * Dr;
-        Di = zi + a * Di;
-        if (Dr == 0 && Di == 0)
-            Dr = tiny;
-        const double cn = Cr * Cr + Ci * Ci;
-        Cr = br + a * Cr / cn;
-        Ci = zi - a * Ci / cn;
-        if (Cr == 0 && Ci == 0)
-            Cr = tiny;
-        const double dn = Dr * Dr + Di * Di;
-        Dr = Dr / dn;
-        Di = -Di / dn;
-        const double er = Cr * Dr - Ci * Di, ei = Cr * Di + Ci * Dr;
-        const double nfr = fr * er - fi * ei;
-        fi = fr * ei + fi * er;
-        fr = nfr;
-        if ((er - 1) * (er - 1) + ei * ei < 1e-32) {
-            const double fn = fr * fr + fi * fi;
-            *out = fr / fn - I * (fi / fn);
-            return 0;
-        }
-    }
-    return -1;
+    /* the continued fraction: lamp_cf4's, one lane used */
+    const v4d vr = { zr, zr, zr, zr }, vi = { zi, zi, zi, zi };
+    const v4di live = { -1, -1, -1, -1 };
+    v4d Gr, Gi;
+    v4di conv;
+    lamp_cf4(&vr, &vi, &live, &Gr, &Gi, &conv);
+    if (!conv[0])
+        return -1;
+    *out = Gr[0] + I * Gi[0];
+    return 0;
 }
 
 /* Sun, Ramamoorthi, Narasimhan and Nayar's closed form for a point lamp
@@ -1229,57 +1252,15 @@ EF_INLINE void lamp_eo4(const v4d *ur, const v4d *ui, const v4d *uar, const v4d 
  * magnitudes within 1e-150 .. 1e150), so that the value is len2's. */
 EF_INLINE void len2_4(const v4d *x, const v4d *y, v4d *o, v4di *ok)
 {
-    const v4di absm = { 0x7fffffffffffffffLL, 0x7fffffffffffffffLL, 0x7fffffffffffffffLL,
-                        0x7fffffffffffffffLL };
-    const v4d ax = (v4d) ((v4di) *x & absm), ay = (v4d) ((v4di) *y & absm);
+    v4d ax, ay;
+    v_abs(x, &ax);
+    v_abs(y, &ay);
     const v4di xbig = ax > ay;
     v4d m;
     v_sel(&m, &xbig, &ax, &ay);   /* NaN: ay, which fails below as len2's does */
     const v4d s = *x * *x + *y * *y;
     v_sqrt(&s, o);
     *ok = (m < 1e150) & (m > 1e-150);
-}
-
-/* g_e1's continued fraction for the lanes of live (|z| >= 1.5), each
- * lane's iterations stopping at its own convergence (its value is the
- * same whatever its neighbours): G into (Gr, Gi), and in conv whether it
- * converged within 2000 terms. */
-EF_INLINE void lamp_cf4(const v4d *zr, const v4d *zi, const v4di *live_in, v4d *Gr, v4d *Gi,
-                        v4di *conv)
-{
-    const v4d tiny = { 1e-300, 1e-300, 1e-300, 1e-300 };
-    v4d fr = *zr + 1.0, fi = *zi, Cr = fr, Ci = fi, Dr = fr * 0.0, Di = Dr;
-    v4di live = *live_in;
-    *conv = live & 0;
-    for (int j = 1; j < 2000 && v_any(&live); ++j) {
-        const v4d br = *zr + (2.0 * j + 1);
-        const double a = -(double) j * j;
-        v4d nDr = br + a * Dr, nDi = *zi + a * Di;
-        const v4di dz = (nDr == 0.0) & (nDi == 0.0);
-        v_sel(&nDr, &dz, &tiny, &nDr);
-        const v4d cn = Cr * Cr + Ci * Ci;
-        v4d nCr = br + a * Cr / cn;
-        const v4d nCi = *zi - a * Ci / cn;
-        const v4di cz = (nCr == 0.0) & (nCi == 0.0);
-        v_sel(&nCr, &cz, &tiny, &nCr);
-        const v4d dn = nDr * nDr + nDi * nDi;
-        nDr = nDr / dn;
-        nDi = -nDi / dn;
-        const v4d er = nCr * nDr - nCi * nDi, ei = nCr * nDi + nCi * nDr;
-        const v4d nfr = fr * er - fi * ei, nfi = fr * ei + fi * er;
-        v_sel(&Dr, &live, &nDr, &Dr);
-        v_sel(&Di, &live, &nDi, &Di);
-        v_sel(&Cr, &live, &nCr, &Cr);
-        v_sel(&Ci, &live, &nCi, &Ci);
-        v_sel(&fr, &live, &nfr, &fr);
-        v_sel(&fi, &live, &nfi, &fi);
-        const v4di done = live & ((er - 1.0) * (er - 1.0) + ei * ei < 1e-32);
-        *conv |= done;
-        live &= ~done;
-    }
-    const v4d fn = fr * fr + fi * fi;
-    *Gr = fr / fn;
-    *Gi = -(fi / fn);
 }
 
 /* lamp_unit1 for four lanes on vectors: the series pair as
@@ -1351,7 +1332,8 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         v4d m2 = Vr * Vr + Vi * Vi;
         v_sqrt(&m2, &m2);
         rpe = f * m2 * 1e-15;
-        const v4d arp = (v4d) ((v4di) rp & 0x7fffffffffffffffLL);
+        v4d arp;
+        v_abs(&rp, &arp);
         done = pair & (arp < INFINITY) & (rpe <= 1e-13 * arp);
     }
     v4d re2 = zero, ree = zero;

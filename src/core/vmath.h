@@ -35,6 +35,12 @@ EF_INLINE int v_any(const v4di *m)
     return ((*m)[0] | (*m)[1] | (*m)[2] | (*m)[3]) != 0;
 }
 
+/* |x| per lane (the sign bit cleared) */
+EF_INLINE void v_abs(const v4d *x, v4d *o)
+{
+    *o = (v4d) ((v4di) *x & 0x7fffffffffffffffLL);
+}
+
 /* sqrt per lane, correctly rounded as sqrt() is. Through an array: GCC
  * vectorises the loop there (one vsqrtpd in the x86-64-v3 clone, two
  * sqrtpd in the baseline), not on a vector's lanes. */
@@ -134,9 +140,9 @@ EF_INLINE void v_atan2(const v4d *y, const v4d *x, v4d *o)
         0.7853981633974483,
     };
     const v4d magic = { EF_V_MAGIC, EF_V_MAGIC, EF_V_MAGIC, EF_V_MAGIC };
-    const v4di absm = { 0x7fffffffffffffffLL, 0x7fffffffffffffffLL, 0x7fffffffffffffffLL,
-                        0x7fffffffffffffffLL };
-    const v4d ax = (v4d) ((v4di) *x & absm), ay = (v4d) ((v4di) *y & absm);
+    v4d ax, ay;
+    v_abs(x, &ax);
+    v_abs(y, &ay);
     const v4di swap = ay > ax;
     v4d num, den;
     v_sel(&num, &swap, &ax, &ay);
