@@ -997,6 +997,19 @@ static double len2(double x, double y)
     return m == 0 ? 0 : hypot(x, y);
 }
 
+/* |(x, y, z)| with one square root where the largest magnitude lies
+ * within 1e-150 .. 1e150 (its square then neither overflows nor loses
+ * digits that matter), else by len2 twice. lamp_lines computes the same
+ * plain form on vectors. */
+static double len3(double x, double y, double z)
+{
+    const double ax = fabs(x), ay = fabs(y), az = fabs(z), mxy = ax > ay ? ax : ay,
+                 m = mxy > az ? mxy : az;
+    if (m < 1e150 && m > 1e-150)
+        return sqrt(x * x + y * y + z * z);
+    return len2(len2(x, y), z);
+}
+
 /* Where lamp l comes closest to the line of r: its parameter *ts along
  * r->dir, and its distance *h from the line by the cross product (no
  * cancellation near the line); w gets lamp - origin. */
@@ -1008,7 +1021,7 @@ static void lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *t
     const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
                  cy = w[2] * r->dir[0] - w[0] * r->dir[2],
                  cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-    *h = len2(len2(cx, cy), cz);
+    *h = len3(cx, cy, cz);
 }
 
 /* |z|^2, without hypot's care for overflow (the arguments here are far
@@ -1039,45 +1052,74 @@ static int lamp_terms(double r2)
 }
 
 /* g_e1's continued fraction for the lanes of live (|z| >= 1.5), each
- * lane's iterations stopping at its own convergence (its value is the
- * same whatever its neighbours): G into (Gr, Gi), and in conv whether it
- * converged within 2000 terms. */
+ * lane stopping at its own convergence (its value is the same whatever
+ * its neighbours): G into (Gr, Gi), and in conv whether it converged
+ * within 2000 terms. F = b_0 + a_1 / (b_1 + a_2 / (b_2 + ...)), b_j =
+ * z + 2j + 1, a_j = -j^2, G = 1 / F, by the forward recurrences of F's
+ * numerators and denominators (Wallis): no division per term, so one
+ * term is a few multiplications deep rather than the modified Lentz
+ * method's three divisions. Both grow; every fourth term they are scaled
+ * back by a power of two of the lane's own (exact: no rounding), and the
+ * test for convergence uses |F_j - F_(j-1)| = (j!)^2 / |B_j B_(j-1)| (the
+ * product of the a's, not a difference that would cancel), tracked in
+ * the same scale as q2 = (j!)^4. */
 EF_INLINE void lamp_cf4(const v4d *zr, const v4d *zi, const v4di *live_in, v4d *Gr, v4d *Gi,
                         v4di *conv)
 {
-    const v4d tiny = { 1e-300, 1e-300, 1e-300, 1e-300 };
-    v4d fr = *zr + 1.0, fi = *zi, Cr = fr, Ci = fi, Dr = fr * 0.0, Di = Dr;
+    const v4d zero = { 0, 0, 0, 0 };
+    /* A_(j-1), A_j, B_(j-1), B_j; j = 0 */
+    v4d pAr = zero + 1.0, pAi = zero, Ar = *zr + 1.0, Ai = *zi, pBr = zero, pBi = zero,
+        Br = zero + 1.0, Bi = zero, q2 = zero + 1.0;
+    v4d fAr = Ar, fAi = Ai, fBr = Br, fBi = Bi;   /* each lane's at its convergence */
     v4di live = *live_in;
     *conv = live & 0;
     for (int j = 1; j < 2000 && v_any(&live); ++j) {
         const v4d br = *zr + (2.0 * j + 1);
         const double a = -(double) j * j;
-        v4d nDr = br + a * Dr, nDi = *zi + a * Di;
-        const v4di dz = (nDr == 0.0) & (nDi == 0.0);
-        v_sel(&nDr, &dz, &tiny, &nDr);
-        const v4d cn = Cr * Cr + Ci * Ci;
-        v4d nCr = br + a * Cr / cn;
-        const v4d nCi = *zi - a * Ci / cn;
-        const v4di cz = (nCr == 0.0) & (nCi == 0.0);
-        v_sel(&nCr, &cz, &tiny, &nCr);
-        const v4d dn = nDr * nDr + nDi * nDi;
-        nDr = nDr / dn;
-        nDi = -nDi / dn;
-        const v4d er = nCr * nDr - nCi * nDi, ei = nCr * nDi + nCi * nDr;
-        const v4d nfr = fr * er - fi * ei, nfi = fr * ei + fi * er;
-        v_sel(&Dr, &live, &nDr, &Dr);
-        v_sel(&Di, &live, &nDi, &Di);
-        v_sel(&Cr, &live, &nCr, &Cr);
-        v_sel(&Ci, &live, &nCi, &Ci);
-        v_sel(&fr, &live, &nfr, &fr);
-        v_sel(&fi, &live, &nfi, &fi);
-        const v4di done = live & ((er - 1.0) * (er - 1.0) + ei * ei < 1e-32);
+        const v4d nAr = (br * Ar - *zi * Ai) + a * pAr, nAi = (br * Ai + *zi * Ar) + a * pAi;
+        const v4d nBr = (br * Br - *zi * Bi) + a * pBr, nBi = (br * Bi + *zi * Br) + a * pBi;
+        pAr = Ar;
+        pAi = Ai;
+        pBr = Br;
+        pBi = Bi;
+        Ar = nAr;
+        Ai = nAi;
+        Br = nBr;
+        Bi = nBi;
+        q2 = q2 * (a * a);
+        /* |F_j - F_(j-1)| < 1e-16 |F_j|: (j!)^2 < 1e-16 |A_j| |B_(j-1)| */
+        const v4di done =
+            live & (q2 < 1e-32 * ((Ar * Ar + Ai * Ai) * (pBr * pBr + pBi * pBi)));
+        v_sel(&fAr, &done, &Ar, &fAr);
+        v_sel(&fAi, &done, &Ai, &fAi);
+        v_sel(&fBr, &done, &Br, &fBr);
+        v_sel(&fBi, &done, &Bi, &fBi);
         *conv |= done;
         live &= ~done;
+        if (j % 4 == 0) {
+            /* by 2^-e, 2^e <= |Br| + |Bi| < 2^(e+1) (lanes not live may
+             * hold anything: their scale is never used) */
+            v4d m, t;
+            v_abs(&Br, &m);
+            v_abs(&Bi, &t);
+            m = m + t;
+            const v4u eb = ((v4u) m >> 52) & 2047;
+            const v4d sc = (v4d) ((2046 - eb) << 52), sc2 = sc * sc;
+            pAr = pAr * sc;
+            pAi = pAi * sc;
+            Ar = Ar * sc;
+            Ai = Ai * sc;
+            pBr = pBr * sc;
+            pBi = pBi * sc;
+            Br = Br * sc;
+            Bi = Bi * sc;
+            q2 = q2 * (sc2 * sc2);
+        }
     }
-    const v4d fn = fr * fr + fi * fi;
-    *Gr = fr / fn;
-    *Gi = -(fi / fn);
+    /* G = B / A */
+    const v4d an = fAr * fAr + fAi * fAi;
+    *Gr = (fBr * fAr + fBi * fAi) / an;
+    *Gi = (fBi * fAr - fBr * fAi) / an;
 }
 
 /* G(z) = e^z E1(z) for Re z >= 0, z != 0, to about 1e-16 of |G|: the
@@ -1208,44 +1250,116 @@ typedef struct lamp4 {
     double ts[4], h[4], a[4], D[4];
 } lamp4;
 
-/* sum_k w_k z^k over all of lamp_w (21 terms: 1e-17 at |z| = 1.5, more
- * than needed nearer 0, so that a lane's value never depends on its
- * neighbours) as E(u) + z O(u), u = z^2, E and O over the even and odd
- * weights: two independent chains of ten steps (the dependent chain of
- * one Horner over 21 is what bounds its time). With pair, also the
- * divided differences [E](uD, ua) and [O](uD, ua) (q <- b + ua q beside
- * b <- w + uD b), u = (ur, ui) the far end's and ua the near one's. */
-EF_INLINE void lamp_eo4(const v4d *ur, const v4d *ui, const v4d *uar, const v4d *uai, int pair,
-                        v4d *Er, v4d *Ei, v4d *Or, v4d *Oi, v4d *qEr, v4d *qEi, v4d *qOr,
-                        v4d *qOi)
+/* (or, oi) = (ar, ai) (br, bi), complex, per lane */
+EF_INLINE void cmul4(const v4d *ar, const v4d *ai, const v4d *br, const v4d *bi, v4d *or,
+                     v4d *oi)
+{
+    const v4d r = *ar * *br - *ai * *bi, i = *ar * *bi + *ai * *br;
+    *or = r;
+    *oi = i;
+}
+
+/* lamp_terms per lane */
+EF_INLINE void lamp_terms4(const v4d *r2, v4di *nt)
+{
+    const v4di twelve = { 12, 12, 12, 12 };
+    *nt = twelve - 3 * (*r2 > 0.0625) - 2 * (*r2 > 0.25) - (*r2 > 0.5625) - 2 * (*r2 > 1.0) -
+          (*r2 > 1.5625);
+}
+
+/* One of lamp_poly4's chains: X(v) = sum_n lamp_w[i0 + 4 n] v^n over
+ * i0 + 4 n <= nt (each lane's own terms, zeros above), by Horner at v
+ * into b, and with pair its divided difference [X](v, va) into q (q <- b
+ * + va q beside b <- w + v b). Steps above every lane's terms are not
+ * taken: they would hold exact zeros, so a lane's bits do not depend on
+ * its neighbours' counts. */
+EF_INLINE void lamp_chain4(int i0, const v4di *nt, const v4d *vr, const v4d *vi,
+                           const v4d *var, const v4d *vai, int pair, v4d b[2], v4d q[2])
 {
     const v4d zero = { 0, 0, 0, 0 };
-    v4d er = zero + lamp_w[20], ei = zero, orr = zero + lamp_w[21], oi = zero;
-    v4d qer = zero, qei = zero, qor = zero, qoi = zero;
-    for (int m = 9; m >= 0; --m) {
+    long long mx = (*nt)[0];
+    for (int i = 1; i < 4; ++i)
+        mx = (*nt)[i] > mx ? (*nt)[i] : mx;
+    v4d br = zero, bi = zero, qr = zero, qi = zero;
+    if (mx < i0)
+        goto out;
+    const int top = (int) (mx - i0) / 4;
+    br = (v4d) ((v4di) (zero + lamp_w[i0 + 4 * top]) & (*nt >= i0 + 4 * top));
+    for (int n = top - 1; n >= 0; --n) {
         if (pair) {
-            const v4d nqer = er + *uar * qer - *uai * qei, nqei = ei + *uar * qei + *uai * qer;
-            const v4d nqor = orr + *uar * qor - *uai * qoi, nqoi = oi + *uar * qoi + *uai * qor;
-            qer = nqer;
-            qei = nqei;
-            qor = nqor;
-            qoi = nqoi;
+            const v4d nqr = br + (*var * qr - *vai * qi), nqi = bi + (*var * qi + *vai * qr);
+            qr = nqr;
+            qi = nqi;
         }
-        const v4d ner = lamp_w[2 * m] + *ur * er - *ui * ei, nei = *ur * ei + *ui * er;
-        const v4d nor = lamp_w[2 * m + 1] + *ur * orr - *ui * oi, noi = *ur * oi + *ui * orr;
-        er = ner;
-        ei = nei;
-        orr = nor;
-        oi = noi;
+        const v4d w = (v4d) ((v4di) (zero + lamp_w[i0 + 4 * n]) & (*nt >= i0 + 4 * n));
+        const v4d nbr = w + (*vr * br - *vi * bi), nbi = *vr * bi + *vi * br;
+        br = nbr;
+        bi = nbi;
     }
-    *Er = er;
-    *Ei = ei;
-    *Or = orr;
-    *Oi = oi;
-    *qEr = qer;
-    *qEi = qei;
-    *qOr = qor;
-    *qOi = qoi;
+out:
+    b[0] = br;
+    b[1] = bi;
+    q[0] = qr;
+    q[1] = qi;
+}
+
+/* P(z) = sum_k w_k z^k, k <= nt (lamp_terms of the larger |z|^2, per
+ * lane) into P, or with pair the divided difference [P](z, za) =
+ * (P(z) - P(za)) / (z - za) without that difference's cancellation. The
+ * weights split four ways, P(z) = EE(v) + u EO(v) + z (OE(v) + u OO(v)),
+ * u = z^2, v = u^2: four independent chains of five steps (the dependent
+ * chain of one Horner over 21 is what bounds its time), and [P] from the
+ * chains' divided differences by [A(u) + u B(u)](uD, ua) = [A] (uD + ua)
+ * ... applied twice: [E](u, ua) = [EE](v, va) t + EO(v) + ua [EO](v, va) t,
+ * t = u + ua, and [P] = [E] s + O(u) + za [O] s, s = z + za. */
+EF_INLINE void lamp_poly4(const v4d *zr, const v4d *zi, const v4d *zar, const v4d *zai,
+                          const v4di *nt, int pair, v4d *Pr, v4d *Pi)
+{
+    v4d ur, ui, vr, vi, uar = *zr, uai = *zi, var = *zr, vai = *zi;
+    cmul4(zr, zi, zr, zi, &ur, &ui);
+    cmul4(&ur, &ui, &ur, &ui, &vr, &vi);
+    if (pair) {
+        cmul4(zar, zai, zar, zai, &uar, &uai);
+        cmul4(&uar, &uai, &uar, &uai, &var, &vai);
+    }
+    v4d ee[2], eo[2], oe[2], oo[2], qee[2], qeo[2], qoe[2], qoo[2];
+    lamp_chain4(0, nt, &vr, &vi, &var, &vai, pair, ee, qee);
+    lamp_chain4(2, nt, &vr, &vi, &var, &vai, pair, eo, qeo);
+    lamp_chain4(1, nt, &vr, &vi, &var, &vai, pair, oe, qoe);
+    lamp_chain4(3, nt, &vr, &vi, &var, &vai, pair, oo, qoo);
+    v4d t0, t1;
+    cmul4(&ur, &ui, &oo[0], &oo[1], &t0, &t1);
+    const v4d Or = oe[0] + t0, Oi = oe[1] + t1;   /* O(u) */
+    if (!pair) {
+        v4d x0, x1;
+        cmul4(&ur, &ui, &eo[0], &eo[1], &t0, &t1);
+        cmul4(zr, zi, &Or, &Oi, &x0, &x1);
+        *Pr = (ee[0] + t0) + x0;
+        *Pi = (ee[1] + t1) + x1;
+        return;
+    }
+    const v4d tr = ur + uar, ti = ui + uai, sr = *zr + *zar, si = *zi + *zai;
+    /* [E] and [O] over (u, ua) */
+    v4d a0, a1, b0, b1, dEr, dEi, dOr, dOi;
+    cmul4(&uar, &uai, &qeo[0], &qeo[1], &a0, &a1);
+    a0 = qee[0] + a0;
+    a1 = qee[1] + a1;
+    cmul4(&a0, &a1, &tr, &ti, &b0, &b1);
+    dEr = b0 + eo[0];
+    dEi = b1 + eo[1];
+    cmul4(&uar, &uai, &qoo[0], &qoo[1], &a0, &a1);
+    a0 = qoe[0] + a0;
+    a1 = qoe[1] + a1;
+    cmul4(&a0, &a1, &tr, &ti, &b0, &b1);
+    dOr = b0 + oo[0];
+    dOi = b1 + oo[1];
+    /* [P] = ([E] + za [O]) s + O(u) */
+    cmul4(zar, zai, &dOr, &dOi, &a0, &a1);
+    a0 = dEr + a0;
+    a1 = dEi + a1;
+    cmul4(&a0, &a1, &sr, &si, &b0, &b1);
+    *Pr = b0 + Or;
+    *Pi = b1 + Oi;
 }
 
 /* sqrt(x^2 + y^2) per lane, and in ok whether len2 takes that form (its
@@ -1318,15 +1432,13 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         v_log1p(&x1, &lr);
         lr = lr * 0.5;
         v_atan2(&y, &x, &li);
-        /* [P](z_D, z_a) = [E](uD, ua) s + O(uD) + z_a [O](uD, ua) s,
-         * s = z_D + z_a, P(z) = E(z^2) + z O(z^2) */
-        const v4d uDr = dr * dr - zi * zi, uDi = 2.0 * dr * zi;
-        const v4d uar = ar * ar - zi * zi, uai = 2.0 * ar * zi;
-        v4d Er, Ei, Or, Oi, qEr, qEi, qOr, qOi;
-        lamp_eo4(&uDr, &uDi, &uar, &uai, 1, &Er, &Ei, &Or, &Oi, &qEr, &qEi, &qOr, &qOi);
-        const v4d sr = ar + dr, si = 2.0 * zi;
-        const v4d tr = qEr + (ar * qOr - zi * qOi), ti = qEi + (ar * qOi + zi * qOr);
-        const v4d qr = (tr * sr - ti * si) + Or, qi = (tr * si + ti * sr) + Oi;
+        v4d qr, qi;   /* [P](z_D, z_a) */
+        const v4di abig = na > nd;
+        v4d nmax;
+        v_sel(&nmax, &abig, &na, &nd);
+        v4di nt;
+        lamp_terms4(&nmax, &nt);
+        lamp_poly4(&dr, &zi, &ar, &zi, &nt, 1, &qr, &qi);
         const v4d Vr = lr + dz * qr, Vi = li + dz * qi;
         rp = f * (cs * Vi - sn * Vr);
         v4d m2 = Vr * Vr + Vi * Vi;
@@ -1353,11 +1465,10 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
                 v4d lg, th;
                 v_log(&r2, &lg);
                 v_atan2(&zi, &zr, &th);
-                /* sum = E(u) + z O(u) (w_0 = 0), u = z^2 */
-                const v4d ur = zr * zr - zi * zi, ui = 2.0 * zr * zi;
-                v4d Sr, Si, Or, Oi, d0, d1, d2, d3;
-                lamp_eo4(&ur, &ui, &ur, &ui, 0, &Sr, &Si, &Or, &Oi, &d0, &d1, &d2, &d3);
-                const v4d sumr = Sr + (zr * Or - zi * Oi), sumi = Si + (zr * Oi + zi * Or);
+                v4d sumr, sumi;
+                v4di nt;
+                lamp_terms4(&r2, &nt);
+                lamp_poly4(&zr, &zi, &zr, &zi, &nt, 0, &sumr, &sumi);
                 const v4d Er = (-0.57721566490153286061 - 0.5 * lg) - sumr, Ei = -th - sumi;
                 v4d m2 = Er * Er + Ei * Ei;
                 v_sqrt(&m2, &m2);
@@ -1411,10 +1522,9 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
  * NULL) E[k][idx[i]] set to the sums from 0 that ef_light_inscatter forms;
  * st[i] -1 and nothing written where a channel's closed form does not
  * hold (the caller integrates). */
-EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3],
-                                       const double e[3], const lamp4 *in, int m,
-                                       const int *idx, double *const S[3], double *const E[3],
-                                       int st[4])
+EF_INLINE void lamp_rays4_in(const double sig[3], const double scat[3], const double e[3],
+                             const lamp4 *in, int m, const int *idx, double *const S[3],
+                             double *const E[3], int st[4])
 {
     double out[3][4], err[3][4];
     /* the integral per unit of scat e, and its rounding, at sig[have]:
@@ -1440,7 +1550,7 @@ EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3]
         }
         for (int i = 0; i < 4; ++i) {
             out[k][i] = unit[i] * scat[k] * e[k];
-            err[k][i] = unit_e[i] * scat[k] * e[k];
+            err[k][i] = E ? unit_e[i] * scat[k] * e[k] : 0;
         }
     }
     for (int i = 0; i < m; ++i)
@@ -1450,6 +1560,15 @@ EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3]
                 if (E)
                     E[k][idx[i]] = 0.0 + err[k][i];
             }
+}
+
+/* lamp_rays4_in, dispatched (one segment at a time: lamp_closed) */
+EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3],
+                                       const double e[3], const lamp4 *in, int m,
+                                       const int *idx, double *const S[3], double *const E[3],
+                                       int st[4])
+{
+    lamp_rays4_in(sig, scat, e, in, m, idx, S, E, st);
 }
 
 /* The uniform fog's extinction sig (its components' sum, in their order)
@@ -2200,27 +2319,66 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
 #define LIT_STACK 256
 #define MAX_LIT 65536
 
-/* lamp_line's ts and h for the n rays r[j] (h < 0: the ray's magnitudes
- * leave len2's plain form, so lamp_line gives it), in a loop the compiler
- * vectorises: the same operations, the same bits. */
-EF_MULTIVERSION static void lamp_lines(const ef_light *l, const ef_ray *r, int n, double *ts,
-                                       double *h)
+/* The n <= EF_SPAN rays r[j] of one span beside point lamp l (radius 0)
+ * in the medium (sig, scat), four at a time by lamp_rays4_in: S[k][j]
+ * and (E not NULL) E[k][j] set, except for the rays whose indices go to
+ * left (their count returned), which the caller evaluates one by one (at
+ * or through the lamp, a length of 0, magnitudes out of range, a closed
+ * form that does not hold). ts and h as lamp_line forms them, in a loop
+ * the compiler vectorises (len3's plain form; lamp_line where a ray
+ * leaves it): the same bits. */
+EF_MULTIVERSION static int lamp_span(const ef_light *l, const double sig[3],
+                                     const double scat[3], const ef_ray *r, int n,
+                                     double *const S[3], double *const E[3], int *left)
 {
-    double F[8][EF_SPAN];
+    double F[8][EF_SPAN], tsv[EF_SPAN], hv[EF_SPAN];
     rays_soa(r, n, F);
     const double px = l->pos[0], py = l->pos[1], pz = l->pos[2];
     for (int j = 0; j < n; ++j) {
         const double dx = F[EF_F_DIR][j], dy = F[EF_F_DIR + 1][j], dz = F[EF_F_DIR + 2][j];
         const double wx = px - F[EF_F_ORG][j], wy = py - F[EF_F_ORG + 1][j],
                      wz = pz - F[EF_F_ORG + 2][j];
-        ts[j] = wx * dx + wy * dy + wz * dz;
+        tsv[j] = wx * dx + wy * dy + wz * dz;
         const double cx = wy * dz - wz * dy, cy = wz * dx - wx * dz, cz = wx * dy - wy * dx;
         const double ax = fabs(cx), ay = fabs(cy), az = fabs(cz);
-        const double m1 = ax > ay ? ax : ay, xy = sqrt(cx * cx + cy * cy);
-        const double m2 = xy > az ? xy : az, v = sqrt(xy * xy + cz * cz);
-        const int plain = m1 < 1e150 && m1 > 1e-150 && m2 < 1e150 && m2 > 1e-150;
-        h[j] = plain ? v : -1.0;
+        const double mxy = ax > ay ? ax : ay, m = mxy > az ? mxy : az;
+        const double v = sqrt(cx * cx + cy * cy + cz * cz);
+        hv[j] = m < 1e150 && m > 1e-150 ? v : -1.0;
     }
+    int idx[4], m = 0, nl = 0;
+    lamp4 in;
+    for (int j = 0; j <= n; ++j) {
+        if (j < n) {
+            double w[3], ts = tsv[j], h = hv[j];
+            const int beside = r[j].dist > 0;
+            if (beside && !(h >= 0))
+                lamp_line(l, &r[j], w, &ts, &h);
+            if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
+                left[nl++] = j;
+                continue;
+            }
+            in.ts[m] = ts;
+            in.h[m] = h;
+            in.a[m] = 0;
+            in.D[m] = r[j].dist;
+            idx[m++] = j;
+        }
+        if (m == 4 || (j == n && m > 0)) {
+            for (int i = m; i < 4; ++i) {   /* the last batch: its last ray again */
+                in.ts[i] = in.ts[m - 1];
+                in.h[i] = in.h[m - 1];
+                in.a[i] = in.a[m - 1];
+                in.D[i] = in.D[m - 1];
+            }
+            int st[4];
+            lamp_rays4_in(sig, scat, l->e, &in, m, idx, S, E, st);
+            for (int i = 0; i < m; ++i)
+                if (st[i])   /* the ends cancel: ef_light_inscatter integrates */
+                    left[nl++] = idx[i];
+            m = 0;
+        }
+    }
+    return nl;
 }
 
 /* Whether ef_light_inscatter takes l's light in s from lamp_closed
@@ -2253,45 +2411,22 @@ static void one_ray(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, i
 void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, int n,
                    double *const S[3], double *const E[3])
 {
+    if (!lamp_batch(s, l) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0)) {
+        for (int j = 0; j < n; ++j)
+            one_ray(s, l, r, j, S, E);
+        return;
+    }
     double sig[3], scat[3];
-    const int batch = lamp_batch(s, l) && (l->e[0] != 0 || l->e[1] != 0 || l->e[2] != 0);
-    if (batch)
-        lamp_medium(s, sig, scat);
-    int idx[4], m = 0;
-    lamp4 in;
-    double tsv[EF_SPAN], hv[EF_SPAN];
-    for (int j = 0; j <= n; ++j) {
-        if (batch && j % EF_SPAN == 0 && j < n)
-            lamp_lines(l, r + j, n - j < EF_SPAN ? n - j : EF_SPAN, tsv, hv);
-        if (j < n) {
-            double w[3], ts = tsv[j % EF_SPAN], h = hv[j % EF_SPAN];
-            const int beside = batch && r[j].dist > 0;
-            if (beside && !(h >= 0))
-                lamp_line(l, &r[j], w, &ts, &h);
-            if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
-                one_ray(s, l, r, j, S, E);
-                continue;
-            }
-            in.ts[m] = ts;
-            in.h[m] = h;
-            in.a[m] = 0;
-            in.D[m] = r[j].dist;
-            idx[m++] = j;
-        }
-        if (m == 4 || (j == n && m > 0)) {
-            for (int i = m; i < 4; ++i) {   /* the last batch: its last ray again */
-                in.ts[i] = in.ts[m - 1];
-                in.h[i] = in.h[m - 1];
-                in.a[i] = in.a[m - 1];
-                in.D[i] = in.D[m - 1];
-            }
-            int st[4];
-            lamp_rays4(sig, scat, l->e, &in, m, idx, S, E, st);
-            for (int i = 0; i < m; ++i)
-                if (st[i])   /* the ends cancel: ef_light_inscatter integrates */
-                    one_ray(s, l, r, idx[i], S, E);
-            m = 0;
-        }
+    lamp_medium(s, sig, scat);
+    for (int j0 = 0; j0 < n; j0 += EF_SPAN) {
+        const int m = n - j0 < EF_SPAN ? n - j0 : EF_SPAN;
+        double *const Sj[3] = { S[0] + j0, S[1] + j0, S[2] + j0 };
+        double *const Ej[3] = { E ? E[0] + j0 : NULL, E ? E[1] + j0 : NULL,
+                                E ? E[2] + j0 : NULL };
+        int left[EF_SPAN];
+        const int nl = lamp_span(l, sig, scat, r + j0, m, Sj, E ? Ej : NULL, left);
+        for (int i = 0; i < nl; ++i)
+            one_ray(s, l, r + j0, left[i], Sj, E ? Ej : NULL);
     }
 }
 
