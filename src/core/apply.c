@@ -47,6 +47,16 @@ static inline double coverage_sum(double a, int shows, double S, double Sf)
     return (a > 0.0 ? a * S : 0.0) + (shows && a < 1.0 ? (1.0 - a) * Sf : 0.0);
 }
 
+/* add[j] += coverage_sum(a[j], shows[j], S[j], Sf[j]) for j < n, in a
+ * loop the compiler vectorises (the arrays do not overlap add) */
+EF_INLINE void span_coverage(int n, const double *restrict a,
+                             const unsigned char *restrict shows, const double *restrict S,
+                             const double *restrict Sf, double *restrict add)
+{
+    for (int j = 0; j < n; ++j)
+        add[j] += coverage_sum(a[j], shows[j], S[j], Sf[j]);
+}
+
 /* One light's a S + (1 - a) S_far (far: the far segment when it differs
  * from r; need_inf: the far part shows), and the same sum of their error
  * estimates in ve (NULL: not wanted). */
@@ -564,9 +574,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                                 Sf[k][sp->qj[m]] = sp->Sq[k][m];
                     }
                     for (int k = 0; k < 3; ++k)
-                        for (int j = 0; j < n; ++j)
-                            sp->add[k][j] += coverage_sum(sp->a[j], sp->shows[j], sp->S[k][j],
-                                                          Sf[k][j]);
+                        span_coverage(n, sp->a, sp->shows, sp->S[k], Sf[k], sp->add[k]);
                 }
             } else if (sky) {
                 /* add_sky: sky_segment along the surface segment with its T,

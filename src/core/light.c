@@ -1259,52 +1259,34 @@ EF_INLINE void cmul4(const v4d *ar, const v4d *ai, const v4d *br, const v4d *bi,
     *oi = i;
 }
 
-/* lamp_terms per lane */
-EF_INLINE void lamp_terms4(const v4d *r2, v4di *nt)
-{
-    const v4di twelve = { 12, 12, 12, 12 };
-    *nt = twelve - 3 * (*r2 > 0.0625) - 2 * (*r2 > 0.25) - (*r2 > 0.5625) - 2 * (*r2 > 1.0) -
-          (*r2 > 1.5625);
-}
-
-/* One of lamp_poly4's chains: X(v) = sum_n lamp_w[i0 + 4 n] v^n over
- * i0 + 4 n <= nt (each lane's own terms, zeros above), by Horner at v
- * into b, and with pair its divided difference [X](v, va) into q (q <- b
- * + va q beside b <- w + v b). Steps above every lane's terms are not
- * taken: they would hold exact zeros, so a lane's bits do not depend on
- * its neighbours' counts. */
-EF_INLINE void lamp_chain4(int i0, const v4di *nt, const v4d *vr, const v4d *vi,
-                           const v4d *var, const v4d *vai, int pair, v4d b[2], v4d q[2])
+/* One of lamp_poly4's chains: X(v) = sum_n lamp_w[i0 + 4 n] v^n, n =
+ * 0..top, by Horner at v into b, and with pair its divided difference
+ * [X](v, va) into q (q <- b + va q beside b <- w + v b). */
+EF_INLINE void lamp_chain4(int i0, int top, const v4d *vr, const v4d *vi, const v4d *var,
+                           const v4d *vai, int pair, v4d b[2], v4d q[2])
 {
     const v4d zero = { 0, 0, 0, 0 };
-    long long mx = (*nt)[0];
-    for (int i = 1; i < 4; ++i)
-        mx = (*nt)[i] > mx ? (*nt)[i] : mx;
-    v4d br = zero, bi = zero, qr = zero, qi = zero;
-    if (mx < i0)
-        goto out;
-    const int top = (int) (mx - i0) / 4;
-    br = (v4d) ((v4di) (zero + lamp_w[i0 + 4 * top]) & (*nt >= i0 + 4 * top));
+    v4d br = zero + lamp_w[i0 + 4 * top], bi = zero, qr = zero, qi = zero;
     for (int n = top - 1; n >= 0; --n) {
         if (pair) {
             const v4d nqr = br + (*var * qr - *vai * qi), nqi = bi + (*var * qi + *vai * qr);
             qr = nqr;
             qi = nqi;
         }
-        const v4d w = (v4d) ((v4di) (zero + lamp_w[i0 + 4 * n]) & (*nt >= i0 + 4 * n));
-        const v4d nbr = w + (*vr * br - *vi * bi), nbi = *vr * bi + *vi * br;
+        const v4d nbr = lamp_w[i0 + 4 * n] + (*vr * br - *vi * bi), nbi = *vr * bi + *vi * br;
         br = nbr;
         bi = nbi;
     }
-out:
     b[0] = br;
     b[1] = bi;
     q[0] = qr;
     q[1] = qi;
 }
 
-/* P(z) = sum_k w_k z^k, k <= nt (lamp_terms of the larger |z|^2, per
- * lane) into P, or with pair the divided difference [P](z, za) =
+/* P(z) = sum_k w_k z^k over all of lamp_w (21 terms: 1e-17 at |z| = 1.5,
+ * more than needed nearer 0, but the same steps for every lane, so that a
+ * lane's value never depends on its neighbours; per-lane counts measured
+ * no faster) into P, or with pair the divided difference [P](z, za) =
  * (P(z) - P(za)) / (z - za) without that difference's cancellation. The
  * weights split four ways, P(z) = EE(v) + u EO(v) + z (OE(v) + u OO(v)),
  * u = z^2, v = u^2: four independent chains of five steps (the dependent
@@ -1313,7 +1295,7 @@ out:
  * ... applied twice: [E](u, ua) = [EE](v, va) t + EO(v) + ua [EO](v, va) t,
  * t = u + ua, and [P] = [E] s + O(u) + za [O] s, s = z + za. */
 EF_INLINE void lamp_poly4(const v4d *zr, const v4d *zi, const v4d *zar, const v4d *zai,
-                          const v4di *nt, int pair, v4d *Pr, v4d *Pi)
+                          int pair, v4d *Pr, v4d *Pi)
 {
     v4d ur, ui, vr, vi, uar = *zr, uai = *zi, var = *zr, vai = *zi;
     cmul4(zr, zi, zr, zi, &ur, &ui);
@@ -1323,10 +1305,10 @@ EF_INLINE void lamp_poly4(const v4d *zr, const v4d *zi, const v4d *zar, const v4
         cmul4(&uar, &uai, &uar, &uai, &var, &vai);
     }
     v4d ee[2], eo[2], oe[2], oo[2], qee[2], qeo[2], qoe[2], qoo[2];
-    lamp_chain4(0, nt, &vr, &vi, &var, &vai, pair, ee, qee);
-    lamp_chain4(2, nt, &vr, &vi, &var, &vai, pair, eo, qeo);
-    lamp_chain4(1, nt, &vr, &vi, &var, &vai, pair, oe, qoe);
-    lamp_chain4(3, nt, &vr, &vi, &var, &vai, pair, oo, qoo);
+    lamp_chain4(0, 5, &vr, &vi, &var, &vai, pair, ee, qee);
+    lamp_chain4(2, 4, &vr, &vi, &var, &vai, pair, eo, qeo);
+    lamp_chain4(1, 5, &vr, &vi, &var, &vai, pair, oe, qoe);
+    lamp_chain4(3, 4, &vr, &vi, &var, &vai, pair, oo, qoo);
     v4d t0, t1;
     cmul4(&ur, &ui, &oo[0], &oo[1], &t0, &t1);
     const v4d Or = oe[0] + t0, Oi = oe[1] + t1;   /* O(u) */
@@ -1433,12 +1415,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         lr = lr * 0.5;
         v_atan2(&y, &x, &li);
         v4d qr, qi;   /* [P](z_D, z_a) */
-        const v4di abig = na > nd;
-        v4d nmax;
-        v_sel(&nmax, &abig, &na, &nd);
-        v4di nt;
-        lamp_terms4(&nmax, &nt);
-        lamp_poly4(&dr, &zi, &ar, &zi, &nt, 1, &qr, &qi);
+        lamp_poly4(&dr, &zi, &ar, &zi, 1, &qr, &qi);
         const v4d Vr = lr + dz * qr, Vi = li + dz * qi;
         rp = f * (cs * Vi - sn * Vr);
         v4d m2 = Vr * Vr + Vi * Vi;
@@ -1466,9 +1443,7 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
                 v_log(&r2, &lg);
                 v_atan2(&zi, &zr, &th);
                 v4d sumr, sumi;
-                v4di nt;
-                lamp_terms4(&r2, &nt);
-                lamp_poly4(&zr, &zi, &zr, &zi, &nt, 0, &sumr, &sumi);
+                lamp_poly4(&zr, &zi, &zr, &zi, 0, &sumr, &sumi);
                 const v4d Er = (-0.57721566490153286061 - 0.5 * lg) - sumr, Ei = -th - sumi;
                 v4d m2 = Er * Er + Ei * Ei;
                 v_sqrt(&m2, &m2);
@@ -2345,38 +2320,42 @@ EF_MULTIVERSION static int lamp_span(const ef_light *l, const double sig[3],
         const double v = sqrt(cx * cx + cy * cy + cz * cz);
         hv[j] = m < 1e150 && m > 1e-150 ? v : -1.0;
     }
-    int idx[4], m = 0, nl = 0;
-    lamp4 in;
-    for (int j = 0; j <= n; ++j) {
-        if (j < n) {
-            double w[3], ts = tsv[j], h = hv[j];
-            const int beside = r[j].dist > 0;
-            if (beside && !(h >= 0))
-                lamp_line(l, &r[j], w, &ts, &h);
-            if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
-                left[nl++] = j;
-                continue;
-            }
-            in.ts[m] = ts;
-            in.h[m] = h;
-            in.a[m] = 0;
-            in.D[m] = r[j].dist;
-            idx[m++] = j;
+    /* every ray's batch first, then the batches: a batch's four lanes are
+     * read as vectors long after their scalar stores (not through a
+     * stalled store-to-load forward) */
+    lamp4 in[EF_SPAN / 4];
+    int idx[EF_SPAN], m = 0, nl = 0;
+    for (int j = 0; j < n; ++j) {
+        double w[3], ts = tsv[j], h = hv[j];
+        const int beside = r[j].dist > 0;
+        if (beside && !(h >= 0))
+            lamp_line(l, &r[j], w, &ts, &h);
+        if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
+            left[nl++] = j;
+            continue;
         }
-        if (m == 4 || (j == n && m > 0)) {
-            for (int i = m; i < 4; ++i) {   /* the last batch: its last ray again */
-                in.ts[i] = in.ts[m - 1];
-                in.h[i] = in.h[m - 1];
-                in.a[i] = in.a[m - 1];
-                in.D[i] = in.D[m - 1];
-            }
-            int st[4];
-            lamp_rays4_in(sig, scat, l->e, &in, m, idx, S, E, st);
-            for (int i = 0; i < m; ++i)
-                if (st[i])   /* the ends cancel: ef_light_inscatter integrates */
-                    left[nl++] = idx[i];
-            m = 0;
-        }
+        lamp4 *const b = &in[m / 4];
+        b->ts[m % 4] = ts;
+        b->h[m % 4] = h;
+        b->a[m % 4] = 0;
+        b->D[m % 4] = r[j].dist;
+        idx[m++] = j;
+    }
+    for (int i = m; i % 4; ++i) {   /* the last batch: its last ray again */
+        lamp4 *const b = &in[i / 4];
+        const lamp4 *const lb = &in[(m - 1) / 4];
+        b->ts[i % 4] = lb->ts[(m - 1) % 4];
+        b->h[i % 4] = lb->h[(m - 1) % 4];
+        b->a[i % 4] = lb->a[(m - 1) % 4];
+        b->D[i % 4] = lb->D[(m - 1) % 4];
+    }
+    for (int i0 = 0; i0 < m; i0 += 4) {
+        int st[4];
+        const int mb = m - i0 < 4 ? m - i0 : 4;
+        lamp_rays4_in(sig, scat, l->e, &in[i0 / 4], mb, idx + i0, S, E, st);
+        for (int i = 0; i < mb; ++i)
+            if (st[i])   /* the ends cancel: ef_light_inscatter integrates */
+                left[nl++] = idx[i0 + i];
     }
     return nl;
 }
