@@ -1366,7 +1366,7 @@ EF_INLINE void len2_4(const v4d *x, const v4d *y, v4d *o, v4di *ok)
  * inside the series' circle. st[i]: 1 done (r, re), -1 the ends cancel
  * (the caller integrates), 0 left to lamp_unit1 (an end outside the
  * circle, or a value beyond vmath.h's ranges). */
-EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4], int st[4])
+EF_INLINE void lamp_kernel(double sg, const lamp4 *in, v4d *r, v4d *re, v4di *st)
 {
     v4d ts, h, a, D;
     memcpy(&ts, in->ts, sizeof ts);
@@ -1476,19 +1476,13 @@ EF_INLINE void lamp_kernel(double sg, const lamp4 *in, double r[4], double re[4]
         re2 = h2h * V;
         ree = h2h * mag * 2e-15;
     }
-    for (int i = 0; i < 4; ++i) {
-        if (done[i]) {
-            r[i] = rp[i];
-            re[i] = rpe[i];
-            st[i] = 1;
-        } else if (need[i]) {
-            r[i] = re2[i];
-            re[i] = ree[i];
-            st[i] = !bad[i] && ree[i] <= 1e-13 * fabs(re2[i]) && isfinite(re2[i]) ? 1 : -1;
-        } else {
-            st[i] = 0;
-        }
-    }
+    /* as vectors: their lanes are read as vectors next */
+    v4d are2;
+    v_abs(&re2, &are2);
+    const v4di one = { 1, 1, 1, 1 }, ok = ~bad & (ree <= 1e-13 * are2) & (are2 < INFINITY);
+    v_sel(r, &done, &rp, &re2);
+    v_sel(re, &done, &rpe, &ree);
+    *st = (done & one) | (need & ~done & ((ok & one) | (~ok & -one)));
 }
 
 /* lamp_closed for four segments of one medium (sig, scat) and lamp (e),
@@ -1501,32 +1495,52 @@ EF_INLINE void lamp_rays4_in(const double sig[3], const double scat[3], const do
                              const lamp4 *in, int m, const int *idx, double *const S[3],
                              double *const E[3], int st[4])
 {
-    double out[3][4], err[3][4];
+    const v4d zero = { 0, 0, 0, 0 };
+    v4d out[3], err[3];
     /* the integral per unit of scat e, and its rounding, at sig[have]:
      * channels of the same sigma take it (grey fog, coloured lamps) */
-    double unit[4] = { 0 }, unit_e[4] = { 0 };
+    v4d unit = zero, unit_e = zero;
+    v4di stv = { 0, 0, 0, 0 };
     int have = -1;
-    st[0] = st[1] = st[2] = st[3] = 0;
     for (int k = 0; k < 3; ++k) {
         if (!(sig[k] > 0) || scat[k] == 0 || e[k] == 0) {
-            for (int i = 0; i < 4; ++i)
-                out[k][i] = err[k][i] = 0;
+            out[k] = err[k] = zero;
             continue;
         }
         if (have < 0 || sig[k] != sig[have]) {
-            int ust[4];
-            lamp_kernel(sig[k], in, unit, unit_e, ust);
-            for (int i = 0; i < 4; ++i)
-                st[i] |= ust[i] == 1    ? 0
-                         : ust[i] == -1 ? -1
-                                        : lamp_unit1(sig[k], in->ts[i], in->h[i], in->a[i],
-                                                     in->D[i], &unit[i], &unit_e[i]);
+            v4di ust;
+            lamp_kernel(sig[k], in, &unit, &unit_e, &ust);
+            stv |= ust == -1;
+            const v4di left = ust == 0;
+            if (v_any(&left)) {   /* rare: lamp_unit1 for those lanes */
+                double u[4], ue[4];
+                memcpy(u, &unit, sizeof u);
+                memcpy(ue, &unit_e, sizeof ue);
+                for (int i = 0; i < 4; ++i)
+                    if (left[i] && lamp_unit1(sig[k], in->ts[i], in->h[i], in->a[i], in->D[i],
+                                              &u[i], &ue[i]))
+                        stv[i] = -1;
+                memcpy(&unit, u, sizeof u);
+                memcpy(&unit_e, ue, sizeof ue);
+            }
             have = k;
         }
-        for (int i = 0; i < 4; ++i) {
-            out[k][i] = unit[i] * scat[k] * e[k];
-            err[k][i] = E ? unit_e[i] * scat[k] * e[k] : 0;
+        out[k] = unit * scat[k] * e[k];
+        err[k] = E ? unit_e * scat[k] * e[k] : zero;
+    }
+    for (int i = 0; i < 4; ++i)
+        st[i] = (int) stv[i];
+    /* 0.0 + x: a -0 sum from 0, as ef_light_inscatter's */
+    if (m == 4 && idx[3] == idx[0] + 3 && !v_any(&stv)) {
+        for (int k = 0; k < 3; ++k) {
+            const v4d o = 0.0 + out[k];
+            memcpy(S[k] + idx[0], &o, sizeof o);
+            if (E) {
+                const v4d oe = 0.0 + err[k];
+                memcpy(E[k] + idx[0], &oe, sizeof oe);
+            }
         }
+        return;
     }
     for (int i = 0; i < m; ++i)
         if (st[i] == 0)
