@@ -2334,12 +2334,30 @@ EF_MULTIVERSION static int lamp_span(const ef_light *l, const double sig[3],
         const double v = sqrt(cx * cx + cy * cy + cz * cz);
         hv[j] = m < 1e150 && m > 1e-150 ? v : -1.0;
     }
-    /* every ray's batch first, then the batches: a batch's four lanes are
-     * read as vectors long after their scalar stores (not through a
-     * stalled store-to-load forward) */
+    /* the common span: every ray beside the lamp in plain magnitudes, its
+     * batches the arrays' slices (copied as vectors) */
+    int all = n % 4 == 0;
+    for (int j = 0; j < n; ++j)
+        all &= (F[EF_F_DIST][j] > 0) & (hv[j] > 0) & (hv[j] <= DBL_MAX / 64) &
+               (fabs(tsv[j]) < INFINITY);
     lamp4 in[EF_SPAN / 4];
     int idx[EF_SPAN], m = 0, nl = 0;
-    for (int j = 0; j < n; ++j) {
+    if (all) {
+        const double zero[4] = { 0, 0, 0, 0 };
+        for (int b = 0; b < n / 4; ++b) {
+            memcpy(in[b].ts, tsv + 4 * b, sizeof in[b].ts);
+            memcpy(in[b].h, hv + 4 * b, sizeof in[b].h);
+            memcpy(in[b].a, zero, sizeof in[b].a);
+            memcpy(in[b].D, F[EF_F_DIST] + 4 * b, sizeof in[b].D);
+        }
+        for (int j = 0; j < n; ++j)
+            idx[j] = j;
+        m = n;
+    }
+    /* else every ray's batch first, then the batches: a batch's four lanes
+     * are read as vectors long after their scalar stores (not through a
+     * stalled store-to-load forward) */
+    for (int j = 0; !all && j < n; ++j) {
         double w[3], ts = tsv[j], h = hv[j];
         const int beside = r[j].dist > 0;
         if (beside && !(h >= 0))
