@@ -999,7 +999,7 @@ static double len2(double x, double y)
 
 /* |(x, y, z)| with one square root where the largest magnitude lies
  * within 1e-150 .. 1e150 (its square then neither overflows nor loses
- * digits that matter), else by len2 twice. lamp_lines computes the same
+ * digits that matter), else by len2 twice. lamp_span computes the same
  * plain form on vectors. */
 static double len3(double x, double y, double z)
 {
@@ -1289,8 +1289,8 @@ EF_INLINE void lamp_chain4(int i0, int top, const v4d *vr, const v4d *vi, const 
  * no faster) into P, or with pair the divided difference [P](z, za) =
  * (P(z) - P(za)) / (z - za) without that difference's cancellation. The
  * weights split four ways, P(z) = EE(v) + u EO(v) + z (OE(v) + u OO(v)),
- * u = z^2, v = u^2: four independent chains of five steps (the dependent
- * chain of one Horner over 21 is what bounds its time), and [P] from the
+ * u = z^2, v = u^2: four independent chains of five steps (rather than
+ * one Horner's twenty dependent ones), and [P] from the
  * chains' divided differences by [A(u) + u B(u)](uD, ua) = [A] (uD + ua)
  * ... applied twice: [E](u, ua) = [EE](v, va) t + EO(v) + ua [EO](v, va) t,
  * t = u + ua, and [P] = [E] s + O(u) + za [O] s, s = z + za. */
