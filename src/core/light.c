@@ -1283,6 +1283,20 @@ EF_INLINE void lamp_chain4(int i0, int top, const v4d *vr, const v4d *vi, const 
     q[1] = qi;
 }
 
+/* o = (a + u b) t + c, complex (index 0 real, 1 imaginary), per lane:
+ * one step of [A(u) + u B(u)](u, ua) = ([A] + ua [B]) (u + ua) + B(u) */
+EF_INLINE void lamp_dd4(const v4d u[2], const v4d a[2], const v4d b[2], const v4d t[2],
+                        const v4d c[2], v4d o[2])
+{
+    v4d x0, x1, y0, y1;
+    cmul4(&u[0], &u[1], &b[0], &b[1], &x0, &x1);
+    x0 = a[0] + x0;
+    x1 = a[1] + x1;
+    cmul4(&x0, &x1, &t[0], &t[1], &y0, &y1);
+    o[0] = y0 + c[0];
+    o[1] = y1 + c[1];
+}
+
 /* P(z) = sum_k w_k z^k over all of lamp_w (21 terms: 1e-17 at |z| = 1.5,
  * more than needed nearer 0, but the same steps for every lane, so that a
  * lane's value never depends on its neighbours; per-lane counts measured
@@ -1320,28 +1334,15 @@ EF_INLINE void lamp_poly4(const v4d *zr, const v4d *zi, const v4d *zar, const v4
         *Pi = (ee[1] + t1) + x1;
         return;
     }
-    const v4d tr = ur + uar, ti = ui + uai, sr = *zr + *zar, si = *zi + *zai;
-    /* [E] and [O] over (u, ua) */
-    v4d a0, a1, b0, b1, dEr, dEi, dOr, dOi;
-    cmul4(&uar, &uai, &qeo[0], &qeo[1], &a0, &a1);
-    a0 = qee[0] + a0;
-    a1 = qee[1] + a1;
-    cmul4(&a0, &a1, &tr, &ti, &b0, &b1);
-    dEr = b0 + eo[0];
-    dEi = b1 + eo[1];
-    cmul4(&uar, &uai, &qoo[0], &qoo[1], &a0, &a1);
-    a0 = qoe[0] + a0;
-    a1 = qoe[1] + a1;
-    cmul4(&a0, &a1, &tr, &ti, &b0, &b1);
-    dOr = b0 + oo[0];
-    dOi = b1 + oo[1];
-    /* [P] = ([E] + za [O]) s + O(u) */
-    cmul4(zar, zai, &dOr, &dOi, &a0, &a1);
-    a0 = dEr + a0;
-    a1 = dEi + a1;
-    cmul4(&a0, &a1, &sr, &si, &b0, &b1);
-    *Pr = b0 + Or;
-    *Pi = b1 + Oi;
+    const v4d t[2] = { ur + uar, ui + uai }, sz[2] = { *zr + *zar, *zi + *zai },
+              ua[2] = { uar, uai }, za[2] = { *zar, *zai }, O[2] = { Or, Oi };
+    /* [E] and [O] over (u, ua), then [P] = ([E] + za [O]) s + O(u) */
+    v4d dE[2], dO[2], P[2];
+    lamp_dd4(ua, qee, qeo, t, eo, dE);
+    lamp_dd4(ua, qoe, qoo, t, oo, dO);
+    lamp_dd4(za, dE, dO, sz, O, P);
+    *Pr = P[0];
+    *Pi = P[1];
 }
 
 /* sqrt(x^2 + y^2) per lane, and in ok whether len2 takes that form (its
