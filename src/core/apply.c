@@ -522,8 +522,9 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
             const int colour = fast_tau_transmit(s, sp->r, n, sp, sp->T, 0);
             const double *const T[3] = { sp->T[0], sp->T[colour], sp->T[2 * colour] };
             const double *Ti[3] = { T[0], T[1], T[2] };
-            if (lit)   /* the surface rays' depths, for a sun's closed form */
-                memcpy(sp->taur, sp->tau, sizeof sp->taur);
+            /* the surface rays' depths, for a sun's closed form: tau, or a
+             * copy where the far segments' depths overwrite it */
+            double (*taur)[EF_RECON_SPAN] = sp->tau;
             int nq = 0;
             for (int j = 0; ninf && j < n; ++j) {
                 if (!sp->need_inf[j])
@@ -534,6 +535,11 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                 sp->qj[nq++] = j;
             }
             if (nq) {
+                if (lit) {
+                    for (int k = 0; k < 3; ++k)
+                        memcpy(sp->taur[k], sp->tau[k], (size_t) n * sizeof sp->taur[k][0]);
+                    taur = sp->taur;
+                }
                 /* Ti: T, then the far segments' T where they differ. */
                 double Tq[3][EF_RECON_SPAN];
                 fast_tau_transmit(s, sp->q, nq, sp, Tq, 1);
@@ -562,7 +568,7 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                     for (int j = 0; j < n; ++j)
                         sp->add[k][j] = 0.0;
                 for (int l = 0; l < s->nlight; ++l) {
-                    light_rays(s, &s->light[l], sp->r, n, sp->taur, sp->S);
+                    light_rays(s, &s->light[l], sp->r, n, taur, sp->S);
                     double (*Sf)[EF_RECON_SPAN] = sp->S;
                     if (nq) {
                         Sf = sp->Sf;
