@@ -314,6 +314,15 @@ static void test_point_uniform(void **state)
           { 0, -0.2, -1 }, 0.5 },
         { { "exp:density=3" }, "point:position=0.3,2,-1:intensity=100", { 0, 1.7, 0 },
           { 0, 0.3, -1 }, INFINITY },
+        /* the continued fraction near the imaginary axis (z = 0.032 -
+         * 1.6i at the camera end: hundreds of terms, rescaled every
+         * fourth), and at both ends of a segment past a lamp */
+        { { "exp:density=0.02" }, "point:position=80,1.7,-2000:intensity=1e6", { 0, 1.7, 0 },
+          { 0, 0, -1 }, INFINITY },
+        { { "exp:density=0.02" }, "point:position=80,1.7,-2000:intensity=1e6", { 0, 1.7, 0 },
+          { 0, 0, -1 }, 1500 },
+        { { "exp:density=0.05" }, "point:position=40,1.7,-30:intensity=1e4", { 0, 1.7, 0 },
+          { 0, 0, -1 }, 200 },
         /* a spot in uniform fog, its cone crossing the ray */
         { { "exp:density=0.03" },
           "spot:position=0,6,-20:aim=0,-1,0:cone=40:blend=0.2:intensity=100", { 0, 1.7, 0 },
