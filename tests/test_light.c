@@ -315,7 +315,7 @@ static void test_point_uniform(void **state)
         { { "exp:density=3" }, "point:position=0.3,2,-1:intensity=100", { 0, 1.7, 0 },
           { 0, 0.3, -1 }, INFINITY },
         /* the continued fraction near the imaginary axis (z = 0.032 -
-         * 1.6i at the camera end: hundreds of terms, rescaled every
+         * 1.6i at the camera end: 123 terms, rescaled every
          * fourth), and at both ends of a segment past a lamp */
         { { "exp:density=0.02" }, "point:position=80,1.7,-2000:intensity=1e6", { 0, 1.7, 0 },
           { 0, 0, -1 }, INFINITY },
