@@ -2309,6 +2309,15 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
 #define LIT_STACK 256
 #define MAX_LIT 65536
 
+/* Whether lamp_span's batches take a ray of length D whose closest
+ * approach to the lamp is h at ts (h as lamp_line gives it): a segment,
+ * beside the lamp, in magnitudes the kernel handles. No short circuit, so
+ * a loop over a span vectorises. */
+EF_INLINE int lamp_takes(double D, double h, double ts)
+{
+    return (D > 0) & (h > 0) & (h <= DBL_MAX / 64) & (fabs(ts) < INFINITY);
+}
+
 /* The n <= EF_SPAN rays r[j] of one span beside point lamp l (radius 0)
  * in the medium (sig, scat), four at a time by lamp_rays4_in: S[k][j]
  * and (E not NULL) E[k][j] set, except for the rays whose indices go to
@@ -2339,8 +2348,7 @@ EF_MULTIVERSION static int lamp_span(const ef_light *l, const double sig[3],
      * batches the arrays' slices (copied as vectors) */
     int all = n % 4 == 0;
     for (int j = 0; j < n; ++j)
-        all &= (F[EF_F_DIST][j] > 0) & (hv[j] > 0) & (hv[j] <= DBL_MAX / 64) &
-               (fabs(tsv[j]) < INFINITY);
+        all &= lamp_takes(F[EF_F_DIST][j], hv[j], tsv[j]);
     lamp4 in[EF_SPAN / 4];
     int idx[EF_SPAN], m = 0, nl = 0;
     if (all) {
@@ -2363,7 +2371,7 @@ EF_MULTIVERSION static int lamp_span(const ef_light *l, const double sig[3],
         const int beside = r[j].dist > 0;
         if (beside && !(h >= 0))
             lamp_line(l, &r[j], w, &ts, &h);
-        if (!beside || !(h > 0) || !(h <= DBL_MAX / 64) || !isfinite(ts)) {
+        if (!lamp_takes(r[j].dist, h, ts)) {
             left[nl++] = j;
             continue;
         }
