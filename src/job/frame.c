@@ -185,19 +185,44 @@ static void temp_name(char *name, size_t len, const char *what)
     snprintf(name, len, "%s/%s", tmpdir && tmpdir[0] ? tmpdir : "/tmp", what);
 }
 
+/* Refuses to write out (as flag says) over a file the frame reads: the
+ * same name, or the same file through a link. INPUT counts only when
+ * with_input: -o INPUT replaces the image in place, as asked. Returns 0,
+ * or 2 with the message printed. */
+static int refuse_clash(ef_frame *F, const char *out, const char *flag, int with_input)
+{
+    ef_job *J = F->J;
+    ef_read_list *r = ef_job_reads(J, J->has_frame, J->frame, with_input);
+    if (!r) {
+        ef_fail(&F->err, "out of memory");
+        return ef_job_report(J, out, &F->err, 1);
+    }
+    const char *role, *path;
+    int rc = 0;
+    if (ef_output_clash(r, out, &role, &path)) {
+        ef_fail(&F->err, "%s names %s%s%s%s: writing it would replace a file this run reads; "
+                         "nothing was written (give the output its own name)",
+                flag, role, strcmp(out, path) ? " (" : "", strcmp(out, path) ? path : "",
+                strcmp(out, path) ? ", the same file)" : "");
+        rc = ef_job_report(J, out, &F->err, 2);
+    }
+    free(r);
+    return rc;
+}
+
 /* --preview: checked and its temporary file made before any work. */
 static int open_preview(ef_frame *F)
 {
     ef_job *J = F->J;
     const ef_options *o = F->o;
     char msg[512];
-    if (!strcmp(o->preview, o->output) || ef_output_same_file(o->preview, o->output) ||
-        ef_output_same_file(o->preview, o->input) ||
-        (o->depth_file && ef_output_same_file(o->preview, o->depth_file))) {
-        ef_fail(&F->err, "--preview names the same file as INPUT, --depth or -o; give the "
-                         "preview its own name");
+    if (o->output && (!strcmp(o->preview, o->output) || ef_output_same_file(o->preview, o->output))) {
+        ef_fail(&F->err, "--preview names the same file as -o; give the preview its own name");
         return ef_job_report(J, o->preview, &F->err, 2);
     }
+    int rc = refuse_clash(F, o->preview, "--preview", 1);
+    if (rc)
+        return rc;
     if (ef_preview_check(o->preview, msg, sizeof msg)) {
         ef_fail(&F->err, "--preview: %s", msg);
         return ef_job_report(J, o->preview, &F->err, 2);
@@ -215,7 +240,7 @@ static int open_preview(ef_frame *F)
     }
     ef_ocio_display_close(d);
     const char *dot = strrchr(o->preview, '.'), *slash = strrchr(o->preview, '/');
-    const int rc = ef_output_open(&F->pv, o->preview, dot && (!slash || dot > slash) ? dot : NULL,
+    rc = ef_output_open(&F->pv, o->preview, dot && (!slash || dot > slash) ? dot : NULL,
                                   J->h.temps, &F->err);
     return rc ? ef_job_report(J, o->preview, &F->err, rc) : 0;
 }
@@ -235,6 +260,8 @@ static int open_destinations(ef_frame *F)
     if (o->explain)
         return 0;
     int rc;
+    if (o->output && (rc = refuse_clash(F, o->output, "-o", 0)) != 0)
+        return rc;
     if (o->preview && (rc = open_preview(F)) != 0)
         return rc;
     struct stat ost;

@@ -80,45 +80,68 @@ static int drop_repeats(ef_job *J, const char *pattern, long *frames, int *n)
     return 0;
 }
 
-/* Refuses a sequence whose output pattern names another frame's input
- * (s.%d.exr -o s.%d0.exr: frame 1's output is frame 10's input, which
- * would be overwritten before it is read). Every name is known up front.
- * Returns 0, or 2 with the message printed. */
-static int check_overwrites(ef_job *J, const char *pattern, const ef_frame_pattern *pin,
-                            const char *out_pat, const ef_frame_pattern *pout,
-                            const long *frames, int n)
+/* Refuses a sequence whose output (or preview) pattern names another
+ * frame's input, or any frame's --depth or --camera-file (s.%d.exr -o
+ * s.%d0.exr: frame 1's output is frame 10's input, which would be
+ * overwritten before it is read); the same name, or the same file through
+ * a link. The files every frame shares are checked per frame (frame.c).
+ * Every name is known up front. Returns 0, or 2 with the message printed. */
+static int check_overwrites(ef_job *J, const char *pattern, const long *frames, int n,
+                            const char *const outs[2], const ef_frame_pattern pouts[2])
 {
+    enum { PER_FRAME = 3 };   /* INPUT, --depth, --camera-file: the files a pattern names */
     struct id {
         dev_t dev;
         ino_t ino;
-    } *in = malloc((size_t) n * sizeof *in + 1);
+        int set;
+    } *in = calloc((size_t) n * PER_FRAME + 1, sizeof *in);
     if (!in)
         return ef_job_say(J, 1, "out of memory");
-    char a[4096], b[4096];
-    for (int i = 0; i < n; ++i) {
-        struct stat st;
-        in[i].dev = 0;
-        in[i].ino = 0;
-        if (!ef_frame_path(pattern, pin, frames[i], a, sizeof a) && stat(a, &st) == 0) {
-            in[i].dev = st.st_dev;
-            in[i].ino = st.st_ino;
-        }
-    }
     int status = 0;
-    for (int i = 0; i < n && !status; ++i) {
-        struct stat st;
-        if (ef_frame_path(out_pat, pout, frames[i], b, sizeof b) || stat(b, &st) != 0)
+    for (int j = 0; j < n && !status; ++j) {
+        ef_read_list *r = ef_job_reads(J, 1, frames[j], 1);
+        if (!r) {
+            status = ef_job_say(J, 1, "out of memory");
+            break;
+        }
+        for (int k = 0; k < r->n && k < PER_FRAME; ++k) {
+            struct stat st;
+            if (stat(r->f[k].path, &st) == 0)
+                in[j * PER_FRAME + k] = (struct id) { st.st_dev, st.st_ino, 1 };
+        }
+        free(r);
+    }
+    char b[4096];
+    for (int w = 0; w < 2 && !status; ++w) {
+        if (!outs[w])
             continue;
-        for (int j = 0; j < n; ++j)
-            if (j != i && in[j].ino == st.st_ino && in[j].dev == st.st_dev && in[j].ino) {
-                ef_frame_path(pattern, pin, frames[j], a, sizeof a);
-                status = ef_job_say(J, 2, "%s: -o %s names frame %ld's input (%s) as frame "
-                                          "%ld's output: it would be overwritten before it is "
-                                          "read; nothing was written (choose an output pattern "
-                                          "that no other frame's input matches)",
-                                    pattern, out_pat, frames[j], a, frames[i]);
+        for (int i = 0; i < n && !status; ++i) {
+            struct stat st;
+            if (ef_frame_path(outs[w], &pouts[w], frames[i], b, sizeof b) || stat(b, &st) != 0)
+                continue;
+            for (int x = 0; x < n * PER_FRAME; ++x) {
+                const int j = x / PER_FRAME;
+                /* -o over the frame's own INPUT replaces it in place, as asked */
+                if ((w == 0 && x == i * PER_FRAME) || !in[x].set || in[x].ino != st.st_ino ||
+                    in[x].dev != st.st_dev)
+                    continue;
+                ef_read_list *r = ef_job_reads(J, 1, frames[j], 1);
+                if (!r) {
+                    status = ef_job_say(J, 1, "out of memory");
+                    break;
+                }
+                const int k = x % PER_FRAME;
+                status = ef_job_say(J, 2, "%s: %s %s names frame %ld's %s (%s) as frame %ld's "
+                                          "%s: it would be overwritten%s; nothing was written "
+                                          "(choose a pattern that names no file the run reads)",
+                                    pattern, w ? "--preview" : "-o", outs[w], frames[j],
+                                    k == 0 || k >= r->n ? "input" : r->f[k].role + 4,
+                                    k < r->n ? r->f[k].path : "", frames[i],
+                                    w ? "preview" : "output", j > i ? " before it is read" : "");
+                free(r);
                 break;
             }
+        }
     }
     free(in);
     return status;
@@ -246,8 +269,9 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
         return ef_job_say(J, 1, "out of memory");
     }
     int ow;
-    if (out_pat && !o->explain &&
-        (ow = check_overwrites(J, pattern, pin, out_pat, &pout, frames, n)) != 0) {
+    const char *const outs[2] = { out_pat, pv_pat };
+    const ef_frame_pattern pouts[2] = { pout, ppv };
+    if (!o->explain && (ow = check_overwrites(J, pattern, frames, n, outs, pouts)) != 0) {
         ow = write_failed_list(J, ow, frames, n, NULL);
         free(frames);
         return ow;

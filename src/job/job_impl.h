@@ -110,6 +110,25 @@ void ef_warn_traps(ef_job *J, const ef_exr_file *in, int part, const ef_cam_flag
 int ef_regular_file(const char *path);
 int ef_is_exr_file(const char *path);
 
+/* reads.c: the files a frame reads (INPUT too when with_input), each with
+ * the role it plays in a message ("the --depth file"), patterns resolved
+ * for frame when has_frame. Malloc'd (free it); NULL when out of memory. */
+#define EF_MAX_READS (8 + EF_FOG_MAX_COMPONENTS + EF_MAX_LIGHTS)
+typedef struct ef_read_file {
+    char role[128];
+    char path[4096];
+} ef_read_file;
+typedef struct ef_read_list {
+    int n;
+    ef_read_file f[EF_MAX_READS];
+} ef_read_list;
+ef_read_list *ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input);
+
+/* Whether writing out would replace a file of r: the same name, or the same
+ * file through a symbolic or hard link. Returns 1 with *role and *path
+ * (pointing into r) naming it, else 0. */
+int ef_output_clash(const ef_read_list *r, const char *out, const char **role, const char **path);
+
 /* frame.c: fogs one image (o->input to o->output); returns the status. */
 int ef_run_frame(ef_job *J);
 

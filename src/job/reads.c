@@ -1,0 +1,84 @@
+/* The files a run reads, and the refusal of an output that would replace
+ * one of them (job_impl.h: ef_job_reads, ef_output_clash). */
+#include "job_impl.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "lit.h"
+#include "scene.h"
+#include "sky_light.h"
+
+/* Appends (role, path) to the list when there is room and a path. */
+static void add(ef_read_list *r, const char *role, const char *path)
+{
+    if (!path || !path[0] || r->n >= EF_MAX_READS)
+        return;
+    ef_read_file *f = &r->f[r->n++];
+    snprintf(f->role, sizeof f->role, "%s", role);
+    snprintf(f->path, sizeof f->path, "%s", path);
+}
+
+/* A frame pattern's path for frame (has_frame), or the path as written. */
+static void add_pattern(ef_read_list *r, const char *role, const char *pattern, int has_frame,
+                        long frame)
+{
+    if (!pattern)
+        return;
+    ef_frame_pattern p;
+    char path[4096];
+    if (has_frame && ef_frame_pattern_find(pattern, &p) &&
+        !ef_frame_path(pattern, &p, frame, path, sizeof path))
+        add(r, role, path);
+    else
+        add(r, role, pattern);
+}
+
+ef_read_list *ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input)
+{
+    const ef_options *o = &J->o;
+    ef_read_list *r = calloc(1, sizeof *r);
+    if (!r)
+        return NULL;
+    if (with_input)
+        add_pattern(r, "INPUT", o->input, has_frame, frame);
+    add_pattern(r, "the --depth file", o->depth_file, has_frame, frame);
+    add_pattern(r, "the --camera-file", o->camera_file, has_frame, frame);
+    add(r, "the --scene file", o->scene_file);
+    add(r, "the --colorconfig", o->colorconfig);
+    const ef_fog_scene *s = &o->scene;
+    char role[120];
+    for (int i = 0; i < s->ncomp; ++i)
+        if (s->comp[i].path) {
+            snprintf(role, sizeof role, "the file= of fog component %d", i + 1);
+            add(r, role, s->comp[i].path);
+        }
+    for (int i = 0; i < s->nlight; ++i)
+        if (s->light[i].shadow_path[0]) {
+            snprintf(role, sizeof role, "the shadow= map of light %s", s->light[i].name);
+            add(r, role, s->light[i].shadow_path);
+        }
+    if (s->sky_light)
+        add(r, "the --sky-light environment", s->sky_light->path);
+    return r;
+}
+
+int ef_output_clash(const ef_read_list *r, const char *out, const char **role, const char **path)
+{
+    struct stat so, si;
+    const int have = stat(out, &so) == 0;
+    for (int i = 0; i < r->n; ++i) {
+        /* the same name, or the same file through a link (symbolic or hard) */
+        const int same = !strcmp(out, r->f[i].path) ||
+                         (have && stat(r->f[i].path, &si) == 0 && si.st_dev == so.st_dev &&
+                          si.st_ino == so.st_ino);
+        if (same) {
+            *role = r->f[i].role;
+            *path = r->f[i].path;
+            return 1;
+        }
+    }
+    return 0;
+}
