@@ -93,7 +93,40 @@ run() {
   ls seq/u.*.exr >/dev/null 2>&1 && bad "$engine: output after a usage error"
 }
 
+# hostile ENGINE: every name the user passes holds what a shell or the
+# engine would read (space, ; $( ) backquotes, both quotes, newline, && | >
+# * {} ::: %): the working directory, the job directory, the farm script's
+# and exrfog's paths, the input and output patterns and a --scene file. The
+# frames are written, equal the sequential run's, and nothing is run.
+W=$(printf 'w ;$(touch PWN1)`touch PWN2`\x27"\n&& | > * {} ::: %% x')
+hostile() {
+  local engine=$1 rc
+  local h="$tmp/h-$engine-$W"
+  mkdir -p "$h/bin $W" "$h/seq $W" || { bad "$engine: cannot make the hostile directories"; return; }
+  cp "$exrfog" "$h/bin $W/exrfog $W" && cp "$farm" "$h/bin $W/farm $W" || return
+  for f in $(seq 1 4); do cp "seq/shot.$(printf %04d "$f").exr" "$h/seq $W/s $W.$(printf %04d "$f").exr"; done
+  printf '{"fog": ["noise:density=0.05:scale=4:octaves=2:velocity=3,0,1:method=exact"]}\n' > "$h/fog $W.json"
+  (cd "$h" && "./bin $W/farm $W" submit --engine "$engine" --chunk 3 --exrfog "bin $W/exrfog $W" \
+      --jobdir "job $W" --wait -- "seq $W/s $W.#.exr" -o "seq $W/o $W.#.exr" --frames 1-4 \
+      --scene "fog $W.json" >"$tmp/out.txt" 2>"$tmp/err.txt")
+  rc=$?
+  [ $rc = 0 ] || { bad "$engine: hostile names: exit $rc"; cat "$tmp/err.txt"; }
+  (cd "$h" && "$exrfog" "seq $W/s $W.#.exr" -o "seq $W/r $W.#.exr" --frames 1-4 --scene "fog $W.json" -q) ||
+    bad "$engine: hostile names: the sequential run"
+  for f in $(seq -f %04g 1 4); do
+    cmp -s "$h/seq $W/o $W.$f.exr" "$h/seq $W/r $W.$f.exr" || bad "$engine: hostile names: frame $f differs"
+  done
+  cmp -s "$h/seq $W/o $W.0001.exr" "$h/seq $W/o $W.0002.exr" && bad "$engine: hostile names: frames alike"
+  [ "$(cat "$tmp/out.txt")" = "$h/job $W" ] || bad "$engine: hostile names: stdout is not the job directory"
+  "$h/bin $W/farm $W" status "$h/job $W" >"$tmp/status.txt" 2>&1 || bad "$engine: hostile names: status"
+  local pwn
+  # a shell would have run in the submitter's, the engine's or the task's directory
+  pwn=$( (find "$tmp" -name 'PWN*'; find / /tmp "$HOME" "$D" -maxdepth 1 -name 'PWN*') 2>/dev/null | head -3)
+  [ -z "$pwn" ] || bad "$engine: hostile names ran a command: $pwn"
+}
+
 run slurm
+hostile slurm
 # A job submitted without --wait: status follows it to the end.
 job=$tmp/job-nowait
 "$farm" submit --engine slurm --chunk 4 --exrfog "$exrfog" --jobdir "$job" -- \
@@ -110,6 +143,7 @@ for f in $(seq -f %04g 1 12); do
   cmp -s "seq/nw.$f.exr" "seq/ref.$f.exr" || bad "slurm (no --wait): frame $f differs"
 done
 run parallel
+hostile parallel
 
 # Usage of the farm itself.
 "$farm" submit --engine slurm -- seq/shot.#.exr -o seq/x.#.exr --fog exp:density=1 2>err.txt
