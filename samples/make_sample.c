@@ -110,6 +110,7 @@ typedef struct {
     double sx, sy;          /* NDC scale: u = 0.5 + sx * x/z, v = 0.5 - sy * y/z
                              * (orthographic: x and y, not x/z and y/z) */
     int ortho;
+    double hfov;            /* CameraFov, degrees */
     float w2c[16], w2n[16]; /* exactly what goes into the header */
 } camera_t;
 
@@ -347,17 +348,20 @@ static void store_matrices(camera_t *c, const double p[16])
         }
 }
 
-static void setup_camera(camera_t *c, int W, int H)
+/* The default view: eye 1.7 up, 4 degrees down, HFOV_DEG wide; view[]
+ * (height, pitch, fov in degrees) replaces it. */
+static void setup_camera(camera_t *c, int W, int H, const double view[3])
 {
     const double yaw = 6.0 * PI / 180.0;     /* turned slightly right */
-    const double pitch = -4.0 * PI / 180.0;  /* looking slightly down */
+    const double pitch = view[1] * PI / 180.0;
     c->W = W; c->H = H;
     c->ortho = 0;
-    c->eye = V(0.0, 1.7, 0.0);
+    c->eye = V(0.0, view[0], 0.0);
     c->f = V(sin(yaw) * cos(pitch), sin(pitch), -cos(yaw) * cos(pitch));
     c->r = norm(cross(c->f, V(0, 1, 0)));
     c->u = cross(c->r, c->f);
-    double tan_h = tan(0.5 * HFOV_DEG * PI / 180.0);
+    c->hfov = view[2];
+    double tan_h = tan(0.5 * view[2] * PI / 180.0);
     double tan_v = tan_h * (double) H / (double) W;  /* pixelAspectRatio 1 */
     c->sx = 0.5 / tan_h;
     c->sy = 0.5 / tan_v;
@@ -378,6 +382,7 @@ static void setup_sun_camera(camera_t *c, int W, int H, v3 towards, v3 centre, d
 {
     c->W = W; c->H = H;
     c->ortho = 1;
+    c->hfov = HFOV_DEG;
     c->f = scl(norm(towards), -1.0);
     v3 up = fabs(c->f.y) > 0.99 ? V(0, 0, -1) : V(0, 1, 0);
     c->r = norm(cross(c->f, up));
@@ -516,6 +521,7 @@ typedef struct {
     int check;
     int sun_view;
     double sun[3], sun_centre[3], sun_width;
+    double view[3];   /* --view HEIGHT,PITCH,FOV: eye height, pitch and horizontal fov (degrees) */
 } opts_t;
 
 static void comments_string(const opts_t *o, char *buf, size_t n)
@@ -554,7 +560,7 @@ static int write_image(const opts_t *o, render_t *R)
                             k < 3 ? EXR_PERCEPTUALLY_LOGARITHMIC : EXR_PERCEPTUALLY_LINEAR, 1, 1));
     CHK(exr_attr_set_m44f(f, part, "worldToCamera", &w2c));
     CHK(exr_attr_set_m44f(f, part, "worldToNDC", &w2n));
-    CHK(exr_attr_set_float(f, part, "CameraFov", (float) HFOV_DEG));
+    CHK(exr_attr_set_float(f, part, "CameraFov", (float) R->c->hfov));
     CHK(exr_attr_set_string(f, part, "comments", comments));
     CHK(exr_write_header(f));
 
@@ -646,7 +652,7 @@ static int verify_file(const opts_t *o, render_t *R)
     CHK(exr_attr_get_m44f(f, 0, "worldToNDC", &m));
     if (memcmp(m.m, c->w2n, sizeof m.m)) { fprintf(stderr, PROG ": check: worldToNDC differs\n"); bad = 1; }
     CHK(exr_attr_get_float(f, 0, "CameraFov", &fov));
-    if (fov != (float) HFOV_DEG) { fprintf(stderr, PROG ": check: CameraFov differs\n"); bad = 1; }
+    if (fov != (float) R->c->hfov) { fprintf(stderr, PROG ": check: CameraFov differs\n"); bad = 1; }
     CHK(exr_attr_get_string(f, 0, "comments", &slen, &str));
     CHK(exr_get_data_window(f, 0, &dw));
     CHK(exr_get_display_window(f, 0, &disp));
@@ -738,7 +744,9 @@ static void usage(FILE *to)
         "  --sun-view X,Y,Z    render the scene's depth from the sun (towards X,Y,Z) with an\n"
         "                      orthographic camera: a shadow map for exrfog's shadow=\n"
         "  --sun-width W       its width in scene units (default 240)\n"
-        "  --sun-centre X,Y,Z  what it looks at (default 0,0,-90)\n");
+        "  --sun-centre X,Y,Z  what it looks at (default 0,0,-90)\n"
+        "  --view H,P,F        the camera: eye H units above the ground, pitch P degrees\n"
+        "                      (negative: down), horizontal fov F degrees (default 1.7,-4,60)\n");
 }
 
 static int parse_int(const char *s, long lo, long hi, long *out)
@@ -760,11 +768,20 @@ static int parse_args(int argc, char **argv, opts_t *o)
     memset(o, 0, sizeof *o);
     o->W = 640; o->H = 360; o->comp = EXR_COMPRESSION_ZIP; o->seed = 1;
     o->sun_width = 240; o->sun_centre[2] = -90;
+    o->view[0] = 1.7; o->view[1] = -4; o->view[2] = HFOV_DEG;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         const char *val = (i + 1 < argc) ? argv[i + 1] : NULL;
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) { usage(stdout); exit(0); }
         else if (!strcmp(a, "--check")) o->check = 1;
+        else if (!strcmp(a, "--view")) {
+            char tail;
+            if (!val || sscanf(val, "%lf,%lf,%lf%c", &o->view[0], &o->view[1], &o->view[2], &tail) != 3 ||
+                !(o->view[0] > 0) || !(fabs(o->view[1]) < 89) || !(o->view[2] > 1 && o->view[2] < 170)) {
+                fprintf(stderr, PROG ": bad --view '%s' (want HEIGHT>0,PITCH,FOV)\n", val ? val : ""); return 0;
+            }
+            ++i;
+        }
         else if (!strcmp(a, "--sun-view") || !strcmp(a, "--sun-centre") || !strcmp(a, "--sun-width")) {
             double *dst = !strcmp(a, "--sun-view") ? o->sun : !strcmp(a, "--sun-centre") ? o->sun_centre
                                                                                      : &o->sun_width;
@@ -828,7 +845,7 @@ int main(int argc, char **argv)
     }
 
     camera_t cam;
-    setup_camera(&cam, o.W, o.H);
+    setup_camera(&cam, o.W, o.H, o.view);
     static scene_t scene;
     build_scene(&scene, &cam, o.seed);   /* the frame's camera places the spheres */
     if (o.sun_view) {

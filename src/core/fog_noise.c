@@ -37,6 +37,7 @@
 #include "span.h"
 #include "fog.h"
 #include "noise.h"
+#include "noise_clamp.h"
 
 #include <float.h>
 #include <stdint.h>
@@ -102,6 +103,8 @@ typedef struct nstate {
     int tab_off;                     /* separable: index in arr of the prefix tables, or 0 */
     int hash_off;                    /* index in arr of the grid's hash tables (grid_tables) */
     int ladder_off;                  /* index in arr of the planner's ladders (ladders_fill) */
+    int clamp_off;                   /* noise, clamp able to bind: index in arr of the clamp's
+                                      * stop-loss tables (noise_clamp.h), else 0 */
     /* preintegrated with an integer lacunarity: per axis one table of the
      * whole fbm factor over its period 256, piece by piece (merged.c below) */
     int merged, mpa[3];              /* pieces per period, per axis */
@@ -412,7 +415,8 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     const size_t nmerged = mp ? (size_t) s.naxes * MERGED_SIZE(mp) : 0;
     /* the grid's hash tables (uint32 each) and the planner's ladders */
     const size_t nhash = GRID_HASH_WORDS / 2 + ladders_words();
-    double *arr = calloc(head + ntab + nmerged + nhash, sizeof *arr);
+    const size_t nclamp = !sep && s.clamp ? ef_clamp_tables_size(octaves) : 0;
+    double *arr = calloc(head + ntab + nmerged + nhash + nclamp, sizeof *arr);
     if (!arr)
         return ef_fail(err, "fog spec '%s': out of memory", c->spec);
     s.tab_off = ntab ? (int) head : 0;
@@ -438,10 +442,17 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     grid_tables((uint32_t *) (void *) (arr + s.hash_off));
     s.ladder_off = s.hash_off + GRID_HASH_WORDS / 2;
     ladders_fill(arr + s.ladder_off);
+    if (nclamp) {
+        s.clamp_off = (int) (head + ntab + nmerged + nhash);
+        if (ef_clamp_tables_build(&s.fbm, arr + s.clamp_off)) {
+            free(arr);
+            return ef_fail(err, "fog spec '%s': out of memory", c->spec);
+        }
+    }
     memcpy(arr, &s, sizeof s);
     free(c->arr);
     c->arr = arr;
-    c->narr = (int) (head + ntab + nmerged + nhash);
+    c->narr = (int) (head + ntab + nmerged + nhash + nclamp);
     return 0;
 }
 
@@ -3001,6 +3012,205 @@ static double noise_sigma4(const rayc *R, double emax, double L, double m)
 /* Segments per ray, at most (they then grow past SEG_CELLS). */
 #define MAX_SEGS 256
 
+/* ---- the clamp on the fast path ----
+ *
+ * max(0, D) = D + max(0, -D) with D = 1 + c fbm: the clamped density is
+ * the linear one, which adaptive_linear integrates as for |c| <= 0.9649,
+ * plus the clamp's share env max(0, -D), zero wherever D > 0. The share
+ * is worked out on a binary tree of stretches of the segment. On a
+ * stretch, the octaves whose cells are at least twice its length are
+ * resolved (smooth there: known at its ends and middle), the finer ones
+ * are not, and enter through their distribution (noise_clamp.h): the
+ * share's expectation given the resolved octaves' sum F is |c| m_j(y),
+ * y = (1 + c F) / |c|. Where y is linear in t, its integral is exact
+ * whatever the kink: m_j = -v_j' / 2, so the integral of m_j(y(t)) over
+ * [a, b] is (v_j(y_a) - v_j(y_b)) / (2 y'). The rule takes y linear
+ * between the ends, and between each end and the middle; their difference
+ * is the deterministic part of the error (y's curvature), with the
+ * envelope's variation over the stretch times the share's. The realised
+ * share differs from its expectation by a zero-mean error whose variance
+ * is the pointwise variance times the length times a correlation length
+ * (that of the coarsest unresolved octave's noise, CLAMP_CORR of its
+ * cell): four standard deviations of it are the statistical part, added in
+ * quadrature over stretches. Stretches are halved (resolving more
+ * octaves) until both parts fit the stretch's share of the budget; once
+ * every octave is resolved, X = 0 and the same rule integrates max(0, -y)
+ * exactly for linear y. Where the clamp cannot bind at all (m_j = 0 over
+ * the stretch, by the resolved octaves' Lipschitz spread between the
+ * points) the share is 0 with no error: a shot whose |c| is just above 1
+ * costs nothing, its fbm never reaching -1/c. At the work bound a stretch
+ * is taken as it is, with its error. */
+
+/* The correlation length of one octave's noise along a line, in its cells:
+ * LINE_RMS^2 / Var(noise) = 0.0625 / 0.0731 (noise-anchors.md; the
+ * variance measured over 4 million points). */
+#define CLAMP_CORR 0.86
+/* Halvings of one segment, at most (2^-40 of it: rounding below that). */
+#define CLAMP_DEPTH 40
+
+/* A point of the tree: t, the sum of its first j octaves, and j. */
+typedef struct clamp_pt {
+    double t, F;
+    int j;
+} clamp_pt;
+
+typedef struct clamp_job {
+    clamp_pt a, b;
+    int depth;
+} clamp_job;
+
+/* Brings p's sum to the first j octaves. */
+static void clamp_extend(rayc *R, clamp_pt *p, int j)
+{
+    for (int i = p->j; i < j; ++i)
+        p->F += R->s->fbm.weight[i] * octave_at(R, i, p->t);
+    if (j > p->j)
+        p->j = j;
+}
+
+/* The integral over [a, b] of m_j(y(t)), y linear from ya to yb. */
+static double clamp_lin(const double *tab, int N, int j, double a, double b, double ya,
+                        double yb)
+{
+    const double L = b - a, dy = yb - ya;
+    double va, vb;
+    const double ma = ef_clamp_m(tab, N, j, ya, &va), mb = ef_clamp_m(tab, N, j, yb, &vb);
+    if (fabs(dy) <= 1e-9 * (1 + fabs(ya)))
+        return 0.5 * (ma + mb) * L;
+    const double r = (va - vb) / (2 * dy) * L;
+    return r > 0 ? r : 0;
+}
+
+/* The clamp's share, integral of env max(0, -(1 + c fbm)) over [t0, t1],
+ * to within tgt (absolute, in tau / rho) where the work bound allows;
+ * adds its deterministic error to *det and the square of its statistical
+ * estimate (four standard deviations) to *stat2. */
+static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det, double *stat2)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves;
+    const double *tab = (const double *) (const void *) s + s->clamp_off;   /* arr holds s first */
+    const double c = s->contrast, ac = fabs(c);
+    const double a_env = s->k > 0 ? R->khs : 0, Lseg = t1 - t0;
+    if (!(Lseg > 0))
+        return 0;
+    clamp_job stack[CLAMP_DEPTH + 2];
+    int sp = 0;
+    stack[sp++] = (clamp_job) { { t0, 0, 0 }, { t1, 0, 0 }, 0 };
+    ksum acc = { 0, 0 };
+    double dsum = 0, s2 = 0;
+    /* What is left of the budget (0.7 tgt for the deterministic part, half
+     * of tgt^2 for the statistical one) and of the segment: stretches are
+     * taken left to right, and one that uses less than its share of what is
+     * left (most: the clamp cannot bind there) leaves the rest to the
+     * stretches after it. */
+    double dleft = 0.7 * tgt, vleft = 0.5 * tgt * tgt, lenleft = Lseg;
+    while (sp > 0) {
+        clamp_job J = stack[--sp];
+        const double len = J.b.t - J.a.t, h = 0.5 * len;
+        /* the resolved octaves: the first j, cells at least twice the stretch */
+        int j = 0;
+        while (j < N && s->scale / s->fbm.freq[j] >= 2 * len)
+            ++j;
+        /* how far y may leave the chords between the points: by the
+         * resolved octaves' curvature (|y''| <= K: h^2 / 8 on a half of
+         * length h) or their Lipschitz bound (h / 2), whichever is less */
+        double lip = 0, K = 0;
+        for (int i = 0; i < j; ++i) {
+            const double r = s->fbm.freq[i] / s->scale;
+            lip += s->fbm.weight[i] * EF_NOISE_LIPSCHITZ * r;
+            K += s->fbm.weight[i] * EF_NOISE_CURVATURE * r * r;
+        }
+        const double dlt = fmin(K * h * h / 8, lip * h / 2);
+        clamp_pt mid = { J.a.t + h, 0, 0 };
+        clamp_extend(R, &J.a, j);
+        clamp_extend(R, &J.b, j);
+        clamp_extend(R, &mid, j);
+        const double ya = (1 + c * J.a.F) / ac, yb = (1 + c * J.b.F) / ac, ym = (1 + c * mid.F) / ac;
+        double v;
+        if (ef_clamp_m(tab, N, j, fmin(ym, fmin(ya, yb)) - dlt, &v) == 0) {
+            lenleft -= len;
+            continue;   /* the clamp cannot bind on this stretch */
+        }
+        const double ea = env_d(R, J.a.t);
+        double em, eb;
+        const double m1 = env_step(ea, a_env, h, &em), m2 = env_step(em, a_env, h, &eb);
+        if (fmax(ym, fmax(ya, yb)) + dlt < -ef_clamp_ymax(tab, N, j)) {
+            /* clamped throughout, whatever the unresolved octaves do: the
+             * share is -(integral(env) + c sum_i w_i integral(env n_i)),
+             * the resolved octaves' integrals cell by cell (9 Gauss nodes
+             * per cell piece: exact without an envelope; with one, the
+             * change from 8 nodes bounds what is left), the unresolved
+             * ones' 0 with four standard deviations of their line
+             * integral (as the linear part's drop rule) */
+            double iv = 0, iv8 = 0;
+            for (int i = 0; i < j; ++i) {
+                const double w = s->fbm.weight[i];
+                if (s->k > 0) {
+                    iv += w * octave_integral_env(R, i, 9, J.a.t, J.b.t);
+                    iv8 += w * octave_integral_env(R, i, 8, J.a.t, J.b.t);
+                } else {
+                    iv += w * octave_integral_fast(R, i, 9, J.a.t, J.b.t);
+                }
+            }
+            const double sh = -(m1 + m2 + c * iv);
+            kadd(&acc, sh > 0 ? sh : 0);
+            const double e9 = (s->k > 0 ? ac * fabs(iv - iv8) : 0) + 1e-13 * (m1 + m2 + ac * fabs(iv));
+            const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
+            const double sd = 4 * fmax(ea, eb) * ac *
+                              sqrt(ef_clamp_var(tab, N, j) * len * fmin(len, corr));
+            dsum += e9;
+            s2 += sd * sd;
+            dleft -= e9;
+            vleft -= sd * sd;
+            lenleft -= len;
+            continue;
+        }
+        /* y's chords through the three points, shifted by -dlt (the most
+         * the share can be, m_j decreasing) and +dlt (the least) */
+        double rule[3];
+        for (int k = 0; k < 3; ++k) {
+            const double sh = (k - 1) * dlt;
+            rule[k] = m1 / h * clamp_lin(tab, N, j, J.a.t, mid.t, ya + sh, ym + sh) +
+                      m2 / h * clamp_lin(tab, N, j, mid.t, J.b.t, ym + sh, yb + sh);
+        }
+        const double two = rule[1];
+        double var_g = 0, gmax = 0, gmin = INFINITY;
+        const double ys[3] = { ya, ym, yb };
+        for (int k = 0; k < 3; ++k) {
+            double vk;
+            const double mk = ef_clamp_m(tab, N, j, ys[k], &vk);
+            const double vg = vk - mk * mk;
+            var_g = fmax(var_g, vg > 0 ? vg : 0);
+            gmax = fmax(gmax, mk);
+            gmin = fmin(gmin, mk);
+        }
+        /* the bracket's far side, and the envelope's spread over each half
+         * times the share's */
+        const double emax = fmax(ea, eb), emin = fmin(ea, eb);
+        const double d = ac * (fmax(rule[0] - two, two - rule[2]) +
+                               0.5 * (emax - emin) * (gmax - gmin + 2 * dlt) * len);
+        const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
+        const double sig4 = 4 * emax * ac * sqrt(var_g * len * fmin(len, corr));
+        const double share = lenleft > len ? len / lenleft : 1;
+        if ((d <= fmax(dleft, 0) * share && sig4 * sig4 <= fmax(vleft, 0) * share) ||
+            J.depth >= CLAMP_DEPTH || R->evals > EVAL_BUDGET) {
+            kadd(&acc, ac * two);
+            dsum += d;
+            s2 += sig4 * sig4;
+            dleft -= d;
+            vleft -= sig4 * sig4;
+            lenleft -= len;
+            continue;
+        }
+        stack[sp++] = (clamp_job) { mid, J.b, J.depth + 1 };
+        stack[sp++] = (clamp_job) { J.a, mid, J.depth + 1 };
+    }
+    *det += dsum;
+    *stat2 += s2;
+    return kval(&acc);
+}
+
 /* The noise part's integral for the linear density (noise, |c| <= 0.9649)
  * under ttol (the default) over [t0, tend], segment by segment, and
  * tau / rho (the closed-form mean to t1 plus c times it). Each segment gets
@@ -3054,7 +3264,8 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     long double Lmax = first < N && cross[first] > 0 ? SEG_CELLS / cross[first] : Lwalk;
     if (Lmax < Lwalk / MAX_SEGS)
         Lmax = Lwalk / MAX_SEGS;
-    ksum noise = { 0, 0 };
+    ksum noise = { 0, 0 }, corr = { 0, 0 };   /* corr: the clamp's share */
+    double corr_err = 0;
     grid_end ends[EF_FBM_MAX_OCTAVES];
     for (int i = 0; i < N; ++i)
         ends[i].valid = 0;
@@ -3076,7 +3287,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
         const double rest =
             decay_int(a_env > 0 ? e_t : e_tend, fabs(a_env), (double) (tend - t));
         const double E = sqrt(E2);
-        const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
+        const double ulo = mean_sofar + s->contrast * kval(&noise) + kval(&corr) - E;
         /* lo: ulo plus the rest's lower value, its mean less four standard
          * deviations of its noise (noise_sigma4), or (1 - |c| B) times its
          * mean, whichever is larger. */
@@ -3108,7 +3319,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
          * budget too, a sky ray's long tail costs one plan, not a segment
          * per stretch. */
         long double tb;
-        double e_tb, mj, L, envmax;
+        double e_tb, mj, L, envmax, cquota = 0;
         plan P;
         for (int whole = rest_try && a_env >= 0;; whole = 0) {
             tb = t + Lmax;
@@ -3129,12 +3340,16 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
                 sqrt((var > eps * eps / 4096 ? var : eps * eps / 4096) * share);
             L = (double) (tb - t);
             envmax = fmax(e_t, e_tb);
+            /* with the clamp, the linear part takes 0.8 of the quota and
+             * the clamp's share 0.6 (their squares sum to it) */
+            const double qlin = s->clamp ? 0.8 * quota : quota;
             if (grid)
                 plan_segment(R, &SP, L, mj / L,
                              decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
-                             s->rho_max * quota / W, &P);
+                             s->rho_max * qlin / W, &P);
             else
-                plan_octaves(R, L, envmax, s->rho_max * quota / W, &P);
+                plan_octaves(R, L, envmax, s->rho_max * qlin / W, &P);
+            cquota = 0.6 * quota / W;
             if (!whole || P.dropped == N)
                 break;
         }
@@ -3176,7 +3391,13 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
                              : octave_integral_fast(R, i, P.q[i], (double) t, (double) tb);
             kadd(&noise, s->fbm.weight[i] * v);
         }
-        const double used = P.est / s->rho_max;
+        double used = P.est / s->rho_max;
+        if (s->clamp) {
+            double cd = 0, cs2 = 0;
+            kadd(&corr, clamp_part(R, (double) t, (double) tb, cquota, &cd, &cs2));
+            corr_err += cd;
+            used = sqrt(used * used + cd * cd + cs2);
+        }
         E2 += used * used;
         var -= (W * used) * (W * used);
         mean_sofar += mj;
@@ -3186,7 +3407,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
     info->dropped = dropped > __builtin_popcount(over) ? dropped : __builtin_popcount(over);
     const double E = sqrt(E2);
     const double mean_to = (double) env_integral(s, R->h0, R->hs, t0, opaque ? t : t1);
-    double unit = mean_to + s->contrast * kval(&noise);
+    double unit = mean_to + s->contrast * kval(&noise) + kval(&corr);
     if (stop) {
         /* True T_k lies in [0, T_up] with T_up = e^-(rho_k ulo): the
          * estimate (the mean fog to the end) is within it, and the error
@@ -3196,7 +3417,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
          * Past 600 in tau above ulo, the estimate is held there: still
          * within, and T expm1(err) stays finite in double (T would
          * underflow, expm1 overflow). */
-        const double ulo = mean_sofar + s->contrast * kval(&noise) - E;
+        const double ulo = mean_sofar + s->contrast * kval(&noise) + kval(&corr) - E;
         if (rmin * (unit - ulo) < LN2)
             unit = ulo + LN2 / rmin;
         if (s->rho_max * (unit - ulo) > 600)
@@ -3208,7 +3429,7 @@ static double adaptive_linear(rayc *R, long double t0, long double tend, long do
             errk[k] = s->rho[k] > 0 ? LN2 : 0;
     } else {
         for (int k = 0; k < 3; ++k)
-            errk[k] = s->rho[k] * (E + tail);
+            errk[k] = s->rho[k] * (E + corr_err + tail);
     }
     return unit;
 }
@@ -3251,6 +3472,9 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         return;
     }
     const int linear = !s->separable && !s->clamp;
+    /* the clamped noise model on the adaptive fast path: its linear part
+     * plus the clamp's share (clamp_part) */
+    const int clamp_fast = !s->separable && s->clamp && s->method == M_ADAPTIVE && s->ttol > 0;
     double unit = 0, err = 0, tail = 0;  /* tau / rho, its error, the dropped tail's bound */
     long double tend = t1;
     if (sky) {
@@ -3262,13 +3486,13 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
             tend = tail_end(&R, t0, 1e-6, 0);
         const long double a = s->k * R.hs, e_end = env_at(&R, tend);
         tail = (double) (shape_bound(s) * e_end / a);
-        if (linear)
+        if (linear || clamp_fast)
             tail -= (double) (e_end / a);   /* the mean part is exact to infinity */
     }
     const int opaque = opaque_cut(&R, t0, &tend);
     /* The segment walk plans in double: not where k h0 or k hs overflow (a
      * falloff near DBL_MAX), which the general path below handles. */
-    if (linear && s->method == M_ADAPTIVE && s->ttol > 0 &&
+    if ((linear || clamp_fast) && s->method == M_ADAPTIVE && s->ttol > 0 &&
         (s->k == 0 || (isfinite(R.kh0) && isfinite(R.khs)))) {
         double errk[3];
         unit = adaptive_linear(&R, t0, tend, t1, opaque, tail, info, errk);

@@ -1,0 +1,433 @@
+/* noise_sweep.c - the noise fog's default method on a sweep of shots, not
+ * one (issue 41): accuracy against the reference integrator, the error
+ * output's coverage, and the work per pixel.
+ *
+ *   noise_sweep --list [--count N]
+ *   noise_sweep [--count N] [--only NAME] [--pixels P] [--threads T]
+ *               [--width W --height H] [--tsv] [--ref-stop S]
+ *               [--shot NAME,HEIGHT,PITCH,FOV,SPEC]   (that shot alone)
+ *
+ * The shots: the bench's two (noise_bench's noise and horizon), the three
+ * the issue measured, two worst corners (the highest camera with the
+ * gentlest falloff; contrast 4 with 8 octaves), and N (default 24) drawn
+ * from a fixed SplitMix64 seed over what users set: camera height 1.5-300
+ * units (log-uniform), pitch -30 to +10 degrees, horizontal field of view
+ * 30-90 degrees, contrast 0-4 (every third shot above 1, every sixth
+ * negative), octaves 1-8, scale 1-100 (log-uniform), falloff 0 (every
+ * fifth) or 0.002-1 (log-uniform) with base above or below the camera,
+ * a box (every fourth), and noise-separable (every sixth, axes xz). The
+ * scene is the ground plane y = 0 to the horizon and the sky, seen by a
+ * pinhole at (0, height, 0) turned 6 degrees right (as make_sample --view
+ * renders it, so bench/noise_sweep.sh times the same shots end to end).
+ *
+ * Per shot, P pixels (default 1000) of a W x H frame (default 1920 x
+ * 1080): 60 % uniform over the frame, 20 % in the rows within 2 % of the
+ * frame's height of the horizon (long ground and sky rays), 20 % in the
+ * sky or, when none is in frame, the farthest fifth of the ground. For
+ * each: tau and its info from ef_fog_tau (the default method: no method,
+ * tol, ttol or lod key), timed on the thread's CPU clock; the reference
+ * from ef_ref_tau_long, chunk by chunk up to where tau >= S (default 20)
+ * in every channel (T < 2e-9: nothing after can show) or the envelope's
+ * tail is below 1e-9; |dT| = |e^-tau - e^-tau_ref| in long double, max
+ * over channels. Reported per shot: |dT| max and 99.9th percentile, the
+ * share of pixels within the man page's promise (|dT| <= 2^-12), the
+ * share where the error output T expm1(err) covers |dT|, noise
+ * evaluations per pixel (mean, max) and the fog's time per pixel (mean,
+ * max, microseconds of one core). Nothing asserts on time. */
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "fog.h"
+#include "recon.h"
+#include "ref.h"
+#include "splitmix.h"
+
+#define PROG "noise_sweep"
+#define PI 3.14159265358979323846
+#define YAW_DEG 6.0
+#define PROMISE 0x1p-12
+#define MAX_SHOTS 64
+
+typedef struct shot {
+    char name[48];
+    double height, pitch, fov;
+    char spec[512];
+} shot;
+
+static int add_fixed(shot *s, int n, const char *name, double h, double p, double f,
+                     const char *spec)
+{
+    snprintf(s[n].name, sizeof s[n].name, "%s", name);
+    s[n].height = h;
+    s[n].pitch = p;
+    s[n].fov = f;
+    snprintf(s[n].spec, sizeof s[n].spec, "%s", spec);
+    return n + 1;
+}
+
+static double uni(uint64_t *g, double a, double b)
+{
+    return a + (b - a) * splitmix_uni(g);
+}
+
+static double logu(uint64_t *g, double a, double b)
+{
+    return exp(uni(g, log(a), log(b)));
+}
+
+/* The shot list: the fixed ones, then count drawn from seed 41. */
+static int make_shots(shot *s, int count)
+{
+    int n = 0;
+    n = add_fixed(s, n, "bench-noise", 1.7, -4, 60, "noise:density=0.02:scale=10:octaves=4");
+    n = add_fixed(s, n, "bench-horizon", 1.7, -4, 60,
+                  "noise:density=0.05:scale=10:octaves=4:falloff=0.1:base=0");
+    n = add_fixed(s, n, "issue-patchy-30up", 30, -8, 60,
+                  "noise:density=0.02:scale=25:octaves=5:falloff=0.05:contrast=1.2");
+    n = add_fixed(s, n, "issue-patchy-sky", 12, 2, 60,
+                  "noise:density=0.02:scale=25:octaves=6:falloff=0.05:contrast=1.6");
+    n = add_fixed(s, n, "issue-patchy-120up", 120, -20, 60,
+                  "noise:density=0.02:scale=25:octaves=5:falloff=0.05:contrast=2");
+    n = add_fixed(s, n, "corner-high-gentle", 300, -10, 60,
+                  "noise:density=0.01:scale=50:octaves=6:falloff=0.002:base=0:contrast=0.9");
+    n = add_fixed(s, n, "corner-c4-8oct", 10, -5, 60,
+                  "noise:density=0.03:scale=20:octaves=8:falloff=0.05:base=0:contrast=4");
+    uint64_t g = 41;
+    for (int i = 0; i < count && n < MAX_SHOTS; ++i, ++n) {
+        shot *t = &s[n];
+        snprintf(t->name, sizeof t->name, "sweep-%02d", i + 1);
+        t->height = logu(&g, 1.5, 300);
+        t->pitch = uni(&g, -30, 10);
+        t->fov = uni(&g, 30, 90);
+        double c = uni(&g, 0, 1);
+        if (i % 3 == 0)
+            c = uni(&g, 1, 4);
+        else if (i % 6 == 1)
+            c = -uni(&g, 0.2, 2);
+        const int oct = 1 + (int) (splitmix_uni(&g) * 8);
+        const double scale = logu(&g, 1, 100);
+        const double rho = logu(&g, 0.002, 0.1);
+        const int sep = i % 6 == 5;
+        double k = i % 5 == 0 ? 0 : logu(&g, 0.002, 1);
+        /* base above or below the camera, the envelope there at most e^8 */
+        const double span = k > 0 ? fmin(8 / k, 3 * t->height) : 0;
+        const double base = i % 2 ? t->height - uni(&g, 0.2, 1) * span
+                                  : t->height + uni(&g, 0.1, 1) * span;
+        int len = snprintf(t->spec, sizeof t->spec,
+                           "%s:density=%.4g:scale=%.4g:octaves=%d:contrast=%.3g",
+                           sep ? "noise-separable" : "noise", rho, scale, oct, c);
+        if (k > 0)
+            len += snprintf(t->spec + len, sizeof t->spec - (size_t) len, ":falloff=%.4g:base=%.4g",
+                            k, base);
+        if (i % 4 == 3)
+            len += snprintf(t->spec + len, sizeof t->spec - (size_t) len,
+                            ":min=-300,0,-600:max=300,%.4g,-10", 2 * t->height + 20);
+        if (sep)
+            snprintf(t->spec + len, sizeof t->spec - (size_t) len, ":axes=xz");
+    }
+    return n;
+}
+
+/* The pinhole: ray through pixel (x, y) of a W x H frame. */
+typedef struct view {
+    double eye[3], r[3], u[3], f[3], tx, ty;
+    int W, H;
+} view;
+
+static void view_init(view *v, const shot *s, int W, int H)
+{
+    const double yaw = YAW_DEG * PI / 180, pitch = s->pitch * PI / 180;
+    v->W = W;
+    v->H = H;
+    v->eye[0] = 0;
+    v->eye[1] = s->height;
+    v->eye[2] = 0;
+    v->f[0] = sin(yaw) * cos(pitch);
+    v->f[1] = sin(pitch);
+    v->f[2] = -cos(yaw) * cos(pitch);
+    /* r = f x (0,1,0) normalised; u = r x f */
+    double r[3] = { -v->f[2], 0, v->f[0] };
+    const double rn = hypot(r[0], r[2]);
+    for (int a = 0; a < 3; ++a)
+        v->r[a] = r[a] / rn;
+    v->u[0] = v->r[1] * v->f[2] - v->r[2] * v->f[1];
+    v->u[1] = v->r[2] * v->f[0] - v->r[0] * v->f[2];
+    v->u[2] = v->r[0] * v->f[1] - v->r[1] * v->f[0];
+    v->tx = tan(0.5 * s->fov * PI / 180);
+    v->ty = v->tx * H / W;
+}
+
+static void view_ray(const view *v, double px, double py, ef_ray *r)
+{
+    const double sx = (2 * px / v->W - 1) * v->tx, sy = (1 - 2 * py / v->H) * v->ty;
+    double d[3], n = 0;
+    for (int a = 0; a < 3; ++a) {
+        d[a] = v->f[a] + sx * v->r[a] + sy * v->u[a];
+        n += d[a] * d[a];
+    }
+    n = sqrt(n);
+    for (int a = 0; a < 3; ++a) {
+        r->dir[a] = d[a] / n;
+        r->org[a] = v->eye[a];
+    }
+    r->dist = r->dir[1] < 0 ? v->eye[1] / -r->dir[1] : INFINITY;
+    r->planar = r->dist * (r->dir[0] * v->f[0] + r->dir[1] * v->f[1] + r->dir[2] * v->f[2]);
+}
+
+/* The row (fractional) where the horizon is, or NAN when out of frame. */
+static double horizon_row(const view *v)
+{
+    /* direction with dir.y = 0 at the centre column: f + sy u, f.y + sy u.y = 0 */
+    if (v->u[1] == 0)
+        return NAN;
+    const double sy = -v->f[1] / v->u[1];
+    const double py = (1 - sy / v->ty) * v->H / 2;
+    return py >= 0 && py < v->H ? py : NAN;
+}
+
+typedef struct px_result {
+    double dT, cover, evals, us;
+    int sky, ref_ok;
+} px_result;
+
+typedef struct work {
+    const ef_fog_component *c;
+    const view *v;
+    const double (*pix)[2];
+    int n, next;
+    double ref_stop, k, rho_max, base;
+    px_result *out;
+    pthread_mutex_t lock;
+} work;
+
+static double cpu_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec * 1e6 + ts.tv_nsec * 1e-3;
+}
+
+/* The reference's length on a ray: its distance, or for a sky ray where
+ * the envelope's tail is below 1e-9 (0 when the fog never thins). */
+static double ref_len(const work *W, const ef_ray *r, const shot *s)
+{
+    (void) s;
+    if (isfinite(r->dist))
+        return r->dist;
+    if (!(W->k > 0) || !(r->dir[1] > 0))
+        return 0;
+    /* tail from t: rho B e^-(k (y0 + dy t - base)) / (k dy) < 1e-9 */
+    const double a = W->k * r->dir[1];
+    const double need = log(W->rho_max * 5 / (a * 1e-9)) + W->k * (W->base - r->org[1]);
+    return need > 0 ? need / a + 1 : 1;
+}
+
+static void *worker(void *arg)
+{
+    work *W = arg;
+    for (;;) {
+        pthread_mutex_lock(&W->lock);
+        const int j = W->next++;
+        pthread_mutex_unlock(&W->lock);
+        if (j >= W->n)
+            return NULL;
+        ef_ray r;
+        view_ray(W->v, W->pix[j][0], W->pix[j][1], &r);
+        px_result *o = &W->out[j];
+        double tau[3];
+        ef_tau_info info;
+        const double t0 = cpu_us();
+        ef_fog_tau(W->c, &r, tau, &info);
+        o->us = cpu_us() - t0;
+        o->evals = info.evals;
+        o->sky = !isfinite(r.dist);
+        long double tr[3] = { 0, 0, 0 };
+        const double len = ref_len(W, &r, NULL);
+        o->ref_ok = 1;
+        if (o->sky && len == 0) {
+            for (int k = 0; k < 3; ++k)
+                tr[k] = INFINITY;   /* the fog never thins: T = 0 (the model's own answer) */
+        } else {
+            double reached = 0;
+            o->ref_ok = ef_ref_tau_long(W->c, &r, len, 4096, W->ref_stop, tr, &reached, NULL) == 0;
+        }
+        o->dT = 0;
+        o->cover = 1;
+        for (int k = 0; k < 3; ++k) {
+            const long double T = expl(-(long double) tau[k]), Tr = expl(-tr[k]);
+            const double d = (double) fabsl(T - Tr);
+            const double bound = (double) (T > 0 ? T * expm1l(info.err[k]) : 0);
+            if (d > o->dT)
+                o->dT = d;
+            if (!(bound >= d) && d > 0)
+                o->cover = 0;
+        }
+    }
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    const double x = *(const double *) a, y = *(const double *) b;
+    return x < y ? -1 : x > y;
+}
+
+int main(int argc, char **argv)
+{
+    int count = 24, pixels = 1000, threads = 2, W = 1920, H = 1080, list = 0, tsv = 0;
+    const char *only = NULL, *extra = NULL;
+    double ref_stop = 20;
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--list"))
+            list = 1;
+        else if (!strcmp(a, "--tsv"))
+            tsv = 1;
+        else if (v && !strcmp(a, "--count"))
+            count = atoi(argv[++i]);
+        else if (v && !strcmp(a, "--pixels"))
+            pixels = atoi(argv[++i]);
+        else if (v && !strcmp(a, "--threads"))
+            threads = atoi(argv[++i]);
+        else if (v && !strcmp(a, "--width"))
+            W = atoi(argv[++i]);
+        else if (v && !strcmp(a, "--height"))
+            H = atoi(argv[++i]);
+        else if (v && !strcmp(a, "--only"))
+            only = argv[++i];
+        else if (v && !strcmp(a, "--ref-stop"))
+            ref_stop = atof(argv[++i]);
+        else if (v && !strcmp(a, "--shot"))
+            extra = argv[++i];
+        else {
+            fprintf(stderr, "usage: " PROG " [--list] [--count N] [--only NAME] [--pixels P] "
+                            "[--threads T] [--width W --height H] [--tsv] [--ref-stop S] "
+                            "[--shot NAME,HEIGHT,PITCH,FOV,SPEC]\n");
+            return 2;
+        }
+    }
+    if (count < 0 || count > MAX_SHOTS - 8 || pixels < 1 || threads < 1 || W < 2 || H < 2) {
+        fprintf(stderr, PROG ": bad arguments\n");
+        return 2;
+    }
+    shot shots[MAX_SHOTS];
+    int n = make_shots(shots, count);
+    if (extra) {
+        /* --shot NAME,HEIGHT,PITCH,FOV,SPEC: one more shot (and only it) */
+        shot *t = &shots[n];
+        char name[48];
+        int used = 0;
+        if (sscanf(extra, "%47[^,],%lf,%lf,%lf,%n", name, &t->height, &t->pitch, &t->fov, &used) < 4 ||
+            !used) {
+            fprintf(stderr, PROG ": --shot NAME,HEIGHT,PITCH,FOV,SPEC\n");
+            return 2;
+        }
+        snprintf(t->name, sizeof t->name, "%s", name);
+        snprintf(t->spec, sizeof t->spec, "%s", extra + used);
+        only = t->name;
+        ++n;
+    }
+    if (list) {
+        for (int i = 0; i < n; ++i)
+            printf("%s\t%.6g\t%.6g\t%.6g\t%s\n", shots[i].name, shots[i].height, shots[i].pitch,
+                   shots[i].fov, shots[i].spec);
+        return 0;
+    }
+    if (tsv)
+        printf("shot\tpixels\tsky\tref_failed\tmax_dT\tp999_dT\twithin\tcovered\tevals_mean"
+               "\tevals_max\tus_mean\tus_max\n");
+    else
+        printf("| shot | pixels (sky) | max \\|ΔT\\| | 99.9th \\|ΔT\\| | within 2^-12 | error output "
+               "covers | evals/px mean | max | µs/px mean | max |\n|---|---:|---:|---:|---:|---:|"
+               "---:|---:|---:|---:|\n");
+    int bad = 0;
+    for (int s = 0; s < n; ++s) {
+        if (only && strcmp(only, shots[s].name))
+            continue;
+        ef_fog_component c;
+        ef_err err = { 0 };
+        if (ef_fog_parse(shots[s].spec, NULL, &c, &err)) {
+            fprintf(stderr, PROG ": %s: %s\n", shots[s].name, err.msg);
+            bad = 1;
+            continue;
+        }
+        view v;
+        view_init(&v, &shots[s], W, H);
+        ef_fog_bind(&c, v.eye);
+        double (*pix)[2] = malloc((size_t) pixels * sizeof *pix);
+        px_result *out = calloc((size_t) pixels, sizeof *out);
+        uint64_t g = 1000 + (uint64_t) s;
+        const double hr = horizon_row(&v);
+        for (int j = 0; j < pixels; ++j) {
+            const double u = splitmix_uni(&g);
+            double x = uni(&g, 0, W), y;
+            if (u < 0.6 || (u < 0.8 && isnan(hr)))
+                y = uni(&g, 0, H);
+            else if (u < 0.8)
+                y = fmin(H - 1e-9, fmax(0, hr + uni(&g, -0.02, 0.02) * H));
+            else if (!isnan(hr))
+                y = uni(&g, 0, hr);   /* the sky above the horizon */
+            else
+                y = v.f[1] + v.ty * v.u[1] < 0 ? uni(&g, 0, 0.2 * H) : uni(&g, 0, H);
+            pix[j][0] = x;
+            pix[j][1] = y;
+        }
+        double fk = 0, rmax = 0, fbase = 0;
+        {
+            /* the envelope's rate and the densest channel, for the reference's tail */
+            const char *fp = strstr(shots[s].spec, "falloff=");
+            fk = fp ? atof(fp + 8) : 0;
+            const char *dp = strstr(shots[s].spec, "density=");
+            rmax = dp ? atof(dp + 8) : 1;
+            const char *bp = strstr(shots[s].spec, "base=");
+            fbase = bp ? atof(bp + 5) : 0;
+        }
+        work Wk = { &c, &v, (const double (*)[2]) pix, pixels, 0, ref_stop, fk, rmax, fbase, out,
+                    PTHREAD_MUTEX_INITIALIZER };
+        pthread_t th[64];
+        const int nt = threads < 64 ? threads : 64;
+        for (int t = 0; t < nt; ++t)
+            pthread_create(&th[t], NULL, worker, &Wk);
+        for (int t = 0; t < nt; ++t)
+            pthread_join(th[t], NULL);
+        double *dts = malloc((size_t) pixels * sizeof *dts);
+        int nsky = 0, nfail = 0, within = 0, covered = 0, m = 0;
+        double ev = 0, evmax = 0, us = 0, usmax = 0, dmax = 0;
+        for (int j = 0; j < pixels; ++j) {
+            nsky += out[j].sky;
+            ev += out[j].evals;
+            evmax = fmax(evmax, out[j].evals);
+            us += out[j].us;
+            usmax = fmax(usmax, out[j].us);
+            if (!out[j].ref_ok) {
+                ++nfail;
+                continue;
+            }
+            dts[m++] = out[j].dT;
+            dmax = fmax(dmax, out[j].dT);
+            within += out[j].dT <= PROMISE;
+            covered += out[j].cover;
+        }
+        qsort(dts, (size_t) m, sizeof *dts, cmp_d);
+        const double p999 = m ? dts[(int) floor(0.999 * (m - 1))] : 0;
+        if (tsv)
+            printf("%s\t%d\t%d\t%d\t%.3g\t%.3g\t%.4f\t%.4f\t%.0f\t%.0f\t%.2f\t%.1f\n",
+                   shots[s].name, pixels, nsky, nfail, dmax, p999, m ? (double) within / m : 0,
+                   m ? (double) covered / m : 0, ev / pixels, evmax, us / pixels, usmax);
+        else
+            printf("| %s | %d (%d)%s | %.2g | %.2g | %.2f %% | %.2f %% | %.0f | %.0f | %.2f | %.0f "
+                   "|\n",
+                   shots[s].name, pixels, nsky, nfail ? " ref failed on some" : "", dmax, p999,
+                   m ? 100.0 * within / m : 0, m ? 100.0 * covered / m : 0, ev / pixels, evmax,
+                   us / pixels, usmax);
+        fflush(stdout);
+        free(dts);
+        free(pix);
+        free(out);
+        ef_fog_free(&c);
+    }
+    return bad;
+}
