@@ -1488,10 +1488,21 @@ static double shape_bound(const nstate *s)
     return s->bound;
 }
 
+static double march(rayc *R, long double t0, long double t1, int n);
+static double march_bound(const rayc *R, long double t0, long double t1, int n, double unit);
+
+/* The adaptive method's work bound on the piece-by-piece path (the
+ * separable model, and the clamp under tol=): past this many noise
+ * evaluations on a ray, the rest of it is marched in FULL_MARCH steps with
+ * the march's bound as its error. */
+#define FULL_BUDGET 24000
+#define FULL_MARCH 256
+
 /* integral of env * shape over [t0, t1] with the rule pair (lo, hi) on
  * every piece where all coordinates stay in one cell, bisected until the
  * pair agrees to tol_per_len * length (absolute) or, with tol_per_len = 0,
- * to 1e-14 of the piece's own bound (certified). */
+ * to 1e-14 of the piece's own bound (certified). With tol_per_len > 0,
+ * past FULL_BUDGET evaluations the rest is marched (see there). */
 static double full_integral(rayc *R, int lo, int hi, long double t0, long double t1,
                             double tol_per_len, double *err)
 {
@@ -1512,6 +1523,12 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
     ksum acc = { 0, 0 };
     long double ta, tb;
     while (walk_next(&w, &ta, &tb)) {
+        if (tol_per_len > 0 && R->evals > FULL_BUDGET) {
+            const double v = march(R, ta, t1, FULL_MARCH);
+            kadd(&acc, v);
+            *err += march_bound(R, ta, t1, FULL_MARCH, v);
+            break;
+        }
         if (tb > ta) {
             R->cells += 1;
             const int clamp = clamp_state(R, ta, tb);
@@ -3135,7 +3152,14 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
         const double ea = env_d(R, J.a.t);
         double em, eb;
         const double m1 = env_step(ea, a_env, h, &em), m2 = env_step(em, a_env, h, &eb);
-        if (fmax(ym, fmax(ya, yb)) + dlt < -ef_clamp_ymax(tab, N, j)) {
+        const double share = lenleft > len ? len / lenleft : 1;
+        const int leaf = J.depth >= CLAMP_DEPTH || R->evals > EVAL_BUDGET;
+        const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
+        /* the unresolved octaves' line integral: four standard deviations */
+        const double sd_deep = 4 * fmax(ea, eb) * ac *
+                               sqrt(ef_clamp_var(tab, N, j) * len * fmin(len, corr));
+        if (fmax(ym, fmax(ya, yb)) + dlt < -ef_clamp_ymax(tab, N, j) &&
+            (sd_deep * sd_deep <= fmax(vleft, 0) * share || leaf)) {
             /* clamped throughout, whatever the unresolved octaves do: the
              * share is -(integral(env) + c sum_i w_i integral(env n_i)),
              * the resolved octaves' integrals cell by cell (9 Gauss nodes
@@ -3156,9 +3180,7 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
             const double sh = -(m1 + m2 + c * iv);
             kadd(&acc, sh > 0 ? sh : 0);
             const double e9 = (s->k > 0 ? ac * fabs(iv - iv8) : 0) + 1e-13 * (m1 + m2 + ac * fabs(iv));
-            const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
-            const double sd = 4 * fmax(ea, eb) * ac *
-                              sqrt(ef_clamp_var(tab, N, j) * len * fmin(len, corr));
+            const double sd = sd_deep;
             dsum += e9;
             s2 += sd * sd;
             dleft -= e9;
@@ -3190,11 +3212,8 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
         const double emax = fmax(ea, eb), emin = fmin(ea, eb);
         const double d = ac * (fmax(rule[0] - two, two - rule[2]) +
                                0.5 * (emax - emin) * (gmax - gmin + 2 * dlt) * len);
-        const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
         const double sig4 = 4 * emax * ac * sqrt(var_g * len * fmin(len, corr));
-        const double share = lenleft > len ? len / lenleft : 1;
-        if ((d <= fmax(dleft, 0) * share && sig4 * sig4 <= fmax(vleft, 0) * share) ||
-            J.depth >= CLAMP_DEPTH || R->evals > EVAL_BUDGET) {
+        if ((d <= fmax(dleft, 0) * share && sig4 * sig4 <= fmax(vleft, 0) * share) || leaf) {
             kadd(&acc, ac * two);
             dsum += d;
             s2 += sig4 * sig4;
