@@ -1491,18 +1491,19 @@ static double shape_bound(const nstate *s)
 static double march(rayc *R, long double t0, long double t1, int n);
 static double march_bound(const rayc *R, long double t0, long double t1, int n, double unit);
 
-/* The adaptive method's work bound on the piece-by-piece path (the
- * separable model, and the clamp under tol=): past this many noise
+/* The default method's work bound on the piece-by-piece path (the
+ * separable model under ttol, the default): past this many noise
  * evaluations on a ray, the rest of it is marched in FULL_MARCH steps with
- * the march's bound as its error. */
+ * the march's bound as its error. An explicit tol= has no such bound: it
+ * asks for that error on every ray. */
 #define FULL_BUDGET 24000
 #define FULL_MARCH 256
 
 /* integral of env * shape over [t0, t1] with the rule pair (lo, hi) on
  * every piece where all coordinates stay in one cell, bisected until the
  * pair agrees to tol_per_len * length (absolute) or, with tol_per_len = 0,
- * to 1e-14 of the piece's own bound (certified). With tol_per_len > 0,
- * past FULL_BUDGET evaluations the rest is marched (see there). */
+ * to 1e-14 of the piece's own bound (certified). Under ttol, past
+ * FULL_BUDGET evaluations the rest is marched (see there). */
 static double full_integral(rayc *R, int lo, int hi, long double t0, long double t1,
                             double tol_per_len, double *err)
 {
@@ -1523,7 +1524,7 @@ static double full_integral(rayc *R, int lo, int hi, long double t0, long double
     ksum acc = { 0, 0 };
     long double ta, tb;
     while (walk_next(&w, &ta, &tb)) {
-        if (tol_per_len > 0 && R->evals > FULL_BUDGET) {
+        if (tol_per_len > 0 && R->s->ttol > 0 && R->evals > FULL_BUDGET) {
             const double v = march(R, ta, t1, FULL_MARCH);
             kadd(&acc, v);
             *err += march_bound(R, ta, t1, FULL_MARCH, v);
