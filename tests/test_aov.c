@@ -317,6 +317,39 @@ static void test_half_and_float_types(void **state)
     const expect e = { 0.05, 0, 0, { 0, 0, 0 }, 1 };
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 -d half " ALL, in2, out);
     check_aovs(&f, in2, out, &e);
+    /* -d half on a Blender multilayer input (issue 42): the passes are
+     * named LAYER.FogP.X and LAYER.FogDistance.Z there, and stay float
+     * all the same (the rule is what the channel holds, not its name);
+     * LAYER.FogT is half. */
+    {
+        tu_part bp;
+        tu_part_init(&bp, W, H);
+        tu_part_add(&bp, "ViewLayer.Combined.R", EXR_PIXEL_FLOAT, f.R);
+        tu_part_add(&bp, "ViewLayer.Combined.G", EXR_PIXEL_FLOAT, f.G);
+        tu_part_add(&bp, "ViewLayer.Combined.B", EXR_PIXEL_FLOAT, f.B);
+        tu_part_add(&bp, "ViewLayer.Combined.A", EXR_PIXEL_FLOAT, f.A);
+        tu_part_add(&bp, "ViewLayer.Depth.Z", EXR_PIXEL_FLOAT, f.Z);
+        tu_part ref;
+        frame_part(&ref, &f, EXR_PIXEL_FLOAT, NULL);
+        memcpy(bp.m44, ref.m44, sizeof bp.m44);
+        memcpy(bp.f, ref.f, sizeof bp.f);
+        char *bl = tu_path("half_blender.exr");
+        assert_int_equal(tu_write_exr(bl, &bp, 1), 0);
+        assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 -d half --aov T,P,distance --layer "
+                      "ViewLayer.Combined --depth-channel ViewLayer.Depth.Z", bl, out);
+        assert_int_equal(tu_read_image(out, 0, &b), 0);
+        static const char *const kept[] = { "ViewLayer.FogP.X", "ViewLayer.FogP.Y",
+                                            "ViewLayer.FogP.Z", "ViewLayer.FogDistance.Z" };
+        for (size_t k = 0; k < sizeof kept / sizeof kept[0]; ++k) {
+            const int at = tu_image_find(&b, kept[k]);
+            assert_true(at >= 0);
+            assert_int_equal(b.type[at], EXR_PIXEL_FLOAT);
+        }
+        assert_int_equal(b.type[tu_image_find(&b, "ViewLayer.FogT.R")], EXR_PIXEL_HALF);
+        assert_int_equal(b.type[tu_image_find(&b, "ViewLayer.Combined.R")], EXR_PIXEL_HALF);
+        tu_image_free(&b);
+        free(bl);
+    }
     /* -d float: FLOAT, as the default */
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 -d float --aov error", in, out);
     assert_int_equal(tu_read_image(out, 0, &b), 0);

@@ -873,6 +873,58 @@ static void test_bounds_and_partial_aovs(void **state)
     assert_memory_equal(T2, F[2], sizeof T2);
     /* exp's T along the ray to planar depth z at x: exp(-0.1 d) */
     assert_true(F[0][0] > 0.8f && F[0][0] < 0.95f);
+    /* Partial groups on rectangles of several rows (issue 42: the missing
+     * planes' scratch was one row long, and a contiguous rectangle is one
+     * call of the core): T[0] and T[2] without T[1], P[1] alone, error[2]
+     * alone, on 16 x 16 contiguous, 16 x 16 with a stride (gathered) and
+     * 200 x 100 with a stride (row by row): each plane given holds what a
+     * full group gets (ASan would see a write past the scratch). */
+    static const int shapes[3][3] = { { 16, 16, 16 }, { 16, 16, 20 }, { 200, 100, 203 } };
+    for (int sh = 0; sh < 3; ++sh) {
+        const int w = shapes[sh][0], h = shapes[sh][1], st = shapes[sh][2];
+        const size_t n = (size_t) st * (size_t) h;
+        float *buf = calloc(n * 17, sizeof *buf);
+        assert_non_null(buf);
+        float *pl[17];
+        for (int k = 0; k < 17; ++k)
+            pl[k] = buf + (size_t) k * n;
+        for (size_t i = 0; i < n; ++i) {
+            pl[3][i] = 1.0f + (float) (i % 37);   /* depth */
+            pl[0][i] = pl[1][i] = pl[2][i] = pl[8][i] = pl[9][i] = pl[10][i] = 0.5f;
+        }
+        exrfog_image part = { .size = sizeof part, .x0 = 1, .y0 = 2, .width = w, .height = h,
+                              .stride = st, .rgb = { pl[0], pl[1], pl[2] }, .depth = pl[3] };
+        part.T[0] = pl[4];
+        part.T[2] = pl[5];
+        part.P[1] = pl[6];
+        part.error[2] = pl[7];
+        assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &part), EXRFOG_OK);
+        exrfog_image all = part;
+        all.rgb[0] = pl[8];
+        all.rgb[1] = pl[9];
+        all.rgb[2] = pl[10];
+        for (int k = 0; k < 3; ++k) {
+            all.T[k] = pl[11 + k];
+            all.P[k] = pl[14 + k];
+        }
+        float *E[3];
+        for (int k = 0; k < 3; ++k)
+            E[k] = calloc(n, sizeof *E[k]);
+        all.error[0] = E[0];
+        all.error[1] = E[1];
+        all.error[2] = E[2];
+        assert_int_equal(exrfog_fog_pixels(ctx, sc, cam, &all), EXRFOG_OK);
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const size_t i = (size_t) y * (size_t) st + (size_t) x;
+                assert_true(pl[4][i] == pl[11][i] && pl[5][i] == pl[13][i]);
+                assert_true(pl[6][i] == pl[15][i] && pl[7][i] == E[2][i]);
+                assert_true(pl[0][i] == pl[8][i]);
+            }
+        for (int k = 0; k < 3; ++k)
+            free(E[k]);
+        free(buf);
+    }
     exrfog_scene_destroy(sc);
     exrfog_camera_destroy(cam);
     exrfog_context_destroy(ctx);

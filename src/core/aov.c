@@ -5,19 +5,20 @@
 #include <stdio.h>
 #include <string.h>
 
+/* data: positions and distances, which half precision would destroy */
 static const struct {
     const char *name;
     unsigned bit;
-    int n;
+    int n, data;
     const char *ch[4];
 } aovs[] = {
-    { "fog", EF_AOV_FOG, 4, { "fog.R", "fog.G", "fog.B", "fog.A" } },
-    { "T", EF_AOV_T, 3, { "fog_T.R", "fog_T.G", "fog_T.B" } },
-    { "error", EF_AOV_ERROR, 3, { "fog_error.R", "fog_error.G", "fog_error.B" } },
-    { "P", EF_AOV_P, 3, { "fog_P.X", "fog_P.Y", "fog_P.Z" } },
-    { "distance", EF_AOV_DISTANCE, 1, { "fog_distance.Z" } },
-    { "light", EF_AOV_LIGHT, 3, { "fog_ambient.R", "fog_ambient.G", "fog_ambient.B" } },
-    { "lit", EF_AOV_LIT, 0, { NULL } },   /* per shadowed light only */
+    { "fog", EF_AOV_FOG, 4, 0, { "fog.R", "fog.G", "fog.B", "fog.A" } },
+    { "T", EF_AOV_T, 3, 0, { "fog_T.R", "fog_T.G", "fog_T.B" } },
+    { "error", EF_AOV_ERROR, 3, 0, { "fog_error.R", "fog_error.G", "fog_error.B" } },
+    { "P", EF_AOV_P, 3, 1, { "fog_P.X", "fog_P.Y", "fog_P.Z" } },
+    { "distance", EF_AOV_DISTANCE, 1, 1, { "fog_distance.Z" } },
+    { "light", EF_AOV_LIGHT, 3, 0, { "fog_ambient.R", "fog_ambient.G", "fog_ambient.B" } },
+    { "lit", EF_AOV_LIT, 0, 0, { NULL } },   /* per shadowed light only */
 };
 #define NAOV ((int) (sizeof aovs / sizeof aovs[0]))
 
@@ -80,6 +81,18 @@ int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names)
                 ++n;
             }
     return n;
+}
+
+int ef_aov_channel_data(unsigned mask, int index)
+{
+    int n = 0;
+    for (int i = 0; i < NAOV; ++i)
+        if (mask & aovs[i].bit) {
+            if (index < n + aovs[i].n)
+                return aovs[i].data;
+            n += aovs[i].n;
+        }
+    return 0;   /* the light layers */
 }
 
 void ef_aov_list(unsigned mask, char *buf, size_t len)

@@ -54,6 +54,11 @@ unsigned ef_aov_find(const char *name);
  * may be NULL to count. */
 int ef_aov_channels(unsigned mask, const ef_fog_scene *s, const char **names);
 
+/* Whether channel index of ef_aov_channels(mask, ...) holds data (a
+ * position or a distance), which -d half must leave in float whatever
+ * the channel is named (Blender's names differ). */
+int ef_aov_channel_data(unsigned mask, int index);
+
 /* The AOV names of mask as a comma list ("fog,T"), into buf. */
 void ef_aov_list(unsigned mask, char *buf, size_t len);
 

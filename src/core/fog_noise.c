@@ -3077,6 +3077,25 @@ typedef struct clamp_job {
     int depth;
 } clamp_job;
 
+/* The clamp tree's books: the share so far, its two error parts, and what
+ * is left of the budget and of the segment (see clamp_part). */
+typedef struct clamp_books {
+    ksum acc;
+    double dsum, s2, dleft, vleft, lenleft;
+} clamp_books;
+
+/* Takes a stretch of length len with value v, deterministic error d and
+ * squared statistical error s2. */
+static void clamp_take(clamp_books *B, double v, double d, double s2, double len)
+{
+    kadd(&B->acc, v);
+    B->dsum += d;
+    B->s2 += s2;
+    B->dleft -= d;
+    B->vleft -= s2;
+    B->lenleft -= len;
+}
+
 /* Brings p's sum to the first j octaves. */
 static void clamp_extend(rayc *R, clamp_pt *p, int j)
 {
@@ -3115,14 +3134,12 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
     clamp_job stack[CLAMP_DEPTH + 2];
     int sp = 0;
     stack[sp++] = (clamp_job) { { t0, 0, 0 }, { t1, 0, 0 }, 0 };
-    ksum acc = { 0, 0 };
-    double dsum = 0, s2 = 0;
     /* What is left of the budget (0.7 tgt for the deterministic part, half
      * of tgt^2 for the statistical one) and of the segment: stretches are
      * taken left to right, and one that uses less than its share of what is
      * left (most: the clamp cannot bind there) leaves the rest to the
      * stretches after it. */
-    double dleft = 0.7 * tgt, vleft = 0.5 * tgt * tgt, lenleft = Lseg;
+    clamp_books B = { { 0, 0 }, 0, 0, 0.7 * tgt, 0.5 * tgt * tgt, Lseg };
     while (sp > 0) {
         clamp_job J = stack[--sp];
         const double len = J.b.t - J.a.t, h = 0.5 * len;
@@ -3147,20 +3164,20 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
         const double ya = (1 + c * J.a.F) / ac, yb = (1 + c * J.b.F) / ac, ym = (1 + c * mid.F) / ac;
         double v;
         if (ef_clamp_m(tab, N, j, fmin(ym, fmin(ya, yb)) - dlt, &v) == 0) {
-            lenleft -= len;
+            B.lenleft -= len;
             continue;   /* the clamp cannot bind on this stretch */
         }
         const double ea = env_d(R, J.a.t);
         double em, eb;
         const double m1 = env_step(ea, a_env, h, &em), m2 = env_step(em, a_env, h, &eb);
-        const double share = lenleft > len ? len / lenleft : 1;
+        const double share = B.lenleft > len ? len / B.lenleft : 1;
         const int leaf = J.depth >= CLAMP_DEPTH || R->evals > EVAL_BUDGET;
         const double corr = j < N ? CLAMP_CORR * s->scale / s->fbm.freq[j] : 0;
         /* the unresolved octaves' line integral: four standard deviations */
         const double sd_deep = 4 * fmax(ea, eb) * ac *
                                sqrt(ef_clamp_var(tab, N, j) * len * fmin(len, corr));
         if (fmax(ym, fmax(ya, yb)) + dlt < -ef_clamp_ymax(tab, N, j) &&
-            (sd_deep * sd_deep <= fmax(vleft, 0) * share || leaf)) {
+            (sd_deep * sd_deep <= fmax(B.vleft, 0) * share || leaf)) {
             /* clamped throughout, whatever the unresolved octaves do: the
              * share is -(integral(env) + c sum_i w_i integral(env n_i)),
              * the resolved octaves' integrals cell by cell (9 Gauss nodes
@@ -3179,14 +3196,8 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
                 }
             }
             const double sh = -(m1 + m2 + c * iv);
-            kadd(&acc, sh > 0 ? sh : 0);
             const double e9 = (s->k > 0 ? ac * fabs(iv - iv8) : 0) + 1e-13 * (m1 + m2 + ac * fabs(iv));
-            const double sd = sd_deep;
-            dsum += e9;
-            s2 += sd * sd;
-            dleft -= e9;
-            vleft -= sd * sd;
-            lenleft -= len;
+            clamp_take(&B, sh > 0 ? sh : 0, e9, sd_deep * sd_deep, len);
             continue;
         }
         /* y's chords through the three points, shifted by -dlt (the most
@@ -3214,21 +3225,16 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
         const double d = ac * (fmax(rule[0] - two, two - rule[2]) +
                                0.5 * (emax - emin) * (gmax - gmin + 2 * dlt) * len);
         const double sig4 = 4 * emax * ac * sqrt(var_g * len * fmin(len, corr));
-        if ((d <= fmax(dleft, 0) * share && sig4 * sig4 <= fmax(vleft, 0) * share) || leaf) {
-            kadd(&acc, ac * two);
-            dsum += d;
-            s2 += sig4 * sig4;
-            dleft -= d;
-            vleft -= sig4 * sig4;
-            lenleft -= len;
+        if ((d <= fmax(B.dleft, 0) * share && sig4 * sig4 <= fmax(B.vleft, 0) * share) || leaf) {
+            clamp_take(&B, ac * two, d, sig4 * sig4, len);
             continue;
         }
         stack[sp++] = (clamp_job) { mid, J.b, J.depth + 1 };
         stack[sp++] = (clamp_job) { J.a, mid, J.depth + 1 };
     }
-    *det += dsum;
-    *stat2 += s2;
-    return kval(&acc);
+    *det += B.dsum;
+    *stat2 += B.s2;
+    return kval(&B.acc);
 }
 
 /* The noise part's integral for the linear density (noise, |c| <= 0.9649)

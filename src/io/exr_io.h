@@ -145,6 +145,9 @@ typedef struct ef_stream_opts {
      * HALF), filled by the callback; names must not be in the part yet. */
     const char *const *extra;
     int nextra;               /* 0..EF_MAX_EXTRA_CHANNELS */
+    /* per extra channel: data (positions, distances) that a half output
+     * keeps in float; NULL: judged by name (ef_data_channel) */
+    const unsigned char *extra_data;
     /* A v3d attribute of the colour part (exrfog/aovOrigin), when
      * has_origin_attr. */
     int has_origin_attr;

@@ -1057,10 +1057,10 @@ static int define_part(const ef_exr_file *in, exr_context_t out, int p,
             return ef_fail(err, "cannot add channel '%s'", e->name.str);
     }
     for (int c = 0; c < nextra; ++c) {
+        const int data = o->extra_data ? o->extra_data[c] : ef_data_channel(extra[c]);
         const exr_pixel_type_t t =
-            named_type(o, extra[c], o->pixel_type == EXR_PIXEL_HALF && !ef_data_channel(extra[c])
-                                        ? EXR_PIXEL_HALF
-                                        : EXR_PIXEL_FLOAT);
+            named_type(o, extra[c], o->pixel_type == EXR_PIXEL_HALF && !data ? EXR_PIXEL_HALF
+                                                                              : EXR_PIXEL_FLOAT);
         if (exr_add_channel(out, p, extra[c], t, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1))
             return ef_fail(err, "cannot add channel '%s': %s", extra[c], ef_exr_last_core_message());
     }

@@ -749,7 +749,8 @@ static int make_flat_out(const ef_deep_req *q, const plan *P, flat_out *FO, ef_e
     for (int a = 0; a < naov; ++a, ++n) {
         nm[n] = q->aov_names[a];
         int t = EXR_PIXEL_FLOAT;
-        if (q->pixel_type >= 0 && !(q->pixel_type == EXR_PIXEL_HALF && ef_data_channel(nm[n])))
+        if (q->pixel_type >= 0 &&
+            !(q->pixel_type == EXR_PIXEL_HALF && ef_aov_channel_data(q->aov, a)))
             t = q->pixel_type;
         ty[n] = (exr_pixel_type_t) ef_exr_named_type(q->chan_type_name, q->chan_type,
                                                      q->nchan_type, nm[n], t);

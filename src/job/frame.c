@@ -65,6 +65,7 @@ typedef struct ef_frame {
     const char *aov_names[EF_AOV_MAX_CHANNELS];
     int naov;
     char blender_aov[EF_AOV_MAX_CHANNELS][256];   /* Blender's pass names, when used */
+    unsigned char aov_data[EF_AOV_MAX_CHANNELS];  /* per AOV channel: a position or distance */
     ef_output out, pv, mid, dconv, din;
     const char *ext;          /* OUTPUT's extension when it is not .exr */
     int foreign;
@@ -839,6 +840,7 @@ static int prepare_pass(ef_frame *F)
                               .history = F->history,
                               .extra = F->aov_names,
                               .nextra = F->naov,
+                              .extra_data = F->aov_data,
                               .has_origin_attr = o->has_aov_origin,
                               .origin_attr = { o->aov_origin[0], o->aov_origin[1],
                                                o->aov_origin[2] } };
@@ -1113,6 +1115,8 @@ int ef_run_frame(ef_job *J)
     F->job.pv_step = 1;
     pthread_mutex_init(&F->job.lock, NULL);
     F->naov = ef_aov_channels(o->aov, &o->scene, F->aov_names);
+    for (int i = 0; i < F->naov; ++i)
+        F->aov_data[i] = (unsigned char) ef_aov_channel_data(o->aov, i);
     F->out.fd = F->pv.fd = F->mid.fd = F->dconv.fd = F->din.fd = -1;
     F->dwa_out = -1;
     int (*const stages[])(ef_frame *) = { open_destinations, open_inputs, find_views,

@@ -344,7 +344,7 @@ static exrfog_result check_image(exrfog_context *ctx, const exrfog_image *img)
 
 /* The core's view of the caller's planes: AOV planes in the order
  * ef_aov_channels gives, a missing plane of a wanted group pointed at
- * scratch (one row, reused). */
+ * scratch (as long as one call of the core, reused). */
 typedef struct rect_planes {
     float *rgb[3], *alpha;
     const float *depth;
@@ -465,7 +465,7 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     if (ef_depth_conv_init(&conv, mode, &cam->cam, &err))
         return fail(ctx, &err, NULL, EXRFOG_USAGE);
     /* The AOV groups in the core's order (T, error, P): a missing plane of
-     * a wanted group writes to scratch, one row long. */
+     * a wanted group writes to scratch (as long as one call of the core). */
     float *const *groups[3] = { img->T, img->error, img->P };
     static const unsigned bits[3] = { EF_AOV_T, EF_AOV_ERROR, EF_AOV_P };
     float *aov_in[EF_AOV_MAX_CHANNELS];
@@ -514,12 +514,18 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     int need_scratch = 0;
     for (int k = 0; k < naov; ++k)
         need_scratch |= !aov_given[k];
-    if (need_scratch && ctx->scratch_cap < (size_t) img->width + 1) {
-        float *sc = realloc(ctx->scratch, ((size_t) img->width + 1) * sizeof *sc);
+    /* The scratch takes what one call of the core writes to a plane: the
+     * whole rectangle when it is contiguous (fog_rows makes one call),
+     * else a row. */
+    const size_t per_call =
+        (img->stride == img->width ? (size_t) img->width * (size_t) img->height
+                                   : (size_t) img->width) + 1;
+    if (need_scratch && ctx->scratch_cap < per_call) {
+        float *sc = realloc(ctx->scratch, per_call * sizeof *sc);
         if (!sc)
             return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
         ctx->scratch = sc;
-        ctx->scratch_cap = (size_t) img->width + 1;
+        ctx->scratch_cap = per_call;
     }
     for (int k = 0; k < naov; ++k)
         if (!aov_given[k])
