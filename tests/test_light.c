@@ -749,10 +749,29 @@ static void test_cli(void **state)
     assert_int_equal(tu_runf("'%s' -o '%s' --fog height:density=0.05:falloff=0.3:base=0:"
                              "albedo=0.5,0.6,0.7:phase=hg:g=0.7", in, b), 0);
     assert_true(same_pixels(a, b));
+    /* A sun over exp fog adds nothing (its light crosses infinite fog to
+     * get in): a warning names it, and the picture is the unlit one
+     * (issue 42); over height fog, or a lamp in exp fog, no warning. */
+    char *e = tu_path("light_e.exr"), *fl = tu_path("light_f.exr");
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02", in, e), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 "
+                             "--light sun:towards=0,1,0.3:intensity=3:name=noon", in, fl), 0);
+    assert_non_null(strstr(tu_err, "warning: --light 'sun:towards=0,1,0.3:intensity=3:name=noon' "
+                                    "adds nothing"));
+    assert_true(same_pixels(e, fl));
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 -q "
+                             "--light sun:towards=0,1,0.3:intensity=3", in, fl), 0);
+    assert_null(strstr(tu_err, "adds nothing"));
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 "
+                             "--light point:position=2,3,-20:intensity=50", in, fl), 0);
+    assert_null(strstr(tu_err, "adds nothing"));
+    free(e);
+    free(fl);
     /* with a light the picture brightens somewhere and darkens nowhere */
     assert_int_equal(tu_runf("'%s' -o '%s' --fog height:density=0.05:falloff=0.3:base=0 "
                              "--light sun:towards=0,0.3,-1:intensity=2 "
                              "--light point:position=2,3,-20:intensity=50:name=lamp", in, c), 0);
+    assert_null(strstr(tu_err, "adds nothing"));
     int w, h, w2, h2;
     float *ra = tu_read_channel(a, 0, "R", &w, &h), *rc = tu_read_channel(c, 0, "R", &w2, &h2);
     assert_non_null(ra);

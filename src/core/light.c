@@ -364,6 +364,18 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err)
     return 0;
 }
 
+int ef_light_dark(const ef_fog_scene *s, const ef_light *l)
+{
+    if (l->kind != EF_LIGHT_SUN || l->planet > 0)
+        return 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (is_uniform(c) && c->p[0] > 0 && c->p[1] > 0 && c->p[2] > 0)
+            return 1;
+    }
+    return 0;
+}
+
 /* Extinction of component c at x per channel, from its functionals. */
 static void sigma_at(const ef_fog_component *c, const double x[3], double out[3])
 {

@@ -12,6 +12,12 @@
  * component. */
 int ef_lights_check(const ef_fog_scene *s, ef_err *err);
 
+/* Whether light l of s cannot light the fog at all: a sun (without
+ * planet=) over a component that fills all space uniformly with density in
+ * every channel (exp): its light crosses infinite fog on the way in, so S
+ * is 0 everywhere. */
+int ef_light_dark(const ef_fog_scene *s, const ef_light *l);
+
 /* S per channel along r (its org is the camera; r->dist may be INFINITY)
  * from light l of s, and into *err (may be NULL) an estimate of its
  * absolute error per channel (the quadrature's Kronrod-Gauss differences,

@@ -21,6 +21,7 @@
 #include "exr_dwa.h"
 #include "deliver.h"
 #include "job_impl.h"
+#include "lit.h"
 #include "output.h"
 #include "preview.h"
 #include "scene_build.h"
@@ -788,12 +789,35 @@ static int setup_preview(ef_frame *F)
     return 0;
 }
 
+/* Names, once per run, each light that cannot add anything: a sun over
+ * fog that fills all space (exp), whose light never gets in. As linear
+ * and exp2 with lights are refused, this would otherwise be silent. */
+static void warn_dark_lights(ef_frame *F)
+{
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    if (J->noted_dark || o->quiet)
+        return;
+    J->noted_dark = 1;
+    for (int j = 0; j < o->scene.nlight; ++j)
+        if (ef_light_dark(&o->scene, &o->scene.light[j])) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "--light '%s' adds nothing: sunlight crosses infinite "
+                                      "uniform fog (exp fills all space) before it reaches any "
+                                      "point, so none arrives; bound the fog (height, a box, a "
+                                      "half-space) or light it with a point or spot lamp",
+                     o->scene.light[j].spec);
+            ef_job_warn(J, o->input, msg);
+        }
+}
+
 /* The pass's settings: statistics, progress, preview, history, threads. */
 static int prepare_pass(ef_frame *F)
 {
     ef_job *J = F->J;
     ef_options *o = F->o;
     int status;
+    warn_dark_lights(F);
     F->job.aov = o->aov;
     memcpy(F->job.aov_origin, o->aov_origin, sizeof F->job.aov_origin);
     if (o->stats) {

@@ -60,6 +60,7 @@ typedef struct ef_job {
     int dl_ok, dl_type, dl_alpha;
     char dl_ext[32];
     int noted_up;             /* --up-axis auto's choice was told */
+    int noted_dark;           /* the lights that add nothing were named */
 } ef_job;
 
 /* Whether the run is to stop: the host's flag or the progress hook's. */
