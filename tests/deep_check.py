@@ -403,6 +403,10 @@ for spec_text, model in (("exp:density=0.05", ("exp", 0.05)),
     check(run([src, "--fog", spec_text, "--deep", "flatten", "--aov", "fog,T,error,P,distance",
                "-o", out]) == 0, "--deep flatten --aov runs (%s)" % spec_text)
     b = oiio.ImageBuf(out)
+    # the parameters name the deep mode once (issue 42: it stood twice)
+    par = b.spec().get_string_attribute("exrfog/parameters")
+    check(par.count("--deep flatten") == 1 and par.count("--deep-tol") == 1,
+          "exrfog/parameters names --deep flatten once: %s" % par)
     cn = b.spec().channelnames
     px = b.get_pixels(oiio.FLOAT)
     need = ["fog.R", "fog.G", "fog.B", "fog.A", "fog_T.R", "fog_T.G", "fog_T.B",

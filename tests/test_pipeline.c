@@ -621,6 +621,23 @@ static void test_camera_file(void **state)
     assert_non_null(strstr(tu_out, "deg horizontal  from camera file"));
     assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s' --fov 30", g_dir, json);
     assert_non_null(strstr(tu_out, "30 deg horizontal  from flag --fov"));
+    /* near and far from the file say so too, and a flag over one of them
+     * says it is the flag (issue 42: both said "from flag") */
+    char *clip = in_dir("clip.json");
+    FILE *cj = fopen(clip, "w");
+    assert_non_null(cj);
+    fprintf(cj, "{\"convention\": \"exr\", \"fov\": 90, \"near\": 0.25, \"far\": 500, "
+                "\"frames\": {\"3\": {\"camera_to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 30,0,0,1]}}}\n");
+    fclose(cj);
+    assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s'", g_dir, clip);
+    assert_null(strstr(tu_out, "flag --near"));
+    assert_null(strstr(tu_out, "flag --far"));
+    assert_non_null(strstr(tu_out, "0.25  from camera file"));
+    assert_non_null(strstr(tu_out, "500  from camera file"));
+    assert_run(0, "'%s/shot.0003.exr' --explain --camera-file '%s' --far 900", g_dir, clip);
+    assert_non_null(strstr(tu_out, "0.25  from camera file"));
+    assert_non_null(strstr(tu_out, "900  from flag --far"));
+    free(clip);
     /* a frame the file lacks is named */
     char *s4 = in_dir("shot.0004.exr");
     write_frame(s4, 0);

@@ -479,13 +479,13 @@ static int resolve_clip(const ef_cam_meta *meta, const ef_cam_flags *flags, fam 
         if (check_num(flags->near_.v, "--near", err))
             return -1;
         cam->near_ = flags->near_;
-        cam->src_near = "flag --near";
+        cam->src_near = flags->near_src ? flags->near_src : "flag --near";
     }
     if (flags->far_.set) {
         if (check_num(flags->far_.v, "--far", err))
             return -1;
         cam->far_ = flags->far_;
-        cam->src_far = "flag --far";
+        cam->src_far = flags->far_src ? flags->far_src : "flag --far";
     }
     const struct {
         const ef_opt_num *n, *f;

@@ -63,6 +63,8 @@ typedef struct ef_cam_flags {
                                * NULL; kept as the camera's src_fov, so it must outlive it */
     const char *pose_src;     /* where w2c/c2w came from when not the flags (a camera
                                * file's frame), or NULL: its errors are then the file's */
+    const char *near_src;     /* where near_ / far_ came from when not --near / --far (a */
+    const char *far_src;      /* camera file), or NULL; kept as src_near / src_far */
 } ef_cam_flags;
 
 /* Depth-row of the camera->clip projection: z_clip/w = alpha + beta/d for

@@ -232,11 +232,14 @@ static void record(ef_options *o, const char *a)
 }
 
 /* Records an option in canonical form, unless it cannot change the output
- * file (threads, messages, preview): equal outputs get equal headers. */
+ * file (threads, messages, preview): equal outputs get equal headers.
+ * --deep and --deep-tol are the deep pass's to record (frame.c: the mode
+ * and tolerance that ran, defaults too), so that they stand there once. */
 static void record_option(ef_options *o, int c, const char *arg)
 {
     if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES || c == OPT_FAILED_LIST ||
-        c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' || c == 'q' || c == 'o')
+        c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' || c == 'q' || c == 'o' ||
+        c == OPT_DEEP || c == OPT_DEEP_TOL)
         return;
     for (const struct option *lo = long_opts; lo->name; ++lo)
         if (lo->val == c) {

@@ -145,8 +145,12 @@ int ef_camera_flags(ef_job *J, ef_cam_flags *flags, char *src, size_t srclen, ef
         f.pose_src = src;
     if (flags->near_.set)
         f.near_ = flags->near_;
+    else if (f.near_.set)
+        f.near_src = src;
     if (flags->far_.set)
         f.far_ = flags->far_;
+    else if (f.far_.set)
+        f.far_src = src;
     *flags = f;
     snprintf(src, srclen, "camera file %.300s, frame %ld (%.200s)", path, frame,
              ef_camera_file_describe(J->camfile));
