@@ -72,6 +72,10 @@ run() {
   rc=$?
   [ $rc = 0 ] || { bad "$engine: resubmit exit $rc"; cat err.txt; }
   grep -q "resubmitting chunk(s) 1$" err.txt || bad "$engine: resubmit did not rerun chunk 1 alone"
+  # the frames it reruns, not the chunk's (issue 42: it said 5)
+  if [ "$engine" = slurm ]; then
+    grep -q "1 chunk(s) of 1 frame(s)" err.txt || { bad "slurm: resubmit miscounts its frames"; cat err.txt; }
+  fi
   grep -q -- "--frames 7 " "$job/logs/chunk-0001.log" || bad "$engine: resubmit reran more than frame 7"
   "$farm" status "$job" >status.txt 2>&1 || bad "$engine: status after the resubmit is not 0"
   [ "$(grep -c ' done ' status.txt)" = 3 ] || bad "$engine: not every chunk done"
@@ -144,6 +148,17 @@ for f in $(seq -f %04g 1 12); do
 done
 run parallel
 hostile parallel
+
+# An output directory that does not exist is refused up front (issue 42),
+# for -o and --preview, before a job directory exists.
+"$farm" submit --engine parallel --exrfog "$exrfog" --jobdir "$tmp/job-nodir" -- seq/shot.#.exr \
+    -o nodir/f.#.exr --frames 1-3 --fog exp:density=0.05 2>err.txt
+[ $? = 2 ] && grep -q "nodir/f.#.exr: its directory nodir does not exist" err.txt ||
+  { bad "an output directory that does not exist is not refused"; cat err.txt; }
+[ -e "$tmp/job-nodir" ] && bad "a job directory was made for a refused submit"
+"$farm" submit --engine parallel --exrfog "$exrfog" --jobdir "$tmp/job-nodir" -- seq/shot.#.exr \
+    -o seq/f.#.exr --preview=nodir/p.#.png --frames 1-3 --fog exp:density=0.05 2>err.txt
+[ $? = 2 ] && grep -q "does not exist" err.txt || bad "a preview directory that does not exist is not refused"
 
 # Usage of the farm itself.
 "$farm" submit --engine slurm -- seq/shot.#.exr -o seq/x.#.exr --fog exp:density=1 2>err.txt
