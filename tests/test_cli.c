@@ -2000,6 +2000,58 @@ static void test_threads_bit_identical_files(void **state)
                  g_threads[differs]);
 }
 
+/* Whether two files hold the same bytes. */
+static int same_files(const char *a, const char *b)
+{
+    size_t la, lb;
+    unsigned char *da = slurp(a, &la), *db = slurp(b, &lb);
+    const int same = da && db && la == lb && !memcmp(da, db, la);
+    free(da);
+    free(db);
+    return same;
+}
+
+/* Every option of the one output-neutral list (args.c's
+ * ef_option_neutral, read by exrfog/parameters and exrfog/history alike)
+ * leaves the output file byte-identical, spelled in full, by a unique
+ * prefix, with = or as a short cluster (issue 43: --preview-view was in
+ * the parameters' list only, so it changed the history and the file). */
+static void test_neutral_options_same_bytes(void **state)
+{
+    (void) state;
+    mkdir(pth("neutral").s, 0777);
+    path_t base = pth("neutral/base.exr"), out = pth("neutral/out.exr"), pv = pth("neutral/p.png");
+    path_t fl = pth("neutral/failed.txt");
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02", sample(), base.s), 0);
+    static const char *const single[] = {
+        "--threads 1", "--thr 1", "--threads=1", "--stats", "-v", "-q", "-vq", "--verbose",
+        "--quiet", "--preview '%s'", "--preview '%s' --preview-view 'sRGB - Display, Raw'",
+        "--preview '%s' --preview-v 'sRGB - Display, Raw'",
+    };
+    for (size_t k = 0; k < sizeof single / sizeof single[0]; ++k) {
+        char extra[3000];
+        snprintf(extra, sizeof extra, single[k], pv.s);
+        assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 %s", sample(), out.s, extra), 0);
+        if (!same_files(base.s, out.s))
+            fail_msg("%s changed the output file's bytes", single[k]);
+        /* in front of INPUT too */
+        assert_int_equal(tu_runf("%s '%s' --output='%s' --fog exp:density=0.02", extra, sample(),
+                                 out.s), 0);
+        if (!same_files(base.s, out.s))
+            fail_msg("%s (before INPUT, --output=) changed the output file's bytes", single[k]);
+    }
+    /* the sequence's: --frames, --keep-going, --failed-list */
+    path_t s1 = pth("neutral/s.0001.exr"), s2 = pth("neutral/s.0002.exr");
+    assert_int_equal(tu_copy(sample(), s1.s), 0);
+    assert_int_equal(tu_copy(sample(), s2.s), 0);
+    path_t pat = pth("neutral/s.#.exr"), a = pth("neutral/a.#.exr"), b = pth("neutral/b.#.exr");
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02", pat.s, a.s), 0);
+    assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --frames 1-2 --keep-going "
+                             "--failed-list '%s'", pat.s, b.s, fl.s), 0);
+    path_t a1 = pth("neutral/a.0001.exr"), b1 = pth("neutral/b.0001.exr");
+    assert_true(same_files(a1.s, b1.s));
+}
+
 /* ============================================================ end to end */
 
 static void test_e2e_exp_chromatic(void **state)
@@ -2992,6 +3044,7 @@ int main(void)
         cmocka_unit_test(test_killed_run_sigkill),
         cmocka_unit_test(test_threads_deterministic),
         cmocka_unit_test(test_threads_bit_identical_files),
+        cmocka_unit_test(test_neutral_options_same_bytes),
         cmocka_unit_test(test_e2e_exp_chromatic),
         cmocka_unit_test(test_e2e_default_colour_exp2),
         cmocka_unit_test(test_e2e_linear),

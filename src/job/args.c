@@ -231,15 +231,63 @@ static void record(ef_options *o, const char *a)
     snprintf(o->params + len, sizeof o->params - len, "%s%s", len ? " " : "", a);
 }
 
+int ef_option_neutral(int c)
+{
+    return c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES ||
+           c == OPT_FAILED_LIST || c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' ||
+           c == 'q' || c == 'o';
+}
+
+/* The long option a names (--name or --name=VALUE; a unique prefix, as
+ * getopt_long takes it, an exact name first), or NULL. */
+static const struct option *long_option_of(const char *a)
+{
+    if (a[0] != '-' || a[1] != '-' || !a[2])
+        return NULL;
+    const char *name = a + 2, *eq = strchr(name, '=');
+    const size_t n = eq ? (size_t) (eq - name) : strlen(name);
+    const struct option *found = NULL;
+    int matches = 0;
+    for (const struct option *lo = long_opts; lo->name; ++lo)
+        if (!strncmp(lo->name, name, n)) {
+            if (strlen(lo->name) == n)
+                return lo;
+            found = lo;
+            ++matches;
+        }
+    return matches == 1 ? found : NULL;
+}
+
+int ef_option_neutral_span(char **argv, int argc, int i)
+{
+    const char *a = argv[i];
+    if (a[0] == '-' && a[1] == '-') {
+        const struct option *lo = long_option_of(a);
+        if (!lo || !ef_option_neutral(lo->val))
+            return 0;
+        const int takes = lo->has_arg == required_argument && !strchr(a, '=');
+        return takes && i + 1 < argc ? 2 : 1;
+    }
+    if (a[0] != '-' || !a[1])
+        return 0;
+    /* a cluster of short options (:o:d:vqh): every one neutral; o takes
+     * the rest of the cluster, or the next argument */
+    for (const char *c = a + 1; *c; ++c) {
+        if (!ef_option_neutral((unsigned char) *c))
+            return 0;
+        if (*c == 'o')
+            return c[1] ? 1 : i + 1 < argc ? 2 : 1;
+    }
+    return 1;
+}
+
 /* Records an option in canonical form, unless it cannot change the output
- * file (threads, messages, preview): equal outputs get equal headers.
+ * file (ef_option_neutral): equal outputs get equal headers.
  * --deep and --deep-tol are the deep pass's to record (frame.c: the mode
  * and tolerance that ran, defaults too), so that they stand there once. */
 static void record_option(ef_options *o, int c, const char *arg)
 {
-    if (c == OPT_THREADS || c == OPT_STATS || c == OPT_KEEP_GOING || c == OPT_FRAMES || c == OPT_FAILED_LIST ||
-        c == OPT_PREVIEW || c == OPT_PREVIEW_VIEW || c == 'v' || c == 'q' || c == 'o' ||
-        c == OPT_DEEP || c == OPT_DEEP_TOL)
+    if (ef_option_neutral(c) || c == OPT_DEEP || c == OPT_DEEP_TOL)
         return;
     for (const struct option *lo = long_opts; lo->name; ++lo)
         if (lo->val == c) {

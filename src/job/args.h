@@ -69,6 +69,17 @@ typedef enum ef_parse_result {
  * EF_PARSE_FAIL when a file named by an option (--scene, a fog profile) is
  * unreadable or wrong, with err->file naming it. Release o with
  * ef_options_free whatever the result. */
+/* The options that cannot change the output file (threads, messages,
+ * the preview and its view, the output's name, a sequence's frame list,
+ * --keep-going, --failed-list): the one list that both exrfog/parameters
+ * and exrfog/history leave them out by. c is getopt's value. */
+int ef_option_neutral(int c);
+
+/* How many entries of argv, from i, an output-neutral option takes there
+ * (it and its value: 1 or 2, long names by unique prefix as getopt_long
+ * reads them), or 0 when argv[i] is anything else. */
+int ef_option_neutral_span(char **argv, int argc, int i);
+
 ef_parse_result ef_options_parse(int argc, char **argv, ef_options *o, struct ef_colour *colour,
                                  FILE *out, ef_err *err);
 

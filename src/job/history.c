@@ -45,26 +45,10 @@ static int grow_quoted(char **b, size_t *len, size_t *cap, const char *a)
 /* Whether argv[i] is an option that cannot change the output file (and
  * the number of arguments it takes with it): left out of the history so
  * that equal outputs get equal headers whatever the threads, messages,
- * preview or output name. */
+ * preview or output name. The list is args.c's, the parameters' too. */
 static int history_skip(char **argv, int argc, int i)
 {
-    const char *a = argv[i];
-    static const char *const with_arg[] = { "--threads", "--preview", "--output", "-o", "--frames",
-                                            "--failed-list" };
-    static const char *const alone[] = { "--stats", "--verbose", "--quiet", "--keep-going" };
-    for (size_t k = 0; k < sizeof with_arg / sizeof with_arg[0]; ++k) {
-        const size_t n = strlen(with_arg[k]);
-        if (!strcmp(a, with_arg[k]))
-            return i + 1 < argc ? 2 : 1;
-        if (!strncmp(a, with_arg[k], n) && (a[n] == '=' || (n == 2 && a[n])))
-            return 1;
-    }
-    for (size_t k = 0; k < sizeof alone / sizeof alone[0]; ++k)
-        if (!strcmp(a, alone[k]))
-            return 1;
-    if (a[0] == '-' && a[1] && a[1] != '-' && strspn(a + 1, "vq") == strlen(a + 1))
-        return 1;
-    return 0;
+    return ef_option_neutral_span(argv, argc, i);
 }
 
 /* The line this run adds to exrfog/history: the version, the command line
