@@ -271,4 +271,10 @@ extern const ef_fog_model ef_fog_halfspace, ef_fog_halfspace_linear, ef_fog_half
 extern const ef_fog_model ef_fog_height, ef_fog_layered, ef_fog_box, ef_fog_convex;
 extern const ef_fog_model ef_fog_noise, ef_fog_noise_separable;
 
+/* The noise models' default tolerance, 2^-12: |dT| per channel under the
+ * default ttol (and tol='s default), which keeps |dT| below half an ulp of
+ * a half float for every T; lit fog aims at it where no component states
+ * its own. The one home of that number. */
+#define EF_NOISE_DEFAULT_TOL 0x1p-12
+
 #endif

@@ -76,8 +76,8 @@ enum { M_ADAPTIVE = 0, M_EXACT, M_STEPS, M_PREINT };
 
 /* The default tolerance: 2^-12 in tau keeps |dT| = T |dtau| below half an
  * ulp of a half float for every T, so half output cannot tell. */
-#define DEFAULT_TOL 0x1p-12
-#define DEFAULT_TTOL 0x1p-12
+#define DEFAULT_TOL EF_NOISE_DEFAULT_TOL
+#define DEFAULT_TTOL EF_NOISE_DEFAULT_TOL
 #define DEFAULT_STEPS 64
 /* RMS of integral(noise) over a straight stretch of l lattice units, per
  * sqrt(l): 0.235-0.245 measured by the same program (noise-anchors.md has

@@ -1828,7 +1828,7 @@ static double nz_tol(const ef_fog_scene *s)
     for (int i = 0; i < s->ncomp; ++i)
         if (s->comp[i].model->lit_tol)
             rel = fmin(rel, s->comp[i].model->lit_tol(&s->comp[i]));
-    return isfinite(rel) ? fmax(rel, 1e-12) : 0x1p-12;
+    return isfinite(rel) ? fmax(rel, 1e-12) : EF_NOISE_DEFAULT_TOL;
 }
 
 /* Adds to S light l's in-scatter over [a, D] of r (T counted from r's
@@ -1906,7 +1906,7 @@ static void noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         for (int j = 0; j < nl && j < 64; ++j)
             big = fmax(big, lt[j].period);
         if (big > 0)
-            cap = fmin(cap, big * fmin(1, fmax(0.0625, 0.25 * sqrt(rel / 0x1p-12))));
+            cap = fmin(cap, big * fmin(1, fmax(0.0625, 0.25 * sqrt(rel / EF_NOISE_DEFAULT_TOL))));
     }
     double Sum[3] = { 0, 0, 0 }, rest[3] = { 0, 0, 0 };
     double last_mass = INFINITY;   /* the last step's share of extinction */
