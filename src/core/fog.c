@@ -74,6 +74,16 @@ double ef_fog_per_unit2(const ef_fog_context *ctx, double per_meter2)
     return per_meter2 / ctx->units_per_meter / ctx->units_per_meter;
 }
 
+int ef_fog_model_count(void)
+{
+    return (int) (sizeof registry / sizeof registry[0]);
+}
+
+const ef_fog_model *ef_fog_model_at(int i)
+{
+    return i >= 0 && i < ef_fog_model_count() ? registry[i] : NULL;
+}
+
 const ef_fog_model *ef_fog_model_find(const char *name)
 {
     for (size_t i = 0; i < sizeof registry / sizeof registry[0]; ++i)

@@ -215,6 +215,12 @@ void ef_fog_tau_add(const ef_fog_component *c, const ef_ray *r, int n, double (*
 /* The registered model with this name, or NULL. */
 const ef_fog_model *ef_fog_model_find(const char *name);
 
+/* The registry in order: how many models, and model i (NULL past the
+ * end). Tests that sweep the models iterate it, so a new model cannot be
+ * left out unnoticed. */
+int ef_fog_model_count(void);
+const ef_fog_model *ef_fog_model_at(int i);
+
 /* Parses "a" or "a,b,c" into 1 or 3 finite numbers; a single value is
  * broadcast to all three. Returns 0 or -1. Shared by models for R,G,B keys. */
 int ef_parse_rgb(const char *text, double out[3]);
