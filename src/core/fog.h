@@ -171,6 +171,12 @@ typedef struct ef_fog_model {
      * crossings of their features of scale 0 (jumps and kinks), where the
      * rule takes twice the midpoint's deviation instead (deep.c). */
     double (*dsigma_max)(const ef_fog_component *c, const ef_ray *r);
+    /* Optional, for the reference integrator: where the density has kinks
+     * inside its lattice pieces (the noise's clamp max(0, x)), a function
+     * of the functional values v, continuous there, whose sign changes are
+     * the kinks (1 + c fbm). Returns 0 when the component has none (the
+     * clamp cannot bind: *g is not set), else 1 with *g. */
+    int (*kink)(const ef_fog_component *c, const long double *v, long double *g);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

@@ -3810,6 +3810,43 @@ static int lattices_noise(const ef_fog_component *c, ef_fog_lattice *out, int ca
  * point (so the reference and the integrators see the same field). At
  * infinity (the reference's divergence test): 0 where the box or the
  * envelope ends the fog, else the mean density. */
+/* The noise's unclamped factors at a point given by the functional
+ * values v (finite): 1 + c fbm, or per separable axis 1 + c fbm_a, into x;
+ * returns how many. */
+static int shape_factors(const nstate *s, const long double *v, long double x[3])
+{
+    const int N = s->fbm.octaves;
+    long double q[3];
+    for (int a = 0; a < 3; ++a)
+        q[a] = ((v[a] - s->offset[a]) - (long double) s->velocity[a] * s->time) / s->scale +
+               (long double) s->seed * ef_noise_seed_dir[a];
+    if (!s->separable) {
+        double f = 0;
+        for (int i = 0; i < N; ++i) {
+            int64_t X[3];
+            double fr[3];
+            for (int a = 0; a < 3; ++a)
+                split_ld(s->fbm.freq[i] * q[a] + (long double) i * ef_fbm_offset[a], &X[a],
+                         &fr[a]);
+            ef_noise_cell nc;
+            ef_noise_cell_at(X[0], X[1], X[2], &nc);
+            f += s->fbm.weight[i] * ef_noise_cell_eval(&nc, fr[0], fr[1], fr[2]);
+        }
+        x[0] = 1 + (long double) s->contrast * f;
+        return 1;
+    }
+    for (int k = 0; k < s->naxes; ++k) {
+        const int a = s->axis[k];
+        double f = 0;
+        for (int i = 0; i < N; ++i)
+            f += s->fbm.weight[i] *
+                 factor_octave_ld(s, a, i, s->fbm.freq[i] * q[a] +
+                                               (long double) i * ef_fbm_offset[a]);
+        x[k] = 1 + (long double) s->contrast * f;
+    }
+    return s->naxes;
+}
+
 static void density_noise(const ef_fog_component *c, const long double *v, long double out[3])
 {
     const nstate *s = state(c);
@@ -3829,40 +3866,32 @@ static void density_noise(const ef_fog_component *c, const long double *v, long 
         return;
     long double shape = 1;
     if (isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2])) {
-        const int N = s->fbm.octaves;
-        long double q[3];
-        for (int a = 0; a < 3; ++a)
-            q[a] = ((v[a] - s->offset[a]) - (long double) s->velocity[a] * s->time) / s->scale +
-                   (long double) s->seed * ef_noise_seed_dir[a];
-        if (!s->separable) {
-            double f = 0;
-            for (int i = 0; i < N; ++i) {
-                int64_t X[3];
-                double fr[3];
-                for (int a = 0; a < 3; ++a)
-                    split_ld(s->fbm.freq[i] * q[a] + (long double) i * ef_fbm_offset[a], &X[a],
-                             &fr[a]);
-                ef_noise_cell nc;
-                ef_noise_cell_at(X[0], X[1], X[2], &nc);
-                f += s->fbm.weight[i] * ef_noise_cell_eval(&nc, fr[0], fr[1], fr[2]);
-            }
-            const long double x = 1 + (long double) s->contrast * f;
-            shape = x > 0 ? x : 0;
-        } else {
-            for (int k = 0; k < s->naxes; ++k) {
-                const int a = s->axis[k];
-                double f = 0;
-                for (int i = 0; i < N; ++i)
-                    f += s->fbm.weight[i] *
-                         factor_octave_ld(s, a, i, s->fbm.freq[i] * q[a] +
-                                                       (long double) i * ef_fbm_offset[a]);
-                const long double x = 1 + (long double) s->contrast * f;
-                shape *= x > 0 ? x : 0;
-            }
-        }
+        long double x[3];
+        const int n = shape_factors(s, v, x);
+        for (int k = 0; k < n; ++k)
+            shape *= x[k] > 0 ? x[k] : 0;
     }
     for (int k = 0; k < 3; ++k)
         out[k] = s->rho[k] == 0 ? 0 : s->rho[k] * env * shape;
+}
+
+/* The clamp's kinks for the reference: the product of the unclamped
+ * factors changes sign where one of them crosses 0. */
+static int kink_noise(const ef_fog_component *c, const long double *v, long double *g)
+{
+    const nstate *s = state(c);
+    if (!s->clamp)
+        return 0;
+    long double x[3], p = 1;
+    if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2])) {
+        *g = 1;
+        return 1;
+    }
+    const int n = shape_factors(s, v, x);
+    for (int k = 0; k < n; ++k)
+        p *= x[k];
+    *g = p;
+    return 1;
 }
 
 /* method=exact's evaluations along r, predicted from the part of r it
@@ -3948,7 +3977,8 @@ const ef_fog_model ef_fog_noise = {
     .name = "noise", .keys = noise_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .dsigma_max = dsigma_noise,
-    .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
+    .density = density_noise, .kink = kink_noise, .tau_info = tau_noise_info,
+    .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
     .tau_tol = tau_tol_noise, .uses_up = 1
 };
@@ -3957,7 +3987,8 @@ const ef_fog_model ef_fog_noise_separable = {
     .name = "noise-separable", .keys = separable_keys, .set = set_noise, .finish = finish_noise,
     .tau = tau_noise, .functionals = functionals_noise, .features = features_noise,
     .dsigma_max = dsigma_noise,
-    .density = density_noise, .tau_info = tau_noise_info, .lattices = lattices_noise,
+    .density = density_noise, .kink = kink_noise, .tau_info = tau_noise_info,
+    .lattices = lattices_noise,
     .tau_add = tau_add_noise, .bind = bind_noise, .work = work_noise, .lit_tol = lit_tol_noise,
     .tau_tol = tau_tol_noise, .uses_up = 1
 };

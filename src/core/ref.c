@@ -286,6 +286,58 @@ static int refine(quad *q, long double tau[3])
     return 0;
 }
 
+/* Samples per finite piece in the search for kinks (ef_ref_density.kink). */
+#define KINK_SAMPLES 12
+
+/* The functional values at fraction u of the way from vL to vR (the
+ * functionals are linear along the ray). */
+static void values_between(int nf, const long double *vL, const long double *vR, long double u,
+                           long double *v)
+{
+    for (int i = 0; i < nf; ++i)
+        v[i] = vL[i] + u * (vR[i] - vL[i]);
+}
+
+/* The fractions of the piece from vL to vR where d's kink function
+ * changes sign, in increasing order (at most cap); 0 when there is none. */
+static int piece_kinks(const ef_ref_density *d, int nf, const long double *vL,
+                       const long double *vR, long double *at, int cap)
+{
+    long double v[MAXF], g0, g1;
+    if (!d->kink(d->ctx, vL, &g0))
+        return 0;
+    int n = 0;
+    long double u0 = 0;
+    for (int k = 1; k <= KINK_SAMPLES && n < cap; ++k) {
+        const long double u1 = (long double) k / KINK_SAMPLES;
+        values_between(nf, vL, vR, u1, v);
+        if (!d->kink(d->ctx, v, &g1))
+            return 0;
+        if ((g0 < 0) != (g1 < 0)) {
+            long double a = u0, b = u1, ga = g0;
+            for (int it = 0; it < 80 && b - a > 0; ++it) {
+                const long double m = (a + b) / 2;
+                if (!(m > a && m < b))
+                    break;
+                long double gm;
+                values_between(nf, vL, vR, m, v);
+                d->kink(d->ctx, v, &gm);
+                if ((gm < 0) == (ga < 0)) {
+                    a = m;
+                    ga = gm;
+                } else {
+                    b = m;
+                }
+            }
+            if (a > 0 && a < 1)
+                at[n++] = a;
+        }
+        u0 = u1;
+        g0 = g1;
+    }
+    return n;
+}
+
 /* Queues piece [0, w] between stored points iL and iR (or the tail). */
 static int add_piece(quad *q, size_t iL, size_t iR, long double w, int tail)
 {
@@ -541,6 +593,28 @@ int ef_ref_integrate(const ef_ref_density *d, const double org[3], const double 
         const long double w = ld(ef_dd_add(next.a, dd_neg(prev.a)));
         if (!(w > 0))
             continue;
+        if (d->kink) {
+            /* split at the kinks inside the piece: each sub-piece from the
+             * last stored point */
+            long double at[KINK_SAMPLES], vk[MAXF], vprev[MAXF];
+            memcpy(vprev, vals_at(&q, (size_t) iL), (size_t) R.nf * sizeof *vprev);
+            const int nk = piece_kinks(d, R.nf, vprev, vR, at, KINK_SAMPLES);
+            long double u_prev = 0;
+            for (int k = 0; k < nk; ++k) {
+                values_between(R.nf, vprev, vR, at[k], vk);
+                const long ik = ival_store(&q, vk);
+                if (ik < 0 || add_piece(&q, (size_t) iL, (size_t) ik, w * (at[k] - u_prev), 0))
+                    goto oom;
+                iL = ik;
+                u_prev = at[k];
+            }
+            const long iR = ival_store(&q, vR);
+            if (iR < 0 || add_piece(&q, (size_t) iL, (size_t) iR, w * (1 - u_prev), 0))
+                goto oom;
+            prev = next;
+            iL = iR;
+            continue;
+        }
         const long iR = ival_store(&q, vR);
         if (iR < 0 || add_piece(&q, (size_t) iL, (size_t) iR, w, 0))
             goto oom;
@@ -573,6 +647,12 @@ oom:
 typedef struct comp_ctx {
     const ef_fog_component *c;
 } comp_ctx;
+
+static int comp_kink(const void *ctx, const long double *v, long double *g)
+{
+    const ef_fog_component *c = ((const comp_ctx *) ctx)->c;
+    return c->model->kink(c, v, g);
+}
 
 static void comp_density(const void *ctx, const long double *v, long double out[3])
 {
@@ -611,7 +691,8 @@ static int comp_describe(const ef_fog_component *c, ef_fog_functional f[MAXF], c
     if (nlat)
         m->lattices(c, lat, nlat);
     *d = (ef_ref_density) { .nf = nf, .f = f, .nfeat = nfeat, .feat = feat,
-                            .density = comp_density, .ctx = cc, .nlat = nlat, .lat = lat };
+                            .density = comp_density, .ctx = cc, .nlat = nlat, .lat = lat,
+                            .kink = m->kink ? comp_kink : NULL };
     return 0;
 }
 

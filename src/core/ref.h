@@ -32,6 +32,13 @@ typedef struct ef_ref_density {
      * every integer k, so no quadrature interval straddles a seam. */
     int nlat;
     const ef_fog_lattice *lat;
+    /* Kinks inside the pieces (the noise's clamp), or NULL: a function of
+     * the functional values whose sign changes are the kinks (fog.h's
+     * kink; returns 0 where there are none). Each finite piece is sampled
+     * at KINK_SAMPLES points and split at every sign change, located by
+     * bisection to the last bit, so no quadrature interval straddles a
+     * kink. */
+    int (*kink)(const void *ctx, const long double *v, long double *g);
 } ef_ref_density;
 
 /* tau per channel along org + t dir, t in [0, len] (len may be INFINITY:
