@@ -53,6 +53,13 @@ static int unit3(const char *val, double v[3])
 static const char *const sun_keys =
     "towards, color, intensity, angle, planet, name, shadow, bias, slope, outside, penumbra";
 static const char *const point_keys = "position, color, intensity, radius, name";
+
+const char *ef_light_kind_name(ef_light_kind k)
+{
+    static const char *const names[] = { [EF_LIGHT_SUN] = "sun", [EF_LIGHT_POINT] = "point",
+                                         [EF_LIGHT_SPOT] = "spot" };
+    return k >= EF_LIGHT_SUN && k <= EF_LIGHT_SPOT ? names[k] : "?";
+}
 static const char *const spot_keys =
     "position, aim, cone, blend, cosine, color, intensity, radius, name, shadow, bias, slope, "
     "outside";
@@ -120,17 +127,15 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     char buf[sizeof l->spec];
     snprintf(buf, sizeof buf, "%s", spec);
     char *save = NULL, *kind = strtok_r(buf, ":", &save);
-    const char *keys;
-    if (kind && !strcmp(kind, "sun")) {
-        l->kind = EF_LIGHT_SUN;
-        keys = sun_keys;
-    } else if (kind && !strcmp(kind, "point")) {
-        l->kind = EF_LIGHT_POINT;
-        keys = point_keys;
-    } else if (kind && !strcmp(kind, "spot")) {
-        l->kind = EF_LIGHT_SPOT;
-        keys = spot_keys;
-    } else {
+    const char *keys = NULL;
+    const char *const kind_keys[] = { [EF_LIGHT_SUN] = sun_keys, [EF_LIGHT_POINT] = point_keys,
+                                      [EF_LIGHT_SPOT] = spot_keys };
+    for (int k = EF_LIGHT_SUN; kind && k <= EF_LIGHT_SPOT; ++k)
+        if (!strcmp(kind, ef_light_kind_name((ef_light_kind) k))) {
+            l->kind = (ef_light_kind) k;
+            keys = kind_keys[k];
+        }
+    if (!keys) {
         return ef_fail(err, "--light '%s': the kind is not sun, point or spot (write "
                        "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
     }

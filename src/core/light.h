@@ -35,6 +35,10 @@
 
 typedef enum ef_light_kind { EF_LIGHT_SUN = 0, EF_LIGHT_POINT, EF_LIGHT_SPOT } ef_light_kind;
 
+/* A kind's name as a SPEC writes it ("sun", "point", "spot"): the one home
+ * of those names (the parser and the default light names read it). */
+const char *ef_light_kind_name(ef_light_kind k);
+
 typedef struct ef_light {
     ef_light_kind kind;
     char name[64];                   /* name=, else sun1, point1, spot1... */

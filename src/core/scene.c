@@ -81,8 +81,7 @@ static int ef_scene_name_light(ef_fog_scene *s, ef_light *l, const char *spec, e
     for (int i = 0; i < s->nlight; ++i)
         nth += s->light[i].kind == l->kind;
     if (l->name[0] == '\0') {
-        static const char *const kind[] = { "sun", "point", "spot" };
-        snprintf(l->name, sizeof l->name, "%s%d", kind[l->kind], nth + 1);
+        snprintf(l->name, sizeof l->name, "%s%d", ef_light_kind_name(l->kind), nth + 1);
     }
     /* from a copy: the name and the channel names share the scene object,
      * which GCC's restrict check cannot tell apart */
