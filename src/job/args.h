@@ -2,6 +2,7 @@
 #ifndef EF_OPTIONS_H
 #define EF_OPTIONS_H
 
+#include "parse_result.h"
 #include "camera.h"
 #include "depth.h"
 #include "error.h"
@@ -59,10 +60,6 @@ typedef struct ef_options {
     int deep_grey;            /* --deep-grey-alpha */
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
-
-typedef enum ef_parse_result {
-    EF_PARSE_RUN = 0, EF_PARSE_EXIT = 1, EF_PARSE_USAGE = -1, EF_PARSE_FAIL = -2
-} ef_parse_result;
 
 /* Parses argv. EF_PARSE_EXIT after --help/--version (already printed to
  * out); EF_PARSE_USAGE with err set, quoting the offending text;

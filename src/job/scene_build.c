@@ -5,6 +5,7 @@
 #include "env_file.h"
 #include "shadow_file.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 

@@ -4,8 +4,8 @@
 #ifndef EF_SCENE_BUILD_H
 #define EF_SCENE_BUILD_H
 
-#include "args.h"
 #include "colour.h"
+#include "parse_result.h"
 #include "scene.h"
 
 /* What a description of a scene says, applied in this order: a scene file
