@@ -7,6 +7,8 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "recon.h"
 #include "splitmix.h"
@@ -150,6 +152,45 @@ static inline double horizon_row(const view *v)
     const double sy = -v->f[1] / v->u[1];
     const double py = (1 - sy / v->ty) * v->H / 2;
     return py >= 0 && py < v->H ? py : NAN;
+}
+
+/* A number after key in spec, or 0. */
+static inline double spec_num(const char *spec, const char *key)
+{
+    const char *p = strstr(spec, key);
+    return p ? atof(p + strlen(key)) : 0;
+}
+
+/* How far the reference must integrate along r for shot spec: r's
+ * distance, clipped to the box where there is one; on a sky ray, to where
+ * the box is left or the envelope's tail (the most tau it can still add)
+ * is below tail; 0 when fog fills the whole infinite ray (T = 0). */
+static inline double shot_ref_len(const char *spec, const ef_ray *r, double tail)
+{
+    double len = r->dist;
+    const char *mn = strstr(spec, "min="), *mx = strstr(spec, "max=");
+    if (mn && mx) {
+        double lo[3], hi[3], t1 = INFINITY;
+        if (sscanf(mn + 4, "%lf,%lf,%lf", &lo[0], &lo[1], &lo[2]) == 3 &&
+            sscanf(mx + 4, "%lf,%lf,%lf", &hi[0], &hi[1], &hi[2]) == 3)
+            for (int a = 0; a < 3; ++a)
+                if (r->dir[a] != 0)
+                    t1 = fmin(t1, fmax((lo[a] - r->org[a]) / r->dir[a],
+                                       (hi[a] - r->org[a]) / r->dir[a]));
+        /* a little past the exit: the density is 0 there by definition */
+        if (t1 < len)
+            len = t1 > 0 ? t1 * (1 + 1e-12) + 1e-9 : 0;
+    }
+    if (isfinite(len))
+        return len;
+    const double k = spec_num(spec, "falloff="), rho = spec_num(spec, "density="),
+                 base = spec_num(spec, "base=");
+    const double a = k * r->dir[1];
+    if (!(a > 0))
+        return INFINITY;
+    /* tail from t: rho B e^-(k (y0 + dy t - base)) / (k dy) < tail */
+    const double need = log(rho * 5 / (a * tail)) + k * (base - r->org[1]);
+    return need > 0 ? need / a + 1 : 1;
 }
 
 /* n pixels (x, y) of v's frame from seed: 60 % uniform, 20 % within 2 %

@@ -67,7 +67,8 @@ typedef struct work {
     const view *v;
     const double (*pix)[2];
     int n, next;
-    double ref_stop, k, rho_max, base;
+    double ref_stop;
+    const char *spec;
     px_result *out;
     pthread_mutex_t lock;
 } work;
@@ -77,21 +78,6 @@ static double cpu_us(void)
     struct timespec ts;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
     return ts.tv_sec * 1e6 + ts.tv_nsec * 1e-3;
-}
-
-/* The reference's length on a ray: its distance, or for a sky ray where
- * the envelope's tail is below REF_TAIL (0 when the fog never thins). */
-static double ref_len(const work *W, const ef_ray *r, const shot *s)
-{
-    (void) s;
-    if (isfinite(r->dist))
-        return r->dist;
-    if (!(W->k > 0) || !(r->dir[1] > 0))
-        return 0;
-    /* tail from t: rho B e^-(k (y0 + dy t - base)) / (k dy) < REF_TAIL */
-    const double a = W->k * r->dir[1];
-    const double need = log(W->rho_max * 5 / (a * REF_TAIL)) + W->k * (W->base - r->org[1]);
-    return need > 0 ? need / a + 1 : 1;
 }
 
 static void *worker(void *arg)
@@ -114,10 +100,10 @@ static void *worker(void *arg)
         o->evals = info.evals;
         o->sky = !isfinite(r.dist);
         long double tr[3] = { 0, 0, 0 };
-        const double len = ref_len(W, &r, NULL);
+        const double len = shot_ref_len(W->spec, &r, REF_TAIL);
         o->ref_ok = 1;
         int stopped = 0;   /* the reference stopped at tau >= ref_stop: T_ref is an upper value */
-        if (o->sky && len == 0) {
+        if (isinf(len)) {
             for (int k = 0; k < 3; ++k)
                 tr[k] = INFINITY;   /* the fog never thins: T = 0 (the model's own answer) */
         } else {
@@ -235,17 +221,7 @@ int main(int argc, char **argv)
         double (*pix)[2] = malloc((size_t) pixels * sizeof *pix);
         px_result *out = calloc((size_t) pixels, sizeof *out);
         shot_pixels(&v, 1000 + (uint64_t) s, pixels, pix);
-        double fk = 0, rmax = 0, fbase = 0;
-        {
-            /* the envelope's rate and the densest channel, for the reference's tail */
-            const char *fp = strstr(shots[s].spec, "falloff=");
-            fk = fp ? atof(fp + 8) : 0;
-            const char *dp = strstr(shots[s].spec, "density=");
-            rmax = dp ? atof(dp + 8) : 1;
-            const char *bp = strstr(shots[s].spec, "base=");
-            fbase = bp ? atof(bp + 5) : 0;
-        }
-        work Wk = { &c, &v, (const double (*)[2]) pix, pixels, 0, ref_stop, fk, rmax, fbase, out,
+        work Wk = { &c, &v, (const double (*)[2]) pix, pixels, 0, ref_stop, shots[s].spec, out,
                     PTHREAD_MUTEX_INITIALIZER };
         pthread_t th[64];
         const int nt = threads < 64 ? threads : 64;

@@ -27,12 +27,6 @@
 #define REF_STOP 20
 #define REF_TAIL 1e-10
 
-static double spec_num(const char *spec, const char *key)
-{
-    const char *p = strstr(spec, key);
-    return p ? atof(p + strlen(key)) : 0;
-}
-
 static void check_shot(const shot *sh, int pixels)
 {
     ef_fog_component c;
@@ -47,8 +41,6 @@ static void check_shot(const shot *sh, int pixels)
     double (*pix)[2] = malloc((size_t) pixels * sizeof *pix);
     assert_non_null(pix);
     shot_pixels(&v, 2024, pixels, pix);
-    const double k = spec_num(sh->spec, "falloff="), rho = spec_num(sh->spec, "density="),
-                 base = spec_num(sh->spec, "base=");
     int within = 0, covered = 0;
     double worst = 0, evals = 0, emax = 0;
     for (int j = 0; j < pixels; ++j) {
@@ -61,13 +53,8 @@ static void check_shot(const shot *sh, int pixels)
         emax = fmax(emax, info.evals);
         long double tr[3];
         int stopped = 0;
-        double len = r.dist;
-        if (!isfinite(len)) {
-            /* a sky ray: up to where the envelope's tail is below REF_TAIL */
-            const double a = k * r.dir[1];
-            len = a > 0 ? (log(rho * 5 / (a * REF_TAIL)) + k * (base - r.org[1])) / a + 1 : 0;
-        }
-        if (len == 0) {
+        const double len = shot_ref_len(sh->spec, &r, REF_TAIL);
+        if (isinf(len)) {
             for (int ch = 0; ch < 3; ++ch)
                 tr[ch] = INFINITY;   /* fog that never thins: T = 0 */
         } else {
