@@ -22,8 +22,7 @@ cd "$tmp" || exit 1
 cp d.exr spot.exr && cp d.exr env.exr || exit 1
 printf '# height density\n0 0.2\n5 0.05\n20 0\n' > prof.txt
 printf '{"convention": "exr", "fov": 60, "frames": {"1": {"camera_to_world": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,2,0,1]}}}\n' > cam.json
-cp "$src/share/exrfog-config.ocio" cfg.ocio 2>/dev/null || cp -r "$src/share/ocio" . 2>/dev/null
-[ -e cfg.ocio ] || printf 'ocio_profile_version: 2\n' > cfg.ocio
+cp "$src/share/ocio/exrfog-config.ocio" cfg.ocio || exit 1
 printf '{"fog": ["exp:density=0.03"], "lights": ["spot:position=0,1.7,0:aim=0,0,-1:cone=40:intensity=3:shadow=spot.exr"]}\n' > scene.json
 
 fog="--fog exp:density=0.05"
@@ -44,9 +43,8 @@ profile|prof.txt|--fog layered:file=prof.txt"
 # The runs read their inputs as they are: each is fine with its own output.
 echo "$cases" | while IFS='|' read -r name file args; do
   # shellcheck disable=SC2086
-  "$exrfog" a.exr -o ok.exr $args -q 2>err.txt ||
-    { [ "$name" = camera ] || [ "$name" = config ] || { echo "FAIL: $name: the run itself fails"; cat err.txt; }; }
-done
+  "$exrfog" a.exr -o ok.exr $args -q 2>err.txt || { echo "FAIL: $name: the run itself fails"; cat err.txt; exit 1; }
+done || fail=1
 rm -f ok.exr
 
 snapshot() { for f in *; do [ "$f" = err.txt ] || { printf '%s ' "$f"; cksum < "$f"; }; done; }

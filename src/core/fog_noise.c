@@ -3131,6 +3131,13 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
     const double a_env = s->k > 0 ? R->khs : 0, Lseg = t1 - t0;
     if (!(Lseg > 0))
         return 0;
+    /* the first j octaves' Lipschitz and curvature bounds, per unit t */
+    double lipj[EF_FBM_MAX_OCTAVES + 1] = { 0 }, curvj[EF_FBM_MAX_OCTAVES + 1] = { 0 };
+    for (int i = 0; i < N; ++i) {
+        const double r = s->fbm.freq[i] / s->scale;
+        lipj[i + 1] = lipj[i] + s->fbm.weight[i] * EF_NOISE_LIPSCHITZ * r;
+        curvj[i + 1] = curvj[i] + s->fbm.weight[i] * EF_NOISE_CURVATURE * r * r;
+    }
     clamp_job stack[CLAMP_DEPTH + 2];
     int sp = 0;
     stack[sp++] = (clamp_job) { { t0, 0, 0 }, { t1, 0, 0 }, 0 };
@@ -3150,13 +3157,7 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
         /* how far y may leave the chords between the points: by the
          * resolved octaves' curvature (|y''| <= K: h^2 / 8 on a half of
          * length h) or their Lipschitz bound (h / 2), whichever is less */
-        double lip = 0, K = 0;
-        for (int i = 0; i < j; ++i) {
-            const double r = s->fbm.freq[i] / s->scale;
-            lip += s->fbm.weight[i] * EF_NOISE_LIPSCHITZ * r;
-            K += s->fbm.weight[i] * EF_NOISE_CURVATURE * r * r;
-        }
-        const double dlt = fmin(K * h * h / 8, lip * h / 2);
+        const double dlt = fmin(curvj[j] * h * h / 8, lipj[j] * h / 2);
         clamp_pt mid = { J.a.t + h, 0, 0 };
         clamp_extend(R, &J.a, j);
         clamp_extend(R, &J.b, j);

@@ -194,18 +194,20 @@ static void temp_name(char *name, size_t len, const char *what)
 static int refuse_clash(ef_frame *F, const char *out, const char *flag, int with_input)
 {
     ef_job *J = F->J;
-    ef_read_list *r = ef_job_reads(J, J->has_frame, J->frame, with_input);
+    ef_read_list *r = malloc(sizeof *r);
     if (!r) {
         ef_fail(&F->err, "out of memory");
         return ef_job_report(J, out, &F->err, 1);
     }
-    const char *role, *path;
+    ef_job_reads(J, J->has_frame, J->frame, with_input, r);
+    const ef_read_file *f = ef_output_clash(r, out);
     int rc = 0;
-    if (ef_output_clash(r, out, &role, &path)) {
-        ef_fail(&F->err, "%s names %s%s%s%s: writing it would replace a file this run reads; "
+    if (f) {
+        const int same_name = !strcmp(out, f->path);
+        ef_fail(&F->err, "%s names %s%s%s%s%s: writing it would replace a file this run reads; "
                          "nothing was written (give the output its own name)",
-                flag, role, strcmp(out, path) ? " (" : "", strcmp(out, path) ? path : "",
-                strcmp(out, path) ? ", the same file)" : "");
+                flag, ef_read_article(f), f->role, same_name ? "" : " (",
+                same_name ? "" : f->path, same_name ? "" : ", the same file)");
         rc = ef_job_report(J, out, &F->err, 2);
     }
     free(r);

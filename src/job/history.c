@@ -42,15 +42,6 @@ static int grow_quoted(char **b, size_t *len, size_t *cap, const char *a)
     return grow(b, len, cap, "'", 1);
 }
 
-/* Whether argv[i] is an option that cannot change the output file (and
- * the number of arguments it takes with it): left out of the history so
- * that equal outputs get equal headers whatever the threads, messages,
- * preview or output name. The list is args.c's, the parameters' too. */
-static int history_skip(char **argv, int argc, int i)
-{
-    return ef_option_neutral_span(argv, argc, i);
-}
-
 /* The line this run adds to exrfog/history: the version, the command line
  * shell-quoted (less what cannot change the output) and the scene file's
  * contents as read, indented. NULL when out of memory. */
@@ -61,7 +52,9 @@ char *ef_history_line(int argc, char **argv, const char *scene_file, const char 
     if (grow(&b, &len, &cap, "exrfog " EXRFOG_VERSION ":", strlen("exrfog " EXRFOG_VERSION ":")))
         return NULL;
     for (int i = 0; i < argc;) {
-        const int skip = i ? history_skip(argv, argc, i) : 0;
+        /* what cannot change the output is left out (args.c's one list),
+         * so that equal outputs get equal headers */
+        const int skip = i ? ef_option_neutral_span(argv, argc, i) : 0;
         if (skip) {
             i += skip;
             continue;

@@ -89,28 +89,27 @@ static int drop_repeats(ef_job *J, const char *pattern, long *frames, int *n)
 static int check_overwrites(ef_job *J, const char *pattern, const long *frames, int n,
                             const char *const outs[2], const ef_frame_pattern pouts[2])
 {
-    enum { PER_FRAME = 3 };   /* INPUT, --depth, --camera-file: the files a pattern names */
+    enum { PER_FRAME = 3 };   /* at most: INPUT, --depth, --camera-file */
     struct id {
         dev_t dev;
         ino_t ino;
         int set;
     } *in = calloc((size_t) n * PER_FRAME + 1, sizeof *in);
-    if (!in)
+    ef_read_list *r = malloc(sizeof *r);
+    if (!in || !r) {
+        free(in);
+        free(r);
         return ef_job_say(J, 1, "out of memory");
-    int status = 0;
-    for (int j = 0; j < n && !status; ++j) {
-        ef_read_list *r = ef_job_reads(J, 1, frames[j], 1);
-        if (!r) {
-            status = ef_job_say(J, 1, "out of memory");
-            break;
-        }
-        for (int k = 0; k < r->n && k < PER_FRAME; ++k) {
+    }
+    for (int j = 0; j < n; ++j) {
+        ef_job_reads(J, 1, frames[j], 1, r);
+        for (int k = 0; k < r->n && k < PER_FRAME && r->f[k].per_frame; ++k) {
             struct stat st;
             if (stat(r->f[k].path, &st) == 0)
                 in[j * PER_FRAME + k] = (struct id) { st.st_dev, st.st_ino, 1 };
         }
-        free(r);
     }
+    int status = 0;
     char b[4096];
     for (int w = 0; w < 2 && !status; ++w) {
         if (!outs[w])
@@ -119,31 +118,25 @@ static int check_overwrites(ef_job *J, const char *pattern, const long *frames, 
             struct stat st;
             if (ef_frame_path(outs[w], &pouts[w], frames[i], b, sizeof b) || stat(b, &st) != 0)
                 continue;
-            for (int x = 0; x < n * PER_FRAME; ++x) {
-                const int j = x / PER_FRAME;
+            for (int x = 0; x < n * PER_FRAME && !status; ++x) {
+                const int j = x / PER_FRAME, k = x % PER_FRAME;
                 /* -o over the frame's own INPUT replaces it in place, as asked */
-                if ((w == 0 && x == i * PER_FRAME) || !in[x].set || in[x].ino != st.st_ino ||
+                if ((w == 0 && j == i && k == 0) || !in[x].set || in[x].ino != st.st_ino ||
                     in[x].dev != st.st_dev)
                     continue;
-                ef_read_list *r = ef_job_reads(J, 1, frames[j], 1);
-                if (!r) {
-                    status = ef_job_say(J, 1, "out of memory");
-                    break;
-                }
-                const int k = x % PER_FRAME;
+                ef_job_reads(J, 1, frames[j], 1, r);
+                const ef_read_file *f = &r->f[k];
                 status = ef_job_say(J, 2, "%s: %s %s names frame %ld's %s (%s) as frame %ld's "
                                           "%s: it would be overwritten%s; nothing was written "
                                           "(choose a pattern that names no file the run reads)",
                                     pattern, w ? "--preview" : "-o", outs[w], frames[j],
-                                    k == 0 || k >= r->n ? "input" : r->f[k].role + 4,
-                                    k < r->n ? r->f[k].path : "", frames[i],
+                                    k == 0 ? "input" : f->role, f->path, frames[i],
                                     w ? "preview" : "output", j > i ? " before it is read" : "");
-                free(r);
-                break;
             }
         }
     }
     free(in);
+    free(r);
     return status;
 }
 

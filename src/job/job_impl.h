@@ -112,23 +112,28 @@ int ef_regular_file(const char *path);
 int ef_is_exr_file(const char *path);
 
 /* reads.c: the files a frame reads (INPUT too when with_input), each with
- * the role it plays in a message ("the --depth file"), patterns resolved
- * for frame when has_frame. Malloc'd (free it); NULL when out of memory. */
+ * the role it plays in a message ("--depth file"), patterns resolved for
+ * frame when has_frame; per_frame marks those a pattern names per frame
+ * (INPUT, --depth, --camera-file), which come first. The list is large
+ * (put it on the heap). */
 #define EF_MAX_READS (8 + EF_FOG_MAX_COMPONENTS + EF_MAX_LIGHTS)
 typedef struct ef_read_file {
     char role[128];
     char path[4096];
+    int per_frame;
 } ef_read_file;
 typedef struct ef_read_list {
     int n;
     ef_read_file f[EF_MAX_READS];
 } ef_read_list;
-ef_read_list *ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input);
+void ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input, ef_read_list *r);
 
-/* Whether writing out would replace a file of r: the same name, or the same
- * file through a symbolic or hard link. Returns 1 with *role and *path
- * (pointing into r) naming it, else 0. */
-int ef_output_clash(const ef_read_list *r, const char *out, const char **role, const char **path);
+/* "the " before a role in a message, or "" (INPUT). */
+const char *ef_read_article(const ef_read_file *f);
+
+/* The file of r that writing out would replace (the same name, or the
+ * same file through a symbolic or hard link), or NULL. */
+const ef_read_file *ef_output_clash(const ef_read_list *r, const char *out);
 
 /* frame.c: fogs one image (o->input to o->output); returns the status. */
 int ef_run_frame(ef_job *J);

@@ -5,20 +5,21 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 #include "lit.h"
+#include "output.h"
 #include "scene.h"
 #include "sky_light.h"
 
 /* Appends (role, path) to the list when there is room and a path. */
-static void add(ef_read_list *r, const char *role, const char *path)
+static void add(ef_read_list *r, const char *role, const char *path, int per_frame)
 {
     if (!path || !path[0] || r->n >= EF_MAX_READS)
         return;
     ef_read_file *f = &r->f[r->n++];
     snprintf(f->role, sizeof f->role, "%s", role);
     snprintf(f->path, sizeof f->path, "%s", path);
+    f->per_frame = per_frame;
 }
 
 /* A frame pattern's path for frame (has_frame), or the path as written. */
@@ -31,54 +32,47 @@ static void add_pattern(ef_read_list *r, const char *role, const char *pattern, 
     char path[4096];
     if (has_frame && ef_frame_pattern_find(pattern, &p) &&
         !ef_frame_path(pattern, &p, frame, path, sizeof path))
-        add(r, role, path);
+        add(r, role, path, 1);
     else
-        add(r, role, pattern);
+        add(r, role, pattern, 1);
 }
 
-ef_read_list *ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input)
+void ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input, ef_read_list *r)
 {
     const ef_options *o = &J->o;
-    ef_read_list *r = calloc(1, sizeof *r);
-    if (!r)
-        return NULL;
+    r->n = 0;
     if (with_input)
         add_pattern(r, "INPUT", o->input, has_frame, frame);
-    add_pattern(r, "the --depth file", o->depth_file, has_frame, frame);
-    add_pattern(r, "the --camera-file", o->camera_file, has_frame, frame);
-    add(r, "the --scene file", o->scene_file);
-    add(r, "the --colorconfig", o->colorconfig);
+    add_pattern(r, "--depth file", o->depth_file, has_frame, frame);
+    add_pattern(r, "--camera-file", o->camera_file, has_frame, frame);
+    add(r, "--scene file", o->scene_file, 0);
+    add(r, "--colorconfig", o->colorconfig, 0);
     const ef_fog_scene *s = &o->scene;
     char role[120];
     for (int i = 0; i < s->ncomp; ++i)
         if (s->comp[i].path) {
-            snprintf(role, sizeof role, "the file= of fog component %d", i + 1);
-            add(r, role, s->comp[i].path);
+            snprintf(role, sizeof role, "file= of fog component %d", i + 1);
+            add(r, role, s->comp[i].path, 0);
         }
     for (int i = 0; i < s->nlight; ++i)
         if (s->light[i].shadow_path[0]) {
-            snprintf(role, sizeof role, "the shadow= map of light %s", s->light[i].name);
-            add(r, role, s->light[i].shadow_path);
+            snprintf(role, sizeof role, "shadow= map of light %s", s->light[i].name);
+            add(r, role, s->light[i].shadow_path, 0);
         }
     if (s->sky_light)
-        add(r, "the --sky-light environment", s->sky_light->path);
-    return r;
+        add(r, "--sky-light environment", s->sky_light->path, 0);
 }
 
-int ef_output_clash(const ef_read_list *r, const char *out, const char **role, const char **path)
+const char *ef_read_article(const ef_read_file *f)
 {
-    struct stat so, si;
-    const int have = stat(out, &so) == 0;
-    for (int i = 0; i < r->n; ++i) {
+    return strcmp(f->role, "INPUT") ? "the " : "";
+}
+
+const ef_read_file *ef_output_clash(const ef_read_list *r, const char *out)
+{
+    for (int i = 0; i < r->n; ++i)
         /* the same name, or the same file through a link (symbolic or hard) */
-        const int same = !strcmp(out, r->f[i].path) ||
-                         (have && stat(r->f[i].path, &si) == 0 && si.st_dev == so.st_dev &&
-                          si.st_ino == so.st_ino);
-        if (same) {
-            *role = r->f[i].role;
-            *path = r->f[i].path;
-            return 1;
-        }
-    }
-    return 0;
+        if (!strcmp(out, r->f[i].path) || ef_output_same_file(out, r->f[i].path))
+            return &r->f[i];
+    return NULL;
 }
