@@ -2,21 +2,23 @@
  *
  *   grid_calibrate [LINES]     (default 2,000 per direction class and length)
  *
- * src/core/fog_noise.c integrates an octave along a segment either by
+ * The noise fog integrates an octave along a segment either by
  * walking its lattice cells (per-cell Gauss-Legendre; noise_calibrate.c) or
  * on a grid: the composite midpoint rule with nu nodes per lattice unit and
  * an end correction formed from the nodes themselves (grid_walk). This
- * program runs that very code (it includes fog_noise.c) on random straight
- * lines through Perlin's noise, against each line integrated exactly (the
+ * program runs that very code (noise_grid.c's, through noise_fog.h) on
+ * random straight lines through Perlin's noise, against each line integrated exactly (the
  * noise is a degree-16 polynomial along a line inside a cell: 9-point
  * Gauss-Legendre per cell, the cells found on their own here), and prints
  * per nu the root mean square error per square root of the lattice length
  * and the 99.9th percentile and maximum of |error| / that rms, for three
  * direction classes (isotropic, within 3 degrees of an axis, near a
- * diagonal) and lengths 2 to 128 lattice units. grid_rms in fog_noise.c is
+ * diagonal) and lengths 2 to 128 lattice units. grid_rms in noise_fog.h is
  * the largest rms of each column plus 10 %. Deterministic (fixed seed).
  * Calibrated on random lines, not on any scene the tests render. */
-#include "../src/core/fog_noise.c"
+#include "noise_fog.h"
+
+#include <stdio.h>
 #include "splitmix.h"
 
 static uint64_t rs = 0x243f6a8885a308d3ull;
@@ -70,7 +72,7 @@ int main(int argc, char **argv)
         return 2;
     }
     double gx[9], gw[9];
-    gauss_legendre(9, gx, gw);
+    ef_nz_gauss_legendre(9, gx, gw);
     /* a state heading its hash tables, as finish_noise lays them out */
     const size_t head = (sizeof(nstate) + sizeof(double) - 1) / sizeof(double);
     double *arr = calloc(head + GRID_HASH_WORDS / 2, sizeof *arr);
@@ -79,7 +81,7 @@ int main(int argc, char **argv)
     nstate *sp = (nstate *) (void *) arr;
     sp->k = 0;
     sp->hash_off = (int) head;
-    grid_tables((uint32_t *) (void *) (arr + head));
+    ef_nz_grid_tables((uint32_t *) (void *) (arr + head));
     const nstate *stp = sp;
     double *err = malloc(sizeof(double) * (size_t) nl);
     if (!err)
@@ -123,7 +125,7 @@ int main(int argc, char **argv)
                         R.u[a] = (lin) { b[a], d[a], b[a], d[a] };
                     }
                     const double ex = exact_line(b, d, L, gx, gw);
-                    const double v = grid_walk(&R, 0, grid_nu[g], 0, L, 0, NULL);
+                    const double v = ef_nz_octave_grid_flat(&R, 0, grid_nu[g], 0, L, NULL);
                     se += (v - ex) * (v - ex);
                     err[r] = fabs(v - ex);
                 }

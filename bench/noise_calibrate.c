@@ -8,7 +8,7 @@
  * Gauss-Legendre, q = 1..8, and with 9 points (exact: the noise is a
  * degree-16 polynomial along a line inside a cell), and prints per q the
  * maximum of |error| / chord length and sqrt(mean error^2 / mean length^2).
- * src/core/fog_noise.c uses these (times a margin) to pick nodes per octave.
+ * src/core/noise_plan.c uses these (e_max, e_rms) (times a margin) to pick nodes per octave.
  * It also prints the RMS of the noise's integral over straight stretches of
  * 4, 16 and 64 lattice units divided by sqrt(length) (the octave-dropping
  * rule's constant). Deterministic (fixed seed). */

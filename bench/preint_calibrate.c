@@ -10,7 +10,7 @@
  * directions over the sphere, lengths log-uniform from 1 to 500 units, and
  * sky rays), it compares tau(K) with method=exact's tau of the same SPEC
  * and prints, per K, the quantiles of the ratio |error| / d and of the
- * relative error |error| / tau. src/core/fog_noise.c's estimate,
+ * relative error |error| / tau. src/core/noise_preint.c's estimate,
  * C d + R tau, takes C and R from here (with a margin) so that it covers
  * at least 99 % of rays. Deterministic (fixed seed). */
 #include "splitmix.h"

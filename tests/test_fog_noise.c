@@ -1,6 +1,6 @@
-/* The noise fog models (src/core/fog_noise.c) against the reference
- * integrator (src/core/ref.c), which knows only their density and splits at
- * every octave's lattice crossings:
+/* The noise fog models (src/core/fog_noise.c and its noise_*.c
+ * integrators) against the reference integrator (src/core/ref.c), which
+ * knows only their density and splits at every octave's lattice crossings:
  *   - method=exact within 1e-12 relative on >= 10,000 seeded segments:
  *     axis-parallel, in a coordinate plane, grazing, zero length, camera
  *     inside and outside the box, offsets up to 1e6, sky rays up and down

@@ -78,7 +78,7 @@ static void parse(const char *spec, ef_fog_component *c)
 
 #define CAM_H 1.7
 #define PROMISE 0x1p-12      /* the man page's default: |dT| per channel */
-#define BUDGET 40000.0       /* EVAL_BUDGET in fog_noise.c */
+#define BUDGET 40000.0       /* EVAL_BUDGET in noise_linear.c */
 
 enum { KIND_FAR, KIND_NEAR, KIND_SKY };
 
