@@ -6,6 +6,7 @@
  *   noise_sweep [--count N] [--only NAME] [--pixels P] [--threads T]
  *               [--width W --height H] [--tsv] [--ref-stop S]
  *               [--shot NAME,HEIGHT,PITCH,FOV,SPEC]   (that shot alone)
+ *               [--lod]   (every shot with lod=pixel: against its own reference)
  *
  * The shots: the bench's two (noise_bench's noise and horizon), the three
  * the issue measured, two worst corners (the highest camera with the
@@ -36,7 +37,13 @@
  * share of pixels within the man page's promise (|dT| <= 2^-12), the
  * share where the error output T expm1(err) covers |dT|, noise
  * evaluations per pixel (mean, max) and the fog's time per pixel (mean,
- * max, microseconds of one core). Nothing asserts on time. */
+ * max, microseconds of one core). Nothing asserts on time.
+ *
+ * --lod adds lod=pixel to every shot (the shots where it is refused, the
+ * separable and the patchy ones, are listed as such) with the pinhole's
+ * pixel footprint, 2 tan(fov / 2) / W, bound as the CLI binds the camera's:
+ * the reference then integrates the same filtered density (the fade is
+ * in the model's density). */
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -138,7 +145,7 @@ static int cmp_d(const void *a, const void *b)
 
 int main(int argc, char **argv)
 {
-    int count = 24, pixels = 1000, threads = 2, W = 1920, H = 1080, list = 0, tsv = 0;
+    int count = 24, pixels = 1000, threads = 2, W = 1920, H = 1080, list = 0, tsv = 0, lod = 0;
     const char *only = NULL, *extra = NULL;
     double ref_stop = 20;
     for (int i = 1; i < argc; ++i) {
@@ -147,6 +154,8 @@ int main(int argc, char **argv)
             list = 1;
         else if (!strcmp(a, "--tsv"))
             tsv = 1;
+        else if (!strcmp(a, "--lod"))
+            lod = 1;
         else if (v && !strcmp(a, "--count"))
             count = atoi(argv[++i]);
         else if (v && !strcmp(a, "--pixels"))
@@ -166,7 +175,7 @@ int main(int argc, char **argv)
         else {
             fprintf(stderr, "usage: " PROG " [--list] [--count N] [--only NAME] [--pixels P] "
                             "[--threads T] [--width W --height H] [--tsv] [--ref-stop S] "
-                            "[--shot NAME,HEIGHT,PITCH,FOV,SPEC]\n");
+                            "[--shot NAME,HEIGHT,PITCH,FOV,SPEC] [--lod]\n");
             return 2;
         }
     }
@@ -210,13 +219,22 @@ int main(int argc, char **argv)
             continue;
         ef_fog_component c;
         ef_err err = { 0 };
-        if (ef_fog_parse(shots[s].spec, NULL, &c, &err)) {
+        char spec[sizeof shots[s].spec + 16];
+        snprintf(spec, sizeof spec, "%s%s", shots[s].spec, lod ? ":lod=pixel" : "");
+        if (ef_fog_parse(spec, NULL, &c, &err)) {
+            if (lod && strstr(err.msg, "lod=pixel")) {
+                if (!tsv)
+                    printf("| %s | lod=pixel refused (%s) |\n", shots[s].name,
+                           strstr(shots[s].spec, "separable") ? "noise-separable" : "the clamp binds");
+                continue;
+            }
             fprintf(stderr, PROG ": %s: %s\n", shots[s].name, err.msg);
             bad = 1;
             continue;
         }
         view v;
         view_init(&v, &shots[s], W, H);
+        c.spread = 2 * v.tx / W;   /* the pinhole's footprint per unit distance on its axis */
         ef_fog_bind(&c, v.eye);
         double (*pix)[2] = malloc((size_t) pixels * sizeof *pix);
         px_result *out = calloc((size_t) pixels, sizeof *out);

@@ -150,6 +150,8 @@ static void test_arnold_screen(void **state)
     assert_contains(c.src_proj, "screen");
     assert_close(c.hfov_deg, 50.0, 1e-6);
     assert_rays_match(&c, &m, 50.0, 1e-12);
+    /* The pixel footprint lod=pixel reads: 2 tan(hfov / 2) / W on the axis. */
+    assert_close(ef_camera_pixel_spread(&c), 2 * tan(25 * PI / 180) / 150, 1e-15);
     /* [0,1] hypothesis: n = -beta/alpha, f = beta/(1-alpha). */
     assert_true(c.near_.set && c.far_.set);
     assert_close(c.near_.v, 0.01, 1e-12);

@@ -2757,6 +2757,43 @@ static void test_exact_cost_warning(void **state)
     assert_null(strstr(g_err, "predicted"));
 }
 
+/* lod=pixel reads the frame's camera (ef_scene_bind_camera): on a fine
+ * noise seen far off, octaves below the pixel fade out, so the run costs
+ * fewer noise evaluations than lod=point and the picture changes within
+ * what fine detail held. */
+static double stats_evals(void)
+{
+    const char *p = strstr(g_err, "noise evaluations mean ");
+    return p ? atof(p + strlen("noise evaluations mean ")) : -1;
+}
+
+static void test_lod_pixel_camera(void **state)
+{
+    (void) state;
+    fresh_dir("lodpixel");
+    path_t a = pth("lodpixel/point.exr"), b = pth("lodpixel/pixel.exr");
+    assert_status(run("'%s' -o '%s' --fog noise:density=0.05:scale=0.5:octaves=6 --stats",
+                      sample(), a.s), 0);
+    const double ea = stats_evals();
+    assert_status(run("'%s' -o '%s' --fog noise:density=0.05:scale=0.5:octaves=6:lod=pixel "
+                      "--stats", sample(), b.s), 0);
+    const double eb = stats_evals();
+    printf("  noise evaluations per pixel: lod=point %.1f, lod=pixel %.1f\n", ea, eb);
+    assert_true(ea > 0 && eb > 0 && eb < 0.8 * ea);
+    tu_image x, y;
+    assert_int_equal(tu_read_image(a.s, 0, &x), 0);
+    assert_int_equal(tu_read_image(b.s, 0, &y), 0);
+    const int r = tu_image_find(&x, "R");
+    assert_true(r >= 0 && tu_image_find(&y, "R") == r);
+    double most = 0;
+    const float *px = x.plane[r], *py = y.plane[r];   /* read as float */
+    for (size_t k = 0; k < (size_t) x.w * (size_t) x.h; ++k)
+        most = fmax(most, fabs((double) px[k] - (double) py[k]));
+    assert_true(most > 0 && most < 0.05);
+    tu_image_free(&x);
+    tu_image_free(&y);
+}
+
 /* -d CHANNEL=TYPE as oiiotool (issue 9): per-channel types over -d TYPE,
  * the last one naming a channel winning; a name-less override is a usage
  * error. */
@@ -3077,6 +3114,7 @@ int main(void)
         cmocka_unit_test(test_camera_convention),
         cmocka_unit_test(test_up_axis_auto),
         cmocka_unit_test(test_projection_translation_noise),
+        cmocka_unit_test(test_lod_pixel_camera),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

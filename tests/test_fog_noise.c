@@ -1130,6 +1130,109 @@ static void test_density_definition(void **state)
     assert_true(fabs(a - b) <= 1e-13 * b);
 }
 
+/* lod=pixel (the man page's definition): with the camera bound at C and
+ * a pixel footprint of w per unit distance, octave i's weight at a point
+ * at distance s from C is 1 while its cell lambda_i is at least four
+ * footprints (s <= S_i = lambda_i / (4 w)), then e^(-4 (s / S_i - 1)).
+ * The model's density against that formula written here from the public
+ * fbm (ef_fbm_octave_point, ef_noise3); tau along rays from the camera
+ * (the fast path) and from elsewhere (a light's: the faded density piece
+ * by piece) against the reference integrator on that density; the
+ * refusals. */
+static void expect_usage(const char *spec, const char *needle);
+
+static void test_lod_pixel(void **state)
+{
+    (void) state;
+    const double cam[3] = { 3, 2, -1 }, w = 0.01;
+    ef_fog_component c;
+    parse("noise:density=0.2:scale=5:octaves=5:falloff=0.3:base=1:contrast=0.9:lod=pixel", &c);
+    c.spread = w;
+    ef_fog_bind(&c, cam);
+    ef_fbm f;
+    ef_fbm_init(&f, 5, 2, 0.5);
+    rng g = { 77 };
+    double worst = 0;
+    int faded = 0;
+    for (int k = 0; k < 3000; ++k) {
+        double d[3];
+        sphere(&g, d);
+        const double s = uni(&g, 0, 400);
+        const double p[3] = { cam[0] + s * d[0], cam[1] + s * d[1], cam[2] + s * d[2] };
+        const double q[3] = { p[0] / 5, p[1] / 5, p[2] / 5 };
+        double fb = 0;
+        for (int i = 0; i < 5; ++i) {
+            double u[3];
+            ef_fbm_octave_point(&f, i, q, u);
+            const double S = 5 / f.freq[i] / (4 * w), x = s / S;
+            const double phi = x <= 1 ? 1 : exp(-4 * (x - 1));
+            faded += phi < 0.5;
+            fb += f.weight[i] * phi * ef_noise3(u[0], u[1], u[2]);
+        }
+        const double env = 0.2 * exp(-0.3 * (p[1] - 1));
+        const double want = env * (1 + 0.9 * fb);
+        const long double v[4] = { p[0], p[1], p[2], p[1] - 1 };
+        long double out[3];
+        c.model->density(&c, v, out);
+        worst = fmax(worst, fabs((double) out[0] - want) / (env * 1.94));
+    }
+    printf("  lod=pixel density: %d octave points faded below half, worst |diff| %.2g of the "
+           "density's scale\n", faded, worst);
+    assert_true(worst <= 1e-12);
+    assert_true(faded > 3000);
+    /* tau: rays from the camera and from elsewhere */
+    long n = 0, within = 0, covered = 0;
+    double worst_dT = 0;
+    for (int k = 0; k < (int) scaled(400); ++k) {
+        const int from_cam = k % 4 != 0;
+        double d[3], o[3];
+        sphere(&g, d);
+        d[1] = -fabs(d[1]) * (chance(&g, 0.5) ? 0.1 : 1);   /* down, many grazing */
+        unit(d);
+        for (int a = 0; a < 3; ++a)
+            o[a] = from_cam ? cam[a] : cam[a] + uni(&g, -40, 40);
+        const ef_ray r = ray(o, d, uni(&g, 1, from_cam ? 400 : 120));
+        long double ref[3];
+        assert_int_equal(ef_ref_tau(&c, &r, ref, NULL), 0);
+        double tau[3];
+        ef_tau_info info;
+        ef_fog_tau(&c, &r, tau, &info);
+        double e = 0;
+        int cov = 1;
+        for (int ch = 0; ch < 3; ++ch) {
+            const double T = exp(-tau[ch]);
+            const double dT = (double) fabsl(expl(-(long double) tau[ch]) - expl(-ref[ch]));
+            cov &= dT <= (T > 0 ? T * expm1(info.err[ch]) : 0) + 1e-12;
+            e = fmax(e, dT);
+        }
+        n++;
+        within += e <= 0x1p-12;
+        covered += cov;
+        worst_dT = fmax(worst_dT, e);
+    }
+    printf("  lod=pixel tau: %ld rays (a quarter not from the camera): within 2^-12 %ld, error "
+           "output covers %ld, worst |dT| %.2g\n", n, within, covered, worst_dT);
+    assert_true(within >= 0.999 * n);
+    assert_true(covered >= 0.999 * n);
+    /* Before a camera is bound (or with no footprint) every octave is whole:
+     * the density of lod=point. */
+    ef_fog_component p0, q0;
+    parse("noise:density=0.2:scale=5:octaves=5:lod=pixel", &p0);
+    parse("noise:density=0.2:scale=5:octaves=5", &q0);
+    const long double v[4] = { 300, 2, -250, 2 };
+    long double a[3], b[3];
+    p0.model->density(&p0, v, a);
+    q0.model->density(&q0, v, b);
+    assert_true(a[0] == b[0]);
+    ef_fog_free(&p0);
+    ef_fog_free(&q0);
+    ef_fog_free(&c);
+    expect_usage("noise-separable:density=1:scale=1:lod=pixel", "lod=pixel");
+    expect_usage("noise:density=1:scale=1:method=exact:lod=pixel", "lod=pixel");
+    expect_usage("noise:density=1:scale=1:contrast=2:lod=pixel", "lod=pixel");
+    expect_usage("noise:density=1:scale=1:lod=box", "lod='box'");
+}
+
 /* tau moves smoothly with the camera: no stepping beyond the tolerance. */
 static void test_continuity(void **state)
 {
@@ -1284,6 +1387,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_bad_values),
         cmocka_unit_test(test_density_definition),
+        cmocka_unit_test(test_lod_pixel),
         cmocka_unit_test(test_translations),
         cmocka_unit_test(test_copy),
         cmocka_unit_test(test_sky),

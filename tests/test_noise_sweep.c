@@ -8,7 +8,13 @@
  * Asserted against the reference integrator (ef_ref_tau_long): every pixel
  * within the man page's promise |dT| <= 2^-12, the error output covering
  * the actual |dT| on every pixel, and no ray past the work bound's
- * 40,000 noise evaluations by more than one segment's worth. */
+ * 40,000 noise evaluations by more than one segment's worth.
+ *
+ * lod=pixel the same way, on shots where its fade reaches octaves the
+ * rays cross (fine scales, far ground, sky): the pinhole's footprint
+ * bound as the CLI binds a camera's, and the reference integrating the
+ * filtered density (test_fog_noise checks that density against the man
+ * page's formula). */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -29,16 +35,20 @@
 #define REF_STOP 20
 #define REF_TAIL 1e-10
 
-static void check_shot(const shot *sh, int pixels)
+static void check_shot(const shot *sh, int pixels, int lod)
 {
     ef_fog_component c;
     ef_err err = { 0 };
-    if (ef_fog_parse(sh->spec, NULL, &c, &err)) {
-        print_error("%s: %s\n", sh->spec, err.msg);
+    char spec[sizeof sh->spec + 16];
+    snprintf(spec, sizeof spec, "%s%s", sh->spec, lod ? ":lod=pixel" : "");
+    if (ef_fog_parse(spec, NULL, &c, &err)) {
+        print_error("%s: %s\n", spec, err.msg);
         fail();
     }
     view v;
     view_init(&v, sh, 1920, 1080);
+    if (lod)
+        c.spread = 2 * v.tx / 1920;   /* the pinhole's pixel at unit distance on its axis */
     ef_fog_bind(&c, v.eye);
     double (*pix)[2] = malloc((size_t) pixels * sizeof *pix);
     assert_non_null(pix);
@@ -77,13 +87,30 @@ static void check_shot(const shot *sh, int pixels)
         covered += cov;
         worst = fmax(worst, d);
     }
-    printf("  %-20s %d px: within 2^-12 %d, covered %d, worst |dT| %.2g, evals/px mean %.0f max "
-           "%.0f\n", sh->name, pixels, within, covered, worst, evals / pixels, emax);
+    printf("  %-20s%s %d px: within 2^-12 %d, covered %d, worst |dT| %.2g, evals/px mean %.0f max "
+           "%.0f\n", sh->name, lod ? " lod=pixel" : "", pixels, within, covered, worst, evals / pixels, emax);
     assert_int_equal(within, pixels);
     assert_int_equal(covered, pixels);
     assert_true(emax <= 50000);
     free(pix);
     ef_fog_free(&c);
+}
+
+static void run_shots(const char *const *names, size_t nn, int lod)
+{
+    shot shots[MAX_SHOTS];
+    const int n = make_shots(shots, 24);
+    const char *e = getenv("EXRFOG_NOISE_SEGMENTS");
+    const int pixels = e && atof(e) > 0 ? (int) fmax(1, 40 * atof(e)) : 40;
+    for (size_t i = 0; i < nn; ++i) {
+        int found = 0;
+        for (int s = 0; s < n; ++s)
+            if (!strcmp(shots[s].name, names[i])) {
+                check_shot(&shots[s], pixels, lod);
+                found = 1;
+            }
+        assert_true(found);
+    }
 }
 
 static void test_reduced_sweep(void **state)
@@ -93,25 +120,27 @@ static void test_reduced_sweep(void **state)
         "bench-horizon", "issue-patchy-30up", "issue-patchy-sky", "issue-patchy-120up",
         "corner-high-gentle", "sweep-01", "sweep-16", "sweep-24",
     };
-    shot shots[MAX_SHOTS];
-    const int n = make_shots(shots, 24);
-    const char *e = getenv("EXRFOG_NOISE_SEGMENTS");
-    const int pixels = e && atof(e) > 0 ? (int) fmax(1, 40 * atof(e)) : 40;
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; ++i) {
-        int found = 0;
-        for (int s = 0; s < n; ++s)
-            if (!strcmp(shots[s].name, names[i])) {
-                check_shot(&shots[s], pixels);
-                found = 1;
-            }
-        assert_true(found);
-    }
+    run_shots(names, sizeof names / sizeof names[0], 0);
+}
+
+/* lod=pixel: fine scales whose octaves fade within the rays (sweep-23:
+ * cells of 0.04 to 1.4 units, rays of 140; sweep-11: 7 octaves seen from
+ * 2 units up), the highest camera's sky and far ground, the horizon shot,
+ * a box (sweep-08). */
+static void test_lod_pixel_sweep(void **state)
+{
+    (void) state;
+    static const char *const names[] = {
+        "bench-horizon", "corner-high-gentle", "sweep-23", "sweep-11", "sweep-08", "sweep-05",
+    };
+    run_shots(names, sizeof names / sizeof names[0], 1);
 }
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_reduced_sweep),
+        cmocka_unit_test(test_lod_pixel_sweep),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

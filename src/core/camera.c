@@ -603,3 +603,19 @@ int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
     }
     return rigid_part(cam, err);
 }
+
+double ef_camera_pixel_spread(const ef_camera *c)
+{
+    /* h = (px, py, 1) . ray; the axis pixel is where hx = hy = 0, and there
+     * d(dir)/d(px, py) is the 2x2 block over hz (dir = (0, 0, 1): planar
+     * displacement is angle). */
+    const double a = c->ray[0], b = c->ray[3], d = c->ray[1], e = c->ray[4];
+    const double det = a * e - b * d;
+    if (!(fabs(det) > 0) || !isfinite(det))
+        return 0;
+    const double px = (-c->ray[6] * e + b * c->ray[7]) / det;
+    const double py = (-a * c->ray[7] + d * c->ray[6]) / det;
+    const double hz = px * c->ray[2] + py * c->ray[5] + c->ray[8];
+    const double s = sqrt(fabs(det)) / fabs(hz);
+    return isfinite(s) ? s : 0;
+}

@@ -107,6 +107,12 @@ typedef struct ef_camera {
 int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
                       ef_camera *cam, ef_err *err);
 
+/* The angle one pixel subtends where the optical axis meets the image
+ * (radians; the square root of the pixel's solid angle there, so
+ * non-square pixels count by their area): a pixel at distance s from the
+ * camera covers about s times this. 0 when the projection is degenerate. */
+double ef_camera_pixel_spread(const ef_camera *c);
+
 /* Camera-space ray through the centre of absolute pixel (x, y), with dir[2] == 1. */
 static inline void ef_camera_ray(const ef_camera *c, double x, double y, double dir[3])
 {

@@ -71,6 +71,11 @@ typedef struct ef_fog_component {
      * double-double, so per-pixel work skips a per-frame constant. */
     int bound;
     double bound_org[3], bound_dot[2];
+    /* The bound camera's pixel footprint per unit of distance (radians: a
+     * pixel at distance s covers about s spread), set by ef_scene_bind_camera
+     * before ef_fog_bind; 0 when no camera is known. Models whose density
+     * is filtered to the pixel (noise's lod=pixel) read it in bind. */
+    double spread;
     /* When not NULL and *cancel becomes non-zero, models whose optical
      * depth may take long (noise) return 0 at once: the host is stopping
      * and throws the result away. Never read otherwise. */

@@ -43,19 +43,19 @@
 enum {
     K_DENSITY, K_VISIBILITY, K_SCALE, K_OCTAVES, K_LACUNARITY, K_GAIN, K_CONTRAST, K_OFFSET,
     K_VELOCITY, K_SEED, K_FALLOFF, K_BASE, K_MIN, K_MAX, K_METHOD, K_TOL, K_TTOL, K_STEPS,
-    K_AXES,
+    K_LOD, K_AXES,
     K_PIECES
 };
 
 static const char *const noise_keys[] = {
     "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
     "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "ttol", "steps",
-    NULL
+    "lod", NULL
 };
 static const char *const separable_keys[] = {
     "density", "visibility", "scale", "octaves", "lacunarity", "gain", "contrast", "offset",
     "velocity", "seed", "falloff", "base", "min", "max", "method", "tol", "ttol", "steps",
-    "axes",
+    "lod", "axes",
     "pieces", NULL
 };
 
@@ -63,7 +63,7 @@ static const char *const separable_keys[] = {
 enum {
     P_RHO = 0, P_SCALE = 3, P_OCTAVES, P_LACUNARITY, P_GAIN, P_CONTRAST, P_OFFSET = 8,
     P_VELOCITY = 11, P_SEED = 14, P_FALLOFF, P_BASE, P_MIN = 17, P_MAX = 20, P_METHOD = 23,
-    P_TOL, P_STEPS, P_AXES, P_PIECES, P_TTOL
+    P_TOL, P_STEPS, P_AXES, P_PIECES, P_TTOL, P_LOD
 };
 /* ---- parsing ---- */
 
@@ -162,6 +162,13 @@ static int set_noise(ef_fog_component *c, int k, const char *val, ef_err *err)
         p[k == K_STEPS ? P_STEPS : P_PIECES] = (double) n;
         return 0;
     }
+    case K_LOD:
+        if (strcmp(val, "point") && strcmp(val, "pixel"))
+            return ef_fail(err, "fog spec '%s': lod='%s' is not point (the density at every "
+                           "point, the default) or pixel (octaves finer than the camera's "
+                           "pixel footprint fade out with distance)", c->spec, val);
+        p[P_LOD] = !strcmp(val, "pixel");
+        return 0;
     default: { /* K_AXES */
         int mask = 0;
         for (const char *s = val; *s; ++s) {
@@ -237,6 +244,13 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
                        "ttol= (the absolute error of T), not both", c->spec);
     if (sep && (c->seen & (1u << K_PIECES)) && method != M_PREINT)
         return ef_fail(err, "fog spec '%s': pieces= only applies to method=preintegrated", c->spec);
+    const int lod = (c->seen & (1u << K_LOD)) && c->p[P_LOD] > 0;
+    if (lod && sep)
+        return ef_fail(err, "fog spec '%s': lod=pixel applies to the noise model only; "
+                       "noise-separable has no pixel filter (leave lod out)", c->spec);
+    if (lod && method != M_ADAPTIVE)
+        return ef_fail(err, "fog spec '%s': lod=pixel only applies to method=adaptive (the "
+                       "default)", c->spec);
 
     nstate s;
     memset(&s, 0, sizeof s);
@@ -263,6 +277,14 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
                        lac, gain, octaves);
     s.contrast = (c->seen & (1u << K_CONTRAST)) ? c->p[P_CONTRAST] : 0.9;
     s.clamp = fabs(s.contrast) * EF_NOISE_BOUND > 1;
+    if (lod && s.clamp)
+        return ef_fail(err, "fog spec '%s': lod=pixel needs |contrast| <= %.6g, where the clamp "
+                       "max(0, 1 + c fbm) never binds (the clamp's statistics know only "
+                       "unfiltered octaves); leave lod out for patchy fog", c->spec,
+                       1 / EF_NOISE_BOUND);
+    s.lod = lod;
+    for (int i = 0; i < EF_FBM_MAX_OCTAVES; ++i)
+        s.lod_S[i] = INFINITY;   /* until a camera is bound: every octave whole */
     s.bound = pow(1 + fabs(s.contrast) * EF_NOISE_BOUND, sep ? s.naxes : 1);
     s.scale = c->p[P_SCALE];
     for (int i = 0; i < s.fbm.octaves; ++i)
@@ -382,6 +404,11 @@ static void bind_noise(ef_fog_component *c, const double org[3])
 {
     nstate *s = (nstate *) (void *) c->arr;
     s->cam = s->cam_lines = 0;
+    /* lod=pixel: where octave i starts to fade (its cell four footprints
+     * wide), from the camera's pixel footprint */
+    s->spread = s->lod && c->spread > 0 && isfinite(c->spread) ? c->spread : 0;
+    for (int i = 0; i < s->fbm.octaves; ++i)
+        s->lod_S[i] = s->spread > 0 ? s->scale / s->fbm.freq[i] / (4 * s->spread) : INFINITY;
     if (!s->merged)
         ef_nz_bind_lines(s, org);
     else
@@ -425,7 +452,15 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
             tau[k] = s->rho[k] > 0 ? INFINITY : 0;
         return;
     }
-    const int linear = !s->separable && !s->clamp;
+    /* lod=pixel: the fast path fades octaves along rays from the bound
+     * camera under ttol; any other ray (a light's, or under tol=) takes the
+     * faded density point by point, piece by piece (shape_at). */
+    const int lod_general =
+        s->spread > 0 &&
+        !(r->org[0] == s->cam_org[0] && r->org[1] == s->cam_org[1] && r->org[2] == s->cam_org[2] &&
+          s->method == M_ADAPTIVE && s->ttol > 0 &&
+          (s->k == 0 || (isfinite(R.kh0) && isfinite(R.khs))));
+    const int linear = !s->separable && !s->clamp && !lod_general;
     /* the clamped noise model on the adaptive fast path: its linear part
      * plus the clamp's share (clamp_part) */
     const int clamp_fast = !s->separable && s->clamp && s->method == M_ADAPTIVE && s->ttol > 0;
@@ -481,7 +516,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
              * adaptive_linear; the walk alone otherwise) */
             if (isfinite(R.kh0) && isfinite(R.khs) && ef_nz_seg_planner_init(&R, &SP) &&
                 SP.sp[s->fbm.octaves - 1] * L < 0x1p24)
-                ef_nz_plan_segment(&R, &SP, L, envmax, envmax * envmax, tol, &P);
+                ef_nz_plan_segment(&R, &SP, L, envmax, envmax * envmax, NULL, NULL, tol, &P);
             else
                 ef_nz_plan_octaves(&R, L, envmax, tol, &P);
             info->dropped = P.dropped;
@@ -749,7 +784,13 @@ static int shape_factors(const nstate *s, const long double *v, long double x[3]
         q[a] = ((v[a] - s->offset[a]) - (long double) s->velocity[a] * s->time) / s->scale +
                (long double) s->seed * ef_noise_seed_dir[a];
     if (!s->separable) {
-        double f = 0;
+        double f = 0, dist = 0;
+        if (s->spread > 0) {   /* lod=pixel: the distance from the bound camera */
+            long double d2 = 0;
+            for (int a = 0; a < 3; ++a)
+                d2 += (v[a] - s->cam_org[a]) * (v[a] - s->cam_org[a]);
+            dist = (double) sqrtl(d2);
+        }
         for (int i = 0; i < N; ++i) {
             int64_t X[3];
             double fr[3];
@@ -758,7 +799,8 @@ static int shape_factors(const nstate *s, const long double *v, long double x[3]
                          &fr[a]);
             ef_noise_cell nc;
             ef_noise_cell_at(X[0], X[1], X[2], &nc);
-            f += s->fbm.weight[i] * ef_noise_cell_eval(&nc, fr[0], fr[1], fr[2]);
+            const double phi = s->spread > 0 ? lod_phi(dist / s->lod_S[i]) : 1;
+            f += s->fbm.weight[i] * phi * ef_noise_cell_eval(&nc, fr[0], fr[1], fr[2]);
         }
         x[0] = 1 + (long double) s->contrast * f;
         return 1;

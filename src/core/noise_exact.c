@@ -360,6 +360,8 @@ double ef_nz_march_bound(const rayc *R, long double t0, long double t1, int n, d
     const nstate *s = R->s;
     const double m = (double) ef_nz_env_integral(s, R->h0, R->hs, t0, t1);
     const double h = (double) (t1 - t0) / n, a = fabs(s->k * (double) R->hs);
+    if (s->spread > 0)   /* lod=pixel's fade has a kink the curvature bound does not know */
+        return fmax(unit, shape_bound(s) * m);
     const double mid = h * h / 24 * exp(a * h) * curvature_bound(R, 1.0) * m;
     return fmin(mid, fmax(unit, shape_bound(s) * m));
 }

@@ -83,7 +83,23 @@ typedef struct nstate {
     /* each octave's noise and gradient there (the grid's end terms at t = 0) */
     double cam_n[EF_FBM_MAX_OCTAVES], cam_g[EF_FBM_MAX_OCTAVES][3];
     struct mpoint { double k, y, I; int p; } cam_pt[3];
+    /* lod=pixel (noise only): octave i's weight at distance s from the bound
+     * camera is lod_phi(s / lod_S[i]); lod_S[i] = lambda_i / (4 spread), the
+     * distance where its cell is four pixel footprints wide (INFINITY: no
+     * camera bound, or lod=point) */
+    int lod;
+    double spread, lod_S[EF_FBM_MAX_OCTAVES];
 } nstate;
+
+/* lod=pixel's fade of an octave at x = s / S: 1 up to x = 1 (the cell at
+ * least four footprints wide), then e^(-4 (x - 1)): 0.018 where the cell
+ * is two footprints wide, 3.4e-4 at four thirds of one. An exponential
+ * in s, so along a ray from the camera it joins the envelope's. */
+#define LOD_RATE 4.0
+static inline double lod_phi(double x)
+{
+    return x <= 1 ? 1 : exp(-LOD_RATE * (x - 1));
+}
 
 /* A merged table's layout from m_off (64-byte aligned where built): per
  * piece one record of 8 doubles, the 7 coefficients of its antiderivative
@@ -176,6 +192,7 @@ typedef struct rayc {
     double kh0, khs;                 /* k h0 and k hs: the envelope is e^-(kh0 + khs t) */
     lin u[MAXLIN];                   /* noise: octave i axis a at 3 i + a; separable: a * N + i */
     double evals, cells;
+    double org[3], dir[3];           /* the ray (lod=pixel's distance from the camera) */
     int cam;                         /* starts at the bound camera (its lines, cam_n, cam_g) */
 } rayc;
 
@@ -385,9 +402,10 @@ size_t ef_nz_ladders_words(void);
 void ef_nz_ladders_fill(double *at);
 /* Fills SP for ray R; 0 where the grid cannot serve it. */
 int ef_nz_seg_planner_init(const rayc *R, seg_planner *SP);
-/* The plan of one segment of adaptive_linear within tol. */
+/* The plan of one segment of adaptive_linear within tol; fm and fq (or
+ * NULL: 1) scale octave i's mean envelope and its rms (lod=pixel's fade). */
 void ef_nz_plan_segment(const rayc *R, const seg_planner *SP, double L, double emean,
-                        double emsq, double tol, plan *P);
+                        double emsq, const double *fm, const double *fq, double tol, plan *P);
 /* The plan of a whole stretch within tol (no grid). */
 void ef_nz_plan_octaves(const rayc *R, double L, double envmax, double tol, plan *P);
 /* The estimate of what every octave but `only` adds over L. */

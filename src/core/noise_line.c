@@ -73,6 +73,8 @@ void ef_nz_ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     R->s = s;
     R->evals = R->cells = 0;
     R->cam = 0;
+    memcpy(R->org, r->org, sizeof R->org);
+    memcpy(R->dir, r->dir, sizeof R->dir);
     const ef_fog_functional up = { { s->up[0], s->up[1], s->up[2] }, -s->base };
     const ef_dd h0 = ef_dd_dot3(up.n, r->org, up.d), hs = ef_dd_dot3(up.n, r->dir, 0.0);
     R->h0 = (long double) h0.hi + h0.lo;
@@ -156,8 +158,20 @@ double ef_nz_shape_at(rayc *R, long double t)
     const int N = s->fbm.octaves;
     if (!s->separable) {
         double f = 0;
-        for (int i = 0; i < N; ++i)
-            f += s->fbm.weight[i] * octave_at(R, i, t);
+        if (s->spread > 0) {
+            /* lod=pixel: each octave faded by the distance from the camera */
+            double d2 = 0;
+            for (int a = 0; a < 3; ++a) {
+                const double x = R->org[a] + (double) t * R->dir[a] - s->cam_org[a];
+                d2 += x * x;
+            }
+            const double dist = sqrt(d2);
+            for (int i = 0; i < N; ++i)
+                f += s->fbm.weight[i] * lod_phi(dist / s->lod_S[i]) * octave_at(R, i, t);
+        } else {
+            for (int i = 0; i < N; ++i)
+                f += s->fbm.weight[i] * octave_at(R, i, t);
+        }
         const double v = 1 + s->contrast * f;
         return v > 0 ? v : 0;
     }

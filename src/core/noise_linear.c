@@ -295,6 +295,87 @@ static double clamp_part(rayc *R, double t0, double t1, double tgt, double *det,
     return kval(&B.acc);
 }
 
+/* ---- lod=pixel on the fast path ----
+ *
+ * Along a ray from the bound camera the distance is t, and octave i's
+ * weight is 1 up to S_i and e^(-LOD_RATE (t / S_i - 1)) past it: times
+ * the envelope e^-(kh0 + khs t), again an exponential,
+ * e^-((kh0 - LOD_RATE) + (khs + LOD_RATE / S_i) t). So past S_i the octave
+ * goes through the same cell walk or grid with that envelope (their error
+ * calibrations hold for any exponential weight), and a segment that
+ * straddles S_i is integrated in two parts (each smooth; the weight's kink
+ * is at their join). The planner sees each octave's faded moments. */
+
+/* Octave i's fade reaches e^-36 (2e-16) at this many S_i. */
+#define LOD_REACH 10.0
+
+/* Octave i over [a, b] with plan P's way, the envelope as R has it now
+ * (env: weighted by it). */
+static double plan_octave(rayc *R, const plan *P, int i, double a, double b, grid_end *end,
+                          int env)
+{
+    if (P->nu[i] > 0)
+        return env ? ef_nz_octave_grid_env(R, i, P->nu[i], a, b, end)
+                   : ef_nz_octave_grid_flat(R, i, P->nu[i], a, b, end);
+    return env ? ef_nz_octave_integral_env(R, i, P->q[i], a, b)
+               : ef_nz_octave_integral_fast(R, i, P->q[i], a, b);
+}
+
+/* integral over [t, tb] of octave i times its fade and the envelope. */
+static double lod_octave(rayc *R, const plan *P, int i, double t, double tb, grid_end *end)
+{
+    const double S = R->s->lod_S[i];
+    double v = 0;
+    if (t < S)
+        v += plan_octave(R, P, i, t, tb < S ? tb : S, end, R->s->k > 0);
+    if (tb > S) {
+        const double kh0 = R->kh0, khs = R->khs;
+        R->kh0 = kh0 - LOD_RATE;
+        R->khs = khs + LOD_RATE / S;
+        v += plan_octave(R, P, i, t > S ? t : S, tb, end, 1);
+        R->kh0 = kh0;
+        R->khs = khs;
+    }
+    return v;
+}
+
+/* Each octave's faded envelope over [t, tb] against the envelope's own
+ * (e_t: the envelope at t, m: its integral there): fm[i] the ratio of the
+ * integrals, fq[i] the square root of the ratio of the integrals of the
+ * squares. Returns 0 when no octave fades on the segment (fm, fq unset). */
+static int lod_moments(const rayc *R, double t, double tb, double e_t, double m, double *fm,
+                       double *fq)
+{
+    const nstate *s = R->s;
+    const double a = s->k > 0 ? R->khs : 0;
+    int any = 0;
+    double e_end, q;
+    if (!(m > 0))
+        return 0;
+    const double Q = env_step(e_t * e_t, 2 * a, tb - t, &e_end);
+    for (int i = 0; i < s->fbm.octaves; ++i) {
+        const double S = s->lod_S[i];
+        if (!(tb > S)) {
+            fm[i] = fq[i] = 1;
+            continue;
+        }
+        any = 1;
+        /* [t, S] whole, then from x0 = max(t, S) the faded exponential */
+        const double x0 = t > S ? t : S;
+        double m1 = 0, q1 = 0;
+        if (t < S) {
+            m1 = env_step(e_t, a, S - t, &e_end);
+            q1 = env_step(e_t * e_t, 2 * a, S - t, &e_end);
+        }
+        const double e0 = e_t * exp(-a * (x0 - t)) * lod_phi(x0 / S);
+        const double m2 = env_step(e0, a + LOD_RATE / S, tb - x0, &e_end);
+        q = env_step(e0 * e0, 2 * (a + LOD_RATE / S), tb - x0, &e_end);
+        fm[i] = fmin(1, (m1 + m2) / m);
+        fq[i] = Q > 0 ? sqrt(fmin(1, (q1 + q) / Q)) : 1;
+    }
+    return any;
+}
+
 /* The noise part's integral for the linear density (noise, |c| <= 0.9649)
  * under ttol (the default) over [t0, tend], segment by segment, and
  * tau / rho (the closed-form mean to t1 plus c times it). Each segment gets
@@ -339,8 +420,11 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
     }
     unsigned over = 0;
     int first = N;
+    /* lod=pixel: octave i counts to where its fade is e^-36 */
+    const int lod = s->spread > 0;
     for (int i = N - 1; i >= 0; --i) {
-        if (!(cross[i] * Lwalk <= CELL_BUDGET))
+        const double Li = lod ? fmin(Lwalk, LOD_REACH * s->lod_S[i]) : Lwalk;
+        if (!(cross[i] * Li <= CELL_BUDGET))
             over |= 1u << i;
         else
             first = i;
@@ -427,10 +511,14 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
             /* with the clamp, the linear part takes 0.8 of the quota and
              * the clamp's share 0.6 (their squares sum to it) */
             const double qlin = s->clamp ? 0.8 * quota : quota;
+            /* lod=pixel: each octave's share of the envelope's moments */
+            double fm[EF_FBM_MAX_OCTAVES], fq[EF_FBM_MAX_OCTAVES];
+            const int faded = lod && lod_moments(R, (double) t, (double) tb, e_t, mj, fm, fq);
             if (grid)
                 ef_nz_plan_segment(R, &SP, L, mj / L,
-                             decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
-                             s->rho_max * qlin / W, &P);
+                                   decay_int(envmax * envmax, 2 * fabs(a_env), L) / L,
+                                   faded ? fm : NULL, faded ? fq : NULL, s->rho_max * qlin / W,
+                                   &P);
             else
                 ef_nz_plan_octaves(R, L, envmax, s->rho_max * qlin / W, &P);
             cquota = 0.6 * quota / W;
@@ -467,7 +555,9 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
             if (!P.q[i])
                 continue;
             double v;
-            if (P.nu[i] > 0)
+            if (lod)
+                v = lod_octave(R, &P, i, (double) t, (double) tb, &ends[i]);
+            else if (P.nu[i] > 0)
                 v = s->k > 0 ? ef_nz_octave_grid_env(R, i, P.nu[i], (double) t, (double) tb, &ends[i])
                              : ef_nz_octave_grid_flat(R, i, P.nu[i], (double) t, (double) tb, &ends[i]);
             else

@@ -185,7 +185,7 @@ int ef_nz_seg_planner_init(const rayc *R, seg_planner *SP)
  * taken until the sum fits. A stretch under 2 lattice units counts as 2
  * (where the grid's calibration stops). */
 void ef_nz_plan_segment(const rayc *R, const seg_planner *SP, double L, double emean,
-                        double emsq, double tol, plan *P)
+                        double emsq, const double *fm, const double *fq, double tol, plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves;
@@ -195,8 +195,9 @@ void ef_nz_plan_segment(const rayc *R, const seg_planner *SP, double L, double e
     int kept = N;
     P->dropped = 0;
     for (int i = N - 1; i >= 0; --i) {
+        const double m = fm ? fm[i] : 1, q = fq ? fq[i] : 1;
         const double D =
-            A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * emean * L, SP->lrms[i] * erms * sqL);
+            A * s->fbm.weight[i] * fmin(EF_NOISE_BOUND * emean * m * L, SP->lrms[i] * erms * q * sqL);
         if (drop2 + D * D > tol2 / 4)
             break;
         drop2 += D * D;
@@ -212,7 +213,7 @@ void ef_nz_plan_segment(const rayc *R, const seg_planner *SP, double L, double e
         if (i >= kept)
             continue;
         const double Le = L * SP->sp[i] < 2 ? 2 / SP->sp[i] : L;
-        sc[i] = A * erms * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
+        sc[i] = A * erms * (fq ? fq[i] : 1) * s->fbm.weight[i] * sqrt(Le) * SP->isp[i];
         rate[i] = sc[i] * sc[i] / (SP->sp[i] * L);   /* variance per ns, per unit */
         pos[i] = 0;
         plan_set(P, i, ld->kind[0]);

@@ -1,4 +1,5 @@
 #include "scene.h"
+#include "camera.h"
 #include "shadow.h"
 #include "sky_light.h"
 
@@ -109,6 +110,14 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
         const double *up = s->comp[0].up;
         ef_light_bind(&s->light[j], &s->comp[0], up[0] * org[0] + up[1] * org[1] + up[2] * org[2]);
     }
+}
+
+void ef_scene_bind_camera(ef_fog_scene *s, const ef_camera *cam)
+{
+    const double spread = ef_camera_pixel_spread(cam);
+    for (int i = 0; i < s->ncomp; ++i)
+        s->comp[i].spread = spread;
+    ef_scene_bind(s, cam->pos);
 }
 
 int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)

@@ -58,6 +58,11 @@ static inline int ef_scene_lit(const ef_fog_scene *s)
  * frame, before the threads start. */
 void ef_scene_bind(ef_fog_scene *s, const double org[3]);
 
+struct ef_camera;
+/* ef_scene_bind at the camera's position, with its pixel footprint
+ * (ef_camera_pixel_spread) given to every component first. */
+void ef_scene_bind_camera(ef_fog_scene *s, const struct ef_camera *cam);
+
 /* Copies src's settings and components into dst without parsing or reading
  * anything (component data is duplicated); with_spec 0 leaves the SPEC
  * texts empty, for a copy that is only evaluated. Returns 0, or -1 when out

@@ -604,7 +604,7 @@ static int bind_view(ef_frame *F, int v)
         }
         sc = F->view_scene[v];
     }
-    ef_scene_bind(sc, F->cams[v].pos);
+    ef_scene_bind_camera(sc, &F->cams[v]);
     ef_scene_set_cancel(sc, F->J->stop);
     F->job.pass[v] = (ef_fog_pass){ &F->cams[v], &F->convs[v], sc };
     return 0;

@@ -543,7 +543,7 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
         ctx->bound_scene = ctx->bound_cam = 0;
         if (ef_scene_copy(ctx->bound, &scene->s, 0))
             return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
-        ef_scene_bind(ctx->bound, cam->cam.pos);
+        ef_scene_bind_camera(ctx->bound, &cam->cam);
         ctx->bound_scene = scene->tag;
         ctx->bound_cam = cam->tag;
     }
