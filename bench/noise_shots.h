@@ -103,9 +103,10 @@ typedef struct view {
     int W, H;
 } view;
 
-static inline void view_init(view *v, const shot *s, int W, int H)
+/* The shot's pinhole turned yaw_deg right (a pan moves it). */
+static inline void view_init_yaw(view *v, const shot *s, int W, int H, double yaw_deg)
 {
-    const double yaw = YAW_DEG * NS_PI / 180, pitch = s->pitch * NS_PI / 180;
+    const double yaw = yaw_deg * NS_PI / 180, pitch = s->pitch * NS_PI / 180;
     v->W = W;
     v->H = H;
     v->eye[0] = 0;
@@ -124,6 +125,19 @@ static inline void view_init(view *v, const shot *s, int W, int H)
     v->u[2] = v->r[0] * v->f[1] - v->r[1] * v->f[0];
     v->tx = tan(0.5 * s->fov * NS_PI / 180);
     v->ty = v->tx * H / W;
+}
+
+/* The shot's pinhole, turned YAW_DEG right. */
+static inline void view_init(view *v, const shot *s, int W, int H)
+{
+    view_init_yaw(v, s, W, H, YAW_DEG);
+}
+
+/* The pinhole's pixel angle on its axis (what ef_camera_pixel_spread gives
+ * for the camera make_sample --view writes). */
+static inline double view_spread(const view *v)
+{
+    return 2 * v->tx / v->W;
 }
 
 static inline void view_ray(const view *v, double px, double py, ef_ray *r)

@@ -22,26 +22,34 @@
 # Writes bench/noise_sweep.md. Nothing asserts on time.
 #
 # Environment: BENCH_RUNS=3, E2E_BUDGET=20, E2E_MAX=300, PIXELS=1000,
-# ONLY=NAME (one shot), SKIP_ACCURACY=1, SKIP_E2E=1.
+# ONLY=NAME (one shot), SKIP_ACCURACY=1, SKIP_E2E=1, LOD=1 (every SPEC with
+# lod=pixel, the shots where it is refused listed as such; accuracy
+# against its own reference; writes bench/noise_sweep_lod.md instead).
 set -uo pipefail
 die() { echo "noise_sweep: $*" >&2; exit 1; }
 here="$(cd "$(dirname "$0")" && pwd)"
 repo="$(cd "$here/.." && pwd)"
 build="$(cd "${1:-$repo/build}" && pwd)" || die "no build directory"
 runs="${BENCH_RUNS:-3}" budget="${E2E_BUDGET:-20}" emax="${E2E_MAX:-300}"
-pixels="${PIXELS:-1000}" only="${ONLY:-}"
+pixels="${PIXELS:-1000}" only="${ONLY:-}" lod="${LOD:-}"
 exrfog="$build/exrfog" sweep="$build/noise_sweep" make_sample="$build/make_sample"
 for b in "$exrfog" "$sweep" "$make_sample"; do [[ -x "$b" ]] || die "missing $b (build it)"; done
 command -v oiiotool >/dev/null || die "oiiotool is not installed (apt-get install openimageio-tools)"
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-out="$here/noise_sweep.md"
+out="$here/noise_sweep.md" lodarg=() lodkey=""
+if [[ -n "$lod" ]]; then out="$here/noise_sweep_lod.md" lodarg=(--lod) lodkey=":lod=pixel"; fi
 now() { date +%s.%N; }
+# Whether exrfog refuses SPEC for its lod key (noise-separable, patchy fog).
+refused() {
+    "$exrfog" --fog "$1" --explain "$tmp/none.exr" >/dev/null 2>"$tmp/why.txt" && return 1
+    grep -q 'lod=pixel' "$tmp/why.txt"
+}
 median() { sort -g | awk '{ a[NR] = $1 } END { if (NR == 0) print "nan"; else if (NR % 2) print a[(NR + 1) / 2]; else print (a[NR / 2] + a[NR / 2 + 1]) / 2 }'; }
 
 start=$(date -u '+%Y-%m-%d %H:%M:%S UTC')
 {
-    echo "## exrfog noise fog on a sweep of shots (issue 41)"
+    echo "## exrfog noise fog on a sweep of shots (issue 41)${lodkey:+, every SPEC with lod=pixel}"
     echo
     echo "- date: $start"
     echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //'), $(uname -sr)"
@@ -61,6 +69,11 @@ if [[ -z "${SKIP_E2E:-}" ]]; then
     } >> "$out.tmp"
     while IFS=$'\t' read -r name h p f spec; do
         [[ -n "$only" && "$name" != "$only" ]] && continue
+        if [[ -n "$lod" ]] && refused "$spec$lodkey"; then
+            printf '| %s | %s, %s°, %s° | `%s` | – | lod=pixel refused | | | | |\n' "$name" "$h" "$p" "$f" "$spec" >> "$out.tmp"
+            continue
+        fi
+        spec="$spec$lodkey"
         in="$tmp/in.exr"
         "$make_sample" "$in" --size 1920x1080 --view "$h,$p,$f" >/dev/null || die "make_sample $name"
         o=() e=() over=0 stats=""
@@ -105,9 +118,9 @@ if [[ -z "${SKIP_ACCURACY:-}" ]]; then
         echo
     } >> "$out.tmp"
     if [[ -n "$only" ]]; then
-        "$sweep" --pixels "$pixels" --only "$only" >> "$out.tmp"
+        "$sweep" --pixels "$pixels" --only "$only" "${lodarg[@]}" >> "$out.tmp"
     else
-        "$sweep" --pixels "$pixels" >> "$out.tmp"
+        "$sweep" --pixels "$pixels" "${lodarg[@]}" >> "$out.tmp"
     fi
     echo >> "$out.tmp"
 fi
