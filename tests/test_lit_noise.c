@@ -1,5 +1,5 @@
 /* Lit noise fog (issue 25): the sun, lamps and spots scattered in by
- * Perlin noise fog (light.c's lit noise path: the view ray's extinction
+ * Perlin noise fog (lit_noise.c's lit noise path: the view ray's extinction
  * from the noise methods, the light's factor by quadrature in the
  * extinction's own coordinate) against the reference integrator
  * (ef_ref_inscatter: the formula integrated on its own in long double,

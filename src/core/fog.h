@@ -144,7 +144,7 @@ typedef struct ef_fog_model {
     void (*tau_info)(const ef_fog_component *c, const ef_ray *r, double tau[3],
                      ef_tau_info *info);
     /* Optional, models whose tau is not a closed form: the relative
-     * accuracy lit fog aims at through this component (light.c). */
+     * accuracy lit fog aims at through this component (lit_noise.c). */
     double (*lit_tol)(const ef_fog_component *c);
     /* Optional, the same models: tau_info at an absolute tolerance tol on
      * tau where the method has one (others ignore tol). */

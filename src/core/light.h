@@ -91,6 +91,10 @@ void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y);
  * spot_blend), times cos alpha with cosine=1 (Cycles 3.x's spot). */
 double ef_spot_share(const ef_light *l, double cos_alpha);
 
+/* Ch(k (R + y), mu) of planet sun l at height y: from its table (bound by
+ * ef_light_bind) where that holds y, else ef_chapman (mu clamped to [-1, 1]). */
+double ef_light_planet_ch(const ef_light *l, double k, double mu, double y);
+
 
 /* The phase function of c at cos theta = l . u (l towards the light, u the
  * view direction away from the camera: g > 0 scatters forward). */

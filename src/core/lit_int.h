@@ -1,0 +1,89 @@
+/* Lit fog's private header (light.c's lights lit through the models):
+ * what the family's files share and offer each other. Not an interface
+ * outside src/core/lit*.c.
+ *
+ *   light.c      the lights themselves: parsing, kinds, phases, binding (light.h)
+ *   lit.c        which method serves each light and segment; the public
+ *                entry points (lit.h), the sun's closed forms, the cuts
+ *   lit_quad.c   the general quadrature: adaptive Gauss-Kronrod over the
+ *                pieces between the features, in t or in a lamp's angle
+ *   lit_lamp.c   a point lamp in uniform isotropic fog: its closed form,
+ *                four rays at a time
+ *   lit_noise.c  lit fog through a rough (noise) component
+ */
+#ifndef EF_LIT_INT_H
+#define EF_LIT_INT_H
+
+#include "light.h"
+#include "lit.h"
+#include "scene.h"
+
+#define PI 3.14159265358979323846
+
+/* Cut points a segment takes, at most. */
+#define MAX_CUTS 512
+
+/* Uniform fog of position: exp with the true (radial) distance. */
+static inline int is_uniform(const ef_fog_component *c)
+{
+    return c->model == &ef_fog_exp && c->distance == EF_DIST_RADIAL;
+}
+
+/* A component's albedo in channel k (1 unless albedo= was given). */
+static inline double albedo(const ef_fog_component *c, int k)
+{
+    return c->has_albedo ? c->albedo[k] : 1.0;
+}
+
+/* qsort's order of doubles. */
+static inline int cmp_double(const void *a, const void *b)
+{
+    const double x = *(const double *) a, y = *(const double *) b;
+    return (x > y) - (x < y);
+}
+
+/* ---- lit.c ---- */
+
+/* Total optical depth per channel from p along unit d over len (may be
+ * INFINITY), from the models' closed forms. */
+void ef_lit_tau_from(const ef_fog_scene *s, const double p[3], const double d[3], double len,
+                     double tau[3]);
+/* A planet sun's optical depth from x (the scene's one height fog). */
+void ef_lit_sun_planet_tau(const ef_fog_scene *s, const ef_light *l, const double x[3],
+                           double tau[3]);
+
+/* ---- lit_quad.c ---- */
+
+/* Where r's segment (a, D) crosses the components' features, appended to cut. */
+int ef_lit_feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double D, double *cut,
+                        int n);
+/* Cuts at ts +- st 4^j inside (a, D), appended to cut. */
+int ef_lit_steps_around(double *cut, int n, double ts, double a, double D, double st);
+/* Where r crosses spot l's cones, appended to cut. */
+int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, double *cut, int n);
+/* The general quadrature of l's light over [a, D] of r, added to S and E. */
+void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                       double D, double S[3], double E[3]);
+
+/* ---- lit_lamp.c ---- */
+
+/* sqrt(x^2 + y^2), with hypot's care only where the squares need it. */
+double ef_lit_len2(double x, double y);
+/* Lamp l's closest approach along r: w = lamp - origin, ts along r, h off it. */
+void ef_lit_lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *ts, double *h);
+/* The uniform fog's extinction and isotropic scattering per channel. */
+void ef_lit_lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3]);
+/* A point lamp's closed form over [a, D], added to S and E; -1 when it does not hold. */
+int ef_lit_lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
+                       double h, double a, double D, double S[3], double E[3]);
+/* A span of rays beside point lamp l by the closed form; the others' indices into left. */
+int ef_lit_lamp_span(const ef_light *l, const double sig[3], const double scat[3],
+                     const ef_ray *r, int n, double *const S[3], double *const E[3], int *left);
+
+/* ---- lit_noise.c ---- */
+
+/* l's light over [a, D] of r through a rough component, added to S and E. */
+void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                        double D, double S[3], double E[3]);
+
+#endif

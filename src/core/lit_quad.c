@@ -1,0 +1,522 @@
+/* Lit fog's general quadrature (lit_int.h): global adaptive
+ * Gauss-Kronrod (QUADPACK's estimate) over the pieces between the
+ * density's features, a lamp's closest approach (in its angle there) and a
+ * spot's cones, an infinite ray's tail, with the integrand's densities
+ * from the models and the optical depths from their closed forms. */
+#include "lit_int.h"
+#include "gk15.h"
+#include "shadow.h"
+#include "vmath.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Extinction of component c at x per channel, from its functionals. */
+static void sigma_at(const ef_fog_component *c, const double x[3], double out[3])
+{
+    if (is_uniform(c)) {
+        for (int k = 0; k < 3; ++k)
+            out[k] = c->p[k];
+        return;
+    }
+    ef_fog_functional fs[64], *f = fs;
+    long double vs[64], *v = vs;
+    const int n = c->model->functionals(c, NULL, 0);
+    if (n > 64) {
+        f = malloc((size_t) n * sizeof *f);
+        v = malloc((size_t) n * sizeof *v);
+        if (!f || !v) {   /* no memory: no light from here (the caller's estimate) */
+            free(f);
+            free(v);
+            out[0] = out[1] = out[2] = 0;
+            return;
+        }
+    }
+    c->model->functionals(c, f, n);
+    for (int i = 0; i < n; ++i)
+        v[i] = (long double) f[i].n[0] * x[0] + (long double) f[i].n[1] * x[1] +
+               (long double) f[i].n[2] * x[2] + f[i].d;
+    long double o[3];
+    c->model->density(c, v, o);
+    for (int k = 0; k < 3; ++k)
+        out[k] = (double) o[k];
+    if (f != fs) {
+        free(f);
+        free(v);
+    }
+}
+
+/* ----------------------------------------------------- the quadrature */
+
+typedef void (*lit_fn)(const void *q, double u, double out[3]);
+
+typedef struct gk_iv {
+    double a, b, r[3], e[3];
+} gk_iv;
+
+/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel. */
+static void gk15(lit_fn f, const void *q, gk_iv *iv)
+{
+    const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
+    double fv[15][3], rk[3], rg[3];
+    f(q, c, fv[7]);
+    for (int k = 0; k < 3; ++k) {
+        rk[k] = (double) ef_gk15_wk[7] * fv[7][k];
+        rg[k] = (double) ef_gk15_wg[3] * fv[7][k];
+    }
+    for (int j = 0; j < 7; ++j) {
+        const double dx = h * (double) ef_gk15_x[j];
+        f(q, c - dx, fv[j]);
+        f(q, c + dx, fv[14 - j]);
+        for (int k = 0; k < 3; ++k) {
+            rk[k] += (double) ef_gk15_wk[j] * (fv[j][k] + fv[14 - j][k]);
+            if (j & 1)
+                rg[k] += (double) ef_gk15_wg[j / 2] * (fv[j][k] + fv[14 - j][k]);
+        }
+    }
+    /* QUADPACK's qk15 estimate: |K - G| scaled by (200 |K - G| / resasc)^1.5
+     * (resasc: the integral of |f - its mean|), which on a smooth piece
+     * tracks the Kronrod rule's own error rather than the Gauss rule's */
+    for (int k = 0; k < 3; ++k) {
+        const double mean = rk[k] * 0.5;
+        double asc = (double) ef_gk15_wk[7] * fabs(fv[7][k] - mean);
+        for (int j = 0; j < 7; ++j)
+            asc += (double) ef_gk15_wk[j] * (fabs(fv[j][k] - mean) + fabs(fv[14 - j][k] - mean));
+        asc *= fabs(h);
+        double e = fabs((rk[k] - rg[k]) * h);
+        if (asc != 0 && e != 0)
+            e = asc * fmin(1, pow(200 * e / asc, 1.5));
+        iv->r[k] = rk[k] * h;
+        iv->e[k] = fmax(e, 50 * 0x1p-52 * fabs(iv->r[k]));
+    }
+}
+
+#define GK_MAX 512
+
+/* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
+ * the summed error estimate is at most rel of the result plus S in every
+ * channel (or GK_MAX intervals): adds the result to S and its estimate to
+ * E. */
+static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, double rel,
+                     double S[3], double E[3])
+{
+    gk_iv iv[GK_MAX];
+    int n = 0;
+    for (int i = 0; i + 1 < ncut && n < GK_MAX; ++i) {
+        if (!(cut[i + 1] > cut[i]))
+            continue;
+        iv[n].a = cut[i];
+        iv[n].b = cut[i + 1];
+        gk15(f, q, &iv[n++]);
+    }
+    for (;;) {
+        double R[3] = { 0, 0, 0 }, Er[3] = { 0, 0, 0 };
+        for (int i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k) {
+                R[k] += iv[i].r[k];
+                Er[k] += iv[i].e[k];
+            }
+        int done = 1;
+        /* relative to what S already holds too: a far piece of a ray
+         * whose light was collected before need not resolve its own
+         * near-zero to 1e-13 of itself */
+        for (int k = 0; k < 3; ++k)
+            done &= Er[k] <= rel * fabs(R[k] + S[k]) || !isfinite(R[k]);
+        /* the interval of the largest error relative to its channel's total */
+        int worst = -1;
+        double we = -1;
+        for (int i = 0; i < n; ++i) {
+            const double m = 0x1p-20 * (iv[i].b - iv[i].a) < 0x1p-52 * fmax(fabs(iv[i].a),
+                                                                            fabs(iv[i].b))
+                                 ? 0 : 1;   /* too narrow to split further */
+            for (int k = 0; k < 3; ++k) {
+                const double w = m * iv[i].e[k] / (fabs(R[k] + S[k]) + 1e-300);
+                if (w > we) {
+                    we = w;
+                    worst = i;
+                }
+            }
+        }
+        if (done || n + 1 >= GK_MAX || worst < 0 || !(we > 0)) {
+            for (int k = 0; k < 3; ++k) {
+                S[k] += R[k];
+                E[k] += Er[k];
+            }
+            return;
+        }
+        const double a = iv[worst].a, b = iv[worst].b, m = 0.5 * (a + b);
+        iv[worst].b = m;
+        gk15(f, q, &iv[worst]);
+        iv[n].a = m;
+        iv[n].b = b;
+        gk15(f, q, &iv[n++]);
+    }
+}
+
+/* ------------------------------------------------------ the integrands */
+
+typedef struct lit_q {
+    const ef_fog_scene *s;
+    const ef_light *l;
+    const ef_ray *r;
+    int equi;                 /* 1: u = xi, t = ts + hq tan(xi), E dt = e / hq dxi; 2: the tail v; 0: t (sun) or t - ts (lamp) */
+    double ts, hq, h;         /* the lamp's closest approach along the ray, its distances */
+    double w[3], wa, va;      /* lamp - camera; w . aim and dir . aim (spots) */
+    double W;                 /* xi within W of the closest approach, t beyond */
+    double ua, lam;           /* an infinite ray's tail: u = ua + lam v / (1 - v) */
+    int uniform;              /* every component uniform: sig per channel */
+    double sig[3];
+} lit_q;
+/* sum_c sigma_c albedo_c p_c(cos) per channel at x. */
+static void scatter_at(const ef_fog_scene *s, const double x[3], double cos_theta, double acc[3])
+{
+    acc[0] = acc[1] = acc[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        double sg[3];
+        sigma_at(c, x, sg);
+        if (sg[0] == 0 && sg[1] == 0 && sg[2] == 0)
+            continue;
+        const double p = ef_phase_eval(c->phase, c->g, cos_theta);
+        for (int k = 0; k < 3; ++k)
+            acc[k] += sg[k] == 0 ? 0 : sg[k] * albedo(c, k) * p;
+    }
+}
+
+/* The integrand at u (t or xi), light included. For a lamp, its distance
+ * and the phase's angle come from u - ts and the line's distance h (both
+ * exact at the closest approach), not from a world point rounded to
+ * double, whose rounding (an ulp of the ray's length) would be a large
+ * share of d where the lamp is near the ray. */
+static void lit_integrand(const void *qv, double u, double out[3])
+{
+    const lit_q *q = qv;
+    const ef_light *l = q->l;
+    const ef_ray *r = q->r;
+    double t = u, ur = 0, wgt = 1;
+    out[0] = out[1] = out[2] = 0;
+    if (q->equi == 1) {
+        ur = q->hq * tan(u);
+        t = q->ts + ur;
+        wgt = 1 / q->hq;
+    } else if (q->equi == 2) {
+        if (!(u < 1))
+            return;
+        ur = q->ua + q->lam * u / (1 - u);
+        t = q->ts + ur;
+        wgt = q->lam / ((1 - u) * (1 - u)) / (ur * ur + q->hq * q->hq);
+    } else if (l->kind != EF_LIGHT_SUN) {
+        /* a lamp's pieces in t are in u = t - ts: nodes near the lamp
+         * keep their full precision */
+        ur = u;
+        t = q->ts + u;
+        wgt = 1 / (ur * ur + q->hq * q->hq);
+    }
+    if (!(t >= 0))
+        t = 0;
+    double ld[3], dl = INFINITY, cth;
+    if (l->kind == EF_LIGHT_SUN) {
+        memcpy(ld, l->dir, sizeof ld);
+        cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
+    } else {
+        dl = sqrt(ur * ur + q->h * q->h);
+        if (!(dl > 0))
+            return;
+        cth = -ur / dl;
+        double y[3], yn = 0;
+        for (int a = 0; a < 3; ++a) {
+            y[a] = q->w[a] - t * r->dir[a];
+            yn += y[a] * y[a];
+        }
+        yn = sqrt(yn);
+        for (int a = 0; a < 3; ++a)
+            ld[a] = yn > 0 ? y[a] / yn : 0;
+        if (l->kind == EF_LIGHT_SPOT) {
+            wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
+            if (wgt == 0)
+                return;
+        }
+    }
+    if (q->uniform) {
+        /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
+         * exponential per distinct density */
+        double a[3] = { 0, 0, 0 };
+        for (int i = 0; i < q->s->ncomp; ++i) {
+            const ef_fog_component *c = &q->s->comp[i];
+            const double p = ef_phase_eval(c->phase, c->g, cth);
+            for (int k = 0; k < 3; ++k)
+                if (c->p[k] > 0)
+                    a[k] += c->p[k] * albedo(c, k) * p;
+        }
+        double e[3];
+        e[0] = exp(-q->sig[0] * (t + dl));
+        e[1] = q->sig[1] == q->sig[0] ? e[0] : exp(-q->sig[1] * (t + dl));
+        e[2] = q->sig[2] == q->sig[0] ? e[0] : exp(-q->sig[2] * (t + dl));
+        /* the transmittance first: where it is 0 a dense fog's sigma times
+         * a near lamp's weight may overflow, and inf * 0 is no answer */
+        for (int k = 0; k < 3; ++k)
+            out[k] = q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt * l->e[k];
+        return;
+    }
+    double x[3], acc[3];
+    for (int a = 0; a < 3; ++a)
+        x[a] = r->org[a] + t * r->dir[a];
+    scatter_at(q->s, x, cth, acc);
+    if (acc[0] == 0 && acc[1] == 0 && acc[2] == 0)
+        return;
+    double tv[3], tl[3];
+    ef_lit_tau_from(q->s, r->org, r->dir, t, tv);
+    if (l->kind == EF_LIGHT_SUN && l->planet > 0)
+        ef_lit_sun_planet_tau(q->s, l, x, tl);
+    else
+        ef_lit_tau_from(q->s, x, ld, dl, tl);
+    /* where either leg is opaque the density may have overflowed too:
+     * no light, not inf * 0 */
+    for (int k = 0; k < 3; ++k) {
+        const double e = exp(-(tv[k] + tl[k]));
+        out[k] = acc[k] == 0 || e == 0 ? 0 : acc[k] * e * wgt * l->e[k];
+    }
+}
+
+/* Where the view segment [0, D) crosses the components' features (the
+ * density's jumps, kinks and fronts), appended to cut. */
+int ef_lit_feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double D, double *cut,
+                        int n)
+{
+    for (int i = 0; i < s->ncomp && n < MAX_CUTS - 8; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->features || !c->model->functionals)
+            continue;
+        const int nf = c->model->functionals(c, NULL, 0), nt = c->model->features(c, NULL, 0);
+        if (nf <= 0 || nt <= 0 || nf > 256 || nt > 256)
+            continue;
+        ef_fog_functional f[256];
+        ef_fog_feature ft[256];
+        c->model->functionals(c, f, nf);
+        c->model->features(c, ft, nt);
+        for (int j = 0; j < nt && n < MAX_CUTS - 8; ++j) {
+            const ef_fog_functional *F = &f[ft[j].f];
+            const double v0 = F->n[0] * r->org[0] + F->n[1] * r->org[1] + F->n[2] * r->org[2] + F->d;
+            const double rate = F->n[0] * r->dir[0] + F->n[1] * r->dir[1] + F->n[2] * r->dir[2];
+            const double t = (ft[j].value - v0) / rate;
+            if (t > a && t < D)
+                cut[n++] = t;
+        }
+    }
+    return n;
+}
+
+/* Cuts at ts +- st 4^j inside (a, D), from st until past the segment. */
+int ef_lit_steps_around(double *cut, int n, double ts, double a, double D, double st)
+{
+    for (; n < MAX_CUTS - 4; st *= 4) {
+        if (ts + st > a && ts + st < D)
+            cut[n++] = ts + st;
+        if (ts - st > a && ts - st < D)
+            cut[n++] = ts - st;
+        if (!(st < 1e300) || st > fabs(ts) + (isfinite(D) ? D : 0))
+            break;
+    }
+    return n;
+}
+
+/* Where the ray crosses the spot's cones cos alpha = c (c = its edge, and
+ * its blend band's inner edge), appended to cut. */
+int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, double *cut, int n)
+{
+    double w[3];
+    for (int a = 0; a < 3; ++a)
+        w[a] = r->org[a] - l->pos[a];   /* y(t) = w + t v, from the lamp */
+    const double a0 = w[0] * l->dir[0] + w[1] * l->dir[1] + w[2] * l->dir[2];
+    const double a1 = r->dir[0] * l->dir[0] + r->dir[1] * l->dir[1] + r->dir[2] * l->dir[2];
+    const double ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    const double wv = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
+    const double cs[2] = { l->cos_outer, l->cos_outer + l->smooth };
+    for (int i = 0; i < 2; ++i) {
+        const double c = cs[i], c2 = c * c;
+        /* (a0 + a1 t)^2 = c^2 |w + t v|^2 */
+        const double A = a1 * a1 - c2, B = 2 * (a0 * a1 - c2 * wv), C = a0 * a0 - c2 * ww;
+        double roots[2];
+        int nr = 0;
+        if (fabs(A) > 1e-300) {
+            const double disc = B * B - 4 * A * C;
+            if (disc >= 0) {
+                const double sq = sqrt(disc), qq = -0.5 * (B + (B >= 0 ? sq : -sq));
+                roots[nr++] = qq / A;
+                if (qq != 0)
+                    roots[nr++] = C / qq;
+            }
+        } else if (B != 0) {
+            roots[nr++] = -C / B;
+        }
+        for (int j = 0; j < nr; ++j)
+            if (roots[j] > a && roots[j] < D && (a0 + a1 * roots[j]) * c >= 0 && n < MAX_CUTS)
+                cut[n++] = roots[j];
+    }
+    return n;
+}
+
+/* Relative accuracy aimed at: the uniform fog's integrand costs a few
+ * exponentials, the general one optical depths along two rays per node. */
+#define REL_UNIFORM 1e-13
+#define REL_GENERAL 1e-10
+
+/* The general quadrature of light l over [a, D] of r into S and E (what
+ * inscatter_range leaves to it: no rough component, no sun closed form):
+ * the pieces between the features, a lamp's closest approach and cones,
+ * in t or in the lamp's angle, with a point lamp in uniform isotropic fog
+ * by its closed form first. */
+void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                       double D, double S[3], double E[3])
+{
+    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
+    for (int i = 0; i < s->ncomp; ++i) {
+        q.uniform &= is_uniform(&s->comp[i]);
+        for (int k = 0; k < 3 && is_uniform(&s->comp[i]); ++k)
+            q.sig[k] += s->comp[i].p[k];
+    }
+    double cut[MAX_CUTS];
+    int n = 0;
+    cut[n++] = a;
+    if (!q.uniform)
+        n = ef_lit_feature_cuts(s, r, a, D, cut, n);
+    if (l->kind == EF_LIGHT_SPOT)
+        n = ef_lit_cone_cuts(l, r, a, D, cut, n);
+    if (l->kind != EF_LIGHT_SUN) {
+        /* the lamp's closest approach along the line, and its distance
+         * there from the cross product (no cancellation near the line) */
+        double *w = q.w;
+        ef_lit_lamp_line(l, r, w, &q.ts, &q.h);
+        q.wa = w[0] * l->dir[0] + w[1] * l->dir[1] + w[2] * l->dir[2];
+        q.va = r->dir[0] * l->dir[0] + r->dir[1] * l->dir[1] + r->dir[2] * l->dir[2];
+        q.hq = ef_lit_len2(q.h, l->radius);
+        if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
+            return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
+        if (q.hq == 0) {
+            if (q.ts >= a && q.ts <= D) {
+                /* a lamp of radius 0 on the segment: its 1/d^2 does not
+                 * integrate */
+                for (int k = 0; k < 3; ++k)
+                    if (l->e[k] > 0 && (q.uniform ? q.sig[k] > 0 : 1))
+                        S[k] = INFINITY;
+                return;
+            }
+            /* on the line beyond an end: the substitution's hq from a
+             * billionth of its least distance, which changes 1/d^2 by
+             * (hq / d)^2 <= 1e-18 */
+            q.hq = 1e-9 * (q.ts < a ? a - q.ts : q.ts - D);
+        }
+        int iso = 1;
+        for (int i = 0; i < s->ncomp; ++i)
+            iso &= s->comp[i].phase == EF_PHASE_ISO;
+        if (l->kind == EF_LIGHT_POINT && q.uniform && iso && l->radius == 0 && q.h > 0) {
+            double sig[3], scat[3];
+            ef_lit_lamp_medium(s, sig, scat);
+            if (ef_lit_lamp_closed(sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)
+                return;
+            /* The two ends cancelled: a segment short beside its distance
+             * from the lamp, where the integrand is smooth in t. One
+             * Kronrod rule in u = t - ts, kept where its estimate meets
+             * the closed form's 1e-13 (else the pieces below). */
+            if (isfinite(D)) {
+                gk_iv iv = { .a = a - q.ts, .b = D - q.ts };
+                gk15(lit_integrand, &q, &iv);
+                int ok = 1;
+                for (int k = 0; k < 3; ++k)
+                    ok &= iv.e[k] <= REL_UNIFORM * fabs(iv.r[k]) && isfinite(iv.r[k]);
+                if (ok) {
+                    for (int k = 0; k < 3; ++k) {
+                        S[k] += iv.r[k];
+                        E[k] += iv.e[k];
+                    }
+                    return;
+                }
+            }
+        }
+        q.equi = 1;
+        /* Within W of the closest approach the substitution makes 1/d^2
+         * flat; past it, t - ts itself, in pieces of geometric length (a
+         * xi crowded against +-pi/2 would lose the pieces to rounding).
+         * The closest approach itself is a cut (where h is 0 the phase
+         * jumps there); where the radius is far wider than the line's
+         * distance h, the phase still turns from forward to back over ~h:
+         * geometric steps from h inside W too. */
+        const double W = 64 * q.hq;
+        if (q.ts > a && q.ts < D)
+            cut[n++] = q.ts;
+        const double h0 = q.h < q.hq / 16 ? fmax(q.h, 1e-6 * q.hq) : W;
+        n = ef_lit_steps_around(cut, n, q.ts, a, D, h0);
+        if (h0 < W)
+            n = ef_lit_steps_around(cut, n, q.ts, a, D, W);
+        q.W = W;
+    }
+    if (isfinite(D))
+        cut[n++] = D;
+    const double rel = q.uniform ? REL_UNIFORM : REL_GENERAL;
+    if (q.equi) {
+        /* pieces within W of the lamp in xi = atan((t - ts) / hq), the
+         * others in u = t - ts; an infinite ray's last piece in v, u =
+         * ua + lam v / (1 - v), lam its start's distance from the lamp */
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        const double W = q.W;
+        double run[MAX_CUTS];
+        for (int i = 0; i + 1 < n;) {
+            const int in = cut[i] >= q.ts - W && cut[i + 1] <= q.ts + W;
+            int m = 0, j = i;
+            run[m++] = in ? atan((cut[i] - q.ts) / q.hq) : cut[i] - q.ts;
+            for (; j + 1 < n; ++j) {
+                if ((cut[j] >= q.ts - W && cut[j + 1] <= q.ts + W) != in)
+                    break;
+                run[m++] = in ? atan((cut[j + 1] - q.ts) / q.hq) : cut[j + 1] - q.ts;
+            }
+            q.equi = in;
+            gk_adapt(lit_integrand, &q, run, m, rel, S, E);
+            i = j;
+        }
+        if (!isfinite(D)) {
+            q.equi = 2;
+            q.ua = cut[n - 1] - q.ts;
+            q.lam = fmax(fabs(q.ua), q.hq);
+            const double v[2] = { 0, 1 };
+            gk_adapt(lit_integrand, &q, v, 2, rel, S, E);
+        }
+    } else if (isfinite(D)) {
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        gk_adapt(lit_integrand, &q, cut, n, rel, S, E);
+    } else {
+        /* The sun on an infinite ray: pieces doubling in length past the
+         * last cut until what is left is below the tolerance: its integral
+         * is at most max(albedo p) E T(0,t) (1 - T(t,inf)) per channel,
+         * which joins the error estimate. */
+        qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
+        gk_adapt(lit_integrand, &q, cut, n, REL_GENERAL, S, E);
+        const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
+        double pmax = 0;
+        for (int i = 0; i < s->ncomp; ++i)
+            pmax = fmax(pmax, ef_phase_eval(s->comp[i].phase, s->comp[i].g, cth));
+        double ta = cut[n - 1], len = fmax(ta, 1.0);
+        for (int it = 0; it < 2100; ++it) {
+            double x[3], tv[3], tr[3], tail[3];
+            for (int k = 0; k < 3; ++k)
+                x[k] = r->org[k] + ta * r->dir[k];
+            ef_lit_tau_from(s, r->org, r->dir, ta, tv);
+            ef_lit_tau_from(s, x, r->dir, INFINITY, tr);
+            int done = 1;
+            for (int k = 0; k < 3; ++k) {
+                tail[k] = pmax * l->e[k] * exp(-tv[k]) * -expm1(-tr[k]);
+                done &= !(tail[k] > REL_GENERAL * fabs(S[k])) || tail[k] < 1e-300;
+            }
+            if (done || !(ta + len < 1e300)) {
+                for (int k = 0; k < 3; ++k)
+                    E[k] += tail[k] > 0 ? tail[k] : 0;
+                break;
+            }
+            const double piece[2] = { ta, ta + len };
+            gk_adapt(lit_integrand, &q, piece, 2, REL_GENERAL, S, E);
+            ta += len;
+            len *= 2;
+        }
+    }
+}
