@@ -1,6 +1,6 @@
 #include "depth.h"
 
-#include "exact.h"
+#include "ddouble.h"
 
 #include <math.h>
 #include <string.h>

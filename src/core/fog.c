@@ -1,6 +1,6 @@
 #include "fog.h"
 
-#include "exact.h"
+#include "ddouble.h"
 
 #include <errno.h>
 #include <stdio.h>

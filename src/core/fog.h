@@ -7,6 +7,7 @@
 #define EF_FOG_H
 
 #include <float.h>
+#include <math.h>
 #include <stdatomic.h>
 
 #include "error.h"
@@ -118,6 +119,31 @@ typedef struct ef_tau_info {
     int over;           /* the work bound dropped octaves beyond the tolerance */
 } ef_tau_info;
 
+/* A sun as a model's closed form sees it (the sun hook): towards the sun
+ * (unit), and per channel the weight albedo p(theta) E, formed by lit fog
+ * in that order (theta between the sun and the view ray), and whether the
+ * channel has light at all (E and the albedo non-zero). */
+typedef struct ef_sun_light {
+    double dir[3];
+    double w[3];
+    int live[3];
+} ef_sun_light;
+
+/* tau phi(tau q), phi(x) = -expm1(-x) / x: the integral of e^(linear) over
+ * a segment of optical depth tau whose exponent changes by tau q, relative
+ * to its larger end (the sun closed forms' kernel). tau phi(x) while x <= 1
+ * (x -> 0 tends to tau exactly), -expm1(-x) / q beyond (tau = inf gives
+ * 1 / q). */
+static inline double ef_tau_phi(double tau, double q)
+{
+    const double x = tau * q;
+    if (x == 0)
+        return tau;
+    if (x <= 1)
+        return tau * (-expm1(-x) / x);
+    return -expm1(-x) / q;
+}
+
 typedef struct ef_fog_model {
     const char *name;
     const char *const *keys;         /* NULL-terminated list of accepted keys */
@@ -182,6 +208,23 @@ typedef struct ef_fog_model {
      * the kinks (1 + c fbm). Returns 0 when the component has none (the
      * clamp cannot bind: *g is not set), else 1 with *g. */
     int (*kink)(const ef_fog_component *c, const long double *v, long double *g);
+    /* Optional, for lit fog: 1 when the density is the same at every point
+     * of space (it fills all space: exp along the true distance), with
+     * that extinction per channel into sigma; else 0. */
+    int (*uniform)(const ef_fog_component *c, double sigma[3]);
+    /* Optional, for lit fog's planet sun: 1 when the density is
+     * rho e^(-k (up.x - base)) with k > 0 (exponential strata along the
+     * component's up), with rho per channel, k and base; else 0. */
+    int (*strata)(const ef_fog_component *c, double rho[3], double *k, double *base);
+    /* Optional, for lit fog: a sun's single scattering along r when this
+     * component is the scene's only one, in closed form: S[ch] = sl->w[ch]
+     * times the model's own factors (the view ray's optical depth, the
+     * sun's from its ends, the geometry), 0 where !sl->live[ch]. tv: the
+     * view ray's optical depth per channel as tau() gives it, or NULL (the
+     * model computes it). Returns 1, or 0 when the component has no closed
+     * form (S untouched; lit fog integrates instead). */
+    int (*sun)(const ef_fog_component *c, const struct ef_sun_light *sl, const ef_ray *r,
+               const double *tv, double S[3]);
     int depth_only;                  /* tau reads r->dist or r->planar only, never dir or org */
     int uses_distance;               /* accepts distance=radial|planar */
     int uses_up;                     /* accepts up=AXIS (else ctx->up applies) */

@@ -14,6 +14,7 @@
 #include "fog.h"
 
 #include <math.h>
+#include <string.h>
 
 /* p[] layout, shared by the three models. */
 enum {
@@ -408,21 +409,94 @@ static void density_smooth(const ef_fog_component *c, const long double *v, long
     }
 }
 
+/* The sun in this half-space fog, of any of the three densities sigma(X) of
+ * the depth X = -h below the plane (h = n.x + d, n unit, fog where h < 0:
+ * constant, linear, Walker's smooth): from x the sun's path in the fog has
+ * optical depth tau_sun(x) = Sigma(X) / (n.l), Sigma the density's
+ * integral from the plane down, so along the view ray the exponent
+ * E(t) = -(tau_v(0, t) + tau_sun(x(t))) has dE/dt = -sigma (1 - s / (n.l))
+ * (s = n.u) wherever there is fog, and 0 where there is none:
+ *   S = albedo p E int sigma e^E dt = albedo p E (e^E(0) - e^E(D)) / q,
+ * q = 1 - s / (n.l), written as tau_v e^max(E(0), E(D)) phi(tau_v |q|)
+ * (no difference of large terms; q -> 0 tends to tau_v e^E). Both ends'
+ * E come from the model's own closed-form optical depths (the view
+ * segment, and the sun's ray from each end). With n.l <= 0 the sun never
+ * leaves the fog: no light. */
+static void sun_plane(const ef_fog_component *c, const ef_sun_light *sl, const ef_ray *r,
+                      const double *tv_in, int constant, double S[3])
+{
+    const double *n = c->p;
+    const double nl = n[0] * sl->dir[0] + n[1] * sl->dir[1] + n[2] * sl->dir[2];
+    const double sv = n[0] * r->dir[0] + n[1] * r->dir[1] + n[2] * r->dir[2];
+    S[0] = S[1] = S[2] = 0;
+    if (!(nl > 0))
+        return;
+    double tv[3], ta[3], tb[3] = { 0, 0, 0 };
+    if (tv_in)
+        memcpy(tv, tv_in, sizeof tv);
+    else
+        c->model->tau(c, r, tv);
+    if (constant) {
+        /* constant: Sigma(X) = rho X, from the plane values at the ends */
+        const double h0 = n[0] * r->org[0] + n[1] * r->org[1] + n[2] * r->org[2] + n[3];
+        const double hb = isfinite(r->dist) ? h0 + sv * r->dist : 0;
+        for (int ch = 0; ch < 3; ++ch) {
+            ta[ch] = h0 < 0 ? c->p[P_DENS + ch] * -h0 / nl : 0;
+            tb[ch] = hb < 0 ? c->p[P_DENS + ch] * -hb / nl : 0;
+        }
+    } else {
+        ef_ray sun = { { sl->dir[0], sl->dir[1], sl->dir[2] }, INFINITY, INFINITY,
+                       { r->org[0], r->org[1], r->org[2] } };
+        c->model->tau(c, &sun, ta);
+        if (isfinite(r->dist)) {
+            for (int k = 0; k < 3; ++k)
+                sun.org[k] = r->org[k] + r->dist * r->dir[k];
+            c->model->tau(c, &sun, tb);
+        }
+    }
+    const double q = fabs(1 - sv / nl);
+    for (int ch = 0; ch < 3; ++ch) {
+        if (!(tv[ch] > 0) || !sl->live[ch])
+            continue;
+        const double ya = -ta[ch], yb = -tv[ch] - tb[ch];
+        const double e = exp(ya > yb ? ya : yb);
+        S[ch] = e == 0 ? 0 : sl->w[ch] * ef_tau_phi(tv[ch], q) * e;
+    }
+}
+
+/* The sun hooks of the three densities (the constant one from its plane
+ * values, the others from their optical depths along the sun's rays). */
+static int sun_halfspace(const ef_fog_component *c, const ef_sun_light *sl, const ef_ray *r,
+                         const double *tv, double S[3])
+{
+    sun_plane(c, sl, r, tv, 1, S);
+    return 1;
+}
+
+static int sun_halfspace_ray(const ef_fog_component *c, const ef_sun_light *sl,
+                             const ef_ray *r, const double *tv, double S[3])
+{
+    sun_plane(c, sl, r, tv, 0, S);
+    return 1;
+}
+
+
+
 const ef_fog_model ef_fog_halfspace = {
     .name = "halfspace", .keys = halfspace_keys, .set = set_halfspace,
     .finish = finish_halfspace, .tau = tau_halfspace, .functionals = one_plane,
     .tau_add = tau_add_halfspace, .bind = bind_plane,
-    .features = kink_at_plane, .density = density_halfspace,
+    .features = kink_at_plane, .density = density_halfspace, .sun = sun_halfspace,
 };
 const ef_fog_model ef_fog_halfspace_linear = {
     .name = "halfspace-linear", .keys = linear_keys, .set = set_linear,
     .finish = finish_linear, .tau = tau_linear, .functionals = one_plane,
     .tau_add = tau_add_linear, .bind = bind_plane,
-    .features = kink_at_plane, .density = density_linear,
+    .features = kink_at_plane, .density = density_linear, .sun = sun_halfspace_ray,
 };
 const ef_fog_model ef_fog_halfspace_smooth = {
     .name = "halfspace-smooth", .keys = smooth_keys, .set = set_halfspace,
     .finish = finish_smooth, .tau = tau_smooth, .functionals = one_plane,
     .tau_add = tau_add_smooth, .bind = bind_plane,
-    .features = smooth_features, .density = density_smooth,
+    .features = smooth_features, .density = density_smooth, .sun = sun_halfspace_ray,
 };

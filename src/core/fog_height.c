@@ -180,9 +180,77 @@ static void density_height(const ef_fog_component *c, const long double *v, long
     }
 }
 
+/* Exponential strata (lit fog's planet sun): falloff > 0. */
+static int strata_height(const ef_fog_component *c, double rho[3], double *k, double *base)
+{
+    if (!(c->p[3] > 0))
+        return 0;
+    for (int ch = 0; ch < 3; ++ch)
+        rho[ch] = c->p[ch];
+    *k = c->p[3];
+    *base = c->p[4];
+    return 1;
+}
+
+/* The sun in this exponential height fog (k > 0), with its own extinction
+ * in the fog: T_sun(x) = e^-(sigma(x) / (k l_up)), and along the view ray
+ *   S = albedo p E tau_v e^-min(A, B) phi(|B - A|),
+ *   A = sigma(C) / (k l_up), B = tau_v + sigma(P) / (k l_up),
+ * phi(x) = -expm1(-x) / x and B - A = tau_v (1 - mu / l_up) exactly (mu the
+ * view ray's up component), so no difference of large terms is formed. */
+static int sun_height(const ef_fog_component *c, const ef_sun_light *sl, const ef_ray *r,
+                      const double *tv_in, double S[3])
+{
+    const double k = c->p[3];
+    if (!(k > 0))
+        return 0;
+    double tvb[3];
+    const double *tv = tv_in;
+    if (!tv) {
+        tau_height(c, r, tvb);
+        tv = tvb;
+    }
+    const double lu = sl->dir[0] * c->up[0] + sl->dir[1] * c->up[1] + sl->dir[2] * c->up[2];
+    const double mu = r->dir[0] * c->up[0] + r->dir[1] * c->up[1] + r->dir[2] * c->up[2];
+    S[0] = S[1] = S[2] = 0;
+    if (!(lu > 0))
+        return 1;   /* at or below the horizon, the sun crosses unbounded fog */
+    double sc[3], sp[3] = { 0, 0, 0 };
+    /* the densities at the ends, rho e^-(k (height - base)), in double
+     * (one exponential each: the model's own density works in long double
+     * for the reference) */
+    const double hc = c->up[0] * r->org[0] + c->up[1] * r->org[1] + c->up[2] * r->org[2] - c->p[4];
+    const double ec = exp(-k * hc);
+    double ep = 0;
+    if (isfinite(r->dist))
+        ep = exp(-k * (hc + r->dist * mu));
+    else if (!(mu > 0))
+        ep = INFINITY;
+    for (int ch = 0; ch < 3; ++ch) {
+        sc[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ec;
+        sp[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ep;
+    }
+    const double q = fabs(1 - mu / lu);
+    double me = 0;   /* m e^-min(A, B) of channel last (-1: none yet) */
+    int last = -1;
+    for (int ch = 0; ch < 3; ++ch) {
+        if (!(tv[ch] > 0) || !sl->live[ch])
+            continue;
+        /* grey fog: the same densities, the same factor */
+        if (!(last >= 0 && c->p[ch] == c->p[last] && tv[ch] == tv[last])) {
+            last = ch;
+            const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
+            const double e = exp(-(A < B ? A : B));
+            me = e == 0 ? 0 : ef_tau_phi(tv[ch], q) * e;
+        }
+        S[ch] = me == 0 ? 0 : sl->w[ch] * me;
+    }
+    return 1;
+}
+
 const ef_fog_model ef_fog_height = { .name = "height", .keys = height_keys, .set = set_height,
                                      .finish = finish_height, .tau = tau_height,
                                      .tau_add = tau_add_height, .bind = bind_height,
                                      .functionals = functionals_height,
                                      .features = features_height, .density = density_height,
-                                     .uses_up = 1 };
+                                     .strata = strata_height, .sun = sun_height, .uses_up = 1 };

@@ -138,13 +138,24 @@ static void tau_linear(const ef_fog_component *c, const ef_ray *r, double tau[3]
     tau[0] = tau[1] = tau[2] = t;
 }
 
+/* exp along the true distance is uniform fog of position: rho everywhere
+ * (along the planar distance it is not: a function of the camera). */
+static int uniform_exp(const ef_fog_component *c, double sigma[3])
+{
+    if (c->distance != EF_DIST_RADIAL)
+        return 0;
+    for (int k = 0; k < 3; ++k)
+        sigma[k] = c->p[k];
+    return 1;
+}
+
 const ef_fog_model ef_fog_linear = { .name = "linear", .keys = linear_keys, .set = set_linear,
                                      .finish = finish_linear, .tau = tau_linear,
                                      .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp = { .name = "exp", .keys = density_keys, .set = set_density,
                                   .finish = finish_density, .tau = tau_exp,
                                   .tau_add = tau_add_exp, .tau_dist = tau_dist_exp,
-                                  .depth_only = 1, .uses_distance = 1 };
+                                  .uniform = uniform_exp, .depth_only = 1, .uses_distance = 1 };
 const ef_fog_model ef_fog_exp2 = { .name = "exp2", .keys = density_keys, .set = set_density,
                                    .finish = finish_density, .tau = tau_exp2,
                                    .tau_dist = tau_dist_exp2,

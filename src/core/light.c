@@ -352,10 +352,10 @@ double ef_light_planet_ch(const ef_light *l, double k, double mu, double y)
 void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y)
 {
     l->ch_ok = 0;
-    if (!(l->kind == EF_LIGHT_SUN && l->planet > 0) || c->model != &ef_fog_height ||
-        !(c->p[3] > 0))
+    double rho[3], k, base;
+    if (!(l->kind == EF_LIGHT_SUN && l->planet > 0) || !c->model->strata ||
+        !c->model->strata(c, rho, &k, &base))
         return;
-    const double k = c->p[3], base = c->p[4];
     const double mu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
     const double y0 = fmin(cam_y, base) - 200 / k, y1 = fmax(cam_y, base) + 60 / k;
     if (!(l->planet + y0 > 0) || !isfinite(y1))
@@ -387,11 +387,6 @@ void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y)
     }
 }
 
-/* The sun's optical depth from x over a planet of radius l->planet (the
- * scene's one height fog stratified over a sphere whose surface lies at
- * height 0 below x, its centre on x's vertical): sigma(x) H Ch(X, mu), H =
- * 1/k, X = (R + height) / H, mu = l . up; +inf where the planet itself
- * stands between x and the sun (its tangent point below the surface). */
 
 double ef_spot_share(const ef_light *l, double cos_alpha)
 {

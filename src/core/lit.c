@@ -16,8 +16,9 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err)
 {
     if (s->nlight == 0)
         return 0;
-    const int one_height = s->ncomp == 1 && s->comp[0].model == &ef_fog_height &&
-                           s->comp[0].p[3] > 0;
+    double rho[3], k, base;
+    const int one_height = s->ncomp == 1 && s->comp[0].model->strata &&
+                           s->comp[0].model->strata(&s->comp[0], rho, &k, &base);
     for (int j = 0; j < s->nlight; ++j)
         if (s->light[j].planet > 0 && !one_height)
             return ef_fail(err, "--light '%s': planet= takes one exponential height fog "
@@ -42,7 +43,8 @@ int ef_light_dark(const ef_fog_scene *s, const ef_light *l)
         return 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
-        if (is_uniform(c) && c->p[0] > 0 && c->p[1] > 0 && c->p[2] > 0)
+        double sg[3];
+        if (uniform_sigma(c, sg) && sg[0] > 0 && sg[1] > 0 && sg[2] > 0)
             return 1;
     }
     return 0;
@@ -63,11 +65,21 @@ void ef_lit_tau_from(const ef_fog_scene *s, const double p[3], const double d[3]
     }
 }
 
+/* The sun's optical depth from x over a planet of radius l->planet (the
+ * scene's one height fog stratified over a sphere whose surface lies at
+ * height 0 below x, its centre on x's vertical): sigma(x) H Ch(X, mu), H =
+ * 1/k, X = (R + height) / H, mu = l . up; +inf where the planet itself
+ * stands between x and the sun (its tangent point below the surface). */
 void ef_lit_sun_planet_tau(const ef_fog_scene *s, const ef_light *l, const double x[3],
                            double tau[3])
 {
     const ef_fog_component *c = &s->comp[0];
-    const double k = c->p[3], R = l->planet;
+    double rho[3], k, base;
+    if (!c->model->strata || !c->model->strata(c, rho, &k, &base)) {
+        tau[0] = tau[1] = tau[2] = INFINITY;   /* ef_lights_check refuses it */
+        return;
+    }
+    const double R = l->planet;
     const double y = c->up[0] * x[0] + c->up[1] * x[1] + c->up[2] * x[2];
     const double mu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
     const double r0 = R + y;
@@ -75,87 +87,46 @@ void ef_lit_sun_planet_tau(const ef_fog_scene *s, const ef_light *l, const doubl
     if (!(r0 > 0) || (mu < 0 && r0 * sqrt((1 - mu) * (1 + mu)) < R))
         return;
     const double ch = ef_light_planet_ch(l, k, mu, y);
-    const double e = exp(-k * (y - c->p[4]));
+    const double e = exp(-k * (y - base));
     for (int ch3 = 0; ch3 < 3; ++ch3)
-        tau[ch3] = c->p[ch3] == 0 ? 0 : c->p[ch3] * e / k * ch;
+        tau[ch3] = rho[ch3] == 0 ? 0 : rho[ch3] * e / k * ch;
 }
+
 /* ------------------------------------------------------- the closed forms */
 
-/* tau phi(tau q), phi(x) = -expm1(-x) / x: the integral of e^(linear) over
- * a segment of optical depth tau whose exponent changes by tau q, relative
- * to its larger end. tau phi(x) while x <= 1 (x -> 0 tends to tau exactly),
- * -expm1(-x) / q beyond (tau = inf gives 1 / q). */
-static double tau_phi(double tau, double q)
+/* Sun l as component c's closed form sees it along r (the sun hook, fog.h):
+ * its direction, and per channel albedo p E in that order, p the phase at
+ * the angle between the sun and r. */
+static void sun_light(const ef_fog_component *c, const ef_light *l, const ef_ray *r,
+                      ef_sun_light *sl)
 {
-    const double x = tau * q;
-    if (x == 0)
-        return tau;
-    if (x <= 1)
-        return tau * (-expm1(-x) / x);
-    return -expm1(-x) / q;
-}
-
-/* The sun in one exponential height fog (k > 0), with its own extinction
- * in the fog: T_sun(x) = e^-(sigma(x) / (k l_up)), and along the view ray
- *   S = albedo p E tau_v e^-min(A, B) phi(|B - A|),
- *   A = sigma(C) / (k l_up), B = tau_v + sigma(P) / (k l_up),
- * phi(x) = -expm1(-x) / x and B - A = tau_v (1 - mu / l_up) exactly (mu the
- * view ray's up component), so no difference of large terms is formed. */
-static void sun_height_tau(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
-                           const double tv[3], double S[3])
-{
-    const ef_fog_component *c = &s->comp[0];
-    const double k = c->p[3];
-    const double lu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];
-    const double mu = r->dir[0] * c->up[0] + r->dir[1] * c->up[1] + r->dir[2] * c->up[2];
-    S[0] = S[1] = S[2] = 0;
-    if (!(lu > 0))
-        return;   /* at or below the horizon, the sun crosses unbounded fog */
-    double sc[3], sp[3] = { 0, 0, 0 };
-    /* the densities at the ends, rho e^-(k (height - base)), in double
-     * (one exponential each: the model's own density works in long double
-     * for the reference) */
-    const double hc = c->up[0] * r->org[0] + c->up[1] * r->org[1] + c->up[2] * r->org[2] - c->p[4];
-    const double ec = exp(-k * hc);
-    double ep = 0;
-    if (isfinite(r->dist))
-        ep = exp(-k * (hc + r->dist * mu));
-    else if (!(mu > 0))
-        ep = INFINITY;
-    for (int ch = 0; ch < 3; ++ch) {
-        sc[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ec;
-        sp[ch] = c->p[ch] == 0 ? 0 : c->p[ch] * ep;
-    }
+    memcpy(sl->dir, l->dir, sizeof sl->dir);
     const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
-    const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - mu / lu);
-    double me = 0;   /* m e^-min(A, B) of channel last (-1: none yet) */
-    int last = -1;
+    const double p = ef_phase_eval(c->phase, c->g, cth);
     for (int ch = 0; ch < 3; ++ch) {
-        if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
-            continue;
-        /* grey fog: the same densities, the same factor */
-        if (!(last >= 0 && c->p[ch] == c->p[last] && tv[ch] == tv[last])) {
-            last = ch;
-            const double A = sc[ch] / (k * lu), B = tv[ch] + sp[ch] / (k * lu);
-            const double e = exp(-(A < B ? A : B));
-            me = e == 0 ? 0 : tau_phi(tv[ch], q) * e;
-        }
-        S[ch] = me == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * me;
+        sl->w[ch] = albedo(c, ch) * p * l->e[ch];
+        sl->live[ch] = !(l->e[ch] == 0 || albedo(c, ch) == 0);
     }
 }
 
-/* sun_height with the view segment's optical depth from the model. */
-static void sun_height(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+/* Sun l through the scene's one component c in closed form along r (tv:
+ * the view ray's optical depth, or NULL); 0 when c has none. */
+static int sun_closed(const ef_fog_component *c, const ef_light *l, const ef_ray *r,
+                      const double *tv, double S[3])
 {
-    double tv[3];
-    s->comp[0].model->tau(&s->comp[0], r, tv);
-    sun_height_tau(s, l, r, tv, S);
+    if (!c->model->sun)
+        return 0;
+    ef_sun_light sl;
+    sun_light(c, l, r, &sl);
+    return c->model->sun(c, &sl, r, tv, S);
 }
 
 int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l)
 {
+    double rho[3], k, base;
     return l->kind == EF_LIGHT_SUN && !l->shadow && !(l->planet > 0) && s->ncomp == 1 &&
-           s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0;
+           s->comp[0].model->sun && s->comp[0].model->strata &&
+           s->comp[0].model->strata(&s->comp[0], rho, &k, &base);
 }
 
 void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
@@ -165,184 +136,30 @@ void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_r
     /* as ef_light_inscatter: no segment, no light */
     if (!(r->dist > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return;
-    sun_height_tau(s, l, r, tv, S);
+    sun_closed(&s->comp[0], l, r, tv, S);
 }
 
-/* The sun in one half-space fog of any of the three densities sigma(X) of
- * the depth X = -h below the plane (h = n.x + d, n unit, fog where h < 0:
- * constant, linear, Walker's smooth): from x the sun's path in the fog has
- * optical depth tau_sun(x) = Sigma(X) / (n.l), Sigma the density's
- * integral from the plane down, so along the view ray the exponent
- * E(t) = -(tau_v(0, t) + tau_sun(x(t))) has dE/dt = -sigma (1 - s / (n.l))
- * (s = n.u) wherever there is fog, and 0 where there is none:
- *   S = albedo p E int sigma e^E dt = albedo p E (e^E(0) - e^E(D)) / q,
- * q = 1 - s / (n.l), written as tau_v e^max(E(0), E(D)) phi(tau_v |q|)
- * (no difference of large terms; q -> 0 tends to tau_v e^E). Both ends'
- * E come from the model's own closed-form optical depths (the view
- * segment, and the sun's ray from each end). With n.l <= 0 the sun never
- * leaves the fog: no light. */
-static void sun_halfspace(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
+/* Sun l's closed form over [a, b] of r in the scene's one component: T(0,
+ * a) times the closed form along the ray from x(a). Returns 0 (S
+ * untouched) when the component has none. */
+static int closed_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                        double b, double S[3])
 {
     const ef_fog_component *c = &s->comp[0];
-    const double *n = c->p;
-    const double nl = n[0] * l->dir[0] + n[1] * l->dir[1] + n[2] * l->dir[2];
-    const double sv = n[0] * r->dir[0] + n[1] * r->dir[1] + n[2] * r->dir[2];
-    S[0] = S[1] = S[2] = 0;
-    if (!(nl > 0))
-        return;
-    double tv[3], ta[3], tb[3] = { 0, 0, 0 };
-    c->model->tau(c, r, tv);
-    if (c->model == &ef_fog_halfspace) {
-        /* constant: Sigma(X) = rho X, from the plane values at the ends */
-        const double h0 = n[0] * r->org[0] + n[1] * r->org[1] + n[2] * r->org[2] + n[3];
-        const double hb = isfinite(r->dist) ? h0 + sv * r->dist : 0;
-        for (int ch = 0; ch < 3; ++ch) {
-            ta[ch] = h0 < 0 ? c->p[4 + ch] * -h0 / nl : 0;
-            tb[ch] = hb < 0 ? c->p[4 + ch] * -hb / nl : 0;
-        }
-    } else {
-        ef_ray sun = { { l->dir[0], l->dir[1], l->dir[2] }, INFINITY, INFINITY,
-                       { r->org[0], r->org[1], r->org[2] } };
-        c->model->tau(c, &sun, ta);
-        if (isfinite(r->dist)) {
-            for (int k = 0; k < 3; ++k)
-                sun.org[k] = r->org[k] + r->dist * r->dir[k];
-            c->model->tau(c, &sun, tb);
-        }
-    }
-    const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
-    const double p = ef_phase_eval(c->phase, c->g, cth), q = fabs(1 - sv / nl);
-    for (int ch = 0; ch < 3; ++ch) {
-        if (!(tv[ch] > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
-            continue;
-        const double ya = -ta[ch], yb = -tv[ch] - tb[ch];
-        const double e = exp(ya > yb ? ya : yb);
-        S[ch] = e == 0 ? 0 : albedo(c, ch) * p * l->e[ch] * tau_phi(tv[ch], q) * e;
-    }
-}
-
-/* The sun in one constant-density convex volume (box or convex: planes
- * n.x + d < 0, n unit, in c->arr): inside, the sun's path out of the
- * volume is e(t) = min over the planes the sunlight leaves through
- * (n.l > 0) of -(n.x(t) + d) / (n.l), a lower envelope of lines in t, and
- * the fog is only there, so along the view segment's part inside,
- * [t_in, t_out], the exponent -rho (t - t_in + e(t)) is piecewise linear:
- * per piece rho L e^max(ends) phi(|difference|). With no plane facing the
- * sun the sun's path never leaves: no light. */
-static void sun_convex(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3])
-{
-    const ef_fog_component *c = &s->comp[0];
-    const int np = (int) c->p[9];
-    S[0] = S[1] = S[2] = 0;
-    if (np <= 0 || np > 64)
-        return;
-    double h0[64], sv[64], m[64];
-    double tin = 0, tout = r->dist;
-    for (int i = 0; i < np; ++i) {
-        const double *P = c->arr + 4 * i;
-        h0[i] = P[0] * r->org[0] + P[1] * r->org[1] + P[2] * r->org[2] + P[3];
-        sv[i] = P[0] * r->dir[0] + P[1] * r->dir[1] + P[2] * r->dir[2];
-        m[i] = P[0] * l->dir[0] + P[1] * l->dir[1] + P[2] * l->dir[2];
-        if (sv[i] == 0) {
-            if (!(h0[i] < 0))
-                return;   /* along the plane, outside it */
-        } else if (sv[i] < 0) {
-            tin = fmax(tin, -h0[i] / sv[i]);
-        } else {
-            tout = fmin(tout, -h0[i] / sv[i]);
-        }
-    }
-    if (!(tin < tout))
-        return;
-    /* the length inside from the model's own optical depth, which clips in
-     * double-double: a sliver's ends, subtracted in double, would lose it */
-    double tv[3], len = tout - tin;
-    c->model->tau(c, r, tv);
-    for (int ch = 0; ch < 3; ++ch)
-        if (c->p[ch] > 0 && isfinite(tv[ch])) {
-            len = tv[ch] / c->p[ch];
-            break;
-        }
-    /* e(t) = min_i alpha_i + beta_i t over the planes the sun leaves by */
-    int cur = -1;
-    double ecur = INFINITY;
-    for (int i = 0; i < np; ++i)
-        if (m[i] > 0) {
-            const double e = -(h0[i] + tin * sv[i]) / m[i];
-            if (cur < 0 || e < ecur || (e == ecur && -sv[i] / m[i] < -sv[cur] / m[cur])) {
-                cur = i;
-                ecur = e;
-            }
-        }
-    if (cur < 0)
-        return;   /* no plane faces the sun: its light never gets in */
-    const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
-    const double p = ef_phase_eval(c->phase, c->g, cth);
-    /* pieces by their offset from tin (u): the kinks' t only place them,
-     * so the lengths add up to len exactly */
-    double t = tin, u = 0;
-    while (u < len) {
-        const double bc = -sv[cur] / m[cur];
-        /* the next line to dip below the current one */
-        double tn = INFINITY;
-        int next = -1;
-        for (int i = 0; i < np; ++i) {
-            if (!(m[i] > 0) || i == cur)
-                continue;
-            const double bi = -sv[i] / m[i];
-            if (!(bi < bc))
-                continue;
-            /* alpha_i + bi t = alpha_c + bc t, alpha = -h0 / m */
-            const double tx = (-h0[i] / m[i] + h0[cur] / m[cur]) / (bc - bi);
-            if (tx > t && tx < tn && tx - tin < len) {
-                tn = tx;
-                next = i;
-            }
-        }
-        const double e0 = fmax(-(h0[cur] + t * sv[cur]) / m[cur], 0);
-        const double un = next < 0 ? len : fmin(fmax(tn - tin, u), len);
-        const double L = un - u, q = fabs(1 + bc);
-        for (int ch = 0; ch < 3; ++ch) {
-            const double rho = c->p[ch];
-            if (!(rho > 0) || l->e[ch] == 0 || albedo(c, ch) == 0)
-                continue;
-            const double y0 = -rho * (u + e0);
-            const double y1 = y0 - rho * (1 + bc) * L;
-            const double e = isfinite(L) ? exp(y0 > y1 ? y0 : y1) : exp(y0);
-            if (e == 0)
-                continue;
-            S[ch] += albedo(c, ch) * p * l->e[ch] * tau_phi(rho * L, q) * e;
-        }
-        if (next < 0)
-            break;
-        cur = next;
-        t = tn;
-        u = un;
-    }
-}
-
-/* A closed form f (over a whole ray from its origin) over [a, b] of r:
- * T(0, a) times f along the ray from x(a). */
-static void closed_range(void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *,
-                                   double *),
-                         const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                         double b, double S[3])
-{
-    if (a == 0 && b == r->dist) {
-        f(s, l, r, S);
-        return;
-    }
+    if (a == 0 && b == r->dist)
+        return sun_closed(c, l, r, NULL, S);
     ef_ray sub = *r;
     for (int k = 0; k < 3; ++k)
         sub.org[k] = r->org[k] + a * r->dir[k];
     sub.dist = sub.planar = b - a;
     double tv[3];
     ef_lit_tau_from(s, r->org, r->dir, a, tv);
-    f(s, l, &sub, S);
+    if (!sun_closed(c, l, &sub, NULL, S))
+        return 0;
     for (int k = 0; k < 3; ++k)
         S[k] = S[k] == 0 ? 0 : S[k] * exp(-tv[k]);
+    return 1;
 }
-
 
 /* Adds to S the light l scatters in over [a, b] of r (0 <= a < b, b may
  * be INFINITY), T(0, t) counted from the camera, and its error estimate
@@ -362,20 +179,10 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
             uniform &= is_uniform(&s->comp[i]);
         if (uniform)
             return;   /* the sun's light never crosses unbounded uniform fog */
-        void (*f)(const ef_fog_scene *, const ef_light *, const ef_ray *, double *) = NULL;
-        if (s->ncomp == 1 && s->comp[0].model == &ef_fog_height && s->comp[0].p[3] > 0 &&
-            !(l->planet > 0))
-            f = sun_height;
-        if (s->ncomp == 1 && (s->comp[0].model == &ef_fog_halfspace ||
-                              s->comp[0].model == &ef_fog_halfspace_linear ||
-                              s->comp[0].model == &ef_fog_halfspace_smooth))
-            f = sun_halfspace;
-        if (s->ncomp == 1 && (s->comp[0].model == &ef_fog_box ||
-                              s->comp[0].model == &ef_fog_convex) && s->comp[0].p[9] <= 64)
-            f = sun_convex;
-        if (f) {
-            double v[3];
-            closed_range(f, s, l, r, a, D, v);
+        /* one component whose model has the sun's closed form (a planet
+         * sun's curved path has none) */
+        double v[3];
+        if (s->ncomp == 1 && !(l->planet > 0) && closed_range(s, l, r, a, D, v)) {
             for (int k = 0; k < 3; ++k)
                 S[k] += v[k];
             return;

@@ -23,10 +23,20 @@
 /* Cut points a segment takes, at most. */
 #define MAX_CUTS 512
 
-/* Uniform fog of position: exp with the true (radial) distance. */
+/* Whether c is uniform fog of position (the model's uniform hook: exp
+ * along the true distance), with its extinction per channel into sigma
+ * (0 where it is not). */
+static inline int uniform_sigma(const ef_fog_component *c, double sigma[3])
+{
+    sigma[0] = sigma[1] = sigma[2] = 0;
+    return c->model->uniform && c->model->uniform(c, sigma);
+}
+
+/* Whether c is uniform fog of position. */
 static inline int is_uniform(const ef_fog_component *c)
 {
-    return c->model == &ef_fog_exp && c->distance == EF_DIST_RADIAL;
+    double sigma[3];
+    return uniform_sigma(c, sigma);
 }
 
 /* A component's albedo in channel k (1 unless albedo= was given). */

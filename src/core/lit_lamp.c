@@ -595,12 +595,15 @@ void ef_lit_lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3])
 {
     for (int k = 0; k < 3; ++k)
         sig[k] = scat[k] = 0;
-    for (int i = 0; i < s->ncomp; ++i)
+    for (int i = 0; i < s->ncomp; ++i) {
+        double sg[3];
+        uniform_sigma(&s->comp[i], sg);   /* every component is uniform here */
         for (int k = 0; k < 3; ++k) {
-            sig[k] += s->comp[i].p[k];
-            if (s->comp[i].p[k] > 0)
-                scat[k] += s->comp[i].p[k] * albedo(&s->comp[i], k) / (4 * PI);
+            sig[k] += sg[k];
+            if (sg[k] > 0)
+                scat[k] += sg[k] * albedo(&s->comp[i], k) / (4 * PI);
         }
+    }
 }
 
 /* lamp_rays4 for one segment (its lanes all alike): the same bits as the

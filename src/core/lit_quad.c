@@ -16,11 +16,8 @@
 /* Extinction of component c at x per channel, from its functionals. */
 static void sigma_at(const ef_fog_component *c, const double x[3], double out[3])
 {
-    if (is_uniform(c)) {
-        for (int k = 0; k < 3; ++k)
-            out[k] = c->p[k];
+    if (uniform_sigma(c, out))
         return;
-    }
     ef_fog_functional fs[64], *f = fs;
     long double vs[64], *v = vs;
     const int n = c->model->functionals(c, NULL, 0);
@@ -246,9 +243,11 @@ static void lit_integrand(const void *qv, double u, double out[3])
         for (int i = 0; i < q->s->ncomp; ++i) {
             const ef_fog_component *c = &q->s->comp[i];
             const double p = ef_phase_eval(c->phase, c->g, cth);
+            double sg[3];
+            uniform_sigma(c, sg);
             for (int k = 0; k < 3; ++k)
-                if (c->p[k] > 0)
-                    a[k] += c->p[k] * albedo(c, k) * p;
+                if (sg[k] > 0)
+                    a[k] += sg[k] * albedo(c, k) * p;
         }
         double e[3];
         e[0] = exp(-q->sig[0] * (t + dl));
@@ -373,9 +372,13 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 {
     lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
     for (int i = 0; i < s->ncomp; ++i) {
-        q.uniform &= is_uniform(&s->comp[i]);
-        for (int k = 0; k < 3 && is_uniform(&s->comp[i]); ++k)
-            q.sig[k] += s->comp[i].p[k];
+        double sg[3];
+        if (!uniform_sigma(&s->comp[i], sg)) {
+            q.uniform = 0;
+            continue;
+        }
+        for (int k = 0; k < 3; ++k)
+            q.sig[k] += sg[k];
     }
     double cut[MAX_CUTS];
     int n = 0;

@@ -1,6 +1,6 @@
 #include "recon.h"
 
-#include "exact.h"
+#include "ddouble.h"
 
 #include <math.h>
 
