@@ -25,7 +25,7 @@ else
     flags="-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined"
     exe="$out/fuzz_exr"
 fi
-# preview.c and ocio_shim.cpp need OIIO/OCIO and are not on the file path.
+# foreign.c and ocio_shim.cpp need OIIO/OCIO and are not on the file path.
 # shellcheck disable=SC2086
 $CC -std=c11 -D_POSIX_C_SOURCE=200809L -g -O1 -fno-omit-frame-pointer $flags \
     -Wall -Wextra \

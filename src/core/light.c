@@ -44,20 +44,23 @@ static int unit3(const char *val, double v[3])
     return 0;
 }
 
-/* The keys every kind accepts, and the ones it must have. */
-static const char *const sun_keys =
-    "towards, color, intensity, angle, planet, name, shadow, bias, slope, outside, penumbra";
-static const char *const point_keys = "position, color, intensity, radius, name";
+/* The kinds: name, keys, geometry. */
+const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND] = {
+    [EF_LIGHT_SUN] = { "sun",
+                       "towards, color, intensity, angle, planet, name, shadow, bias, slope, "
+                       "outside, penumbra",
+                       0, 0, 1 },
+    [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name", 1, 0, 0 },
+    [EF_LIGHT_SPOT] = { "spot",
+                        "position, aim, cone, blend, cosine, color, intensity, radius, name, "
+                        "shadow, bias, slope, outside",
+                        1, 1, 1 },
+};
 
 const char *ef_light_kind_name(ef_light_kind k)
 {
-    static const char *const names[] = { [EF_LIGHT_SUN] = "sun", [EF_LIGHT_POINT] = "point",
-                                         [EF_LIGHT_SPOT] = "spot" };
-    return k >= EF_LIGHT_SUN && k <= EF_LIGHT_SPOT ? names[k] : "?";
+    return (int) k >= 0 && k < EF_LIGHT_NKIND ? ef_light_kinds[k].name : "?";
 }
-static const char *const spot_keys =
-    "position, aim, cone, blend, cosine, color, intensity, radius, name, shadow, bias, slope, "
-    "outside";
 
 /* Reads l's shadow map through the context and checks it fits the light:
  * a sun's map is orthographic and looks along the sunlight, a spot's is a
@@ -71,7 +74,7 @@ static int light_shadow(const ef_fog_context *ctx, const char *spec, ef_light *l
     const ef_shadow *m = l->shadow;
     const char *why = NULL;
     char detail[200] = "";
-    if (l->kind == EF_LIGHT_SUN) {
+    if (!ef_light_at_position(l)) {
         const double c = -(m->axis[0] * l->dir[0] + m->axis[1] * l->dir[1] +
                            m->axis[2] * l->dir[2]);
         if (!m->ortho)
@@ -123,12 +126,12 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     snprintf(buf, sizeof buf, "%s", spec);
     char *save = NULL, *kind = strtok_r(buf, ":", &save);
     const char *keys = NULL;
-    const char *const kind_keys[] = { [EF_LIGHT_SUN] = sun_keys, [EF_LIGHT_POINT] = point_keys,
-                                      [EF_LIGHT_SPOT] = spot_keys };
-    for (int k = EF_LIGHT_SUN; kind && k <= EF_LIGHT_SPOT; ++k)
-        if (!strcmp(kind, ef_light_kind_name((ef_light_kind) k))) {
+    const ef_light_kind_info *K = NULL;
+    for (int k = 0; kind && k < EF_LIGHT_NKIND; ++k)
+        if (!strcmp(kind, ef_light_kinds[k].name)) {
             l->kind = (ef_light_kind) k;
-            keys = kind_keys[k];
+            K = &ef_light_kinds[k];
+            keys = K->keys;
         }
     if (!keys) {
         return ef_fail(err, "--light '%s': the kind is not sun, point or spot (write "
@@ -152,37 +155,37 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         const char *key = tok, *val = eq + 1;
         unsigned bit = 0;
         int ok = strstr(keys, key) != NULL;
-        if (!strcmp(key, "shadow") && l->kind == EF_LIGHT_POINT)
+        if (!strcmp(key, "shadow") && !K->shadow)
             return ef_fail(err, "--light '%s': a point lamp takes no shadow= map (it shines "
                            "every way; a spot's or the sun's map covers one view)", spec);
         if (!ok) {
             bit = 0;
-        } else if (!strcmp(key, "towards") && l->kind == EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "towards") && !K->at_position) {
             bit = S_DIR;
             if (unit3(val, l->dir))
                 return ef_fail(err, "--light '%s': towards='%s' is not X,Y,Z (a non-zero "
                                "direction from the scene to the sun, world axes)", spec, val);
-        } else if (!strcmp(key, "position") && l->kind != EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "position") && K->at_position) {
             bit = S_POS;
             if (ef_parse_numbers(val, l->pos, 3))
                 return ef_fail(err, "--light '%s': position='%s' is not X,Y,Z (world, scene "
                                "units)", spec, val);
-        } else if (!strcmp(key, "aim") && l->kind == EF_LIGHT_SPOT) {
+        } else if (!strcmp(key, "aim") && K->cone) {
             bit = S_AIM;
             if (unit3(val, l->dir))
                 return ef_fail(err, "--light '%s': aim='%s' is not X,Y,Z (the non-zero direction "
                                "the spot points in, world axes)", spec, val);
-        } else if (!strcmp(key, "cone") && l->kind == EF_LIGHT_SPOT) {
+        } else if (!strcmp(key, "cone") && K->cone) {
             bit = S_CONE;
             if (ef_parse_numbers(val, &cone, 1) || !(cone > 0) || !(cone <= 180))
                 return ef_fail(err, "--light '%s': cone='%s' is not a full cone angle in "
                                "degrees, above 0 and at most 180", spec, val);
-        } else if (!strcmp(key, "blend") && l->kind == EF_LIGHT_SPOT) {
+        } else if (!strcmp(key, "blend") && K->cone) {
             bit = S_BLEND;
             if (ef_parse_numbers(val, &blend, 1) || !(blend >= 0) || !(blend <= 1))
                 return ef_fail(err, "--light '%s': blend='%s' is not a number from 0 to 1", spec,
                                val);
-        } else if (!strcmp(key, "cosine") && l->kind == EF_LIGHT_SPOT) {
+        } else if (!strcmp(key, "cosine") && K->cone) {
             bit = S_COSINE;
             if (!strcmp(val, "0") || !strcmp(val, "1"))
                 l->cosine = val[0] == '1';
@@ -198,23 +201,23 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             bit = S_INT;
             if (ef_parse_numbers(val, &intensity, 1) || !(intensity >= 0))
                 return ef_fail(err, "--light '%s': intensity='%s' is not a number >= 0 (%s)",
-                               spec, val, l->kind == EF_LIGHT_SUN
+                               spec, val, !K->at_position
                                               ? "the irradiance on a surface facing the sun"
                                               : "the radiant intensity, per steradian");
-        } else if (!strcmp(key, "angle") && l->kind == EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "angle") && !K->at_position) {
             bit = S_ANGLE;
             if (ef_parse_numbers(val, &l->angle, 1) || !(l->angle >= 0) || !(l->angle < 180))
                 return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
                                "in degrees, from 0 to below 180", spec, val);
             l->angle *= PI / 180;
-        } else if (!strcmp(key, "penumbra") && l->kind == EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "penumbra") && !K->at_position) {
             bit = S_PENUMBRA;
             if (ef_parse_numbers(val, &penumbra, 1) || !(penumbra >= 0) ||
                 !(penumbra <= EF_PENUMBRA_MAX) || penumbra != floor(penumbra))
                 return ef_fail(err, "--light '%s': penumbra='%s' is not a whole number of "
                                "directions over the sun's disc from 0 (hard shadows) to %d",
                                spec, val, EF_PENUMBRA_MAX);
-        } else if (!strcmp(key, "planet") && l->kind == EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "planet") && !K->at_position) {
             bit = S_PLANET;
             /* earth: 6371 km, in scene units */
             if (!strcmp(val, "earth"))
@@ -223,7 +226,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                      !(l->planet < 1e300))
                 return ef_fail(err, "--light '%s': planet='%s' is not a radius > 0 in scene "
                                "units, or earth", spec, val);
-        } else if (!strcmp(key, "radius") && l->kind != EF_LIGHT_SUN) {
+        } else if (!strcmp(key, "radius") && K->at_position) {
             bit = S_RADIUS;
             if (ef_parse_numbers(val, &l->radius, 1) || !(l->radius >= 0))
                 return ef_fail(err, "--light '%s': radius='%s' is not a number >= 0 (scene "
@@ -276,20 +279,20 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         seen |= bit;
         tok = next;
     }
-    if (l->kind == EF_LIGHT_SUN && !(seen & S_DIR))
+    if (!K->at_position && !(seen & S_DIR))
         return ef_fail(err, "--light '%s': missing towards=X,Y,Z (from the scene to the sun)", spec);
-    if (l->kind != EF_LIGHT_SUN && !(seen & S_POS))
+    if (K->at_position && !(seen & S_POS))
         return ef_fail(err, "--light '%s': missing position=X,Y,Z", spec);
-    if (l->kind == EF_LIGHT_SPOT && (seen & (S_AIM | S_CONE)) != (S_AIM | S_CONE))
+    if (K->cone && (seen & (S_AIM | S_CONE)) != (S_AIM | S_CONE))
         return ef_fail(err, "--light '%s': a spot needs aim=X,Y,Z and cone=DEG", spec);
     /* point and spot: E = I / d_m^2 with d_m = d / U metres */
-    const double U = ctx->units_per_meter, scale = l->kind == EF_LIGHT_SUN ? 1 : U * U;
+    const double U = ctx->units_per_meter, scale = K->at_position ? U * U : 1;
     for (int k = 0; k < 3; ++k) {
         l->e[k] = color[k] * intensity * scale;
         if (!isfinite(l->e[k]))
             return ef_fail(err, "--light '%s': color times intensity overflows", spec);
     }
-    if (l->kind == EF_LIGHT_SPOT) {
+    if (K->cone) {
         l->cos_outer = cos(cone * (PI / 360));
         l->smooth = blend * (1 - l->cos_outer);
     }
@@ -353,7 +356,7 @@ void ef_light_bind(ef_light *l, const ef_fog_component *c, double cam_y)
 {
     l->ch_ok = 0;
     double rho[3], k, base;
-    if (!(l->kind == EF_LIGHT_SUN && l->planet > 0) || !c->model->strata ||
+    if (!(!ef_light_at_position(l) && l->planet > 0) || !c->model->strata ||
         !c->model->strata(c, rho, &k, &base))
         return;
     const double mu = l->dir[0] * c->up[0] + l->dir[1] * c->up[1] + l->dir[2] * c->up[2];

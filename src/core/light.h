@@ -33,7 +33,23 @@
 /* The most lights a scene holds. */
 #define EF_MAX_LIGHTS 32
 
-typedef enum ef_light_kind { EF_LIGHT_SUN = 0, EF_LIGHT_POINT, EF_LIGHT_SPOT } ef_light_kind;
+typedef enum ef_light_kind { EF_LIGHT_SUN = 0, EF_LIGHT_POINT, EF_LIGHT_SPOT, EF_LIGHT_NKIND } ef_light_kind;
+
+/* A kind of light: what the parser, the default names and the
+ * integrators know of it (the table in light.c). A new kind adds its row
+ * there, its parsing of any key of its own, its branches where the lit
+ * files ask at_position or cone, and its integrand in ref.c. */
+typedef struct ef_light_kind_info {
+    const char *name;                /* as written: --light NAME:... */
+    const char *keys;                /* the keys it accepts, for messages */
+    int at_position;                 /* a lamp at pos: E = I / (d^2 + radius^2), from all
+                                      * around it; else a direction (the sun: dir, E) */
+    int cone;                        /* lit only inside a cone around dir (aim=, cone=) */
+    int shadow;                      /* takes a shadow= map (one view of its light) */
+} ef_light_kind_info;
+
+/* The table, one row per kind (light.c). */
+extern const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND];
 
 /* A kind's name as a SPEC writes it ("sun", "point", "spot"): the one home
  * of those names (the parser and the default light names read it). */
@@ -77,6 +93,18 @@ typedef struct ef_light {
  * Returns 0, or -1 with a message naming the spec and key (l holds
  * nothing then). */
 int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_err *err);
+
+/* Whether l is a lamp at a position (point, spot), not a direction (sun). */
+static inline int ef_light_at_position(const ef_light *l)
+{
+    return ef_light_kinds[l->kind].at_position;
+}
+
+/* Whether l shines inside a cone only (a spot). */
+static inline int ef_light_coned(const ef_light *l)
+{
+    return ef_light_kinds[l->kind].cone;
+}
 
 /* Makes light l ready for fog c seen from a camera at height cam_y (up
  * the fog's up axis): a planet sun's Chebyshev table of Ch over the

@@ -39,7 +39,7 @@ int ef_lights_check(const ef_fog_scene *s, ef_err *err)
 
 int ef_light_dark(const ef_fog_scene *s, const ef_light *l)
 {
-    if (l->kind != EF_LIGHT_SUN || l->planet > 0)
+    if (ef_light_at_position(l) || l->planet > 0)
         return 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
@@ -124,7 +124,7 @@ static int sun_closed(const ef_fog_component *c, const ef_light *l, const ef_ray
 int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l)
 {
     double rho[3], k, base;
-    return l->kind == EF_LIGHT_SUN && !l->shadow && !(l->planet > 0) && s->ncomp == 1 &&
+    return !ef_light_at_position(l) && !l->shadow && !(l->planet > 0) && s->ncomp == 1 &&
            s->comp[0].model->sun && s->comp[0].model->strata &&
            s->comp[0].model->strata(&s->comp[0], rho, &k, &base);
 }
@@ -173,7 +173,7 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
             ef_lit_noise_range(s, l, r, a, D, S, E);
             return;
         }
-    if (l->kind == EF_LIGHT_SUN) {
+    if (!ef_light_at_position(l)) {
         int uniform = 1;
         for (int i = 0; i < s->ncomp; ++i)
             uniform &= is_uniform(&s->comp[i]);
@@ -195,7 +195,7 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
 {
     double c[MAX_CUTS];
     int n = 0;
-    if (l->kind != EF_LIGHT_SUN) {
+    if (ef_light_at_position(l)) {
         double w[3], ts, h;
         ef_lit_lamp_line(l, r, w, &ts, &h);
         const double hq = ef_lit_len2(h, l->radius);
@@ -206,7 +206,7 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
              * the closest approach: geometric cuts from there */
             n = ef_lit_steps_around(c, n, ts, a, b, hq > 0 ? hq : 1e-9 * fmax(fabs(ts), 1));
         }
-        if (l->kind == EF_LIGHT_SPOT)
+        if (ef_light_coned(l))
             n = ef_lit_cone_cuts(l, r, a, b, c, n);
     }
     if (l->shadow && n < MAX_CUTS - 2) {
@@ -239,7 +239,7 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
  * shadow, in fog that is uniform and isotropic throughout. */
 static int lamp_batch(const ef_fog_scene *s, const ef_light *l)
 {
-    if (l->kind != EF_LIGHT_POINT || l->radius != 0 || l->shadow || s->ncomp == 0)
+    if (!(ef_light_at_position(l) && !ef_light_coned(l)) || l->radius != 0 || l->shadow || s->ncomp == 0)
         return 0;
     for (int i = 0; i < s->ncomp; ++i)
         if (s->comp[i].model->tau_info || !is_uniform(&s->comp[i]) ||

@@ -41,7 +41,7 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
     double x[3], ld[3], dl = INFINITY, f = 1;
     for (int a = 0; a < 3; ++a)
         x[a] = r->org[a] + t * r->dir[a];
-    if (l->kind == EF_LIGHT_SUN) {
+    if (!ef_light_at_position(l)) {
         memcpy(ld, l->dir, sizeof ld);
         p->cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
     } else {
@@ -57,7 +57,7 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
             ld[a] = y[a] / dl;
         p->cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
         f = 1 / (d2 + l->radius * l->radius);
-        if (l->kind == EF_LIGHT_SPOT)
+        if (ef_light_coned(l))
             f *= ef_spot_share(l, -(ld[0] * l->dir[0] + ld[1] * l->dir[1] + ld[2] * l->dir[2]));
         if (f == 0)
             return;
@@ -169,7 +169,7 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             amax = fmax(amax, albedo(&s->comp[i], k));
     }
     double emax = fmax(l->e[0], fmax(l->e[1], l->e[2]));
-    if (l->kind != EF_LIGHT_SUN) {
+    if (ef_light_at_position(l)) {
         double w[3], ts, h;
         ef_lit_lamp_line(l, r, w, &ts, &h);
         const double hq = ef_lit_len2(h, l->radius);
@@ -184,7 +184,7 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         if (ts > a && ts < D)
             cut[n++] = ts;
         n = ef_lit_steps_around(cut, n, ts, a, D, hq > 0 ? hq : 1e-9 * fmax(fabs(ts), 1));
-        if (l->kind == EF_LIGHT_SPOT)
+        if (ef_light_coned(l))
             n = ef_lit_cone_cuts(l, r, a, D, cut, n);
         emax /= hq * hq;
     }

@@ -204,7 +204,7 @@ static void lit_integrand(const void *qv, double u, double out[3])
         ur = q->ua + q->lam * u / (1 - u);
         t = q->ts + ur;
         wgt = q->lam / ((1 - u) * (1 - u)) / (ur * ur + q->hq * q->hq);
-    } else if (l->kind != EF_LIGHT_SUN) {
+    } else if (ef_light_at_position(l)) {
         /* a lamp's pieces in t are in u = t - ts: nodes near the lamp
          * keep their full precision */
         ur = u;
@@ -214,7 +214,7 @@ static void lit_integrand(const void *qv, double u, double out[3])
     if (!(t >= 0))
         t = 0;
     double ld[3], dl = INFINITY, cth;
-    if (l->kind == EF_LIGHT_SUN) {
+    if (!ef_light_at_position(l)) {
         memcpy(ld, l->dir, sizeof ld);
         cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
     } else {
@@ -230,7 +230,7 @@ static void lit_integrand(const void *qv, double u, double out[3])
         yn = sqrt(yn);
         for (int a = 0; a < 3; ++a)
             ld[a] = yn > 0 ? y[a] / yn : 0;
-        if (l->kind == EF_LIGHT_SPOT) {
+        if (ef_light_coned(l)) {
             wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
             if (wgt == 0)
                 return;
@@ -267,7 +267,7 @@ static void lit_integrand(const void *qv, double u, double out[3])
         return;
     double tv[3], tl[3];
     ef_lit_tau_from(q->s, r->org, r->dir, t, tv);
-    if (l->kind == EF_LIGHT_SUN && l->planet > 0)
+    if (!ef_light_at_position(l) && l->planet > 0)
         ef_lit_sun_planet_tau(q->s, l, x, tl);
     else
         ef_lit_tau_from(q->s, x, ld, dl, tl);
@@ -385,9 +385,9 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     cut[n++] = a;
     if (!q.uniform)
         n = ef_lit_feature_cuts(s, r, a, D, cut, n);
-    if (l->kind == EF_LIGHT_SPOT)
+    if (ef_light_coned(l))
         n = ef_lit_cone_cuts(l, r, a, D, cut, n);
-    if (l->kind != EF_LIGHT_SUN) {
+    if (ef_light_at_position(l)) {
         /* the lamp's closest approach along the line, and its distance
          * there from the cross product (no cancellation near the line) */
         double *w = q.w;
@@ -414,7 +414,7 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         int iso = 1;
         for (int i = 0; i < s->ncomp; ++i)
             iso &= s->comp[i].phase == EF_PHASE_ISO;
-        if (l->kind == EF_LIGHT_POINT && q.uniform && iso && l->radius == 0 && q.h > 0) {
+        if ((ef_light_at_position(l) && !ef_light_coned(l)) && q.uniform && iso && l->radius == 0 && q.h > 0) {
             double sig[3], scat[3];
             ef_lit_lamp_medium(s, sig, scat);
             if (ef_lit_lamp_closed(sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)

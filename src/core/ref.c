@@ -883,7 +883,7 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
     out[0] = out[1] = out[2] = 0;
     for (int a = 0; a < 3; ++a)
         x[a] = (double) (r->org[a] + t * (long double) r->dir[a]);
-    if (l->kind == EF_LIGHT_SUN) {
+    if (!ef_light_at_position(l)) {
         for (int a = 0; a < 3; ++a)
             ld[a] = l->dir[a];
         for (int k = 0; k < 3; ++k)
@@ -906,7 +906,7 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
             ld[a] = (double) (y[a] / d);
         cthl = yv / d;
         long double f = 1 / (d2 + (long double) l->radius * l->radius);
-        if (l->kind == EF_LIGHT_SPOT)
+        if (ef_light_coned(l))
             f *= ef_spot_share(l, (double) (-ya / d));
         for (int k = 0; k < 3; ++k)
             E[k] = l->e[k] * f;
@@ -939,11 +939,11 @@ static void lit_ref_at(lit_ref *q, long double t, long double out[3])
         return;
     long double tv[3], tl[3];
     if (lit_tau(q->s, r->org, r->dir, (double) t, tv) < 0 ||
-        (!(l->kind == EF_LIGHT_SUN && l->planet > 0) && lit_tau(q->s, x, ld, dl, tl) < 0)) {
+        (!(!ef_light_at_position(l) && l->planet > 0) && lit_tau(q->s, x, ld, dl, tl) < 0)) {
         q->fail = 1;
         return;
     }
-    if (l->kind == EF_LIGHT_SUN && l->planet > 0) {
+    if (!ef_light_at_position(l) && l->planet > 0) {
         /* sigma(x) times the path integral: the density's own form */
         const long double path = planet_path(q->s, l, x);
         const ef_fog_component *c = &q->s->comp[0];
@@ -1184,7 +1184,7 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
         }
     }
     /* a lamp's 1/d^2 peak: geometric steps around its closest approach */
-    if (l->kind != EF_LIGHT_SUN) {
+    if (ef_light_at_position(l)) {
         long double w[3], ts = 0, ww = 0;
         for (int a = 0; a < 3; ++a) {
             w[a] = (long double) l->pos[a] - r->org[a];
@@ -1210,7 +1210,7 @@ int ef_ref_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
                 break;
         }
     }
-    if (l->kind == EF_LIGHT_SPOT)
+    if (ef_light_coned(l))
         n = spot_cuts(l, r, cut, n, NCUT);
     qsort(cut, (size_t) n, sizeof cut[0], cmp_ld);
     lit_ref q = { s, l, r, 0, 1, 0 };

@@ -14,13 +14,6 @@
 #include <string.h>
 #include <unistd.h>
 
-int ef_exr_part_is_deep(const ef_exr_file *f, int part)
-{
-    exr_storage_t st;
-    return exr_get_storage(f->ctx, part, &st) == EXR_ERR_SUCCESS &&
-           (st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED);
-}
-
 static int type_bytes(exr_pixel_type_t t)
 {
     return t == EXR_PIXEL_HALF ? 2 : 4;
@@ -94,21 +87,6 @@ void ef_deep_rows_free(ef_deep_rows *r)
     if (r->inflater)
         libdeflate_free_decompressor(r->inflater);
     memset(r, 0, sizeof *r);
-}
-
-int ef_deep_grow(void **p, size_t *cap, size_t need)
-{
-    if (need <= *cap)
-        return 0;
-    size_t n = *cap ? *cap : 4096;
-    while (n < need)
-        n *= 2;
-    void *q = realloc(*p, n);
-    if (!q)
-        return -1;
-    *p = q;
-    *cap = n;
-    return 0;
 }
 
 /* OpenEXR's RLE: a negative count n is -n literal bytes, else n + 1
@@ -556,132 +534,6 @@ int ef_flat_pack_rows(int nch, const exr_pixel_type_t *type, int w, int n, const
 static int cmp_name(const char *a, const char *b)
 {
     return strcmp(a, b);
-}
-
-int ef_exr_define_part_copy(const ef_exr_file *in, int p, exr_context_t out,
-                            const char *history, const char *params, ef_err *err)
-{
-    const char *name = NULL;
-    exr_storage_t st;
-    exr_compression_t comp;
-    exr_lineorder_t lo;
-    const exr_attr_chlist_t *cl;
-    int op;
-    exr_get_name(in->ctx, p, &name);
-    if (exr_get_storage(in->ctx, p, &st) || exr_get_compression(in->ctx, p, &comp) ||
-        exr_get_lineorder(in->ctx, p, &lo) || exr_get_channels(in->ctx, p, &cl))
-        return ef_fail(err, "part %d: cannot read its header: %s", p, ef_exr_last_core_message());
-    if (exr_add_part(out, name, st, &op) || op != p)
-        return ef_fail(err, "cannot add output part %d: %s", p, ef_exr_last_core_message());
-    if (st == EXR_STORAGE_TILED || st == EXR_STORAGE_DEEP_TILED) {
-        uint32_t tx, ty;
-        exr_tile_level_mode_t lm;
-        exr_tile_round_mode_t rm;
-        exr_get_tile_descriptor(in->ctx, p, &tx, &ty, &lm, &rm);
-        if (lm != EXR_TILE_ONE_LEVEL)
-            return ef_fail(err, "part %d is tiled with mipmap or ripmap levels: exrfog copies "
-                                "one-level parts beside a deep one (split the parts first, e.g. "
-                                "oiiotool IN --subimage NAME -o PART.exr)", p);
-        if (exr_set_tile_descriptor(out, p, tx, ty, lm, rm))
-            return ef_fail(err, "cannot set the tile size of part %d", p);
-    }
-    for (int c = 0; c < cl->num_channels; ++c) {
-        const exr_attr_chlist_entry_t *e = &cl->entries[c];
-        if (exr_add_channel(out, p, e->name.str, e->pixel_type,
-                            e->p_linear ? EXR_PERCEPTUALLY_LINEAR : EXR_PERCEPTUALLY_LOGARITHMIC,
-                            e->x_sampling, e->y_sampling))
-            return ef_fail(err, "cannot add channel '%s' to part %d", e->name.str, p);
-    }
-    /* the chunks go in as they are: the same compression and line order */
-    if (exr_set_compression(out, p, comp) || exr_set_lineorder(out, p, lo))
-        return ef_fail(err, "cannot set the compression of part %d", p);
-    return ef_exr_copy_attrs(in, p, out, p, params, history, err);
-}
-
-/* Copies one chunk of part p (ci read from in) into out. */
-static int copy_chunk(const ef_exr_file *in, int p, exr_context_t out, int deep, int tiled,
-                      int tx, int ty, int y, const exr_chunk_info_t *ci, uint8_t **buf,
-                      size_t *cap, uint8_t **tab, size_t *tcap, ef_err *err)
-{
-    if (ci->packed_size > (1ull << 34) || ci->sample_count_table_size > (1ull << 34)) {
-        ef_fail(err, "part %d has a chunk of %llu bytes: the file is corrupt", p,
-                (unsigned long long) ci->packed_size);
-        err->file = in->path;
-        return -1;
-    }
-    if (ef_deep_grow((void **) buf, cap, (size_t) ci->packed_size + 1) ||
-        (deep && ef_deep_grow((void **) tab, tcap, (size_t) ci->sample_count_table_size + 1)))
-        return ef_fail(err, "out of memory");
-    exr_result_t rc = deep ? exr_read_deep_chunk(in->ctx, p, ci, *buf, *tab)
-                           : exr_read_chunk(in->ctx, p, ci, *buf);
-    if (rc) {
-        ef_fail(err, "part %d: cannot read a chunk (the file is truncated or corrupt): %s", p,
-                ef_exr_last_core_message());
-        err->file = in->path;
-        return -1;
-    }
-    if (deep && tiled)
-        rc = exr_write_deep_tile_chunk(out, p, tx, ty, 0, 0, *buf, ci->packed_size,
-                                       ci->unpacked_size, *tab, ci->sample_count_table_size);
-    else if (deep)
-        rc = exr_write_deep_scanline_chunk(out, p, y, *buf, ci->packed_size, ci->unpacked_size,
-                                           *tab, ci->sample_count_table_size);
-    else if (tiled)
-        rc = exr_write_tile_chunk(out, p, tx, ty, 0, 0, *buf, ci->packed_size);
-    else
-        rc = exr_write_scanline_chunk(out, p, y, *buf, ci->packed_size);
-    if (rc)
-        return ef_fail(err, "cannot write part %d: %s", p, ef_exr_last_core_message());
-    return 0;
-}
-
-int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_err *err)
-{
-    exr_storage_t st;
-    exr_attr_box2i_t dw;
-    if (exr_get_storage(in->ctx, p, &st) || exr_get_data_window(in->ctx, p, &dw))
-        return ef_fail(err, "part %d: cannot read its header", p);
-    const int deep = st == EXR_STORAGE_DEEP_SCANLINE || st == EXR_STORAGE_DEEP_TILED;
-    const int tiled = st == EXR_STORAGE_TILED || st == EXR_STORAGE_DEEP_TILED;
-    uint8_t *buf = NULL, *tab = NULL;
-    size_t cap = 0, tcap = 0;
-    int rc = 0;
-    exr_chunk_info_t ci;
-    if (tiled) {
-        uint32_t tw, th;
-        exr_get_tile_descriptor(in->ctx, p, &tw, &th, NULL, NULL);
-        const int64_t w = (int64_t) dw.max.x - dw.min.x + 1, h = (int64_t) dw.max.y - dw.min.y + 1;
-        const int64_t nx = tw ? (w + tw - 1) / tw : 0, ny = th ? (h + th - 1) / th : 0;
-        for (int64_t ty = 0; ty < ny && !rc; ++ty)
-            for (int64_t tx = 0; tx < nx && !rc; ++tx) {
-                if (exr_read_tile_chunk_info(in->ctx, p, (int) tx, (int) ty, 0, 0, &ci)) {
-                    rc = ef_fail(err, "part %d: tile (%lld, %lld) is missing or damaged (the file "
-                                      "is truncated or corrupt): %s", p, (long long) tx,
-                                 (long long) ty, ef_exr_last_core_message());
-                    err->file = in->path;
-                } else
-                    rc = copy_chunk(in, p, out, deep, 1, (int) tx, (int) ty, 0, &ci, &buf,
-                                    &cap, &tab, &tcap, err);
-            }
-    } else {
-        int32_t lines = 1;
-        exr_get_scanlines_per_chunk(in->ctx, p, &lines);
-        if (lines < 1)
-            lines = 1;
-        for (int64_t y = dw.min.y; y <= dw.max.y && !rc; y += lines) {
-            if (exr_read_scanline_chunk_info(in->ctx, p, (int) y, &ci)) {
-                rc = ef_fail(err, "part %d: the chunk of line %lld is missing or damaged (the "
-                                  "file is truncated or corrupt): %s", p, (long long) y,
-                             ef_exr_last_core_message());
-                err->file = in->path;
-            } else
-                rc = copy_chunk(in, p, out, deep, 0, 0, 0, (int) y, &ci, &buf, &cap, &tab,
-                                &tcap, err);
-        }
-    }
-    free(buf);
-    free(tab);
-    return rc;
 }
 
 /* Adds the written part (index op = its place) to o->ctx. */

@@ -8,6 +8,7 @@
 #define EF_EXR_DEEP_H
 
 #include "exr_io.h"
+#include "exr_parts.h"
 
 #include <stddef.h>
 #include <stdint.h>
@@ -30,8 +31,6 @@ typedef struct ef_deep_in {
     int tiled, tw, th;        /* deep tiled: level 0's tiles of tw x th */
 } ef_deep_in;
 
-/* Whether part p of f is deep (scanline or tiled). */
-int ef_exr_part_is_deep(const ef_exr_file *f, int part);
 
 /* Describes deep part p of f (scanline, or tiled: level 0 is read).
  * Refuses compressions a deep part cannot have and channel lists exrfog
@@ -54,9 +53,6 @@ typedef struct ef_deep_rows {
 
 void ef_deep_rows_free(ef_deep_rows *r);
 
-/* Grows the buffer *p of *cap bytes to at least need bytes (doubling).
- * Returns 0, or -1 when out of memory (*p is then unchanged). */
-int ef_deep_grow(void **p, size_t *cap, size_t need);
 
 /* Reads rows [y, y + n) (inside the data window) of d into r, chunk by
  * chunk. Thread-safe for distinct r. Returns 0, or -1 with a message
@@ -113,14 +109,6 @@ int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_fil
                       int deep, int nch, const char *const *name, const exr_pixel_type_t *type,
                       const char *history, const char *params, const double *aov_origin,
                       int others, ef_err *err);
-/* Adds part p of in to out (its next part, index p) as it is: storage,
- * tiles (one level; mip and rip maps are refused), channels, compression,
- * line order and every attribute, plus history and parameters. */
-int ef_exr_define_part_copy(const ef_exr_file *in, int p, exr_context_t out,
-                            const char *history, const char *params, ef_err *err);
-/* Copies every chunk of part p of in, flat or deep, scanline or tiled, into
- * part p of out as it is (no decoding), in increasing y. */
-int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_err *err);
 
 /* Writes one packed chunk (in increasing y). */
 int ef_deep_out_write(ef_deep_out *o, const ef_deep_packed *p, ef_err *err);

@@ -212,22 +212,7 @@ const char *ef_exr_part_has_any(const ef_exr_file *f, int part, const char *cons
  * Returns 0 or -1. */
 int ef_compression_parse(const char *name, int *compression, int *level, float *dwa_level,
                          ef_err *err);
-/* The attributes of in's part pin onto out's part pout (which has its
- * channels, compression and storage already): exrfog/parameters = params
- * and this run's history line appended to exrfog/history (each NULL:
- * none), user-typed attributes, then every attribute not yet set, checked
- * one by one (Core 3.1.5 can stop copying early yet report success). */
-int ef_exr_copy_attrs(const ef_exr_file *in, int pin, exr_context_t out, int pout,
-                      const char *params, const char *history, ef_err *err);
 
-/* Core's write_fn to a descriptor the caller created (pwrite; EINTR
- * retried): user is an ef_exr_sink, whose errnum keeps the first error. */
-typedef struct ef_exr_sink {
-    int fd;
-    int errnum;
-} ef_exr_sink;
-int64_t ef_exr_sink_write(exr_const_context_t ctx, void *user, const void *buf, uint64_t sz,
-                          uint64_t off, exr_stream_error_func_ptr_t error_cb);
 
 /* Shared inside the adapter: a context initializer whose error handler
  * keeps Core's last message (per thread) instead of printing it. */

@@ -3,8 +3,8 @@
  * through the fog callback, and the result is compressed in parallel and
  * written in chunk order. Memory is a few units per thread, whatever the
  * image size. */
-#include "exr_deep.h"
 #include "exr_io.h"
+#include "exr_parts.h"
 #include "exr_deflate.h"
 #include "exr_ring.h"
 #include "half_conv.h"
@@ -876,147 +876,6 @@ static exr_pixel_type_t named_type(const ef_stream_opts *o, const char *name, ex
                                                  name, (int) t);
 }
 
-/* Attributes that describe a part's storage: set for the output by what
- * it is, never copied from a part stored otherwise. */
-static int storage_attr(const char *name)
-{
-    static const char *const names[] = { "tiles", "chunkCount", "type", "version", "name",
-                                         "channels", "compression", "lineOrder",
-                                         "maxSamplesPerPixel" };
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; ++i)
-        if (!strcmp(name, names[i]))
-            return 1;
-    return 0;
-}
-
-/* One attribute onto out's part p by its type's setter (the windows by
- * theirs). Returns 0 or an exr_result_t. */
-static exr_result_t set_attr(exr_context_t out, int p, const exr_attribute_t *a)
-{
-    const char *n = a->name;
-    if (!strcmp(n, "dataWindow"))
-        return exr_set_data_window(out, p, a->box2i);
-    if (!strcmp(n, "displayWindow"))
-        return exr_set_display_window(out, p, a->box2i);
-    switch (a->type) {
-    case EXR_ATTR_BOX2I: return exr_attr_set_box2i(out, p, n, a->box2i);
-    case EXR_ATTR_BOX2F: return exr_attr_set_box2f(out, p, n, a->box2f);
-    case EXR_ATTR_CHROMATICITIES: return exr_attr_set_chromaticities(out, p, n, a->chromaticities);
-    case EXR_ATTR_COMPRESSION: return exr_attr_set_compression(out, p, n, (exr_compression_t) a->uc);
-    case EXR_ATTR_DOUBLE: return exr_attr_set_double(out, p, n, a->d);
-    case EXR_ATTR_ENVMAP: return exr_attr_set_envmap(out, p, n, (exr_envmap_t) a->uc);
-    case EXR_ATTR_FLOAT: return exr_attr_set_float(out, p, n, a->f);
-    case EXR_ATTR_FLOAT_VECTOR:
-        return exr_attr_set_float_vector(out, p, n, a->floatvector->length, a->floatvector->arr);
-    case EXR_ATTR_INT: return exr_attr_set_int(out, p, n, a->i);
-    case EXR_ATTR_KEYCODE: return exr_attr_set_keycode(out, p, n, a->keycode);
-    case EXR_ATTR_LINEORDER: return exr_attr_set_lineorder(out, p, n, (exr_lineorder_t) a->uc);
-    case EXR_ATTR_M33F: return exr_attr_set_m33f(out, p, n, a->m33f);
-    case EXR_ATTR_M33D: return exr_attr_set_m33d(out, p, n, a->m33d);
-    case EXR_ATTR_M44F: return exr_attr_set_m44f(out, p, n, a->m44f);
-    case EXR_ATTR_M44D: return exr_attr_set_m44d(out, p, n, a->m44d);
-    case EXR_ATTR_PREVIEW: return exr_attr_set_preview(out, p, n, a->preview);
-    case EXR_ATTR_RATIONAL: return exr_attr_set_rational(out, p, n, a->rational);
-    case EXR_ATTR_STRING: return exr_attr_set_string(out, p, n, a->string->str);
-    case EXR_ATTR_STRING_VECTOR: {
-        const int32_t k = a->stringvector->n_strings;
-        const char **v = calloc((size_t) (k > 0 ? k : 1), sizeof *v);
-        if (!v)
-            return EXR_ERR_OUT_OF_MEMORY;
-        for (int32_t i = 0; i < k; ++i)
-            v[i] = a->stringvector->strings[i].str;
-        const exr_result_t rc = exr_attr_set_string_vector(out, p, n, k, v);
-        free(v);
-        return rc;
-    }
-    case EXR_ATTR_TIMECODE: return exr_attr_set_timecode(out, p, n, a->timecode);
-    case EXR_ATTR_V2I: return exr_attr_set_v2i(out, p, n, a->v2i);
-    case EXR_ATTR_V2F: return exr_attr_set_v2f(out, p, n, a->v2f);
-    case EXR_ATTR_V2D: return exr_attr_set_v2d(out, p, n, a->v2d);
-    case EXR_ATTR_V3I: return exr_attr_set_v3i(out, p, n, a->v3i);
-    case EXR_ATTR_V3F: return exr_attr_set_v3f(out, p, n, a->v3f);
-    case EXR_ATTR_V3D: return exr_attr_set_v3d(out, p, n, a->v3d);
-    case EXR_ATTR_OPAQUE:
-        return exr_attr_set_user(out, p, n, a->type_name, a->opaque->size, a->opaque->packed_data);
-    default:
-        return EXR_ERR_SUCCESS;   /* a storage description (tiles, channels): the output's own */
-    }
-}
-
-/* Whether in's part pin and out's part pout store pixels alike (both
- * tiled or both not): Core's copy of every unset attribute is then right;
- * otherwise it would give a scanline part the tiles of a tiled one. */
-static int same_layout(const ef_exr_file *in, int pin, exr_context_t out, int pout)
-{
-    exr_storage_t a, b;
-    if (exr_get_storage(in->ctx, pin, &a) || exr_get_storage(out, pout, &b))
-        return 1;
-    const int ta = a == EXR_STORAGE_TILED || a == EXR_STORAGE_DEEP_TILED;
-    const int tb = b == EXR_STORAGE_TILED || b == EXR_STORAGE_DEEP_TILED;
-    return ta == tb;
-}
-
-int ef_exr_copy_attrs(const ef_exr_file *in, int pin, exr_context_t out, int pout,
-                      const char *params, const char *history, ef_err *err)
-{
-    const int alike = same_layout(in, pin, out, pout);
-    if (params && exr_attr_set_string(out, pout, "exrfog/parameters", params))
-        return ef_fail(err, "cannot record exrfog/parameters");
-    if (history) {
-        /* Earlier passes' lines first, as oiiotool appends to ImageHistory. */
-        const exr_attribute_t *h = NULL;
-        const char *prev = NULL;
-        if (exr_get_attribute_by_name(in->ctx, pin, "exrfog/history", &h) == EXR_ERR_SUCCESS &&
-            h->type == EXR_ATTR_STRING && h->string && h->string->str && h->string->length > 0)
-            prev = h->string->str;
-        const size_t n = (prev ? strlen(prev) + 1 : 0) + strlen(history) + 1;
-        char *v = malloc(n);
-        if (!v)
-            return ef_fail(err, "out of memory");
-        snprintf(v, n, "%s%s%s", prev ? prev : "", prev ? "\n" : "", history);
-        const int bad = exr_attr_set_string(out, pout, "exrfog/history", v) != EXR_ERR_SUCCESS;
-        free(v);
-        if (bad)
-            return ef_fail(err, "cannot record exrfog/history: %s", ef_exr_last_core_message());
-    }
-    /* Core 3.1.5's copy cannot duplicate attributes of user-defined types
-     * (EXR_ATTR_OPAQUE); declare those first so the copy skips them. */
-    int32_t na = 0;
-    exr_get_attribute_count(in->ctx, pin, &na);
-    for (int32_t i = 0; i < na; ++i) {
-        const exr_attribute_t *a;
-        if (exr_get_attribute_by_index(in->ctx, pin, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
-            a->type != EXR_ATTR_OPAQUE || !a->opaque)
-            continue;
-        if (exr_attr_set_user(out, pout, a->name, a->type_name, a->opaque->size,
-                              a->opaque->packed_data))
-            return ef_fail(err, "cannot copy attribute '%s' of part %d: %s", a->name, pin,
-                           ef_exr_last_core_message());
-    }
-    if (alike && exr_copy_unset_attributes(out, pout, in->ctx, pin))
-        return ef_fail(err, "cannot copy the header of part %d: %s", pin, ef_exr_last_core_message());
-    for (int32_t i = 0; !alike && i < na; ++i) {
-        const exr_attribute_t *a, *b;
-        if (exr_get_attribute_by_index(in->ctx, pin, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
-            storage_attr(a->name) || a->type == EXR_ATTR_OPAQUE ||
-            exr_get_attribute_by_name(out, pout, a->name, &b) == EXR_ERR_SUCCESS)
-            continue;
-        if (set_attr(out, pout, a))
-            return ef_fail(err, "cannot copy attribute '%s' of part %d: %s", a->name, pin,
-                           ef_exr_last_core_message());
-    }
-    /* Core 3.1.5 can stop copying early yet report success; never drop
-     * metadata silently. */
-    for (int32_t i = 0; i < na; ++i) {
-        const exr_attribute_t *a, *b;
-        if (exr_get_attribute_by_index(in->ctx, pin, EXR_ATTR_LIST_FILE_ORDER, i, &a) == 0 &&
-            (alike || !storage_attr(a->name)) &&
-            exr_get_attribute_by_name(out, pout, a->name, &b) != EXR_ERR_SUCCESS)
-            return ef_fail(err, "cannot copy attribute '%s' of part %d", a->name, pin);
-    }
-    return 0;
-}
-
 static int define_part(const ef_exr_file *in, exr_context_t out, int p,
                        const char *const *extra, int nextra, const ef_channel_plan *plans,
                        int nplans, const ef_exr_file *df, const ef_stream_opts *o, ef_err *err)
@@ -1217,32 +1076,6 @@ static int has_long_names(const ef_exr_file *in)
                     return 1;
     }
     return 0;
-}
-
-/* The output stream: Core writes through the caller's descriptor, so the
- * file is the one the caller created (exclusively, beside OUTPUT) and no
- * name is opened again. The first failure's errno is kept for the message. */
-int64_t ef_exr_sink_write(exr_const_context_t ctx, void *user, const void *buf, uint64_t sz,
-                          uint64_t off, exr_stream_error_func_ptr_t error_cb)
-{
-    ef_exr_sink *s = user;
-    const unsigned char *p = buf;
-    uint64_t done = 0;
-    while (done < sz) {
-        const ssize_t n = pwrite(s->fd, p + done, (size_t) (sz - done), (off_t) (off + done));
-        if (n < 0 && errno == EINTR)
-            continue;
-        if (n <= 0) {
-            const int e = n < 0 ? errno : ENOSPC;
-            if (!s->errnum)
-                s->errnum = e;
-            if (error_cb)
-                error_cb(ctx, EXR_ERR_WRITE_IO, "%s", strerror(e));
-            return -1;
-        }
-        done += (uint64_t) n;
-    }
-    return (int64_t) sz;
 }
 
 /* The extra channels of part p: those of every plan whose colour is

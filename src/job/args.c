@@ -10,7 +10,7 @@
 
 #include "aov.h"
 #include "argscan.h"
-#include "preview.h"
+#include "foreign.h"
 #include "exr_deflate.h"
 #include "exr_io.h"
 #include "colour.h"

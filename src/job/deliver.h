@@ -5,7 +5,7 @@
 #define EF_DELIVER_H
 
 #include "job_impl.h"
-#include "preview.h"
+#include "foreign.h"
 
 typedef struct ef_deliver {
     ef_oiio_deliver d;        /* what the writer is given */

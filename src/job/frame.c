@@ -23,7 +23,7 @@
 #include "job_impl.h"
 #include "lit.h"
 #include "output.h"
-#include "preview.h"
+#include "foreign.h"
 #include "scene_build.h"
 
 _Static_assert(EF_AOV_MAX_CHANNELS <= EF_MAX_EXTRA_CHANNELS,

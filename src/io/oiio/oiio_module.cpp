@@ -3,7 +3,7 @@
 // 130 MB at start-up, more than fogging a 1080p frame.
 #include <OpenImageIO/imageio.h>
 
-#include "../preview.h"
+#include "../foreign.h"
 
 #include <stdlib.h>
 #include <unistd.h>

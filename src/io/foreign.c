@@ -1,5 +1,6 @@
-/* Loads the OpenImageIO module on demand (see oiio/oiio_module.cpp). */
-#include "preview.h"
+/* The foreign formats' face (foreign.h): loads the OpenImageIO module on
+ * demand (see oiio/oiio_module.cpp) and calls through it. */
+#include "foreign.h"
 
 #include "module.h"
 

@@ -1,6 +1,8 @@
-/* Preview images through OpenImageIO (any format it writes, by extension). */
-#ifndef EF_PREVIEW_H
-#define EF_PREVIEW_H
+/* Foreign image formats through OpenImageIO, loaded on demand: previews
+ * (8-bit, any format it writes, by extension), deliverables in other
+ * formats than EXR, and depth and images imported from them. */
+#ifndef EF_FOREIGN_H
+#define EF_FOREIGN_H
 
 #include <stddef.h>
 
