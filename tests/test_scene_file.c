@@ -600,8 +600,8 @@ static void test_limits(void **state)
 
     /* The SPEC buffer's size fits; one more does not. "exp:density=" is 12
      * characters. */
-    const size_t cap = sizeof(((ef_fog_component *) 0)->spec) - 1;
-    static char digits[sizeof(((ef_fog_component *) 0)->spec) + 16];
+    const size_t cap = EF_SPEC_MAX;
+    static char digits[EF_SPEC_MAX + 17];
     memset(digits, '1', cap - 12);
     digits[cap - 12] = '\0';
     snprintf(json, sizeof json, "{\"fog\": [\"exp:density=%s\"]}", digits);

@@ -387,6 +387,11 @@ int ef_fog_copy(ef_fog_component *dst, const ef_fog_component *src)
     *dst = *src;
     dst->arr = NULL;
     dst->path = NULL;
+    dst->spec = (char *) ef_spec_none;
+    if (src->spec != ef_spec_none && src->spec && !(dst->spec = strdup(src->spec))) {
+        dst->spec = (char *) ef_spec_none;
+        return -1;
+    }
     if (src->path && !(dst->path = strdup(src->path)))
         return -1;
     if (src->narr > 0) {
@@ -417,12 +422,17 @@ void ef_fog_bind(ef_fog_component *c, const double org[3])
     c->bound = 1;
 }
 
+const char ef_spec_none[] = "";
+
 void ef_fog_free(ef_fog_component *c)
 {
     free(c->arr);
     free(c->path);
+    if (c->spec != ef_spec_none)
+        free(c->spec);
     c->arr = NULL;
     c->path = NULL;
+    c->spec = (char *) ef_spec_none;
     c->narr = 0;
 }
 
@@ -441,16 +451,16 @@ char *ef_spec_next(const char *tok, char **save)
 
 int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *c, ef_err *err)
 {
-    char buf[sizeof c->spec];
+    char buf[EF_SPEC_MAX + 1];
     ef_fog_context dflt;
     if (!ctx) {
         ef_fog_context_init(&dflt);
         ctx = &dflt;
     }
     memset(c, 0, sizeof *c);
+    c->spec = (char *) ef_spec_none;
     if (strlen(spec) >= sizeof buf)
         return ef_fail(err, "fog spec '%.40s...' is too long", spec);
-    snprintf(c->spec, sizeof c->spec, "%s", spec);
     snprintf(buf, sizeof buf, "%s", spec);
 
     if (strstr(spec, "::") || spec[0] == ':' || (spec[0] && spec[strlen(spec) - 1] == ':'))
@@ -464,6 +474,10 @@ int ef_fog_parse(const char *spec, const ef_fog_context *ctx, ef_fog_component *
     c->model = ef_fog_model_find(name);
     if (!c->model)
         return ef_fail(err, "fog spec '%s': unknown model '%s' (models: %s)", spec, name, models);
+    if (!(c->spec = strdup(spec))) {
+        c->spec = (char *) ef_spec_none;
+        return ef_fail(err, "out of memory");
+    }
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
         char *next = ef_spec_next(tok, &save);

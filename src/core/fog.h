@@ -81,8 +81,16 @@ typedef struct ef_fog_component {
      * depth may take long (noise) return 0 at once: the host is stopping
      * and throws the result away. Never read otherwise. */
     const _Atomic int *cancel;
-    char spec[8192];                 /* the SPEC as written, for messages */
+    /* the SPEC as written, for messages: owned (malloc'd), or ef_spec_none
+     * in a copy made only for evaluation (ef_scene_copy without specs) */
+    char *spec;
 } ef_fog_component;
+
+/* The empty SPEC of a component copied without its text (never freed). */
+extern const char ef_spec_none[];
+
+/* The longest SPEC accepted (a usage error beyond). */
+#define EF_SPEC_MAX ((size_t) 8191)
 
 /* The phase functions of phase= (normalised over the sphere). */
 enum { EF_PHASE_ISO = 0, EF_PHASE_RAYLEIGH, EF_PHASE_HG, EF_PHASE_CS };

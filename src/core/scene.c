@@ -142,10 +142,9 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
         if (with_spec) {
             bad = ef_fog_copy(d, c);
         } else {
-            /* the SPEC text is 8 kB a component: a copy only evaluated
-             * needs none of it */
-            memcpy(d, c, offsetof(ef_fog_component, spec));
-            d->spec[0] = '\0';
+            /* a copy only evaluated needs no SPEC text */
+            *d = *c;
+            d->spec = (char *) ef_spec_none;
             d->arr = NULL;
             d->path = NULL;
             d->narr = 0;

@@ -21,8 +21,6 @@
  * wrong file, and reading it whole would only waste memory. */
 #define EF_TEXT_FILE_MAX ((size_t) 64 * 1024 * 1024)
 
-/* The longest SPEC a component can hold (ef_fog_component.spec). */
-#define EF_SPEC_MAX (sizeof(((ef_fog_component *) 0)->spec) - 1)
 
 static const char top_keys[] = "units, up, color, sky, time, aov, fog, lights, sky_light";
 
