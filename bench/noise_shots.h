@@ -1,5 +1,5 @@
 /* noise_shots.h - the shots of the noise sweep (issue 41), shared by
- * bench/noise_sweep.c and the suite's reduced sweep (tests/test_noise_sweep.c):
+ * bench/noise_sweep.c and the suite's reduced sweep (tests/unit/test_noise_sweep.c):
  * the list, and a pinhole over the ground plane y = 0 as make_sample --view
  * renders it. Header-only (static functions). */
 #ifndef EF_BENCH_NOISE_SHOTS_H

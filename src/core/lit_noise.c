@@ -198,7 +198,7 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
      * the noise's own scales (the light's path crosses other features as
      * the point moves), and Richardson's estimate only sees what a step's
      * five points resolve. Measured against the reference and tight-tol
-     * runs (tests/test_lit_noise.c; a quarter cell: within 5e-5 on a
+     * runs (tests/unit/test_lit_noise.c; a quarter cell: within 5e-5 on a
      * 10-unit ray at the ground where the whole cell was 0.4 % off). */
     double cap = INFINITY;
     for (int i = 0; i < nc; ++i) {

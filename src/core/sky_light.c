@@ -134,7 +134,7 @@ static void fft(double *re, double *im, int n, const double *twr, const double *
 /* The grid size a phase needs: 3 pi / N at most 1.35 times its lobe's
  * width 1 - |g| (Rayleigh's 1), a power of two from 64 to 256; 1 for
  * iso. Measured against known transforms and a texel-by-texel sum
- * (tests/test_sky_light.c): a few 1e-4 relative, up to 3e-3 near a sharp
+ * (tests/unit/test_sky_light.c): a few 1e-4 relative, up to 3e-3 near a sharp
  * lobe. */
 static int grid_for(int phase, double g)
 {

@@ -4,7 +4,7 @@
  * strict C11 contracts nothing: each lane's value is the same bits in the
  * baseline clone (two SSE2 halves), the x86-64-v3 clone (one AVX2 vector)
  * and on any other CPU, whatever its neighbours hold. Accurate to a few
- * ulp (tests/test_vmath.c measures each against libm); every function
+ * ulp (tests/unit/test_vmath.c measures each against libm); every function
  * states the inputs it takes, and its callers keep to them (a lane outside
  * goes to libm's scalar functions instead).
  *

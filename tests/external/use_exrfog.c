@@ -1,5 +1,5 @@
 /* A program outside the project using the installed libexrfog (built by
- * tests/install_check.sh through pkg-config and through find_package).
+ * tests/scripts/install_check.sh through pkg-config and through find_package).
  * usage: use_exrfog SAMPLE.exr OUTDIR; exit 0 when every check holds. */
 #include <exrfog.h>
 

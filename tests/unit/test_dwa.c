@@ -1,7 +1,7 @@
 /* DWAA/DWAB through the C++ library (src/io/exr_dwa.cpp): files written
  * here with OpenEXRCore (ZIP) are transcoded to DWA and back, and checked
  * against the originals (read by Core) and against the OpenEXR C++
- * library's own decode of the DWA files (tests/dwa_ref.cpp):
+ * library's own decode of the DWA files (tests/refs/dwa_ref.cpp):
  *   - channels DWA stores losslessly (everything but the R, G, B, Y, BY, RY
  *     suffixes) come back bit-exact after ZIP -> DWA;
  *   - after DWA -> ZIP every channel is bit-exact with the reference

@@ -2,7 +2,7 @@
  * reasoning: Perlin's golden values, zeros on the lattice (huge coordinates
  * included), the period 256, the cell-split evaluation against ef_noise3 bit
  * for bit, fbm's construction and values, and the two fog densities at spot
- * points. Values marked "perlin_ref.py" come from tests/perlin_ref.py, a
+ * points. Values marked "perlin_ref.py" come from tests/refs/perlin_ref.py, a
  * plain-Python implementation of the contract (the noise_reference test
  * compares 1.2e5 random points with it bit for bit). This file is built with
  * -ffp-contract=off: noise.h's inline cell evaluation is part of the

@@ -1,5 +1,5 @@
 """Runs inside Blender (blender -b --factory-startup --python THIS -- OUT plain|fog|sunmap SPP
-SUN [shadow]): a tiny Cycles scene for lit fog (tests/blender_lit_run.py compares):
+SUN [shadow]): a tiny Cycles scene for lit fog (tests/blender/blender_lit_run.py compares):
 emission-only surfaces (a ground plane and a ball that casts no shadow, or
 with "shadow" does: shafts),
 a black world, a box of homogeneous fog (Volume Scatter, HG g = 0.5, plus

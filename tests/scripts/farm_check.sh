@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# exrfog-farm on a real single-node Slurm (tests/slurm-local) and on GNU
+# exrfog-farm on a real single-node Slurm (tests/scripts/slurm-local) and on GNU
 # parallel: a 12-frame sequence with one frame missing fails with that frame
 # and its log named, the other eleven are written, a resubmit after the frame
 # is restored reruns only it, and every frame equals a sequential exrfog run
@@ -34,9 +34,9 @@ fog=(--fog 'noise:density=0.05:scale=4:octaves=2:velocity=3,0,1:method=exact')
 cmp -s seq/ref.0001.exr seq/ref.0002.exr && bad "frames 1 and 2 fog alike (time does not move the fog)"
 
 D=$tmp/slurm
-conf=$("$src/tests/slurm-local" start "$D") || { echo "FAIL: slurm-local start"; exit 1; }
+conf=$("$src/tests/scripts/slurm-local" start "$D") || { echo "FAIL: slurm-local start"; exit 1; }
 eval "$conf"
-trap '"$src/tests/slurm-local" stop "$D" >/dev/null 2>&1' EXIT
+trap '"$src/tests/scripts/slurm-local" stop "$D" >/dev/null 2>&1' EXIT
 [ -n "${SLURM_CONF:-}" ] || bad "slurm-local start printed no SLURM_CONF"
 
 # run ENGINE: the missing-frame round, the resubmit, the comparison.

@@ -1,5 +1,5 @@
 """ctest blender_addon: renders a tiny Cycles frame in headless Blender with
-the exrfog add-on (tests/blender_check.py), then checks the add-on's
+the exrfog add-on (tests/blender/blender_check.py), then checks the add-on's
 fogged frame against exrfog run on the raw render with the same camera
 given by flags, and against a run through the camera file it wrote.
 Exits 77 (skipped) when Blender is not installed."""

@@ -1,5 +1,5 @@
 /* Checks ef_noise3 and ef_fbm_eval bit for bit (0 ulp) against
- * tests/perlin_ref.py, an independent plain-Python implementation of the
+ * tests/refs/perlin_ref.py, an independent plain-Python implementation of the
  * noise contract. The script writes seeded random records as hex floats:
  *   n x y z value
  *   f octaves lacunarity gain qx qy qz value

@@ -1,5 +1,5 @@
 """ctest blender_lit: lit fog against Blender Cycles. Renders
-tests/blender_lit.py's scene without fog (with depth), and with the fog
+tests/blender/blender_lit.py's scene without fog (with depth), and with the fog
 box with the sun on and off; runs exrfog on the fog-free render with the
 same camera, fog and sun, and with the sun off. Cycles lets the emissive
 surfaces light its fog too (exrfog's lights are only --light), so the

@@ -2,7 +2,7 @@
 renders a tiny Cycles frame with the exrfog add-on enabled (fog after
 render), writes the camera file, and records the camera as the test
 computes it itself (Blender's angle_x, matrix_world) for the comparison
-run outside Blender (tests/blender_check_run.py)."""
+run outside Blender (tests/blender/blender_check_run.py)."""
 import json
 import math
 import os

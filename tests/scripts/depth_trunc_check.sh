@@ -46,7 +46,7 @@ for spec in "z.tif -d float" "zh.tif -d half" "zc.tif -d float --compression zip
 done
 # fuzz_depth's finding: a 372-byte BMP claiming 13 million pixels a row
 # took 1 GB before its truncation was found; now refused unread.
-huge="$here/../fuzz/regressions_depth/huge-row.bmp"
+huge="$here/../../fuzz/regressions_depth/huge-row.bmp"
 rm -f out.exr
 "$exrfog" in.exr --depth "$huge" -o out.exr --fog exp:density=0.02 2>err.txt
 rc=$?

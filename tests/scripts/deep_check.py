@@ -17,7 +17,7 @@ Checked, per scene (exp and height fog):
 and that every output reads back in OpenImageIO and exrheader, with
 maxSamplesPerPixel equal to the largest count.
 
-Multi-part input (with EXR_PARTS, tests/exr_parts.cpp: the OpenEXR C++
+Multi-part input (with EXR_PARTS, tests/refs/exr_parts.cpp: the OpenEXR C++
 library writes a flat part and a deep one into one file, which OIIO
 refuses to write, and reads every output part back): the fogged part
 equals the single-part run exactly, every other part its input exactly.
@@ -306,7 +306,7 @@ for name, spec_text, model in (
             cn = oiio.ImageBuf(outs[mode]).spec().channelnames
             check(all(c in cn for c in ("AR", "AG", "AB")),
                   "chromatic fog: --deep %s writes AR, AG, AB (%s)" % (mode, ",".join(cn)))
-    # every output read in full by the OpenEXR C++ library (tests/exr_parts.cpp)
+    # every output read in full by the OpenEXR C++ library (tests/refs/exr_parts.cpp)
     for mode, path in outs.items():
         if exr_parts and os.path.exists(exr_parts):
             rb = subprocess.run([exr_parts, "read", path], capture_output=True, text=True)
@@ -551,10 +551,10 @@ else:
 # within --deep-tol (the default, 1e-3). The exact part is computed here:
 # closed forms for height, layered (piecewise linear in height, integrated
 # piece by piece) and box (the length inside), and for noise a fine
-# Gauss-Legendre quadrature of the density from tests/perlin_ref.py's
+# Gauss-Legendre quadrature of the density from tests/refs/perlin_ref.py's
 # independent Perlin noise (floats), 8 nodes per eighth of the finest cell.
 import random
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "refs"))
 import perlin_ref
 
 
@@ -775,7 +775,7 @@ check(worst_half <= 1, "lit holdout: as stored within --deep-tol + half rounding
 # pixels: --deep flatten, and --deep samples flattened by OpenImageIO, whose
 # fog samples are cut at the lit intervals' ends and split for the colour
 # contract (within 1e-6: float rounding of the summed samples).
-sample_exr = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "samples", "sample.exr")
+sample_exr = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "samples", "sample.exr")
 make_sample = os.path.join(os.path.dirname(os.path.abspath(exrfog)), "make_sample")
 if os.path.exists(sample_exr) and os.path.exists(make_sample):
     cflat, cdeep = os.path.join(tmp, "lit_crop.exr"), os.path.join(tmp, "lit_crop_deep.exr")
