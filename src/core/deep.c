@@ -868,11 +868,12 @@ int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef
     double zf = INFINITY, zb = -INFINITY, m[EF_DEEP_STRIDE(EF_DEEP_MAX_CH)];
     for (int c = 0; c < nch; ++c)
         out[c] = 0;
-    int i = 0, j = 0, first = 1;
+    int i = 0, j = 0, first = 1, in_a = 0;
     while (i < a->n || j < b->n) {
         const double *p = i < a->n ? a->v + (size_t) i * (size_t) S : NULL;
         const double *q = j < b->n ? b->v + (size_t) j * (size_t) S : NULL;
         const double *s;
+        int from_a = 1;
         if (p && q && p[nch] == q[nch] && p[nch + 1] == q[nch + 1]) {
             memcpy(m, p, (size_t) S * sizeof *m);
             merge_into(L, m, q);
@@ -882,6 +883,7 @@ int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef
             const int take_p = p && (!q || p[nch] < q[nch] ||
                                      (p[nch] == q[nch] && p[nch + 1] < q[nch + 1]));
             s = take_p ? p : q;
+            from_a = take_p;
             const double *o = take_p ? q : p;
             /* the other list's next sample must not start inside this one */
             if (o && s[nch + 1] > s[nch] && o[nch] < s[nch + 1])
@@ -889,15 +891,21 @@ int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef
             take_p ? ++i : ++j;
         }
         over(L, s, out, first);
-        zf = fmin(zf, s[nch]);
-        zb = fmax(zb, fmax(s[nch], s[nch + 1]));
+        /* Z and ZBack from a's samples alone: b's (the fog's, which start
+         * at the camera) are a medium, no surface a depth merge or a
+         * defocus should see */
+        if (from_a) {
+            zf = fmin(zf, s[nch]);
+            zb = fmax(zb, fmax(s[nch], s[nch + 1]));
+            in_a = 1;
+        }
         first = 0;
     }
     for (int c = 0; c < nch; ++c) {
         if (L->role[c] == EF_DEEP_Z)
             out[c] = zf;
         else if (L->role[c] == EF_DEEP_ZBACK)
-            out[c] = first ? INFINITY : zb;
+            out[c] = in_a ? zb : INFINITY;
     }
     return 0;
 }

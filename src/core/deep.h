@@ -124,8 +124,10 @@ void ef_deep_flatten(const ef_deep_layout *L, const ef_deep_buf *tidy, double *o
 
 /* ef_deep_flatten of the tidy union of two tidy lists a and b whose
  * samples either coincide (merged) or do not overlap, without building
- * it. Returns 0, or 1 (out undefined) when a sample of one starts inside a
- * volume of the other: tidy the union then. */
+ * it; Z and ZBack come from a's samples alone (a the input, b the fog:
+ * the flattened depth is the render's nearest sample, not the fog's start
+ * at the camera). Returns 0, or 1 (out undefined) when a sample of one
+ * starts inside a volume of the other: tidy the union then. */
 int ef_deep_flatten_pair(const ef_deep_layout *L, const ef_deep_buf *a, const ef_deep_buf *b,
                          double *out);
 

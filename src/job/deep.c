@@ -328,7 +328,9 @@ static int union_tidy(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, ef_
     return 0;
 }
 
-/* The flatten of the union of a and b (union_tidy's lists) into out. */
+/* The flatten of the union of a and b (union_tidy's lists) into out, its
+ * Z and ZBack a's alone (ef_deep_flatten_pair: the input's nearest
+ * sample, not the fog's start at the camera). */
 static int flatten_union(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, double *out,
                          ef_err *err)
 {
@@ -338,6 +340,11 @@ static int flatten_union(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, 
     if (union_tidy(w, a, b, err))
         return -1;
     ef_deep_flatten(L, &w->out, out);
+    double own[EF_DEEP_MAX_CH];
+    ef_deep_flatten(L, a, own);
+    for (int c = 0; c < L->nch; ++c)
+        if (L->role[c] == EF_DEEP_Z || L->role[c] == EF_DEEP_ZBACK)
+            out[c] = own[c];
     return 0;
 }
 

@@ -284,6 +284,23 @@ for name, spec_text, model in (
         outs[mode] = os.path.join(tmp, "deep_%s_%s.exr" % (name, mode))
         check(run([src, "--fog", spec_text, "--deep", mode, "-o", outs[mode]]) == 0,
               "%s --deep %s runs" % (name, mode))
+    # --deep flatten's Z is the input's nearest sample (issue 42: the fog's
+    # samples start at the camera and once made it 0 everywhere), read from
+    # the input by OIIO's deep API; inf where the pixel holds no sample
+    zin = oiio.ImageBuf(src)
+    zdd, zci = zin.deepdata(), zin.spec().channelnames.index("Z")
+    zf = oiio.ImageBuf(outs["flatten"])
+    zpx = zf.get_pixels(oiio.FLOAT)
+    zo = zf.spec().channelnames.index("Z")
+    zbad = 0
+    for p in range(zdd.pixels):
+        n = zdd.samples(p)
+        want = min(zdd.deep_value(p, zci, j) for j in range(n)) if n else float("inf")
+        got = float(zpx[p // W][p % W][zo])
+        if not (got == want or abs(got - want) <= 1e-6 * max(1.0, abs(want))):
+            zbad += 1
+    check(zbad == 0, "%s --deep flatten: Z is the nearest input sample (%d pixels differ)"
+          % (name, zbad))
     flat_s = os.path.join(tmp, "deep_%s_samples_flat.exr" % name.replace(" ", "_"))
     flat_m = os.path.join(tmp, "deep_%s_merge_flat.exr" % name)
     check(oiiotool([outs["samples"], "--flatten", "-o", flat_s]) == 0, "oiiotool flattens samples")
