@@ -8,7 +8,8 @@
  *   lit_quad.c   the general quadrature: adaptive Gauss-Kronrod over the
  *                pieces between the features, in t or in a lamp's angle
  *   lit_lamp.c   a point lamp in uniform isotropic fog: its closed form,
- *                four rays at a time
+ *                four rays at a time (lit.c holds a lamp's geometry along a
+ *                ray and the uniform medium it sees)
  *   lit_noise.c  lit fog through a rough (noise) component
  */
 #ifndef EF_LIT_INT_H
@@ -75,7 +76,7 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double S[3], double E[3]);
 
-/* ---- lit_lamp.c ---- */
+/* ---- lit.c: a lamp's geometry, the uniform medium ---- */
 
 /* sqrt(x^2 + y^2), with hypot's care only where the squares need it. */
 double ef_lit_len2(double x, double y);
@@ -83,6 +84,9 @@ double ef_lit_len2(double x, double y);
 void ef_lit_lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *ts, double *h);
 /* The uniform fog's extinction and isotropic scattering per channel. */
 void ef_lit_lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3]);
+
+/* ---- lit_lamp.c ---- */
+
 /* A point lamp's closed form over [a, D], added to S and E; -1 when it does not hold. */
 int ef_lit_lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
                        double h, double a, double D, double S[3], double E[3]);

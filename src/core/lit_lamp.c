@@ -14,43 +14,6 @@
 
 /* ------------------------------------------ a point lamp in uniform fog */
 
-/* sqrt(x^2 + y^2): hypot's care only where the squares could overflow
- * or underflow (hypot costs several times more). */
-double ef_lit_len2(double x, double y)
-{
-    const double ax = fabs(x), ay = fabs(y), m = ax > ay ? ax : ay;   /* (NaN: NaN below) */
-    if (m < 1e150 && m > 1e-150)
-        return sqrt(x * x + y * y);
-    return m == 0 ? 0 : hypot(x, y);
-}
-
-/* |(x, y, z)| with one square root where the largest magnitude lies
- * within 1e-150 .. 1e150 (its square then neither overflows nor loses
- * digits that matter), else by len2 twice. lamp_span computes the same
- * plain form on vectors. */
-static double len3(double x, double y, double z)
-{
-    const double ax = fabs(x), ay = fabs(y), az = fabs(z), mxy = ax > ay ? ax : ay,
-                 m = mxy > az ? mxy : az;
-    if (m < 1e150 && m > 1e-150)
-        return sqrt(x * x + y * y + z * z);
-    return ef_lit_len2(ef_lit_len2(x, y), z);
-}
-
-/* Where lamp l comes closest to the line of r: its parameter *ts along
- * r->dir, and its distance *h from the line by the cross product (no
- * cancellation near the line); w gets lamp - origin. */
-void ef_lit_lamp_line(const ef_light *l, const ef_ray *r, double w[3], double *ts, double *h)
-{
-    for (int k = 0; k < 3; ++k)
-        w[k] = l->pos[k] - r->org[k];
-    *ts = w[0] * r->dir[0] + w[1] * r->dir[1] + w[2] * r->dir[2];
-    const double cx = w[1] * r->dir[2] - w[2] * r->dir[1],
-                 cy = w[2] * r->dir[0] - w[0] * r->dir[2],
-                 cz = w[0] * r->dir[1] - w[1] * r->dir[0];
-    *h = len3(cx, cy, cz);
-}
-
 /* |z|^2, without hypot's care for overflow (the arguments here are far
  * from it) */
 static double norm2(double complex z)
@@ -586,24 +549,6 @@ EF_MULTIVERSION static void lamp_rays4(const double sig[3], const double scat[3]
                                        int st[4])
 {
     lamp_rays4_in(sig, scat, e, in, m, idx, S, E, st);
-}
-
-/* The uniform fog's extinction sig (its components' sum, in their order)
- * and isotropic scattering scat per channel, as inscatter_range gives
- * them to lamp_closed. */
-void ef_lit_lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3])
-{
-    for (int k = 0; k < 3; ++k)
-        sig[k] = scat[k] = 0;
-    for (int i = 0; i < s->ncomp; ++i) {
-        double sg[3];
-        uniform_sigma(&s->comp[i], sg);   /* every component is uniform here */
-        for (int k = 0; k < 3; ++k) {
-            sig[k] += sg[k];
-            if (sg[k] > 0)
-                scat[k] += sg[k] * albedo(&s->comp[i], k) / (4 * PI);
-        }
-    }
 }
 
 /* lamp_rays4 for one segment (its lanes all alike): the same bits as the
