@@ -401,6 +401,11 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             if (ef_parse_numbers(a, &o->deep_tol, 1) || !(o->deep_tol > 0) || !(o->deep_tol < 1))
                 return ef_fail(err, "--deep-tol '%s' must be a number between 0 and 1 (e.g. "
                                     "1e-3)", a), EF_PARSE_USAGE;
+            if (o->deep_tol < EF_DEEP_TOL_FLOOR)
+                return ef_fail(err, "--deep-tol '%s' is below %g, finer than double precision "
+                                    "computes a fog sample's transmittance (and than a float "
+                                    "channel stores, 6e-8): give %g or more", a,
+                               EF_DEEP_TOL_FLOOR, EF_DEEP_TOL_FLOOR), EF_PARSE_USAGE;
             break;
         case OPT_SKY:
             f.has_sky = 1;

@@ -17,6 +17,13 @@ struct ef_colour;
 /* --deep: what a deep input becomes. */
 enum { EF_DEEP_MODE_SAMPLES = 0, EF_DEEP_MODE_FOG, EF_DEEP_MODE_FLATTEN };
 #define EF_DEEP_DEFAULT_TOL 1e-3
+/* The finest --deep-tol: below it the bound asks for more than double
+ * precision computes a fog sample's transmittance to (the closed forms'
+ * 1e-13 relative, summed over a pixel's samples) and far more than a float
+ * channel stores (6e-8). */
+#define EF_DEEP_TOL_FLOOR 1e-9
+/* Below this --deep-tol a run is warned of its cost. */
+#define EF_DEEP_TOL_COSTLY 1e-5
 
 typedef struct ef_options {
     const char *input, *output, *depth_file, *layer, *depth_channel, *preview, *scene_file;

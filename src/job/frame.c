@@ -453,6 +453,19 @@ static int check_deep(ef_frame *F)
         ef_fail(&F->err, "%s", why);
         return ef_job_report(J, o->input, &F->err, status);
     }
+    /* A fine --deep-tol, once per run: the split rule's bound falls with
+     * the square of a fog sample's length, so the samples, and the deep
+     * pass's time, grow as sqrt(1e-3 / tol). */
+    if (o->deep_tol < EF_DEEP_TOL_COSTLY && !J->noted_deep_tol && !o->quiet && !o->explain) {
+        J->noted_deep_tol = 1;
+        char msg[400];
+        snprintf(msg, sizeof msg, "--deep-tol %g asks for about %.0f times the fog samples of "
+                                  "the default %g where a fog sample is split by its bound, and "
+                                  "the deep pass takes about that much longer there; a float "
+                                  "channel stores 6e-8, a half one 5e-4",
+                 o->deep_tol, sqrt(EF_DEEP_DEFAULT_TOL / o->deep_tol), EF_DEEP_DEFAULT_TOL);
+        ef_job_warn(J, o->input, msg);
+    }
     return 0;
 }
 

@@ -61,6 +61,7 @@ typedef struct ef_job {
     char dl_ext[32];
     int noted_up;             /* --up-axis auto's choice was told */
     int noted_dark;           /* the lights that add nothing were named */
+    int noted_deep_tol;       /* a costly --deep-tol was warned about */
 } ef_job;
 
 /* Whether the run is to stop: the host's flag or the progress hook's. */

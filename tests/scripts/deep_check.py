@@ -954,6 +954,7 @@ for tw, th in ((32, 32), (64, 20)):
 # Usage: what deep input does not take is refused (exit 2), never ignored.
 flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
 for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
+                   ([src, "--deep-tol", "1e-17"], 2), ([src, "--deep-tol", "1e-300"], 2),
                    ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2),
                    ([src, "--deep", "samples", "--aov", "light", "--light",
                      "point:position=1,1,3:intensity=1"], 2),
@@ -965,6 +966,16 @@ for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
     check(r.returncode == want and r.stderr.startswith("exrfog: ") and
           not os.path.exists(os.path.join(tmp, "u.exr")),
           "%s -> exit %d with a message (got %d: %s)" % (args[1:], want, r.returncode, r.stderr.strip()))
+# The floor is named (issue 42: 1e-17 and 1e-300 ran past 120 s), and a fine
+# tolerance above it is warned with its cost before the work, once.
+r = subprocess.run([exrfog, src, "--deep-tol", "1e-17", "--fog", "exp:density=0.1", "-o",
+                    os.path.join(tmp, "u.exr")], capture_output=True, text=True)
+check("below 1e-09" in r.stderr, "--deep-tol 1e-17 names the floor: %s" % r.stderr.strip())
+r = subprocess.run([exrfog, src, "--deep-tol", "1e-7", "--deep", "flatten", "--fog",
+                    "exp:density=0.1", "-o", os.path.join(tmp, "tol.exr")],
+                   capture_output=True, text=True)
+check(r.returncode == 0 and r.stderr.count("warning: --deep-tol 1e-07 asks for about 100 times") == 1,
+      "--deep-tol 1e-7 is warned of its cost once: %s" % r.stderr.strip())
 # --deep flatten writes any format (issue 23's deliverables): a PNG of the
 # flattened frame is its EXR encoded by the sRGB formula (straight alpha);
 # the deep modes are EXR only.
