@@ -26,7 +26,7 @@ enum {
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_FAILED_LIST, OPT_VIEW, OPT_CAMERA_FILE,
     OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
-    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP, OPT_DEEP_GREY
+    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP, OPT_DEEP_GREY, OPT_OUTPUT_DISPLAY
 };
 
 static const struct option long_opts[] = {
@@ -57,6 +57,7 @@ static const struct option long_opts[] = {
     { "colorspace", required_argument, NULL, OPT_COLORSPACE },
     { "preview-view", required_argument, NULL, OPT_PREVIEW_VIEW },
     { "output-colorspace", required_argument, NULL, OPT_OUTPUT_COLORSPACE },
+    { "output-display", required_argument, NULL, OPT_OUTPUT_DISPLAY },
     { "crop", required_argument, NULL, OPT_CROP },
     { "aov", required_argument, NULL, OPT_AOV },
     { "aov-origin", required_argument, NULL, OPT_AOV_ORIGIN },
@@ -177,6 +178,9 @@ void ef_options_usage(FILE *out)
             "                           PNG and JPEG uint8)\n"
             "      --output-colorspace NAME  an integer (display-referred) non-EXR output's\n"
             "                           colour space (default: the config's sRGB texture)\n"
+            "      --output-display \"DISPLAY, VIEW\"  a non-EXR output through an OCIO\n"
+            "                           display and view instead (as oiiotool --ociodisplay),\n"
+            "                           at any -d\n"
             "      --crop display|data  a non-EXR output covers the display window (default)\n"
             "                           or only the data window\n"
             "      --threads N          worker threads, 0 = all cores (default)\n"
@@ -446,6 +450,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             break;
         case OPT_PREVIEW_VIEW: o->preview_view = a; break;
         case OPT_OUTPUT_COLORSPACE: o->output_colorspace = a; break;
+        case OPT_OUTPUT_DISPLAY: o->output_display = a; break;
         case OPT_CROP:
             if (strcmp(a, "display") && strcmp(a, "data"))
                 return ef_fail(err, "--crop '%s' is not display or data", a), EF_PARSE_USAGE;
@@ -645,6 +650,7 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
     } names[] = { { "layer", o->layer }, { "depth-channel", o->depth_channel },
                   { "colorspace", o->colorspace }, { "preview-view", o->preview_view },
                   { "output-colorspace", o->output_colorspace },
+                  { "output-display", o->output_display },
                   { "view", o->nviews > 0 ? o->views[0] : NULL },
                   { "view", o->nviews > 1 ? o->views[1] : NULL } };
     for (size_t k = 0; k < sizeof names / sizeof names[0]; ++k)
@@ -655,6 +661,9 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
         if (strlen(o->views[k]) > 1024)
             return ef_fail(err, "--view '%s' is longer than any name exrfog reads (1024 bytes at "
                                 "most)", o->views[k]), EF_PARSE_USAGE;
+    if (o->output_colorspace && o->output_display)
+        return ef_fail(err, "--output-colorspace and --output-display both say how a non-EXR "
+                            "output is encoded; give one"), EF_PARSE_USAGE;
     if (o->camera_file && (o->cam.w2c.set || o->cam.c2w.set))
         return ef_fail(err, "--camera-file and --%s both give the camera's pose; give one",
                        o->cam.w2c.set ? "world-to-camera" : "camera-to-world"), EF_PARSE_USAGE;

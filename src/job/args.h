@@ -41,6 +41,7 @@ typedef struct ef_options {
     int pixel_type;           /* -1: keep; else EXR_PIXEL_HALF/FLOAT */
     int out_dt;               /* -d TYPE for a non-EXR output: EF_DT_*, 0: the format's */
     const char *output_colorspace;   /* --output-colorspace NAME, or NULL */
+    const char *output_display;      /* --output-display "DISPLAY, VIEW", or NULL */
     int crop_data;            /* --crop data: a non-EXR output is the data window */
     /* -d CHANNEL=TYPE, as oiiotool: per-channel types over pixel_type */
     const char *chan_type_name[EF_MAX_CHAN_TYPES];

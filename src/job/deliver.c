@@ -29,7 +29,9 @@ static void set_plan(const ef_job *J, ef_deliver *dv, int type, int alpha)
     dv->d.type = type;
     dv->integer = type >= EF_DT_UINT8 && type <= EF_DT_UINT16;
     dv->d.full_window = !J->o.crop_data;
-    dv->d.unassociate = dv->integer;
+    /* display-referred colour (integers, or any type through a display)
+     * is encoded and stored with straight alpha */
+    dv->d.unassociate = dv->integer || J->o.output_display != NULL;
 }
 
 int ef_deliver_plan(ef_job *J, const char *ext, ef_deliver *dv, ef_err *err)
@@ -88,7 +90,7 @@ int ef_deliver_plan(ef_job *J, const char *ext, ef_deliver *dv, ef_err *err)
 
 int ef_deliver_needs_colour(const ef_job *J, const ef_deliver *dv)
 {
-    return dv->integer || J->o.output_colorspace != NULL;
+    return dv->integer || J->o.output_colorspace != NULL || J->o.output_display != NULL;
 }
 
 /* The encoder the writer calls: the OCIO processor on RGB triples. */
@@ -154,10 +156,17 @@ int ef_deliver_colour(ef_job *J, ef_deliver *dv, ef_err *err)
     if (!cfg)
         return 1;
     char msg[1200];
-    dv->proc = ef_ocio_space_open(cfg, *work ? work : NULL, J->o.output_colorspace, dv->space,
-                                  sizeof dv->space, msg, sizeof msg);
+    /* A display and view (oiiotool's --ociodisplay) at any -d, else a
+     * colour space; the file is labelled by the display's name. */
+    if (J->o.output_display)
+        dv->proc = ef_ocio_display_open(cfg, *work ? work : NULL, J->o.output_display, dv->space,
+                                        sizeof dv->space, msg, sizeof msg);
+    else
+        dv->proc = ef_ocio_space_open(cfg, *work ? work : NULL, J->o.output_colorspace,
+                                      dv->space, sizeof dv->space, msg, sizeof msg);
     if (!dv->proc)
-        return ef_fail(err, "%s", msg), J->o.output_colorspace ? 2 : 1;
+        return ef_fail(err, "%s%s", J->o.output_display ? "--output-display: " : "", msg),
+               J->o.output_colorspace || J->o.output_display ? 2 : 1;
     dv->d.encode = encode;
     dv->d.encode_user = dv->proc;
     label(dv);

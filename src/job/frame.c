@@ -280,6 +280,11 @@ static int open_destinations(ef_frame *F)
                 : o->out_dt == EF_DT_UINT12 ? "12" : "16");
         return ef_job_report(J, o->output, &F->err, 2);
     }
+    if (o->output_display && o->output && !F->foreign) {
+        ef_fail(&F->err, "--output-display is for non-EXR outputs (.png, .tif, .dpx, .jpg): an "
+                         "EXR stays scene-referred (use --preview for a display view of it)");
+        return ef_job_report(J, o->output, &F->err, 2);
+    }
     if (F->foreign) {
         if (F->naov) {
             ef_fail(&F->err, "--aov needs an EXR output: AOVs are extra channels, and %s holds "
