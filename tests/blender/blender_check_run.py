@@ -34,7 +34,7 @@ def same_pixels(a, b):
 with tempfile.TemporaryDirectory() as d:
     env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
-                        os.path.join(src, "tests", "blender_check.py"), "--", d, exrfog,
+                        os.path.join(src, "tests", "blender", "blender_check.py"), "--", d, exrfog,
                         os.path.join(src, "integrations", "blender")],
                        capture_output=True, text=True, env=env)
     if r.returncode or "blender_check: rendered and fogged" not in r.stdout:

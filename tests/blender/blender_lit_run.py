@@ -68,7 +68,7 @@ def rgb(path):
 
 with tempfile.TemporaryDirectory() as d:
     env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
-    scene = os.path.join(src, "tests", "blender_lit.py")
+    scene = os.path.join(src, "tests", "blender", "blender_lit.py")
     for name, mode, spp, sun, extra in (("plain", "plain", 4, 3, ""), ("lit", "fog", 256, 3, ""),
                                         ("dark", "fog", 256, 0, ""),
                                         ("plainS", "plain", 4, 3, "shadow"),

@@ -669,6 +669,7 @@ static void test_reductions_to_exp(void **state)
         assert_true(near_rel(tau0(&cv, org, dir, isinf(len) ? 1e5 : len),
                              tau0(&ex, org, dir, isinf(len) ? 1e5 : len), 1e-15, 0));
     }
+    ef_fog_free(&ex);
     ef_fog_free(&hf);
     ef_fog_free(&hs);
     ef_fog_free(&ly);

@@ -79,8 +79,10 @@ static void test_exp(void **state)
     scene_with(&s, "exp:density=0.1");
     expect_T(&s, ray(10, 8), 0.36787944117144233, 0.36787944117144233, 0.36787944117144233);
     expect_T(&s, ray(0, 0), 1, 1, 1);
+    ef_scene_free(&s);
     scene_with(&s, "exp:density=0.1:distance=planar");
     expect_T(&s, ray(10, 8), 0.44932896411722156, 0.44932896411722156, 0.44932896411722156);
+    ef_scene_free(&s);
 }
 
 static void test_exp2(void **state)
@@ -90,6 +92,7 @@ static void test_exp2(void **state)
     scene_with(&s, "exp2:density=0.1");
     expect_T(&s, ray(10, 10), 0.36787944117144233, 0.36787944117144233, 0.36787944117144233);
     expect_T(&s, ray(20, 20), 0.018315638888734179, 0.018315638888734179, 0.018315638888734179);
+    ef_scene_free(&s);
 }
 
 static void test_linear(void **state)
@@ -102,6 +105,7 @@ static void test_linear(void **state)
     expect_T(&s, ray(5, 5), 1, 1, 1);     /* clamped to 1 before start */
     expect_T(&s, ray(40, 40), 0, 0, 0);   /* clamped to 0 beyond end */
     expect_T(&s, ray(INFINITY, INFINITY), 0, 0, 0);
+    ef_scene_free(&s);
 }
 
 static void test_per_channel_and_sum(void **state)
@@ -114,6 +118,7 @@ static void test_per_channel_and_sum(void **state)
     ef_err err;
     assert_int_equal(ef_scene_add(&s, "exp:density=0.05", &err), 0);
     expect_T(&s, ray(10, 10), exp(-1.5), exp(-2.5), exp(-3.5));
+    ef_scene_free(&s);
 }
 
 static void test_sky_limits(void **state)
@@ -129,6 +134,7 @@ static void test_sky_limits(void **state)
     assert_true(T[0] == 0.0 && T[1] == 1.0 && T[2] == 0.0);
     assert_memory_equal(T, Tinf, sizeof T);
     /* Background as a shell at 100: Tinf ends there. */
+    ef_scene_free(&s);
     scene_with(&s, "exp:density=0.01");
     ef_err err;
     assert_int_equal(ef_scene_parse_sky(&s, "distance=100", &err), 0);
@@ -136,6 +142,7 @@ static void test_sky_limits(void **state)
     ef_scene_eval(&s, &near, &surf, &inf);
     assert_true(fabs(Tinf[0] - exp(-1.0)) < 1e-15);
     assert_true(fabs(T[0] - exp(-0.05)) < 1e-15);
+    ef_scene_free(&s);
 }
 
 static void test_composite(void **state)
@@ -207,8 +214,10 @@ static void test_spec_ok(void **state)
     assert_int_equal(ef_fog_parse("exp2:density=1e-3,2e-3,3e-3:distance=planar", NULL, &c, &err), 0);
     assert_true(c.model == &ef_fog_exp2 && c.distance == EF_DIST_PLANAR);
     assert_true(c.p[0] == 1e-3 && c.p[1] == 2e-3 && c.p[2] == 3e-3);
+    ef_fog_free(&c);
     assert_int_equal(ef_fog_parse("linear:end=5", NULL, &c, &err), 0);
     assert_true(c.p[0] == 0.0 && c.p[1] == 5.0);
+    ef_fog_free(&c);
 }
 
 static void test_colour_mix_at_infinity(void **state)
@@ -234,11 +243,13 @@ static void test_colour_mix_at_infinity(void **state)
     for (int k = 0; k < 3; ++k)
         assert_close(surf.F[k], want[k], 1e-15);
     /* A glFog wall (linear end) in front of the sky takes the colour. */
+    ef_scene_free(&s);
     scene_with(&s, "linear:start=0:end=5:color=0.1,0.2,0.3");
     assert_int_equal(ef_scene_add(&s, "exp:density=0.001:color=1,1,1", &err), 0);
     ef_scene_eval(&s, &sky, &surf, NULL);
     assert_close(surf.F[0], 0.1, 1e-15);
     assert_close(surf.F[2], 0.3, 1e-15);
+    ef_scene_free(&s);
 }
 
 static void test_huge_plane_coefficients(void **state)

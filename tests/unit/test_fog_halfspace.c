@@ -353,6 +353,8 @@ static void test_smooth_limits(void **state)
         tau_of(&li, 0, -2, 0, dirs[i][0], dirs[i][1], 0, 10, tl);
         check_rel(__LINE__, (int) i, ts[0], tl[0], 1e-8);
         assert_true(ts[0] < tl[0]);                        /* delta(x) < S x */
+        ef_fog_free(&sm);
+        ef_fog_free(&li);
     }
 }
 

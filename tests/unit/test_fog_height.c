@@ -52,6 +52,8 @@ static void test_falloff_zero_is_exp(void **state)
     /* Uniform fog never ends: every sky ray is opaque. */
     assert_true(isinf(tau1(&h, 0, 0, 0, 0, 1, 0, INFINITY)));
     assert_true(isinf(tau1(&h, 0, 0, 0, 0, -1, 0, INFINITY)));
+    ef_fog_free(&h);
+    ef_fog_free(&e);
 }
 
 static void test_vertical_and_345(void **state)
@@ -82,8 +84,11 @@ static void test_vertical_and_345(void **state)
     parse("height:density=1:falloff=" LN2_TEXT ":base=10", NULL, &b);
     assert_rel(tau1(&b, 0, 10, 0, 0, 1, 0, 1), 0.5 / LN2, 4e-16);
     assert_rel(tau1(&b, 0, 11, 0, 0, 1, 0, 1), 0.25 / LN2, 4e-16);
+    ef_fog_free(&b);
     parse("height:density=1:falloff=" LN2_TEXT ":base=-1", NULL, &b);
     assert_rel(tau1(&b, 0, 0, 0, 0.6, 0.8, 0, 5), 0.5 * (15.0 / 16.0) / (0.8 * LN2), 1e-15);
+    ef_fog_free(&c);
+    ef_fog_free(&b);
 }
 
 static void test_sky(void **state)
@@ -99,6 +104,7 @@ static void test_sky(void **state)
     assert_true(isinf(tau1(&c, 0, 0, 0, 0.6, -0.8, 0, INFINITY)));
     assert_true(isinf(tau1(&c, 0, 50, 0, 1, 0, 0, INFINITY)));
     /* No fog stays no fog, and channels keep their own limits. */
+    ef_fog_free(&c);
     parse("height:density=0,1,2:falloff=" LN2_TEXT, NULL, &c);
     double t[3];
     tau_of(&c, 0, 1, 0, 0, -1, 0, INFINITY, t);
@@ -108,6 +114,7 @@ static void test_sky(void **state)
     assert_rel(t[1], 0.5 / LN2, 4e-16);
     assert_rel(t[2], 1 / LN2, 4e-16);
     /* A tiny up-going slope: finite, huge. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=1", NULL, &c);
     ef_ray r = { { 1, 1e-300, 0 }, INFINITY, INFINITY, { 0, 0, 0 } };
     c.model->tau(&c, &r, t);
@@ -118,6 +125,7 @@ static void test_sky(void **state)
     r.org[1] = 800;          /* ... but e^-800 brings it back: e^-800 / 1e-310 */
     c.model->tau(&c, &r, t);
     assert_rel(t[0], exp(-800 + 310 * LN10), 1e-12);
+    ef_fog_free(&c);
 }
 
 static void test_up_axes(void **state)
@@ -134,13 +142,16 @@ static void test_up_axes(void **state)
     ef_fog_context ctx;
     ef_fog_context_init(&ctx);
     ctx.up[0] = 0, ctx.up[1] = 0, ctx.up[2] = 1;
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT, &ctx, &c);
     assert_rel(tau1(&c, 0, 0, 1, 0, 1, 0, 6), 3, 4e-16);
     /* ... and an up= key overrides it. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT ":up=y", &ctx, &c);
     assert_rel(tau1(&c, 0, 1, 7, 1, 0, 0, 6), 3, 4e-16);
 
     /* -y: height is -y, so going towards -y climbs. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT ":up=-y", NULL, &c);
     assert_rel(tau1(&c, 0, 0, 0, 0, -1, 0, 1), 0.5 / LN2, 4e-16);
     assert_rel(tau1(&c, 0, 1, 0, 1, 0, 0, 3), 6, 4e-16);        /* height -1: density 2 */
@@ -148,8 +159,10 @@ static void test_up_axes(void **state)
     assert_rel(tau1(&c, 0, 0, 0, 0, -1, 0, INFINITY), 1 / LN2, 4e-16);
 
     /* An oblique up: (1,1,0)/sqrt 2; the ray along x climbs at 1/sqrt 2. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT ":up=1,1,0", NULL, &c);
     assert_rel(tau1(&c, 0, 0, 0, 1, 0, 0, SQRT2), 0.5 / (SQRT1_2 * LN2), 1e-15);
+    ef_fog_free(&c);
 }
 
 static void test_extremes(void **state)
@@ -171,12 +184,15 @@ static void test_extremes(void **state)
     assert_true(isinf(tau1(&c, 0, -1e6, 0, 0.6, 0.8, 0, 1e300)));
     /* Near the edge of the double range: e^-710 is subnormal, times 1e10
      * must keep its digits. */
+    ef_fog_free(&c);
     parse("height:density=1e10:falloff=1", NULL, &c);
     assert_rel(tau1(&c, 0, 710, 0, 1, 0, 0, 1), exp(-710 + 10 * LN10), 1e-12);
     /* ... and e^720 overflows alone but 1e-300 e^720 does not. */
+    ef_fog_free(&c);
     parse("height:density=1e-300:falloff=1", NULL, &c);
     assert_rel(tau1(&c, 0, -720, 0, 1, 0, 0, 1), exp(720 - 300 * LN10), 1e-12);
     /* A huge falloff: from the base, integral_0^1 e^(-1e300 t) dt = 1e-300. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=1e300", NULL, &c);
     assert_rel(tau1(&c, 0, 0, 0, 0, 1, 0, 1), 1e-300, 1e-15);
     assert_true(tau1(&c, 0, 0, 0, 1, 0, 0, 2) == 2.0);
@@ -184,22 +200,27 @@ static void test_extremes(void **state)
     assert_true(isinf(tau1(&c, 0, -1, 0, 1, 0, 0, 2)));
     assert_true(isinf(tau1(&c, 0, -1e10, 0, 0, 1, 0, 2)));
     /* A tiny falloff: integral_0^1 e^(-1e-12 t) dt = 1 - 5e-13 + ... */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=1e-12", NULL, &c);
     assert_rel(tau1(&c, 0, 0, 0, 0, 1, 0, 1), 1 - 5e-13, 3e-16);
     /* Grazing: climbing 1e-12 per unit over 1000, density 2^-(1e-12 t):
      * 1000 (1 - ln2 1e-9 / 2) to first order (the next term is ~1e-19). */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT, NULL, &c);
     ef_ray r = { { 1, 1e-12, 0 }, 1000, 1000, { 0, 0, 0 } };
     c.model->tau(&c, &r, t);
     assert_rel(t[0], 1000 * (1 - 0.5 * LN2 * 1e-9), 1e-15);
     /* Far from the origin: base 1e7, camera one unit above it at x, z = 1e7. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT ":base=10000000", NULL, &c);
     assert_rel(tau1(&c, 1e7, 1e7 + 1, -1e7, 0, 1, 0, 1), 0.25 / LN2, 4e-16);
     assert_rel(tau1(&c, 1e7, 1e7 + 1, -1e7, 0.6, 0.8, 0, INFINITY), 0.5 / (0.8 * LN2), 1e-15);
     /* Zero density with an exploding exponent: 0, not 0 * inf. */
+    ef_fog_free(&c);
     parse("height:density=0:falloff=1", NULL, &c);
     assert_true(tau1(&c, 0, -1e6, 0, 1, 0, 0, 1) == 0);
     assert_true(tau1(&c, 0, -1e6, 0, 1, 0, 0, INFINITY) == 0);
+    ef_fog_free(&c);
 }
 
 /* The exact additivity of the optical depth, on a segment split at a
@@ -221,6 +242,7 @@ static void test_split_and_reverse(void **state)
     }
     /* Its value: rho e^(-0.3 (-5)) (1 - e^(-0.3 * 6))/(0.3 * 0.6). */
     assert_rel(whole[0], 0.2 * exp(1.5) * -expm1(-1.8) / 0.18, 1e-14);
+    ef_fog_free(&c);
 }
 
 static void test_units_visibility_channels(void **state)
@@ -234,6 +256,7 @@ static void test_units_visibility_channels(void **state)
     parse("height:density=1:falloff=" LN2_TEXT, &cm, &c);
     assert_rel(tau1(&c, 0, 0, 0, 0, 1, 0, 100), 0.5 / LN2, 1e-15);
     /* base is in scene units: base=100 is one metre. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=" LN2_TEXT ":base=100", &cm, &c);
     assert_rel(tau1(&c, 0, 200, 0, 0, 1, 0, 100), 0.25 / LN2, 1e-15);
     assert_rel(tau1(&c, 0, 200, 0, 0, 1, 0, INFINITY), 0.5 / LN2, 1e-15);
@@ -241,26 +264,32 @@ static void test_units_visibility_channels(void **state)
     assert_rel(tau1(&c, 0, 100, 0, 1, 0, 0, 250), 2.5, 1e-15);
 
     /* visibility=V is density 3.912/V per metre. */
+    ef_fog_free(&c);
     parse("height:visibility=3.912:falloff=0", NULL, &c);
     assert_rel(tau1(&c, 0, 0, 0, 1, 0, 0, 2), 2, 1e-15);
+    ef_fog_free(&c);
     parse("height:visibility=3.912,1.956,0.978:falloff=" LN2_TEXT, NULL, &c);
     double t[3];
     tau_of(&c, 0, 0, 0, 0, 1, 0, 1, t);
     assert_rel(t[0], 0.5 / LN2, 1e-15);
     assert_rel(t[1], 1 / LN2, 1e-15);
     assert_rel(t[2], 2 / LN2, 1e-15);
+    ef_fog_free(&c);
     parse("height:visibility=391.2:falloff=0", &cm, &c);     /* 0.01 per metre */
     assert_rel(tau1(&c, 0, 0, 0, 1, 0, 0, 500), 0.05, 1e-15);
 
+    ef_fog_free(&c);
     parse("height:density=1,2,4:falloff=" LN2_TEXT ":base=1", NULL, &c);
     tau_of(&c, 0, 1, 0, 0, 1, 0, 1, t);
     assert_rel(t[0], 0.5 / LN2, 4e-16);
     assert_rel(t[1], 1 / LN2, 4e-16);
     assert_rel(t[2], 2 / LN2, 4e-16);
     /* color= is the component's own and does not change tau. */
+    ef_fog_free(&c);
     parse("height:density=1:falloff=0:color=1,0.5,0.25", NULL, &c);
     assert_true(c.has_color && c.color[1] == 0.5);
     assert_true(tau1(&c, 0, 0, 0, 1, 0, 0, 3) == 3);
+    ef_fog_free(&c);
 }
 
 static void test_reference_interface(void **state)
@@ -292,6 +321,7 @@ static void test_reference_interface(void **state)
     c.model->density(&c, &v, out);
     assert_true(isinf(out[0]) && out[0] > 0);
 
+    ef_fog_free(&c);
     parse("height:density=0,2,3:falloff=0", NULL, &c);
     assert_int_equal(c.model->features(&c, ft, 2), 0);
     v = -INFINITY;
@@ -300,6 +330,7 @@ static void test_reference_interface(void **state)
     v = INFINITY;
     c.model->density(&c, &v, out);
     assert_true(out[0] == 0 && out[1] == 2 && out[2] == 3);
+    ef_fog_free(&c);
 }
 
 static void expect_error(const char *spec, const char *quote)
@@ -334,6 +365,7 @@ static void test_spec_errors(void **state)
     ef_fog_component c;
     parse("height:density=1:falloff=1", NULL, &c);
     assert_true(c.p[4] == 0);
+    ef_fog_free(&c);
 }
 
 int main(void)
