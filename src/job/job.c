@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "job_impl.h"
+#include "output.h"
 
 int ef_cpu_count(void)
 {
@@ -140,6 +141,50 @@ static int check_overwrites(ef_job *J, const char *pattern, const long *frames, 
     return status;
 }
 
+/* --failed-list names a file of its own (issue 47): a regular file or
+ * none (a FIFO would block the write for ever, a device or directory
+ * lose it), and no file the run reads (any frame's INPUT, depth, camera
+ * file, the scene, profiles, maps, the environment, the config) or
+ * writes (any frame's output or preview): the list is rewritten at the
+ * end, which would leave such a file empty. Returns 0, or 2 with the
+ * message printed, before any work. */
+static int check_failed_list(ef_job *J, const long *frames, int n, const char *const outs[2],
+                             const ef_frame_pattern pouts[2])
+{
+    const char *fl = J->o.failed_list;
+    if (!fl)
+        return 0;
+    struct stat st;
+    if (stat(fl, &st) == 0 && !S_ISREG(st.st_mode))
+        return ef_job_say(J, 2, "--failed-list %s: is not a regular file (a FIFO would block the "
+                                "list's write, a device or directory lose it); give a file name",
+                          fl);
+    ef_read_list *r = malloc(sizeof *r);
+    if (!r)
+        return ef_job_say(J, 1, "out of memory");
+    int status = 0;
+    char b[4096];
+    for (int i = 0; i < n && !status; ++i) {
+        ef_job_reads(J, 1, frames[i], 1, r);
+        const ef_read_file *f = ef_output_clash(r, fl);
+        if (f) {
+            status = ef_job_say(J, 2, "--failed-list %s names %s%s (%s, frame %ld): the list is "
+                                      "written at the end of the run and would replace it; give "
+                                      "the list its own name",
+                                fl, ef_read_article(f), f->role, f->path, frames[i]);
+            break;
+        }
+        for (int w = 0; w < 2 && !status; ++w)
+            if (outs[w] && !ef_frame_path(outs[w], &pouts[w], frames[i], b, sizeof b) &&
+                (!strcmp(fl, b) || ef_output_same_file(fl, b)))
+                status = ef_job_say(J, 2, "--failed-list %s names frame %ld's %s (%s): give the "
+                                          "list its own name",
+                                    fl, frames[i], w == 0 ? "output" : "preview", b);
+    }
+    free(r);
+    return status;
+}
+
 /* Writes --failed-list: every frame of frames[0..n) not marked written,
  * one per line (an empty file when all were). Returns status, or 1 with
  * the message printed when the list cannot be written. */
@@ -264,6 +309,10 @@ static int run_sequence(ef_job *J, const ef_frame_pattern *pin)
     int ow;
     const char *const outs[2] = { out_pat, pv_pat };
     const ef_frame_pattern pouts[2] = { pout, ppv };
+    if (!o->explain && (ow = check_failed_list(J, frames, n, outs, pouts)) != 0) {
+        free(frames);
+        return ow;
+    }
     if (!o->explain && (ow = check_overwrites(J, pattern, frames, n, outs, pouts)) != 0) {
         ow = write_failed_list(J, ow, frames, n, NULL);
         free(frames);

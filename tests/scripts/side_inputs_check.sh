@@ -112,5 +112,29 @@ cmp -s in.exr a.exr && bad "-o INPUT in place did not write"
 "$exrfog" 'seq/s.%d.exr' -o 'seq/s.%d.exr' --frames 1,2 --depth 'seq/z.%d.exr' $fog -q ||
   bad "a sequence in place is refused"
 
-[ $fail = 0 ] && echo "side inputs: -o and --preview over each, by name and by link, refused; sequences too"
+# --failed-list (issue 47): it is rewritten at the end of the run, so it
+# may name no file the run reads or writes (it left such a file empty,
+# exit 0), and no FIFO (which blocked the run for ever): each refused with
+# exit 2 before any work, every file kept.
+ln -sf ../sun.exr seq/map.exr
+for fl in seq/s.1.exr seq/z.2.exr seq/o.2.exr seq/map.exr; do
+  before=$(cd seq && snapshot)
+  "$exrfog" 'seq/s.%d.exr' -o 'seq/o.%d.exr' --frames 1,2 --depth 'seq/z.%d.exr' $fog $sun \
+    --failed-list "$fl" -q 2>err.txt
+  rc=$?
+  [ $rc = 2 ] && grep -q -- "--failed-list $fl" err.txt ||
+    { bad "--failed-list $fl: exit $rc"; cat err.txt; }
+  [ "$(cd seq && snapshot)" = "$before" ] || bad "--failed-list $fl: files changed"
+done
+mkfifo seq/fifo || exit 1
+timeout 20 "$exrfog" 'seq/s.%d.exr' -o 'seq/o.%d.exr' --frames 1,2 --depth 'seq/z.%d.exr' $fog \
+  --failed-list seq/fifo -q 2>err.txt
+rc=$?
+[ $rc = 2 ] && grep -q "not a regular file" err.txt || { bad "--failed-list FIFO: exit $rc"; cat err.txt; }
+rm -f seq/fifo seq/map.exr
+"$exrfog" 'seq/s.%d.exr' -o 'seq/o.%d.exr' --frames 1,2 --depth 'seq/z.%d.exr' $fog \
+  --failed-list seq/failed.txt -q 2>err.txt || { bad "--failed-list of its own: refused"; cat err.txt; }
+[ -f seq/failed.txt ] && [ ! -s seq/failed.txt ] || bad "--failed-list of its own: not an empty list"
+
+[ $fail = 0 ] && echo "side inputs: -o and --preview over each, by name and by link, refused; sequences too; --failed-list too"
 exit $fail
