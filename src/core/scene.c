@@ -218,6 +218,9 @@ int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
             return ef_fail(err, "--sky-light '%s': %s='%s' is not %s", spec, tok, eq + 1,
                            bit == 1 ? "an angle in degrees" : "a number >= 0");
     }
+    /* a turn is a turn: in radians a rotate of 1e308 degrees overflows
+     * and turned every pixel NaN (fmod is exact) */
+    rotate = fmod(rotate, 360);
     if (!s->ctx.load_sky)
         return ef_fail(err, "--sky-light '%s': environments cannot be read here", spec);
     int phases[EF_FOG_MAX_COMPONENTS];

@@ -2757,6 +2757,51 @@ static void test_exact_cost_warning(void **state)
     assert_null(strstr(g_err, "predicted"));
 }
 
+/* --sky-light's rotate= is a turn modulo 360 (issue 47: 1e308 degrees
+ * overflowed in radians and made every pixel NaN): 450 gives 90's bytes,
+ * and a huge angle a finite image. The environment varies with longitude,
+ * so the turn shows. */
+static void test_sky_rotate_huge(void **state)
+{
+    (void) state;
+    fresh_dir("skyrot");
+    path_t env = pth("skyrot/env.exr"), a = pth("skyrot/a.exr"), b = pth("skyrot/b.exr"),
+           c = pth("skyrot/c.exr");
+    enum { W = 32, H = 16 };
+    static float R[W * H], G[W * H], B[W * H];
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            R[y * W + x] = (float) x / W;
+            G[y * W + x] = 0.5f;
+            B[y * W + x] = 1.0f - (float) x / W;
+        }
+    tu_part p;
+    tu_part_init(&p, W, H);
+    tu_part_add(&p, "R", EXR_PIXEL_FLOAT, R);
+    tu_part_add(&p, "G", EXR_PIXEL_FLOAT, G);
+    tu_part_add(&p, "B", EXR_PIXEL_FLOAT, B);
+    assert_int_equal(tu_write_exr(env.s, &p, 1), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 --sky-light '%s:rotate=90' -d float",
+                      sample(), a.s, env.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 --sky-light '%s:rotate=450' -d float",
+                      sample(), b.s, env.s), 0);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 --sky-light '%s:rotate=1e308' -d float",
+                      sample(), c.s, env.s), 0);
+    tu_image x, y, z;
+    assert_int_equal(tu_read_image(a.s, 0, &x), 0);
+    assert_int_equal(tu_read_image(b.s, 0, &y), 0);
+    assert_int_equal(tu_read_image(c.s, 0, &z), 0);
+    for (int ch = 0; ch < x.nch; ++ch) {
+        assert_memory_equal(x.plane[ch], y.plane[ch], sizeof(float) * (size_t) x.w * (size_t) x.h);
+        const float *v = z.plane[ch];
+        for (size_t k = 0; k < (size_t) z.w * (size_t) z.h; ++k)
+            assert_false(isnan(v[k]));
+    }
+    tu_image_free(&x);
+    tu_image_free(&y);
+    tu_image_free(&z);
+}
+
 /* lod=pixel reads the frame's camera (ef_scene_bind_camera): on a fine
  * noise seen far off, octaves below the pixel fade out, so the run costs
  * fewer noise evaluations than lod=point and the picture changes within
@@ -3115,6 +3160,7 @@ int main(void)
         cmocka_unit_test(test_up_axis_auto),
         cmocka_unit_test(test_projection_translation_noise),
         cmocka_unit_test(test_lod_pixel_camera),
+        cmocka_unit_test(test_sky_rotate_huge),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
