@@ -138,7 +138,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                        "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
     }
     double color[3] = { 1, 1, 1 }, intensity = 1, cone = 0, blend = 0;
-    l->shadow_opts = (ef_shadow_opts) { 0, 1, 1 };   /* bias 0, slope 1, outside lit */
+    l->shadow_opts = (ef_shadow_opts) { 0, 1, 1, 0 };   /* bias 0, slope 1, outside lit */
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
@@ -301,6 +301,9 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     if ((seen & S_PENUMBRA) && (!(seen & S_SHADOW) || !(l->angle > 0)))
         return ef_fail(err, "--light '%s': penumbra= needs shadow=FILE.exr and the sun's "
                        "angle=DEG (its angular diameter, e.g. 0.53)", spec);
+    /* the map's memory grows with the penumbra's copies: the loader bounds
+     * both before it reads a texel */
+    l->shadow_opts.copies = l->angle > 0 && penumbra > 0 ? (int) penumbra : 0;
     if ((seen & S_SHADOW) && light_shadow(ctx, spec, l, err))
         return -1;
     if (l->shadow && l->angle > 0 && penumbra > 0 &&

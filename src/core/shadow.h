@@ -49,7 +49,16 @@ typedef struct ef_shadow_src {
 typedef struct ef_shadow_opts {
     double bias, slope;
     int outside_lit;
+    int copies;          /* the penumbra's tilted copies to be made of the map (0: none) */
 } ef_shadow_opts;
+
+/* The most texels a shadow map may hold over itself and its penumbra
+ * copies (2^27: a 11585^2 map alone, a 2048^2 one with 31 copies): a
+ * texel costs about 12 bytes in the map and up to 26 in each copy (the
+ * hostile campaign's 16384^2 map took 3 GB, a penumbra of 64 on a 2048^2
+ * one 7.1 GB), so this bounds a map's memory between 1.6 and 3.5 GB. Past
+ * it a map is refused before it is read (LIMITS). */
+#define EF_SHADOW_MAX_TEXELS 134217728.0
 
 /* A shadow map, immutable once built and shared (by reference count)
  * between the copies of a scene. */

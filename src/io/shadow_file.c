@@ -54,7 +54,16 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
                exr_get_data_window(f.ctx, part, &dw) == EXR_ERR_SUCCESS) {
         const int h = dw.max.y - dw.min.y + 1;
         int w = 0;
-        if (!(ys = malloc((size_t) h * sizeof *ys)) ||
+        const double texels = ((double) dw.max.x - dw.min.x + 1) * h * (1.0 + o->copies);
+        if (!(texels <= EF_SHADOW_MAX_TEXELS)) {
+            ef_fail(err, "the shadow map's %d x %d texels%s come to %.3g over the map%s, past "
+                    "the limit of %.0f (12 to 26 bytes each; see LIMITS): render the map "
+                    "smaller%s",
+                    dw.max.x - dw.min.x + 1, h,
+                    o->copies ? " times its penumbra's copies" : "", texels,
+                    o->copies ? " and its copies" : "", EF_SHADOW_MAX_TEXELS,
+                    o->copies ? " or lower penumbra=" : "");
+        } else if (!(ys = malloc((size_t) h * sizeof *ys)) ||
             ef_exr_sample_rows(&f, part, chan, h, &depth, &w, ys) != h) {
             ef_fail(err, "cannot read the shadow map's depth channel (damaged or out of "
                     "memory)");

@@ -2803,6 +2803,29 @@ static void test_sky_rotate_huge(void **state)
     tu_image_free(&z);
 }
 
+/* A shadow map's memory is bounded before it is read (issue 47: a
+ * penumbra of 64 on a small map took 7.1 GB): 2048^2 texels with 64
+ * penumbra copies is past the limit of 2^27 texels (exit 1, the limit
+ * named, nothing written); with 8 copies the same map runs. */
+static void test_shadow_map_bound(void **state)
+{
+    (void) state;
+    fresh_dir("mapbound");
+    path_t map = pth("mapbound/sun.exr"), out = pth("mapbound/out.exr");
+    const char *mk = getenv("EXRFOG_MAKE_SAMPLE");
+    assert_non_null(mk);
+    char cmd[8192];
+    snprintf(cmd, sizeof cmd, "'%s' '%s' --sun-view 0.3,1,0.2 --size 2048x2048 >/dev/null", mk,
+             map.s);
+    assert_int_equal(system(cmd), 0);
+    assert_status(run("'%s' -o '%s' --fog height:density=0.05:falloff=0.3 --light "
+                      "sun:towards=0.3,1,0.2:intensity=3:angle=0.53:penumbra=64:shadow='%s'",
+                      sample(), out.s, map.s), 1);
+    assert_non_null(strstr(g_err, "past the limit of 134217728"));
+    assert_non_null(strstr(g_err, "penumbra="));
+    assert_false(tu_exists(out.s));
+}
+
 /* lod=pixel reads the frame's camera (ef_scene_bind_camera): on a fine
  * noise seen far off, octaves below the pixel fade out, so the run costs
  * fewer noise evaluations than lod=point and the picture changes within
@@ -3162,6 +3185,7 @@ int main(void)
         cmocka_unit_test(test_projection_translation_noise),
         cmocka_unit_test(test_lod_pixel_camera),
         cmocka_unit_test(test_sky_rotate_huge),
+        cmocka_unit_test(test_shadow_map_bound),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
