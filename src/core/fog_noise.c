@@ -352,7 +352,10 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     /* the grid's hash tables (uint32 each) and the planner's ladders */
     const size_t nhash = GRID_HASH_WORDS / 2 + ef_nz_ladders_words();
     const size_t nclamp = !sep && s.clamp ? ef_clamp_tables_size(octaves) : 0;
-    double *arr = calloc(head + ntab + nmerged + nhash + nclamp, sizeof *arr);
+    /* noise-separable, methods that evaluate the factors point by point:
+     * each factor octave's cell polynomials (ef_nz_factor_octave) */
+    const size_t nfpoly = sep && !mp ? (size_t) s.naxes * (size_t) octaves * 256 * 7 : 0;
+    double *arr = calloc(head + ntab + nmerged + nhash + nclamp + nfpoly, sizeof *arr);
     if (!arr)
         return ef_fail(err, "fog spec '%s': out of memory", c->spec);
     s.tab_off = ntab ? (int) head : 0;
@@ -378,6 +381,12 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     ef_nz_grid_tables((uint32_t *) (void *) (arr + s.hash_off));
     s.ladder_off = s.hash_off + GRID_HASH_WORDS / 2;
     ef_nz_ladders_fill(arr + s.ladder_off);
+    if (nfpoly) {
+        for (int k = 0; k < s.naxes; ++k)
+            s.fslot[s.axis[k]] = k;
+        s.fpoly_off = (int) (head + ntab + nmerged + nhash + nclamp);
+        ef_nz_factor_tables(&s, arr + s.fpoly_off);
+    }
     if (nclamp) {
         s.clamp_off = (int) (head + ntab + nmerged + nhash);
         if (ef_clamp_tables_build(&s.fbm, arr + s.clamp_off)) {
@@ -388,7 +397,7 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
     memcpy(arr, &s, sizeof s);
     free(c->arr);
     c->arr = arr;
-    c->narr = (int) (head + ntab + nmerged + nhash + nclamp);
+    c->narr = (int) (head + ntab + nmerged + nhash + nclamp + nfpoly);
     return 0;
 }
 

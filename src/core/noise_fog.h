@@ -89,6 +89,10 @@ typedef struct nstate {
      * camera bound, or lod=point) */
     int lod;
     double spread, lod_S[EF_FBM_MAX_OCTAVES];
+    /* noise-separable: index in arr of each factor's cell polynomials
+     * (ef_nz_factor_tables: [axis slot][octave][cell][7]), and axis a's
+     * slot; 0 when none */
+    int fpoly_off, fslot[3];
 } nstate;
 
 /* lod=pixel's fade of an octave at x = s / S: 1 up to x = 1 (the cell at
@@ -424,6 +428,11 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
 
 /* The per-octave prefix tables. */
 void ef_nz_build_tables(nstate *s, double *tab);
+/* Octave i of factor a inside its cell m as a polynomial of degree 6 in
+ * the fraction (exact in long double). */
+void ef_nz_cell_poly(const nstate *s, int a, int i, long m, long double p[7]);
+/* The separable factors' cell polynomials, naxes * octaves * 256 * 7 doubles. */
+void ef_nz_factor_tables(const nstate *s, double *tab);
 /* Factor a's merged table; returns its pieces (0: out of memory). */
 int ef_nz_build_merged(const nstate *s, int a, double *tab, int cap, double *total);
 /* Binds the camera at org in the merged tables. */

@@ -115,7 +115,7 @@ static double blend_fades(const gcell *c, double x, double y, double z, double u
 /* Octave i of factor a inside cell m of its own coordinate, as the
  * polynomial sum_j p[j] x^j (x the fraction, degree 6): the noise there is
  * E(x, fade(x)) with E bilinear in the coordinate and its fade. */
-static void cell_poly(const nstate *s, int a, int i, long m, long double p[7])
+void ef_nz_cell_poly(const nstate *s, int a, int i, long m, long double p[7])
 {
     int64_t X[3];
     double f[3];
@@ -151,6 +151,23 @@ static void cell_poly(const nstate *s, int a, int i, long m, long double p[7])
     p[4] = 10 * de - 15 * ga;
     p[5] = 6 * ga - 15 * de;
     p[6] = 6 * de;
+}
+
+/* Fills the separable factors' cell polynomials (noise_fog.h: FPOLY_*):
+ * per axis slot k, octave i and cell m, the 7 coefficients of
+ * ef_nz_cell_poly in double. */
+void ef_nz_factor_tables(const nstate *s, double *tab)
+{
+    const int N = s->fbm.octaves;
+    for (int k = 0; k < s->naxes; ++k)
+        for (int i = 0; i < N; ++i)
+            for (long m = 0; m < 256; ++m) {
+                long double p[7];
+                ef_nz_cell_poly(s, s->axis[k], i, m, p);
+                double *q = tab + (((size_t) k * (size_t) N + (size_t) i) * 256 + (size_t) m) * 7;
+                for (int c = 0; c < 7; ++c)
+                    q[c] = (double) p[c];
+            }
 }
 
 /* Builds factor a's merged table over s in [0, 256): pieces between every
@@ -215,7 +232,7 @@ int ef_nz_build_merged(const nstate *s, int a, double *tab, int cap, double *tot
             double *q = qs[i];
             if (p == 0 || m != last[i]) {
                 long double ql[7];
-                cell_poly(s, a, i, m, ql);
+                ef_nz_cell_poly(s, a, i, m, ql);
                 for (int k = 0; k < 7; ++k)
                     q[k] = (double) ql[k];
                 last[i] = m;
