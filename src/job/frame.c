@@ -454,6 +454,9 @@ static int check_deep(ef_frame *F)
         why = "a deep output is EXR (--deep flatten writes other formats)";
     else if (o->preview)
         why = "--preview does not apply to deep input";
+    else if (o->depth_file)
+        why = "--depth does not apply to deep input: its samples carry their own Z (leave "
+              "--depth out)";
     if (why) {
         ef_fail(&F->err, "%s", why);
         return ef_job_report(J, o->input, &F->err, status);

@@ -955,6 +955,7 @@ for tw, th in ((32, 32), (64, 20)):
 flat = os.path.join(shared, "real-exr", "arnold-representative-flat.exr")
 for args, want in (([src, "--deep", "bogus"], 2), ([src, "--deep-tol", "0"], 2),
                    ([src, "--deep-tol", "1e-17"], 2), ([src, "--deep-tol", "1e-300"], 2),
+                   ([src, "--depth", flat], 2),
                    ([src, "--aov", "T"], 2), ([flat, "--deep", "fog"], 2),
                    ([src, "--deep", "samples", "--aov", "light", "--light",
                      "point:position=1,1,3:intensity=1"], 2),
