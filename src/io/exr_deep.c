@@ -598,6 +598,13 @@ int ef_deep_out_begin(ef_deep_out *o, const char *path, int fd, const ef_exr_fil
         o->sink = NULL;
         return ef_fail(err, "cannot create the output: %s", ef_exr_last_core_message());
     }
+    /* a channel name past 31 bytes (an AOV of a light with a long name)
+     * needs the long-names flag */
+    int longn = 0;
+    for (int c = 0; c < nch; ++c)
+        longn |= strlen(name[c]) > 31;
+    if (longn && exr_set_longname_support(o->ctx, 1))
+        return ef_fail(err, "cannot enable long names: %s", ef_exr_last_core_message());
     int32_t nparts = 0;
     exr_get_count(in->ctx, &nparts);
     const int multi = nparts > 1;

@@ -1164,9 +1164,14 @@ static int stream_named(const ef_exr_file *in, const ef_exr_file *df, const ef_c
         err->file = out_path;
         return -1;
     }
-    /* Names longer than 31 bytes (Blender view layers, renderer metadata)
-     * are legal with the long-names flag; the reader accepted them. */
-    if (has_long_names(in) && exr_set_longname_support(out, 1)) {
+    /* Names longer than 31 bytes (Blender view layers, renderer metadata,
+     * an AOV of a light with a long name) are legal with the long-names
+     * flag; the reader accepted them. */
+    int longn = has_long_names(in);
+    for (int k = 0; k < nplans && !longn; ++k)
+        for (int c = 0; c < o->nextra; ++c)
+            longn |= strlen(xname[k][c]) > 31;
+    if (longn && exr_set_longname_support(out, 1)) {
         exr_finish(&out);
         ef_fail(err, "cannot enable long names: %s", ef_exr_last_core_message());
         err->file = out_path;

@@ -2826,6 +2826,30 @@ static void test_shadow_map_bound(void **state)
     assert_false(tu_exists(out.s));
 }
 
+/* A light's AOV channel past 31 bytes (issue 47: names of 20 to 63
+ * characters failed at the write with "Channel name must shorter than
+ * length allowed by file"): the output takes the long-names flag and
+ * holds the channels. */
+static void test_long_light_name_aov(void **state)
+{
+    (void) state;
+    fresh_dir("longname");
+    path_t out = pth("longname/out.exr");
+    const char *name = "a_lamp_with_a_name_of_sixty_three_characters_for_its_aov_layer_";
+    assert_int_equal(strlen(name), 63);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02 --light "
+                      "point:position=1,2,-5:intensity=10:name=%s --aov light",
+                      sample(), out.s, name), 0);
+    tu_image img;
+    assert_int_equal(tu_read_image(out.s, 0, &img), 0);
+    char want[128];
+    for (int k = 0; k < 3; ++k) {
+        snprintf(want, sizeof want, "fog_light.%s.%c", name, "RGB"[k]);
+        assert_true(tu_image_find(&img, want) >= 0);
+    }
+    tu_image_free(&img);
+}
+
 /* lod=pixel reads the frame's camera (ef_scene_bind_camera): on a fine
  * noise seen far off, octaves below the pixel fade out, so the run costs
  * fewer noise evaluations than lod=point and the picture changes within
@@ -3186,6 +3210,7 @@ int main(void)
         cmocka_unit_test(test_lod_pixel_camera),
         cmocka_unit_test(test_sky_rotate_huge),
         cmocka_unit_test(test_shadow_map_bound),
+        cmocka_unit_test(test_long_light_name_aov),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
