@@ -154,6 +154,15 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         *eq = '\0';
         const char *key = tok, *val = eq + 1;
         unsigned bit = 0;
+        /* a number that overflows or underflows is out of range, whatever
+         * the key's own rule (names and paths hold no numbers to read) */
+        static const char *const words[] = { "name", "shadow", "outside", "cosine", NULL };
+        int wordy = 0;
+        for (int w = 0; words[w]; ++w)
+            wordy |= !strcmp(key, words[w]);
+        if (!wordy && strstr(keys, key) && ef_out_of_range(val, 0))
+            return ef_fail(err, "--light '%s': %s='%s' is out of range (numbers are 0 or between "
+                           "2.2e-308 and 1.8e308 in magnitude)", spec, key, val);
         int ok = strstr(keys, key) != NULL;
         if (!strcmp(key, "shadow") && !K->shadow)
             return ef_fail(err, "--light '%s': a point lamp takes no shadow= map (it shines "

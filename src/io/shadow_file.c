@@ -2,6 +2,7 @@
 #include "shadow_file.h"
 
 #include "exr_io.h"
+#include "exr_parts.h"
 #include "shadow.h"
 
 #include <stdio.h>
@@ -47,7 +48,10 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
     int rc = -1;
     float *depth = NULL;
     int *ys = NULL;
-    if (chan < 0) {
+    if (chan >= 0 && ef_exr_part_is_deep(&f, part)) {
+        ef_fail(err, "the shadow map is a deep image; a map is a flat depth render of the "
+                "light's view (render it without deep output, or flatten it first)");
+    } else if (chan < 0) {
         ef_fail(err, "no depth channel (Z, depth.Z, depth or *.Z) in the shadow map: render "
                 "the light's view with its depth (Z) pass");
     } else if (ef_exr_read_cam_meta(&f, part, &meta, err) == 0 &&

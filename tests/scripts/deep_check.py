@@ -977,6 +977,13 @@ r = subprocess.run([exrfog, src, "--deep-tol", "1e-7", "--deep", "flatten", "--f
                    capture_output=True, text=True)
 check(r.returncode == 0 and r.stderr.count("warning: --deep-tol 1e-07 asks for about 100 times") == 1,
       "--deep-tol 1e-7 is warned of its cost once: %s" % r.stderr.strip())
+# A deep image given as a shadow map is named as such (issue 47: "damaged
+# or out of memory" before).
+r = subprocess.run([exrfog, flat, "--fog", "height:density=0.05:falloff=0.3", "--light",
+                    "sun:towards=0.2,0.3,-1:intensity=3:shadow=" + src, "-o",
+                    os.path.join(tmp, "u.exr")], capture_output=True, text=True)
+check(r.returncode == 1 and "is a deep image" in r.stderr,
+      "a deep shadow map: %d %s" % (r.returncode, r.stderr.strip()))
 # --deep flatten writes any format (issue 23's deliverables): a PNG of the
 # flattened frame is its EXR encoded by the sRGB formula (straight alpha);
 # the deep modes are EXR only.

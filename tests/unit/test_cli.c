@@ -2850,6 +2850,26 @@ static void test_long_light_name_aov(void **state)
     tu_image_free(&img);
 }
 
+/* A light key's number that overflows or underflows is called out of
+ * range, as in a SPEC (issue 47: it was reported with the key's own rule);
+ * a name that merely holds digits is no number. */
+static void test_light_key_range(void **state)
+{
+    (void) state;
+    fresh_dir("lightrange");
+    path_t out = pth("lightrange/out.exr");
+    static const char *const bad[] = { "point:position=1,2,3:intensity=1e999",
+                                       "point:position=1e-400,2,3:intensity=1",
+                                       "sun:towards=0,1,0:intensity=3:angle=1e999" };
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; ++k) {
+        assert_status(run("'%s' -o '%s' --fog exp:density=0.05 --light '%s'", sample(), out.s,
+                          bad[k]), 2);
+        assert_non_null(strstr(g_err, "is out of range"));
+    }
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.05 --light "
+                      "'point:position=1,2,3:intensity=1:name=lamp1e999'", sample(), out.s), 0);
+}
+
 /* lod=pixel reads the frame's camera (ef_scene_bind_camera): on a fine
  * noise seen far off, octaves below the pixel fade out, so the run costs
  * fewer noise evaluations than lod=point and the picture changes within
@@ -3211,6 +3231,7 @@ int main(void)
         cmocka_unit_test(test_sky_rotate_huge),
         cmocka_unit_test(test_shadow_map_bound),
         cmocka_unit_test(test_long_light_name_aov),
+        cmocka_unit_test(test_light_key_range),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
