@@ -230,6 +230,169 @@ static int is_tidy(const ef_deep_buf *b, int nch)
     return 1;
 }
 
+long long ef_deep_tidy_cap(int stride)
+{
+    return EF_DEEP_TIDY_BYTES / ((long long) stride * (long long) sizeof(double) +
+                                 (long long) sizeof(order));
+}
+
+/* The first index of B[0..nb) not below z (B sorted). */
+static int lower_bound(const double *B, int nb, double z)
+{
+    int lo = 0, hi = nb;
+    while (lo < hi) {
+        const int mid = lo + (hi - lo) / 2;
+        if (B[mid] < z)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* A running sum with Neumaier's compensation: samples' densities are
+ * added at their fronts and taken away at their backs, and what is left
+ * where few remain must not be the rounding of what passed. */
+typedef struct nsum {
+    double s, c;
+} nsum;
+
+static void nadd(nsum *a, double x)
+{
+    const double t = a->s + x;
+    a->c += fabs(a->s) >= fabs(x) ? (a->s - t) + x : (x - t) + a->s;
+    a->s = t;
+}
+
+/* Whether tidy_sweep serves in: no id channel (their first-non-zero rule
+ * follows the merge's order), every volume's alphas in [0, 1) and every
+ * value finite. */
+static int sweep_ok(const ef_deep_layout *L, const ef_deep_buf *in)
+{
+    const int nch = L->nch;
+    for (int c = 0; c < nch; ++c)
+        if (L->role[c] == EF_DEEP_COPY)
+            return 0;
+    for (int i = 0; i < in->n; ++i) {
+        const double *s = in->v + (size_t) i * (size_t) in->stride;
+        if (!(s[nch + 1] > s[nch]))
+            continue;
+        for (int c = 0; c < nch; ++c)
+            if (!isfinite(s[c]) || (L->role[c] == EF_DEEP_ALPHA && !(s[c] >= 0 && s[c] < 1)))
+                return 0;
+    }
+    return 1;
+}
+
+/* The tidy list of in by one sweep over its sorted distinct boundaries B
+ * (nb of them), in O(n log n + nb nch) time and O(nb nch) memory where
+ * the split makes O(n^2) pieces. Over an interval of length l inside a
+ * volume of length V, the split rule gives the volume optical depth
+ * u l / V per alpha channel (u = -log1p(-a)) and keeps each colour per
+ * unit optical depth, c v (v = u / a; 1 where a = 0); the merge of
+ * coincident pieces adds the optical depths and the colours weighted by
+ * theirs (merge_into keeps sum u and sum c v). So per interval
+ * U = l sum(u / V) and K = l sum(c v / V) over the volumes that span it,
+ * running sums of densities added at fronts and taken at backs, and the
+ * merged piece is alpha = -expm1(-U), colour = K alpha / U (K where U is
+ * 0); colours without an alpha add (K = l sum(c / V)). Points are merged
+ * among themselves as ef_deep_tidy does, before the interval starting at
+ * their depth. Returns 0 or -1 (out of memory). */
+static int tidy_sweep(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out,
+                      const double *B, int nb)
+{
+    const int nch = L->nch, S = in->stride;
+    double *dens = calloc((size_t) nb * (size_t) nch, sizeof *dens);
+    int *cnt = calloc((size_t) nb, sizeof *cnt), np = 0;
+    nsum *run = calloc((size_t) nch, sizeof *run);
+    if (!dens || !cnt || !run || reserve(&out->ord, &out->ocap, in->n, sizeof(order))) {
+        free(dens);
+        free(cnt);
+        free(run);
+        return -1;
+    }
+    order *pts = out->ord;
+    for (int i = 0; i < in->n; ++i) {
+        const double *s = in->v + (size_t) i * (size_t) S;
+        const double z = s[nch], zb = s[nch + 1];
+        if (!(zb > z)) {
+            pts[np++] = (order){ z, z, i };
+            continue;
+        }
+        const int lo = lower_bound(B, nb, z), hi = lower_bound(B, nb, zb);
+        const double V = zb - z;
+        double v[EF_DEEP_MAX_CH];
+        for (int c = 0; c < nch; ++c)
+            if (L->role[c] == EF_DEEP_ALPHA) {
+                const double u = -log1p(-s[c]);
+                v[c] = s[c] > 0 ? u / s[c] : 1;
+                dens[(size_t) lo * nch + c] += u / V;
+                dens[(size_t) hi * nch + c] -= u / V;
+            }
+        for (int c = 0; c < nch; ++c)
+            if (L->role[c] == EF_DEEP_COLOR) {
+                const int ai = L->alpha[c];
+                const double d = s[c] * (ai >= 0 ? v[ai] : 1) / V;
+                dens[(size_t) lo * nch + c] += d;
+                dens[(size_t) hi * nch + c] -= d;
+            }
+        ++cnt[lo];
+        --cnt[hi];
+    }
+    sort_nearly(pts, np, sizeof *pts, cmp_order);
+    int ip = 0, active = 0, rc = 0;
+    for (int j = 0; j < nb && !rc; ++j) {
+        /* the points at B[j], merged in input order */
+        double *prev = NULL;
+        for (; ip < np && pts[ip].z <= B[j]; ++ip) {
+            const double *s = in->v + (size_t) pts[ip].i * (size_t) S;
+            if (prev) {
+                merge_into(L, prev, s);
+                continue;
+            }
+            if (!(prev = ef_deep_buf_push_raw(out))) {
+                rc = -1;
+                break;
+            }
+            memcpy(prev, s, (size_t) S * sizeof *prev);
+            prev[nch + 1] = prev[nch];
+        }
+        active += cnt[j];
+        for (int c = 0; c < nch; ++c)
+            nadd(&run[c], dens[(size_t) j * nch + c]);
+        if (active <= 0 || j + 1 >= nb || rc)
+            continue;
+        double *d = ef_deep_buf_push_raw(out);
+        if (!d) {
+            rc = -1;
+            break;
+        }
+        const double l = B[j + 1] - B[j];
+        double U[EF_DEEP_MAX_CH];
+        for (int c = 0; c < nch; ++c)
+            if (L->role[c] == EF_DEEP_ALPHA) {
+                U[c] = fmax(0.0, l * (run[c].s + run[c].c));
+                d[c] = -expm1(-U[c]);
+            }
+        for (int c = 0; c < nch; ++c) {
+            const double K = l * (run[c].s + run[c].c);
+            const int ai = L->alpha[c];
+            if (L->role[c] == EF_DEEP_COLOR)
+                d[c] = ai >= 0 && U[ai] > 0 ? K * (d[ai] / U[ai]) : K;
+            else if (L->role[c] == EF_DEEP_Z)
+                d[c] = B[j];
+            else if (L->role[c] == EF_DEEP_ZBACK)
+                d[c] = B[j + 1];
+        }
+        d[nch] = B[j];
+        d[nch + 1] = B[j + 1];
+    }
+    free(dens);
+    free(cnt);
+    free(run);
+    return rc;
+}
+
 int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out)
 {
     const int nch = L->nch, S = in->stride;
@@ -252,23 +415,27 @@ int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *ou
     if (nb < 0)
         return -1;
     const double *B = out->bnd;
+    /* how many pieces first: a volume makes one per boundary interval it
+     * spans (B holds its front and back exactly), a point one */
+    long long total = 0;
+    for (int i = 0; i < in->n; ++i) {
+        const double *s = in->v + (size_t) i * (size_t) S;
+        const double z = s[nch], zb = s[nch + 1];
+        total += zb > z ? lower_bound(B, nb, zb) - lower_bound(B, nb, z) : 1;
+    }
+    out->pieces = total;
+    /* where the samples overlap heavily, the sweep (linear in them);
+     * elsewhere the pieces, as renders' files keep them */
+    if (total > 4LL * in->n + 64 && sweep_ok(L, in))
+        return tidy_sweep(L, in, out, B, nb);
+    if (total > ef_deep_tidy_cap(S))
+        return -2;
     /* the pieces: every point, every volume cut at every depth inside it */
     int np = 0;
     for (int i = 0; i < in->n; ++i) {
         const double *s = in->v + (size_t) i * (size_t) S;
         const double z = s[nch], zb = s[nch + 1];
-        int lo = 0;
-        if (zb > z) {
-            /* B holds z exactly: find it, then every piece up to zb */
-            int hi = nb - 1;
-            while (lo < hi) {
-                const int mid = (lo + hi) / 2;
-                if (B[mid] < z)
-                    lo = mid + 1;
-                else
-                    hi = mid;
-            }
-        }
+        const int lo = zb > z ? lower_bound(B, nb, z) : 0;
         for (int j = lo; zb > z ? j + 1 < nb && B[j + 1] <= zb : j == lo; ++j) {
             if (reserve((void **) &out->sv, &out->scap, (np + 1) * S, sizeof *out->sv))
                 return -1;

@@ -58,6 +58,8 @@ typedef struct ef_deep_buf {
      * sample order, image units) */
     double *lv;
     int lvcap;
+    /* ef_deep_tidy's refusal: the pieces the split would have made */
+    long long pieces;
 } ef_deep_buf;
 
 /* The values ef_deep_buf.lv keeps per sample for a scene. */
@@ -95,11 +97,22 @@ typedef struct ef_deep_stats {
     double pix_light_err[3];
 } ef_deep_stats;
 
+/* The split's memory for one pixel (per thread): nested volumes split at
+ * each other's boundaries make O(n^2) pieces (6,000 nested samples: 36
+ * million), so the pieces are counted before any is made. */
+#define EF_DEEP_TIDY_BYTES ((long long) 256 << 20)
+
+/* The most pieces ef_deep_tidy makes of one pixel of stride doubles per
+ * sample. */
+long long ef_deep_tidy_cap(int stride);
+
 /* Tidies in (n samples, front/back set) into out: every volume split at
  * every other sample's front and back (Beer-Lambert within the slab),
  * coincident samples merged (optical depths add, sources weight by them),
- * sorted by front then back (points first). Returns 0, or -1 when out of
- * memory. out must not be in. */
+ * sorted by front then back (points first). Returns 0, -1 when out of
+ * memory, or -2 (nothing made) when the split would make more pieces than
+ * ef_deep_tidy_cap allows: their count is then in out->pieces. out must
+ * not be in. */
 int ef_deep_tidy(const ef_deep_layout *L, const ef_deep_buf *in, ef_deep_buf *out);
 
 /* The fog along ray r (the pixel's, dist ignored) as volume samples into

@@ -323,7 +323,11 @@ static int union_tidy(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, ef_
         else
             ++j;
     }
-    if (ef_deep_tidy(L, &w->all, &w->out))
+    const int rc = ef_deep_tidy(L, &w->all, &w->out);
+    if (rc == -2)
+        return ef_fail(err, "the fog's samples and the input's overlap into %lld pieces (at most "
+                            "%lld)", w->out.pieces, ef_deep_tidy_cap(w->out.stride));
+    if (rc)
         return ef_fail(err, "out of memory");
     return 0;
 }
@@ -348,12 +352,24 @@ static int flatten_union(worker *w, const ef_deep_buf *a, const ef_deep_buf *b, 
     return 0;
 }
 
-/* The fog of one pixel into w->out (samples, fog) or flat (nch values). */
-static int fog_pixel(worker *w, const ef_ray *r, int mode, double *flat, ef_err *err)
+/* The fog of pixel (x, y) into w->out (samples, fog) or flat (nch
+ * values). */
+static int fog_pixel(worker *w, const ef_ray *r, int x, int y, int mode, double *flat,
+                     ef_err *err)
 {
     const shared *S = w->S;
     const ef_deep_layout *L = &S->P->L;
-    if (ef_deep_tidy(L, &w->in, &w->tidy) ||
+    const int rc = ef_deep_tidy(L, &w->in, &w->tidy);
+    if (rc == -2)
+        return ef_fail(err,
+                       "pixel (%d, %d): its %d deep samples overlap so much that splitting "
+                       "them at each other's fronts and backs (the OpenEXR tidy rule) would "
+                       "make %lld pieces, past the %lld one pixel may hold (%lld MiB a "
+                       "thread); render volumes as samples that do not overlap, or merge "
+                       "the overlapping ones before exrfog",
+                       x, y, w->in.n, w->tidy.pieces, ef_deep_tidy_cap(w->tidy.stride),
+                       EF_DEEP_TIDY_BYTES >> 20);
+    if (rc ||
         ef_deep_fog_samples(L, &S->fog, r, &w->tidy, mode != EF_DEEP_MODE_FOG, &w->fog, &w->st))
         return ef_fail(err, "out of memory");
     if (mode == EF_DEEP_MODE_FOG)
@@ -585,7 +601,7 @@ static void do_unit(worker *w, unit *u)
             double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
             double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
             if (load_pixel(w, &w->rows, (size_t) j * (size_t) W + (size_t) i, k, x, y, &u->err) ||
-                fog_pixel(w, &r, mode, o, &u->err) ||
+                fog_pixel(w, &r, x, y, mode, o, &u->err) ||
                 (o && S->aov && pixel_aovs(w, &r, o, av, &u->err))) {
                 u->failed = 1;
                 return;
