@@ -132,6 +132,19 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
     for (int i = 0; r == EF_PARSE_RUN && i < d->nlight; ++i)
         if (ef_scene_add_light(s, d->lights[i], err))
             r = err->file ? EF_PARSE_FAIL : EF_PARSE_USAGE;   /* a shadow map's fault: 1 */
+    /* A light brighter than a half can hold lights pixels past it, which a
+     * half output writes as +inf: refused as a fog colour past it is. */
+    for (int i = 0; r == EF_PARSE_RUN && i < s->nlight; ++i) {
+        const ef_light *l = &s->light[i];
+        const double U = s->ctx.units_per_meter, scale = ef_light_at_position(l) ? U * U : 1;
+        const double e = fmax(l->e[0], fmax(l->e[1], l->e[2])) / scale;
+        if (e > EF_COLOR_MAX) {
+            ef_fail(err, "light '%s': color times intensity is %g, past %g (the largest half, "
+                         "as fog colours are held to); give the scene's light in the units "
+                         "its image is in", l->name, e, EF_COLOR_MAX);
+            r = EF_PARSE_USAGE;
+        }
+    }
     if (r == EF_PARSE_RUN && ef_lights_check(s, err))
         r = EF_PARSE_USAGE;
     /* after the components: the sky light is convolved with their phases */
