@@ -262,10 +262,19 @@ static int load_pixel(worker *w, const ef_deep_rows *R, size_t pi, double k, int
                 o[c] = o[P->from_alpha[c]];
         const double z = P->in_z >= 0 ? iv[P->in_z] : NAN;
         double zb = P->in_zb >= 0 ? iv[P->in_zb] : z;
-        if (!(z >= 0) || !(z < INFINITY) || zb != zb)
+        if (!(z >= 0) || !(z < INFINITY))
             return ef_fail(err, "pixel (%d, %d) has a sample at Z = %g; deep depths must be "
                                 "finite and not negative (the file is corrupt, or its Z is not "
                                 "a distance)", x, y, z);
+        if (zb != zb)
+            return ef_fail(err, "pixel (%d, %d) has a sample at Z = %g whose ZBack is %g; "
+                                "deep depths must be numbers (the file is corrupt)", x, y, z, zb);
+        /* an infinite alpha makes every rule's arithmetic NaN (inf - inf) */
+        for (int c = 0; c < nch; ++c)
+            if (P->L.role[c] == EF_DEEP_ALPHA && !isfinite(o[c]))
+                return ef_fail(err, "pixel (%d, %d) has a sample at Z = %g whose %s is %g; "
+                                    "deep alphas must be finite, 0 to 1 (the file is corrupt)",
+                               x, y, z, P->name[c], o[c]);
         if (!(zb < INFINITY))
             zb = z;
         o[nch] = z * k;

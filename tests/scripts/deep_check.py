@@ -1130,6 +1130,28 @@ check(r.returncode == 1 and m and int(m.group(1)) >= 36000000 and "overlap" in r
       "6,000 nested volumes with an id channel: refused up front with the count (%s)"
       % r.stderr.strip())
 
+# Non-numbers in a deep sample (issue 47): an alpha of +inf made the
+# flattened pixel NaN with exit 0, and a ZBack of NaN was reported by its
+# valid Z. Each is refused (exit 1) naming the channel, with no output.
+bad_src = oiio.ImageBuf(src)
+for chan, val, want in (("A", float("inf"), "whose A is inf"),
+                        ("ZBack", float("nan"), "whose ZBack is nan")):
+    bb = oiio.ImageBuf()
+    bb.copy(bad_src)
+    bsp, bdd = bb.spec(), bb.deepdata()
+    bp = next(p for p in range(bdd.pixels) if bdd.samples(p) > 0)
+    bx, by = bsp.x + bp % bsp.width, bsp.y + bp // bsp.width
+    bb.set_deep_value(bx, by, 0, bsp.channelnames.index(chan), 0, val)
+    bpath, bout = os.path.join(tmp, "bad_%s.exr" % chan), os.path.join(tmp, "bad_%s_out.exr" % chan)
+    check(bb.write(bpath), "OpenImageIO writes a deep file with %s = %g" % (chan, val))
+    for mode in ("flatten", "samples"):
+        r = subprocess.run([exrfog, bpath, "-o", bout, "--deep", mode, "--fog", "exp:density=0.1"],
+                           capture_output=True, text=True)
+        check(r.returncode == 1 and want in r.stderr and ("pixel (%d, %d)" % (bx, by)) in r.stderr
+              and not os.path.exists(bout),
+              "a deep sample with %s = %g is refused, named (--deep %s: %s)"
+              % (chan, val, mode, r.stderr.strip()))
+
 # -d on deep input as on flat: --deep flatten -d float writes float colour
 # (the half flatten's values to half precision), -d half never demotes Z,
 # NAME=TYPE overrides win, and the deep modes take it too.
