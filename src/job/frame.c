@@ -434,9 +434,14 @@ static int check_deep(ef_frame *F)
     }
     if (!F->deep) {
         if ((o->deep_set || o->deep_grey) && !o->explain) {
-            ef_fail(&F->err, "%s applies to deep input, and INPUT is flat (leave it out)",
+            /* in a sequence it is this frame's file that differs from the
+             * rest: a failed frame (--keep-going goes on), not a usage error */
+            ef_fail(&F->err, J->has_frame
+                                 ? "%s applies to deep input, and this frame is flat (the "
+                                   "sequence mixes flat and deep frames)"
+                                 : "%s applies to deep input, and INPUT is flat (leave it out)",
                     o->deep_set ? "--deep" : "--deep-grey-alpha");
-            return ef_job_report(J, o->input, &F->err, 2);
+            return ef_job_report(J, o->input, &F->err, J->has_frame ? 1 : 2);
         }
         return 0;
     }

@@ -27,6 +27,7 @@ usage: deep_check.py EXRFOG SHARED_DIR TMPDIR [EXR_PARTS]   (exit 77: skipped)
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -1151,6 +1152,25 @@ for chan, val, want in (("A", float("inf"), "whose A is inf"),
               and not os.path.exists(bout),
               "a deep sample with %s = %g is refused, named (--deep %s: %s)"
               % (chan, val, mode, r.stderr.strip()))
+
+# A flat frame in a deep sequence (issue 47): it stopped the sequence as a
+# usage error (exit 2) even under --keep-going. It is that frame's failure:
+# --keep-going writes the others and exits 1 naming it.
+seqd = os.path.join(tmp, "mixseq")
+os.makedirs(seqd, exist_ok=True)
+for f in os.listdir(seqd):
+    os.remove(os.path.join(seqd, f))
+shutil.copy(src, os.path.join(seqd, "in.0001.exr"))
+check(oiiotool([src, "--flatten", "-o", os.path.join(seqd, "in.0002.exr")]) == 0, "flat frame made")
+shutil.copy(src, os.path.join(seqd, "in.0003.exr"))
+r = subprocess.run([exrfog, os.path.join(seqd, "in.#.exr"), "-o", os.path.join(seqd, "out.#.exr"),
+                    "--frames", "1-3", "--deep", "flatten", "--fog", "exp:density=0.1",
+                    "--keep-going"], capture_output=True, text=True)
+outs_seq = sorted(f for f in os.listdir(seqd) if f.startswith("out."))
+check(r.returncode == 1 and outs_seq == ["out.0001.exr", "out.0003.exr"] and
+      "this frame is flat" in r.stderr and "frames failed: 2" in r.stderr,
+      "a flat frame in a deep sequence fails alone under --keep-going (%d, %s, %s)"
+      % (r.returncode, outs_seq, r.stderr.strip()))
 
 # -d on deep input as on flat: --deep flatten -d float writes float colour
 # (the half flatten's values to half precision), -d half never demotes Z,
