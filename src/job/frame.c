@@ -1077,7 +1077,17 @@ static int convert_output(ef_frame *F)
                         !strcmp(F->dv.ext, ".dpx") ? "DPX deliveries are RGB"
                                                    : "the format cannot hold it");
         }
-        if (ef_oiio_convert_exr(mid, pl->rgb[0].part, names, names[3] && F->dv.alpha ? 4 : 3,
+        /* a deep flatten's intermediate holds the fogged part alone, its
+         * channels without the part's name as their layer */
+        const int part = F->deep ? 0 : pl->rgb[0].part;
+        const char *pn = NULL;
+        if (F->deep && exr_get_name(F->in.ctx, pl->rgb[0].part, &pn) == EXR_ERR_SUCCESS && pn) {
+            const size_t pl_len = strlen(pn);
+            for (int k = 0; k < 4; ++k)
+                if (names[k] && !strncmp(names[k], pn, pl_len) && names[k][pl_len] == '.')
+                    names[k] += pl_len + 1;
+        }
+        if (ef_oiio_convert_exr(mid, part, names, names[3] && F->dv.alpha ? 4 : 3,
                                 out, F->out.tmp, &F->dv.d, msg, sizeof msg)) {
             ef_fail(&F->err, "%s", msg);
             return ef_job_report(J, o->output, &F->err, 1);

@@ -574,6 +574,15 @@ if exr_parts and os.path.exists(exr_parts):
     check(deep_values(out, 0) == deep_values(src_f, 0), "two deep parts: left copied exactly")
     check(deep_values(out, 1) == deep_values(single_f, 0),
           "two deep parts: right fogged as alone")
+    # --deep flatten of a multi-part file's deep part to TIFF and PNG
+    # (issue 47: "cannot read the fogged frame back" with an empty reason,
+    # after the run): the deliverable equals the single-part file's
+    for ext in ("tif", "png"):
+        mo, so_ = os.path.join(tmp, "mixed_deliver." + ext), os.path.join(tmp, "single_deliver." + ext)
+        ok = run([mixed, "--fog", fogs, "--layer", "part1", "--deep", "flatten", "-o", mo]) == 0
+        ok &= run([src, "--fog", fogs, "--deep", "flatten", "-o", so_]) == 0
+        check(ok and flat_pixels_any(mo) == flat_pixels_any(so_),
+              "multi-part --deep flatten to %s = the single part's" % ext)
     print("multi-part deep input: checked")
 else:
     print("no exr_parts: multi-part checks skipped")
