@@ -93,7 +93,7 @@ EXRFOG_API exrfog_result exrfog_set_warning(exrfog_context *ctx, exrfog_warning_
  * (default 0: only exrfog_error keeps the failure). */
 EXRFOG_API exrfog_result exrfog_set_print(exrfog_context *ctx, int print);
 
-/* Asks the exrfog_run or exrfog_explain in progress with ctx (from
+/* Asks the exrfog_run, exrfog_explain or exrfog_fog_pixels in progress with ctx (from
  * another thread or a signal handler) to stop: it stops at the next chunk
  * of decode, fog or encode work, removes its temporary files, writes
  * nothing and returns EXRFOG_CANCELLED. A later call on ctx starts afresh. */
@@ -193,7 +193,9 @@ typedef struct exrfog_image {
 /* Fogs img in place with scene seen from cam. The scene is bound to the
  * camera on a private copy: nothing is parsed and no file is read. Safe to
  * call from several threads at once on disjoint rectangles (one context
- * each). */
+ * each). exrfog_cancel(ctx) from another thread stops it between bands of
+ * rows (about 16,384 pixels): it returns EXRFOG_CANCELLED, the rectangle
+ * fogged in part. */
 EXRFOG_API exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
                                            const exrfog_camera *cam, exrfog_image *img);
 

@@ -355,7 +355,8 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
                     img.sky[k] = sky[k].ctypes.data
                 img.light = ctypes.cast(larr, ctypes.POINTER(ctypes.c_void_p))
                 img.lit = ctypes.cast(tarr, ctypes.POINTER(ctypes.c_void_p))
-            ctx.check(_lib.exrfog_fog_pixels(ctx.p, sc, cam, ctypes.byref(img)))
+            # on a thread of its own, as a run: Ctrl-C cancels it at once
+            ctx.check(_call(ctx, _lib.exrfog_fog_pixels, ctx.p, sc, cam, ctypes.byref(img)))
             if layers:
                 extra = {"ambient": np.stack(amb, axis=2),
                          "lights": {names[j]: np.stack(lp[j], axis=2) for j in range(nl)},

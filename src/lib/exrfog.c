@@ -416,14 +416,19 @@ static exrfog_result fog_rows(exrfog_context *ctx, const ef_fog_pass *pass,
         }
         return EXRFOG_OK;
     }
-    const int rows = img->stride == w ? 1 : h;   /* contiguous: one call */
-    for (int y = 0; y < h; y += h / rows) {
+    /* contiguous: bands of about 16,384 pixels (one call each), else row
+     * by row; exrfog_cancel is heard between them */
+    const int band = img->stride == w ? (w >= 16384 ? 1 : 16384 / w) : 1;
+    for (int y = 0; y < h; y += band) {
+        if (atomic_load(&ctx->cancel))
+            return EXRFOG_CANCELLED;
+        const int n_rows = h - y < band ? h - y : band;
         const ptrdiff_t o = (ptrdiff_t) y * img->stride;
         rect_planes p = { { img->rgb[0] + o, img->rgb[1] + o, img->rgb[2] + o },
                           img->alpha ? img->alpha + o : NULL, img->depth + o, { NULL }, naov };
         for (int k = 0; k < naov; ++k)
             p.aov[k] = aov_in[k] + (aov_given[k] ? o : 0);
-        fog_rect(pass, img->x0, img->y0 + y, w, h / rows, &p, mask);
+        fog_rect(pass, img->x0, img->y0 + y, w, n_rows, &p, mask);
     }
     return EXRFOG_OK;
 }
@@ -438,6 +443,7 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     err.file = NULL;
     err.msg[0] = '\0';
     ctx->error[0] = '\0';
+    atomic_store(&ctx->cancel, 0);
     /* A caller built before the light layers passes the size up to P:
      * the members past its size read as NULL. */
     const size_t base = offsetof(exrfog_image, ambient);
@@ -549,6 +555,9 @@ exrfog_result exrfog_fog_pixels(exrfog_context *ctx, const exrfog_scene *scene,
     }
     const ef_fog_pass pass = { &cam->cam, &conv, ctx->bound };
     r = fog_rows(ctx, &pass, img, aov_in, aov_given, naov, mask);
+    if (r == EXRFOG_CANCELLED)
+        return ef_fail(&err, "cancelled: the rectangle is fogged in part"),
+               fail(ctx, &err, NULL, EXRFOG_CANCELLED);
     if (r != EXRFOG_OK)
         return ef_fail(&err, "out of memory"), fail(ctx, &err, NULL, EXRFOG_ERROR);
     return EXRFOG_OK;
