@@ -126,6 +126,15 @@ class _Context:
             raise Error(_lib.exrfog_error(self.p).decode("utf-8", "replace"), status)
 
 
+def _text(s):
+    """s as a C string: refused, as open() refuses a name, where a NUL
+    would cut it short (C would see a shorter word)."""
+    b = s.encode() if isinstance(s, str) else bytes(s)
+    if b"\0" in b:
+        raise ValueError("embedded null byte")
+    return b
+
+
 def _argv(args):
     enc = [a.encode() if isinstance(a, str) else os.fsencode(a) for a in args]
     for a in enc:
@@ -321,7 +330,7 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
                 if len(camera["camera_to_world"]) != 16:
                     raise Error("fog_pixels: camera_to_world must be 16 numbers", 2)
                 ctx.check(_lib.exrfog_camera_from_matrix(
-                    ctx.p, m, camera.get("convention", "exr").encode(), float(camera["fov"]),
+                    ctx.p, m, _text(camera.get("convention", "exr")), float(camera["fov"]),
                     (ctypes.c_int * 4)(*win), ctypes.byref(cam)))
             img = _Image()
             img.size = ctypes.sizeof(_Image)
@@ -333,7 +342,7 @@ def fog_pixels(rgb, alpha, depth, camera, scene, color=None, depth_mode=None, or
                 img.P[k] = P[k].ctypes.data
             img.alpha = a.ctypes.data if a is not None else None
             img.depth = d.ctypes.data
-            img.depth_mode = depth_mode.encode() if depth_mode else None
+            img.depth_mode = _text(depth_mode) if depth_mode else None
             extra = {}
             if layers:
                 nl = _lib.exrfog_scene_light_count(sc)

@@ -164,6 +164,15 @@ if np is not None:
     depth = np.full((h, w), 2.0, np.float32)
     cam = {"camera_to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "fov": 90.0}
     res = exrfog.fog_pixels(rgb, None, depth, cam, ["exp:density=0.1"], color=(1, 1, 1))
+    # a NUL in the convention or the depth mode was cut off silently by C
+    # (issue 47): refused as open() refuses such a name
+    for kw in ({"depth_mode": "planar\0junk"}, {}):
+        c2 = dict(cam, convention="exr\0junk") if not kw else cam
+        try:
+            exrfog.fog_pixels(rgb, None, depth, c2, ["exp:density=0.1"], **kw)
+            check(False, "a NUL in %s is refused" % (kw or "convention"))
+        except ValueError as e:
+            check("null" in str(e), "a NUL in %s is refused (%s)" % (kw or "convention", e))
     for y in range(h):
         for x in range(w):
             dx = 2 * (x + 0.5) / w - 1
