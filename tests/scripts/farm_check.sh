@@ -149,6 +149,37 @@ done
 run parallel
 hostile parallel
 
+# Stopped runs (issue 47): after Ctrl-C (SIGINT to the submitter's process
+# group) or a kill -9 of the lot, no chunk stays "pending" or "running" for
+# ever: status says failed or lost, resubmit reruns them to the end, and no
+# temporary file is left beside the frames. A damaged state file is named,
+# not a Python traceback. (Frames of about 2 s each, one a chunk, two at
+# once: the signal comes while two run and two wait.)
+slow=(--fog 'noise:density=0.05:scale=0.25:octaves=7:method=exact')
+for sig in INT KILL; do
+  job=$tmp/job-stop-$sig
+  rm -f seq/st.*.exr
+  setsid "$farm" submit --engine parallel --chunk 1 --jobs 2 --exrfog "$exrfog" --jobdir "$job" \
+      -- seq/shot.#.exr -o seq/st.#.exr --frames 1-4 "${slow[@]}" >/dev/null 2>&1 &
+  pid=$!
+  sleep 1
+  kill -$sig -- -$pid 2>/dev/null
+  wait $pid 2>/dev/null
+  sleep 1
+  "$farm" status "$job" >status.txt 2>&1
+  grep -Eq " (pending|running) " status.txt && { bad "SIG$sig: a chunk stays pending or running"; cat status.txt; }
+  grep -Eq " (failed|lost) " status.txt || { bad "SIG$sig: no chunk was stopped (too fast?)"; cat status.txt; }
+  "$farm" resubmit --wait "$job" >/dev/null 2>err.txt || { bad "SIG$sig: resubmit failed"; cat err.txt; }
+  for f in 1 2 3 4; do
+    [ -s "seq/st.000$f.exr" ] || bad "SIG$sig: frame $f not written after the resubmit"
+  done
+  ls -a seq | grep -q "exrfog-" && bad "SIG$sig: temporary files left in seq/"
+done
+echo '{"state": ' >"$tmp/job-stop-INT/state/chunk-0000.json"
+"$farm" status "$tmp/job-stop-INT" 2>err.txt
+[ $? = 1 ] && grep -q "chunk-0000.json: not the JSON exrfog-farm writes" err.txt && ! grep -q Traceback err.txt ||
+  { bad "a damaged state file: no clear message"; cat err.txt; }
+
 # An output directory that does not exist is refused up front (issue 42),
 # for -o and --preview, before a job directory exists.
 "$farm" submit --engine parallel --exrfog "$exrfog" --jobdir "$tmp/job-nodir" -- seq/shot.#.exr \
