@@ -46,9 +46,14 @@ int ef_deep_in_open(const ef_exr_file *f, int part, ef_deep_in *d, ef_err *err)
     }
     if (st == EXR_STORAGE_DEEP_TILED) {
         uint32_t tx, ty;
-        if (exr_get_tile_descriptor(f->ctx, part, &tx, &ty, NULL, NULL) || tx < 1 || ty < 1 ||
-            tx > 4096 || ty > 4096)
+        if (exr_get_tile_descriptor(f->ctx, part, &tx, &ty, NULL, NULL) || tx < 1 || ty < 1)
             return ef_fail(err, "part %d is deep and tiled with an invalid tile size", part);
+        /* legal in OpenEXR, but a tile is read whole: its rows are one band */
+        if (tx > 4096 || ty > 4096)
+            return ef_fail(err, "part %d is deep in tiles of %u x %u pixels; exrfog reads deep "
+                                "tiles of at most 4096 on a side (re-tile it, e.g. oiiotool IN "
+                                "--tile 64 64 -o OUT, or write it as scanlines)",
+                           part, tx, ty);
         d->tiled = 1;
         d->tw = (int) tx;
         d->th = (int) ty;

@@ -1140,6 +1140,25 @@ check(r.returncode == 1 and m and int(m.group(1)) >= 36000000 and "overlap" in r
       "6,000 nested volumes with an id channel: refused up front with the count (%s)"
       % r.stderr.strip())
 
+# Deep tiles past exrfog's 4096 (legal in OpenEXR): refused with that
+# limit and a way out, not as "an invalid tile size" (issue 47).
+big_tiles = os.path.join(tmp, "tiles4097.exr")
+tsp = oiio.ImageSpec(4100, 10, 5, "half")
+tsp.channelnames = ("R", "G", "B", "A", "Z")
+tsp.channelformats = (oiio.HALF,) * 4 + (oiio.FLOAT,)
+tsp.deep = True
+tsp.tile_width = tsp.tile_height = 4097
+tdd = oiio.DeepData()
+tdd.init(4100 * 10, 5, tsp.channelformats, tsp.channelnames)
+tout = oiio.ImageOutput.create(big_tiles)
+check(tout.open(big_tiles, tsp) and tout.write_deep_image(tdd) and tout.close(),
+      "OpenImageIO writes deep tiles of 4097^2")
+r = subprocess.run([exrfog, big_tiles, "-o", os.path.join(tmp, "tiles4097_out.exr"), "--deep",
+                    "flatten", "--fog", "exp:density=0.1", "--fov", "50", "--world-to-camera",
+                    "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1"], capture_output=True, text=True)
+check(r.returncode == 1 and "tiles of 4097 x 4097" in r.stderr and "at most 4096" in r.stderr,
+      "deep tiles of 4097^2: the limit named (%s)" % r.stderr.strip())
+
 # Non-numbers in a deep sample (issue 47): an alpha of +inf made the
 # flattened pixel NaN with exit 0, and a ZBack of NaN was reported by its
 # valid Z. Each is refused (exit 1) naming the channel, with no output.
