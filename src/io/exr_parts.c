@@ -299,9 +299,10 @@ int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_
         for (int64_t ty = 0; ty < ny && !rc; ++ty)
             for (int64_t tx = 0; tx < nx && !rc; ++tx) {
                 if (exr_read_tile_chunk_info(in->ctx, p, (int) tx, (int) ty, 0, 0, &ci)) {
+                    const char *m = ef_exr_last_core_message();
                     rc = ef_fail(err, "part %d: tile (%lld, %lld) is missing or damaged (the file "
-                                      "is truncated or corrupt): %s", p, (long long) tx,
-                                 (long long) ty, ef_exr_last_core_message());
+                                      "is truncated or corrupt)%s%s", p, (long long) tx,
+                                 (long long) ty, *m ? ": " : "", m);
                     err->file = in->path;
                 } else
                     rc = copy_chunk(in, p, out, deep, 1, (int) tx, (int) ty, 0, &ci, &buf,
@@ -314,9 +315,11 @@ int ef_exr_copy_part_chunks(const ef_exr_file *in, int p, exr_context_t out, ef_
             lines = 1;
         for (int64_t y = dw.min.y; y <= dw.max.y && !rc; y += lines) {
             if (exr_read_scanline_chunk_info(in->ctx, p, (int) y, &ci)) {
+                /* (Core leaves no message for some offsets past the end) */
+                const char *m = ef_exr_last_core_message();
                 rc = ef_fail(err, "part %d: the chunk of line %lld is missing or damaged (the "
-                                  "file is truncated or corrupt): %s", p, (long long) y,
-                             ef_exr_last_core_message());
+                                  "file is truncated or corrupt)%s%s", p, (long long) y,
+                             *m ? ": " : "", m);
                 err->file = in->path;
             } else
                 rc = copy_chunk(in, p, out, deep, 0, 0, 0, (int) y, &ci, &buf, &cap, &tab,

@@ -559,6 +559,40 @@ if exr_parts and os.path.exists(exr_parts):
               "truncated or corrupt" in r.stderr and not os.path.exists(out),
               "truncated multi-part file, --layer %s: exit 1 naming it, nothing written (%d %s)"
               % (layer, r.returncode, r.stderr.strip()))
+    # cut anywhere, the reason never ends empty (issue 47: OpenEXRCore keeps
+    # no message for a chunk whose offset is the end of the file, and
+    # "...corrupt): " followed): cut at 20 lengths and at chunk starts, read
+    # from the offset tables (headers: attributes name, type, size, value;
+    # an empty name ends one, an empty header the list; then per part
+    # chunkCount offsets of 8 bytes)
+    def chunk_starts(b):
+        at, counts = 8, []
+        while b[at] != 0:
+            while b[at] != 0:
+                name_end = b.index(0, at)
+                type_end = b.index(0, name_end + 1)
+                size = int.from_bytes(b[type_end + 1:type_end + 5], "little")
+                if b[at:name_end] == b"chunkCount":
+                    counts.append(int.from_bytes(b[type_end + 5:type_end + 9], "little"))
+                at = type_end + 5 + size
+            at += 1
+        at += 1
+        total = sum(counts)
+        return [int.from_bytes(b[at + 8 * i:at + 8 * i + 8], "little") for i in range(total)]
+    starts = chunk_starts(data)
+    cuts = sorted(set([len(data) * k // 20 for k in range(1, 20)] + starts[1::max(1, len(starts) // 24)]))
+    empty = []
+    for n in cuts:
+        with open(trunc, "wb") as fh:
+            fh.write(data[:n])
+        for layer in ("part0", "part1"):
+            r = subprocess.run([exrfog, trunc, "--layer", layer, "--fog", fogs, "-o",
+                                os.path.join(tmp, "mixed_trunc_out.exr")],
+                               capture_output=True, text=True)
+            if r.returncode != 1 or r.stderr.rstrip().endswith(":"):
+                empty.append((n, layer, r.returncode, r.stderr.strip()))
+    check(not empty, "truncated multi-part files at %d lengths: exit 1 with a reason (%s)"
+          % (len(cuts), empty[:2]))
     # two deep parts (OIIO writes those): the chosen one fogged, the other copied
     two = os.path.join(tmp, "two_deep.exr")
     check(oiiotool([src, "--attrib", "name", "left", src, "--attrib", "name", "right",
