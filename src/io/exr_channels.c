@@ -46,6 +46,21 @@ static void part_layer(const ef_exr_file *f, int p, char *layer, size_t len, cha
         layer[0] = '\0';
         return;
     }
+    /* The one part of its view, whatever its name ("beauty_L" with view
+     * "left"): that view's whole image too. */
+    if (view[0]) {
+        int same = 0;
+        for (int q = 0; q < f->nparts; ++q) {
+            const char *w = NULL;
+            int32_t wl = 0;
+            same += exr_attr_get_string(f->ctx, q, "view", &wl, &w) == EXR_ERR_SUCCESS && w &&
+                    (size_t) wl == strlen(view) && !strncmp(w, view, (size_t) wl);
+        }
+        if (same == 1) {
+            layer[0] = '\0';
+            return;
+        }
+    }
     if (view[0]) {
         char sfx[80];
         for (int k = 0; k < 2; ++k) {

@@ -184,7 +184,18 @@ int ef_choose_views(ef_job *J, const ef_exr_file *in, const ef_exr_file *df, cha
     for (int k = 0; k < nv; ++k)
         snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", k ? ", " : "", views[k]);
     if (nv == 0) {
-        if (o->nviews)
+        /* a single part whose header names its one view (Weta's left-eye
+         * elements): --view of that name is the whole file */
+        const char *own = NULL;
+        int32_t ol = 0;
+        if (in->nparts == 1 && (exr_attr_get_string(in->ctx, 0, "view", &ol, &own) !=
+                                    EXR_ERR_SUCCESS || !own || ol <= 0))
+            own = NULL;
+        for (int i = 0; own && i < o->nviews; ++i)
+            if ((int) strlen(o->views[i]) != ol || strncmp(o->views[i], own, (size_t) ol))
+                return ef_fail(err, "--view %s: INPUT holds the view '%.*s' alone (its view "
+                                    "attribute)", o->views[i], (int) ol, own), 2;
+        if (o->nviews && !own)
             return ef_fail(err, "--view %s: INPUT has no views (no multiView attribute and no "
                                 "part with a view)", o->views[0]), 2;
         *nplans = 1;

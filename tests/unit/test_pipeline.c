@@ -744,8 +744,11 @@ static void test_views_multipart(void **state)
     /* Parts named as their views ("left"/"right") or as oiiotool names
      * them ("subimage00/01"), with a view attribute: both eyes, each with
      * its camera (the part name is not a layer of its channels). */
-    static const char *const names[2][2] = { { "left", "right" }, { "subimage00", "subimage01" } };
-    for (int n = 0; n < 2; ++n) {
+    /* ... and parts named anything, one per view ("beauty_L"/"beauty_R",
+     * issue 47: 'no colour channels found') */
+    static const char *const names[3][2] = { { "left", "right" }, { "subimage00", "subimage01" },
+                                             { "beauty_L", "beauty_R" } };
+    for (int n = 0; n < 3; ++n) {
         for (int k = 0; k < 2; ++k) {
             p[k].name = names[n][k];
             set_camera(&p[k], k ? 1.0 : -1.0);
@@ -757,6 +760,24 @@ static void test_views_multipart(void **state)
         assert_true(channel_differs(in, out, 0, "R"));
         assert_true(channel_differs(in, out, 1, "R"));
     }
+    /* One part whose header names its one view (Weta's left-eye
+     * elements): --view of that view is the file (issue 47: 'INPUT has no
+     * views'), the same pixels as without it; another view is refused. */
+    char *one = in_dir("left_only.exr"), *o2 = in_dir("left_only_plain.exr");
+    p[0].name = NULL;
+    assert_int_equal(tu_write_exr(one, p, 1), 0);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --view left", one, out);
+    assert_run(0, "'%s' -o '%s' --fog exp:density=0.05", one, o2);
+    assert_true(channel_differs(one, out, 0, "R"));
+    float *a = tu_read_channel(out, 0, "R", &(int){ 0 }, &(int){ 0 });
+    float *b = tu_read_channel(o2, 0, "R", &(int){ 0 }, &(int){ 0 });
+    assert_true(a && b && !memcmp(a, b, (size_t) W * H * sizeof *a));
+    free(a);
+    free(b);
+    assert_run(2, "'%s' -o '%s' --fog exp:density=0.05 --view right", one, out);
+    assert_non_null(strstr(tu_err, "holds the view 'left' alone"));
+    free(one);
+    free(o2);
     free(in);
     free(out);
 }
