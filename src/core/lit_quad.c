@@ -18,6 +18,17 @@ static void sigma_at(const ef_fog_component *c, const double x[3], double out[3]
 {
     if (uniform_sigma(c, out))
         return;
+    /* Exponential strata in double: the model's long double density cost
+     * half of a lamp's quadrature in height fog, for nothing the 1e-10 of
+     * the quadrature can see (where exp overflows, the view's optical
+     * depth has already made the light 0). */
+    double rho[3], k, base;
+    if (c->model->strata && c->model->strata(c, rho, &k, &base)) {
+        const double e = exp(-k * (c->up[0] * x[0] + c->up[1] * x[1] + c->up[2] * x[2] - base));
+        for (int ch = 0; ch < 3; ++ch)
+            out[ch] = rho[ch] == 0 ? 0 : rho[ch] * e;
+        return;
+    }
     ef_fog_functional fs[64], *f = fs;
     long double vs[64], *v = vs;
     const int n = c->model->functionals(c, NULL, 0);
