@@ -25,9 +25,16 @@
  * estimates (4 sigma each, independent) add in quadrature. */
 
 #define NZ_STEPS 4096
+/* The work bound of one light along one ray, in noise evaluations (the
+ * view's pieces and the light's paths): past it the rest of the ray's
+ * light is its bound in the error output, as the unlit model's work bound
+ * does (noise-separable with a lamp took 130 ms a pixel, and cheap unlit
+ * SPECs minutes once lit). About 20 to 100 ms of one core. */
+#define NZ_BUDGET 2e6
 
 typedef struct nz_pt {
     double t, cth, G[3], gerr;   /* E T_light (spot share) per channel, T_light's tau error */
+    double evals;                /* noise evaluations its light's path cost */
 } nz_pt;
 
 /* The point at t of r for light l: its light before scattering. */
@@ -36,6 +43,7 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
 {
     p->t = t;
     p->gerr = 0;
+    p->evals = 0;
     p->G[0] = p->G[1] = p->G[2] = 0;
     p->cth = 0;
     double x[3], ld[3], dl = INFINITY, f = 1;
@@ -71,6 +79,7 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
             ef_tau_info in;
             c->model->tau_info(c, &lr, v, &in);
             p->gerr += fmax(in.err[0], fmax(in.err[1], in.err[2]));
+            p->evals += in.evals;
         } else {
             c->model->tau(c, &lr, v);
         }
@@ -84,12 +93,13 @@ static void nz_point(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, 
 }
 
 /* Optical depth of each component over [t0, t1] of r into tau (ncomp x
- * 3), the noise methods' error estimates summed into *err. The view ray's
+ * 3), the noise methods' error estimates summed into *err and their
+ * evaluations into *evals (may be NULL). The view ray's
  * pieces go at 1/16 of each model's tolerance: their errors add up along
  * the ray in T(0, t) (over ~100 steps, to ~10 tol at the model's own),
  * where the light paths' errors are independent and average out. */
 static void nz_taus(const ef_fog_scene *s, const ef_ray *r, double t0, double t1,
-                    double (*tau)[3], double *err)
+                    double (*tau)[3], double *err, double *evals)
 {
     ef_ray sub = *r;
     for (int a = 0; a < 3; ++a)
@@ -101,10 +111,14 @@ static void nz_taus(const ef_fog_scene *s, const ef_ray *r, double t0, double t1
             ef_tau_info in;
             c->model->tau_tol(c, &sub, c->model->lit_tol(c) / 16, tau[i], &in);
             *err += fmax(in.err[0], fmax(in.err[1], in.err[2]));
+            if (evals)
+                *evals += in.evals;
         } else if (c->model->tau_info) {
             ef_tau_info in;
             c->model->tau_info(c, &sub, tau[i], &in);
             *err += fmax(in.err[0], fmax(in.err[1], in.err[2]));
+            if (evals)
+                *evals += in.evals;
         } else {
             c->model->tau(c, &sub, tau[i]);
         }
@@ -148,7 +162,7 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     double rss[3] = { 0, 0, 0 };  /* the independent errors' squares */
     const double rel = nz_tol(s);
     if (a > 0) {
-        nz_taus(s, r, 0, a, cum, &cum_var);   /* one call: its estimate, squared */
+        nz_taus(s, r, 0, a, cum, &cum_var, NULL);   /* one call: its estimate, squared */
         cum_var *= cum_var;
     } else {
         for (int i = 0; i < nc; ++i)
@@ -217,7 +231,7 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
     double last_mass = INFINITY;   /* the last step's share of extinction */
     nz_pt pa;
     nz_point(s, l, r, a, &pa);
-    double dt = 0;
+    double dt = 0, work = pa.evals;
     int steps = 0;
     for (int ci = 0; ci < n && steps < NZ_STEPS; ++ci) {
         if (ci + 1 == n && isfinite(D))
@@ -261,7 +275,10 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
                 }
             }
             double smax = fmax(Sum[0], fmax(Sum[1], Sum[2]));
-            if (!(left > 0.25 * rel * smax) || left < 1e-300) {
+            /* (past the work bound too, at the default tolerance: the rest
+             * is its bound; an explicit finer tol asks for it everywhere) */
+            if (!(left > 0.25 * rel * smax) || left < 1e-300 ||
+                (work > NZ_BUDGET && rel >= log1p(EF_NOISE_DEFAULT_TOL))) {
                 for (int k = 0; k < 3; ++k)
                     E[k] += left;
                 t = INFINITY;
@@ -281,8 +298,10 @@ void ef_lit_noise_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
             pq[0] = pa;
             for (int j = 1; j <= 4; ++j) {
                 const double tj = j == 4 ? b : t + 0.25 * j * (b - t);
-                nz_taus(s, r, j == 1 ? t : t + 0.25 * (j - 1) * (b - t), tj, tq[j - 1], &terr);
+                nz_taus(s, r, j == 1 ? t : t + 0.25 * (j - 1) * (b - t), tj, tq[j - 1], &terr,
+                        &work);
                 nz_point(s, l, r, tj, &pq[j]);
+                work += pq[j].evals;
             }
             double Q[3] = { 0, 0, 0 }, Qe[3] = { 0, 0, 0 }, hm[3] = { 0, 0, 0 };
             for (int i = 0; i < nc; ++i) {
