@@ -561,7 +561,7 @@ if exr_parts and os.path.exists(exr_parts):
               % (layer, r.returncode, r.stderr.strip()))
     # cut anywhere, the reason never ends empty (issue 47: OpenEXRCore keeps
     # no message for a chunk whose offset is the end of the file, and
-    # "...corrupt): " followed): cut at 20 lengths and at chunk starts, read
+    # "...corrupt): " followed): cut at 7 lengths and at chunk starts, read
     # from the offset tables (headers: attributes name, type, size, value;
     # an empty name ends one, an empty header the list; then per part
     # chunkCount offsets of 8 bytes)
@@ -580,7 +580,7 @@ if exr_parts and os.path.exists(exr_parts):
         total = sum(counts)
         return [int.from_bytes(b[at + 8 * i:at + 8 * i + 8], "little") for i in range(total)]
     starts = chunk_starts(data)
-    cuts = sorted(set([len(data) * k // 20 for k in range(1, 20)] + starts[1::max(1, len(starts) // 24)]))
+    cuts = sorted(set([len(data) * k // 8 for k in range(1, 8)] + starts[1::max(1, len(starts) // 10)]))
     empty = []
     for n in cuts:
         with open(trunc, "wb") as fh:
