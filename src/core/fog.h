@@ -202,7 +202,8 @@ typedef struct ef_fog_model {
                      int first, double *const tau[3]);
     /* Optional: the noise evaluations tau is predicted to make along r
      * when that work is not bounded per ray (method=exact), else 0: an
-     * estimate for a warning before an extreme run, not a bound. */
+     * estimate, not a bound (the job times a sample of pixels for its
+     * cost warning and reads this only to say method=exact is why). */
     double (*work)(const ef_fog_component *c, const ef_ray *r);
     /* Optional: a bound on |d sigma/dt| (the largest channel's) along r over
      * [0, r->dist], for the deep split rule h^2/8 max|sigma'|. Models

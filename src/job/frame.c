@@ -80,6 +80,8 @@ typedef struct ef_frame {
     int deep;                 /* the colour part is deep (deep.c's pass) */
     char din_path[PATH_MAX], dconv_path[PATH_MAX];   /* fd_path of din and dconv */
     ef_deep_result deep_res;
+    double pred_fog_s;        /* probe_cost: the frame's fog predicted, in thread seconds */
+    int pred_n;               /* the pixels it timed (0: not probed) */
 } ef_frame;
 
 /* A display-referred value (0..1) to 8 bits. */
@@ -636,27 +638,42 @@ static int bind_view(ef_frame *F, int v)
     return 0;
 }
 
-/* Before an extreme run: method=exact's work on a sample of this frame's
- * rays (16 rows of the depth, 64 pixels each), projected over the frame on
- * the run's threads at 150 ns an evaluation (exact's long-double walk and
- * bisected cells, measured); a warning past two minutes. Once per run, on
- * its first frame: the sample's decoding is not repeated frame by frame.
- * Other methods bound their work per pixel. */
-static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_camera *cam,
-                            const ef_depth_conv *conv)
+/* Up to 64 columns of a row, in bit-reversed order: a probe stopped early
+ * has still seen the whole width. */
+static int probe_column(int k)
+{
+    int r = 0;
+    for (int b = 0; b < 6; ++b)
+        r |= (k >> b & 1) << (5 - b);
+    return r;
+}
+
+/* Before a costly run: the fog of a sample of this frame's pixels (16 rows
+ * of the depth, up to 64 pixels each, the whole per-pixel pass with its
+ * lights), timed on this thread and projected over the frame on the run's
+ * threads; a warning past two minutes, and the prediction for --stats.
+ * Timing, not a count: the clamp's pieces, separable factors and lit
+ * noise cost what no evaluation count foresees. The probe stops after
+ * half a second (whole pixels: a cancel stops the pixel), so it costs a
+ * cheap frame nothing and a costly one a fraction of a per cent. Only
+ * where some component's cost varies by the pixel (noise) or lights
+ * integrate: closed forms cost tens of ns a pixel. Once per run, on its
+ * first frame: the first frame speaks for the sequence. */
+static void probe_cost(ef_frame *F, const ef_channel_plan *pl)
 {
     ef_job *J = F->J;
     const ef_options *o = F->o;
-    const ef_fog_scene *sc = &o->scene;
-    if (J->cost_checked || o->quiet || o->explain)
+    const ef_fog_scene *sc = F->job.pass[0].scene;
+    if (J->cost_checked || o->explain || (o->quiet && !o->stats))
         return;
-    J->cost_checked = 1;   /* the first frame speaks for the sequence */
-    /* Only where some component's work is unbounded: a short probe ray. */
-    ef_ray probe = { { 0, 0, 1 }, 1, 1, { cam->pos[0], cam->pos[1], cam->pos[2] } };
-    int any = 0;
-    for (int i = 0; i < sc->ncomp; ++i)
-        any |= sc->comp[i].model->work && sc->comp[i].model->work(&sc->comp[i], &probe) > 0;
-    if (!any)
+    J->cost_checked = 1;
+    int costly = ef_scene_lit(sc), exact = 0;
+    ef_ray probe = { { 0, 0, 1 }, 1, 1, { F->cams[0].pos[0], F->cams[0].pos[1], F->cams[0].pos[2] } };
+    for (int i = 0; i < sc->ncomp; ++i) {
+        costly |= sc->comp[i].model->tau_info != NULL;
+        exact |= sc->comp[i].model->work && sc->comp[i].model->work(&sc->comp[i], &probe) > 0;
+    }
+    if (!costly)
         return;
     float *d;
     int w, ys[16];
@@ -668,30 +685,44 @@ static void warn_exact_cost(ef_frame *F, const ef_channel_plan *pl, const ef_cam
             free(d);
         return;
     }
-    const int step = w > 64 ? w / 64 : 1;
-    double sum = 0, cnt = 0;
-    for (int i = 0; i < n; ++i)
-        for (int x = 0; x < w; x += step) {
-            ef_ray r;
-            ef_reconstruct(cam, conv, dw.min.x + x, ys[i], d[(size_t) i * (size_t) w + (size_t) x],
-                           &r);
-            for (int k = 0; k < sc->ncomp; ++k)
-                if (sc->comp[k].model->work)
-                    sum += sc->comp[k].model->work(&sc->comp[k], &r);
-            cnt += 1;
+    const int cols = w < 64 ? w : 64;
+    const double t0 = thread_cpu_ns(), w0 = mono_ns();
+    int done = 0;
+    for (int k = 0; k < 64 && mono_ns() - w0 < 0.5e9; ++k) {
+        const int c = probe_column(k);
+        if (c >= cols)
+            continue;
+        const int x = (int) ((long) c * w / cols);
+        for (int i = 0; i < n; ++i) {
+            float r = 0, g = 0, b = 0, *rgb[3] = { &r, &g, &b };
+            ef_fog_block(&F->job.pass[0], dw.min.x + x, ys[i], 1, 1, rgb, NULL,
+                         &d[(size_t) i * (size_t) w + (size_t) x]);
+            ++done;
         }
+    }
+    const double per_px = done > 0 ? (thread_cpu_ns() - t0) * 1e-9 / done : 0;
     free(d);
     const double px = ((double) cw.max.x - cw.min.x + 1) * ((double) cw.max.y - cw.min.y + 1);
     const int threads = o->threads > 0 ? o->threads : ef_cpu_count();
-    const double per_px = cnt > 0 ? sum / cnt : 0, secs = per_px * px * 150e-9 / threads;
-    if (!(secs > 120))
+    F->pred_fog_s = per_px * px * F->nplans;
+    F->pred_n = done;
+    const double secs = F->pred_fog_s / threads;
+    if (!(secs > 120) || o->quiet || ef_job_cancelled(J))
         return;
-    char msg[400];
-    snprintf(msg, sizeof msg, "method=exact is predicted to take about %.0f minutes on this frame "
-                              "(%.3g noise evaluations per pixel on a sample of its rays, %d "
-                              "thread%s); the default method bounds each pixel's work (drop "
-                              "method=exact), or use a coarser scale or fewer octaves",
-             secs / 60, per_px, threads, threads > 1 ? "s" : "");
+    char msg[600], when[64];
+    if (secs < 2 * 3600)
+        snprintf(when, sizeof when, "%.0f minutes", secs / 60);
+    else
+        snprintf(when, sizeof when, "%.1f hours", secs / 3600);
+    snprintf(msg, sizeof msg, "this frame is predicted to take about %s (%.3g ms of fog a pixel "
+                              "on %d sampled pixels, %d thread%s)%s; Ctrl-C stops it and writes "
+                              "nothing",
+             when, per_px * 1e3, done, threads, threads > 1 ? "s" : "",
+             exact ? "; method=exact has no bound on a pixel's work, the default method bounds "
+                     "it (drop method=exact)"
+             : ef_scene_lit(sc) ? "; lit fog integrates every light along every ray: fewer "
+                                  "lights, a coarser noise scale or fewer octaves cost less"
+                                : "; a coarser noise scale or fewer octaves cost less");
     ef_job_warn(J, o->input, msg);
 }
 
@@ -766,9 +797,9 @@ static int resolve_view(ef_frame *F, int v)
     }
     if (!conv_ok)
         return ef_job_report(J, o->input, &F->err, 1);
-    if (v == 0 && !F->deep)
-        warn_exact_cost(F, pl, cam, &F->convs[0]);
-    return bind_view(F, v);
+    if ((status = bind_view(F, v)) == 0 && v == 0 && !F->deep)
+        probe_cost(F, pl);
+    return status;
 }
 
 static int resolve_views(ef_frame *F)
@@ -1130,6 +1161,10 @@ static int commit(ef_frame *F)
                         st->wall_s, st->decode_s, st->fog_s, st->encode_s, st->write_s,
                         st->wait_s, st->units, F->so.threads, (double) ru.ru_maxrss / 1024.0);
         }
+        if (F->pred_n > 0)
+            ef_job_note(J, "exrfog: stats: fog predicted before the pass at %.3f s of thread "
+                           "time (%d sampled pixels timed)\n",
+                        F->pred_fog_s, F->pred_n);
         ef_print_tau_stats(J, &o->scene, F->job.stats);
     }
     return 0;

@@ -55,7 +55,7 @@ typedef struct ef_job {
     int has_frame;            /* a frame of a sequence: */
     long frame;               /* its number */
     int noted_alpha;          /* the note on a deliverable without alpha was given */
-    int cost_checked;         /* method=exact's cost was predicted (on the first frame) */
+    int cost_checked;         /* the fog's cost was probed (on the first frame) */
     /* A non-EXR output's writer, probed once per run (deliver.c) */
     int dl_ok, dl_type, dl_alpha;
     char dl_ext[32];
