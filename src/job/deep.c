@@ -4,6 +4,7 @@
  * rows in flight. */
 #define _GNU_SOURCE 1
 #include <math.h>
+#include <time.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -659,6 +660,67 @@ static void do_unit(worker *w, unit *u)
     }
 }
 
+/* This thread's CPU time in ns. */
+static double cpu_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
+}
+
+/* The fog's thread time per pixel, from up to 64 pixels of each of up to
+ * 16 rows spread over the image (bit-reversed, so a probe stopped early
+ * has still seen its height), for at most half a second of wall time
+ * (whole pixels). Only the fog is timed (the pixels' samples in, the fog
+ * samples, their union or flattening and the AOVs), not the decoding of
+ * the rows. The worker's statistics are left as they were. Returns 0 when
+ * nothing could be timed (the pass then reports what failed). */
+static double probe_deep(worker *w, int *npx)
+{
+    shared *S = w->S;
+    const ef_deep_in *d = S->d;
+    const int mode = S->q->mode, W = d->w, step = W > 64 ? W / 64 : 1;
+    const ef_deep_stats st = w->st;
+    const double sin = w->samples_in, mxin = w->max_in;
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    const double w0 = (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
+    double ns = 0;
+    int n = 0;
+    ef_err err;
+    for (int k = 0; k < 16; ++k) {
+        clock_gettime(CLOCK_MONOTONIC, &ts);
+        if ((double) ts.tv_sec * 1e9 + (double) ts.tv_nsec - w0 > 0.5e9)
+            break;
+        const int rk = (k & 1) << 3 | (k & 2) << 1 | (k & 4) >> 1 | (k & 8) >> 3;
+        const int y = d->y0 + (int) ((2 * (long) rk + 1) * d->h / 32);
+        if (y >= d->y0 + d->h || ef_deep_read_rows(d, y, 1, &w->rows, &err))
+            break;
+        for (int i = 0; i < W; i += step) {
+            const int x = d->x0 + i;
+            const double t = cpu_ns();
+            ef_ray r;
+            ef_reconstruct(S->q->cam, S->q->conv, x, y, 1.0, &r);
+            double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
+            double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
+            if (load_pixel(w, &w->rows, (size_t) i, r.dist, x, y, &err) ||
+                fog_pixel(w, &r, x, y, mode, o, &err) ||
+                (o && S->aov && pixel_aovs(w, &r, o, av, &err)))
+                goto done;
+            ns += cpu_ns() - t;
+            ++n;
+            if (S->q->cancel && atomic_load_explicit(S->q->cancel, memory_order_relaxed))
+                goto done;
+        }
+    }
+done:
+    w->st = st;
+    w->samples_in = sin;
+    w->max_in = mxin;
+    *npx = n;
+    return n > 0 ? ns * 1e-9 / n : 0;
+}
+
 static void *work(void *arg)
 {
     worker *w = arg;
@@ -911,6 +973,12 @@ int ef_deep_run(const ef_deep_req *q, ef_deep_result *res, ef_err *err)
         ef_deep_buf_init(&W[t].ta, P->L.nch);
         ef_deep_buf_init(&W[t].tb, P->L.nch);
         ef_deep_buf_init(&W[t].bare, P->L.nch);
+    }
+    if (!rc && q->predicted) {
+        int n = 0;
+        const double per_px = probe_deep(&W[0], &n);
+        if (n > 0)
+            q->predicted(q->progress_user, per_px * (double) d.w * (double) d.h, n);
     }
     const int urows = d.tiled && d.th % UNIT_ROWS == 0 && d.th <= UNIT_MAX ? d.th : UNIT_ROWS;
     for (int y0 = d.y0; !rc && y0 < d.y0 + d.h;) {

@@ -39,7 +39,10 @@ typedef struct ef_deep_req {
     int grey;                 /* --deep-grey-alpha */
     const _Atomic int *cancel;
     void (*progress)(void *user, long pixels);
-    void *progress_user;
+    /* Optional: told before the pass the fog's thread time predicted for
+     * the part (a timed sample of its pixels, see probe_deep) */
+    void (*predicted)(void *user, double thread_s, int sampled);
+    void *progress_user;      /* progress's and predicted's */
 } ef_deep_req;
 
 typedef struct ef_deep_result {

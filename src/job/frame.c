@@ -976,7 +976,38 @@ static int choose_dwa_output(ef_frame *F)
 
 static void deep_progress(void *user, long px)
 {
-    ef_progress_add(user, px);
+    ef_progress_add(((ef_frame *) user)->J, px);
+}
+
+/* The deep pass's prediction (deep.c's timed probe): kept for --stats,
+ * and past two minutes on the run's threads a warning before the work, as
+ * probe_cost gives a flat frame. */
+static void deep_predicted(void *user, double thread_s, int sampled)
+{
+    ef_frame *F = user;
+    ef_job *J = F->J;
+    const ef_options *o = F->o;
+    F->pred_fog_s = thread_s;
+    F->pred_n = sampled;
+    const double secs = thread_s / (F->so.threads > 0 ? F->so.threads : 1);
+    if (!(secs > 120) || o->quiet || J->cost_checked || ef_job_cancelled(J))
+        return;
+    J->cost_checked = 1;
+    char msg[600], when[64];
+    if (secs < 2 * 3600)
+        snprintf(when, sizeof when, "%.0f minutes", secs / 60);
+    else
+        snprintf(when, sizeof when, "%.1f hours", secs / 3600);
+    snprintf(msg, sizeof msg, "this deep frame is predicted to take about %s (%.3g ms of fog a "
+                              "pixel on %d sampled pixels, %d thread%s)%s; Ctrl-C stops it and "
+                              "writes nothing",
+             when, thread_s / ((double) F->dw.max.x - F->dw.min.x + 1) /
+                       ((double) F->dw.max.y - F->dw.min.y + 1) * 1e3,
+             sampled, F->so.threads, F->so.threads > 1 ? "s" : "",
+             o->deep_tol < EF_DEEP_TOL_COSTLY ? "; a coarser --deep-tol makes fewer fog samples"
+             : ef_scene_lit(F->job.pass[0].scene) ? "; lit fog integrates every light along every fog sample"
+                                                    : "");
+    ef_job_warn(J, o->input, msg);
 }
 
 /* A deep part's pass (deep.c), with its own statistics line. */
@@ -1033,7 +1064,9 @@ static int run_deep_pass(ef_frame *F)
                             .keep_parts = !F->foreign,
                             .cancel = J->stop,
                             .progress = J->active_pg ? deep_progress : NULL,
-                            .progress_user = J };
+                            .predicted = o->explain || (o->quiet && !o->stats) ? NULL
+                                                                              : deep_predicted,
+                            .progress_user = F };
     const int drc = ef_deep_run(&q, &F->deep_res, &F->err);
     free(hist);
     if (drc)
