@@ -307,6 +307,55 @@ static void test_sky(void **state)
     ef_fog_free(&boxed);
 }
 
+/* method=exact at the extremes of falloff, base and density (issue 47's
+ * campaign saw a NaN there; 24 such SPECs here, clamped and separable
+ * among them, give none): every channel's tau is a number >= 0 (inf where
+ * the fog is opaque) and its error a number, on segments, long rays and
+ * sky rays up, down and level, from the ground and from far above. */
+static void test_exact_extremes(void **state)
+{
+    (void) state;
+    static const char *const fogs[] = {
+        "falloff=50:base=0", "falloff=1e3:base=0", "falloff=1e300:base=0",
+        "falloff=1e300:base=1e300", "falloff=1e300:base=-1e300", "falloff=1e-300:base=0",
+        "falloff=0.5:base=1e300", "falloff=0.5:base=-1e300",
+    };
+    static const char *const dens[] = { "density=1e-300", "density=0.05", "density=1e300" };
+    static const char *const kinds[] = { "noise:%s:%s:scale=50:octaves=3:method=exact",
+                                         "noise:%s:%s:scale=50:octaves=3:contrast=2:method=exact",
+                                         "noise-separable:%s:%s:scale=50:octaves=3:method=exact" };
+    const double orgs[2][3] = { { 0.3, 1.7, -0.2 }, { 0.3, 1e5, -0.2 } };
+    const double dirs[4][3] = { { 0.6, 0.8, 0 }, { 0.6, -0.8, 0 }, { 1, 0, 0 }, { 0.8, 0.01, 0.6 } };
+    const double lens[3] = { 5, 800, INFINITY };
+    int n = 0;
+    for (int k = 0; k < 3; ++k)
+        for (int f = 0; f < 8; ++f) {
+            char spec[200];
+            snprintf(spec, sizeof spec, kinds[k], dens[(f + k) % 3], fogs[f]);
+            ef_fog_component c;
+            parse(spec, &c);
+            for (int o = 0; o < 2; ++o)
+                for (int d = 0; d < 4; ++d)
+                    for (int l = 0; l < 3; ++l) {
+                        double dir[3] = { dirs[d][0], dirs[d][1], dirs[d][2] }, tau[3];
+                        unit(dir);
+                        const ef_ray r = ray(orgs[o], dir, lens[l]);
+                        ef_tau_info info;
+                        ef_fog_tau(&c, &r, tau, &info);
+                        for (int ch = 0; ch < 3; ++ch) {
+                            if (!(tau[ch] >= 0) || info.err[ch] != info.err[ch])
+                                print_error("%s along (%g,%g,%g) for %g: tau %g err %g\n", spec,
+                                            dir[0], dir[1], dir[2], lens[l], tau[ch], info.err[ch]);
+                            assert_true(tau[ch] >= 0);
+                            assert_false(info.err[ch] != info.err[ch]);
+                        }
+                        ++n;
+                    }
+            ef_fog_free(&c);
+        }
+    assert_int_equal(n, 24 * 24);
+}
+
 /* A grazing sky ray in height fog, or a very long segment, is cut where
  * the fog is opaque (tau >= 60 at the least): T <= e^-60, and the error
  * output (ln 2: the true T lies in [0, T]) says so. */
@@ -1391,6 +1440,7 @@ int main(void)
         cmocka_unit_test(test_translations),
         cmocka_unit_test(test_copy),
         cmocka_unit_test(test_sky),
+        cmocka_unit_test(test_exact_extremes),
         cmocka_unit_test(test_opaque),
         cmocka_unit_test(test_opaque_probe),
         cmocka_unit_test(test_adaptive_ttol),
