@@ -13,7 +13,14 @@ the lens and sensor fit as a horizontal field of view, the clip range):
   (blender -b ... -a, a farm) it stops the render with exit status 1;
 * "Fog EXR" fogs a chosen EXR with the current frame's camera;
 * "Write camera file" writes a camera file (exrfog --camera-file) for the
-  frame range, so any later exrfog run finds the cameras.
+  frame range, so any later exrfog run finds the cameras;
+* "Render shadow map" renders the active sun's or spot's shadow map in one
+  step: the depth of the scene seen from the light (orthographic along a
+  sun's light, from a camera "Sun map distance" back along it from the sun
+  object over "Sun map width" units; perspective from a spot over its
+  cone), written as MAP.exr with its camera in MAP.exr.json (exrfog's
+  camera-file form, shadow-camera=), and the --light SPEC that uses both
+  (shown in the panel and added to "Extra options" when asked).
 
 The fog (exrfog SPECs), its colour and extra options are stored in the
 .blend. exrfog is run as a program (the "exrfog program" setting, default
@@ -81,6 +88,106 @@ def camera_args(scene, cam):
     return ["--camera-convention", "blender",
             "--camera-to-world", ",".join(repr(v) for v in e["camera_to_world"]),
             "--fov", repr(e["fov"]), "--near", repr(e["near"]), "--far", repr(e["far"])]
+
+
+def light_spec(light, map_path=None):
+    """exrfog's --light SPEC for a Blender sun or spot (world axes as
+    Blender's, the add-on's runs use --up-axis z): a sun's strength is
+    irradiance (W/m^2), a spot's power P watts is I = P / (4 pi) W/sr as for
+    a point lamp (Cycles), its cone its spot_size. With map_path, the light's
+    shadow map and its camera file."""
+    d = light.data
+    col = ",".join(repr(c) for c in d.color)
+    m = light.matrix_world
+    if d.type == 'SUN':
+        t = m.col[2]
+        spec = "sun:towards=%r,%r,%r:color=%s:intensity=%r" % (t[0], t[1], t[2], col, d.energy)
+        if d.angle > 0:
+            spec += ":angle=%r" % math.degrees(d.angle)
+    elif d.type == 'SPOT':
+        p, a = m.col[3], -m.col[2]
+        spec = ("spot:position=%r,%r,%r:aim=%r,%r,%r:cone=%r:blend=%r:color=%s:intensity=%r"
+                % (p[0], p[1], p[2], a[0], a[1], a[2], math.degrees(d.spot_size), d.spot_blend,
+                   col, d.energy / (4 * math.pi)))
+        if bpy.app.version < (4, 0, 0):
+            # Cycles 3.x's spots also fall as cos alpha inside the cone
+            # (tests/blender/blender_lit_run.py measures it)
+            spec += ":cosine=1"
+    else:
+        raise ValueError("a shadow map is for a sun or a spot (this light is %s)" % d.type)
+    if map_path:
+        spec += ":shadow=%s:shadow-camera=%s.json" % (map_path, map_path)
+    return spec
+
+
+def render_shadow_map(scene, light, path, size, width, distance):
+    """Renders light's shadow map into path (an EXR with Z) and its camera
+    into path.json; returns the --light SPEC. The scene's camera, render
+    settings and engine are restored afterwards."""
+    d = light.data
+    if d.type not in ('SUN', 'SPOT'):
+        raise ValueError("a shadow map is for a sun or a spot (this light is %s)" % d.type)
+    cam_data = bpy.data.cameras.new("exrfog_shadow_map")
+    cam = bpy.data.objects.new("exrfog_shadow_map", cam_data)
+    scene.collection.objects.link(cam)
+    m = light.matrix_world
+    cam.matrix_world = m.copy()
+    if d.type == 'SUN':
+        # back along the light from the sun object, looking down the light
+        t = m.col[2]
+        cam.location = (m.col[3][0] + distance * t[0], m.col[3][1] + distance * t[1],
+                        m.col[3][2] + distance * t[2])
+        cam_data.type = 'ORTHO'
+        cam_data.ortho_scale = width
+        cam_data.clip_end = max(2 * distance, 1000.0)
+    else:
+        cam_data.type = 'PERSP'
+        cam_data.sensor_fit = 'HORIZONTAL'
+        cam_data.angle = min(d.spot_size, math.radians(170))
+        cam_data.clip_end = 1e5
+    cam_data.clip_start = 1e-3
+    r = scene.render
+    img = r.image_settings
+    keep = (scene.camera, r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage,
+            r.pixel_aspect_x, r.pixel_aspect_y, r.filepath, r.use_border, img.file_format,
+            img.color_depth, img.use_zbuffer, scene.cycles.samples, r.film_transparent)
+    layer = bpy.context.view_layer
+    keep_z = layer.use_pass_z
+    try:
+        scene.camera = cam
+        r.engine = 'CYCLES'
+        scene.cycles.samples = 1
+        r.resolution_x = r.resolution_y = size
+        r.resolution_percentage = 100
+        r.pixel_aspect_x = r.pixel_aspect_y = 1
+        r.use_border = False
+        r.film_transparent = False
+        img.file_format = 'OPEN_EXR'
+        img.color_depth = '32'
+        img.use_zbuffer = True
+        layer.use_pass_z = True
+        r.filepath = path
+        bpy.context.view_layer.update()
+        bpy.ops.render.render(write_still=True)
+        cm = cam.matrix_world
+        entry = {"camera_to_world": [cm[i][j] for i in range(4) for j in range(4)]}
+        if d.type == 'SUN':
+            entry["ortho_width"] = cam_data.ortho_scale
+        else:
+            entry["fov"] = math.degrees(cam_data.angle_x)
+        with open(path + ".json", "w") as fh:
+            json.dump({"convention": "blender", "frames": {str(scene.frame_current): entry}},
+                      fh, indent=1)
+    finally:
+        (scene.camera, r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage,
+         r.pixel_aspect_x, r.pixel_aspect_y, r.filepath, r.use_border, img.file_format,
+         img.color_depth, img.use_zbuffer, scene.cycles.samples, r.film_transparent) = keep
+        layer.use_pass_z = keep_z
+        bpy.data.objects.remove(cam, do_unlink=True)
+        bpy.data.cameras.remove(cam_data)
+    if not os.path.exists(path):
+        raise RuntimeError("Blender did not write the shadow map " + path)
+    return light_spec(light, path)
 
 
 def exrfog_command(scene, input_path, output_path):
@@ -172,6 +279,24 @@ class ExrfogSettings(bpy.types.PropertyGroup):
                                     description="More exrfog options, as on a command line")
     camera_file: bpy.props.StringProperty(name="Camera file", default="//cameras.json",
                                           subtype='FILE_PATH')
+    shadow_map: bpy.props.StringProperty(
+        name="Shadow map", default="//shadow_{light}.exr", subtype='FILE_PATH',
+        description="Where \"Render shadow map\" writes the active light's map ({light}: its "
+                    "name); its camera goes beside it, in the same name plus .json")
+    shadow_size: bpy.props.IntProperty(name="Map size", default=1024, min=16, max=11585,
+                                       description="The shadow map's width and height in texels")
+    sun_width: bpy.props.FloatProperty(
+        name="Sun map width", default=100.0, min=1e-3,
+        description="How much of the scene a sun's map covers across, in scene units, around "
+                    "the sun object's location")
+    sun_distance: bpy.props.FloatProperty(
+        name="Sun map distance", default=500.0, min=0.0,
+        description="How far back along the sunlight from the sun object a sun's map camera "
+                    "sits: everything that casts a shadow must lie in front of it")
+    add_light: bpy.props.BoolProperty(
+        name="Add the light to Extra options", default=True,
+        description="Append the --light SPEC with the new map to Extra options")
+    last_light: bpy.props.StringProperty(name="Last shadow map's light", default="")
 
 
 class EXRFOG_OT_write_camera(bpy.types.Operator):
@@ -193,6 +318,36 @@ class EXRFOG_OT_write_camera(bpy.types.Operator):
         with open(path, "w") as fh:
             json.dump({"convention": "blender", "frames": frames}, fh, indent=1)
         self.report({'INFO'}, "exrfog: %d cameras written to %s" % (len(frames), path))
+        return {'FINISHED'}
+
+
+class EXRFOG_OT_shadow_map(bpy.types.Operator):
+    """Render the active sun's or spot's shadow map (depth from the light, with its camera
+    file) for exrfog's shadow= and shadow-camera="""
+    bl_idname = "exrfog.shadow_map"
+    bl_label = "Render shadow map"
+
+    def execute(self, context):
+        scene = context.scene
+        s = scene.exrfog
+        light = context.active_object
+        if light is None or light.type != 'LIGHT':
+            self.report({'ERROR'}, "exrfog: select a sun or a spot light first")
+            return {'CANCELLED'}
+        path = bpy.path.abspath(s.shadow_map.replace("{light}", bpy.path.clean_name(light.name)))
+        folder = os.path.dirname(path)
+        try:
+            if folder:
+                os.makedirs(folder, exist_ok=True)
+            spec = render_shadow_map(scene, light, path, s.shadow_size, s.sun_width,
+                                     s.sun_distance)
+        except (RuntimeError, ValueError, OSError) as e:
+            self.report({'ERROR'}, "exrfog: " + str(e))
+            return {'CANCELLED'}
+        s.last_light = spec
+        if s.add_light:
+            s.extra = (s.extra + " " if s.extra.strip() else "") + shlex.join(["--light", spec])
+        self.report({'INFO'}, "exrfog: shadow map written to %s; --light %s" % (path, spec))
         return {'FINISHED'}
 
 
@@ -240,6 +395,15 @@ class EXRFOG_PT_panel(bpy.types.Panel):
         col.operator(EXRFOG_OT_fog_file.bl_idname)
         col.prop(s, "camera_file")
         col.operator(EXRFOG_OT_write_camera.bl_idname)
+        col.separator()
+        col.prop(s, "shadow_map")
+        col.prop(s, "shadow_size")
+        col.prop(s, "sun_width")
+        col.prop(s, "sun_distance")
+        col.prop(s, "add_light")
+        col.operator(EXRFOG_OT_shadow_map.bl_idname)
+        if s.last_light:
+            col.label(text="--light " + s.last_light[:180])
 
 
 @persistent
@@ -271,7 +435,8 @@ def fog_written_frame(scene, *args):
         show_error(LAST_ERROR)
 
 
-classes = (ExrfogSettings, EXRFOG_OT_write_camera, EXRFOG_OT_fog_file, EXRFOG_PT_panel)
+classes = (ExrfogSettings, EXRFOG_OT_write_camera, EXRFOG_OT_shadow_map, EXRFOG_OT_fog_file,
+           EXRFOG_PT_panel)
 
 
 def register():

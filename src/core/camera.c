@@ -581,6 +581,11 @@ int ef_camera_resolve(const ef_cam_meta *meta, const ef_cam_flags *flags,
     memset(cam, 0, sizeof *cam);
     cam->unit = 1;
     cam->src_pose = cam->src_fov = cam->src_near = cam->src_far = cam->src_proj = "none";
+    if (flags->ortho_width.set)
+        return ef_fail(err, "the camera file gives an orthographic camera (ortho_width %g): "
+                            "an image exrfog fogs is seen through a perspective camera; "
+                            "ortho_width is for a shadow map's camera (a light's "
+                            "shadow-camera=FILE)", flags->ortho_width.v);
     if (meta->disp[2] < meta->disp[0] || meta->disp[3] < meta->disp[1])
         return ef_fail(err, "empty displayWindow (%d,%d)-(%d,%d)", meta->disp[0],
                        meta->disp[1], meta->disp[2], meta->disp[3]);

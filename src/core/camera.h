@@ -57,6 +57,8 @@ typedef struct ef_cam_flags {
                                * turned into a horizontal fov with the display
                                * window's aspect times the pixel aspect. Setting
                                * both fov and vfov is an error. */
+    ef_opt_num ortho_width;   /* a camera file's ortho_width: an orthographic camera's
+                               * width in scene units (shadow maps only) */
     ef_opt_num near_;         /* --near */
     ef_opt_num far_;          /* --far */
     const char *fov_src;      /* where fov came from when not --fov (a camera file), or

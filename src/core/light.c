@@ -47,13 +47,13 @@ static int unit3(const char *val, double v[3])
 /* The kinds: name, keys, geometry. */
 const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND] = {
     [EF_LIGHT_SUN] = { "sun",
-                       "towards, color, intensity, angle, planet, name, shadow, bias, slope, "
-                       "outside, penumbra",
+                       "towards, color, intensity, angle, planet, name, shadow, shadow-camera, "
+                       "bias, slope, outside, penumbra",
                        0, 0, 1 },
     [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name", 1, 0, 0 },
     [EF_LIGHT_SPOT] = { "spot",
                         "position, aim, cone, blend, cosine, color, intensity, radius, name, "
-                        "shadow, bias, slope, outside",
+                        "shadow, shadow-camera, bias, slope, outside",
                         1, 1, 1 },
 };
 
@@ -69,7 +69,9 @@ static int light_shadow(const ef_fog_context *ctx, const char *spec, ef_light *l
 {
     if (!ctx->load_shadow)
         return ef_fail(err, "--light '%s': shadow maps cannot be read here", spec);
-    if (ctx->load_shadow(l->shadow_path, &l->shadow_opts, &l->shadow, err))
+    ef_shadow_opts o = l->shadow_opts;
+    o.camera = l->shadow_camera[0] ? l->shadow_camera : NULL;   /* read while loading only */
+    if (ctx->load_shadow(l->shadow_path, &o, &l->shadow, err))
         return -1;
     const ef_shadow *m = l->shadow;
     const char *why = NULL;
@@ -138,12 +140,12 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                        "sun:towards=X,Y,Z:intensity=E or point:position=X,Y,Z:intensity=I)", spec);
     }
     double color[3] = { 1, 1, 1 }, intensity = 1, cone = 0, blend = 0;
-    l->shadow_opts = (ef_shadow_opts) { 0, 1, 1, 0 };   /* bias 0, slope 1, outside lit */
+    l->shadow_opts = (ef_shadow_opts) { 0, 1, 1, 0, NULL };   /* bias 0, slope 1, outside lit */
     unsigned seen = 0;
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
            S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384, S_PLANET = 32768,
-           S_PENUMBRA = 65536 };
+           S_PENUMBRA = 65536, S_SHADOWCAM = 131072 };
     double penumbra = 16;   /* directions over the sun's disc, with angle= and shadow= */
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
@@ -156,7 +158,8 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         unsigned bit = 0;
         /* a number that overflows or underflows is out of range, whatever
          * the key's own rule (names and paths hold no numbers to read) */
-        static const char *const words[] = { "name", "shadow", "outside", "cosine", NULL };
+        static const char *const words[] = { "name", "shadow", "shadow-camera", "outside",
+                                             "cosine", NULL };
         int wordy = 0;
         for (int w = 0; words[w]; ++w)
             wordy |= !strcmp(key, words[w]);
@@ -240,6 +243,11 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             if (ef_parse_numbers(val, &l->radius, 1) || !(l->radius >= 0))
                 return ef_fail(err, "--light '%s': radius='%s' is not a number >= 0 (scene "
                                "units)", spec, val);
+        } else if (!strcmp(key, "shadow-camera")) {
+            bit = S_SHADOWCAM;
+            if (strlen(val) >= sizeof l->shadow_camera)
+                return ef_fail(err, "--light '%s': shadow-camera= path is too long", spec);
+            snprintf(l->shadow_camera, sizeof l->shadow_camera, "%s", val);
         } else if (!strcmp(key, "shadow")) {
             bit = S_SHADOW;
             if (strlen(val) >= sizeof l->shadow_path)
@@ -305,8 +313,9 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
         l->cos_outer = cos(cone * (PI / 360));
         l->smooth = blend * (1 - l->cos_outer);
     }
-    if ((seen & (S_BIAS | S_OUTSIDE | S_SLOPE)) && !(seen & S_SHADOW))
-        return ef_fail(err, "--light '%s': bias=, slope= and outside= need shadow=FILE.exr", spec);
+    if ((seen & (S_BIAS | S_OUTSIDE | S_SLOPE | S_SHADOWCAM)) && !(seen & S_SHADOW))
+        return ef_fail(err, "--light '%s': bias=, slope=, outside= and shadow-camera= need "
+                       "shadow=FILE.exr", spec);
     if ((seen & S_PENUMBRA) && (!(seen & S_SHADOW) || !(l->angle > 0)))
         return ef_fail(err, "--light '%s': penumbra= needs shadow=FILE.exr and the sun's "
                        "angle=DEG (its angular diameter, e.g. 0.53)", spec);

@@ -82,6 +82,7 @@ typedef struct ef_light {
     struct ef_shadow *shadow;
     ef_shadow_opts shadow_opts;
     char shadow_path[256];
+    char shadow_camera[256];  /* shadow-camera=: the map's camera file, "" for its header */
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

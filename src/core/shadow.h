@@ -50,6 +50,8 @@ typedef struct ef_shadow_opts {
     double bias, slope;
     int outside_lit;
     int copies;          /* the penumbra's tilted copies to be made of the map (0: none) */
+    const char *camera;  /* the map's camera from this camera file instead of its header
+                          * (NULL: the header's); read by the loader only */
 } ef_shadow_opts;
 
 /* The most texels a shadow map may hold over itself and its penumbra

@@ -21,6 +21,7 @@ typedef struct cf_frame {
     int is_w2c;
     ef_mat4 m;                     /* as written, row by row, in the file's convention */
     ef_opt_num fov, vfov, near_, far_;
+    ef_opt_num ortho;              /* ortho_width: an orthographic (shadow map) camera */
     char where[100];               /* "frames.1001", "frames[3]", "line 12" */
     int seq;                       /* its place in the file */
 } cf_frame;
@@ -281,13 +282,13 @@ static int read_chan(ef_camera_file *cf, char *text, ef_err *err)
 
 /* The lens and clip keys a frame or the file level may hold. */
 typedef struct lens {
-    ef_opt_num fov, vfov, focal, aperture, near_, far_;
+    ef_opt_num fov, vfov, focal, aperture, near_, far_, ortho;
 } lens;
 
 static const char frame_keys[] = "camera_to_world, world_to_camera, fov, vfov, focal_length, "
-                                 "aperture, near, far";
+                                 "aperture, near, far, ortho_width";
 static const char top_keys[] = "convention, frames, fov, vfov, focal_length, aperture, near, "
-                               "far";
+                               "far, ortho_width";
 
 /* A positive finite number (fov and vfov also below 180). */
 static int num_key(const json_t *v, const char *path, const char *key, ef_opt_num *out,
@@ -317,7 +318,8 @@ static int lens_key(const char *key, const json_t *v, const char *path, lens *l,
                   : !strcmp(key, "focal_length") ? &l->focal
                   : !strcmp(key, "aperture") ? &l->aperture
                   : !strcmp(key, "near") ? &l->near_
-                  : !strcmp(key, "far") ? &l->far_ : NULL;
+                  : !strcmp(key, "far") ? &l->far_
+                  : !strcmp(key, "ortho_width") ? &l->ortho : NULL;
     if (!o)
         return 1;
     return num_key(v, path, key, o, err) ? -1 : 0;
@@ -326,6 +328,9 @@ static int lens_key(const char *key, const json_t *v, const char *path, lens *l,
 static int lens_check(const lens *l, const char *path, ef_err *err)
 {
     const int k = l->fov.set + l->vfov.set + l->focal.set;
+    if (k > 0 && l->ortho.set)
+        return ef_fail(err, "%s: gives ortho_width (an orthographic camera's width) and a "
+                            "perspective lens (fov, vfov or focal_length); give one", path);
     if (k > 1)
         return ef_fail(err, "%s: gives %s%s%s%s%s; give one of fov (horizontal degrees), vfov "
                             "(vertical degrees) or focal_length with aperture", path,
@@ -433,7 +438,7 @@ static int read_frame(ef_camera_file *cf, const json_t *obj, const char *path, i
     if (lens_check(&l, path, err))
         return -1;
     /* The frame's lens replaces the file-level one as a whole. */
-    const int own = l.fov.set || l.vfov.set || l.focal.set;
+    const int own = l.fov.set || l.vfov.set || l.focal.set || l.ortho.set;
     const lens *src = own ? &l : top;
     const ef_opt_num ap = l.aperture.set ? l.aperture : top->aperture;
     if (src->focal.set) {
@@ -451,6 +456,7 @@ static int read_frame(ef_camera_file *cf, const json_t *obj, const char *path, i
                                 "focal_length too, or drop it", path, l.aperture.v);
         f->fov = src->fov;
         f->vfov = src->vfov;
+        f->ortho = src->ortho;
     }
     f->near_ = l.near_.set ? l.near_ : top->near_;
     f->far_ = l.far_.set ? l.far_ : top->far_;
@@ -651,6 +657,7 @@ int ef_camera_file_frame(const ef_camera_file *cf, double frame, ef_cam_flags *f
         flags->w2c.v = fr->m;
     else
         flags->c2w.v = fr->m;
+    flags->ortho_width = fr->ortho;
     if (fr->fov.set) {
         flags->fov = fr->fov;
         flags->vfov.set = 0;

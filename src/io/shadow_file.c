@@ -1,10 +1,12 @@
 /* Shadow maps from files (shadow_file.h). */
 #include "shadow_file.h"
 
+#include "camera_file.h"
 #include "exr_io.h"
 #include "exr_parts.h"
 #include "shadow.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,6 +30,79 @@ static int depth_channel(const ef_exr_file *f, int p)
             return i;
     }
     return -1;
+}
+
+/* The map's camera from a camera file (shadow-camera=) in place of its
+ * header's: its one frame's pose, and ortho_width (a sun's orthographic
+ * map, that many scene units across the display window) or a perspective
+ * lens (a spot's), as worldToCamera and a worldToScreen-style projection
+ * (centre 0,0, y up, +-1 over the display window). Returns 0, or -1 with
+ * a message naming the file. */
+static int map_camera(const char *file, const ef_cam_meta *meta, ef_mat4 *w2c, ef_mat4 *proj,
+                      ef_err *err)
+{
+    ef_camera_file *cf;
+    if (ef_camera_file_read(file, EF_CONV_EXR, &cf, err))
+        return -1;
+    double first, last;
+    int n;
+    ef_camera_file_frames(cf, &first, &last, &n);
+    ef_cam_flags fl;
+    memset(&fl, 0, sizeof fl);
+    int rc = 0;
+    if (n != 1)
+        rc = ef_fail(err, "the shadow map's camera file holds %d frames; a map is rendered once, "
+                     "from one camera: give that one frame", n);
+    else
+        rc = ef_camera_file_frame(cf, first, &fl, err);
+    ef_camera_file_free(cf);
+    const int ortho = fl.ortho_width.set;
+    const double width = fl.ortho_width.v;
+    if (!rc && ortho) {
+        fl.ortho_width.set = 0;   /* the pose resolves as a perspective one's */
+        fl.vfov.set = 0;
+        fl.fov.set = 1;
+        fl.fov.v = 90;
+    } else if (!rc && !fl.fov.set && !fl.vfov.set) {
+        rc = ef_fail(err, "the shadow map's camera file gives no lens: ortho_width (scene units "
+                     "across the map) for a sun's orthographic map, or fov, vfov or "
+                     "focal_length for a spot's perspective one");
+    }
+    ef_camera cam;
+    if (!rc && ef_camera_resolve(meta, &fl, &cam, err))
+        rc = -1;
+    if (rc) {
+        ef_err_set_file(err, file);
+        return -1;
+    }
+    ef_mat4 c2w, P;
+    memset(&c2w, 0, sizeof c2w);
+    memset(&P, 0, sizeof P);
+    for (int r = 0; r < 3; ++r) {
+        for (int j = 0; j < 3; ++j)
+            c2w.m[4 * r + j] = cam.rot[3 * r + j] * cam.unit;
+        c2w.m[12 + r] = cam.pos[r];
+    }
+    c2w.m[15] = 1;
+    if (ef_mat4_invert(&c2w, w2c)) {
+        ef_fail(err, "the shadow map's camera pose is singular");
+        ef_err_set_file(err, file);
+        return -1;
+    }
+    /* half the view across and up: the display window's shape with its
+     * pixel aspect */
+    const double Wd = meta->disp[2] - meta->disp[0] + 1.0, Hd = meta->disp[3] - meta->disp[1] + 1.0;
+    const double hx = ortho ? width / 2 : tan(cam.hfov_deg * (3.14159265358979323846 / 360));
+    const double hy = hx * Hd / (Wd * meta->pixel_aspect);
+    P.m[0] = 1 / hx;
+    P.m[5] = 1 / hy;
+    P.m[10] = 1;
+    if (ortho)
+        P.m[15] = 1;
+    else
+        P.m[11] = 1;
+    ef_mat4_mul(w2c, &P, proj);
+    return 0;
 }
 
 int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_shadow **out,
@@ -81,12 +156,25 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
             src.dw[1] = dw.min.y;
             memcpy(src.disp, meta.disp, sizeof src.disp);
             src.depth = depth;
+            ef_mat4 cw2c, cproj;
+            if (o->camera && map_camera(o->camera, &meta, &cw2c, &cproj, err)) {
+                free(depth);
+                free(ys);
+                ef_exr_close(&f);
+                return -1;
+            }
             src.has_w2c = meta.w2c.set;
             src.w2c = meta.w2c.v;
             const int scr = meta.w2screen.set;
             src.has_proj = scr || meta.w2ndc.set;
             src.proj = scr ? meta.w2screen.v : meta.w2ndc.v;
             src.proj_name = scr ? "worldToScreen" : "worldToNDC";
+            if (o->camera) {
+                src.has_w2c = src.has_proj = 1;
+                src.w2c = cw2c;
+                src.proj = cproj;
+                src.proj_name = "camera file's projection";
+            }
             *out = ef_shadow_build(&src, o, err);
             rc = *out ? 0 : -1;
         }

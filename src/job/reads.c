@@ -58,6 +58,10 @@ void ef_job_reads(const ef_job *J, int has_frame, long frame, int with_input, ef
         if (s->light[i].shadow_path[0]) {
             snprintf(role, sizeof role, "shadow= map of light %s", s->light[i].name);
             add(r, role, s->light[i].shadow_path, 0);
+            if (s->light[i].shadow_camera[0]) {
+                snprintf(role, sizeof role, "shadow-camera= file of light %s", s->light[i].name);
+                add(r, role, s->light[i].shadow_camera, 0);
+            }
         }
     if (s->sky_light)
         add(r, "--sky-light environment", s->sky_light->path, 0);

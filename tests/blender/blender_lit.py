@@ -11,6 +11,7 @@ shadow map; OUT.json then holds that camera and its ortho scale). Writes
 OUT and OUT.json (the camera and the direction towards the sun)."""
 import json
 import math
+import os
 import sys
 
 import bpy
@@ -133,6 +134,23 @@ if spotmap:
     cam.data.clip_start, cam.data.clip_end = 0.01, 500.0
     sc.render.resolution_x = sc.render.resolution_y = 512
 bpy.context.view_layer.update()
+if args[1] == "opmap":
+    # the add-on's "Render shadow map" on the sun (moved to where the test's
+    # own sun map is centred, with its width, distance and size) or the spot
+    sys.path.insert(0, os.path.join(os.environ["EXRFOG_SOURCE_DIR"], "integrations", "blender"))
+    import addon_utils
+    addon_utils.enable("exrfog_blender", default_set=True, handle_error=None)
+    light = spo if spot else so
+    so.location = (0, 4, 2)
+    bpy.context.view_layer.objects.active = light
+    s = sc.exrfog
+    s.shadow_map, s.shadow_size, s.sun_width, s.sun_distance = out, 512, 48.0, 40.0
+    res = bpy.ops.exrfog.shadow_map()
+    print("blender_lit: operator %s" % sorted(res))
+    print("blender_lit: light " + s.last_light)
+    print("blender_lit: extra " + s.extra)
+    print("blender_lit: rendered")
+    sys.exit(0)
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
 m = cam.matrix_world

@@ -16,6 +16,7 @@ off Cycles' render of a white Lambertian plane (Blender's watts are not
 W/sr: the plane measures the factor), compared the same way."""
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -66,6 +67,25 @@ def rgb(path):
     return oiio.ImageBuf(path).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
 
 
+said = {}
+
+
+def operator_light(name):
+    """The --light SPEC the add-on's "Render shadow map" gave in run name,
+    after checking it wrote the map, its camera file and the SPEC into
+    Extra options."""
+    out = said[name]
+    light = [l[len("blender_lit: light "):] for l in out.splitlines()
+             if l.startswith("blender_lit: light ")]
+    extra = [l for l in out.splitlines() if l.startswith("blender_lit: extra ")]
+    if "FINISHED" not in out or not light or not extra or light[0] not in extra[0]:
+        raise SystemExit("blender_lit: FAILED: the shadow map operator in %s: %s" % (name, out[-2000:]))
+    m = re.search(r":shadow=([^:]+):shadow-camera=([^:]+)$", light[0])
+    if not m or not os.path.exists(m.group(1)) or not os.path.exists(m.group(2)):
+        raise SystemExit("blender_lit: FAILED: the operator's map or camera file: " + light[0])
+    return light[0]
+
+
 with tempfile.TemporaryDirectory() as d:
     env = dict(os.environ, BLENDER_USER_CONFIG=d + "/cfg", BLENDER_USER_SCRIPTS=d + "/scripts")
     scene = os.path.join(src, "tests", "blender", "blender_lit.py")
@@ -79,12 +99,15 @@ with tempfile.TemporaryDirectory() as d:
                                         ("lampfog", "fog", 256, 300, "lamp"),
                                         ("calib", "plain", 16, 300, "calib"),
                                         ("spotfog", "fog", 256, 40000, "spot shadow"),
-                                        ("spotmap", "spotmap", 1, 40000, "shadow")):
+                                        ("spotmap", "spotmap", 1, 40000, "shadow"),
+                                        ("opsun", "opmap", 1, 3, "shadow"),
+                                        ("opspot", "opmap", 1, 40000, "spot shadow")):
         r = run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", scene,
                  "--", "%s/%s.exr" % (d, name), mode, str(spp), str(sun)] + extra.split(),
                 env)
         if "blender_lit: rendered" not in r.stdout:
             raise SystemExit("blender_lit: FAILED: Blender did not render " + name)
+        said[name] = r.stdout
     cam = json.load(open(d + "/plain.exr.json"))
     common = ["--camera-convention", "blender", "--camera-to-world",
               ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]),
@@ -134,6 +157,20 @@ with tempfile.TemporaryDirectory() as d:
         raise SystemExit("blender_lit: FAILED: exrfog's shafts differ from Cycles'")
     if not shade > 0.02:
         raise SystemExit("blender_lit: FAILED: the ball's shadow took almost nothing")
+    # The add-on's one-step sun map (issue 42 item 4): Cycles' depth from an
+    # orthographic camera back along the sunlight, its camera in a camera
+    # file (no header matrices), read by shadow-camera=. Its camera is the
+    # test's own map's (the sun moved to that centre, the same width, size
+    # and distance): the shafts come out as the header-stamped map's.
+    op_sun = operator_light("opsun")
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_opsun.exr", "--light", op_sun] + common)
+    ef_o = rgb(d + "/ef_opsun.exr") - rgb(d + "/ef_darkS.exr")
+    op_rel = (ef_o.mean() - ef_s.mean()) / ef_s.mean()
+    print("blender_lit: the add-on's sun map (%s): the shafts' mean %+.4f %% from the "
+          "header-stamped map's, largest |diff| %.2e (of %.3f)"
+          % (op_sun, 100 * op_rel, np.abs(ef_o - ef_s).max(), ef_s.max()))
+    if not (abs(op_rel) < 1e-3 and np.abs(ef_o - ef_s).max() < 0.01 * ef_s.max()):
+        raise SystemExit("blender_lit: FAILED: the add-on's sun map gives other shafts")
     # penumbrae: Cycles' sun 3 degrees wide against angle=3 (32 directions,
     # filtered), as a whole and in what the penumbra changes from the hard
     # shadow, after a 7 x 7 box blur (Cycles' noise), where the soft and hard
@@ -238,6 +275,22 @@ with tempfile.TemporaryDirectory() as d:
             shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)
     if not (abs(mean_rel) < 0.02 and rows.max() < 0.06 and shade > 0.03):
         raise SystemExit("blender_lit: FAILED: exrfog's shadowed spot differs from Cycles'")
+    # The add-on's spot map: perspective from the spot over its 70-degree
+    # cone (the test's own map spans 90), its SPEC (cone, blend, power over
+    # 4 pi, cosine=1 on Blender 3) from the light itself: against Cycles as
+    # the header-stamped map is.
+    op_spot = operator_light("opspot")
+    run([exrfog, d + "/plainS.exr", "-o", d + "/ef_opspot.exr", "--light", op_spot] + common)
+    ef_q = rgb(d + "/ef_opspot.exr") - rgb(d + "/ef_darkS.exr")
+    q_rel = (cyc_p.mean() - ef_q.mean()) / ef_q.mean()
+    qb = ef_q.sum(axis=(1, 2)).reshape(-1, 4).sum(axis=1)
+    q_rows = np.abs(cb - qb)[lit_rows] / qb[lit_rows]
+    q_shade = 1 - ef_q.mean() / ef_pu.mean()
+    print("blender_lit: the add-on's spot map (%s): Cycles mean %.5f, exrfog %.5f (%+.2f %%); "
+          "lit bands within %.2f %%; the shadow takes %.1f %%"
+          % (op_spot, cyc_p.mean(), ef_q.mean(), 100 * q_rel, 100 * q_rows.max(), 100 * q_shade))
+    if not (abs(q_rel) < 0.02 and q_rows.max() < 0.06 and q_shade > 0.03):
+        raise SystemExit("blender_lit: FAILED: the add-on's spot map differs from Cycles'")
     if os.environ.get("BLENDER_LIT_KEEP"):
         for f in ("lampfog.exr", "dark.exr", "ef_lamp.exr", "ef_dark.exr", "calib.exr"):
             shutil.copy(d + "/" + f, os.environ["BLENDER_LIT_KEEP"] + "/" + f)

@@ -1,6 +1,6 @@
 #!/bin/sh
 # -o and --preview over a file the run reads besides INPUT (issue 46): the
-# --depth file, a sun's and a spot's shadow= map (on the command line and
+# --depth file, a sun's and a spot's shadow= map and a map's shadow-camera= file (on the command line and
 # in a --scene file), the --sky-light environment, the --scene file, the
 # --camera-file, the --colorconfig and a layered file= profile, named as
 # written, through a symbolic link and through a hard link; and in a
@@ -23,6 +23,8 @@ cp d.exr spot.exr && cp d.exr env.exr || exit 1
 printf '# height density\n0 0.2\n5 0.05\n20 0\n' > prof.txt
 printf '{"convention": "exr", "fov": 60, "frames": {"1": {"camera_to_world": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,2,0,1]}}}\n' > cam.json
 cp "$src/share/ocio/exrfog-config.ocio" cfg.ocio || exit 1
+w2c=$(oiiotool --info -v sun.exr | sed -n 's/.*worldToCamera: //p')
+printf '{"convention": "exr", "ortho_width": 240, "frames": {"1": {"world_to_camera": [%s]}}}\n' "$w2c" > suncam.json
 printf '{"fog": ["exp:density=0.03"], "lights": ["spot:position=0,1.7,0:aim=0,0,-1:cone=40:intensity=3:shadow=spot.exr"]}\n' > scene.json
 
 fog="--fog exp:density=0.05"
@@ -33,6 +35,7 @@ spot="--light spot:position=0,1.7,0:aim=0,0,-1:cone=40:intensity=3:shadow=spot.e
 cases="depth|d.exr|--depth d.exr $fog
 sun|sun.exr|$fog $sun
 spot|spot.exr|$fog $spot
+suncam|suncam.json|$fog $sun:shadow-camera=suncam.json
 scene-map|spot.exr|--scene scene.json
 scene|scene.json|--scene scene.json
 sky|env.exr|$fog --sky-light env.exr:intensity=0.5

@@ -2867,6 +2867,140 @@ static void test_shadow_map_bound(void **state)
     assert_false(tu_exists(out.s));
 }
 
+/* Largest |a - b| over R, G and B of two same-sized outputs (finite
+ * values; the sky's 1e10 depth makes no colour). */
+static double rgb_max_diff(const char *a, const char *b)
+{
+    tu_image x, y;
+    assert_int_equal(tu_read_image(a, 0, &x), 0);
+    assert_int_equal(tu_read_image(b, 0, &y), 0);
+    assert_int_equal(x.w * x.h, y.w * y.h);
+    double m = 0;
+    for (int k = 0; k < 3; ++k) {
+        const char *n = (const char *[]) { "R", "G", "B" }[k];
+        const float *p = x.plane[tu_image_find(&x, n)], *q = y.plane[tu_image_find(&y, n)];
+        for (size_t i = 0; i < (size_t) x.w * (size_t) x.h; ++i)
+            if (isfinite(p[i]) && isfinite(q[i]) && fabs((double) p[i] - q[i]) > m)
+                m = fabs((double) p[i] - q[i]);
+    }
+    tu_image_free(&x);
+    tu_image_free(&y);
+    return m;
+}
+
+/* A shadow map's camera from a camera file (issue 42 item 4: shadow-
+ * camera=, for maps whose header has none, as a DCC writes them): make_
+ * sample's sun map with its header's matrices erased and the same camera
+ * in a JSON camera file (world_to_camera as oiiotool prints it, 6 digits,
+ * and ortho_width, the map's 240 units) shades as the header's map does,
+ * within a half float's step at the brightest fog (the digits), while the
+ * map changes the image by far more. A spot map likewise (make_sample's
+ * perspective view, fov from its header). The mistakes are refused with
+ * the file named: two frames, no lens, ortho_width with a fov, ortho_width
+ * for the image's own camera, shadow-camera= without shadow=. */
+static void test_shadow_camera_file(void **state)
+{
+    (void) state;
+    fresh_dir("mapcam");
+    path_t map = pth("mapcam/sun.exr"), bare = pth("mapcam/bare.exr"), cj = pth("mapcam/sun.json");
+    path_t a = pth("mapcam/a.exr"), b = pth("mapcam/b.exr"), c = pth("mapcam/c.exr");
+    const char *mk = getenv("EXRFOG_MAKE_SAMPLE");
+    assert_non_null(mk);
+    char cmd[16384], w2c[600];
+    snprintf(cmd, sizeof cmd, "'%s' '%s' --sun-view 0.2,0.3,-1 --size 256x256 >/dev/null && "
+             "oiiotool '%s' --eraseattrib worldToCamera --eraseattrib worldToNDC -o '%s' && "
+             "oiiotool --info -v '%s' | sed -n 's/.*worldToCamera: //p' > '%s.w2c'",
+             mk, map.s, map.s, bare.s, map.s, cj.s);
+    assert_int_equal(system(cmd), 0);
+    snprintf(cmd, sizeof cmd, "%s.w2c", cj.s);
+    slurp_text(cmd, w2c, sizeof w2c);
+    w2c[strcspn(w2c, "\n")] = 0;
+    FILE *f = fopen(cj.s, "w");
+    assert_non_null(f);
+    fprintf(f, "{\"convention\": \"exr\", \"ortho_width\": 240,\n \"frames\": {\"7\": "
+               "{\"world_to_camera\": [%s]}}}\n", w2c);
+    fclose(f);
+    const char *fog = "--fog height:density=0.05:falloff=0.2 --light sun:towards=0.2,0.3,-1:intensity=3";
+    assert_status(run("'%s' -o '%s' %s:shadow='%s'", sample(), a.s, fog, map.s), 0);
+    assert_status(run("'%s' -o '%s' %s:shadow='%s':shadow-camera='%s'", sample(), b.s, fog,
+                      bare.s, cj.s), 0);
+    assert_status(run("'%s' -o '%s' %s", sample(), c.s, fog), 0);
+    const double same = rgb_max_diff(a.s, b.s), differ = rgb_max_diff(a.s, c.s);
+    printf("shadow-camera=: %.3g from the header's map; the map itself changes up to %.3g\n",
+           same, differ);
+    assert_true(same <= 2e-3 && differ > 0.02);
+    /* without the camera file the bare map is refused, naming what it lacks */
+    assert_status(run("'%s' -o '%s' %s:shadow='%s'", sample(), b.s, fog, bare.s), 1);
+    assert_non_null(strstr(g_err, "light camera in its header"));
+
+    /* a spot's perspective map: make_sample's own view from the spot */
+    path_t spot = pth("mapcam/spot.exr"), sbare = pth("mapcam/sbare.exr"), sj = pth("mapcam/spot.json");
+    snprintf(cmd, sizeof cmd, "'%s' '%s' --view 6,-30,70 --size 256x256 >/dev/null && "
+             "oiiotool '%s' --eraseattrib worldToCamera --eraseattrib worldToNDC "
+             "--eraseattrib CameraFov -o '%s' && oiiotool --info -v '%s' | sed -n "
+             "'s/.*worldToCamera: //p' > '%s.w2c'", mk, spot.s, spot.s, sbare.s, spot.s, sj.s);
+    assert_int_equal(system(cmd), 0);
+    snprintf(cmd, sizeof cmd, "%s.w2c", sj.s);
+    slurp_text(cmd, w2c, sizeof w2c);
+    w2c[strcspn(w2c, "\n")] = 0;
+    /* the spot at the view's camera, aimed along its axis: from the matrix's
+     * inverse (row vectors: position -t R^T, axis the third row of R^T) */
+    double m[16];
+    assert_int_equal(sscanf(w2c, "%lf, %lf, %lf, %lf, %lf, %lf, %lf, %lf, %lf, %lf, %lf, %lf, "
+                            "%lf, %lf, %lf, %lf", &m[0], &m[1], &m[2], &m[3], &m[4], &m[5],
+                            &m[6], &m[7], &m[8], &m[9], &m[10], &m[11], &m[12], &m[13],
+                            &m[14], &m[15]), 16);
+    double pos[3], aim[3];
+    for (int j = 0; j < 3; ++j) {
+        pos[j] = -(m[12] * m[4 * j] + m[13] * m[4 * j + 1] + m[14] * m[4 * j + 2]);
+        aim[j] = m[4 * j + 2];
+    }
+    f = fopen(sj.s, "w");
+    assert_non_null(f);
+    fprintf(f, "[{\"frame\": 1, \"world_to_camera\": [%s], \"fov\": 70}]\n", w2c);
+    fclose(f);
+    char lspot[600];
+    snprintf(lspot, sizeof lspot, "--fog exp:density=0.04 --light spot:position=%.9g,%.9g,%.9g:"
+             "aim=%.9g,%.9g,%.9g:cone=60:intensity=1500", pos[0], pos[1], pos[2], aim[0], aim[1],
+             aim[2]);
+    assert_status(run("'%s' -o '%s' %s:shadow='%s'", sample(), a.s, lspot, spot.s), 0);
+    assert_status(run("'%s' -o '%s' %s:shadow='%s':shadow-camera='%s'", sample(), b.s, lspot,
+                      sbare.s, sj.s), 0);
+    assert_status(run("'%s' -o '%s' %s", sample(), c.s, lspot), 0);
+    const double ssame = rgb_max_diff(a.s, b.s), sdiffer = rgb_max_diff(a.s, c.s);
+    printf("spot shadow-camera=: %.3g from the header's map; the map changes up to %.3g\n",
+           ssame, sdiffer);
+    assert_true(ssame <= 2e-3 && sdiffer > 0.02);
+
+    /* what is refused */
+    static const struct { const char *json, *want; } bad[] = {
+        { "{\"ortho_width\": 240, \"frames\": {\"1\": {\"world_to_camera\": [%s]}, \"2\": "
+          "{\"world_to_camera\": [%s]}}}", "holds 2 frames" },
+        { "{\"frames\": {\"1\": {\"world_to_camera\": [%s]}}}%s", "gives no lens" },
+        { "{\"frames\": {\"1\": {\"world_to_camera\": [%s], \"fov\": 30, \"ortho_width\": 9}}}%s",
+          "gives ortho_width" },
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+        f = fopen(cj.s, "w");
+        assert_non_null(f);
+        fprintf(f, bad[i].json, w2c, i == 0 ? w2c : "");
+        fclose(f);
+        assert_status(run("'%s' -o '%s' %s:shadow='%s':shadow-camera='%s'", sample(), b.s, fog,
+                          bare.s, cj.s), 1);
+        assert_non_null(strstr(g_err, bad[i].want));
+        assert_non_null(strstr(g_err, "sun.json"));
+    }
+    f = fopen(cj.s, "w");
+    assert_non_null(f);
+    fprintf(f, "{\"frames\": {\"1\": {\"world_to_camera\": [%s], \"ortho_width\": 9}}}", w2c);
+    fclose(f);
+    assert_status(run("'%s' -o '%s' --fog exp:density=0.02 --camera-file '%s'",
+                      sbare.s, b.s, cj.s), 1);
+    assert_non_null(strstr(g_err, "shadow map's camera"));
+    assert_status(run("'%s' -o '%s' %s:shadow-camera='%s'", sample(), b.s, fog, cj.s), 2);
+    assert_non_null(strstr(g_err, "need shadow=FILE.exr"));
+}
+
 /* A light's AOV channel past 31 bytes (issue 47: names of 20 to 63
  * characters failed at the write with "Channel name must shorter than
  * length allowed by file"): the output takes the long-names flag and
@@ -3285,6 +3419,7 @@ int main(void)
         cmocka_unit_test(test_lod_pixel_camera),
         cmocka_unit_test(test_sky_rotate_huge),
         cmocka_unit_test(test_shadow_map_bound),
+        cmocka_unit_test(test_shadow_camera_file),
         cmocka_unit_test(test_long_light_name_aov),
         cmocka_unit_test(test_light_key_range),
     };

@@ -134,7 +134,7 @@ static ef_shadow *lcam_build(const lcam *c, const float *depth, double bias, dou
     src.proj_name = "worldToNDC";
     lcam_matrices(c, &src.w2c, &src.proj);
     ef_err err;
-    const ef_shadow_opts o = { bias, slope, outside_lit, 0 };
+    const ef_shadow_opts o = { bias, slope, outside_lit, 0, NULL };
     ef_shadow *m = ef_shadow_build(&src, &o, &err);
     if (!m)
         fail_msg("the map did not build: %s", err.msg);
