@@ -378,6 +378,8 @@ static exrfog_result fog_rows(exrfog_context *ctx, const ef_fog_pass *pass,
 {
     const int w = img->width, h = img->height;
     const size_t n = (size_t) w * (size_t) h;
+    if (n == 0)
+        return EXRFOG_OK;   /* an empty rectangle (a band of 16384 / w rows needs w > 0) */
     if (h > 1 && img->stride != w && n <= 16384) {
         const int nplanes = 5 + naov;
         if (ctx->gather_cap < n * (size_t) nplanes) {

@@ -1173,6 +1173,182 @@ static void test_fault_injection(void **state)
     fprintf(stderr, "test_api: %ld allocations failed one at a time\n", tried);
 }
 
+/* ---- every field of exrfog_image, at random (issue 42 item 11) ---- */
+
+/* SplitMix64: the same cases on every machine. */
+static uint64_t fz_next(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+static int fz_int(uint64_t *s, int lo, int hi)
+{
+    return lo + (int) (fz_next(s) % (uint64_t) (hi - lo + 1));
+}
+
+/* A plane the harness owns: exactly the floats the image's rectangle
+ * reaches (stride (h - 1) + w, at least one), so ASan sees any access past
+ * it; the gaps between rows hold a sentinel the call must leave alone. */
+typedef struct fz_plane {
+    float *p;
+    size_t n;
+} fz_plane;
+
+#define FZ_SENTINEL (-1234.5f)
+
+static float *fz_alloc(fz_plane *pl, int w, int h, ptrdiff_t stride, uint64_t *s, int values)
+{
+    const size_t n = w > 0 && h > 0 && stride >= w ? (size_t) stride * (size_t) (h - 1) + (size_t) w : 1;
+    pl->p = malloc(n * sizeof *pl->p);
+    pl->n = n;
+    assert_non_null(pl->p);
+    for (size_t i = 0; i < n; ++i) {
+        const int inside = w > 0 && stride > 0 && (ptrdiff_t) (i % (size_t) stride) < w;
+        static const float odd[] = { 0.0f, -1.0f, INFINITY, NAN, 1e30f, 1e-30f, 3.0f, 40.0f };
+        pl->p[i] = !inside ? FZ_SENTINEL
+                   : values ? odd[fz_next(s) % 8] : (float) (fz_next(s) % 1000) * 0.01f;
+    }
+    return pl->p;
+}
+
+/* The row gaps still hold the sentinel. */
+static int fz_gaps_kept(const fz_plane *pl, int w, ptrdiff_t stride)
+{
+    for (size_t i = 0; i < pl->n; ++i)
+        if (!(w > 0 && stride > 0 && (ptrdiff_t) (i % (size_t) stride) < w) &&
+            pl->p[i] != FZ_SENTINEL)
+            return 0;
+    return 1;
+}
+
+/* exrfog_fog_pixels with every field of exrfog_image drawn at random, on
+ * an unlit scene and on one with a lamp and a sun with a shadow map: the
+ * rectangle (inside, across and outside the display window, empty and
+ * negative sizes), the stride (below, at and past the width), each plane of
+ * every group (colour, alpha, depth, T, error, P, ambient, sky) present or
+ * NULL, the light and lit arrays (NULL, NULL entries, entries aliasing one
+ * buffer), the ABI size (today's, the one before the light members, wrong
+ * ones), the depth mode (valid, unknown) and depth values (0, negative,
+ * inf, NaN, huge). Every plane is allocated to exactly what the rectangle
+ * reaches, so under ASan (the sanitized suite) any access past it fails;
+ * every call returns EXRFOG_OK or EXRFOG_USAGE with a message, and the
+ * memory between rows is left as it was. The hostile campaign's overflow
+ * (T[0] and T[2] without T[1], P[1] alone, aliased light planes, a sky
+ * plane without a sky light) is among the draws. */
+static void test_image_fuzz(void **state)
+{
+    (void) state;
+    const char *mk = getenv("EXRFOG_MAKE_SAMPLE");
+    char map[1200], cmd[3000];
+    snprintf(map, sizeof map, "%s", path_in("fuzzmap.exr"));
+    int lit_ok = 0;
+    if (mk) {
+        snprintf(cmd, sizeof cmd, "'%s' '%s' --sun-view 0.2,0.3,-1 --size 64x64 >/dev/null 2>&1",
+                 mk, map);
+        lit_ok = system(cmd) == 0;
+    }
+    exrfog_context *ctx = exrfog_context_create();
+    assert_non_null(ctx);
+    exrfog_scene *scenes[2] = { NULL, NULL };
+    const char *unlit = "height:density=0.2:falloff=0.3";
+    assert_int_equal(exrfog_scene_create(ctx, &unlit, 1, NULL, NULL, &scenes[0]), EXRFOG_OK);
+    if (lit_ok) {
+        char lights[1400];
+        snprintf(lights, sizeof lights, "%s", path_in("fuzzlights.json"));
+        FILE *f = fopen(lights, "w");
+        assert_non_null(f);
+        fprintf(f, "{\"lights\": [\"sun:towards=0.2,0.3,-1:intensity=3:shadow=%s\", "
+                   "\"point:position=1,2,-8:intensity=40\"]}\n", map);
+        fclose(f);
+        assert_int_equal(exrfog_scene_create(ctx, &unlit, 1, lights, NULL, &scenes[1]), EXRFOG_OK);
+    }
+    const double c2w[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 1.7, 0, 1 };
+    const int win[4] = { 0, 0, 63, 35 };
+    exrfog_camera *cam = NULL;
+    assert_int_equal(exrfog_camera_from_matrix(ctx, c2w, "exr", 60, win, &cam), EXRFOG_OK);
+    uint64_t seed = 0x66757a7aull;
+    const int runs = 4000;
+    int ok = 0, usage = 0;
+    for (int it = 0; it < runs; ++it) {
+        exrfog_scene *sc = scenes[lit_ok ? it & 1 : 0];
+        const int nl = exrfog_scene_light_count(sc);
+        exrfog_image img;
+        memset(&img, 0, sizeof img);
+        const int sz = fz_int(&seed, 0, 15);
+        img.size = sz < 13 ? sizeof img : sz == 13 ? offsetof(exrfog_image, ambient)
+                                    : sz == 14 ? sizeof img + 8 : 3;
+        img.x0 = fz_int(&seed, -10, 70);
+        img.y0 = fz_int(&seed, -10, 40);
+        img.width = fz_int(&seed, -1, 9);
+        img.height = fz_int(&seed, -1, 5);
+        img.stride = img.width + fz_int(&seed, -1, 5);
+        const int w = img.width, h = img.height;
+        const ptrdiff_t st = img.stride;
+        fz_plane pl[32];
+        int np = 0;
+#define FZ_PLANE(values) fz_alloc(&pl[np++], w, h, st, &seed, values)
+        for (int k = 0; k < 3; ++k)
+            img.rgb[k] = fz_int(&seed, 0, 15) ? FZ_PLANE(0) : NULL;
+        img.alpha = fz_int(&seed, 0, 1) ? FZ_PLANE(0) : NULL;
+        img.depth = fz_int(&seed, 0, 15) ? FZ_PLANE(1) : NULL;
+        static const char *const modes[] = { NULL, "planar", "radial", NULL, "planar",
+                                             "radial", "bogus", "" };
+        img.depth_mode = modes[fz_int(&seed, 0, 7)];
+        float **groups[5] = { img.T, img.error, img.P, img.ambient, img.sky };
+        for (int g = 0; g < 5; ++g) {
+            const int want = fz_int(&seed, 0, 2);   /* 0: none, 1: some, 2: all */
+            for (int k = 0; k < 3; ++k)
+                groups[g][k] = want == 2 || (want == 1 && fz_int(&seed, 0, 1)) ? FZ_PLANE(0) : NULL;
+        }
+        float **light = NULL, **lit = NULL;
+        if (nl > 0 && fz_int(&seed, 0, 2)) {
+            light = malloc((size_t) (3 * nl) * sizeof *light);
+            assert_non_null(light);
+            const int alias = fz_int(&seed, 0, 1);
+            float *one = alias ? FZ_PLANE(0) : NULL;
+            for (int k = 0; k < 3 * nl; ++k)
+                light[k] = alias ? (fz_int(&seed, 0, 3) ? one : NULL)
+                                 : (fz_int(&seed, 0, 3) ? FZ_PLANE(0) : NULL);
+            img.light = light;
+        }
+        if (nl > 0 && fz_int(&seed, 0, 2)) {
+            lit = malloc((size_t) nl * sizeof *lit);
+            assert_non_null(lit);
+            for (int k = 0; k < nl; ++k)
+                lit[k] = fz_int(&seed, 0, 2) ? FZ_PLANE(0) : NULL;
+            img.lit = lit;
+        }
+#undef FZ_PLANE
+        const exrfog_result r = exrfog_fog_pixels(ctx, sc, cam, &img);
+        if (r != EXRFOG_OK && r != EXRFOG_USAGE)
+            print_error("case %d: result %d: %s\n", it, (int) r, exrfog_error(ctx));
+        assert_true(r == EXRFOG_OK || r == EXRFOG_USAGE);
+        if (r == EXRFOG_USAGE) {
+            assert_non_null(exrfog_error(ctx));
+            assert_true(exrfog_error(ctx)[0] != '\0');
+            ++usage;
+        } else {
+            ++ok;
+        }
+        for (int k = 0; k < np; ++k) {
+            assert_true(fz_gaps_kept(&pl[k], w, st));
+            free(pl[k].p);
+        }
+        free(light);
+        free(lit);
+    }
+    printf("exrfog_image fuzz: %d calls (%s), %d fogged, %d refused as usage errors\n", runs,
+           lit_ok ? "unlit and lit scenes" : "unlit scene only", ok, usage);
+    assert_true(ok > runs / 10 && usage > runs / 10);
+    exrfog_camera_destroy(cam);
+    exrfog_scene_destroy(scenes[0]);
+    exrfog_scene_destroy(scenes[1]);
+    exrfog_context_destroy(ctx);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -1188,6 +1364,7 @@ int main(void)
         cmocka_unit_test(test_null_arguments),
         cmocka_unit_test(test_bounds_and_partial_aovs),
         cmocka_unit_test(test_light_layers),
+        cmocka_unit_test(test_image_fuzz),
         cmocka_unit_test(test_fault_injection),
     };
     /* EF_API_TESTS=a,b: only those (the ThreadSanitizer build runs the
