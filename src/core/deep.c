@@ -25,6 +25,9 @@ void ef_deep_buf_free(ef_deep_buf *b)
     free(b->ft);
     free(b->cut);
     free(b->lv);
+    for (int i = 0; i < b->ndense; ++i)
+        ef_lit_dense_free(&b->dense[i]);
+    free(b->dense);
     const int stride = b->stride;
     memset(b, 0, sizeof *b);
     b->stride = stride;
@@ -538,6 +541,11 @@ typedef struct px_lit {
     int sky;                                    /* --sky-light: sky_c joins the colours */
     double sky_c[EF_FOG_MAX_COMPONENTS][3];     /* albedo_c C_c(u), u the pixel's direction */
     double scale;   /* the lights' in-scatter along the pixel's visible ray: the colour unit */
+    /* lights whose in-scatter along the whole ray (to dend) is in dense[j]
+     * (bit j): a segment's is then a difference of it, not a quadrature */
+    unsigned dmask;
+    double dend;
+    ef_lit_dense *dense;       /* the thread's (ef_deep_buf.dense): its memo changes */
 } px_lit;
 
 static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, double a, double b,
@@ -636,20 +644,67 @@ static double max3(const double v[3])
  * lights' in-scatter over it (from its front) with theirs. */
 typedef struct piece {
     double a, b, tau[3], col[3], csky[3], err[3], S[3], Se[3];
+    double Ta[3];             /* T(0, a) per channel, Ta[0] < 0 when not known */
     int depth;
 } piece;
 
+/* Light j's in-scatter over [a, b) seen from a from its dense output:
+ * (J(b) - J(a)) / T(0, a), Ta = T(0, a), with the leaves' estimates from
+ * a's to b's as its error. 0 (the caller integrates the segment itself)
+ * where that error passes 1e-6 of the segment's light plus 1e-9 of the
+ * whole ray's (a segment beyond which T has underflowed, or one whose
+ * difference the whole ray's rounding would swamp): what a composite sees
+ * of a sample is T(0, a) times its light, so the second term bounds the
+ * composite's error at 1e-9 of the pixel's light, far inside --deep-tol
+ * (test_light's test_dense measures 4e-12). */
+static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], double v[3],
+                       double e[3])
+{
+    double Ja[3], Ea[3], La[3], Jb[3], Eb[3], Lb[3];
+    const double *Jt = d->total;
+    ef_lit_dense_at(d, a, Ja, Ea, La);
+    ef_lit_dense_at(d, b, Jb, Eb, Lb);
+    for (int k = 0; k < 3; ++k) {
+        const double dj = Jb[k] - Ja[k];
+        /* the leaves from a's to b's, and the rounding of J's sums */
+        const double de = (Eb[k] - La[k]) + 1e-15 * fabs(Jb[k]);
+        if (!(Ta[k] > 1e-300) || !(de <= 1e-6 * fabs(dj) + 1e-9 * fabs(Jt[k])))
+            return 0;
+        v[k] = dj > 0 ? dj / Ta[k] : 0;
+        e[k] = de / Ta[k];
+    }
+    return 1;
+}
+
 /* The lights' in-scatter over [a, b) of r1 (b may be INFINITY), seen from
  * a (T counted from there), summed over the scene's lights, into S, and
- * their error estimates into E. */
-static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double b, double S[3],
-                      double E[3], double (*per)[3])
+ * their error estimates into E. Ta: T(0, a) per channel when known (the
+ * dense lights need it), else Ta[0] < 0 and it is computed there when
+ * needed and left in Ta. */
+static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, double a,
+                      double b, double S[3], double E[3], double (*per)[3], double Ta[3])
 {
     S[0] = S[1] = S[2] = E[0] = E[1] = E[2] = 0;
     const ef_ray seg = seg_ray(r1, a, b);
     for (int j = 0; j < s->nlight; ++j) {
         double v[3], e[3];
-        ef_light_inscatter(s, &s->light[j], &seg, v, e);
+        int done = 0;
+        if (lt && (lt->dmask >> j & 1) && b <= lt->dend) {
+            if (Ta[0] < 0) {
+                double tau[3] = { 0, 0, 0 };
+                for (int i = 0; i < s->ncomp; ++i) {
+                    double t[3];
+                    comp_tau(&s->comp[i], r1, 0, a, t, NULL);
+                    for (int k = 0; k < 3; ++k)
+                        tau[k] += t[k];
+                }
+                for (int k = 0; k < 3; ++k)
+                    Ta[k] = exp(-tau[k]);
+            }
+            done = dense_light(&lt->dense[j], a, b, Ta, v, e);
+        }
+        if (!done)
+            ef_light_inscatter(s, &s->light[j], &seg, v, e);
         for (int k = 0; k < 3; ++k) {
             S[k] += v[k];
             E[k] += e[k];
@@ -659,14 +714,17 @@ static void seg_light(const ef_fog_scene *s, const ef_ray *r1, double a, double 
     }
 }
 
-/* The piece [a, b) of r1 with every value computed. */
+/* The piece [a, b) of r1 with every value computed; Ta: T(0, a) when
+ * known (NULL: not). */
 static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1, double a,
-                        double b, int depth, int *linear, double (*per)[3])
+                        double b, int depth, int *linear, double (*per)[3], const double *Ta)
 {
-    piece p = { .a = a, .b = b, .depth = depth };
+    piece p = { .a = a, .b = b, .depth = depth, .Ta = { -1, -1, -1 } };
+    if (Ta)
+        memcpy(p.Ta, Ta, sizeof p.Ta);
     seg_tau(F->scene, lt, r1, a, b, p.tau, p.col, p.csky, linear, F->want_err ? p.err : NULL);
     if (lt->lights)
-        seg_light(F->scene, r1, a, b, p.S, p.Se, per);
+        seg_light(F->scene, lt, r1, a, b, p.S, p.Se, per, p.Ta);
     return p;
 }
 
@@ -779,7 +837,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
     double sl[DEPTH + 2][EF_MAX_LIGHTS][3];
 #define PER(i) (F->per_light ? sl[(i)] : NULL)
     int linear;
-    stack[0] = make_piece(F, lt, r1, a, b, 0, &linear, PER(0));
+    stack[0] = make_piece(F, lt, r1, a, b, 0, &linear, PER(0), NULL);
     int sp = 1;
     while (sp > 0) {
         const piece p = stack[--sp];
@@ -798,7 +856,8 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
         piece front;
         int have_front = 0;
         if (!split && can && lt->lights && lt->scale > 0 && isfinite(max3(p.S))) {
-            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1));
+            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1),
+                               p.Ta[0] >= 0 ? p.Ta : NULL);
             have_front = 1;
             const double ec = color_est(&p, &front, *Tf, lt->scale);
             est = fmax(est, ec);
@@ -807,8 +866,14 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
         if (split) {
             /* the back half after: in p's slot, the front above it */
             if (!have_front)
-                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1));
-            stack[sp] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL, PER(sp));
+                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1),
+                                   p.Ta[0] >= 0 ? p.Ta : NULL);
+            /* T(0, m) = T(0, a) T(a, m) */
+            double Tm[3];
+            for (int k = 0; k < 3; ++k)
+                Tm[k] = front.Ta[k] >= 0 ? front.Ta[k] * exp(-front.tau[k]) : -1;
+            stack[sp] = make_piece(F, lt, r1, m, sb, p.depth + 1, NULL, PER(sp),
+                                   Tm[0] >= 0 ? Tm : NULL);
             ++sp;
             stack[sp++] = front;
             continue;
@@ -909,8 +974,9 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
         /* (its error replaces nothing: the piece it extends stays counted,
          * an over-estimate) */
         seg_tau(F->scene, lt, r1, za, INFINITY, t, c, cs, NULL, F->want_err ? e : NULL);
+        double Ta[3] = { -1, -1, -1 };
         if (lt->lights)
-            seg_light(F->scene, r1, za, INFINITY, S, Se, F->per_light ? Sl : NULL);
+            seg_light(F->scene, lt, r1, za, INFINITY, S, Se, F->per_light ? Sl : NULL, Ta);
         for (int k = 0; st && k < 3; ++k) {
             if (F->want_err)
                 st->pix_err[k] += e[k];
@@ -984,7 +1050,29 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                            : s->sky == EF_SKY_DISTANCE_MODE ? fmax(last, s->sky_distance) : last;
         double S[3], E[3];
         if (end > 0) {
-            seg_light(s, &r1, 0, end, S, E, NULL);
+            /* one quadrature along the whole ray per light (its dense
+             * output), from which every fog sample's light is a
+             * difference */
+            if (fog->ndense < s->nlight) {
+                ef_lit_dense *nd = realloc(fog->dense, (size_t) s->nlight * sizeof *nd);
+                if (!nd)
+                    return -1;
+                memset(nd + fog->ndense, 0, (size_t) (s->nlight - fog->ndense) * sizeof *nd);
+                fog->dense = nd;
+                fog->ndense = s->nlight;
+            }
+            const ef_ray whole = seg_ray(&r1, 0, end);
+            for (int j = 0; j < s->nlight; ++j) {
+                const int rc = ef_lit_dense_build(s, &s->light[j], &whole, &fog->dense[j]);
+                if (rc < 0)
+                    return -1;
+                if (rc == 0)
+                    lt.dmask |= 1u << j;
+            }
+            lt.dense = fog->dense;
+            lt.dend = end;
+            double T0[3] = { 1, 1, 1 };
+            seg_light(s, &lt, &r1, 0, end, S, E, NULL, T0);
             lt.scale = max3(S);
         }
     }

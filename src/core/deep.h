@@ -58,6 +58,10 @@ typedef struct ef_deep_buf {
      * sample order, image units) */
     double *lv;
     int lvcap;
+    /* lit fog samples: per light of the scene its dense in-scatter along
+     * the pixel's ray (struct ef_lit_dense, lit.h), reused between pixels */
+    struct ef_lit_dense *dense;
+    int ndense;
     /* ef_deep_tidy's refusal: the pieces the split would have made */
     long long pieces;
 } ef_deep_buf;

@@ -387,3 +387,153 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         for (int k = 0; k < 3; ++k)
             err[k] = E[k];
 }
+
+/* ------------------------------------------------- the dense output */
+
+int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                       ef_lit_dense *d)
+{
+    d->n = 0;
+    d->failed = 0;
+    d->nmemo = d->next = 0;
+    d->total[0] = d->total[1] = d->total[2] = 0;
+    if (!ef_light_at_position(l) || s->ncomp == 0)
+        return 1;   /* a sun: its closed forms per segment are cheaper */
+    for (int i = 0; i < s->ncomp; ++i)
+        if (s->comp[i].model->tau_info)
+            return 1;   /* noise fog: lit_noise.c's own integrator */
+    const double D = r->dist;
+    if (!(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return 0;
+    if (!l->shadow) {
+        ef_lit_quad_range_dense(s, l, r, 0, D, 1, d);
+    } else {
+        double stack[LIT_STACK][3];
+        const int n = ef_shadow_pieces(l->shadow, r->org, r->dir, 0, D, stack, LIT_STACK);
+        if (n < 0)
+            return 1;   /* more lit pieces than the stack: per segment */
+        for (int i = 0; i < n && !d->failed; ++i)
+            ef_lit_quad_range_dense(s, l, r, stack[i][0], stack[i][1], stack[i][2], d);
+    }
+    if (d->failed)
+        return d->leaf || d->fv ? 1 : -1;
+    double J[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
+    for (int i = 0; i < d->n; ++i) {
+        ef_lit_leaf *f = &d->leaf[i];
+        for (int k = 0; k < 3; ++k) {
+            f->J0[k] = J[k];
+            f->E0[k] = E[k];
+            J[k] += f->r[k];
+            E[k] += f->e[k];
+        }
+    }
+    memcpy(d->total, J, sizeof J);
+    return 0;
+}
+
+static void dense_at(const ef_lit_dense *d, double t, double J[3], double E[3], double Elo[3]);
+
+void ef_lit_dense_at(ef_lit_dense *d, double t, double J[3], double E[3], double Elo[3])
+{
+    for (int i = 0; i < d->nmemo; ++i)
+        if (d->memo[i][0] == t) {
+            memcpy(J, d->memo[i] + 1, 3 * sizeof *J);
+            memcpy(E, d->memo[i] + 4, 3 * sizeof *E);
+            memcpy(Elo, d->memo[i] + 7, 3 * sizeof *Elo);
+            return;
+        }
+    dense_at(d, t, J, E, Elo);
+    double *m = d->memo[d->next];
+    d->next = (d->next + 1) & 3;
+    if (d->nmemo < 4)
+        ++d->nmemo;
+    m[0] = t;
+    memcpy(m + 1, J, 3 * sizeof *J);
+    memcpy(m + 4, E, 3 * sizeof *E);
+    memcpy(m + 7, Elo, 3 * sizeof *Elo);
+}
+
+/* Legendre's recurrence P_{m+1} = A_m y P_m - B_m P_{m-1} (A_m = (2m + 1) /
+ * (m + 1), B_m = m / (m + 1)), and 1 / (2m + 1) for the integrals:
+ * constants, so a lookup divides nothing. */
+static const double lg_A[EF_LIT_DENSE_NC] = {
+    1.0, 1.5, 5.0 / 3, 7.0 / 4, 9.0 / 5, 11.0 / 6, 13.0 / 7, 15.0 / 8,
+    17.0 / 9, 19.0 / 10, 21.0 / 11, 23.0 / 12, 25.0 / 13, 27.0 / 14, 29.0 / 15,
+};
+static const double lg_B[EF_LIT_DENSE_NC] = {
+    0.0, 0.5, 2.0 / 3, 3.0 / 4, 4.0 / 5, 5.0 / 6, 6.0 / 7, 7.0 / 8,
+    8.0 / 9, 9.0 / 10, 10.0 / 11, 11.0 / 12, 12.0 / 13, 13.0 / 14, 14.0 / 15,
+};
+static const double lg_I[EF_LIT_DENSE_NC] = {
+    1.0, 1.0 / 3, 1.0 / 5, 1.0 / 7, 1.0 / 9, 1.0 / 11, 1.0 / 13, 1.0 / 15,
+    1.0 / 17, 1.0 / 19, 1.0 / 21, 1.0 / 23, 1.0 / 25, 1.0 / 27, 1.0 / 29,
+};
+
+/* ef_lit_dense_at without the memo. */
+static void dense_at(const ef_lit_dense *d, double t, double J[3], double E[3], double Elo[3])
+{
+    J[0] = J[1] = J[2] = E[0] = E[1] = E[2] = Elo[0] = Elo[1] = Elo[2] = 0;
+    if (d->n == 0 || !(t > d->leaf[0].t0))
+        return;
+    /* the last leaf starting before t */
+    int lo = 0, hi = d->n - 1;
+    while (lo < hi) {
+        const int mid = (lo + hi + 1) / 2;
+        if (d->leaf[mid].t0 < t)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    const ef_lit_leaf *f = &d->leaf[lo];
+    if (!(t < f->t1)) {   /* past it: its whole integral */
+        for (int k = 0; k < 3; ++k) {
+            J[k] = f->J0[k] + f->r[k];
+            E[k] = Elo[k] = f->E0[k] + f->e[k];
+        }
+        return;
+    }
+    double u;
+    switch (f->mode) {
+    case 1:
+        u = atan((t - f->ts) / f->hq);
+        break;
+    case 2: {
+        const double x = t - f->ts - f->ua;
+        u = x / (f->lam + x);
+        break;
+    }
+    case 0:
+        u = t - f->ts;
+        break;
+    default:
+        u = t;
+    }
+    const double h = 0.5 * (f->u1 - f->u0);
+    double y = h > 0 ? (u - 0.5 * (f->u0 + f->u1)) / h : 1;
+    y = y < -1 ? -1 : y > 1 ? 1 : y;
+    /* integral over [-1, y] of P_m: y + 1 for m = 0, else
+     * (P_{m+1}(y) - P_{m-1}(y)) / (2m + 1) */
+    double I[EF_LIT_DENSE_NC], pm1 = 1, pm = y;   /* P_{m-1}, P_m from m = 1 */
+    I[0] = y + 1;
+    for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
+        const double pn = lg_A[m] * y * pm - lg_B[m] * pm1;
+        I[m] = (pn - pm1) * lg_I[m];
+        pm1 = pm;
+        pm = pn;
+    }
+    for (int k = 0; k < 3; ++k) {
+        double v = 0;
+        for (int m = EF_LIT_DENSE_NC - 1; m >= 0; --m)
+            v += f->c[k][m] * I[m];
+        J[k] = f->J0[k] + h * v;
+        E[k] = f->E0[k] + f->e[k];
+        Elo[k] = f->E0[k];
+    }
+}
+
+void ef_lit_dense_free(ef_lit_dense *d)
+{
+    free(d->leaf);
+    free(d->fv);
+    memset(d, 0, sizeof *d);
+}

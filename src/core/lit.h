@@ -41,6 +41,50 @@ void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, in
  * how many. Deep fog samples are cut there, so that the split rule's
  * colour error can be estimated from one midpoint per sample. */
 int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double *cut, int cap);
+/* A light's in-scatter along one whole view ray as a dense output of the
+ * general quadrature: its final Gauss-Kronrod intervals, each with the
+ * Legendre series of its integrand (from the 15 Kronrod values), so that
+ * J(t) = integral over [0, t] of T(0, u) sigma_s p E du is at hand for any
+ * t. A view segment's light seen from its front a is then
+ * (J(b) - J(a)) / T(0, a): one quadrature per pixel for all its deep fog
+ * samples instead of one or more per sample. Owned by the caller (one per
+ * thread, reused: ef_lit_dense_free releases it). */
+#define EF_LIT_DENSE_NC 15
+typedef struct ef_lit_leaf {
+    double t0, t1;            /* its stretch of the ray, in t */
+    double u0, u1;            /* in the quadrature's variable */
+    int mode;                 /* how u maps to t (lit_quad.c's equi; 3: u = t) */
+    double ts, hq, ua, lam;   /* the mapping's constants */
+    double c[3][EF_LIT_DENSE_NC];   /* the integrand's Legendre coefficients on [u0, u1] */
+    double J0[3], E0[3];      /* J and the summed error estimates at t0 */
+    double r[3], e[3];        /* the leaf's integral and its estimate */
+} ef_lit_leaf;
+typedef struct ef_lit_dense {
+    ef_lit_leaf *leaf;
+    int n, cap;
+    int failed;               /* out of memory or the interval cap: not usable */
+    double total[3];          /* J to the ray's end */
+    double *fv;               /* scratch: 45 values per interval of one adaptive run */
+    int fvcap;
+    /* ef_lit_dense_at's last answers (a deep pixel's samples share ends):
+     * t, then J, E and Elo */
+    double memo[4][10];
+    int nmemo, next;
+} ef_lit_dense;
+
+/* Builds d for light l of s along the whole of r (org the camera, r->dist
+ * possibly INFINITY): 0, or 1 where the per-segment methods serve l better
+ * or alone can (a sun, whose closed forms are cheap per segment; noise
+ * fog, which has its own integrator), or -1 (out of memory). */
+int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                       ef_lit_dense *d);
+/* J(t) per channel, the summed error estimates of the leaves up to t's
+ * leaf included (E) and excluded (Elo), so that J(b) - J(a) is within
+ * E(b) - Elo(a) (a leaf's estimate covers its partial integrals); t may
+ * be INFINITY. */
+void ef_lit_dense_at(ef_lit_dense *d, double t, double J[3], double E[3], double Elo[3]);
+void ef_lit_dense_free(ef_lit_dense *d);
+
 /* Whether l's light in scene s is the closed form of the sun in one
  * exponential height fog, without a shadow map: what the span path of
  * apply.c computes from the optical depths it already has. */

@@ -72,6 +72,10 @@ int ef_lit_feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double
 int ef_lit_steps_around(double *cut, int n, double ts, double a, double D, double st);
 /* Where r crosses spot l's cones, appended to cut. */
 int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, double *cut, int n);
+/* ef_lit_quad_range recording its final intervals into d (weighted by w,
+ * a shadow map's visibility), without the closed forms. */
+void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                             double D, double w, ef_lit_dense *d);
 /* The general quadrature of l's light over [a, D] of r, added to S and E. */
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double S[3], double E[3]);

@@ -64,8 +64,9 @@ typedef struct gk_iv {
     double a, b, r[3], e[3];
 } gk_iv;
 
-/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel. */
-static void gk15(lit_fn f, const void *q, gk_iv *iv)
+/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel; the 15
+ * values, in node order (fvo[3 i + k]), into fvo when not NULL. */
+static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo)
 {
     const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
     double fv[15][3], rk[3], rg[3];
@@ -99,6 +100,13 @@ static void gk15(lit_fn f, const void *q, gk_iv *iv)
         iv->r[k] = rk[k] * h;
         iv->e[k] = fmax(e, 50 * 0x1p-52 * fabs(iv->r[k]));
     }
+    if (fvo)
+        memcpy(fvo, fv, sizeof fv);
+}
+
+static void gk15(lit_fn f, const void *q, gk_iv *iv)
+{
+    gk15_fv(f, q, iv, NULL);
 }
 
 #define GK_MAX 512
@@ -106,9 +114,18 @@ static void gk15(lit_fn f, const void *q, gk_iv *iv)
 /* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
  * the summed error estimate is at most rel of the result plus S in every
  * channel (or GK_MAX intervals): adds the result to S and its estimate to
- * E. */
-static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, double rel,
-                     double S[3], double E[3])
+ * E, and with rec its final intervals as leaves (dense_keep). */
+typedef struct dense_rec dense_rec;
+static void dense_keep(dense_rec *rec, const gk_iv *iv, int n);
+
+static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, double rel,
+                         double S[3], double E[3], dense_rec *rec);
+
+/* The values of interval i (rec's scratch), or NULL without a record. */
+static double *rec_fv(dense_rec *rec, int i);
+
+static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, double rel,
+                         double S[3], double E[3], dense_rec *rec)
 {
     gk_iv iv[GK_MAX];
     int n = 0;
@@ -117,7 +134,8 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
             continue;
         iv[n].a = cut[i];
         iv[n].b = cut[i + 1];
-        gk15(f, q, &iv[n++]);
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n));
+        ++n;
     }
     for (;;) {
         double R[3] = { 0, 0, 0 }, Er[3] = { 0, 0, 0 };
@@ -152,14 +170,17 @@ static void gk_adapt(lit_fn f, const void *q, const double *cut, int ncut, doubl
                 S[k] += R[k];
                 E[k] += Er[k];
             }
+            if (rec)
+                dense_keep(rec, iv, n);
             return;
         }
         const double a = iv[worst].a, b = iv[worst].b, m = 0.5 * (a + b);
         iv[worst].b = m;
-        gk15(f, q, &iv[worst]);
+        gk15_fv(f, q, &iv[worst], rec_fv(rec, worst));
         iv[n].a = m;
         iv[n].b = b;
-        gk15(f, q, &iv[n++]);
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n));
+        ++n;
     }
 }
 
@@ -290,6 +311,122 @@ static void lit_integrand(const void *qv, double u, double out[3])
     }
 }
 
+/* ----------------------------------------------- the dense output */
+
+struct dense_rec {
+    ef_lit_dense *d;
+    const lit_q *q;
+    double w;                 /* the visibility the leaves are weighted by */
+};
+
+static double *rec_fv(dense_rec *rec, int i)
+{
+    if (!rec || rec->d->failed)
+        return NULL;
+    ef_lit_dense *d = rec->d;
+    if (d->fvcap < GK_MAX) {
+        double *fv = realloc(d->fv, (size_t) GK_MAX * 45 * sizeof *fv);
+        if (!fv) {
+            d->failed = 1;
+            return NULL;
+        }
+        d->fv = fv;
+        d->fvcap = GK_MAX;
+    }
+    return d->fv + (size_t) i * 45;
+}
+
+/* t at u of a leaf (lit_integrand's mappings; mode 3: u = t). */
+static double leaf_t(const ef_lit_leaf *f, double u)
+{
+    switch (f->mode) {
+    case 1:
+        return f->ts + f->hq * tan(u);
+    case 2:
+        return u >= 1 ? INFINITY : f->ts + f->ua + f->lam * u / (1 - u);
+    case 0:
+        return f->ts + u;
+    default:
+        return u;
+    }
+}
+
+/* Appends an adaptive run's final intervals to the record as leaves, in
+ * order along the ray, each with its integrand's Legendre series
+ * c_n = (2n + 1) / 2 sum_i w_i f_i P_n(y_i) over the 15 Kronrod nodes. */
+static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
+{
+    ef_lit_dense *d = rec->d;
+    if (d->failed || n <= 0)
+        return;
+    if (d->n + n > d->cap) {
+        const int cap = d->n + n > 2 * d->cap ? d->n + n : 2 * d->cap;
+        ef_lit_leaf *l = realloc(d->leaf, (size_t) cap * sizeof *l);
+        if (!l) {
+            d->failed = 1;
+            return;
+        }
+        d->leaf = l;
+        d->cap = cap;
+    }
+    /* sort by start, carrying each interval's values */
+    int ord[GK_MAX];
+    for (int i = 0; i < n; ++i)
+        ord[i] = i;
+    for (int i = 1; i < n; ++i)   /* insertion: runs are short and nearly sorted */
+        for (int j = i; j > 0 && iv[ord[j - 1]].a > iv[ord[j]].a; --j) {
+            const int t = ord[j];
+            ord[j] = ord[j - 1];
+            ord[j - 1] = t;
+        }
+    const lit_q *q = rec->q;
+    const int mode = q->equi == 1 ? 1 : q->equi == 2 ? 2 : ef_light_at_position(q->l) ? 0 : 3;
+    double y[15], W[15];
+    for (int j = 0; j < 7; ++j) {
+        y[j] = -(double) ef_gk15_x[j];
+        y[14 - j] = (double) ef_gk15_x[j];
+        W[j] = W[14 - j] = (double) ef_gk15_wk[j];
+    }
+    y[7] = 0;
+    W[7] = (double) ef_gk15_wk[7];
+    /* P_m at the nodes, times the rule's weight and (2m + 1) / 2 */
+    double P[15][EF_LIT_DENSE_NC];
+    for (int i = 0; i < 15; ++i) {
+        double p0 = 1, p1 = y[i];
+        P[i][0] = 0.5 * W[i];
+        for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
+            P[i][m] = p1 * (2 * m + 1) * 0.5 * W[i];
+            const double pn = ((2 * m + 1) * y[i] * p1 - m * p0) / (m + 1);
+            p0 = p1;
+            p1 = pn;
+        }
+    }
+    for (int o = 0; o < n; ++o) {
+        const gk_iv *v = &iv[ord[o]];
+        const double *fv = d->fv + (size_t) ord[o] * 45;
+        ef_lit_leaf *f = &d->leaf[d->n++];
+        f->u0 = v->a;
+        f->u1 = v->b;
+        f->mode = mode;
+        f->ts = q->ts;
+        f->hq = q->hq;
+        f->ua = q->ua;
+        f->lam = q->lam;
+        f->t0 = leaf_t(f, v->a);
+        f->t1 = leaf_t(f, v->b);
+        for (int k = 0; k < 3; ++k) {
+            f->r[k] = rec->w * v->r[k];
+            f->e[k] = rec->w * v->e[k];
+            for (int m = 0; m < EF_LIT_DENSE_NC; ++m) {
+                double c = 0;
+                for (int i = 0; i < 15; ++i)
+                    c += fv[3 * i + k] * P[i][m];
+                f->c[k][m] = rec->w * c;
+            }
+        }
+    }
+}
+
 /* Where the view segment [0, D) crosses the components' features (the
  * density's jumps, kinks and fronts), appended to cut. */
 int ef_lit_feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double D, double *cut,
@@ -378,10 +515,11 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
  * the pieces between the features, a lamp's closest approach and cones,
  * in t or in the lamp's angle, with a point lamp in uniform isotropic fog
  * by its closed form first. */
-void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                       double D, double S[3], double E[3])
+static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                       double D, double S[3], double E[3], ef_lit_dense *dense, double vis)
 {
     lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
+    dense_rec rec_ = { dense, &q, vis }, *rec = dense ? &rec_ : NULL;
     for (int i = 0; i < s->ncomp; ++i) {
         double sg[3];
         if (!uniform_sigma(&s->comp[i], sg)) {
@@ -425,7 +563,8 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         int iso = 1;
         for (int i = 0; i < s->ncomp; ++i)
             iso &= s->comp[i].phase == EF_PHASE_ISO;
-        if ((ef_light_at_position(l) && !ef_light_coned(l)) && q.uniform && iso && l->radius == 0 && q.h > 0) {
+        if (!rec && (ef_light_at_position(l) && !ef_light_coned(l)) && q.uniform && iso &&
+            l->radius == 0 && q.h > 0) {
             double sig[3], scat[3];
             ef_lit_lamp_medium(s, sig, scat);
             if (ef_lit_lamp_closed(sig, scat, l->e, q.ts, q.h, a, D, S, E) == 0)
@@ -486,7 +625,7 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
                 run[m++] = in ? atan((cut[j + 1] - q.ts) / q.hq) : cut[j + 1] - q.ts;
             }
             q.equi = in;
-            gk_adapt(lit_integrand, &q, run, m, rel, S, E);
+            gk_adapt_rec(lit_integrand, &q, run, m, rel, S, E, rec);
             i = j;
         }
         if (!isfinite(D)) {
@@ -494,18 +633,18 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
             q.ua = cut[n - 1] - q.ts;
             q.lam = fmax(fabs(q.ua), q.hq);
             const double v[2] = { 0, 1 };
-            gk_adapt(lit_integrand, &q, v, 2, rel, S, E);
+            gk_adapt_rec(lit_integrand, &q, v, 2, rel, S, E, rec);
         }
     } else if (isfinite(D)) {
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        gk_adapt(lit_integrand, &q, cut, n, rel, S, E);
+        gk_adapt_rec(lit_integrand, &q, cut, n, rel, S, E, rec);
     } else {
         /* The sun on an infinite ray: pieces doubling in length past the
          * last cut until what is left is below the tolerance: its integral
          * is at most max(albedo p) E T(0,t) (1 - T(t,inf)) per channel,
          * which joins the error estimate. */
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        gk_adapt(lit_integrand, &q, cut, n, REL_GENERAL, S, E);
+        gk_adapt_rec(lit_integrand, &q, cut, n, REL_GENERAL, S, E, rec);
         const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
         double pmax = 0;
         for (int i = 0; i < s->ncomp; ++i)
@@ -528,9 +667,26 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
                 break;
             }
             const double piece[2] = { ta, ta + len };
-            gk_adapt(lit_integrand, &q, piece, 2, REL_GENERAL, S, E);
+            gk_adapt_rec(lit_integrand, &q, piece, 2, REL_GENERAL, S, E, rec);
             ta += len;
             len *= 2;
         }
     }
+}
+
+void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                       double D, double S[3], double E[3])
+{
+    quad_range(s, l, r, a, D, S, E, NULL, 1);
+}
+
+void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
+                             double D, double w, ef_lit_dense *d)
+{
+    double S[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
+    quad_range(s, l, r, a, D, S, E, d, w);
+    /* a lamp on the segment itself (inf) has no leaves to hold it */
+    for (int k = 0; k < 3; ++k)
+        if (!isfinite(S[k]))
+            d->failed = 1;
 }
