@@ -386,22 +386,15 @@ class EXRFOG_PT_panel(bpy.types.Panel):
             box = col.box()
             for line in LAST_ERROR.splitlines()[:4]:
                 box.label(text=line[:200], icon='ERROR')
-        col.prop(s, "enabled")
-        col.prop(s, "fog")
-        col.prop(s, "fog_color")
-        col.prop(s, "output")
-        col.prop(s, "extra")
-        col.prop(s, "program")
-        col.operator(EXRFOG_OT_fog_file.bl_idname)
-        col.prop(s, "camera_file")
-        col.operator(EXRFOG_OT_write_camera.bl_idname)
-        col.separator()
-        col.prop(s, "shadow_map")
-        col.prop(s, "shadow_size")
-        col.prop(s, "sun_width")
-        col.prop(s, "sun_distance")
-        col.prop(s, "add_light")
-        col.operator(EXRFOG_OT_shadow_map.bl_idname)
+        # each group of settings, then the operator that uses them
+        for props, op in ((("enabled", "fog", "fog_color", "output", "extra", "program"),
+                           EXRFOG_OT_fog_file),
+                          (("camera_file",), EXRFOG_OT_write_camera),
+                          (("shadow_map", "shadow_size", "sun_width", "sun_distance", "add_light"),
+                           EXRFOG_OT_shadow_map)):
+            for name in props:
+                col.prop(s, name)
+            col.operator(op.bl_idname)
         if s.last_light:
             col.label(text="--light " + s.last_light[:180])
 

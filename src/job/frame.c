@@ -638,6 +638,24 @@ static int bind_view(ef_frame *F, int v)
     return 0;
 }
 
+/* The warning before a frame predicted to take more than two minutes on
+ * the run's threads (secs of wall time): what is predicted, from what,
+ * and the advice (from "; "). */
+static void warn_predicted(ef_job *J, const char *file, const char *what, double secs,
+                           double ms_px, int sampled, int threads, const char *advice)
+{
+    char msg[600], when[64];
+    if (secs < 2 * 3600)
+        snprintf(when, sizeof when, "%.0f minutes", secs / 60);
+    else
+        snprintf(when, sizeof when, "%.1f hours", secs / 3600);
+    snprintf(msg, sizeof msg, "this %s is predicted to take about %s (%.3g ms of fog a pixel on "
+                              "%d sampled pixels, %d thread%s)%s; Ctrl-C stops it and writes "
+                              "nothing",
+             what, when, ms_px, sampled, threads, threads > 1 ? "s" : "", advice);
+    ef_job_warn(J, file, msg);
+}
+
 /* Up to 64 columns of a row, in bit-reversed order: a probe stopped early
  * has still seen the whole width. */
 static int probe_column(int k)
@@ -709,21 +727,13 @@ static void probe_cost(ef_frame *F, const ef_channel_plan *pl)
     const double secs = F->pred_fog_s / threads;
     if (!(secs > 120) || o->quiet || ef_job_cancelled(J))
         return;
-    char msg[600], when[64];
-    if (secs < 2 * 3600)
-        snprintf(when, sizeof when, "%.0f minutes", secs / 60);
-    else
-        snprintf(when, sizeof when, "%.1f hours", secs / 3600);
-    snprintf(msg, sizeof msg, "this frame is predicted to take about %s (%.3g ms of fog a pixel "
-                              "on %d sampled pixels, %d thread%s)%s; Ctrl-C stops it and writes "
-                              "nothing",
-             when, per_px * 1e3, done, threads, threads > 1 ? "s" : "",
-             exact ? "; method=exact has no bound on a pixel's work, the default method bounds "
-                     "it (drop method=exact)"
-             : ef_scene_lit(sc) ? "; lit fog integrates every light along every ray: fewer "
-                                  "lights, a coarser noise scale or fewer octaves cost less"
-                                : "; a coarser noise scale or fewer octaves cost less");
-    ef_job_warn(J, o->input, msg);
+    warn_predicted(J, o->input, "frame", secs, per_px * 1e3, done, threads,
+                   exact ? "; method=exact has no bound on a pixel's work, the default method "
+                           "bounds it (drop method=exact)"
+                   : ef_scene_lit(sc) ? "; lit fog integrates every light along every ray: "
+                                        "fewer lights, a coarser noise scale or fewer octaves "
+                                        "cost less"
+                                      : "; a coarser noise scale or fewer octaves cost less");
 }
 
 /* View v's camera, resolved and explained (or warned about), its depth
@@ -989,25 +999,19 @@ static void deep_predicted(void *user, double thread_s, int sampled)
     const ef_options *o = F->o;
     F->pred_fog_s = thread_s;
     F->pred_n = sampled;
-    const double secs = thread_s / (F->so.threads > 0 ? F->so.threads : 1);
+    const int threads = F->so.threads > 0 ? F->so.threads : 1;
+    const double secs = thread_s / threads;
     if (!(secs > 120) || o->quiet || J->cost_checked || ef_job_cancelled(J))
         return;
     J->cost_checked = 1;
-    char msg[600], when[64];
-    if (secs < 2 * 3600)
-        snprintf(when, sizeof when, "%.0f minutes", secs / 60);
-    else
-        snprintf(when, sizeof when, "%.1f hours", secs / 3600);
-    snprintf(msg, sizeof msg, "this deep frame is predicted to take about %s (%.3g ms of fog a "
-                              "pixel on %d sampled pixels, %d thread%s)%s; Ctrl-C stops it and "
-                              "writes nothing",
-             when, thread_s / ((double) F->dw.max.x - F->dw.min.x + 1) /
+    warn_predicted(J, o->input, "deep frame", secs,
+                   thread_s / ((double) F->dw.max.x - F->dw.min.x + 1) /
                        ((double) F->dw.max.y - F->dw.min.y + 1) * 1e3,
-             sampled, F->so.threads, F->so.threads > 1 ? "s" : "",
-             o->deep_tol < EF_DEEP_TOL_COSTLY ? "; a coarser --deep-tol makes fewer fog samples"
-             : ef_scene_lit(F->job.pass[0].scene) ? "; lit fog integrates every light along every fog sample"
-                                                    : "");
-    ef_job_warn(J, o->input, msg);
+                   sampled, threads,
+                   o->deep_tol < EF_DEEP_TOL_COSTLY ? "; a coarser --deep-tol makes fewer fog samples"
+                   : ef_scene_lit(F->job.pass[0].scene) ? "; lit fog integrates every light along "
+                                                          "every fog sample"
+                                                        : "");
 }
 
 /* A deep part's pass (deep.c), with its own statistics line. */
