@@ -104,9 +104,11 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
             fprintf(out, "  over a planet of radius %g scene units (the sun's path by Chapman's "
                          "function; general quadrature)\n", l->planet);
         if (l->shadow)
-            fprintf(out, "  shadow map %s: %d x %d, %s, bias %g, slope %g, outside %s\n",
+            fprintf(out, "  shadow map %s: %d x %d, %s, camera from %s, bias %g, slope %g, "
+                         "outside %s\n",
                     l->shadow_path, l->shadow->w, l->shadow->h,
-                    l->shadow->ortho ? "orthographic" : "perspective", l->shadow_opts.bias,
+                    l->shadow->ortho ? "orthographic" : "perspective",
+                    l->shadow_camera[0] ? l->shadow_camera : "its header", l->shadow_opts.bias,
                     l->shadow_opts.slope, l->shadow_opts.outside_lit ? "lit" : "shadow");
         if (l->shadow && l->shadow->ntilt)
             fprintf(out, "  penumbra: %d directions over the sun's disc of %g degrees (filtered, "
@@ -271,6 +273,11 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
             fprintf(out, ", \"width\": %d, \"height\": %d, \"projection\": ", l->shadow->w,
                     l->shadow->h);
             json_str(out, l->shadow->ortho ? "orthographic" : "perspective");
+            fputs(", \"camera_file\": ", out);
+            if (l->shadow_camera[0])
+                json_str(out, l->shadow_camera);
+            else
+                fputs("null", out);
             fputs(", \"bias\": ", out);
             json_num(out, l->shadow_opts.bias);
             fputs(", \"slope\": ", out);

@@ -2959,6 +2959,11 @@ static void test_shadow_camera_file(void **state)
     fclose(f);
     const char *fog = "--fog height:density=0.05:falloff=0.2 --light sun:towards=0.2,0.3,-1:intensity=3";
     map_camera_same("sun", fog, map.s, bare.s, cj.s, a.s, b.s, c.s);
+    /* --explain says where the map's camera came from */
+    assert_status(run("'%s' --explain %s:shadow='%s':shadow-camera='%s'", sample(), fog, bare.s,
+                      cj.s), 0);
+    assert_non_null(strstr(g_out, "orthographic, camera from "));
+    assert_non_null(strstr(g_out, "sun.json"));
     /* without the camera file the bare map is refused, naming what it lacks */
     assert_status(run("'%s' -o '%s' %s:shadow='%s'", sample(), b.s, fog, bare.s), 1);
     assert_non_null(strstr(g_err, "light camera in its header"));
