@@ -862,6 +862,18 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
           "oiiotool crops and deepens the sample")
     check(subprocess.run([make_sample, smap, "--sun-view", "0.2,0.3,-1", "--size", "256x256"],
                          capture_output=True).returncode == 0, "make_sample --sun-view")
+    # a spot's perspective map: make_sample's own view from 6 units up, the
+    # spot at that camera and aimed along its axis (row vectors: position
+    # -t R^T, axis R's third column), so its samples take the dense output
+    # with a shadow map's lit pieces
+    spmap = os.path.join(tmp, "lit_spotmap.exr")
+    check(subprocess.run([make_sample, spmap, "--view", "6,-30,70", "--size", "256x256"],
+                         capture_output=True).returncode == 0, "make_sample --view (spot map)")
+    wm = oiio.ImageBuf(spmap).spec().getattribute("worldToCamera")
+    spos = [-(wm[12] * wm[4 * j] + wm[13] * wm[4 * j + 1] + wm[14] * wm[4 * j + 2]) for j in range(3)]
+    saim = [wm[4 * j + 2] for j in range(3)]
+    spot_light = ("spot:position=%r,%r,%r:aim=%r,%r,%r:cone=60:blend=0.1:intensity=400:shadow=%s"
+                  % tuple(spos + saim + [spmap]))
     # a sky for the sky light's layer: a gradient and a bright lobe
     genv = os.path.join(tmp, "lit_crop_env.exr")
     gy, gx = np.mgrid[0:32, 0:64]
@@ -877,6 +889,7 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
                       ("sun with penumbrae", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:angle=6:"
                                               "penumbra=8:shadow=" + smap]),
                       ("lamp", ["--light", "point:position=1,2,-9:intensity=40"]),
+                      ("spot with a shadow map", ["--light", spot_light]),
                       ("lamp and sky light", ["--light", "point:position=1,2,-9:intensity=40",
                                               "--sky-light", genv]),
                       ("sky light alone", ["--sky-light", genv])):
