@@ -416,7 +416,7 @@ int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
             ef_lit_quad_range_dense(s, l, r, stack[i][0], stack[i][1], stack[i][2], d);
     }
     if (d->failed)
-        return d->leaf || d->fv ? 1 : -1;
+        return d->failed == 2 ? -1 : 1;
     double J[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
     for (int i = 0; i < d->n; ++i) {
         ef_lit_leaf *f = &d->leaf[i];
@@ -452,22 +452,6 @@ void ef_lit_dense_at(ef_lit_dense *d, double t, double J[3], double E[3], double
     memcpy(m + 4, E, 3 * sizeof *E);
     memcpy(m + 7, Elo, 3 * sizeof *Elo);
 }
-
-/* Legendre's recurrence P_{m+1} = A_m y P_m - B_m P_{m-1} (A_m = (2m + 1) /
- * (m + 1), B_m = m / (m + 1)), and 1 / (2m + 1) for the integrals:
- * constants, so a lookup divides nothing. */
-static const double lg_A[EF_LIT_DENSE_NC] = {
-    1.0, 1.5, 5.0 / 3, 7.0 / 4, 9.0 / 5, 11.0 / 6, 13.0 / 7, 15.0 / 8,
-    17.0 / 9, 19.0 / 10, 21.0 / 11, 23.0 / 12, 25.0 / 13, 27.0 / 14, 29.0 / 15,
-};
-static const double lg_B[EF_LIT_DENSE_NC] = {
-    0.0, 0.5, 2.0 / 3, 3.0 / 4, 4.0 / 5, 5.0 / 6, 6.0 / 7, 7.0 / 8,
-    8.0 / 9, 9.0 / 10, 10.0 / 11, 11.0 / 12, 12.0 / 13, 13.0 / 14, 14.0 / 15,
-};
-static const double lg_I[EF_LIT_DENSE_NC] = {
-    1.0, 1.0 / 3, 1.0 / 5, 1.0 / 7, 1.0 / 9, 1.0 / 11, 1.0 / 13, 1.0 / 15,
-    1.0 / 17, 1.0 / 19, 1.0 / 21, 1.0 / 23, 1.0 / 25, 1.0 / 27, 1.0 / 29,
-};
 
 /* ef_lit_dense_at without the memo. */
 static void dense_at(const ef_lit_dense *d, double t, double J[3], double E[3], double Elo[3])

@@ -62,7 +62,7 @@ typedef struct ef_lit_leaf {
 typedef struct ef_lit_dense {
     ef_lit_leaf *leaf;
     int n, cap;
-    int failed;               /* out of memory or the interval cap: not usable */
+    int failed;               /* 1: not usable (a lamp on the ray itself), 2: out of memory */
     double total[3];          /* J to the ray's end */
     double *fv;               /* scratch: 45 values per interval of one adaptive run */
     int fvcap;

@@ -72,6 +72,22 @@ int ef_lit_feature_cuts(const ef_fog_scene *s, const ef_ray *r, double a, double
 int ef_lit_steps_around(double *cut, int n, double ts, double a, double D, double st);
 /* Where r crosses spot l's cones, appended to cut. */
 int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, double *cut, int n);
+/* Legendre's recurrence P_{m+1} = A_m y P_m - B_m P_{m-1} (A_m = (2m + 1) /
+ * (m + 1), B_m = m / (m + 1)), and 1 / (2m + 1) for the integrals:
+ * constants, so a lookup divides nothing. */
+static const double lg_A[EF_LIT_DENSE_NC] = {
+    1.0, 1.5, 5.0 / 3, 7.0 / 4, 9.0 / 5, 11.0 / 6, 13.0 / 7, 15.0 / 8,
+    17.0 / 9, 19.0 / 10, 21.0 / 11, 23.0 / 12, 25.0 / 13, 27.0 / 14, 29.0 / 15,
+};
+static const double lg_B[EF_LIT_DENSE_NC] = {
+    0.0, 0.5, 2.0 / 3, 3.0 / 4, 4.0 / 5, 5.0 / 6, 6.0 / 7, 7.0 / 8,
+    8.0 / 9, 9.0 / 10, 10.0 / 11, 11.0 / 12, 12.0 / 13, 13.0 / 14, 14.0 / 15,
+};
+static const double lg_I[EF_LIT_DENSE_NC] = {
+    1.0, 1.0 / 3, 1.0 / 5, 1.0 / 7, 1.0 / 9, 1.0 / 11, 1.0 / 13, 1.0 / 15,
+    1.0 / 17, 1.0 / 19, 1.0 / 21, 1.0 / 23, 1.0 / 25, 1.0 / 27, 1.0 / 29,
+};
+
 /* ef_lit_quad_range recording its final intervals into d (weighted by w,
  * a shadow map's visibility), without the closed forms. */
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,

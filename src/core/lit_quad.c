@@ -111,19 +111,17 @@ static void gk15(lit_fn f, const void *q, gk_iv *iv)
 
 #define GK_MAX 512
 
+/* A record of an adaptive run's final intervals for the dense output
+ * (below): its leaves, and each interval's 15 values while it runs. */
+typedef struct dense_rec dense_rec;
+static void dense_keep(dense_rec *rec, const gk_iv *iv, int n);
+/* The values of interval i (rec's scratch), or NULL without a record. */
+static double *rec_fv(dense_rec *rec, int i);
+
 /* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
  * the summed error estimate is at most rel of the result plus S in every
  * channel (or GK_MAX intervals): adds the result to S and its estimate to
  * E, and with rec its final intervals as leaves (dense_keep). */
-typedef struct dense_rec dense_rec;
-static void dense_keep(dense_rec *rec, const gk_iv *iv, int n);
-
-static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, double rel,
-                         double S[3], double E[3], dense_rec *rec);
-
-/* The values of interval i (rec's scratch), or NULL without a record. */
-static double *rec_fv(dense_rec *rec, int i);
-
 static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, double rel,
                          double S[3], double E[3], dense_rec *rec)
 {
@@ -327,7 +325,7 @@ static double *rec_fv(dense_rec *rec, int i)
     if (d->fvcap < GK_MAX) {
         double *fv = realloc(d->fv, (size_t) GK_MAX * 45 * sizeof *fv);
         if (!fv) {
-            d->failed = 1;
+            d->failed = 2;
             return NULL;
         }
         d->fv = fv;
@@ -363,7 +361,7 @@ static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
         const int cap = d->n + n > 2 * d->cap ? d->n + n : 2 * d->cap;
         ef_lit_leaf *l = realloc(d->leaf, (size_t) cap * sizeof *l);
         if (!l) {
-            d->failed = 1;
+            d->failed = 2;
             return;
         }
         d->leaf = l;
@@ -395,8 +393,8 @@ static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
         double p0 = 1, p1 = y[i];
         P[i][0] = 0.5 * W[i];
         for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
-            P[i][m] = p1 * (2 * m + 1) * 0.5 * W[i];
-            const double pn = ((2 * m + 1) * y[i] * p1 - m * p0) / (m + 1);
+            P[i][m] = p1 * 0.5 * W[i] / lg_I[m];
+            const double pn = lg_A[m] * y[i] * p1 - lg_B[m] * p0;
             p0 = p1;
             p1 = pn;
         }
@@ -687,6 +685,6 @@ void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_
     quad_range(s, l, r, a, D, S, E, d, w);
     /* a lamp on the segment itself (inf) has no leaves to hold it */
     for (int k = 0; k < 3; ++k)
-        if (!isfinite(S[k]))
+        if (!isfinite(S[k]) && !d->failed)
             d->failed = 1;
 }

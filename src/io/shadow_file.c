@@ -35,11 +35,11 @@ static int depth_channel(const ef_exr_file *f, int p)
 /* The map's camera from a camera file (shadow-camera=) in place of its
  * header's: its one frame's pose, and ortho_width (a sun's orthographic
  * map, that many scene units across the display window) or a perspective
- * lens (a spot's), as worldToCamera and a worldToScreen-style projection
- * (centre 0,0, y up, +-1 over the display window). Returns 0, or -1 with
- * a message naming the file. */
-static int map_camera(const char *file, const ef_cam_meta *meta, ef_mat4 *w2c, ef_mat4 *proj,
-                      ef_err *err)
+ * lens (a spot's), into meta as worldToCamera and worldToScreen (centre
+ * 0,0, y up, +-1 over the display window), the header's own matrices
+ * dropped. Read before the texels. Returns 0, or -1 with a message naming
+ * the file. */
+static int map_camera(const char *file, ef_cam_meta *meta, ef_err *err)
 {
     ef_camera_file *cf;
     if (ef_camera_file_read(file, EF_CONV_EXR, &cf, err))
@@ -75,7 +75,7 @@ static int map_camera(const char *file, const ef_cam_meta *meta, ef_mat4 *w2c, e
         ef_err_set_file(err, file);
         return -1;
     }
-    ef_mat4 c2w, P;
+    ef_mat4 c2w, P, w2c;
     memset(&c2w, 0, sizeof c2w);
     memset(&P, 0, sizeof P);
     for (int r = 0; r < 3; ++r) {
@@ -84,7 +84,7 @@ static int map_camera(const char *file, const ef_cam_meta *meta, ef_mat4 *w2c, e
         c2w.m[12 + r] = cam.pos[r];
     }
     c2w.m[15] = 1;
-    if (ef_mat4_invert(&c2w, w2c)) {
+    if (ef_mat4_invert(&c2w, &w2c)) {
         ef_fail(err, "the shadow map's camera pose is singular");
         ef_err_set_file(err, file);
         return -1;
@@ -101,7 +101,10 @@ static int map_camera(const char *file, const ef_cam_meta *meta, ef_mat4 *w2c, e
         P.m[15] = 1;
     else
         P.m[11] = 1;
-    ef_mat4_mul(w2c, &P, proj);
+    meta->w2c.set = meta->w2screen.set = 1;
+    meta->w2ndc.set = 0;
+    meta->w2c.v = w2c;
+    ef_mat4_mul(&w2c, &P, &meta->w2screen.v);
     return 0;
 }
 
@@ -120,7 +123,7 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
             part = p;
     ef_cam_meta meta;
     exr_attr_box2i_t dw;
-    int rc = -1;
+    int rc = -1, named = 0;   /* named: the message names the camera file */
     float *depth = NULL;
     int *ys = NULL;
     if (chan >= 0 && ef_exr_part_is_deep(&f, part)) {
@@ -130,7 +133,8 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
         ef_fail(err, "no depth channel (Z, depth.Z, depth or *.Z) in the shadow map: render "
                 "the light's view with its depth (Z) pass");
     } else if (ef_exr_read_cam_meta(&f, part, &meta, err) == 0 &&
-               exr_get_data_window(f.ctx, part, &dw) == EXR_ERR_SUCCESS) {
+               exr_get_data_window(f.ctx, part, &dw) == EXR_ERR_SUCCESS &&
+               !(o->camera && (named = map_camera(o->camera, &meta, err) != 0))) {
         const int h = dw.max.y - dw.min.y + 1;
         int w = 0;
         const double texels = ((double) dw.max.x - dw.min.x + 1) * h * (1.0 + o->copies);
@@ -156,25 +160,12 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
             src.dw[1] = dw.min.y;
             memcpy(src.disp, meta.disp, sizeof src.disp);
             src.depth = depth;
-            ef_mat4 cw2c, cproj;
-            if (o->camera && map_camera(o->camera, &meta, &cw2c, &cproj, err)) {
-                free(depth);
-                free(ys);
-                ef_exr_close(&f);
-                return -1;
-            }
             src.has_w2c = meta.w2c.set;
             src.w2c = meta.w2c.v;
             const int scr = meta.w2screen.set;
             src.has_proj = scr || meta.w2ndc.set;
             src.proj = scr ? meta.w2screen.v : meta.w2ndc.v;
             src.proj_name = scr ? "worldToScreen" : "worldToNDC";
-            if (o->camera) {
-                src.has_w2c = src.has_proj = 1;
-                src.w2c = cw2c;
-                src.proj = cproj;
-                src.proj_name = "camera file's projection";
-            }
             *out = ef_shadow_build(&src, o, err);
             rc = *out ? 0 : -1;
         }
@@ -182,7 +173,7 @@ int ef_shadow_load(const char *path, const struct ef_shadow_opts *o, struct ef_s
     free(depth);
     free(ys);
     ef_exr_close(&f);
-    if (rc)
+    if (rc && !named)
         ef_err_set_file(err, path);
     return rc;
 }
