@@ -570,6 +570,21 @@ static int pixel_aovs(worker *w, const ef_ray *r, const double *flat, double *ao
     return 0;
 }
 
+/* Pixel (x, y), index pi of the rows read, through the whole per-pixel
+ * fog: its ray r, its samples in, the fog samples and their union (or,
+ * flattening, o: the flat pixel, and av: its AOVs). Returns 0, or -1 with
+ * a message. */
+static int fog_one(worker *w, size_t pi, int x, int y, ef_ray *r, double *o, double *av,
+                   ef_err *err)
+{
+    const shared *S = w->S;
+    ef_reconstruct(S->q->cam, S->q->conv, x, y, 1.0, r);
+    return load_pixel(w, &w->rows, pi, r->dist, x, y, err) ||
+                   fog_pixel(w, r, x, y, S->q->mode, o, err) ||
+                   (o && S->aov && pixel_aovs(w, r, o, av, err))
+               ? -1 : 0;
+}
+
 static void do_unit(worker *w, unit *u)
 {
     shared *S = w->S;
@@ -604,18 +619,15 @@ static void do_unit(worker *w, unit *u)
                 u->failed = 1;
                 return;
             }
-            const int x = d->x0 + i;
             ef_ray r;
-            ef_reconstruct(q->cam, q->conv, x, y, 1.0, &r);
-            const double k = r.dist;
             double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
             double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
-            if (load_pixel(w, &w->rows, (size_t) j * (size_t) W + (size_t) i, k, x, y, &u->err) ||
-                fog_pixel(w, &r, x, y, mode, o, &u->err) ||
-                (o && S->aov && pixel_aovs(w, &r, o, av, &u->err))) {
+            if (fog_one(w, (size_t) j * (size_t) W + (size_t) i, d->x0 + i, y, &r, o, av,
+                        &u->err)) {
                 u->failed = 1;
                 return;
             }
+            const double k = r.dist;
             if (o) {
                 if (P->z >= 0)
                     o[P->z] = isfinite(o[P->z]) ? o[P->z] / k : INFINITY;
@@ -660,18 +672,18 @@ static void do_unit(worker *w, unit *u)
     }
 }
 
-/* This thread's CPU time in ns. */
-static double cpu_ns(void)
+/* A clock's time in ns (the thread's CPU time, or the wall's). */
+static double clock_ns(clockid_t id)
 {
     struct timespec ts;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    clock_gettime(id, &ts);
     return (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
 }
 
 /* The fog's thread time per pixel, from up to 64 pixels of each of up to
  * 16 rows spread over the image (bit-reversed, so a probe stopped early
- * has still seen its height), for at most half a second of wall time
- * (whole pixels). Only the fog is timed (the pixels' samples in, the fog
+ * has still seen its height), until half a second of wall time has
+ * passed (checked between pixels). Only the fog is timed (the pixels' samples in, the fog
  * samples, their union or flattening and the AOVs), not the decoding of
  * the rows. The worker's statistics are left as they were. Returns 0 when
  * nothing could be timed (the pass then reports what failed). */
@@ -679,38 +691,29 @@ static double probe_deep(worker *w, int *npx)
 {
     shared *S = w->S;
     const ef_deep_in *d = S->d;
-    const int mode = S->q->mode, W = d->w, step = W > 64 ? W / 64 : 1;
+    const int W = d->w, step = W > 64 ? W / 64 : 1;
     const ef_deep_stats st = w->st;
-    const double sin = w->samples_in, mxin = w->max_in;
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    const double w0 = (double) ts.tv_sec * 1e9 + (double) ts.tv_nsec;
+    const double sin = w->samples_in, mxin = w->max_in, w0 = clock_ns(CLOCK_MONOTONIC);
     double ns = 0;
     int n = 0;
     ef_err err;
     for (int k = 0; k < 16; ++k) {
-        clock_gettime(CLOCK_MONOTONIC, &ts);
-        if ((double) ts.tv_sec * 1e9 + (double) ts.tv_nsec - w0 > 0.5e9)
-            break;
         const int rk = (k & 1) << 3 | (k & 2) << 1 | (k & 4) >> 1 | (k & 8) >> 3;
         const int y = d->y0 + (int) ((2 * (long) rk + 1) * d->h / 32);
         if (y >= d->y0 + d->h || ef_deep_read_rows(d, y, 1, &w->rows, &err))
             break;
         for (int i = 0; i < W; i += step) {
-            const int x = d->x0 + i;
-            const double t = cpu_ns();
+            if (clock_ns(CLOCK_MONOTONIC) - w0 > 0.5e9 ||
+                (S->q->cancel && atomic_load_explicit(S->q->cancel, memory_order_relaxed)))
+                goto done;
+            const double t = clock_ns(CLOCK_THREAD_CPUTIME_ID);
             ef_ray r;
-            ef_reconstruct(S->q->cam, S->q->conv, x, y, 1.0, &r);
             double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
-            double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
-            if (load_pixel(w, &w->rows, (size_t) i, r.dist, x, y, &err) ||
-                fog_pixel(w, &r, x, y, mode, o, &err) ||
-                (o && S->aov && pixel_aovs(w, &r, o, av, &err)))
+            if (fog_one(w, (size_t) i, d->x0 + i, y, &r,
+                        S->q->mode == EF_DEEP_MODE_FLATTEN ? px : NULL, av, &err))
                 goto done;
-            ns += cpu_ns() - t;
+            ns += clock_ns(CLOCK_THREAD_CPUTIME_ID) - t;
             ++n;
-            if (S->q->cancel && atomic_load_explicit(S->q->cancel, memory_order_relaxed))
-                goto done;
         }
     }
 done:

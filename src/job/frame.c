@@ -706,18 +706,21 @@ static void probe_cost(ef_frame *F, const ef_channel_plan *pl)
     const int cols = w < 64 ? w : 64;
     const double t0 = thread_cpu_ns(), w0 = mono_ns();
     int done = 0;
-    for (int k = 0; k < 64 && mono_ns() - w0 < 0.5e9; ++k) {
+    for (int k = 0; k < 64; ++k) {
         const int c = probe_column(k);
         if (c >= cols)
             continue;
         const int x = (int) ((long) c * w / cols);
         for (int i = 0; i < n; ++i) {
+            if (mono_ns() - w0 > 0.5e9)
+                goto timed;   /* (checked between pixels) */
             float r = 0, g = 0, b = 0, *rgb[3] = { &r, &g, &b };
             ef_fog_block(&F->job.pass[0], dw.min.x + x, ys[i], 1, 1, rgb, NULL,
                          &d[(size_t) i * (size_t) w + (size_t) x]);
             ++done;
         }
     }
+timed:;
     const double per_px = done > 0 ? (thread_cpu_ns() - t0) * 1e-9 / done : 0;
     free(d);
     const double px = ((double) cw.max.x - cw.min.x + 1) * ((double) cw.max.y - cw.min.y + 1);
