@@ -3,7 +3,11 @@
  * Z = 4 and Z = 60 whose spacing, alpha and colour vary over the frame
  * (as a volume render's samples do), written deep scanline ZIPS.
  *
- *   make_deep FLAT.exr OUT.exr N
+ *   make_deep FLAT.exr OUT.exr N [chain]
+ *
+ * chain: instead, N samples a pixel each 0.002 deep and starting 0.001
+ * after the one before (every sample overlaps its neighbours: issue 42's
+ * hostile "chain"), N up to 100,000.
  *
  * The header is copied from FLAT (make_sample's frame); the samples are
  * packed by exrfog's own deep writer (src/io/exr_deep.c) and read back by
@@ -14,19 +18,20 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 
 int main(int argc, char **argv)
 {
-    if (argc != 4) {
-        fprintf(stderr, "usage: make_deep FLAT.exr OUT.exr N\n");
+    if (argc != 4 && !(argc == 5 && !strcmp(argv[4], "chain"))) {
+        fprintf(stderr, "usage: make_deep FLAT.exr OUT.exr N [chain]\n");
         return 2;
     }
-    const int N = atoi(argv[3]);
+    const int N = atoi(argv[3]), chain = argc == 5, Nmax = chain ? 100000 : 1000;
     ef_err err = { 0 };
     ef_exr_file in = { 0 };
-    if (N < 1 || N > 1000 || ef_exr_open(argv[1], &in, &err)) {
-        fprintf(stderr, "make_deep: %s\n", N < 1 || N > 1000 ? "N must be 1..1000" : err.msg);
+    if (N < 1 || N > Nmax || ef_exr_open(argv[1], &in, &err)) {
+        fprintf(stderr, "make_deep: %s\n", N < 1 || N > Nmax ? "N out of range" : err.msg);
         return 1;
     }
     exr_attr_box2i_t dw;
@@ -55,6 +60,12 @@ int main(int argc, char **argv)
                 const double dz = (56.0 / N) * (0.6 + 0.8 * fabs(sin(7 * u + 3 * t + i)));
                 const double a = 0.02 + 0.06 * (0.5 + 0.5 * sin(5 * t + i * 0.7));
                 double *p = v + s * 6;
+                if (chain) {
+                    p[0] = p[1] = p[2] = p[3] = 0.0004;
+                    p[4] = 4 + 0.001 * i;
+                    p[5] = p[4] + 0.002;
+                    continue;
+                }
                 p[0] = a;
                 p[1] = a * (0.2 + 0.6 * t);
                 p[2] = a * (0.3 + 0.4 * u);

@@ -10,6 +10,7 @@
 #include <errno.h>
 #include <libdeflate.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -164,6 +165,34 @@ static double read_value(const uint8_t *p, exr_pixel_type_t t)
     return (double) f;
 }
 
+/* The values a read into r may decode into. */
+static uint64_t rows_cap(const ef_deep_rows *r)
+{
+    return r->cap > 0 && r->cap < EF_DEEP_MAX_CHUNK_VALUES ? r->cap : EF_DEEP_MAX_CHUNK_VALUES;
+}
+
+/* The refusal of rows r->y.. whose samples (n so far) pass the cap: -2,
+ * with the figure (the caller may read fewer rows under a soft cap). */
+static int too_many(const ef_deep_in *d, const ef_deep_rows *r, uint64_t n, ef_err *err)
+{
+    char rows[48];
+    if (r->n > 1)
+        snprintf(rows, sizeof rows, "rows %d-%d", r->y, r->y + r->n - 1);
+    else
+        snprintf(rows, sizeof rows, "row %d", r->y);
+    ef_fail(err, "%s hold%s %llu deep samples (%.2f GiB decoded), past the %.2f GiB "
+                 "exrfog decodes at once per thread (a pixel may hold up to %d samples, one "
+                 "%s at most %llu values: samples times channels); write the file with fewer "
+                 "samples%s",
+            rows, r->n > 1 ? "" : "s", (unsigned long long) n,
+            (double) n * (double) d->nch * 8 / (1 << 30), (double) rows_cap(r) * 8 / (1 << 30),
+            EF_DEEP_MAX_PIXEL_SAMPLES, d->tiled ? "row of tiles" : "chunk of rows",
+            (unsigned long long) rows_cap(r),
+            d->tiled ? " or in smaller tiles"
+                     : d->lines > 1 ? " or one row per chunk (ZIPS or RLE)" : "");
+    return -2;
+}
+
 /* Reads the chunk starting at row cy into r (rows from r->y). */
 static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
 {
@@ -220,10 +249,8 @@ static int read_chunk(const ef_deep_in *d, int cy, ef_deep_rows *r, ef_err *err)
                        (unsigned long long) ci.unpacked_size,
                        (unsigned long long) (total * bps));
     const uint64_t base = r->start[(size_t) r0 * (size_t) w];
-    if ((base + total) * (uint64_t) d->nch > EF_DEEP_MAX_CHUNK_VALUES)
-        return ef_fail(err, "rows %d-%d hold %llu deep samples, more than exrfog reads at once "
-                            "(the file is probably corrupt)", r->y, r->y + r->n - 1,
-                       (unsigned long long) (base + total));
+    if ((base + total) * (uint64_t) d->nch > rows_cap(r))
+        return too_many(d, r, base + total, err);
     for (int j = 0; j < rows; ++j)
         for (int x = 0; x < w; ++x) {
             const size_t i = (size_t) (r0 + j) * (size_t) w + (size_t) x;
@@ -365,10 +392,8 @@ static int read_tiles(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
             for (size_t i = 0; i < (size_t) n * (size_t) w; ++i)
                 r->start[i + 1] = r->start[i] + r->count[i];
             r->total = r->start[(size_t) n * (size_t) w];
-            if (r->total * (uint64_t) d->nch > EF_DEEP_MAX_CHUNK_VALUES)
-                return ef_fail(err, "rows %d-%d hold %llu deep samples, more than exrfog reads "
-                                    "at once (the file is probably corrupt)", y, y + n - 1,
-                               (unsigned long long) r->total);
+            if (r->total * (uint64_t) d->nch > rows_cap(r))
+                return too_many(d, r, r->total, err);
             if (ef_deep_grow((void **) &r->v, &r->vcap, (size_t) r->total * (size_t) d->nch * sizeof(double)))
                 return ef_fail(err, "out of memory for deep samples");
         }
@@ -395,8 +420,9 @@ int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err
     for (int cy = y - (y - d->y0) % d->lines; cy < y + n; cy += d->lines) {
         if (cy < y)
             return ef_fail(err, "internal error: rows %d.. do not start a chunk", y);
-        if (read_chunk(d, cy, r, err))
-            return -1;
+        const int rc = read_chunk(d, cy, r, err);
+        if (rc)
+            return rc;
     }
     return 0;
 }

@@ -16,7 +16,8 @@
 #define EF_DEEP_IO_MAX_CH 64
 /* Samples one pixel may have; more is taken for corruption. */
 #define EF_DEEP_MAX_PIXEL_SAMPLES (1 << 20)
-/* Samples one chunk may decode into (memory: 8 bytes per channel each). */
+/* Values (samples times channels) one read may decode into, at most
+ * (memory: 8 bytes each, 1 GiB): a single chunk past it is refused. */
 #define EF_DEEP_MAX_CHUNK_VALUES (1ull << 27)
 
 typedef struct ef_deep_in {
@@ -45,6 +46,7 @@ typedef struct ef_deep_rows {
     uint64_t *start;          /* n * w + 1 */
     double *v;                /* start[n * w] * nch */
     uint64_t total;
+    uint64_t cap;             /* values a read may decode into (0: EF_DEEP_MAX_CHUNK_VALUES) */
     size_t vcap, pcap, ccap;
     uint8_t *raw, *packed, *tab;  /* scratch */
     size_t rawcap, packcap, tabcap;
@@ -55,8 +57,11 @@ void ef_deep_rows_free(ef_deep_rows *r);
 
 
 /* Reads rows [y, y + n) (inside the data window) of d into r, chunk by
- * chunk. Thread-safe for distinct r. Returns 0, or -1 with a message
- * (corrupt chunk, absurd sample counts, out of memory). */
+ * chunk. Thread-safe for distinct r. Returns 0; -2 with a message when
+ * the rows hold more than r->cap values (samples times channels), found
+ * from the sample tables before the samples are decoded (a caller may
+ * then read fewer rows); or -1 with a message (corrupt chunk, absurd
+ * sample counts, out of memory). */
 int ef_deep_read_rows(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err);
 
 /* One packed output chunk (what a worker makes and the writer puts out). */

@@ -585,6 +585,27 @@ static int fog_one(worker *w, size_t pi, int x, int y, ef_ray *r, double *o, dou
                ? -1 : 0;
 }
 
+/* Samples times channels a unit decodes at once when it can read fewer
+ * rows (128 MiB of doubles a thread): past it, chunk by chunk. */
+#define BATCH_VALUES (1ull << 24)
+
+/* Rows from y (at most n, whole chunks) into r: all n where they hold at
+ * most BATCH_VALUES values or a chunk holds all n, else the first chunk's
+ * rows alone (up to the reader's hard cap, refused with the figure past
+ * it). A chain of 20,000 overlapping samples a pixel in ZIPS then takes
+ * one row at a time, not a unit's 16. */
+static int read_batch(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
+{
+    const int chunk = d->tiled ? n : d->lines - (y - d->y0) % d->lines;
+    r->cap = chunk < n ? BATCH_VALUES : 0;
+    int rc = ef_deep_read_rows(d, y, n, r, err);
+    if (rc == -2 && chunk < n) {
+        r->cap = 0;
+        rc = ef_deep_read_rows(d, y, chunk, r, err);
+    }
+    return rc ? -1 : 0;
+}
+
 static void do_unit(worker *w, unit *u)
 {
     shared *S = w->S;
@@ -592,7 +613,7 @@ static void do_unit(worker *w, unit *u)
     const ef_deep_in *d = S->d;
     const plan *P = S->P;
     const int nch = P->L.nch, W = d->w, mode = q->mode;
-    if (ef_deep_read_rows(d, u->y, u->n, &w->rows, &u->err)) {
+    if (read_batch(d, u->y, u->n, &w->rows, &u->err)) {
         u->failed = 1;
         return;
     }
@@ -612,6 +633,12 @@ static void do_unit(worker *w, unit *u)
     u->npk = 0;
     for (int j = 0; j < u->n; ++j) {
         const int y = u->y + j;
+        if (y >= w->rows.y + w->rows.n &&
+            read_batch(d, y, u->y + u->n - y, &w->rows, &u->err)) {
+            u->failed = 1;
+            return;
+        }
+        const size_t row0 = (size_t) (y - w->rows.y) * (size_t) W;
         size_t nv = 0;
         for (int i = 0; i < W; ++i) {
             if (q->cancel && atomic_load_explicit(q->cancel, memory_order_relaxed)) {
@@ -622,8 +649,7 @@ static void do_unit(worker *w, unit *u)
             ef_ray r;
             double px[EF_DEEP_MAX_CH], av[EF_AOV_MAX_CHANNELS];
             double *o = mode == EF_DEEP_MODE_FLATTEN ? px : NULL;
-            if (fog_one(w, (size_t) j * (size_t) W + (size_t) i, d->x0 + i, y, &r, o, av,
-                        &u->err)) {
+            if (fog_one(w, row0 + (size_t) i, d->x0 + i, y, &r, o, av, &u->err)) {
                 u->failed = 1;
                 return;
             }
@@ -1059,10 +1085,10 @@ int ef_deep_census(const ef_exr_file *f, int part, double *pixels, double *sampl
     if (ef_deep_in_open(f, part, &d, err))
         return -1;
     int rc = 0;
-    for (int y = d.y0; y < d.y0 + d.h && !rc; y += UNIT_ROWS) {
+    for (int y = d.y0; y < d.y0 + d.h && !rc; y += r.n) {
         const int n = d.y0 + d.h - y < UNIT_ROWS ? d.y0 + d.h - y : UNIT_ROWS;
-        rc = ef_deep_read_rows(&d, y, n, &r, err);
-        for (size_t i = 0; !rc && i < (size_t) n * (size_t) d.w; ++i)
+        rc = read_batch(&d, y, n, &r, err);
+        for (size_t i = 0; !rc && i < (size_t) r.n * (size_t) d.w; ++i)
             if (r.count[i] > *max_px)
                 *max_px = r.count[i];
         if (!rc)
