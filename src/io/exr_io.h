@@ -109,6 +109,10 @@ typedef struct ef_chunk {
     const float *depth;
     float *extra[EF_MAX_EXTRA_CHANNELS];
     int nextra;
+    /* With ef_stream_opts.halo, the rows just outside the unit as read
+     * (0: row y0 - 1, 1: row y0 + h; w values each), NULL where the data
+     * window ends or the part is tiled; read-only. */
+    const float *halo_rgb[2][3], *halo_alpha[2], *halo_depth[2];
 } ef_chunk;
 
 /* Edits the colour of one unit in place; called from worker threads, so it
@@ -152,6 +156,9 @@ typedef struct ef_stream_opts {
      * has_origin_attr. */
     int has_origin_attr;
     double origin_attr[3];
+    /* Scanline colour parts: give each unit the rows just outside it
+     * (ef_chunk's halo), for --edges. */
+    int halo;
 } ef_stream_opts;
 
 /* Writes every part of in to out_fd (a new, empty file the caller opened

@@ -538,6 +538,7 @@ typedef struct part_job {
     void *user;
     const _Atomic int *cancel;    /* opts->cancel: stop at the next unit */
     int codec;                /* EF_CODEC_* */
+    int halo;                 /* opts->halo (scanline parts only) */
     ef_ring ring;             /* pending encoded units, written in order */
     pthread_mutex_t lock;
     int failed;               /* guarded by lock */
@@ -694,6 +695,28 @@ static void *worker(void *arg)
             r->as_float[r->chan] = 1;
         r->hs.fast = ef_half_fast();
     }
+    /* The halo (opts->halo): per side a reader of this part whose chunk
+     * cache serves the units that share it, and per target its rows. */
+    const int halo = j->halo && !j->g.tiled;
+    depth_reader hr[2];
+    memset(hr, 0, sizeof hr);
+    float *hbuf = NULL;
+    for (int side = 0; ok && halo && side < 2; ++side) {
+        depth_reader *r = &hr[side];
+        r->ctx = j->in;
+        r->part = j->part;
+        r->codec = j->codec;
+        r->nch = j->nch;
+        r->hs.fast = ef_half_fast();
+        ok = !geom_init(r->ctx, r->part, 1, &r->g) &&
+             (r->planes = calloc((size_t) r->nch, sizeof *r->planes)) != NULL &&
+             (r->as_float = malloc((size_t) r->nch)) != NULL;
+        if (ok)
+            memcpy(r->as_float, j->as_float, (size_t) r->nch);
+    }
+    if (ok && halo)
+        ok = (hbuf = malloc((size_t) 2 * (size_t) j->ntarget * 5 * (size_t) j->g.width *
+                            sizeof *hbuf)) != NULL;
     if (!ok)
         job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
 
@@ -732,6 +755,39 @@ static void *worker(void *arg)
                          y0, ef_exr_last_core_message());
                 goto out;
             }
+        /* the halo rows: colour, alpha and depth of each target */
+        int have[2] = { 0, 0 };
+        for (int side = 0; halo && side < 2; ++side) {
+            const int y = side ? y0 + h : y0 - 1;
+            if (y < j->g.dw.min.y || y > j->g.dw.max.y)
+                continue;
+            for (int t = 0; t < j->ntarget; ++t) {
+                const ef_channel_plan *pl = j->t[t].pl;
+                float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * (size_t) w;
+                int more[4], nm = 0;
+                float *mo[4];
+                for (int k = 1; k < 3; ++k) {
+                    more[nm] = pl->rgb[k].index;
+                    mo[nm++] = b + (size_t) k * (size_t) w;
+                }
+                if (pl->alpha.part >= 0) {
+                    more[nm] = pl->alpha.index;
+                    mo[nm++] = b + 3 * (size_t) w;
+                }
+                if (j->t[t].depth_local >= 0) {
+                    more[nm] = j->t[t].depth_local;
+                    mo[nm++] = b + 4 * (size_t) w;
+                }
+                hr[side].chan = pl->rgb[0].index;
+                if (depth_read_n(&hr[side], x0, y, w, 1, b, more, mo, nm) ||
+                    (j->t[t].depth_local < 0 && depth_read(&dr[t], x0, y, w, 1, b + 4 * (size_t) w))) {
+                    job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is "
+                                "truncated or corrupt", y, ef_exr_last_core_message());
+                    goto out;
+                }
+            }
+            have[side] = 1;
+        }
         double t1 = ef_now();
         td += t1 - t0;
         for (int t = 0; t < j->ntarget; ++t) {
@@ -752,6 +808,15 @@ static void *worker(void *arg)
             }
             ck.alpha = pl->alpha.part >= 0 ? planes[pl->alpha.index] : NULL;
             ck.depth = j->t[t].depth_local >= 0 ? planes[j->t[t].depth_local] : depth[t];
+            for (int side = 0; side < 2; ++side) {
+                if (!have[side])
+                    continue;
+                const float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * (size_t) w;
+                for (int k = 0; k < 3; ++k)
+                    ck.halo_rgb[side][k] = b + (size_t) k * (size_t) w;
+                ck.halo_alpha[side] = pl->alpha.part >= 0 ? b + 3 * (size_t) w : NULL;
+                ck.halo_depth[side] = b + 4 * (size_t) w;
+            }
             j->fn(j->user, &ck);
         }
         double t2 = ef_now();
@@ -796,6 +861,9 @@ out:
         depth_reader_free(&dr[t]);
         free(depth[t]);
     }
+    depth_reader_free(&hr[0]);
+    depth_reader_free(&hr[1]);
+    free(hbuf);
     ef_unit_free(&ob);
     free(hs.buf);
     for (int k = 0; planes && k < nplanes; ++k)
@@ -976,6 +1044,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     j.user = user;
     j.cancel = o->cancel;
     j.codec = o->codec;
+    j.halo = o->halo;
     for (int k = 0; k < nplans; ++k)
         if (plans[k].rgb[0].part == p) {
             j.t[j.ntarget].plan = k;

@@ -26,7 +26,7 @@ enum {
     OPT_UNITS, OPT_TIME, OPT_AOV, OPT_AOV_ORIGIN, OPT_FOCAL, OPT_APERTURE, OPT_CONVENTION,
     OPT_FRAMES, OPT_FPS, OPT_KEEP_GOING, OPT_FAILED_LIST, OPT_VIEW, OPT_CAMERA_FILE,
     OPT_COLORCONFIG, OPT_COLORSPACE, OPT_PREVIEW_VIEW, OPT_JSON, OPT_CODEC, OPT_DEEP,
-    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP, OPT_DEEP_GREY, OPT_OUTPUT_DISPLAY
+    OPT_DEEP_TOL, OPT_OUTPUT_COLORSPACE, OPT_CROP, OPT_DEEP_GREY, OPT_OUTPUT_DISPLAY, OPT_EDGES
 };
 
 static const struct option long_opts[] = {
@@ -39,6 +39,7 @@ static const struct option long_opts[] = {
     { "deep", required_argument, NULL, OPT_DEEP },
     { "deep-tol", required_argument, NULL, OPT_DEEP_TOL },
     { "deep-grey-alpha", no_argument, NULL, OPT_DEEP_GREY },
+    { "edges", required_argument, NULL, OPT_EDGES },
     { "fog", required_argument, NULL, OPT_FOG },
     { "light", required_argument, NULL, OPT_LIGHT },
     { "sky-light", required_argument, NULL, OPT_SKY_LIGHT },
@@ -127,6 +128,9 @@ void ef_options_usage(FILE *out)
             "                           light, estimated)\n"
             "      --deep-grey-alpha    deep output of chromatic fog for readers of A only:\n"
             "                           every alpha the least, the rest folded into colour\n"
+            "      --edges unmix|off    flat input: fog each anti-aliased edge pixel as the\n"
+            "                           mix of the near and far surfaces its neighbours\n"
+            "                           show, each at its own depth (default off)\n"
             "      --scene FILE         JSON scene: fog, lights, color, sky, up, units, time,\n"
             "                           aov; the flags given here override it\n"
             "      --up-axis y|z|-y|-z|auto|X,Y,Z  up for the height models (default y;\n"
@@ -400,6 +404,14 @@ static ef_parse_result parse_options(int argc, char **argv, ef_options *o, ef_co
             break;
         case OPT_DEEP_GREY:
             o->deep_grey = 1;
+            break;
+        case OPT_EDGES:
+            if (!strcmp(a, "unmix"))
+                o->edges = 1;
+            else if (!strcmp(a, "off"))
+                o->edges = 0;
+            else
+                return ef_fail(err, "--edges '%s' is not unmix or off", a), EF_PARSE_USAGE;
             break;
         case OPT_DEEP_TOL:
             if (ef_parse_numbers(a, &o->deep_tol, 1) || !(o->deep_tol > 0) || !(o->deep_tol < 1))

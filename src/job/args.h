@@ -66,6 +66,7 @@ typedef struct ef_options {
     int deep_mode, deep_set;  /* --deep (EF_DEEP_MODE_*) and whether it was given */
     double deep_tol;          /* --deep-tol */
     int deep_grey;            /* --deep-grey-alpha */
+    int edges;                /* --edges: 1 unmix, 0 off */
     char params[2048];        /* the options as given, for exrfog/parameters */
 } ef_options;
 

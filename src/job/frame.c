@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "apply.h"
+#include "edges.h"
 #include "deep_pass.h"
 #include "exr_deep.h"
 #include "exr_dwa.h"
@@ -44,6 +45,8 @@ typedef struct fog_job {
     /* preview: every step-th pixel of the data window */
     unsigned char *preview;
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
+    int edges;                /* --edges unmix */
+    _Atomic int edge_oom;     /* a unit could not get the edges' memory */
 } fog_job;
 
 typedef struct ef_frame {
@@ -156,8 +159,29 @@ static void fog_chunk(void *user, const ef_chunk *ck)
         st[0].clock_ns = mono_ns;
         st[0].cpu_ns = thread_cpu_ns;
     }
+    /* --edges: the edge pixels are found on the input as read (the pass
+     * then writes over it) and replaced after it */
+    ef_edge_work wk = { 0 };
+    int nedge = 0;
+    if (j->edges) {
+        const ef_edge_rows u = { ck->x0, ck->y0, ck->w, ck->h,
+                                 { ck->rgb[0], ck->rgb[1], ck->rgb[2] }, ck->alpha, ck->depth,
+                                 { ck->halo_rgb[0][0], ck->halo_rgb[0][1], ck->halo_rgb[0][2] },
+                                 ck->halo_alpha[0], ck->halo_depth[0],
+                                 { ck->halo_rgb[1][0], ck->halo_rgb[1][1], ck->halo_rgb[1][2] },
+                                 ck->halo_alpha[1], ck->halo_depth[1] };
+        nedge = ef_edge_find(&j->pass[ck->view], &u, &wk);
+        if (nedge < 0) {
+            atomic_store(&j->edge_oom, 1);
+            nedge = 0;
+        }
+    }
     ef_fog_block_aov(&j->pass[ck->view], ck->x0, ck->y0, ck->w, ck->h, ck->rgb, ck->alpha, ck->depth, &aov,
                      j->stats ? st : NULL);
+    if (nedge)
+        ef_edge_apply(&j->pass[ck->view], ck->x0, ck->y0, ck->w, wk.px, nedge, ck->rgb, ck->alpha,
+                      &aov);
+    ef_edge_work_free(&wk);
     if (j->stats) {
         pthread_mutex_lock(&j->lock);
         for (int i = 0; i < ncomp; ++i)
@@ -451,6 +475,9 @@ static int check_deep(ef_frame *F)
     int status = 2;
     if (F->nplans > 1)
         why = "deep input with several views is not supported (choose one with --view NAME)";
+    else if (o->edges)
+        why = "--edges applies to flat input: deep samples carry each surface's own depth, so "
+              "deep fog is exact at edges already (leave --edges out)";
     else if (o->deep_grey && o->deep_mode == EF_DEEP_MODE_FLATTEN)
         why = "--deep-grey-alpha applies to deep output (--deep samples or fog): a flattened "
               "image is exact per channel already";
@@ -949,6 +976,8 @@ static int prepare_pass(ef_frame *F)
     }
     F->so.nplans = F->nplans;
     F->so.cancel = J->stop;
+    F->so.halo = o->edges;
+    F->job.edges = o->edges;
     return 0;
 }
 
@@ -1110,6 +1139,10 @@ static int run_pass(ef_frame *F)
     if (ef_exr_stream(&F->in, F->df, F->plans, o->output, fd, &F->so, fog_chunk, &F->job, &F->st,
                       &F->err))
         return ef_job_report(J, o->output, &F->err, ef_job_cancelled(J) ? 3 : 1);
+    if (atomic_load(&F->job.edge_oom)) {
+        ef_fail(&F->err, "out of memory for the edge pixels (--edges); nothing was written");
+        return ef_job_report(J, o->output, &F->err, 1);
+    }
     if (ef_job_cancelled(J)) {
         ef_fail(&F->err, "cancelled; nothing was written");
         return ef_job_report(J, o->output, &F->err, 3);

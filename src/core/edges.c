@@ -1,0 +1,444 @@
+/* Fog at the edges of flat renders: the unmixing (edges.h). */
+#include "edges.h"
+
+#include "recon.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Below this contrast between the two layers' colours (relative to the
+ * larger), the colours cannot tell the shares apart: the pixel's own
+ * depth does instead. */
+#define CONTRAST_MIN 0.02
+/* The share's uncertainty beyond what the residual shows (edges.h's du):
+ * calibrated on bench/edges.py's calibration scene (not a test scene). */
+#define DU_FLOOR 0.05
+/* A mix of the two colours leaving a residual above this fraction of
+ * their difference explains nothing (texture, or a third surface). */
+#define RES_MAX 0.35
+
+void ef_edge_work_free(ef_edge_work *wk)
+{
+    free(wk->iz);
+    free(wk->edge);
+    free(wk->px);
+    memset(wk, 0, sizeof *wk);
+}
+
+/* The rows of u, r = -1 (above) .. h (below): depth, colour and alpha. */
+static const float *row_depth(const ef_edge_rows *u, int r)
+{
+    return r < 0 ? u->up_depth : r >= u->h ? u->dn_depth : u->depth + (size_t) r * (size_t) u->w;
+}
+
+static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
+{
+    const float *const *rgb = r < 0 ? u->up_rgb : r >= u->h ? u->dn_rgb : u->rgb;
+    const float *a = r < 0 ? u->up_alpha : r >= u->h ? u->dn_alpha : u->alpha;
+    const size_t off = (r < 0 || r >= u->h) ? (size_t) x : (size_t) r * (size_t) u->w + (size_t) x;
+    for (int k = 0; k < 3; ++k)
+        c[k] = rgb[k] ? rgb[k][off] : 0;
+    c[3] = a ? a[off] : 1.0;
+    for (int k = 0; k < 4; ++k)
+        if (!isfinite(c[k]))
+            c[k] = 0;
+}
+
+/* 1 / planar depth of every pixel of rows -1..h (0 for sky, NaN where the
+ * row is missing or the depth unusable) into wk->iz, (h + 2) rows of w. */
+static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, double *iz)
+{
+    ef_ray rays[EF_RECON_SPAN];
+    unsigned char sky[EF_RECON_SPAN];
+    for (int r = -1; r <= u->h; ++r) {
+        double *out = iz + (size_t) (r + 1) * (size_t) u->w;
+        const float *d = row_depth(u, r);
+        if (!d || (r < 0 && !u->up_rgb[0]) || (r >= u->h && !u->dn_rgb[0])) {
+            for (int x = 0; x < u->w; ++x)
+                out[x] = NAN;
+            continue;
+        }
+        for (int xs = 0; xs < u->w; xs += EF_RECON_SPAN) {
+            const int n = u->w - xs < EF_RECON_SPAN ? u->w - xs : EF_RECON_SPAN;
+            ef_reconstruct_span(pass->cam, pass->conv, u->x0 + xs, u->y0 + r, n, d + xs, 0, rays,
+                                sky);
+            for (int j = 0; j < n; ++j) {
+                const double p = rays[j].planar;
+                out[xs + j] = sky[j] ? 0.0 : p > 0 && isfinite(p) ? 1.0 / p : NAN;
+            }
+        }
+    }
+}
+
+/* Whether 1/z bends at (x, r) over a pair of opposite neighbours. */
+static int bends(const ef_edge_rows *u, const double *iz, int x, int r)
+{
+    const int w = u->w;
+    const double c = iz[(size_t) (r + 1) * (size_t) w + (size_t) x];
+    if (isnan(c))
+        return 0;
+    static const int dir[4][2] = { { 1, 0 }, { 0, 1 }, { 1, 1 }, { 1, -1 } };
+    for (int k = 0; k < 4; ++k) {
+        const int xa = x - dir[k][0], xb = x + dir[k][0], ra = r - dir[k][1], rb = r + dir[k][1];
+        if (xa < 0 || xb >= w || xa >= w || xb < 0 || ra < -1 || rb < -1 || ra > u->h || rb > u->h)
+            continue;
+        const double a = iz[(size_t) (ra + 1) * (size_t) w + (size_t) xa];
+        const double b = iz[(size_t) (rb + 1) * (size_t) w + (size_t) xb];
+        if (isnan(a) || isnan(b))
+            continue;
+        const double m = fmax(c, fmax(a, b));
+        if (fabs(a - 2 * c + b) > EF_EDGE_REL * m)
+            return 1;
+    }
+    return 0;
+}
+
+/* Whether 1/z value q belongs to the layer of 1/z value l. */
+static int same_layer(double q, double l)
+{
+    return l == 0 ? q == 0 : fabs(q - l) <= EF_EDGE_REL * l;
+}
+
+/* The layers of a window and the colours their pure pixels show. */
+#define MAXL 4      /* layers per 3x3 window */
+#define MAXC 12     /* colours per layer */
+typedef struct layer {
+    double iz;      /* 1 / planar depth (0: sky) */
+    float v;        /* a stored depth value of it in the 3x3 window */
+    int n;
+    int pure;       /* some colours are of pixels that are no edges (a surface's own) */
+    int npure;      /* those come first */
+    double c[MAXC][4];
+} layer;
+
+/* Up to MAXC colours of layer L: its pixels in the 5x5 window of (x, r)
+ * that are not edges themselves, nearest first; where there is none, its
+ * other pixels of the 3x3 window (the edge pixel itself excepted). */
+static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigned char *edge,
+                          int x, int r, layer *L)
+{
+    const int w = u->w;
+    L->n = 0;
+    for (int pass = 0; pass < 2 && L->n == 0; ++pass) {
+        for (int ring = 1; ring <= (pass ? 1 : 2); ++ring)
+            for (int dr = -ring; dr <= ring; ++dr)
+                for (int dx = -ring; dx <= ring; ++dx) {
+                    if (abs(dr) != ring && abs(dx) != ring)
+                        continue;   /* this ring only */
+                    const int xx = x + dx, rr = r + dr;
+                    if (xx < 0 || xx >= w || rr < -1 || rr > u->h || L->n >= MAXC)
+                        continue;
+                    const size_t k = (size_t) (rr + 1) * (size_t) w + (size_t) xx;
+                    if (isnan(iz[k]) || (!pass && edge[k]) || !same_layer(iz[k], L->iz))
+                        continue;
+                    pixel_colour(u, rr, xx, L->c[L->n++]);
+                }
+        L->npure = pass == 0 ? L->n : 0;
+    }
+    L->pure = L->npure > 0;
+}
+
+/* The share s of colour a in C = s a + (1 - s) b (RGB and alpha, least
+ * squares, s in [0, 1]) and the squared residual; 0 where the two are
+ * too alike to tell (their RGB within CONTRAST_MIN of the larger and
+ * their alphas equal). */
+static int unmix(const double C[4], const double a[4], const double b[4], double *s, double *res2,
+                 double *dd_out)
+{
+    double dd = 0, dot = 0, mag = 0;
+    for (int c = 0; c < 4; ++c) {
+        const double d = a[c] - b[c];
+        dd += d * d;
+        dot += (C[c] - b[c]) * d;
+        if (c < 3)
+            mag = fmax(mag, fmax(fabs(a[c]), fabs(b[c])));
+    }
+    const double rgb2 = dd - (a[3] - b[3]) * (a[3] - b[3]);
+    if (!(rgb2 > CONTRAST_MIN * CONTRAST_MIN * mag * mag) && !(fabs(a[3] - b[3]) > CONTRAST_MIN))
+        return 0;
+    double sm = dot / dd;
+    sm = sm < 0 ? 0 : sm > 1 ? 1 : sm;
+    double r2 = 0;
+    for (int c = 0; c < 4; ++c) {
+        const double e = C[c] - (sm * a[c] + (1 - sm) * b[c]);
+        r2 += e * e;
+    }
+    *s = sm;
+    *res2 = r2;
+    *dd_out = dd;
+    return 1;
+}
+
+int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *wk)
+{
+    const int w = u->w, h = u->h;
+    const size_t n = (size_t) (h + 2) * (size_t) w;
+    if (n > wk->cap) {
+        double *iz = realloc(wk->iz, n * sizeof *iz);
+        if (!iz)
+            return -1;
+        wk->iz = iz;
+        unsigned char *e = realloc(wk->edge, n);
+        if (!e)
+            return -1;
+        wk->edge = e;
+        wk->cap = n;
+    }
+    double *iz = wk->iz;
+    unsigned char *edge = wk->edge;
+    inverse_depths(pass, u, iz);
+    for (int r = -1; r <= h; ++r)
+        for (int x = 0; x < w; ++x)
+            edge[(size_t) (r + 1) * (size_t) w + (size_t) x] = (unsigned char) bends(u, iz, x, r);
+    int count = 0, seen = 0, seen_between = 0;
+    for (int r = 0; r < h; ++r)
+        for (int x = 0; x < w; ++x) {
+            const size_t k = (size_t) (r + 1) * (size_t) w + (size_t) x;
+            if (!edge[k])
+                continue;
+            /* the layers its 8 neighbours show (1/z clusters) */
+            layer Ls[MAXL];
+            int nl = 0;
+            for (int dr = -1; dr <= 1; ++dr)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const int xx = x + dx, rr = r + dr;
+                    if (xx < 0 || xx >= w || rr < -1 || rr > h || (dx == 0 && dr == 0))
+                        continue;   /* the neighbours' layers: the pixel's own may be none */
+                    const double q = iz[(size_t) (rr + 1) * (size_t) w + (size_t) xx];
+                    if (isnan(q))
+                        continue;
+                    int m = 0;
+                    while (m < nl && !same_layer(q, Ls[m].iz) && !same_layer(Ls[m].iz, q))
+                        ++m;
+                    if (m == nl && nl < MAXL) {
+                        Ls[nl].iz = q;
+                        Ls[nl].v = row_depth(u, rr)[xx];
+                        ++nl;
+                    }
+                }
+            if (nl < 2)
+                continue;   /* curvature, not two layers */
+            const double izp = iz[k];
+            const float vp = u->depth[(size_t) r * (size_t) w + (size_t) x];
+            int own = -1;
+            for (int m = 0; m < nl; ++m) {
+                layer_colours(u, iz, edge, x, r, &Ls[m]);
+                if (same_layer(izp, Ls[m].iz) && (own < 0 || (Ls[m].pure && !Ls[own].pure)))
+                    own = m;
+            }
+            double C[4];
+            pixel_colour(u, r, x, C);
+            ++seen;
+            seen_between += own < 0;
+            /* Where the pixel's own depth is a layer (a closest-sample or
+             * one-sample Z), that layer and the other layer and pure colours
+             * that explain C best: the share from the colours. Where it lies
+             * between two layers (a filtered Z, the mean of the surfaces'
+             * depths), the share from the depth: Z = s z_a + (1 - s) z_b
+             * with the layers just in front and behind. */
+            double best = INFINITY, bs = 1, bdd = 1, du = 0.5;
+            int ba = -1, bb = -1, bca = 0, bcb = 0, bca_sel = 0, between = 0;
+            if (own >= 0) {
+                /* A colour within the range its own layer's pure pixels
+                 * span is that surface's texture, not a mix. Else the own
+                 * colour nearest to it, and the other layer's colour that
+                 * explains it best with that one: the least share that
+                 * can be given away. */
+                const layer *O = &Ls[own];
+                if (O->n == 0)
+                    continue;
+                int inside = O->npure > 0;
+                for (int c = 0; c < 4 && inside; ++c) {
+                    double lo = O->c[0][c], hi = lo;
+                    for (int ia = 1; ia < O->npure; ++ia) {
+                        lo = fmin(lo, O->c[ia][c]);
+                        hi = fmax(hi, O->c[ia][c]);
+                    }
+                    const double tol = 0.01 * fmax(fabs(lo), fabs(hi)) + 1e-6;
+                    inside = C[c] >= lo - tol && C[c] <= hi + tol;
+                }
+                if (inside)
+                    continue;
+                /* the own colour nearest C where the layer shows pure
+                 * pixels; where it shows none (a thing thinner than the
+                 * filter), the one that differs most from the other
+                 * layer's: the purest its pixels come */
+                double dmin = INFINITY;
+                for (int ia = 0; ia < O->n; ++ia) {
+                    double d2 = 0;
+                    for (int c = 0; c < 4; ++c)
+                        d2 += (C[c] - O->c[ia][c]) * (C[c] - O->c[ia][c]);
+                    if (d2 < dmin) {
+                        dmin = d2;
+                        bca = ia;
+                    }
+                }
+                ba = own;
+                for (int mb = 0; mb < nl; ++mb) {
+                    if (mb == own)
+                        continue;
+                    for (int ib = 0; ib < Ls[mb].n; ++ib) {
+                        int ia = bca;
+                        if (!O->pure) {
+                            double dmax = -1;
+                            for (int q = 0; q < O->n; ++q) {
+                                double d2 = 0;
+                                for (int c = 0; c < 4; ++c)
+                                    d2 += (O->c[q][c] - Ls[mb].c[ib][c]) *
+                                          (O->c[q][c] - Ls[mb].c[ib][c]);
+                                if (d2 > dmax) {
+                                    dmax = d2;
+                                    ia = q;
+                                }
+                            }
+                        }
+                        double sm, r2, dd;
+                        if (!unmix(C, O->c[ia], Ls[mb].c[ib], &sm, &r2, &dd) || !(r2 < best))
+                            continue;
+                        best = r2;
+                        bs = sm;
+                        bdd = dd;
+                        bb = mb;
+                        bcb = ib;
+                        bca_sel = ia;
+                    }
+                }
+                bca = bca_sel;
+                if (bb < 0 || sqrt(best / bdd) > RES_MAX)
+                    continue;   /* the colours cannot tell, or no mix of the two explains
+                                 * the pixel: its own depth stands */
+                du = fmin(1, sqrt(best / bdd) + DU_FLOOR + (O->pure && Ls[bb].pure ? 0 : 0.25));
+            } else {
+                for (int m = 0; m < nl; ++m) {
+                    if (Ls[m].iz > izp && (ba < 0 || Ls[m].iz < Ls[ba].iz))
+                        ba = m;   /* the nearest layer in front */
+                    if (Ls[m].iz < izp && (bb < 0 || Ls[m].iz > Ls[bb].iz))
+                        bb = m;   /* the nearest behind */
+                }
+                if (ba < 0 || bb < 0 || Ls[ba].n == 0 || Ls[bb].n == 0)
+                    continue;
+                const double za = 1 / Ls[ba].iz, zp = 1 / izp;
+                bs = Ls[bb].iz > 0 ? (1 / Ls[bb].iz - zp) / (1 / Ls[bb].iz - za) : 1;
+                bs = !(bs > 0) ? 0 : bs > 1 ? 1 : bs;
+                between = 1;
+            }
+            double pa[4], pb[4];
+            memcpy(pa, Ls[ba].c[bca], sizeof pa);
+            memcpy(pb, Ls[bb].c[bcb], sizeof pb);
+            if (ba == own && bs >= 1)
+                continue;   /* all of it the pixel's own surface: the pass is right */
+            if ((size_t) count >= wk->pxcap) {
+                const size_t cap = wk->pxcap ? 2 * wk->pxcap : 256;
+                ef_edge_px *p = realloc(wk->px, cap * sizeof *p);
+                if (!p)
+                    return -1;
+                wk->px = p;
+                wk->pxcap = cap;
+            }
+            ef_edge_px *e = &wk->px[count];
+            e->i = r * w + x;
+            e->v[0] = ba == own ? vp : Ls[ba].v;
+            e->v[1] = bb == own ? vp : Ls[bb].v;
+            e->w = bs;
+            e->du = du;
+            e->between = between;
+            for (int c = 0; c < 4; ++c) {
+                const double res = C[c] - (bs * pa[c] + (1 - bs) * pb[c]);
+                e->c[0][c] = bs * (pa[c] + res);
+                e->c[1][c] = C[c] - e->c[0][c];
+                e->pure[0][c] = pa[c];
+                e->pure[1][c] = pb[c];
+            }
+            ++count;
+        }
+    /* A unit whose edge pixels mostly lie between layers has a filtered
+     * Z: there a pixel whose depth is a layer is that surface's (nearly)
+     * alone, and its colour's likeness to a mix is the texture's. */
+    if (seen_between > seen / 5) {
+        int k = 0;
+        for (int m = 0; m < count; ++m)
+            if (wk->px[m].between)
+                wk->px[k++] = wk->px[m];
+        count = k;
+    }
+    return count;
+}
+
+/* The mixable planes of an AOV binding (not fog_P, not fog_distance), in a
+ * fixed order; returns their count. */
+static int mixable(const ef_aov_out *a, float **out)
+{
+    int n = 0;
+    for (int k = 0; k < 4; ++k)
+        out[n++] = a->fog[k];
+    for (int k = 0; k < 3; ++k)
+        out[n++] = a->T[k];
+    for (int k = 0; k < 3; ++k)
+        out[n++] = a->err[k];
+    for (int k = 0; k < 3; ++k)
+        out[n++] = a->ambient[k];
+    for (int l = 0; l < EF_MAX_LIGHTS; ++l)
+        for (int k = 0; k < 3; ++k)
+            out[n++] = a->light[l][k];
+    for (int l = 0; l < EF_MAX_LIGHTS; ++l)
+        out[n++] = a->lit[l];
+    for (int k = 0; k < 3; ++k)
+        out[n++] = a->sky[k];
+    return n;
+}
+
+#define NMIX (4 + 3 + 3 + 3 + 4 * EF_MAX_LIGHTS + 3)
+
+void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge_px *e, int n,
+                   float *const rgb[3], float *alpha, const ef_aov_out *aov)
+{
+    const ef_fog_scene *s = pass->scene;
+    const unsigned mask = aov ? aov->mask : 0;
+    float vals[2][EF_AOV_MAX_CHANNELS];
+    float *planes[2][EF_AOV_MAX_CHANNELS];
+    ef_aov_out loc[2];
+    float *unit_mix[NMIX], *loc_mix[2][NMIX];
+    int nmix = 0;
+    if (mask) {
+        for (int p = 0; p < 2; ++p) {
+            for (int c = 0; c < EF_AOV_MAX_CHANNELS; ++c)
+                planes[p][c] = &vals[p][c];
+            memset(&loc[p], 0, sizeof loc[p]);
+            ef_aov_bind(&loc[p], mask, s, planes[p]);
+            memcpy(loc[p].origin, aov->origin, sizeof loc[p].origin);
+            mixable(&loc[p], loc_mix[p]);
+        }
+        nmix = mixable(aov, unit_mix);
+    }
+    for (int m = 0; m < n; ++m) {
+        const ef_edge_px *E = &e[m];
+        const int x = x0 + E->i % w, y = y0 + E->i / w;
+        double out[2][4];
+        for (int p = 0; p < 2; ++p) {
+            const double wp = p ? 1 - E->w : E->w;
+            float c[3], a;
+            for (int k = 0; k < 3; ++k)
+                c[k] = (float) (wp > 1e-9 ? E->c[p][k] / wp : E->pure[p][k]);
+            a = (float) (wp > 1e-9 ? E->c[p][3] / wp : E->pure[p][3]);
+            float *cp[3] = { &c[0], &c[1], &c[2] };
+            const float v = E->v[p];
+            ef_fog_block_aov(pass, x, y, 1, 1, cp, alpha ? &a : NULL, &v, mask ? &loc[p] : NULL,
+                             NULL);
+            for (int k = 0; k < 3; ++k)
+                out[p][k] = c[k];
+            out[p][3] = a;
+        }
+        const double s = E->w;
+        for (int k = 0; k < 3; ++k)
+            rgb[k][E->i] = (float) (s * out[0][k] + (1 - s) * out[1][k]);
+        if (alpha && isfinite(alpha[E->i]))
+            alpha[E->i] = (float) (s * out[0][3] + (1 - s) * out[1][3]);
+        for (int q = 0; q < nmix; ++q)
+            if (unit_mix[q] && loc_mix[0][q] && loc_mix[1][q])
+                unit_mix[q][E->i] = (float) (s * *loc_mix[0][q] + (1 - s) * *loc_mix[1][q]);
+        if (mask & EF_AOV_ERROR)
+            for (int k = 0; k < 3; ++k)
+                aov->err[k][E->i] += (float) (E->du * fabs(out[0][k] - out[1][k]));
+    }
+}

@@ -1,0 +1,76 @@
+/* Fog at the edges of flat renders (--edges unmix).
+ *
+ * An anti-aliased edge pixel mixes the colours of a near surface and of
+ * what lies behind it, but its depth is one number, so one fog for the
+ * whole pixel is wrong for part of its colour (the outline around thin
+ * things). Here each edge pixel is taken as a mix of two surfaces its
+ * neighbourhood shows, the nearest and the farthest of its 3x3 window:
+ * their colours are the nearest pixels of each layer in the 5x5 window
+ * that are not edges themselves; the near surface's share w solves
+ * C = w c_near + (1 - w) c_far (RGB and alpha) in least squares, and the
+ * residual goes to both parts by their shares. Each part is fogged at its
+ * own depth along the pixel's own ray, by the pass itself (lights, sky
+ * light and AOVs included), and the two are summed. Pixels that are not
+ * edges are left to the pass as they are.
+ *
+ * An edge is a pixel where the inverse depth 1/z of its 3x3 window bends:
+ * |1/z_q - 2/z_p + 1/z_q'| over a pair of opposite neighbours above
+ * EF_EDGE_REL of the window's largest 1/z (a step of 5 % in depth). A
+ * plane has 1/z linear on the screen, so ground seen at a grazing angle
+ * is no edge, however fast its depth grows.
+ *
+ * Pure C, no I/O, no globals. */
+#ifndef EF_EDGES_H
+#define EF_EDGES_H
+
+#include "apply.h"
+#include "aov.h"
+
+#include <stddef.h>
+
+#define EF_EDGE_REL 0.05
+
+/* One unit of rows and the rows just outside it (NULL where the frame or
+ * the stream has none). alpha and the rows' alphas may be NULL (1). */
+typedef struct ef_edge_rows {
+    int x0, y0, w, h;
+    const float *rgb[3], *alpha, *depth;
+    const float *up_rgb[3], *up_alpha, *up_depth;   /* row y0 - 1 */
+    const float *dn_rgb[3], *dn_alpha, *dn_depth;   /* row y0 + h */
+} ef_edge_rows;
+
+/* An edge pixel's two parts: part 0 near, part 1 far. */
+typedef struct ef_edge_px {
+    int i;                   /* index in the unit (row-major, w wide) */
+    float v[2];              /* each part's stored depth value */
+    double w;                /* the near part's share of the pixel */
+    double c[2][4];          /* each part's premultiplied RGB and alpha (they sum to the pixel's) */
+    double pure[2][4];       /* each layer's colour as its pure pixel shows it */
+    double du;               /* the uncertainty of w (the error output's unmixing share) */
+    int between;             /* its depth lies between the layers (a filtered Z) */
+} ef_edge_px;
+
+/* Scratch kept between units by one thread. */
+typedef struct ef_edge_work {
+    double *iz;              /* 1 / planar depth of the unit and its two outer rows */
+    unsigned char *edge;
+    size_t cap;
+    ef_edge_px *px;
+    size_t pxcap;
+} ef_edge_work;
+
+void ef_edge_work_free(ef_edge_work *wk);
+
+/* The edge pixels of unit u (its input, before the fog) into wk->px.
+ * Returns their count, or -1 when out of memory. */
+int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *wk);
+
+/* Replaces the pass's result at each of the n edge pixels e (unit at x0,
+ * y0, w wide; rgb, alpha and aov as the pass wrote them) by the sum of its
+ * two parts, each fogged by the pass at its own depth; fog_P and
+ * fog_distance stay the pixel's own, and the error output gains du times
+ * the difference of the two parts' fogged colours. */
+void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge_px *e, int n,
+                   float *const rgb[3], float *alpha, const ef_aov_out *aov);
+
+#endif
