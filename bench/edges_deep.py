@@ -24,6 +24,7 @@ between the two flat runs, and the error output's coverage of the edge
 fix's actual error.
 """
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -163,7 +164,7 @@ actual = np.abs(F - R)
 cover = float(np.mean(np.all(E[edge] + 1e-6 >= actual[edge], axis=1)))
 res = {"z": args.z, "fog": args.fog, "edge_px": int(edge.sum()), "naive": rn, "edges": rf,
        "interior_change": interior, "cover": cover}
-print(res)
+print(json.dumps(res))
 if args.out_png:
     for name, img in (("naive", N), ("edges", F)):
         err = np.abs(img - R).max(axis=2)

@@ -13,7 +13,11 @@
 #define CONTRAST_MIN 0.02
 /* The share's uncertainty beyond what the residual shows (edges.h's du):
  * calibrated on bench/edges.py's calibration scene (not a test scene). */
-#define DU_FLOOR 0.05
+#define DU_FLOOR 0.1
+/* The share of another layer a pixel left as it is may still hold (the
+ * error output's term there): calibrated on bench/edges_blender.py's
+ * calib scene, not a test scene (bench/edges.md). */
+#define DU_KEEP 0.2
 /* A mix of the two colours leaving a residual above this fraction of
  * their difference explains nothing (texture, or a third surface). */
 #define RES_MAX 0.35
@@ -170,7 +174,7 @@ static int unmix(const double C[4], const double a[4], const double b[4], double
     return 1;
 }
 
-int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *wk)
+int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, ef_edge_work *wk)
 {
     const int w = u->w, h = u->h;
     const size_t n = (size_t) (h + 2) * (size_t) w;
@@ -247,7 +251,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
                  * can be given away. */
                 const layer *O = &Ls[own];
                 if (O->n == 0)
-                    continue;
+                    goto keep;
                 int inside = O->npure > 0;
                 for (int c = 0; c < 4 && inside; ++c) {
                     double lo = O->c[0][c], hi = lo;
@@ -259,7 +263,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
                     inside = C[c] >= lo - tol && C[c] <= hi + tol;
                 }
                 if (inside)
-                    continue;
+                    goto keep;
                 /* the own colour nearest C where the layer shows pure
                  * pixels; where it shows none (a thing thinner than the
                  * filter), the one that differs most from the other
@@ -306,8 +310,8 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
                 }
                 bca = bca_sel;
                 if (bb < 0 || sqrt(best / bdd) > RES_MAX)
-                    continue;   /* the colours cannot tell, or no mix of the two explains
-                                 * the pixel: its own depth stands */
+                    goto keep;   /* the colours cannot tell, or no mix of the two explains
+                                  * the pixel: its own depth stands */
                 du = fmin(1, sqrt(best / bdd) + DU_FLOOR + (O->pure && Ls[bb].pure ? 0 : 0.25));
             } else {
                 for (int m = 0; m < nl; ++m) {
@@ -317,7 +321,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
                         bb = m;   /* the nearest behind */
                 }
                 if (ba < 0 || bb < 0 || Ls[ba].n == 0 || Ls[bb].n == 0)
-                    continue;
+                    goto keep;
                 const double za = 1 / Ls[ba].iz, zp = 1 / izp;
                 bs = Ls[bb].iz > 0 ? (1 / Ls[bb].iz - zp) / (1 / Ls[bb].iz - za) : 1;
                 bs = !(bs > 0) ? 0 : bs > 1 ? 1 : bs;
@@ -326,8 +330,28 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
             double pa[4], pb[4];
             memcpy(pa, Ls[ba].c[bca], sizeof pa);
             memcpy(pb, Ls[bb].c[bcb], sizeof pb);
-            if (ba == own && bs >= 1)
-                continue;   /* all of it the pixel's own surface: the pass is right */
+            int kept = 0;
+            if (ba == own && bs >= 1) {
+            keep:
+                /* The pass's result stands (all of it the pixel's own
+                 * surface, as far as the colours tell); with the error
+                 * output, what a share DU_KEEP of the layer farthest from
+                 * its own would move it by. */
+                if (!want_err)
+                    continue;
+                bb = 0;
+                for (int m = 1; m < nl; ++m)
+                    if (fabs(Ls[m].iz - izp) > fabs(Ls[bb].iz - izp))
+                        bb = m;
+                if (Ls[bb].n == 0)
+                    continue;
+                memcpy(pa, C, sizeof pa);
+                memcpy(pb, Ls[bb].c[0], sizeof pb);
+                bs = 1;
+                du = DU_KEEP;
+                kept = 1;
+                ba = -1;
+            }
             if ((size_t) count >= wk->pxcap) {
                 const size_t cap = wk->pxcap ? 2 * wk->pxcap : 256;
                 ef_edge_px *p = realloc(wk->px, cap * sizeof *p);
@@ -338,11 +362,12 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
             }
             ef_edge_px *e = &wk->px[count];
             e->i = r * w + x;
-            e->v[0] = ba == own ? vp : Ls[ba].v;
+            e->v[0] = ba == own || kept ? vp : Ls[ba].v;
             e->v[1] = bb == own ? vp : Ls[bb].v;
             e->w = bs;
             e->du = du;
             e->between = between;
+            e->keep = kept;
             for (int c = 0; c < 4; ++c) {
                 const double res = C[c] - (bs * pa[c] + (1 - bs) * pb[c]);
                 e->c[0][c] = bs * (pa[c] + res);
@@ -358,8 +383,10 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *w
     if (seen_between > seen / 5) {
         int k = 0;
         for (int m = 0; m < count; ++m)
-            if (wk->px[m].between)
-                wk->px[k++] = wk->px[m];
+            if (wk->px[m].between || want_err) {
+                wk->px[k] = wk->px[m];
+                wk->px[k++].keep |= !wk->px[m].between;
+            }
         count = k;
     }
     return count;
@@ -414,6 +441,8 @@ void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge
     for (int m = 0; m < n; ++m) {
         const ef_edge_px *E = &e[m];
         const int x = x0 + E->i % w, y = y0 + E->i / w;
+        if (E->keep && !(mask & EF_AOV_ERROR))
+            continue;
         double out[2][4];
         for (int p = 0; p < 2; ++p) {
             const double wp = p ? 1 - E->w : E->w;
@@ -428,6 +457,12 @@ void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge
             for (int k = 0; k < 3; ++k)
                 out[p][k] = c[k];
             out[p][3] = a;
+        }
+        if (E->keep) {
+            /* the pass's pixel stands; only the error output learns more */
+            for (int k = 0; k < 3; ++k)
+                aov->err[k][E->i] += (float) (E->du * fabs(out[0][k] - out[1][k]));
+            continue;
         }
         const double s = E->w;
         for (int k = 0; k < 3; ++k)

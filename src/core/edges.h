@@ -48,6 +48,7 @@ typedef struct ef_edge_px {
     double pure[2][4];       /* each layer's colour as its pure pixel shows it */
     double du;               /* the uncertainty of w (the error output's unmixing share) */
     int between;             /* its depth lies between the layers (a filtered Z) */
+    int keep;                /* the pass's pixel stands; only its error output gains du */
 } ef_edge_px;
 
 /* Scratch kept between units by one thread. */
@@ -61,9 +62,11 @@ typedef struct ef_edge_work {
 
 void ef_edge_work_free(ef_edge_work *wk);
 
-/* The edge pixels of unit u (its input, before the fog) into wk->px.
- * Returns their count, or -1 when out of memory. */
-int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, ef_edge_work *wk);
+/* The edge pixels of unit u (its input, before the fog) into wk->px;
+ * with want_err (the error output is written), also those the pass's
+ * result stands for, for their error term. Returns their count, or -1
+ * when out of memory. */
+int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, ef_edge_work *wk);
 
 /* Replaces the pass's result at each of the n edge pixels e (unit at x0,
  * y0, w wide; rgb, alpha and aov as the pass wrote them) by the sum of its

@@ -170,7 +170,7 @@ static void fog_chunk(void *user, const ef_chunk *ck)
                                  ck->halo_alpha[0], ck->halo_depth[0],
                                  { ck->halo_rgb[1][0], ck->halo_rgb[1][1], ck->halo_rgb[1][2] },
                                  ck->halo_alpha[1], ck->halo_depth[1] };
-        nedge = ef_edge_find(&j->pass[ck->view], &u, &wk);
+        nedge = ef_edge_find(&j->pass[ck->view], &u, (j->aov & EF_AOV_ERROR) != 0, &wk);
         if (nedge < 0) {
             atomic_store(&j->edge_oom, 1);
             nedge = 0;
