@@ -75,24 +75,32 @@ static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, doubl
     }
 }
 
-/* Whether 1/z bends at (x, r) over a pair of opposite neighbours. */
-static int bends(const ef_edge_rows *u, const double *iz, int x, int r)
+/* Whether 1/z bends at (x, r) over a pair of opposite neighbours (the
+ * rows up, mid and dn of 1/z, up or dn NULL where missing). */
+static inline int bends_at(const double *up, const double *mid, const double *dn, int w, int x)
 {
-    const int w = u->w;
-    const double c = iz[(size_t) (r + 1) * (size_t) w + (size_t) x];
+    const double c = mid[x];
     if (isnan(c))
         return 0;
-    static const int dir[4][2] = { { 1, 0 }, { 0, 1 }, { 1, 1 }, { 1, -1 } };
-    for (int k = 0; k < 4; ++k) {
-        const int xa = x - dir[k][0], xb = x + dir[k][0], ra = r - dir[k][1], rb = r + dir[k][1];
-        if (xa < 0 || xb >= w || xa >= w || xb < 0 || ra < -1 || rb < -1 || ra > u->h || rb > u->h)
+    const int l = x > 0, rr = x + 1 < w;
+    double pa[4], pb[4];
+    int n = 0;
+    if (l && rr) {
+        pa[n] = mid[x - 1], pb[n++] = mid[x + 1];
+        if (up && dn) {
+            pa[n] = up[x - 1], pb[n++] = dn[x + 1];
+            pa[n] = dn[x - 1], pb[n++] = up[x + 1];
+        }
+    }
+    if (up && dn)
+        pa[n] = up[x], pb[n++] = dn[x];
+    for (int k = 0; k < n; ++k) {
+        const double A = pa[k], B = pb[k];
+        if (isnan(A) || isnan(B))
             continue;
-        const double a = iz[(size_t) (ra + 1) * (size_t) w + (size_t) xa];
-        const double b = iz[(size_t) (rb + 1) * (size_t) w + (size_t) xb];
-        if (isnan(a) || isnan(b))
-            continue;
-        const double m = fmax(c, fmax(a, b));
-        if (fabs(a - 2 * c + b) > EF_EDGE_REL * m)
+        double m = c > A ? c : A;
+        m = m > B ? m : B;
+        if (fabs(A - 2 * c + B) > EF_EDGE_REL * m)
             return 1;
     }
     return 0;
@@ -116,31 +124,55 @@ typedef struct layer {
     double c[MAXC][4];
 } layer;
 
-/* Up to MAXC colours of layer L: its pixels in the 5x5 window of (x, r)
- * that are not edges themselves, nearest first; where there is none, its
- * other pixels of the 3x3 window (the edge pixel itself excepted). */
+/* The 5x5 window's cells around its centre, nearest first (Chebyshev
+ * ring, then Manhattan distance). */
+static const signed char ring_cells[24][2] = {
+    { 0, -1 }, { -1, 0 }, { 1, 0 }, { 0, 1 }, { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
+    { 0, -2 }, { -2, 0 }, { 2, 0 }, { 0, 2 }, { -1, -2 }, { 1, -2 }, { -2, -1 }, { 2, -1 },
+    { -2, 1 }, { 2, 1 }, { -1, 2 }, { 1, 2 }, { -2, -2 }, { 2, -2 }, { -2, 2 }, { 2, 2 },
+};
+
+/* Up to MAXC colours of each of the nl layers Ls in one pass over the 5x5
+ * window of (x, r): a layer's pixels that are not edges themselves,
+ * nearest first; where it has none, its other pixels of the 3x3 window
+ * (the edge pixel itself excepted). */
 static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigned char *edge,
-                          int x, int r, layer *L)
+                          int x, int r, layer *Ls, int nl)
 {
     const int w = u->w;
-    L->n = 0;
-    for (int pass = 0; pass < 2 && L->n == 0; ++pass) {
-        for (int ring = 1; ring <= (pass ? 1 : 2); ++ring)
-            for (int dr = -ring; dr <= ring; ++dr)
-                for (int dx = -ring; dx <= ring; ++dx) {
-                    if (abs(dr) != ring && abs(dx) != ring)
-                        continue;   /* this ring only */
-                    const int xx = x + dx, rr = r + dr;
-                    if (xx < 0 || xx >= w || rr < -1 || rr > u->h || L->n >= MAXC)
-                        continue;
-                    const size_t k = (size_t) (rr + 1) * (size_t) w + (size_t) xx;
-                    if (isnan(iz[k]) || (!pass && edge[k]) || !same_layer(iz[k], L->iz))
-                        continue;
-                    pixel_colour(u, rr, xx, L->c[L->n++]);
-                }
-        L->npure = pass == 0 ? L->n : 0;
+    int nmix[MAXL] = { 0 };
+    double mix[MAXL][8][4];
+    for (int m = 0; m < nl; ++m)
+        Ls[m].n = 0;
+    for (int q = 0; q < 24; ++q) {
+        const int xx = x + ring_cells[q][0], rr = r + ring_cells[q][1];
+        if (xx < 0 || xx >= w || rr < -1 || rr > u->h)
+            continue;
+        const size_t k = (size_t) (rr + 1) * (size_t) w + (size_t) xx;
+        const double v = iz[k];
+        if (isnan(v))
+            continue;
+        int m = 0;
+        while (m < nl && !same_layer(v, Ls[m].iz))
+            ++m;
+        if (m == nl)
+            continue;
+        if (!edge[k]) {
+            if (Ls[m].n < MAXC)
+                pixel_colour(u, rr, xx, Ls[m].c[Ls[m].n++]);
+        } else if (q < 8 && nmix[m] < 8) {
+            pixel_colour(u, rr, xx, mix[m][nmix[m]++]);
+        }
     }
-    L->pure = L->npure > 0;
+    for (int m = 0; m < nl && m < MAXL; ++m) {
+        Ls[m].npure = Ls[m].n;
+        Ls[m].pure = Ls[m].n > 0;
+        if (!Ls[m].pure) {
+            for (int q = 0; q < nmix[m] && q < 8; ++q)
+                memcpy(Ls[m].c[q], mix[m][q], sizeof mix[m][q]);
+            Ls[m].n = nmix[m];
+        }
+    }
 }
 
 /* The share s of colour a in C = s a + (1 - s) b (RGB and alpha, least
@@ -192,9 +224,13 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     double *iz = wk->iz;
     unsigned char *edge = wk->edge;
     inverse_depths(pass, u, iz);
-    for (int r = -1; r <= h; ++r)
+    for (int r = -1; r <= h; ++r) {
+        const double *mid = iz + (size_t) (r + 1) * (size_t) w;
+        const double *up = r > -1 ? mid - w : NULL, *dn = r < h ? mid + w : NULL;
+        unsigned char *e = edge + (size_t) (r + 1) * (size_t) w;
         for (int x = 0; x < w; ++x)
-            edge[(size_t) (r + 1) * (size_t) w + (size_t) x] = (unsigned char) bends(u, iz, x, r);
+            e[x] = (unsigned char) bends_at(up, mid, dn, w, x);
+    }
     int count = 0, seen = 0, seen_between = 0;
     for (int r = 0; r < h; ++r)
         for (int x = 0; x < w; ++x) {
@@ -226,11 +262,10 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             const double izp = iz[k];
             const float vp = u->depth[(size_t) r * (size_t) w + (size_t) x];
             int own = -1;
-            for (int m = 0; m < nl; ++m) {
-                layer_colours(u, iz, edge, x, r, &Ls[m]);
+            layer_colours(u, iz, edge, x, r, Ls, nl);
+            for (int m = 0; m < nl; ++m)
                 if (same_layer(izp, Ls[m].iz) && (own < 0 || (Ls[m].pure && !Ls[own].pure)))
                     own = m;
-            }
             double C[4];
             pixel_colour(u, r, x, C);
             ++seen;

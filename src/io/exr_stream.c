@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <time.h>
 #include <unistd.h>
 
 
@@ -539,6 +540,23 @@ typedef struct part_job {
     const _Atomic int *cancel;    /* opts->cancel: stop at the next unit */
     int codec;                /* EF_CODEC_* */
     int halo;                 /* opts->halo (scanline parts only) */
+    /* The halo's shared rows: unit u, once decoded, leaves its first and
+     * last rows of every target (rgb, alpha, depth) in slot u % nslot, so
+     * the units above and below it take them instead of decoding its
+     * chunks again; a slot another unit has taken over is a miss (the
+     * reader decodes). */
+    int nslot;
+    int halo_sync;                /* halo_mx and halo_cv made */
+    pthread_mutex_t halo_mx;      /* with halo_cv: a slot was filled */
+    pthread_cond_t halo_cv;
+    struct halo_slot {
+        pthread_mutex_t lock;
+        int unit;                 /* -1: empty */
+        float *rows;              /* [first, last][target][5][width] */
+        int pre_unit;             /* -1, or the unit whose decoded planes pre holds */
+        uint8_t *pre;             /* nch planes of a unit, as the worker decodes them, or NULL */
+    } *slot;
+    size_t pre_plane;             /* bytes of one plane in pre */
     ef_ring ring;             /* pending encoded units, written in order */
     pthread_mutex_t lock;
     int failed;               /* guarded by lock */
@@ -657,6 +675,114 @@ static int write_unit(void *arg, int u, const ef_unit_buf *b)
     return 0;
 }
 
+/* Planes of target t of a unit for the halo: rgb, alpha (NULL: none) and
+ * depth, rows w long. */
+typedef struct halo_src {
+    const float *p[5];
+} halo_src;
+
+/* Leaves unit u's first and last rows (h rows of w) in its slot. */
+static void halo_publish(part_job *j, int u, int w, int h, const halo_src *src)
+{
+    struct halo_slot *sl = &j->slot[u % j->nslot];
+    pthread_mutex_lock(&sl->lock);
+    for (int side = 0; side < 2; ++side)
+        for (int t = 0; t < j->ntarget; ++t)
+            for (int k = 0; k < 5; ++k) {
+                float *d = sl->rows + ((size_t) ((side * j->ntarget + t) * 5 + k)) * (size_t) w;
+                if (src[t].p[k])
+                    memcpy(d, src[t].p[k] + (size_t) (side ? h - 1 : 0) * (size_t) w,
+                           (size_t) w * sizeof *d);
+            }
+    sl->unit = u;
+    pthread_mutex_unlock(&sl->lock);
+    pthread_mutex_lock(&j->halo_mx);
+    pthread_cond_broadcast(&j->halo_cv);
+    pthread_mutex_unlock(&j->halo_mx);
+}
+
+/* A unit's decoded planes, left by the unit above it, which decoded its
+ * chunk for its own halo (a ZIP chunk of 16 rows is the whole unit): the
+ * unit then need not decode it again. */
+static void pre_publish(part_job *j, int u, void *const *planes, size_t bytes)
+{
+    struct halo_slot *sl = &j->slot[u % j->nslot];
+    if (!sl->pre || bytes > j->pre_plane)
+        return;
+    pthread_mutex_lock(&sl->lock);
+    for (int k = 0; k < j->nch; ++k)
+        memcpy(sl->pre + (size_t) k * j->pre_plane, planes[k], bytes);
+    sl->pre_unit = u;
+    pthread_mutex_unlock(&sl->lock);
+}
+
+/* Unit u's planes from its slot into planes (bytes each): 1, else 0. */
+static int pre_take(part_job *j, int u, void **planes, size_t bytes)
+{
+    struct halo_slot *sl = &j->slot[u % j->nslot];
+    if (!sl->pre || bytes > j->pre_plane)
+        return 0;
+    pthread_mutex_lock(&sl->lock);
+    const int hit = sl->pre_unit == u;
+    if (hit) {
+        for (int k = 0; k < j->nch; ++k)
+            memcpy(planes[k], sl->pre + (size_t) k * j->pre_plane, bytes);
+        sl->pre_unit = -1;
+    }
+    pthread_mutex_unlock(&sl->lock);
+    return hit;
+}
+
+static int halo_take_now(part_job *j, int u, int side, int w, float *out);
+
+/* Unit u's first (side 0) or last row of every target into out ([target]
+ * [5][w]), when its slot holds it: 1, else 0. A unit another thread has
+ * claimed but not yet decoded is waited for (it publishes right after its
+ * decode, before anything that could wait on this unit), up to 50 ms. */
+static int halo_take(part_job *j, int u, int side, int w, float *out)
+{
+    for (int tries = 0; tries < 10; ++tries) {
+        if (halo_take_now(j, u, side, w, out))
+            return 1;
+        pthread_mutex_lock(&j->ring.lock);
+        const int claimed = j->ring.next > u && !j->ring.failed;
+        pthread_mutex_unlock(&j->ring.lock);
+        pthread_mutex_lock(&j->lock);
+        const int failed = j->failed;
+        pthread_mutex_unlock(&j->lock);
+        if (!claimed || failed)
+            return 0;
+        struct timespec ts;
+        clock_gettime(CLOCK_REALTIME, &ts);
+        ts.tv_nsec += 5000000;
+        if (ts.tv_nsec >= 1000000000) {
+            ts.tv_sec += 1;
+            ts.tv_nsec -= 1000000000;
+        }
+        pthread_mutex_lock(&j->halo_mx);
+        if (!halo_take_now(j, u, side, w, out))
+            pthread_cond_timedwait(&j->halo_cv, &j->halo_mx, &ts);
+        else {
+            pthread_mutex_unlock(&j->halo_mx);
+            return 1;
+        }
+        pthread_mutex_unlock(&j->halo_mx);
+    }
+    return 0;
+}
+
+static int halo_take_now(part_job *j, int u, int side, int w, float *out)
+{
+    struct halo_slot *sl = &j->slot[u % j->nslot];
+    pthread_mutex_lock(&sl->lock);
+    const int hit = sl->unit == u;
+    if (hit)
+        memcpy(out, sl->rows + (size_t) (side * j->ntarget) * 5 * (size_t) w,
+               (size_t) j->ntarget * 5 * (size_t) w * sizeof *out);
+    pthread_mutex_unlock(&sl->lock);
+    return hit;
+}
+
 static void *worker(void *arg)
 {
     part_job *j = arg;
@@ -732,8 +858,9 @@ static void *worker(void *arg)
         int x0, y0, w, h;
         unit_rect(&j->g, u, &x0, &y0, &w, &h);
         double t0 = ef_now();
-        /* decode */
-        for (int y = y0; y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
+        /* decode (unless the unit above left this unit's planes) */
+        const int pre = halo && pre_take(j, u, planes, (size_t) w * (size_t) h * 4);
+        for (int y = y0; !pre && y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
             exr_chunk_info_t ci;
             int cx, cy;
             if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
@@ -755,12 +882,29 @@ static void *worker(void *arg)
                          y0, ef_exr_last_core_message());
                 goto out;
             }
-        /* the halo rows: colour, alpha and depth of each target */
+        /* the halo rows: colour, alpha and depth of each target, from the
+         * neighbouring units' slots where they are there, else decoded */
         int have[2] = { 0, 0 };
+        if (halo) {
+            halo_src src[EF_MAX_VIEWS];
+            for (int t = 0; t < j->ntarget; ++t) {
+                const ef_channel_plan *pl = j->t[t].pl;
+                for (int k = 0; k < 3; ++k)
+                    src[t].p[k] = planes[pl->rgb[k].index];
+                src[t].p[3] = pl->alpha.part >= 0 ? planes[pl->alpha.index] : NULL;
+                src[t].p[4] = j->t[t].depth_local >= 0 ? planes[j->t[t].depth_local] : depth[t];
+            }
+            halo_publish(j, u, w, h, src);
+        }
         for (int side = 0; halo && side < 2; ++side) {
             const int y = side ? y0 + h : y0 - 1;
             if (y < j->g.dw.min.y || y > j->g.dw.max.y)
                 continue;
+            if (halo_take(j, side ? u + 1 : u - 1, !side,  w,
+                          hbuf + (size_t) (side * j->ntarget) * 5 * (size_t) w)) {
+                have[side] = 1;
+                continue;
+            }
             for (int t = 0; t < j->ntarget; ++t) {
                 const ef_channel_plan *pl = j->t[t].pl;
                 float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * (size_t) w;
@@ -785,6 +929,14 @@ static void *worker(void *arg)
                                 "truncated or corrupt", y, ef_exr_last_core_message());
                     goto out;
                 }
+            }
+            /* the chunk below is the whole next unit: leave it decoded */
+            if (side && u + 1 < j->g.nunits) {
+                int nx0, ny0, nw, nh;
+                unit_rect(&j->g, u + 1, &nx0, &ny0, &nw, &nh);
+                const depth_reader *r = &hr[1];
+                if (r->cached && r->cy == ny0 && r->ch == nh && r->cx == nx0 && r->cw == nw)
+                    pre_publish(j, u + 1, r->planes, (size_t) nw * (size_t) nh * 4);
             }
             have[side] = 1;
         }
@@ -1027,6 +1179,24 @@ static int check_depth_window(const ef_exr_file *in, const ef_exr_file *df,
     return -1;
 }
 
+/* The halo's slots, if any. */
+static void halo_free(part_job *j)
+{
+    if (j->halo_sync) {
+        pthread_mutex_destroy(&j->halo_mx);
+        pthread_cond_destroy(&j->halo_cv);
+        j->halo_sync = 0;
+    }
+    for (int i = 0; j->slot && i < j->nslot; ++i) {
+        pthread_mutex_destroy(&j->slot[i].lock);
+        free(j->slot[i].rows);
+        free(j->slot[i].pre);
+    }
+    free(j->slot);
+    j->slot = NULL;
+    j->nslot = 0;
+}
+
 static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t out,
                     const char *out_path, int p, const ef_channel_plan *plans, int nplans,
                     const char *const *extra, int nx, const ef_stream_opts *o, ef_chunk_fn fn,
@@ -1095,7 +1265,34 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
         if ((uint64_t) nt > fit)
             nt = fit < 1 ? 1 : (int) fit;
     }
+    if (j.halo && !j.g.tiled) {
+        pthread_mutex_init(&j.halo_mx, NULL);
+        pthread_cond_init(&j.halo_cv, NULL);
+        j.halo_sync = 1;
+        j.nslot = 4 * nt + 4;
+        j.slot = calloc((size_t) j.nslot, sizeof *j.slot);
+        for (int i = 0; j.slot && i < j.nslot; ++i) {
+            pthread_mutex_init(&j.slot[i].lock, NULL);
+            j.slot[i].unit = -1;
+            j.slot[i].pre_unit = -1;
+            j.slot[i].rows = malloc((size_t) 2 * (size_t) j.ntarget * 5 * (size_t) j.g.width *
+                                    sizeof(float));
+            /* the decoded planes of a unit too, within 64 MB for all slots */
+            j.pre_plane = (size_t) j.g.width * (size_t) j.g.unit_rows * 4;
+            if ((uint64_t) j.pre_plane * (uint64_t) j.nch * (uint64_t) j.nslot <= (64u << 20))
+                j.slot[i].pre = malloc(j.pre_plane * (size_t) j.nch);
+            if (!j.slot[i].rows)
+                j.halo = 0;   /* no sharing: every halo row is decoded */
+        }
+        if (!j.slot)
+            j.nslot = 0;
+        if (!j.halo || !j.slot) {
+            halo_free(&j);
+            return ef_fail(err, "out of memory for the edges' rows");
+        }
+    }
     if (ef_ring_init(&j.ring, ef_ring_slots(nt), j.g.nunits, write_unit, &j)) {
+        halo_free(&j);
         pthread_mutex_destroy(&j.lock);
         free(j.as_float);
         return ef_fail(err, "out of memory");
@@ -1112,6 +1309,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
     free(th);
     stats->wait_s += j.ring.wait_s;
     ef_ring_destroy(&j.ring);
+    halo_free(&j);
     pthread_mutex_destroy(&j.lock);
     free(j.as_float);
     stats->decode_s += j.t_decode;
