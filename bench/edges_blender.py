@@ -59,15 +59,20 @@ scene.world = world
 bpy.context.view_layer.use_pass_z = True
 
 
-def emissive(name, colour, alpha_tex=None):
-    """A material that only emits colour (and, for cards, is transparent
-    where a procedural texture says so)."""
+def bare_material(name):
+    """A new node material with no nodes but its output: (material, tree, output)."""
     m = bpy.data.materials.new(name)
     m.use_nodes = True
     nt = m.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
-    o = nt.nodes.new("ShaderNodeOutputMaterial")
+    return m, nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
+
+def emissive(name, colour, alpha_tex=None):
+    """A material that only emits colour (and, for cards, is transparent
+    where a procedural texture says so)."""
+    m, nt, o = bare_material(name)
     e = nt.nodes.new("ShaderNodeEmission")
     e.inputs[0].default_value = colour + (1.0,)
     e.inputs[1].default_value = 1.0
@@ -180,12 +185,7 @@ bpy.ops.render.render(write_still=True)
 # the fog inside the scene: a cube of 4 km around everything
 bpy.ops.mesh.primitive_cube_add(size=4000, location=(0, 0, 0))
 fogbox = bpy.context.object
-m = bpy.data.materials.new("fog")
-m.use_nodes = True
-nt = m.node_tree
-for n in list(nt.nodes):
-    nt.nodes.remove(n)
-o = nt.nodes.new("ShaderNodeOutputMaterial")
+m, nt, o = bare_material("fog")
 ab = nt.nodes.new("ShaderNodeVolumeAbsorption")
 ab.inputs["Color"].default_value = (0, 0, 0, 1)   # Cycles absorbs density (1 - colour)
 ab.inputs["Density"].default_value = density

@@ -37,6 +37,23 @@ def check(cond, what):
         failures.append(what)
 
 
+def judge(r, who, rms_max, over2_max, cover_min):
+    """Checks a scorer's run (r: its process) against the limits."""
+    check(r.returncode == 0, "%s: the scorer runs (%s)" % (who, r.stderr.strip()[-300:]))
+    if r.returncode:
+        return
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    n, e = res["naive"], res["edges"]
+    print("  %s: %d edge pixels; RMS %.4f -> %.4f, off by 2 %%: %d -> %d, covered %.3f"
+          % (who, res["edge_px"], n["rms"], e["rms"], n["over2"], e["over2"], res["cover"]))
+    check(e["rms"] <= rms_max * n["rms"], "%s: edge RMS error at most %g of naive" % (who, rms_max))
+    check(e["over2"] <= over2_max * n["over2"],
+          "%s: pixels off by 2 %% at most %g of naive" % (who, over2_max))
+    check(res["interior_change"] == 0.0, "%s: pixels away from edges unchanged" % who)
+    check(res["cover"] >= cover_min,
+          "%s: the error output covers %g of edge pixels" % (who, cover_min))
+
+
 # 1. the deep file's own flatten as the truth
 r = subprocess.run(["/usr/bin/python3", os.path.join(source, "bench", "edges_deep.py"), exrfog,
                     os.path.join(work, "weta"), "--shared", shared, "--fog", "exp:density=0.02"],
@@ -44,17 +61,7 @@ r = subprocess.run(["/usr/bin/python3", os.path.join(source, "bench", "edges_dee
 if r.returncode == 77:
     print("Weta's deep elements are missing: part 1 skipped")
 else:
-    check(r.returncode == 0, "edges_deep.py runs (%s)" % r.stderr.strip()[-300:])
-    if r.returncode == 0:
-        res = json.loads(r.stdout.strip().splitlines()[-1])
-        n, e = res["naive"], res["edges"]
-        print("  Weta, closest Z: %d edge pixels; RMS %.4f -> %.4f, off by 2 %%: %d -> %d, "
-              "covered %.3f" % (res["edge_px"], n["rms"], e["rms"], n["over2"], e["over2"],
-                                res["cover"]))
-        check(e["rms"] <= 0.30 * n["rms"], "Weta: edge RMS error at most 0.30 of naive")
-        check(e["over2"] <= 0.25 * n["over2"], "Weta: pixels off by 2 % at most a quarter")
-        check(res["interior_change"] == 0.0, "Weta: pixels away from edges unchanged")
-        check(res["cover"] >= 0.95, "Weta: the error output covers 95 % of edge pixels")
+    judge(r, "Weta, closest Z", 0.30, 0.25, 0.95)
 
 # 2. Blender's render with the fog in the scene
 blender = shutil.which("blender")
@@ -70,17 +77,7 @@ else:
     if "edges_blender: rendered" in r.stdout:
         r = subprocess.run(["/usr/bin/python3", os.path.join(source, "bench", "edges_eval.py"),
                             exrfog, d], capture_output=True, text=True)
-        check(r.returncode == 0, "edges_eval.py runs (%s)" % r.stderr.strip()[-300:])
-        if r.returncode == 0:
-            res = json.loads(r.stdout.strip().splitlines()[-1])
-            n, e = res["naive"], res["edges"]
-            print("  Blender thin: %d edge pixels; RMS %.4f -> %.4f, off by 2 %%: %d -> %d, "
-                  "covered %.3f" % (res["edge_px"], n["rms"], e["rms"], n["over2"], e["over2"],
-                                    res["cover"]))
-            check(e["rms"] <= 0.55 * n["rms"], "Blender: edge RMS error at most 0.55 of naive")
-            check(e["over2"] <= 0.27 * n["over2"], "Blender: pixels off by 2 % at most 0.27")
-            check(res["interior_change"] == 0.0, "Blender: pixels away from edges unchanged")
-            check(res["cover"] >= 0.93, "Blender: the error output covers 93 % of edge pixels")
+        judge(r, "Blender thin", 0.55, 0.27, 0.93)
 
 # 3. the flag
 deep = os.path.join(shared, "real-exr", "arnold-deep-representative.exr")
