@@ -18,6 +18,9 @@
  * error output's term there): calibrated on bench/edges_blender.py's
  * calib scene, not a test scene (bench/edges.md). */
 #define DU_KEEP 0.2
+/* The share of a thin thing (no pixel of it pure) in its most distinct
+ * pixel, as the pixel filter leaves it: calibrated on the calib scene. */
+#define W_THIN 0.85
 /* A mix of the two colours leaving a residual above this fraction of
  * their difference explains nothing (texture, or a third surface). */
 #define RES_MAX 0.35
@@ -278,6 +281,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
              * with the layers just in front and behind. */
             double best = INFINITY, bs = 1, bdd = 1, du = 0.5;
             int ba = -1, bb = -1, bca = 0, bcb = 0, bca_sel = 0, between = 0;
+            double a_sel[4] = { 0, 0, 0, 0 };
             if (own >= 0) {
                 /* A colour within the range its own layer's pure pixels
                  * span is that surface's texture, not a mix. Else the own
@@ -332,8 +336,17 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                                 }
                             }
                         }
+                        /* a layer no pixel shows whole: its most distinct
+                         * pixel is itself a mix; its own colour lies beyond,
+                         * at W_THIN of the way */
+                        double a[4];
+                        for (int c = 0; c < 4; ++c)
+                            a[c] = O->pure ? O->c[ia][c]
+                                           : Ls[mb].c[ib][c] + (O->c[ia][c] - Ls[mb].c[ib][c]) / W_THIN;
+                        if (!O->pure && (a[3] > 1 || a[3] < 0))
+                            a[3] = a[3] > 1 ? 1 : 0;
                         double sm, r2, dd;
-                        if (!unmix(C, O->c[ia], Ls[mb].c[ib], &sm, &r2, &dd) || !(r2 < best))
+                        if (!unmix(C, a, Ls[mb].c[ib], &sm, &r2, &dd) || !(r2 < best))
                             continue;
                         best = r2;
                         bs = sm;
@@ -341,6 +354,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                         bb = mb;
                         bcb = ib;
                         bca_sel = ia;
+                        memcpy(a_sel, a, sizeof a_sel);
                     }
                 }
                 bca = bca_sel;
@@ -363,7 +377,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                 between = 1;
             }
             double pa[4], pb[4];
-            memcpy(pa, Ls[ba].c[bca], sizeof pa);
+            memcpy(pa, between ? Ls[ba].c[bca] : a_sel, sizeof pa);
             memcpy(pb, Ls[bb].c[bcb], sizeof pb);
             int kept = 0;
             if (ba == own && bs >= 1) {
