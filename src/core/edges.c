@@ -12,7 +12,7 @@
  * depth does instead. */
 #define CONTRAST_MIN 0.02
 /* The share's uncertainty beyond what the residual shows (edges.h's du):
- * calibrated on bench/edges.py's calibration scene (not a test scene). */
+ * calibrated on bench/edges_blender.py's calib scene, not a test scene. */
 #define DU_FLOOR 0.1
 /* The share of another layer a pixel left as it is may still hold (the
  * error output's term there): calibrated on bench/edges_blender.py's
@@ -39,6 +39,8 @@ static const float *row_depth(const ef_edge_rows *u, int r)
     return r < 0 ? u->up_depth : r >= u->h ? u->dn_depth : u->depth + (size_t) r * (size_t) u->w;
 }
 
+/* Pixel (x, r)'s premultiplied RGB and alpha (1 without alpha; a value
+ * that is not finite counts as 0). */
 static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
 {
     const float *const *rgb = r < 0 ? u->up_rgb : r >= u->h ? u->dn_rgb : u->rgb;

@@ -4,14 +4,18 @@
  * what lies behind it, but its depth is one number, so one fog for the
  * whole pixel is wrong for part of its colour (the outline around thin
  * things). Here each edge pixel is taken as a mix of two surfaces its
- * neighbourhood shows, the nearest and the farthest of its 3x3 window:
- * their colours are the nearest pixels of each layer in the 5x5 window
- * that are not edges themselves; the near surface's share w solves
- * C = w c_near + (1 - w) c_far (RGB and alpha) in least squares, and the
- * residual goes to both parts by their shares. Each part is fogged at its
- * own depth along the pixel's own ray, by the pass itself (lights, sky
- * light and AOVs included), and the two are summed. Pixels that are not
- * edges are left to the pass as they are.
+ * neighbourhood shows. The layers are the depths its 8 neighbours show;
+ * a layer's colour comes from its nearest pixels in the 5x5 window that
+ * are not edges themselves. Where the pixel's own depth is a layer (a Z
+ * that is one surface's depth), its share s solves C = s A + (1 - s) B
+ * (RGB and alpha, least squares) with A its own layer's colour nearest
+ * C and B the other layer's colour that fits best; no mix where C lies
+ * within its own layer's texture or no mix explains it. Where its depth
+ * lies between two layers (a filtered Z), the depth gives the share. The
+ * fit's residual goes to both parts by their shares. Each part is
+ * fogged at its own depth along the pixel's own ray, by the pass itself
+ * (lights, sky light and AOVs included), and the two are summed. Pixels
+ * that are not edges are left to the pass as they are.
  *
  * An edge is a pixel where the inverse depth 1/z of its 3x3 window bends:
  * |1/z_q - 2/z_p + 1/z_q'| over a pair of opposite neighbours above
