@@ -58,7 +58,7 @@ static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
  * row is missing or the depth unusable) into wk->iz, (h + 2) rows of w. */
 static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, double *iz)
 {
-    ef_ray rays[EF_RECON_SPAN];
+    double planar[EF_RECON_SPAN];
     unsigned char sky[EF_RECON_SPAN];
     for (int r = -1; r <= u->h; ++r) {
         double *out = iz + (size_t) (r + 1) * (size_t) u->w;
@@ -70,10 +70,10 @@ static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, doubl
         }
         for (int xs = 0; xs < u->w; xs += EF_RECON_SPAN) {
             const int n = u->w - xs < EF_RECON_SPAN ? u->w - xs : EF_RECON_SPAN;
-            ef_reconstruct_span(pass->cam, pass->conv, u->x0 + xs, u->y0 + r, n, d + xs, 0, rays,
-                                sky);
+            ef_reconstruct_dist(pass->cam, pass->conv, u->x0 + xs, u->y0 + r, n, d + xs, 0, planar,
+                                NULL, sky);
             for (int j = 0; j < n; ++j) {
-                const double p = rays[j].planar;
+                const double p = planar[j];
                 out[xs + j] = sky[j] ? 0.0 : p > 0 && isfinite(p) ? 1.0 / p : NAN;
             }
         }
