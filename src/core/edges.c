@@ -468,12 +468,15 @@ static int mixable(const ef_aov_out *a, float **out)
 
 #define NMIX (4 + 3 + 3 + 3 + 4 * EF_MAX_LIGHTS + 3)
 
+/* Edge pixels fogged together when they are neighbours in a row. */
+#define RUN 64
+
 void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge_px *e, int n,
                    float *const rgb[3], float *alpha, const ef_aov_out *aov)
 {
     const ef_fog_scene *s = pass->scene;
     const unsigned mask = aov ? aov->mask : 0;
-    float vals[2][EF_AOV_MAX_CHANNELS];
+    float vals[2][EF_AOV_MAX_CHANNELS][RUN];
     float *planes[2][EF_AOV_MAX_CHANNELS];
     ef_aov_out loc[2];
     float *unit_mix[NMIX], *loc_mix[2][NMIX];
@@ -481,7 +484,7 @@ void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge
     if (mask) {
         for (int p = 0; p < 2; ++p) {
             for (int c = 0; c < EF_AOV_MAX_CHANNELS; ++c)
-                planes[p][c] = &vals[p][c];
+                planes[p][c] = vals[p][c];
             memset(&loc[p], 0, sizeof loc[p]);
             ef_aov_bind(&loc[p], mask, s, planes[p]);
             memcpy(loc[p].origin, aov->origin, sizeof loc[p].origin);
@@ -489,42 +492,48 @@ void ef_edge_apply(const ef_fog_pass *pass, int x0, int y0, int w, const ef_edge
         }
         nmix = mixable(aov, unit_mix);
     }
-    for (int m = 0; m < n; ++m) {
-        const ef_edge_px *E = &e[m];
-        const int x = x0 + E->i % w, y = y0 + E->i / w;
-        if (E->keep && !(mask & EF_AOV_ERROR))
-            continue;
-        double out[2][4];
+    for (int m = 0; m < n;) {
+        /* a run of edge pixels next to each other in one row */
+        int len = 1;
+        while (m + len < n && len < RUN && e[m + len].i == e[m].i + len &&
+               e[m + len].i / w == e[m].i / w)
+            ++len;
+        const int x = x0 + e[m].i % w, y = y0 + e[m].i / w;
+        float c[2][3][RUN], a[2][RUN], v[2][RUN];
         for (int p = 0; p < 2; ++p) {
-            const double wp = p ? 1 - E->w : E->w;
-            float c[3], a;
-            for (int k = 0; k < 3; ++k)
-                c[k] = (float) (wp > 1e-9 ? E->c[p][k] / wp : E->pure[p][k]);
-            a = (float) (wp > 1e-9 ? E->c[p][3] / wp : E->pure[p][3]);
-            float *cp[3] = { &c[0], &c[1], &c[2] };
-            const float v = E->v[p];
-            ef_fog_block_aov(pass, x, y, 1, 1, cp, alpha ? &a : NULL, &v, mask ? &loc[p] : NULL,
-                             NULL);
-            for (int k = 0; k < 3; ++k)
-                out[p][k] = c[k];
-            out[p][3] = a;
+            for (int j = 0; j < len; ++j) {
+                const ef_edge_px *E = &e[m + j];
+                const double wp = p ? 1 - E->w : E->w;
+                for (int k = 0; k < 3; ++k)
+                    c[p][k][j] = (float) (wp > 1e-9 ? E->c[p][k] / wp : E->pure[p][k]);
+                a[p][j] = (float) (wp > 1e-9 ? E->c[p][3] / wp : E->pure[p][3]);
+                v[p][j] = E->v[p];
+            }
+            float *cp[3] = { c[p][0], c[p][1], c[p][2] };
+            ef_fog_block_aov(pass, x, y, len, 1, cp, alpha ? a[p] : NULL, v[p],
+                             mask ? &loc[p] : NULL, NULL);
         }
-        if (E->keep) {
-            /* the pass's pixel stands; only the error output learns more */
+        for (int j = 0; j < len; ++j) {
+            const ef_edge_px *E = &e[m + j];
+            if (E->keep) {
+                /* the pass's pixel stands; only the error output learns more */
+                for (int k = 0; mask & EF_AOV_ERROR && k < 3; ++k)
+                    aov->err[k][E->i] += (float) (E->du * fabs(c[0][k][j] - c[1][k][j]));
+                continue;
+            }
+            const double sh = E->w;
             for (int k = 0; k < 3; ++k)
-                aov->err[k][E->i] += (float) (E->du * fabs(out[0][k] - out[1][k]));
-            continue;
+                rgb[k][E->i] = (float) (sh * c[0][k][j] + (1 - sh) * c[1][k][j]);
+            if (alpha && isfinite(alpha[E->i]))
+                alpha[E->i] = (float) (sh * a[0][j] + (1 - sh) * a[1][j]);
+            for (int q = 0; q < nmix; ++q)
+                if (unit_mix[q] && loc_mix[0][q] && loc_mix[1][q])
+                    unit_mix[q][E->i] =
+                        (float) (sh * loc_mix[0][q][j] + (1 - sh) * loc_mix[1][q][j]);
+            if (mask & EF_AOV_ERROR)
+                for (int k = 0; k < 3; ++k)
+                    aov->err[k][E->i] += (float) (E->du * fabs(c[0][k][j] - c[1][k][j]));
         }
-        const double s = E->w;
-        for (int k = 0; k < 3; ++k)
-            rgb[k][E->i] = (float) (s * out[0][k] + (1 - s) * out[1][k]);
-        if (alpha && isfinite(alpha[E->i]))
-            alpha[E->i] = (float) (s * out[0][3] + (1 - s) * out[1][3]);
-        for (int q = 0; q < nmix; ++q)
-            if (unit_mix[q] && loc_mix[0][q] && loc_mix[1][q])
-                unit_mix[q][E->i] = (float) (s * *loc_mix[0][q] + (1 - s) * *loc_mix[1][q]);
-        if (mask & EF_AOV_ERROR)
-            for (int k = 0; k < 3; ++k)
-                aov->err[k][E->i] += (float) (E->du * fabs(out[0][k] - out[1][k]));
+        m += len;
     }
 }
