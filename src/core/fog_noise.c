@@ -474,6 +474,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
      * plus the clamp's share (clamp_part) */
     const int clamp_fast = !s->separable && s->clamp && s->method == M_ADAPTIVE && s->ttol > 0;
     double unit = 0, err = 0, tail = 0;  /* tau / rho, its error, the dropped tail's bound */
+    double stop_lo = 0;                  /* past the ttol stop: tau / rho's lower value */
     long double tend = t1;
     if (sky) {
         if (s->method == M_ADAPTIVE)
@@ -572,7 +573,27 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
             }
             info->dropped = n;
         }
-        const long double per = OPAQUE_TAU / 2 / (s->rho_max * shape_bound(s));
+        /* Under ttol (the default) the ray stops where T is below ttol/4
+         * in every channel, as the fast path does: nothing past it can
+         * move T by more; else at OPAQUE_TAU. */
+        const int ttol_stop = s->method == M_ADAPTIVE && s->ttol > 0 && !(tol_over > 0);
+        double cut_tau = OPAQUE_TAU;
+        if (ttol_stop) {
+            /* the stop, chunk by chunk at its scale, where the ray surely
+             * reaches it (the shape's least value over the mean fog);
+             * elsewhere the chunks stay OPAQUE_TAU's, as the stop cannot
+             * pay for the pieces their ends split */
+            double wsum = 0;
+            for (int i = 0; i < s->fbm.octaves; ++i)
+                wsum += s->fbm.weight[i];
+            const double f = 1 - fabs(s->contrast) * EF_NOISE_BOUND * wsum;
+            const double least = f > 0 ? pow(f, s->separable ? s->naxes : 1) : 0;
+            const double tau_stop = log(4 / s->ttol);
+            if (least * ef_nz_rho_min(s) *
+                    (double) ef_nz_env_integral(s, R.h0, R.hs, t0, tend) >= tau_stop)
+                cut_tau = tau_stop;
+        }
+        const long double per = cut_tau / 2 / (s->rho_max * shape_bound(s));
         const int chunked = (double) ef_nz_env_integral(s, R.h0, R.hs, t0, tend) > (double) per * 2;
         /* A ray that may turn opaque, under adaptive: the coarsest kept
          * octave goes first, alone, chunk by chunk (in quarter chunks: it
@@ -618,7 +639,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
             const double sofar = linear ? (double) ef_nz_env_integral(s, R.h0, R.hs, t0, ca) +
                                               s->contrast * kval(&noise) - rest
                                         : kval(&noise);
-            if (ca < t1 && chunked && sofar * ef_nz_rho_min(s) >= OPAQUE_TAU) {
+            if (ca < t1 && chunked && (sofar - (linear ? 0 : e)) * ef_nz_rho_min(s) >= cut_tau) {
                 cut = 1;
                 break;
             }
@@ -635,6 +656,19 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
             mean = linear ? (double) ef_nz_env_integral(s, R.h0, R.hs, t0, ca) - rest : 0;
         }
         unit = linear ? mean + s->contrast * kval(&noise) : kval(&noise);
+        if (cut && cut_tau < OPAQUE_TAU) {
+            /* Stopped under ttol: the true T lies in [0, T_up], T_up from
+             * the lower value reached. Reported: the mean fog to the end,
+             * but at least ln 2 above the lower value (T at most T_up / 2),
+             * and the error output spans [0, T_up] (as the fast path's
+             * stop). */
+            stop_lo = linear ? unit : unit - e;
+            const double rmin = ef_nz_rho_min(s);
+            const double to_end = (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1);
+            unit = fmax(stop_lo + LN2 / rmin, to_end);
+            if (s->rho_max * (unit - stop_lo) > 600)
+                unit = stop_lo + 600 / s->rho_max;
+        }
         if (s->method == M_EXACT)
             /* Rounding: the comparison with the reference saw up to 5.6e-14
              * relative over 10,000 segments; 1e-13 of tau covers it. */
@@ -642,7 +676,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         else
             err = (linear ? P.est / s->rho_max : e) + tail + over_err;
         if (cut)
-            err = -1;
+            err = cut_tau < OPAQUE_TAU ? -2 : -1;
         break;
     }
     case M_STEPS: {
@@ -667,12 +701,16 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
     }
     if (unit < 0)
         unit = 0;   /* rounding below an exactly zero density */
-    if (opaque)
+    if (opaque && err != -2)
         err = -1;   /* marks the cut: see below */
     for (int k = 0; k < 3; ++k) {
         tau[k] = s->rho[k] * unit;
-        /* Past the cut the true T lies in [0, T]: |dT| <= T = T expm1(ln 2). */
-        info->err[k] = err < 0 ? (s->rho[k] > 0 ? LN2 : 0) : s->rho[k] * err;
+        /* Past the cut the true T lies in [0, T]: |dT| <= T = T expm1(ln 2);
+         * past the ttol stop, in [0, T_up] (err -2). */
+        info->err[k] = !(s->rho[k] > 0) ? 0
+                       : err == -2      ? fmax(LN2, s->rho[k] * (unit - stop_lo))
+                       : err < 0        ? LN2
+                                        : s->rho[k] * err;
     }
     info->evals = R.evals;
     info->cells = R.cells;
