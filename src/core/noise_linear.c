@@ -127,8 +127,9 @@ static double noise_sigma4(const rayc *R, double emax, double L, double m)
  * coarse cells); deeper in the tree the rule's three points cost less
  * than 17 evaluations a cell of every resolved octave (corner-c4-8oct:
  * 14,516 -> 11,138 evaluations a pixel, 88 -> 96 % of pixels within
- * 2^-12 as fewer reach the work bound; sweep-19 3,316 -> 2,854; sweep-01
- * 576 -> 647). */
+ * 2^-12 as fewer reach the work bound, though 18 % more CPU: the rule's
+ * points cost more than the walk's nodes; sweep-19 3,316 -> 2,854 and 6 %
+ * less CPU; sweep-01 576 -> 647). */
 #define CLAMP_EXACT_J 2
 
 
