@@ -805,6 +805,31 @@ static void test_clamp_fast_path(void **state)
     ef_fog_free(&b);
 }
 
+/* tau of c on r against the reference in channel 0: counts into *bad a
+ * ray whose |dT| is over 2^-12 or not covered by the error output, keeps
+ * the largest |dT| in *worst, gives the reference's tau in *ref0 (may be
+ * NULL); returns the evaluations. */
+static double ray_vs_ref(const ef_fog_component *c, const ef_ray *r, double *worst, long *bad,
+                         long double *ref0)
+{
+    long double ref[3];
+    assert_int_equal(ef_ref_tau(c, r, ref, NULL), 0);
+    double tau[3];
+    ef_tau_info in;
+    ef_fog_tau(c, r, tau, &in);
+    const long double T = expl(-(long double) tau[0]);
+    const double dT = (double) fabsl(T - expl(-ref[0]));
+    const int cov = dT <= (double) (T > 0 ? T * expm1l(in.err[0]) : 0) || dT == 0;
+    *worst = fmax(*worst, dT);
+    if (!(dT <= 0x1p-12) || !cov) {
+        ++*bad;
+        printf("  ray: tau %.9g ref %.9Lg err %.3g\n", tau[0], ref[0], in.err[0]);
+    }
+    if (ref0)
+        *ref0 = ref[0];
+    return in.evals;
+}
+
 /* Patchy fog that the rays end opaque in (a camera high above steep
  * height fog, looking down into it: the bench sweep's sweep-22). The
  * clamp left every lower value of the ray's depth at 0, so the early thin
@@ -832,20 +857,11 @@ static void test_clamp_opaque_pilot(void **state)
                      { uni(&g, -50, 50), h, uni(&g, -50, 50) } };
         /* to the ground y = 0, or 300 units into the sky */
         r.dist = r.planar = r.dir[1] < -1e-3 ? h / -r.dir[1] : 300;
-        long double ref[3];
-        assert_int_equal(ef_ref_tau(&patchy, &r, ref, NULL), 0);
+        long double ref0;
+        ep += ray_vs_ref(&patchy, &r, &worst, &bad, &ref0);
+        opaque += ref0 > 20;
         double tau[3];
-        ef_tau_info ip, is;
-        ef_fog_tau(&patchy, &r, tau, &ip);
-        const long double T = expl(-(long double) tau[0]);
-        const double dT = (double) fabsl(T - expl(-ref[0]));
-        const int cov = dT <= (double) (T > 0 ? T * expm1l(ip.err[0]) : 0) || dT == 0;
-        worst = fmax(worst, dT);
-        bad += !(dT <= 0x1p-12) || !cov;
-        opaque += ref[0] > 20;
-        if (!(dT <= 0x1p-12) || !cov)
-            printf("  ray %ld: tau %.9g ref %.9Lg err %.3g\n", k, tau[0], ref[0], ip.err[0]);
-        ep += ip.evals;
+        ef_tau_info is;
         ef_fog_tau(&smooth, &r, tau, &is);
         es += is.evals;
     }
@@ -877,19 +893,9 @@ static void test_separable_stop(void **state)
     for (long k = 0; k < n; ++k) {
         ef_ray r = random_segment(&g, 5, NULL, NULL, 0);
         r.dist = r.planar = uni(&g, 300, 500);   /* tau about 60 to 100 */
-        long double ref[3];
-        assert_int_equal(ef_ref_tau(&d, &r, ref, NULL), 0);
+        ed += ray_vs_ref(&d, &r, &worst, &bad, NULL);
         double tau[3];
-        ef_tau_info id, it;
-        ef_fog_tau(&d, &r, tau, &id);
-        const long double T = expl(-(long double) tau[0]);
-        const double dT = (double) fabsl(T - expl(-ref[0]));
-        const int cov = dT <= (double) (T * expm1l(id.err[0]));
-        worst = fmax(worst, dT);
-        bad += !(dT <= 0x1p-12) || !cov;
-        if (!(dT <= 0x1p-12) || !cov)
-            printf("  ray %ld: tau %.9g ref %.9Lg err %.3g\n", k, tau[0], ref[0], id.err[0]);
-        ed += id.evals;
+        ef_tau_info it;
         ef_fog_tau(&t, &r, tau, &it);
         et += it.evals;
     }
