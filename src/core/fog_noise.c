@@ -474,7 +474,8 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
      * plus the clamp's share (clamp_part) */
     const int clamp_fast = !s->separable && s->clamp && s->method == M_ADAPTIVE && s->ttol > 0;
     double unit = 0, err = 0, tail = 0;  /* tau / rho, its error, the dropped tail's bound */
-    double stop_lo = 0;                  /* past the ttol stop: tau / rho's lower value */
+    double stop_err[3];                  /* past the ttol stop: the error output (stopped) */
+    int stopped = 0;
     long double tend = t1;
     if (sky) {
         if (s->method == M_ADAPTIVE)
@@ -588,7 +589,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
                 wsum += s->fbm.weight[i];
             const double f = 1 - fabs(s->contrast) * EF_NOISE_BOUND * wsum;
             const double least = f > 0 ? pow(f, s->separable ? s->naxes : 1) : 0;
-            const double tau_stop = log(4 / s->ttol);
+            const double tau_stop = ef_nz_tau_stop(s);
             if (least * ef_nz_rho_min(s) *
                     (double) ef_nz_env_integral(s, R.h0, R.hs, t0, tend) >= tau_stop)
                 cut_tau = tau_stop;
@@ -657,17 +658,12 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         }
         unit = linear ? mean + s->contrast * kval(&noise) : kval(&noise);
         if (cut && cut_tau < OPAQUE_TAU) {
-            /* Stopped under ttol: the true T lies in [0, T_up], T_up from
-             * the lower value reached. Reported: the mean fog to the end,
-             * but at least ln 2 above the lower value (T at most T_up / 2),
-             * and the error output spans [0, T_up] (as the fast path's
-             * stop). */
-            stop_lo = linear ? unit : unit - e;
-            const double rmin = ef_nz_rho_min(s);
-            const double to_end = (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1);
-            unit = fmax(stop_lo + LN2 / rmin, to_end);
-            if (s->rho_max * (unit - stop_lo) > 600)
-                unit = stop_lo + 600 / s->rho_max;
+            /* stopped under ttol, as the fast path stops: the lower value
+             * reached (the pieces less their error), the mean fog to the
+             * end as the estimate */
+            unit = ef_nz_stop_report(s, linear ? unit : unit - e,
+                                     (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1), stop_err);
+            stopped = 1;
         }
         if (s->method == M_EXACT)
             /* Rounding: the comparison with the reference saw up to 5.6e-14
@@ -676,7 +672,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         else
             err = (linear ? P.est / s->rho_max : e) + tail + over_err;
         if (cut)
-            err = cut_tau < OPAQUE_TAU ? -2 : -1;
+            err = -1;
         break;
     }
     case M_STEPS: {
@@ -701,16 +697,13 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
     }
     if (unit < 0)
         unit = 0;   /* rounding below an exactly zero density */
-    if (opaque && err != -2)
+    if (opaque)
         err = -1;   /* marks the cut: see below */
     for (int k = 0; k < 3; ++k) {
         tau[k] = s->rho[k] * unit;
         /* Past the cut the true T lies in [0, T]: |dT| <= T = T expm1(ln 2);
-         * past the ttol stop, in [0, T_up] (err -2). */
-        info->err[k] = !(s->rho[k] > 0) ? 0
-                       : err == -2      ? fmax(LN2, s->rho[k] * (unit - stop_lo))
-                       : err < 0        ? LN2
-                                        : s->rho[k] * err;
+         * past the ttol stop, ef_nz_stop_report's error. */
+        info->err[k] = stopped ? stop_err[k] : err < 0 ? (s->rho[k] > 0 ? LN2 : 0) : s->rho[k] * err;
     }
     info->evals = R.evals;
     info->cells = R.cells;

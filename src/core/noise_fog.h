@@ -420,6 +420,20 @@ double ef_nz_ttol_budget(const rayc *R, long double t0, long double t1, double L
 
 /* ---- noise_linear.c: the default method, segment by segment ---- */
 
+/* The optical depth past which a ray under ttol stops: T below ttol/4 in
+ * every channel, which nothing past it can move by more. */
+static inline double ef_nz_tau_stop(const nstate *s)
+{
+    return log(4 / s->ttol);
+}
+
+/* A ray stopped under ttol, whose true tau / rho is at least lo: the tau
+ * / rho to report, est (the mean fog to the end) held at least ln 2
+ * above lo in every channel (T at most T_up / 2) and at most 600 above
+ * (T expm1(err) stays finite in double), and into errk the error output
+ * per channel, which then spans [0, T_up] and no more. */
+double ef_nz_stop_report(const nstate *s, double lo, double est, double errk[3]);
+
 /* tau / rho of the noise model under ttol, with its error per channel. */
 double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long double t1,
                              int opaque, double tail, ef_tau_info *info, double errk[3]);

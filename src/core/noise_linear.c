@@ -462,6 +462,23 @@ static double pilot_rest(const pilot *P, double t)
     return r;
 }
 
+double ef_nz_stop_report(const nstate *s, double lo, double est, double errk[3])
+{
+    /* The estimate lies within [0, T_up]; at least ln 2 above lo it is at
+     * most T_up / 2, so the error output, at least T itself, spans
+     * [0, T_up]. Past 600 above lo it is held there: still within, and T
+     * would underflow and expm1 overflow. */
+    const double rmin = ef_nz_rho_min(s);
+    double unit = est;
+    if (rmin * (unit - lo) < LN2)
+        unit = lo + LN2 / rmin;
+    if (s->rho_max * (unit - lo) > 600)
+        unit = lo + 600 / s->rho_max;
+    for (int k = 0; k < 3; ++k)
+        errk[k] = s->rho[k] > 0 ? fmax(LN2, s->rho[k] * (unit - lo)) : 0;
+    return unit;
+}
+
 /* The noise part's integral for the linear density (noise, |c| <= 0.9649)
  * under ttol (the default) over [t0, tend], segment by segment, and
  * tau / rho (the closed-form mean to t1 plus c times it). Each segment gets
@@ -484,7 +501,7 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
     const nstate *s = R->s;
     const int N = s->fbm.octaves;
     const double eps = s->ttol, rmin = ef_nz_rho_min(s);
-    const double tau_stop = log(4 / eps);
+    const double tau_stop = ef_nz_tau_stop(s);
     double cross[EF_FBM_MAX_OCTAVES];
     for (int i = 0; i < N; ++i)
         cross[i] = (double) (fabsl(R->u[3 * i].d) + fabsl(R->u[3 * i + 1].d) +
@@ -676,21 +693,9 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
     const double mean_to = (double) ef_nz_env_integral(s, R->h0, R->hs, t0, opaque ? t : t1);
     double unit = mean_to + s->contrast * kval(&noise) + kval(&corr);
     if (stop) {
-        /* True T_k lies in [0, T_up] with T_up = e^-(rho_k ulo): the
-         * estimate (the mean fog to the end) is within it, and the error
-         * output reaches from it to T_up. The estimate is at most T_up / 2
-         * in every channel (at least ln 2 above ulo in tau): the error
-         * output, at least T itself, then spans [0, T_up] and no more.
-         * Past 600 in tau above ulo, the estimate is held there: still
-         * within, and T expm1(err) stays finite in double (T would
-         * underflow, expm1 overflow). */
+        /* True T_k lies in [0, T_up] with T_up = e^-(rho_k ulo) */
         const double ulo = mean_sofar + s->contrast * kval(&noise) + kval(&corr) - E;
-        if (rmin * (unit - ulo) < LN2)
-            unit = ulo + LN2 / rmin;
-        if (s->rho_max * (unit - ulo) > 600)
-            unit = ulo + 600 / s->rho_max;
-        for (int k = 0; k < 3; ++k)
-            errk[k] = s->rho[k] > 0 ? fmax(LN2, s->rho[k] * (unit - ulo)) : 0;
+        unit = ef_nz_stop_report(s, ulo, unit, errk);
     } else if (opaque) {
         for (int k = 0; k < 3; ++k)
             errk[k] = s->rho[k] > 0 ? LN2 : 0;
