@@ -1265,6 +1265,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
         if ((uint64_t) nt > fit)
             nt = fit < 1 ? 1 : (int) fit;
     }
+    int halo_ok = 1;
     if (j.halo && !j.g.tiled) {
         pthread_mutex_init(&j.halo_mx, NULL);
         pthread_cond_init(&j.halo_cv, NULL);
@@ -1277,17 +1278,19 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
             j.slot[i].pre_unit = -1;
             j.slot[i].rows = malloc((size_t) 2 * (size_t) j.ntarget * 5 * (size_t) j.g.width *
                                     sizeof(float));
-            /* the decoded planes of a unit too, within 64 MB for all slots */
+            /* the decoded planes of a unit too, within 64 MB for all slots
+             * (without them, the halo decodes its chunks itself) */
             j.pre_plane = (size_t) j.g.width * (size_t) j.g.unit_rows * 4;
             if ((uint64_t) j.pre_plane * (uint64_t) j.nch * (uint64_t) j.nslot <= (64u << 20))
                 j.slot[i].pre = malloc(j.pre_plane * (size_t) j.nch);
-            if (!j.slot[i].rows)
-                j.halo = 0;   /* no sharing: every halo row is decoded */
+            halo_ok &= j.slot[i].rows != NULL;
         }
-        if (!j.slot)
-            j.nslot = 0;
-        if (!j.halo || !j.slot) {
+        if (!j.slot || !halo_ok) {
+            if (!j.slot)
+                j.nslot = 0;
             halo_free(&j);
+            pthread_mutex_destroy(&j.lock);
+            free(j.as_float);
             return ef_fail(err, "out of memory for the edges' rows");
         }
     }

@@ -34,8 +34,6 @@ _Static_assert(EF_AOV_MAX_CHANNELS <= EF_MAX_EXTRA_CHANNELS,
 
 /* What the workers share read-only during the pass, except the statistics,
  * which each unit adds under the lock. */
-#define EDGE_POOL 64
-
 typedef struct fog_job {
     ef_job *J;
     ef_fog_pass pass[EF_MAX_VIEWS];   /* per view (ef_chunk.view) */
@@ -49,10 +47,6 @@ typedef struct fog_job {
     int pv_w, pv_h, pv_step, dw_x0, dw_y0;
     int edges;                /* --edges unmix */
     _Atomic int edge_oom;     /* a unit could not get the edges' memory */
-    /* the edges' scratch, kept between units: up to EDGE_POOL of them,
-     * taken and given back under lock */
-    ef_edge_work pool[EDGE_POOL];
-    int npool;
 } fog_job;
 
 typedef struct ef_frame {
@@ -170,10 +164,6 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     ef_edge_work wk = { 0 };
     int nedge = 0;
     if (j->edges) {
-        pthread_mutex_lock(&j->lock);
-        if (j->npool > 0)
-            wk = j->pool[--j->npool];
-        pthread_mutex_unlock(&j->lock);
         const ef_edge_rows u = { ck->x0, ck->y0, ck->w, ck->h,
                                  { ck->rgb[0], ck->rgb[1], ck->rgb[2] }, ck->alpha, ck->depth,
                                  { ck->halo_rgb[0][0], ck->halo_rgb[0][1], ck->halo_rgb[0][2] },
@@ -191,14 +181,7 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     if (nedge)
         ef_edge_apply(&j->pass[ck->view], ck->x0, ck->y0, ck->w, wk.px, nedge, ck->rgb, ck->alpha,
                       &aov);
-    if (j->edges) {
-        pthread_mutex_lock(&j->lock);
-        if (j->npool < EDGE_POOL)
-            j->pool[j->npool++] = wk;
-        else
-            ef_edge_work_free(&wk);
-        pthread_mutex_unlock(&j->lock);
-    }
+    ef_edge_work_free(&wk);
     if (j->stats) {
         pthread_mutex_lock(&j->lock);
         for (int i = 0; i < ncomp; ++i)
@@ -1270,9 +1253,6 @@ static void frame_free(ef_frame *F)
     ef_output_abort(&F->din);
     free(F->job.preview);
     free(F->job.stats);
-    for (int i = 0; i < F->job.npool; ++i)
-        ef_edge_work_free(&F->job.pool[i]);
-    F->job.npool = 0;
     pthread_mutex_destroy(&F->job.lock);
     for (int v = 1; v < EF_MAX_VIEWS; ++v)
         if (F->view_scene[v]) {
