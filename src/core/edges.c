@@ -124,8 +124,7 @@ typedef struct layer {
     double iz;      /* 1 / planar depth (0: sky) */
     float v;        /* a stored depth value of it in the 3x3 window */
     int n;
-    int pure;       /* some colours are of pixels that are no edges (a surface's own) */
-    int npure;      /* those come first */
+    int npure;      /* colours of pixels that are no edges (a surface's own); the rest mixed */
     double c[MAXC][4];
 } layer;
 
@@ -171,8 +170,7 @@ static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigne
     }
     for (int m = 0; m < nl && m < MAXL; ++m) {
         Ls[m].npure = Ls[m].n;
-        Ls[m].pure = Ls[m].n > 0;
-        if (!Ls[m].pure) {
+        if (!Ls[m].npure) {
             for (int q = 0; q < nmix[m] && q < 8; ++q)
                 memcpy(Ls[m].c[q], mix[m][q], sizeof mix[m][q]);
             Ls[m].n = nmix[m];
@@ -211,6 +209,165 @@ static int unmix(const double C[4], const double a[4], const double b[4], double
     return 1;
 }
 
+/* The layers the 8 neighbours of (x, r) show (1/z clusters; the pixel's
+ * own depth may be none of them), each with one stored depth value:
+ * their count. */
+static int window_layers(const ef_edge_rows *u, const double *iz, int x, int r, layer *Ls)
+{
+    const int w = u->w;
+    int nl = 0;
+    for (int dr = -1; dr <= 1; ++dr)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, rr = r + dr;
+            if (xx < 0 || xx >= w || rr < -1 || rr > u->h || (dx == 0 && dr == 0))
+                continue;
+            const double q = iz[(size_t) (rr + 1) * (size_t) w + (size_t) xx];
+            if (isnan(q))
+                continue;
+            int m = 0;
+            while (m < nl && !same_layer(q, Ls[m].iz) && !same_layer(Ls[m].iz, q))
+                ++m;
+            if (m == nl && nl < MAXL) {
+                Ls[nl].iz = q;
+                Ls[nl].v = row_depth(u, rr)[xx];
+                ++nl;
+            }
+        }
+    return nl;
+}
+
+/* How an edge pixel splits: layer a's part (share s, colour pa) and layer
+ * b's (colour pb), the share's uncertainty du. */
+typedef struct split {
+    int a, b;
+    double s, du;
+    double pa[4], pb[4];
+} split;
+
+/* The pixel's own depth is layer own (a closest-sample or one-sample Z):
+ * the share from the colours. A colour within the range its own layer's
+ * pure pixels span is that surface's texture, not a mix. Else the own
+ * colour nearest to it (where the layer shows no pure pixel, a thing
+ * thinner than the filter, the most distinct one taken beyond itself at
+ * W_THIN of the way) and the other layer's colour that explains it best:
+ * the least share that can be given away. 0 where no mix explains C. */
+static int split_by_colour(const double C[4], const layer *Ls, int nl, int own, split *sp)
+{
+    const layer *O = &Ls[own];
+    if (O->n == 0)
+        return 0;
+    int inside = O->npure > 0;
+    for (int c = 0; c < 4 && inside; ++c) {
+        double lo = O->c[0][c], hi = lo;
+        for (int ia = 1; ia < O->npure; ++ia) {
+            lo = fmin(lo, O->c[ia][c]);
+            hi = fmax(hi, O->c[ia][c]);
+        }
+        const double tol = 0.01 * fmax(fabs(lo), fabs(hi)) + 1e-6;
+        inside = C[c] >= lo - tol && C[c] <= hi + tol;
+    }
+    if (inside)
+        return 0;
+    int near = 0;
+    double dmin = INFINITY;
+    for (int ia = 0; ia < O->n; ++ia) {
+        double d2 = 0;
+        for (int c = 0; c < 4; ++c)
+            d2 += (C[c] - O->c[ia][c]) * (C[c] - O->c[ia][c]);
+        if (d2 < dmin) {
+            dmin = d2;
+            near = ia;
+        }
+    }
+    double best = INFINITY, bdd = 1;
+    sp->a = own;
+    sp->b = -1;
+    for (int mb = 0; mb < nl; ++mb) {
+        if (mb == own)
+            continue;
+        for (int ib = 0; ib < Ls[mb].n; ++ib) {
+            const double *bc = Ls[mb].c[ib];
+            int ia = near;
+            if (O->npure == 0) {
+                double dmax = -1;
+                for (int q = 0; q < O->n; ++q) {
+                    double d2 = 0;
+                    for (int c = 0; c < 4; ++c)
+                        d2 += (O->c[q][c] - bc[c]) * (O->c[q][c] - bc[c]);
+                    if (d2 > dmax) {
+                        dmax = d2;
+                        ia = q;
+                    }
+                }
+            }
+            double a[4];
+            for (int c = 0; c < 4; ++c)
+                a[c] = O->npure ? O->c[ia][c] : bc[c] + (O->c[ia][c] - bc[c]) / W_THIN;
+            if (!O->npure && (a[3] > 1 || a[3] < 0))
+                a[3] = a[3] > 1 ? 1 : 0;
+            double sm, r2, dd;
+            if (!unmix(C, a, bc, &sm, &r2, &dd) || !(r2 < best))
+                continue;
+            best = r2;
+            bdd = dd;
+            sp->s = sm;
+            sp->b = mb;
+            memcpy(sp->pa, a, sizeof sp->pa);
+            memcpy(sp->pb, bc, sizeof sp->pb);
+        }
+    }
+    if (sp->b < 0 || sqrt(best / bdd) > RES_MAX)
+        return 0;
+    sp->du = fmin(1, sqrt(best / bdd) + DU_FLOOR + (O->npure && Ls[sp->b].npure ? 0 : 0.25));
+    return 1;
+}
+
+/* The pixel's depth lies between the layers (a filtered Z, the mean of
+ * the surfaces' depths): the share from it, Z = s z_a + (1 - s) z_b with
+ * the layers just in front and behind. 0 where there are not both. */
+static int split_by_depth(double izp, const layer *Ls, int nl, split *sp)
+{
+    int a = -1, b = -1;
+    for (int m = 0; m < nl; ++m) {
+        if (Ls[m].iz > izp && (a < 0 || Ls[m].iz < Ls[a].iz))
+            a = m;
+        if (Ls[m].iz < izp && (b < 0 || Ls[m].iz > Ls[b].iz))
+            b = m;
+    }
+    if (a < 0 || b < 0 || Ls[a].n == 0 || Ls[b].n == 0)
+        return 0;
+    const double za = 1 / Ls[a].iz, zp = 1 / izp;
+    double s = Ls[b].iz > 0 ? (1 / Ls[b].iz - zp) / (1 / Ls[b].iz - za) : 1;
+    sp->a = a;
+    sp->b = b;
+    sp->s = !(s > 0) ? 0 : s > 1 ? 1 : s;
+    sp->du = 0.5;
+    memcpy(sp->pa, Ls[a].c[0], sizeof sp->pa);
+    memcpy(sp->pb, Ls[b].c[0], sizeof sp->pb);
+    return 1;
+}
+
+/* The pass's result stands (all of it the pixel's own surface, as far as
+ * the colours tell); for the error output, what a share DU_KEEP of the
+ * layer farthest from its own would move it by. 0 where that layer shows
+ * no colour. */
+static int split_keep(const double C[4], double izp, const layer *Ls, int nl, split *sp)
+{
+    int b = 0;
+    for (int m = 1; m < nl; ++m)
+        if (fabs(Ls[m].iz - izp) > fabs(Ls[b].iz - izp))
+            b = m;
+    if (Ls[b].n == 0)
+        return 0;
+    sp->a = -1;
+    sp->b = b;
+    sp->s = 1;
+    sp->du = DU_KEEP;
+    memcpy(sp->pa, C, sizeof sp->pa);
+    memcpy(sp->pb, Ls[b].c[0], sizeof sp->pb);
+    return 1;
+}
+
 int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, ef_edge_work *wk)
 {
     const int w = u->w, h = u->h;
@@ -242,166 +399,29 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             const size_t k = (size_t) (r + 1) * (size_t) w + (size_t) x;
             if (!edge[k])
                 continue;
-            /* the layers its 8 neighbours show (1/z clusters) */
             layer Ls[MAXL];
-            int nl = 0;
-            for (int dr = -1; dr <= 1; ++dr)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const int xx = x + dx, rr = r + dr;
-                    if (xx < 0 || xx >= w || rr < -1 || rr > h || (dx == 0 && dr == 0))
-                        continue;   /* the neighbours' layers: the pixel's own may be none */
-                    const double q = iz[(size_t) (rr + 1) * (size_t) w + (size_t) xx];
-                    if (isnan(q))
-                        continue;
-                    int m = 0;
-                    while (m < nl && !same_layer(q, Ls[m].iz) && !same_layer(Ls[m].iz, q))
-                        ++m;
-                    if (m == nl && nl < MAXL) {
-                        Ls[nl].iz = q;
-                        Ls[nl].v = row_depth(u, rr)[xx];
-                        ++nl;
-                    }
-                }
+            const int nl = window_layers(u, iz, x, r, Ls);
             if (nl < 2)
                 continue;   /* curvature, not two layers */
             const double izp = iz[k];
             const float vp = u->depth[(size_t) r * (size_t) w + (size_t) x];
-            int own = -1;
             layer_colours(u, iz, edge, x, r, Ls, nl);
+            int own = -1;
             for (int m = 0; m < nl; ++m)
-                if (same_layer(izp, Ls[m].iz) && (own < 0 || (Ls[m].pure && !Ls[own].pure)))
+                if (same_layer(izp, Ls[m].iz) && (own < 0 || (Ls[m].npure && !Ls[own].npure)))
                     own = m;
             double C[4];
             pixel_colour(u, r, x, C);
             ++seen;
             seen_between += own < 0;
-            /* Where the pixel's own depth is a layer (a closest-sample or
-             * one-sample Z), that layer and the other layer and pure colours
-             * that explain C best: the share from the colours. Where it lies
-             * between two layers (a filtered Z, the mean of the surfaces'
-             * depths), the share from the depth: Z = s z_a + (1 - s) z_b
-             * with the layers just in front and behind. */
-            double best = INFINITY, bs = 1, bdd = 1, du = 0.5;
-            int ba = -1, bb = -1, bca = 0, bcb = 0, bca_sel = 0, between = 0;
-            double a_sel[4] = { 0, 0, 0, 0 };
-            if (own >= 0) {
-                /* A colour within the range its own layer's pure pixels
-                 * span is that surface's texture, not a mix. Else the own
-                 * colour nearest to it, and the other layer's colour that
-                 * explains it best with that one: the least share that
-                 * can be given away. */
-                const layer *O = &Ls[own];
-                if (O->n == 0)
-                    goto keep;
-                int inside = O->npure > 0;
-                for (int c = 0; c < 4 && inside; ++c) {
-                    double lo = O->c[0][c], hi = lo;
-                    for (int ia = 1; ia < O->npure; ++ia) {
-                        lo = fmin(lo, O->c[ia][c]);
-                        hi = fmax(hi, O->c[ia][c]);
-                    }
-                    const double tol = 0.01 * fmax(fabs(lo), fabs(hi)) + 1e-6;
-                    inside = C[c] >= lo - tol && C[c] <= hi + tol;
-                }
-                if (inside)
-                    goto keep;
-                /* the own colour nearest C where the layer shows pure
-                 * pixels; where it shows none (a thing thinner than the
-                 * filter), the one that differs most from the other
-                 * layer's: the purest its pixels come */
-                double dmin = INFINITY;
-                for (int ia = 0; ia < O->n; ++ia) {
-                    double d2 = 0;
-                    for (int c = 0; c < 4; ++c)
-                        d2 += (C[c] - O->c[ia][c]) * (C[c] - O->c[ia][c]);
-                    if (d2 < dmin) {
-                        dmin = d2;
-                        bca = ia;
-                    }
-                }
-                ba = own;
-                for (int mb = 0; mb < nl; ++mb) {
-                    if (mb == own)
-                        continue;
-                    for (int ib = 0; ib < Ls[mb].n; ++ib) {
-                        int ia = bca;
-                        if (!O->pure) {
-                            double dmax = -1;
-                            for (int q = 0; q < O->n; ++q) {
-                                double d2 = 0;
-                                for (int c = 0; c < 4; ++c)
-                                    d2 += (O->c[q][c] - Ls[mb].c[ib][c]) *
-                                          (O->c[q][c] - Ls[mb].c[ib][c]);
-                                if (d2 > dmax) {
-                                    dmax = d2;
-                                    ia = q;
-                                }
-                            }
-                        }
-                        /* a layer no pixel shows whole: its most distinct
-                         * pixel is itself a mix; its own colour lies beyond,
-                         * at W_THIN of the way */
-                        double a[4];
-                        for (int c = 0; c < 4; ++c)
-                            a[c] = O->pure ? O->c[ia][c]
-                                           : Ls[mb].c[ib][c] + (O->c[ia][c] - Ls[mb].c[ib][c]) / W_THIN;
-                        if (!O->pure && (a[3] > 1 || a[3] < 0))
-                            a[3] = a[3] > 1 ? 1 : 0;
-                        double sm, r2, dd;
-                        if (!unmix(C, a, Ls[mb].c[ib], &sm, &r2, &dd) || !(r2 < best))
-                            continue;
-                        best = r2;
-                        bs = sm;
-                        bdd = dd;
-                        bb = mb;
-                        bcb = ib;
-                        bca_sel = ia;
-                        memcpy(a_sel, a, sizeof a_sel);
-                    }
-                }
-                bca = bca_sel;
-                if (bb < 0 || sqrt(best / bdd) > RES_MAX)
-                    goto keep;   /* the colours cannot tell, or no mix of the two explains
-                                  * the pixel: its own depth stands */
-                du = fmin(1, sqrt(best / bdd) + DU_FLOOR + (O->pure && Ls[bb].pure ? 0 : 0.25));
-            } else {
-                for (int m = 0; m < nl; ++m) {
-                    if (Ls[m].iz > izp && (ba < 0 || Ls[m].iz < Ls[ba].iz))
-                        ba = m;   /* the nearest layer in front */
-                    if (Ls[m].iz < izp && (bb < 0 || Ls[m].iz > Ls[bb].iz))
-                        bb = m;   /* the nearest behind */
-                }
-                if (ba < 0 || bb < 0 || Ls[ba].n == 0 || Ls[bb].n == 0)
-                    goto keep;
-                const double za = 1 / Ls[ba].iz, zp = 1 / izp;
-                bs = Ls[bb].iz > 0 ? (1 / Ls[bb].iz - zp) / (1 / Ls[bb].iz - za) : 1;
-                bs = !(bs > 0) ? 0 : bs > 1 ? 1 : bs;
-                between = 1;
-            }
-            double pa[4], pb[4];
-            memcpy(pa, between ? Ls[ba].c[bca] : a_sel, sizeof pa);
-            memcpy(pb, Ls[bb].c[bcb], sizeof pb);
+            split sp;
+            const int found = own >= 0 ? split_by_colour(C, Ls, nl, own, &sp)
+                                       : split_by_depth(izp, Ls, nl, &sp);
             int kept = 0;
-            if (ba == own && bs >= 1) {
-            keep:
-                /* The pass's result stands (all of it the pixel's own
-                 * surface, as far as the colours tell); with the error
-                 * output, what a share DU_KEEP of the layer farthest from
-                 * its own would move it by. */
-                if (!want_err)
+            if (!found || (sp.a == own && sp.s >= 1)) {
+                if (!want_err || !split_keep(C, izp, Ls, nl, &sp))
                     continue;
-                bb = 0;
-                for (int m = 1; m < nl; ++m)
-                    if (fabs(Ls[m].iz - izp) > fabs(Ls[bb].iz - izp))
-                        bb = m;
-                if (Ls[bb].n == 0)
-                    continue;
-                memcpy(pa, C, sizeof pa);
-                memcpy(pb, Ls[bb].c[0], sizeof pb);
-                bs = 1;
-                du = DU_KEEP;
                 kept = 1;
-                ba = -1;
             }
             if ((size_t) count >= wk->pxcap) {
                 const size_t cap = wk->pxcap ? 2 * wk->pxcap : 256;
@@ -411,22 +431,21 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                 wk->px = p;
                 wk->pxcap = cap;
             }
-            ef_edge_px *e = &wk->px[count];
+            ef_edge_px *e = &wk->px[count++];
             e->i = r * w + x;
-            e->v[0] = ba == own || kept ? vp : Ls[ba].v;
-            e->v[1] = bb == own ? vp : Ls[bb].v;
-            e->w = bs;
-            e->du = du;
-            e->between = between;
+            e->v[0] = kept || sp.a == own ? vp : Ls[sp.a].v;
+            e->v[1] = sp.b == own ? vp : Ls[sp.b].v;
+            e->w = sp.s;
+            e->du = sp.du;
+            e->between = own < 0 && !kept;
             e->keep = kept;
             for (int c = 0; c < 4; ++c) {
-                const double res = C[c] - (bs * pa[c] + (1 - bs) * pb[c]);
-                e->c[0][c] = bs * (pa[c] + res);
+                const double res = C[c] - (sp.s * sp.pa[c] + (1 - sp.s) * sp.pb[c]);
+                e->c[0][c] = sp.s * (sp.pa[c] + res);
                 e->c[1][c] = C[c] - e->c[0][c];
-                e->pure[0][c] = pa[c];
-                e->pure[1][c] = pb[c];
+                e->pure[0][c] = sp.pa[c];
+                e->pure[1][c] = sp.pb[c];
             }
-            ++count;
         }
     /* A unit whose edge pixels mostly lie between layers has a filtered
      * Z: there a pixel whose depth is a layer is that surface's (nearly)
