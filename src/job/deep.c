@@ -592,14 +592,21 @@ static int fog_one(worker *w, size_t pi, int x, int y, ef_ray *r, double *o, dou
 /* Rows from y (at most n, whole chunks) into r: all n where they hold at
  * most BATCH_VALUES values or a chunk holds all n, else the first chunk's
  * rows alone (up to the reader's hard cap, refused with the figure past
- * it). A chain of 20,000 overlapping samples a pixel in ZIPS then takes
- * one row at a time, not a unit's 16. */
-static int read_batch(const ef_deep_in *d, int y, int n, ef_deep_rows *r, ef_err *err)
+ * it). *chunkwise (set here once the rows of a unit pass the budget) goes
+ * straight to a chunk at a time for the rest of the unit, not reading
+ * what it would drop. A chain of 20,000 overlapping samples a pixel in
+ * ZIPS then takes one row at a time, not a unit's 16. */
+static int read_batch(const ef_deep_in *d, int y, int n, ef_deep_rows *r, int *chunkwise,
+                      ef_err *err)
 {
     const int chunk = d->tiled ? n : d->lines - (y - d->y0) % d->lines;
-    r->cap = chunk < n ? BATCH_VALUES : 0;
-    int rc = ef_deep_read_rows(d, y, n, r, err);
+    int rc = -2;
+    if (!*chunkwise || chunk >= n) {
+        r->cap = chunk < n ? BATCH_VALUES : 0;
+        rc = ef_deep_read_rows(d, y, n, r, err);
+    }
     if (rc == -2 && chunk < n) {
+        *chunkwise = 1;
         r->cap = 0;
         rc = ef_deep_read_rows(d, y, chunk, r, err);
     }
@@ -613,7 +620,8 @@ static void do_unit(worker *w, unit *u)
     const ef_deep_in *d = S->d;
     const plan *P = S->P;
     const int nch = P->L.nch, W = d->w, mode = q->mode;
-    if (read_batch(d, u->y, u->n, &w->rows, &u->err)) {
+    int chunkwise = 0;
+    if (read_batch(d, u->y, u->n, &w->rows, &chunkwise, &u->err)) {
         u->failed = 1;
         return;
     }
@@ -634,7 +642,7 @@ static void do_unit(worker *w, unit *u)
     for (int j = 0; j < u->n; ++j) {
         const int y = u->y + j;
         if (y >= w->rows.y + w->rows.n &&
-            read_batch(d, y, u->y + u->n - y, &w->rows, &u->err)) {
+            read_batch(d, y, u->y + u->n - y, &w->rows, &chunkwise, &u->err)) {
             u->failed = 1;
             return;
         }
@@ -1084,10 +1092,10 @@ int ef_deep_census(const ef_exr_file *f, int part, double *pixels, double *sampl
     *pixels = *samples = *max_px = 0;
     if (ef_deep_in_open(f, part, &d, err))
         return -1;
-    int rc = 0;
+    int rc = 0, chunkwise = 0;
     for (int y = d.y0; y < d.y0 + d.h && !rc; y += r.n) {
         const int n = d.y0 + d.h - y < UNIT_ROWS ? d.y0 + d.h - y : UNIT_ROWS;
-        rc = read_batch(&d, y, n, &r, err);
+        rc = read_batch(&d, y, n, &r, &chunkwise, err);
         for (size_t i = 0; !rc && i < (size_t) r.n * (size_t) d.w; ++i)
             if (r.count[i] > *max_px)
                 *max_px = r.count[i];
