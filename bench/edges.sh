@@ -8,7 +8,8 @@
 # 1. Blender (Debian's) renders each scene of bench/edges_blender.py (thin
 #    poles/fence/wire, leaf cards with alpha textures, a fast pole with
 #    motion blur, a shallow depth of field; and the calib scene the error
-#    output's two constants were set on) at 320x180, 256 samples, twice:
+#    output's constants were set on) at 320x180, 256 samples, fog density
+#    0.05 (the thin scene also 0.01 and 0.2), twice:
 #    without fog, and with the fog as an emission-absorption volume inside
 #    the scene (the truth). bench/edges_eval.py fogs the first with exrfog
 #    without and with --edges unmix and scores the edge pixels.
@@ -40,21 +41,24 @@ echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
 echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'); load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
-echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, default pixel filter (Blackman-Harris 1.5 px), 320x180, 256 samples; the fog exp:density=0.05 with colour 0.7,0.75,0.8 as an emission-absorption volume around everything, every surface only emitting (each camera sample's colour is then exactly c T + F (1 - T))"
+echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, default pixel filter (Blackman-Harris 1.5 px), 320x180, 256 samples; the fog exp:density=0.05 (the thin scene also 0.01 and 0.2) with colour 0.7,0.75,0.8 as an emission-absorption volume around everything, every surface only emitting (each camera sample's colour is then exactly c T + F (1 - T))"
 echo "- edge pixels: the depth of their 3x3 window spans a ratio over 1.05 (sky infinitely far); error: max over RGB of |out - truth|; 'off by 2 %': relative to the truth; 'covered': the error output (--aov error) at least the fixed run's actual error, beyond the truth's own noise (its 99th percentile on interior pixels, where the naive run is exact)"
 echo
 echo "### Against the fog rendered inside the scene"
 echo
 echo "| scene | edge pixels | naive RMS | --edges RMS | ratio | naive off by 2 % | --edges off by 2 % | ratio | off by 10 %: naive, --edges | interior pixels changed | error output covers |"
 echo "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"
-for v in thin cards motion dof calib; do
-    d="$tmp/$v"
+for vd in thin:0.05 cards:0.05 motion:0.05 dof:0.05 calib:0.05 thin:0.01 thin:0.2; do
+    v=${vd%%:*} dens=${vd#*:}
+    d="$tmp/$v-$dens"
     mkdir -p "$d"
-    blender -b --factory-startup --python "$here/edges_blender.py" -- "$d" "$v" 320 180 256 0.05 \
-        >"$d/log" 2>&1 || die "blender $v"
+    blender -b --factory-startup --python "$here/edges_blender.py" -- "$d" "$v" 320 180 256 "$dens" \
+        >"$d/log" 2>&1 || die "blender $v $dens"
     grep -q "edges_blender: rendered" "$d/log" || die "blender $v: no render"
-    /usr/bin/python3 "$here/edges_eval.py" "$exrfog" "$d" --png "$out/$v" >"$d/res.json" || die "eval $v"
-    if [[ "$v" == thin ]]; then
+    png="$out/$v"
+    [[ "$dens" == 0.05 ]] || png="$tmp/$v-$dens"
+    /usr/bin/python3 "$here/edges_eval.py" "$exrfog" "$d" --png "$png" >"$d/res.json" || die "eval $v"
+    if [[ "$v" == thin && "$dens" == 0.05 ]]; then
         # a crop of the fence and a pole: without --edges | with | the truth
         for k in out_naive out_edges fog; do
             oiiotool "$d/$k.exr" --ch "ViewLayer.Combined.R,ViewLayer.Combined.G,ViewLayer.Combined.B" \
@@ -64,10 +68,11 @@ for v in thin cards motion dof calib; do
         oiiotool "$tmp/crop_out_naive.png" "$tmp/crop_out_edges.png" "$tmp/crop_fog.png" \
             --mosaic:pad=4 3x1 -o "$out/thin_crop.png" 2>/dev/null || die "mosaic"
     fi
-    /usr/bin/python3 - "$d/res.json" "$v" <<'EOF'
+    /usr/bin/python3 - "$d/res.json" "$v" "$dens" <<'EOF'
 import json, sys
 r = json.load(open(sys.argv[1])); n, e = r["naive"], r["edges"]
 name = sys.argv[2] + (" (calibration, not a test)" if sys.argv[2] == "calib" else "")
+name += ", density %s" % sys.argv[3]
 print("| %s | %d | %.4f | %.4f | %.0f %% | %d | %d | %.0f %% | %d, %d | %s | %.1f %% |" % (
     name, r["edge_px"], n["rms"], e["rms"], 100 * r["rms_ratio"], n["over2"], e["over2"],
     100 * r["over2_ratio"], n["over10"], e["over10"],
