@@ -48,7 +48,7 @@ static int unit3(const char *val, double v[3])
 const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND] = {
     [EF_LIGHT_SUN] = { "sun",
                        "towards, color, intensity, angle, planet, name, shadow, shadow-camera, "
-                       "bias, slope, outside, penumbra",
+                       "bias, slope, outside, penumbra, scattering, ground",
                        0, 0, 1 },
     [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name", 1, 0, 0 },
     [EF_LIGHT_SPOT] = { "spot",
@@ -145,7 +145,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     enum { S_DIR = 1, S_POS = 2, S_AIM = 4, S_CONE = 8, S_COLOR = 16, S_INT = 32, S_ANGLE = 64,
            S_RADIUS = 128, S_BLEND = 256, S_NAME = 512, S_SHADOW = 1024, S_BIAS = 2048,
            S_OUTSIDE = 4096, S_SLOPE = 8192, S_COSINE = 16384, S_PLANET = 32768,
-           S_PENUMBRA = 65536, S_SHADOWCAM = 131072 };
+           S_PENUMBRA = 65536, S_SHADOWCAM = 131072, S_SCATTER = 262144, S_GROUND = 524288 };
     double penumbra = 16;   /* directions over the sun's disc, with angle= and shadow= */
     char *tok = strtok_r(NULL, ":", &save);
     while (tok) {
@@ -167,6 +167,10 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             return ef_fail(err, "--light '%s': %s='%s' is out of range (numbers are 0 or between "
                            "2.2e-308 and 1.8e308 in magnitude)", spec, key, val);
         int ok = strstr(keys, key) != NULL;
+        if (!strcmp(key, "scattering") && K->at_position)
+            return ef_fail(err, "--light '%s': scattering= is the sun's so far: multiple "
+                           "scattering is solved for a sun in fog that is the same along the "
+                           "ground; a %s lamp's light is scattered once", spec, kind);
         if (!strcmp(key, "shadow") && !K->shadow)
             return ef_fail(err, "--light '%s': a point lamp takes no shadow= map (it shines "
                            "every way; a spot's or the sun's map covers one view)", spec);
@@ -222,6 +226,20 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                 return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
                                "in degrees, from 0 to below 180", spec, val);
             l->angle *= PI / 180;
+        } else if (!strcmp(key, "scattering") && !K->at_position) {
+            bit = S_SCATTER;
+            if (!strcmp(val, "single") || !strcmp(val, "multiple"))
+                l->multiple = val[0] == 'm';
+            else
+                return ef_fail(err, "--light '%s': scattering='%s' is not single or multiple "
+                               "(multiple adds the light scattered twice and more)", spec, val);
+        } else if (!strcmp(key, "ground") && !K->at_position) {
+            bit = S_GROUND;
+            if (ef_parse_numbers(val, &l->ground, 1))
+                return ef_fail(err, "--light '%s': ground='%s' is not a height (scene units "
+                               "along the fog's up axis: the black ground multiple scattering "
+                               "stops at)", spec, val);
+            l->has_ground = 1;
         } else if (!strcmp(key, "penumbra") && !K->at_position) {
             bit = S_PENUMBRA;
             if (ef_parse_numbers(val, &penumbra, 1) || !(penumbra >= 0) ||
@@ -316,6 +334,12 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     if ((seen & (S_BIAS | S_OUTSIDE | S_SLOPE | S_SHADOWCAM)) && !(seen & S_SHADOW))
         return ef_fail(err, "--light '%s': bias=, slope=, outside= and shadow-camera= need "
                        "shadow=FILE.exr", spec);
+    if ((seen & S_GROUND) && !l->multiple)
+        return ef_fail(err, "--light '%s': ground= is where multiple scattering stops: it needs "
+                       "scattering=multiple", spec);
+    if (l->multiple && (seen & S_PLANET))
+        return ef_fail(err, "--light '%s': scattering=multiple is solved over flat ground; "
+                       "drop planet= or scattering=multiple", spec);
     if ((seen & S_PENUMBRA) && (!(seen & S_SHADOW) || !(l->angle > 0)))
         return ef_fail(err, "--light '%s': penumbra= needs shadow=FILE.exr and the sun's "
                        "angle=DEG (its angular diameter, e.g. 0.53)", spec);

@@ -83,6 +83,13 @@ typedef struct ef_light {
     ef_shadow_opts shadow_opts;
     char shadow_path[256];
     char shadow_camera[256];  /* shadow-camera=: the map's camera file, "" for its header */
+    /* sun: scattering=multiple adds the light scattered twice and more
+     * (ms.h), over a black ground at height ground (has_ground) along the
+     * fog's up; ms: its solve (shared, counted like the shadow map), built
+     * by ef_scene_prepare_lights, NULL before or where it adds nothing */
+    int multiple, has_ground;
+    double ground;
+    struct ef_ms *ms;
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

@@ -4,6 +4,7 @@
  * (cuts), and the public entry points per ray and per span. lit_int.h
  * lists the family. */
 #include "lit_int.h"
+#include "ms.h"
 #include "shadow.h"
 #include "vmath.h"
 
@@ -178,6 +179,22 @@ static int sun_closed(const ef_fog_component *c, const ef_light *l, const ef_ray
     return c->model->sun(c, &sl, r, tv, S);
 }
 
+/* Adds sun l's light scattered twice and more (scattering=multiple) along
+ * r to S, and its error estimate to E (may be NULL). */
+static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
+                         double E[3])
+{
+    if (!l->ms)
+        return;
+    double Sm[3], Em[3];
+    ef_ms_gather(l->ms, s, r, Sm, Em);
+    for (int k = 0; k < 3; ++k) {
+        S[k] += Sm[k];
+        if (E)
+            E[k] += Em[k];
+    }
+}
+
 int ef_light_sun_span(const ef_fog_scene *s, const ef_light *l)
 {
     double rho[3], k, base;
@@ -194,6 +211,7 @@ void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_r
     if (!(r->dist > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return;
     sun_closed(&s->comp[0], l, r, tv, S);
+    add_multiple(s, l, r, S, NULL);
 }
 
 /* Sun l's closed form over [a, b] of r in the scene's one component: T(0,
@@ -383,6 +401,7 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         if (iv != stack)
             free(iv);
     }
+    add_multiple(s, l, r, S, E);
     if (err)
         for (int k = 0; k < 3; ++k)
             err[k] = E[k];

@@ -1,6 +1,7 @@
 #include "scene.h"
 #include "camera.h"
 #include "shadow.h"
+#include "ms.h"
 #include "sky_light.h"
 
 #include "expneg.h"
@@ -131,7 +132,10 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     dst->nlight = src->nlight;
     memcpy(dst->light, src->light, (size_t) src->nlight * sizeof src->light[0]);
     for (int j = 0; j < dst->nlight; ++j)
+    {
         ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
+        ef_ms_ref(dst->light[j].ms);
+    }
     dst->sky_light = src->sky_light;
     ef_sky_light_ref(dst->sky_light);
     memcpy(dst->sky_light_spec, src->sky_light_spec, sizeof dst->sky_light_spec);
@@ -177,6 +181,8 @@ void ef_scene_free(ef_fog_scene *s)
     for (int j = 0; j < s->nlight; ++j) {
         ef_shadow_unref(s->light[j].shadow);
         s->light[j].shadow = NULL;
+        ef_ms_unref(s->light[j].ms);
+        s->light[j].ms = NULL;
     }
     ef_sky_light_unref(s->sky_light);
     s->sky_light = NULL;
@@ -395,4 +401,16 @@ void ef_scene_eval_info(const ef_fog_scene *s, const ef_ray *r, ef_fog_sample *s
     }
     sum_tau(s, r, surf, info);
     transmit(surf->T);
+}
+
+int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err)
+{
+    for (int j = 0; j < s->nlight; ++j) {
+        ef_light *l = &s->light[j];
+        ef_ms_unref(l->ms);
+        l->ms = NULL;
+        if (l->multiple && ef_ms_build(s, l, &l->ms, err))
+            return -1;
+    }
+    return 0;
 }

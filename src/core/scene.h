@@ -48,6 +48,12 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err);
  * with a message (err->file naming the map when it is at fault). */
 int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err);
 
+/* Solves what the lights need from the whole scene once its components
+ * are final: the multiple scattering of each scattering=multiple sun
+ * (ms.h). Call again after the components change. Returns 0, or -1 with a
+ * message (a component the solve does not take). */
+int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err);
+
 /* Whether the scene has any light (--light or --sky-light). */
 static inline int ef_scene_lit(const ef_fog_scene *s)
 {

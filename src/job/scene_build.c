@@ -147,6 +147,8 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
     }
     if (r == EF_PARSE_RUN && ef_lights_check(s, err))
         r = EF_PARSE_USAGE;
+    if (r == EF_PARSE_RUN && ef_scene_prepare_lights(s, err))
+        r = EF_PARSE_USAGE;
     /* after the components: the sky light is convolved with their phases */
     const char *sky_light = d->sky_light ? d->sky_light : sf.sky_light;
     if (r == EF_PARSE_RUN && sky_light && ef_scene_set_sky_light(s, sky_light, err)) {
@@ -187,5 +189,5 @@ int ef_scene_rebuild(ef_fog_scene *s, const double *up, double time, ef_err *err
     ef_scene_free(s);
     *s = *ns;
     free(ns);
-    return 0;
+    return ef_scene_prepare_lights(s, err);
 }

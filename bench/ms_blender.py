@@ -1,0 +1,96 @@
+"""Runs inside Blender (blender -b --factory-startup --python THIS -- OUT SPP BOUNCES ELEV
+DENSITY ALBEDO G TOP WIDTH HEIGHT): the multiple-scattering reference scene of bench/ms.sh and
+tests/blender/blender_ms_run.py.
+
+A slab of homogeneous fog (Volume Scatter of density DENSITY * ALBEDO, HG anisotropy G, plus
+Volume Absorption of the rest) from the ground z = 0 to z = TOP (its box reaches 1 below), 4 km wide (so that it is
+the same along the ground for what the camera sees), a black ground that only absorbs (no
+emission, no BSDF: exrfog's black ground=0), a black world, a sun of strength 1 at ELEV
+degrees above the horizon, the camera 2 units up looking 8 degrees down. BOUNCES volume
+bounces (0: single scattering; 128: every order the issue asks for; -1: no fog, for the depth), max bounces as many,
+transparent bounces left at their default. Writes OUT (RGBA + Z, 32-bit) and OUT.json (the
+camera and the direction towards the sun)."""
+import json
+import math
+import sys
+
+import bpy
+
+args = sys.argv[sys.argv.index("--") + 1:]
+out, spp, bounces = args[0], int(args[1]), int(args[2])
+plain = bounces < 0   # no fog: the depth alone (Cycles' Z inside fog is unreliable)
+bounces = max(bounces, 0)
+elev, dens, albedo, g, top = (float(v) for v in args[3:8])
+width, height = int(args[8]), int(args[9])
+sc = bpy.context.scene
+for o in list(bpy.data.objects):
+    if o.type in ('MESH', 'LIGHT'):
+        bpy.data.objects.remove(o, do_unlink=True)
+sc.render.engine = 'CYCLES'
+sc.cycles.device = 'CPU'
+sc.cycles.samples = spp
+sc.cycles.use_denoising = False
+sc.cycles.use_adaptive_sampling = False
+sc.cycles.max_bounces = max(bounces, 1)
+sc.cycles.volume_bounces = bounces
+sc.cycles.diffuse_bounces = 0
+sc.cycles.glossy_bounces = 0
+sc.cycles.transmission_bounces = 0
+sc.cycles.sample_clamp_direct = 0
+sc.cycles.sample_clamp_indirect = 0
+sc.cycles.seed = 11
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = width, height, 100
+sc.render.image_settings.file_format = 'OPEN_EXR'
+sc.render.image_settings.color_depth = '32'
+sc.render.image_settings.use_zbuffer = True
+bpy.context.view_layer.use_pass_z = True
+sc.render.film_transparent = False
+w = bpy.data.worlds.new("black"); w.use_nodes = True
+w.node_tree.nodes["Background"].inputs[1].default_value = 0.0
+sc.world = w
+# the ground: black, absorbing every ray (a material with no output)
+bpy.ops.mesh.primitive_plane_add(size=4000, location=(0, 0, 0))
+gm = bpy.data.materials.new("ground"); gm.use_nodes = True
+gm.node_tree.nodes.clear()
+e = gm.node_tree.nodes.new('ShaderNodeEmission'); e.inputs[1].default_value = 0.0
+o = gm.node_tree.nodes.new('ShaderNodeOutputMaterial'); gm.node_tree.links.new(e.outputs[0], o.inputs[0])
+bpy.context.object.data.materials.append(gm)
+# the fog's box reaches below the ground (a face on the ground's plane would hide it)
+bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (top - 1) / 2))
+cube = bpy.context.object
+cube.scale = (4000, 4000, top + 1)
+if plain:
+    cube.hide_render = True
+m = bpy.data.materials.new("fog"); m.use_nodes = True
+nt = m.node_tree; nt.nodes.clear()
+s = nt.nodes.new('ShaderNodeVolumeScatter')
+s.inputs['Density'].default_value = dens * albedo
+s.inputs['Anisotropy'].default_value = g
+s.inputs['Color'].default_value = (1, 1, 1, 1)
+a = nt.nodes.new('ShaderNodeVolumeAbsorption')
+a.inputs['Density'].default_value = dens * (1 - albedo)
+a.inputs['Color'].default_value = (0, 0, 0, 1)
+add = nt.nodes.new('ShaderNodeAddShader')
+o = nt.nodes.new('ShaderNodeOutputMaterial')
+nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
+nt.links.new(add.outputs[0], o.inputs['Volume'])
+m.cycles.homogeneous_volume = True
+m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+cube.data.materials.append(m)
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 1.0; sun.angle = 0.0
+so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
+so.rotation_euler = (math.radians(90 - elev), 0, math.radians(150))
+cam = sc.camera
+cam.location = (0, 0, 2.0); cam.rotation_euler = (math.radians(82), 0, 0)
+cam.data.sensor_fit = 'HORIZONTAL'
+cam.data.angle = math.radians(60)
+cam.data.clip_start, cam.data.clip_end = 0.05, 10000.0
+bpy.context.view_layer.update()
+sc.render.filepath = out
+bpy.ops.render.render(write_still=True)
+mw = cam.matrix_world
+t = so.matrix_world.col[2]
+json.dump({"c2w": [mw[i][j] for i in range(4) for j in range(4)], "fov": math.degrees(cam.data.angle_x),
+           "near": cam.data.clip_start, "far": cam.data.clip_end, "towards": [t[0], t[1], t[2]]},
+          open(out + ".json", "w"))
+print("ms_blender: rendered")

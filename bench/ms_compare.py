@@ -1,0 +1,115 @@
+"""Compares exrfog's multiple scattering with Cycles' (bench/ms.sh, the suite's blender_ms):
+
+  ms_compare.py EXRFOG BLENDER DIR SPP ELEV DENSITY ALBEDO G TOP W H [BLOCK]
+
+Renders bench/ms_blender.py's slab twice (volume bounces 0 and 128), runs exrfog on the
+render's depth with colour 0 (so the output is the fog's light alone) with the same sun,
+scattering=single and scattering=multiple:ground=0, and prints one line of JSON: per BLOCKxBLOCK
+block of pixels (noise averaged down), Cycles' radiance with every bounce against exrfog's
+single + multiple, the share single scattering alone gives, Cycles' own noise (the standard
+error of the block mean from its pixels), exrfog's error output, and the times."""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import OpenImageIO as oiio
+
+exrfog, blender, d = sys.argv[1], sys.argv[2], sys.argv[3]
+spp, elev, dens, albedo, g, top = sys.argv[4], *(float(v) for v in sys.argv[5:10])
+W, H = int(sys.argv[10]), int(sys.argv[11])
+block = int(sys.argv[12]) if len(sys.argv) > 12 else 4
+here = os.path.dirname(os.path.abspath(__file__))
+os.makedirs(d, exist_ok=True)
+tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g)
+
+
+def render(bounces):
+    out = "%s/%s_%s.exr" % (d, tag, "b%d" % bounces if bounces >= 0 else "plain")
+    t0 = time.time()
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                        here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
+                        str(dens), str(albedo), str(g), str(top), str(W), str(H)],
+                       capture_output=True, text=True)
+    if "ms_blender: rendered" not in r.stdout:
+        raise SystemExit("ms_compare: Blender failed:\n" + r.stdout[-2000:] + r.stderr[-2000:])
+    return out, time.time() - t0
+
+
+def pixels(path):
+    b = oiio.ImageBuf(path)
+    return b.get_pixels(oiio.FLOAT), b.spec()
+
+
+c0, t_c0 = render(0)
+cm, t_cm = render(128)
+cp, _ = render(-1)
+cam = json.load(open(cm + ".json"))
+# exrfog's input: colour 0, the depth of the render without fog
+px, spec = pixels(cp)
+inp = np.zeros_like(px)
+inp[..., 3] = 1
+inp[..., 4] = px[..., 4]
+ib = oiio.ImageBuf(spec)
+ib.set_pixels(oiio.ROI(), inp)
+ib.write("%s/%s_in.exr" % (d, tag))
+fog = "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-top, dens, albedo, g)
+common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world",
+          ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]), "--near",
+          repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0", "--fog", fog,
+          "--aov", "error"]
+sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
+times = {}
+for mode, extra in (("single", ""), ("multiple", ":scattering=multiple:ground=0")):
+    t0 = time.time()
+    r = subprocess.run([exrfog, "%s/%s_in.exr" % (d, tag), "-o", "%s/%s_ef_%s.exr" % (d, tag, mode),
+                        "--light", sun + extra] + common, capture_output=True, text=True)
+    times[mode] = time.time() - t0
+    if r.returncode:
+        raise SystemExit("ms_compare: exrfog failed: " + r.stderr)
+cyc0 = pixels(c0)[0][..., :3]
+cycm = pixels(cm)[0][..., :3]
+efs, s1 = pixels("%s/%s_ef_single.exr" % (d, tag))
+efm, s2 = pixels("%s/%s_ef_multiple.exr" % (d, tag))
+names = list(s2.channelnames)
+err = efm[..., names.index("fog_error.R"):names.index("fog_error.R") + 3]
+efs, efm = efs[..., :3], efm[..., :3]
+h, w = (H // block) * block, (W // block) * block
+
+
+def blocks(a):
+    a = a[:h, :w].mean(axis=2)
+    return a.reshape(h // block, block, w // block, block).mean(axis=(1, 3))
+
+
+def block_se(a):
+    a = a[:h, :w].mean(axis=2)
+    a = a.reshape(h // block, block, w // block, block)
+    return a.std(axis=(1, 3)) / block   # the mean's standard error over block^2 pixels
+
+
+C, C0, E1, EM, ER = blocks(cycm), blocks(cyc0), blocks(efs), blocks(efm), blocks(err)
+# Cycles' noise: the spread of its pixels about a smooth field is mostly noise
+# (the field varies little within a block at this size); an over-estimate
+noise = block_se(cycm)
+ok = C > 1e-4
+rel = (EM - C)[ok] / C[ok]
+res = {
+    "case": tag, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
+    "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,
+    "blocks": int(ok.sum()),
+    "cycles_mean": float(C[ok].mean()), "cycles_single_mean": float(C0[ok].mean()),
+    "exrfog_single_mean": float(E1[ok].mean()), "exrfog_multiple_mean": float(EM[ok].mean()),
+    "single_share_median": float(np.median(E1[ok] / C[ok])),
+    "single_check_median": float(np.median((E1[ok] - C0[ok]) / C0[ok])),
+    "rel_median": float(np.median(np.abs(rel))), "rel_p99": float(np.percentile(np.abs(rel), 99)),
+    "rel_signed_median": float(np.median(rel)),
+    "noise_rel_median": float(np.median(noise[ok] / C[ok])),
+    "covered": float(np.mean(np.abs(EM - C)[ok] <= ER[ok] + 2 * noise[ok])),
+    "err_rel_median": float(np.median(ER[ok] / C[ok])),
+    "t_cycles_single": t_c0, "t_cycles_multiple": t_cm,
+    "t_exrfog_single": times["single"], "t_exrfog_multiple": times["multiple"],
+}
+print(json.dumps(res))

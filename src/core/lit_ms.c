@@ -1,0 +1,994 @@
+/* Multiple scattering of a sun in fog that is the same along the ground:
+ * the plane-parallel solve and the view's gather (ms.h says what is
+ * computed and how far it may be off). */
+#include "ms.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "lit_int.h"
+
+/* A mode is iterated order by order while its scattering operator's norm
+ * (on the node directions) is below this; else solved directly. */
+#define MS_ITER_KAPPA 0.9
+/* Iterated modes stop where the bound of the orders left out falls below
+ * this fraction of the mode's single-scatter source. */
+#define MS_TAIL_REL 1e-7
+/* The deepest vertical optical depth solved without a ground. */
+#define MS_TAU_DEEP 1e4
+/* The direction table: polar angles of the propagation direction over
+ * [0, pi] and azimuths from the beam's over [0, pi]. */
+#define MS_NT 121
+#define MS_NP 61
+
+/* ------------------------------------------------------------ helpers */
+
+/* 1 - (1 - e^-x) / x, the weight of the far end of a linear source over
+ * an optical depth x (series where the difference cancels). */
+static double w_far(double x)
+{
+    if (x < 1e-3)
+        return x * (0.5 - x * (1.0 / 6 - x * (1.0 / 24 - x / 120)));
+    return 1 + expm1(-x) / x;
+}
+
+/* (a - x e^-x) / x, a = 1 - e^-x: the slope term of a linear source
+ * integrated against e^-y over [0, x]. */
+static double w_slope(double x)
+{
+    if (x < 1e-3)
+        return x * (0.5 - x * (1.0 / 3 - x * (1.0 / 8 - x / 30)));
+    return (-expm1(-x) - x * exp(-x)) / x;
+}
+
+/* Gauss-Legendre nodes and weights on [0, 1], n of them. */
+static void gauss01(int n, double *x, double *w)
+{
+    for (int i = 0; i < n; ++i) {
+        double z = cos(PI * (i + 0.75) / (n + 0.5)), dp = 1;
+        for (int it = 0; it < 100; ++it) {
+            double p0 = 1, p1 = z;
+            for (int l = 2; l <= n; ++l) {
+                const double p2 = ((2 * l - 1) * z * p1 - (l - 1) * p0) / l;
+                p0 = p1;
+                p1 = p2;
+            }
+            dp = n * (z * p1 - p0) / (z * z - 1);
+            const double dz = p1 / dp;
+            z -= dz;
+            if (fabs(dz) < 1e-16)
+                break;
+        }
+        x[i] = 0.5 * (1 + z);
+        w[i] = 1 / ((1 - z * z) * dp * dp);   /* 2 / (...) on [-1, 1], halved */
+    }
+}
+
+/* Lambda_l^m(mu) = sqrt((l-m)!/(l+m)!) P_l^m(mu) for l = m..L-1 into
+ * out[l] (out[l] = 0 for l < m). */
+static void lambda_m(int m, int L, double mu, double *out)
+{
+    for (int l = 0; l < m && l < L; ++l)
+        out[l] = 0;
+    if (m >= L)
+        return;
+    double s = 1;
+    const double st = sqrt(fmax(0, 1 - mu * mu));
+    for (int i = 1; i <= m; ++i)
+        s *= sqrt((2.0 * i - 1) / (2.0 * i)) * st;
+    out[m] = s;
+    if (m + 1 < L)
+        out[m + 1] = sqrt(2.0 * m + 1) * mu * s;
+    for (int l = m + 2; l < L; ++l)
+        out[l] = ((2.0 * l - 1) * mu * out[l - 1] -
+                  sqrt((double) (l + m - 1) * (l - m - 1)) * out[l - 2]) /
+                 sqrt((double) (l + m) * (l - m));
+}
+
+/* ------------------------------------------------------------ the solve */
+
+struct ef_ms_solve {
+    int n, nh, N, L;
+    double *tau;      /* [n] */
+    double *a;        /* [n][L]: omega b_l */
+    double *M;        /* [L modes][n][L]: sum_j w_j Lambda_l^m(mu_j) L^m(k, j) */
+    double tail;      /* bound of the orders left out, summed over modes */
+    int direct, iterated;
+    double resid;     /* largest relative change of a direct mode under one more sweep */
+};
+
+/* What a mode's solve works with. */
+typedef struct mode_ws {
+    int n, nh, N, L, m;
+    const double *tau, *mu, *w;
+    double *lam;        /* [N][L]: Lambda_l^m at the node directions */
+    double *C;          /* [n or 1][N][N] */
+    int cstride;        /* N*N, or 0 when every node shares one C */
+    double *Q;          /* [n][N] the first-order source */
+    double *cE, *cA, *cB;   /* [n-1][nh] cell weights */
+} mode_ws;
+
+/* L = the transport of source S (both [n][N]) with nothing entering at
+ * the top or the bottom. */
+static void transport(const mode_ws *w, const double *S, double *Lr)
+{
+    const int n = w->n, N = w->N, nh = w->nh;
+    for (int i = 0; i < nh; ++i) {   /* up: from the bottom */
+        Lr[(n - 1) * N + i] = 0;
+        for (int k = n - 2; k >= 0; --k) {
+            const int c = k * nh + i;
+            Lr[k * N + i] = w->cE[c] * Lr[(k + 1) * N + i] + w->cA[c] * S[(k + 1) * N + i] +
+                            w->cB[c] * S[k * N + i];
+        }
+    }
+    for (int i = nh; i < N; ++i) {   /* down: from the top */
+        Lr[i] = 0;
+        for (int k = 0; k + 1 < n; ++k) {
+            const int c = k * nh + (i - nh);
+            Lr[(k + 1) * N + i] = w->cE[c] * Lr[k * N + i] + w->cA[c] * S[k * N + i] +
+                                  w->cB[c] * S[(k + 1) * N + i];
+        }
+    }
+}
+
+/* S = C L per node (both [n][N]). */
+static void scatter(const mode_ws *w, const double *Lr, double *S)
+{
+    const int N = w->N;
+    for (int k = 0; k < w->n; ++k) {
+        const double *C = w->C + (size_t) k * w->cstride, *x = Lr + (size_t) k * N;
+        double *y = S + (size_t) k * N;
+        for (int i = 0; i < N; ++i) {
+            double v = 0;
+            for (int j = 0; j < N; ++j)
+                v += C[i * N + j] * x[j];
+            y[i] = v;
+        }
+    }
+}
+
+static double sup(const double *v, size_t n)
+{
+    double m = 0;
+    for (size_t i = 0; i < n; ++i)
+        m = fmax(m, fabs(v[i]));
+    return m;
+}
+
+/* The mode's diffuse radiance of every order into Lr ([n][N]), directly:
+ * one banded system, its rows ordered so that each unknown's own
+ * coefficient is on the diagonal (diagonally dominant for omega <= 1 and
+ * a positive kernel, so elimination needs no pivots). Returns 0, or -1
+ * (out of memory). */
+static int solve_direct(const mode_ws *w, double *Lr)
+{
+    const int n = w->n, N = w->N, nh = w->nh;
+    const long nt = (long) n * N;
+    const int kl = 2 * N - 1, ku = 2 * N - 1, W = kl + ku + 1;
+    double *A = calloc((size_t) nt * (size_t) W, sizeof *A);
+    if (!A)
+        return -1;
+#define AT(r, c) A[(size_t) (r) * (size_t) W + (size_t) ((c) - (r) + kl)]
+    for (int k = 0; k < n; ++k)
+        for (int i = 0; i < N; ++i) {
+            const long r = (long) k * N + i;
+            const int up = i < nh;
+            double *rhs = &Lr[r];
+            *rhs = 0;
+            AT(r, r) = 1;
+            if ((up && k == n - 1) || (!up && k == 0))
+                continue;   /* nothing enters: L = 0 */
+            /* the cell that ends at k: from s (its start) to k */
+            const int s = up ? k + 1 : k - 1, cell = up ? k : k - 1;
+            const int ci = cell * nh + (up ? i : i - nh);
+            const double E = w->cE[ci], Aw = w->cA[ci], Bw = w->cB[ci];
+            const double *Cs = w->C + (size_t) s * w->cstride + (size_t) i * N;
+            const double *Ce = w->C + (size_t) k * w->cstride + (size_t) i * N;
+            AT(r, (long) s * N + i) -= E;
+            for (int j = 0; j < N; ++j) {
+                AT(r, (long) s * N + j) -= Aw * Cs[j];
+                AT(r, (long) k * N + j) -= Bw * Ce[j];
+            }
+            *rhs = Aw * w->Q[s * N + i] + Bw * w->Q[k * N + i];
+        }
+    for (long c = 0; c < nt; ++c) {
+        const double piv = AT(c, c);
+        const long rend = c + kl < nt - 1 ? c + kl : nt - 1;
+        const long cend = c + ku < nt - 1 ? c + ku : nt - 1;
+        for (long r = c + 1; r <= rend; ++r) {
+            const double f = AT(r, c) / piv;
+            if (f == 0)
+                continue;
+            for (long cc = c + 1; cc <= cend; ++cc)
+                AT(r, cc) -= f * AT(c, cc);
+            Lr[r] -= f * Lr[c];
+        }
+    }
+    for (long r = nt - 1; r >= 0; --r) {
+        double v = Lr[r];
+        const long cend = r + ku < nt - 1 ? r + ku : nt - 1;
+        for (long cc = r + 1; cc <= cend; ++cc)
+            v -= AT(r, cc) * Lr[cc];
+        Lr[r] = v / AT(r, r);
+    }
+#undef AT
+    free(A);
+    return 0;
+}
+
+void ef_ms_solve_free(ef_ms_solve *so)
+{
+    if (!so)
+        return;
+    free(so->tau);
+    free(so->a);
+    free(so->M);
+    free(so);
+}
+
+ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_flux *flux)
+{
+    const int n = sl->n, nh = res->nh, N = 2 * nh, L = N;
+    ef_ms_solve *so = calloc(1, sizeof *so);
+    if (!so || n < 2)
+        return free(so), NULL;
+    so->n = n;
+    so->nh = nh;
+    so->N = N;
+    so->L = L;
+    so->tau = malloc((size_t) n * sizeof *so->tau);
+    so->a = calloc((size_t) n * L, sizeof *so->a);
+    so->M = calloc((size_t) L * n * L, sizeof *so->M);
+    double *xg = malloc(sizeof(double) * (size_t) nh), *wg = malloc(sizeof(double) * (size_t) nh);
+    double *mu = malloc(sizeof(double) * (size_t) N), *wt = malloc(sizeof(double) * (size_t) N);
+    mode_ws w = { .n = n, .nh = nh, .N = N, .L = L };
+    int shared = 1;
+    for (int k = 1; k < n && shared; ++k)
+        for (int l = 0; l < sl->nl && shared; ++l)
+            shared = sl->a[k * sl->nl + l] == sl->a[l];
+    w.cstride = shared ? 0 : N * N;
+    w.lam = malloc(sizeof(double) * (size_t) N * L);
+    w.C = malloc(sizeof(double) * (size_t) (shared ? 1 : n) * N * N);
+    w.Q = malloc(sizeof(double) * (size_t) n * N);
+    w.cE = malloc(sizeof(double) * (size_t) (n - 1) * nh);
+    w.cA = malloc(sizeof(double) * (size_t) (n - 1) * nh);
+    w.cB = malloc(sizeof(double) * (size_t) (n - 1) * nh);
+    double *Lr = malloc(sizeof(double) * (size_t) n * N), *Ln = malloc(sizeof(double) * (size_t) n * N);
+    double *S = malloc(sizeof(double) * (size_t) n * N), *lb = malloc(sizeof(double) * (size_t) L);
+    int ok = so->tau && so->a && so->M && xg && wg && mu && wt && w.lam && w.C && w.Q && w.cE &&
+             w.cA && w.cB && Lr && Ln && S && lb;
+    if (!ok)
+        goto done;
+    memcpy(so->tau, sl->tau, (size_t) n * sizeof *so->tau);
+    for (int k = 0; k < n; ++k)
+        for (int l = 0; l < L && l < sl->nl; ++l)
+            so->a[k * L + l] = sl->a[k * sl->nl + l];
+    gauss01(nh, xg, wg);
+    for (int i = 0; i < nh; ++i) {
+        mu[i] = xg[i];
+        mu[nh + i] = -xg[i];
+        wt[i] = wt[nh + i] = wg[i];
+    }
+    w.tau = so->tau;
+    w.mu = mu;
+    w.w = wt;
+    for (int k = 0; k + 1 < n; ++k) {
+        const double dt = so->tau[k + 1] - so->tau[k];
+        for (int i = 0; i < nh; ++i) {
+            const double x = dt / xg[i];
+            w.cE[k * nh + i] = exp(-x);
+            w.cB[k * nh + i] = w_far(x);
+            w.cA[k * nh + i] = -expm1(-x) - w.cB[k * nh + i];
+        }
+    }
+    if (flux)
+        flux->up_top = flux->down_bottom = 0;
+    for (int m = 0; m < L; ++m) {
+        w.m = m;
+        for (int i = 0; i < N; ++i)
+            lambda_m(m, L, mu[i], w.lam + (size_t) i * L);
+        lambda_m(m, L, -sl->mu_s, lb);
+        /* C_k[i][j] = 1/2 sum_l (2l + 1) a_l Lambda_l^m(mu_i) Lambda_l^m(mu_j) w_j */
+        for (int k = 0; k < (shared ? 1 : n); ++k) {
+            const double *a = so->a + (size_t) k * L;
+            double *C = w.C + (size_t) k * N * N;
+            for (int i = 0; i < N; ++i)
+                for (int j = 0; j < N; ++j) {
+                    double v = 0;
+                    for (int l = m; l < L; ++l)
+                        v += (2 * l + 1) * a[l] * w.lam[i * L + l] * w.lam[j * L + l];
+                    C[i * N + j] = 0.5 * v * wt[j];
+                }
+        }
+        /* the beam's first scattering: E e^(-tau/mu_s) p / 4 pi per mode */
+        const double fm = (m == 0 ? 1.0 : 2.0) / (4 * PI);
+        for (int k = 0; k < n; ++k) {
+            const double *a = so->a + (size_t) k * L;
+            const double beam = sl->E * exp(-so->tau[k] / sl->mu_s);
+            for (int i = 0; i < N; ++i) {
+                double v = 0;
+                for (int l = m; l < L; ++l)
+                    v += (2 * l + 1) * a[l] * w.lam[i * L + l] * lb[l];
+                w.Q[k * N + i] = fm * beam * v;
+            }
+        }
+        const double qn = sup(w.Q, (size_t) n * N);
+        if (qn == 0)
+            continue;
+        double kappa = 0;
+        for (int k = 0; k < (shared ? 1 : n); ++k)
+            for (int i = 0; i < N; ++i) {
+                double r = 0;
+                for (int j = 0; j < N; ++j)
+                    r += fabs(w.C[(size_t) k * N * N + i * N + j]);
+                kappa = fmax(kappa, r);
+            }
+        if (res->max_order > 0 || kappa < MS_ITER_KAPPA) {
+            /* order by order: L_1 from the beam's source, J_(n+1) = C L_n */
+            memset(Lr, 0, sizeof(double) * (size_t) n * N);
+            memcpy(S, w.Q, sizeof(double) * (size_t) n * N);
+            double left = 0;
+            for (int order = 1;; ++order) {
+                transport(&w, S, Ln);
+                for (size_t q = 0; q < (size_t) n * N; ++q)
+                    Lr[q] += Ln[q];
+                scatter(&w, Ln, S);   /* J_(order + 1) */
+                const double sn = sup(S, (size_t) n * N);
+                if (res->max_order > 0) {
+                    if (order + 1 >= res->max_order)
+                        break;
+                } else if (sn * kappa / (1 - kappa) <= MS_TAIL_REL * qn || order > 10000) {
+                    left = sn * kappa / (1 - kappa);
+                    break;
+                }
+            }
+            so->tail += left;
+            so->iterated++;
+        } else {
+            if (solve_direct(&w, Lr)) {
+                ok = 0;
+                goto done;
+            }
+            /* the check: one more sweep changes it by rounding alone */
+            scatter(&w, Lr, S);
+            for (size_t q = 0; q < (size_t) n * N; ++q)
+                S[q] += w.Q[q];
+            transport(&w, S, Ln);
+            double d = 0;
+            for (size_t q = 0; q < (size_t) n * N; ++q)
+                d = fmax(d, fabs(Ln[q] - Lr[q]));
+            const double ln = sup(Lr, (size_t) n * N);
+            so->resid = fmax(so->resid, ln > 0 ? d / ln : 0);
+            so->direct++;
+        }
+        if (flux && m == 0)
+            for (int i = 0; i < nh; ++i) {
+                flux->up_top += 2 * PI * wt[i] * mu[i] * Lr[i];
+                flux->down_bottom += 2 * PI * wt[nh + i] * xg[i] * Lr[(n - 1) * N + nh + i];
+            }
+        /* the moments the view's source is formed from */
+        for (int k = 0; k < n; ++k) {
+            double *Mk = so->M + ((size_t) m * n + k) * L;
+            for (int l = m; l < L; ++l) {
+                double v = 0;
+                for (int j = 0; j < N; ++j)
+                    v += wt[j] * w.lam[j * L + l] * Lr[k * N + j];
+                Mk[l] = v;
+            }
+        }
+    }
+done:
+    free(xg);
+    free(wg);
+    free(mu);
+    free(wt);
+    free(w.lam);
+    free(w.C);
+    free(w.Q);
+    free(w.cE);
+    free(w.cA);
+    free(w.cB);
+    free(Lr);
+    free(Ln);
+    free(S);
+    free(lb);
+    if (!ok) {
+        ef_ms_solve_free(so);
+        return NULL;
+    }
+    return so;
+}
+
+/* J's azimuthal modes at node k and propagation cosine mu into jm[0..L-1];
+ * lam: scratch of L. */
+static void eval_modes(const ef_ms_solve *so, int k, double mu, double *jm, double *lam)
+{
+    const int L = so->L, n = so->n;
+    const double *a = so->a + (size_t) k * L;
+    for (int m = 0; m < L; ++m) {
+        lambda_m(m, L, mu, lam);
+        const double *Mk = so->M + ((size_t) m * n + k) * L;
+        double v = 0;
+        for (int l = m; l < L; ++l)
+            v += (2 * l + 1) * a[l] * lam[l] * Mk[l];
+        jm[m] = 0.5 * v;
+    }
+}
+
+double ef_ms_slab_eval(const ef_ms_solve *so, int k, double mu, double dphi)
+{
+    double jm[128], lam[128];
+    if (so->L > 128 || k < 0 || k >= so->n)
+        return NAN;
+    eval_modes(so, k, mu, jm, lam);
+    double v = 0;
+    for (int m = 0; m < so->L; ++m)
+        v += jm[m] * cos(m * dphi);
+    return v;
+}
+
+double ef_ms_slab_tail(const ef_ms_solve *so)
+{
+    return so->tail;
+}
+
+/* ------------------------------------------------ the scene's solve */
+
+/* One depth table: J (per unit irradiance) and its error estimate at each
+ * node, polar angle and azimuth, and the largest J + error from each node
+ * down (the gather's early stop). */
+typedef struct ms_tab {
+    int n;
+    double *tau;
+    float *v;        /* [n][MS_NT][MS_NP][2] */
+} ms_tab;
+
+struct ef_ms {
+    _Atomic int refs;
+    double up[3], bh[3];
+    int has_bh;
+    double E[3];
+    int tab_of[3];
+    int ntab;
+    ms_tab tab[3];
+    ef_ms_info info;
+};
+
+void ef_ms_ref(ef_ms *m)
+{
+    if (m)
+        atomic_fetch_add(&m->refs, 1);
+}
+
+void ef_ms_unref(ef_ms *m)
+{
+    if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
+        return;
+    for (int t = 0; t < m->ntab; ++t) {
+        free(m->tab[t].tau);
+        free(m->tab[t].v);
+    }
+    free(m);
+}
+
+void ef_ms_get_info(const ef_ms *m, ef_ms_info *info)
+{
+    if (m)
+        *info = m->info;
+    else
+        memset(info, 0, sizeof *info);
+}
+
+static double dot3(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* The Legendre coefficients b_0..b_{L-1} of phase function (phase, g). */
+static void phase_legendre(int phase, double g, int L, double *b)
+{
+    for (int l = 0; l < L; ++l)
+        b[l] = 0;
+    b[0] = 1;
+    if (phase == EF_PHASE_HG) {
+        for (int l = 1; l < L; ++l)
+            b[l] = b[l - 1] * g;
+    } else if (phase == EF_PHASE_RAYLEIGH) {
+        if (L > 2)
+            b[2] = 0.1;
+    } else if (phase == EF_PHASE_CS) {
+        /* b_l = 2 pi int p(x) P_l(x) dx, by 256-point Gauss over each half */
+        enum { NQ = 256 };
+        double x[NQ], w[NQ], P[128];
+        gauss01(NQ, x, w);
+        for (int l = 1; l < L; ++l)
+            b[l] = 0;
+        for (int h = 0; h < 2; ++h)
+            for (int q = 0; q < NQ; ++q) {
+                const double c = h ? x[q] : -x[q], f = 2 * PI * w[q] * ef_phase_eval(phase, g, c);
+                P[0] = 1;
+                P[1] = c;
+                for (int l = 2; l < L && l < 128; ++l)
+                    P[l] = ((2 * l - 1) * c * P[l - 1] - (l - 1) * P[l - 2]) / l;
+                for (int l = 1; l < L && l < 128; ++l)
+                    b[l] += f * P[l];
+            }
+    }
+}
+
+/* Vertical optical depth per channel from height h (along up) to the top. */
+static void vtau(const ef_fog_scene *s, const double up[3], double h, double t[3])
+{
+    const double p[3] = { h * up[0], h * up[1], h * up[2] };
+    ef_lit_tau_from(s, p, up, INFINITY, t);
+}
+
+/* The height where channel k's vertical optical depth reaches tau (tau
+ * non-increasing in height), by bisection between lo and hi. */
+static double height_at(const ef_fog_scene *s, const double up[3], int k, double tau, double lo,
+                        double hi)
+{
+    for (int it = 0; it < 200 && hi - lo > 1e-12 * (1 + fabs(lo) + fabs(hi)); ++it) {
+        const double mid = 0.5 * (lo + hi);
+        double t[3];
+        vtau(s, up, mid, t);
+        if (t[k] >= tau)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+/* Depth nodes from 0 to tb, spacing h0 + r tau; returns how many, into
+ * *out (malloc'd), or -1. */
+static int depth_grid(double tb, double h0, double r, double **out)
+{
+    int cap = 64, n = 0;
+    double *t = malloc(sizeof *t * (size_t) cap), x = 0;
+    if (!t)
+        return -1;
+    t[n++] = 0;
+    while (x < tb) {
+        x += h0 + r * x;
+        if (x > tb * (1 - 1e-9) || tb - x < 0.3 * (h0 + r * x))
+            x = tb;
+        if (n == cap) {
+            double *nt = realloc(t, sizeof *t * (size_t) (cap *= 2));
+            if (!nt)
+                return free(t), -1;
+            t = nt;
+        }
+        t[n++] = x;
+    }
+    *out = t;
+    return n;
+}
+
+/* The per-node omega b_l of channel k at the nodes tau (nl terms) into a. */
+static void node_coeffs(const ef_fog_scene *s, const double up[3], int k, const double *tau, int n,
+                        int nl, double hlo, double hhi, double *a)
+{
+    double bl[EF_FOG_MAX_COMPONENTS][128];
+    for (int c = 0; c < s->ncomp; ++c)
+        phase_legendre(s->comp[c].phase, s->comp[c].g, nl, bl[c]);
+    for (int i = 0; i < n; ++i) {
+        double *ai = a + (size_t) i * nl;
+        memset(ai, 0, sizeof *ai * (size_t) nl);
+        if (s->ncomp == 1) {
+            for (int l = 0; l < nl; ++l)
+                ai[l] = albedo(&s->comp[0], k) * bl[0][l];
+            continue;
+        }
+        /* a mixture: each component's share of the extinction at the
+         * node's height, from its optical depth over a short vertical step */
+        const double h = height_at(s, up, k, tau[i], hlo, hhi), d = 1e-6 * (1 + fabs(h));
+        const double p[3] = { (h - d) * up[0], (h - d) * up[1], (h - d) * up[2] };
+        ef_ray r = { { up[0], up[1], up[2] }, 2 * d, 2 * d, { p[0], p[1], p[2] } };
+        double sum = 0, w[EF_FOG_MAX_COMPONENTS];
+        for (int c = 0; c < s->ncomp; ++c) {
+            double t[3];
+            s->comp[c].model->tau(&s->comp[c], &r, t);
+            w[c] = isfinite(t[k]) ? t[k] : 0;
+            sum += w[c];
+        }
+        for (int c = 0; c < s->ncomp && sum > 0; ++c)
+            for (int l = 0; l < nl; ++l)
+                ai[l] += w[c] / sum * albedo(&s->comp[c], k) * bl[c][l];
+        if (!(sum > 0) && i > 0)
+            memcpy(ai, ai - nl, sizeof *ai * (size_t) nl);
+    }
+}
+
+/* The direction table of solve so at its nodes: [n][MS_NT][MS_NP]. */
+static float *dir_table(const ef_ms_solve *so)
+{
+    float *v = malloc(sizeof *v * (size_t) so->n * MS_NT * MS_NP);
+    double jm[128], lam[128], cs[MS_NP][128];
+    if (!v)
+        return NULL;
+    for (int j = 0; j < MS_NP; ++j)
+        for (int m = 0; m < so->L; ++m)
+            cs[j][m] = cos(m * (PI * j / (MS_NP - 1)));
+    for (int k = 0; k < so->n; ++k)
+        for (int i = 0; i < MS_NT; ++i) {
+            eval_modes(so, k, cos(PI * i / (MS_NT - 1)), jm, lam);
+            for (int j = 0; j < MS_NP; ++j) {
+                double x = 0;
+                for (int m = 0; m < so->L; ++m)
+                    x += jm[m] * cs[j][m];
+                v[((size_t) k * MS_NT + i) * MS_NP + j] = (float) x;
+            }
+        }
+    return v;
+}
+
+/* One channel's table: the solve, a coarser one for the estimate. */
+static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu_s, double tb,
+                     double hlo, double hhi, int nh, ms_tab *tab, ef_ms_info *info)
+{
+    int nl = 2 * nh, ok = 0;
+    const double h0 = 0.02 * fmin(1, 4 * mu_s), r = 0.08;
+    double *tf = NULL, *tc = NULL, *af = NULL, *ac = NULL;
+    ef_ms_solve *sf = NULL, *sc = NULL;
+    float *vf = NULL, *vc = NULL;
+    const int nf = depth_grid(tb, h0, r, &tf), nc = depth_grid(tb, 2 * h0, 2 * r, &tc);
+    const int nhc = nh * 2 / 3 > 4 ? nh * 2 / 3 : 4;
+    if (nf < 0 || nc < 0)
+        goto out;
+    af = malloc(sizeof *af * (size_t) nf * nl);
+    ac = malloc(sizeof *ac * (size_t) nc * nl);
+    if (!af || !ac)
+        goto out;
+    node_coeffs(s, up, k, tf, nf, nl, hlo, hhi, af);
+    node_coeffs(s, up, k, tc, nc, nl, hlo, hhi, ac);
+    const ef_ms_slab slf = { nf, tf, af, nl, mu_s, 1.0 }, slc = { nc, tc, ac, nl, mu_s, 1.0 };
+    const ef_ms_res rf = { nh, 0 }, rc = { nhc, 0 };
+    sf = ef_ms_slab_solve(&slf, &rf, NULL);
+    sc = ef_ms_slab_solve(&slc, &rc, NULL);
+    if (!sf || !sc || !(vf = dir_table(sf)) || !(vc = dir_table(sc)))
+        goto out;
+    tab->v = malloc(sizeof *tab->v * (size_t) nf * MS_NT * MS_NP * 2);
+    if (!tab->v)
+        goto out;
+    tab->n = nf;
+    tab->tau = tf;
+    tf = NULL;
+    const size_t plane = (size_t) MS_NT * MS_NP;
+    double jmax = 0, dmax = 0;
+    int kc = 0;
+    for (int q = 0; q < nf; ++q) {
+        while (kc + 2 < nc && tc[kc + 1] < tab->tau[q])
+            ++kc;
+        const double f = (tab->tau[q] - tc[kc]) / (tc[kc + 1] - tc[kc]);
+        const float *vq = vf + q * plane;
+        for (int i = 0; i < MS_NT; ++i)
+            for (int j = 0; j < MS_NP; ++j) {
+                const size_t d = (size_t) i * MS_NP + j;
+                const double J = vq[d];
+                const double Jc = (1 - f) * vc[kc * plane + d] + f * vc[(kc + 1) * plane + d];
+                /* the bilinear table's own error, from its second differences
+                 * (the azimuth mirrors at 0 and pi) */
+                const int jm = j > 0 ? j - 1 : 1, jp = j + 1 < MS_NP ? j + 1 : MS_NP - 2;
+                double d2 = fabs(vq[i * MS_NP + jm] - 2 * J + vq[i * MS_NP + jp]);
+                if (i > 0 && i + 1 < MS_NT)
+                    d2 += fabs(vq[(i - 1) * MS_NP + j] - 2 * J + vq[(i + 1) * MS_NP + j]);
+                const double e = fabs(J - Jc) + d2 / 8 + sf->tail;
+                tab->v[(q * plane + d) * 2] = (float) J;
+                tab->v[(q * plane + d) * 2 + 1] = (float) e;
+                jmax = fmax(jmax, J);
+                dmax = fmax(dmax, fabs(J - Jc));
+            }
+    }
+    info->nodes = nf;
+    info->nh = nh;
+    info->direct = sf->direct;
+    info->iterated = sf->iterated;
+    if (jmax > 0) {
+        info->tail_rel = fmax(info->tail_rel, sf->tail / jmax);
+        info->disc_rel = fmax(info->disc_rel, dmax / jmax);
+    }
+    ok = 1;
+out:
+    free(tf);
+    free(tc);
+    free(af);
+    free(ac);
+    free(vf);
+    free(vc);
+    ef_ms_solve_free(sf);
+    ef_ms_solve_free(sc);
+    return ok ? 0 : -1;
+}
+
+int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *err)
+{
+    *out = NULL;
+    if (ef_light_at_position(l))
+        return ef_fail(err, "light '%s': multiple scattering is solved for the sun only", l->name);
+    if (l->planet > 0)
+        return ef_fail(err, "light '%s': scattering=multiple is solved over flat ground (no "
+                       "planet=)", l->name);
+    const struct timespec t0 = { 0, 0 };
+    struct timespec ta = t0, tb_ = t0;
+    clock_gettime(CLOCK_MONOTONIC, &ta);
+    /* the common up: every functional of every component along it */
+    double up[3] = { s->ctx.up[0], s->ctx.up[1], s->ctx.up[2] };
+    int have = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (is_uniform(c))
+            continue;
+        ef_fog_functional fn[16];
+        const int nf = c->model->functionals && !c->model->tau_info
+                           ? c->model->functionals(c, fn, 16) : -1;
+        if (nf < 0 || nf > 16)
+            return ef_fail(err, "fog '%s': multiple scattering (light '%s') is solved for fog "
+                           "that is the same along the ground (exp, height, layered, a "
+                           "horizontal half-space); this component's density changes across "
+                           "it", c->spec, l->name);
+        for (int f = 0; f < nf; ++f) {
+            const double nn = sqrt(dot3(fn[f].n, fn[f].n));
+            if (!(nn > 0))
+                continue;
+            double d[3] = { fn[f].n[0] / nn, fn[f].n[1] / nn, fn[f].n[2] / nn };
+            if (!have) {
+                const double sg = dot3(d, up) < 0 ? -1 : 1;
+                for (int q = 0; q < 3; ++q)
+                    up[q] = sg * d[q];
+                have = 1;
+            }
+            if (fabs(fabs(dot3(d, up)) - 1) > 1e-9)
+                return ef_fail(err, "fog '%s': multiple scattering (light '%s') is solved for "
+                               "fog that is the same along the ground (exp, height, layered, a "
+                               "horizontal half-space); this component changes along another "
+                               "direction than the others' up", c->spec, l->name);
+        }
+    }
+    const double mu_s = dot3(l->dir, up);
+    if (!(mu_s > 1e-6) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return 0;   /* no direct light in the plane-parallel fog */
+    /* heights bracketing the fog: its top (optical depth 0 above) and the
+     * ground, or where the depth passes MS_TAU_DEEP */
+    double hhi = 1, hlo = -1, t[3];
+    for (int it = 0; it < 2100; ++it) {
+        vtau(s, up, hhi, t);
+        if (fmax(t[0], fmax(t[1], t[2])) <= 1e-12 || hhi > 1e300)
+            break;
+        hhi *= 2;
+    }
+    vtau(s, up, hhi, t);
+    if (!(fmax(t[0], fmax(t[1], t[2])) < 1e-6))
+        return 0;   /* the fog thickens upwards without end: no sun arrives */
+    if (l->has_ground) {
+        hlo = l->ground;
+    } else {
+        for (int it = 0; it < 2100; ++it) {
+            vtau(s, up, hlo, t);
+            if (fmin(t[0], fmin(t[1], t[2])) >= MS_TAU_DEEP || hlo < -1e300)
+                break;
+            hlo *= 2;
+        }
+    }
+    if (!(hlo < hhi))
+        return 0;
+    double tbot[3];
+    vtau(s, up, hlo, tbot);
+    double gmax = 0;
+    for (int i = 0; i < s->ncomp; ++i)
+        if (s->comp[i].phase == EF_PHASE_HG || s->comp[i].phase == EF_PHASE_CS)
+            gmax = fmax(gmax, fabs(s->comp[i].g));
+    int nh = (int) ceil(3 / (1 - fmin(gmax, 0.99)));
+    nh = nh < 8 ? 8 : nh > 32 ? 32 : nh;
+    ef_ms *m = calloc(1, sizeof *m);
+    if (!m)
+        return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+    atomic_init(&m->refs, 1);
+    memcpy(m->up, up, sizeof m->up);
+    memcpy(m->E, l->e, sizeof m->E);
+    /* the beam's horizontal direction (propagation: away from the sun) */
+    for (int q = 0; q < 3; ++q)
+        m->bh[q] = -l->dir[q] + mu_s * up[q];
+    const double bn = sqrt(dot3(m->bh, m->bh));
+    m->has_bh = bn > 1e-12;
+    for (int q = 0; q < 3 && m->has_bh; ++q)
+        m->bh[q] /= bn;
+    /* channels share a table where their fog is the same */
+    for (int k = 0; k < 3; ++k) {
+        m->tab_of[k] = -1;
+        for (int j = 0; j < k && m->tab_of[k] < 0; ++j) {
+            int same = tbot[j] == tbot[k];
+            for (int i = 0; i < s->ncomp && same; ++i)
+                same = albedo(&s->comp[i], j) == albedo(&s->comp[i], k);
+            for (int q = 0; q < 8 && same; ++q) {
+                const double h = hlo + (hhi - hlo) * q / 7.0;
+                vtau(s, up, h, t);
+                same = t[j] == t[k];
+            }
+            if (same)
+                m->tab_of[k] = m->tab_of[j];
+        }
+        if (m->tab_of[k] >= 0)
+            continue;
+        ms_tab *tab = &m->tab[m->ntab];
+        m->tab_of[k] = m->ntab++;
+        const double tb = fmin(tbot[k], MS_TAU_DEEP);
+        if (!(tb > 1e-9))
+            continue;   /* no fog in this channel: an empty table */
+        if (build_tab(s, up, k, mu_s, tb, hlo, hhi, nh, tab, &m->info)) {
+            ef_ms_unref(m);
+            return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+        }
+    }
+    clock_gettime(CLOCK_MONOTONIC, &tb_);
+    m->info.seconds = (double) (tb_.tv_sec - ta.tv_sec) + 1e-9 * (double) (tb_.tv_nsec - ta.tv_nsec);
+    *out = m;
+    return 0;
+}
+
+/* ------------------------------------------------------------ the gather */
+
+/* A direction's bilinear corners and weights in the table. */
+typedef struct dir_w {
+    size_t at[4];
+    double w[4];
+} dir_w;
+
+/* J and its estimate at node q of tab for direction dw. */
+static void node_val(const ms_tab *tab, const dir_w *dw, int q, double *J, double *e)
+{
+    const float *v = tab->v + (size_t) q * MS_NT * MS_NP * 2;
+    double j = 0, x = 0;
+    for (int c = 0; c < 4; ++c) {
+        j += dw->w[c] * v[dw->at[c] * 2];
+        x += dw->w[c] * v[dw->at[c] * 2 + 1];
+    }
+    *J = j;
+    *e = x;
+}
+
+/* J and its estimate at depth tau (linear between nodes; 0 past the bottom). */
+static void tau_val(const ms_tab *tab, const dir_w *dw, double tau, double *J, double *e)
+{
+    const int n = tab->n;
+    if (!(tau <= tab->tau[n - 1]) || tau < 0) {
+        *J = *e = 0;
+        return;
+    }
+    int lo = 0, hi = n - 1;
+    while (hi - lo > 1) {
+        const int mid = (lo + hi) / 2;
+        if (tab->tau[mid] <= tau)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    double J0, e0, J1, e1;
+    node_val(tab, dw, lo, &J0, &e0);
+    node_val(tab, dw, hi, &J1, &e1);
+    const double f = (tau - tab->tau[lo]) / (tab->tau[hi] - tab->tau[lo]);
+    *J = J0 + f * (J1 - J0);
+    *e = e0 + f * (e1 - e0);
+}
+
+/* int_0^{sD} e^-s J(tauc + q s) ds and its estimate, J linear between the
+ * table's nodes (q: the change of vertical depth per unit of the view's). */
+static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, double sD,
+                 double out[2])
+{
+    out[0] = out[1] = 0;
+    const double tbot = tab->tau[tab->n - 1];
+    double J0, e0;
+    if (fabs(q) * fmin(sD, 40) <= 1e-12 * (1 + tauc)) {
+        tau_val(tab, dw, tauc, &J0, &e0);
+        const double a = isinf(sD) ? 1 : -expm1(-sD);
+        out[0] = a * J0;
+        out[1] = a * e0;
+        return;
+    }
+    /* the stretch of depth the ray covers inside [0, tbot] */
+    double t0 = tauc, s0 = 0;
+    if (q < 0 && t0 > tbot) {   /* rising from below the bottom */
+        s0 = (t0 - tbot) / -q;
+        t0 = tbot;
+    }
+    if ((q > 0 && t0 >= tbot) || s0 >= sD)
+        return;
+    double tend = q > 0 ? tbot : 0;
+    const double sEnd = fmin(sD, (tend - tauc) / q);   /* where the ray leaves it */
+    if (sEnd < sD)
+        sD = sEnd;
+    else
+        tend = tauc + q * sD;
+    /* the first node past t0 the way the ray goes */
+    int next = 0;
+    while (next < tab->n && tab->tau[next] <= t0)
+        ++next;
+    if (q < 0) {
+        next = tab->n - 1;
+        while (next >= 0 && tab->tau[next] >= t0)
+            --next;
+    }
+    tau_val(tab, dw, t0, &J0, &e0);
+    double s1 = s0, ta = t0;
+    for (int guard = 0; guard <= tab->n && s1 < sD && s1 < 40; ++guard) {
+        double tn;
+        int at_node = 0;
+        if (next >= 0 && next < tab->n && (q > 0 ? tab->tau[next] < tend : tab->tau[next] > tend)) {
+            tn = tab->tau[next];
+            at_node = 1;
+        } else {
+            tn = tend;
+        }
+        double J1, e1;
+        if (at_node)
+            node_val(tab, dw, next, &J1, &e1);
+        else
+            tau_val(tab, dw, tn, &J1, &e1);
+        const double x = fmax(0, (tn - ta) / q), a = -expm1(-x), g = w_slope(x), es = exp(-s1);
+        out[0] += es * (J0 * a + (J1 - J0) * g);
+        out[1] += es * (e0 * a + (e1 - e0) * g);
+        s1 += x;
+        ta = tn;
+        J0 = J1;
+        e0 = e1;
+        if (!at_node)
+            break;
+        next += q > 0 ? 1 : -1;
+    }
+}
+
+void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, double S[3], double E[3])
+{
+    S[0] = S[1] = S[2] = 0;
+    if (E)
+        E[0] = E[1] = E[2] = 0;
+    if (!m || !(r->dist > 0))
+        return;
+    /* the propagation direction towards the camera: -dir */
+    const double mu_u = dot3(r->dir, m->up), mu_p = -mu_u;
+    double th = acos(mu_p > 1 ? 1 : mu_p < -1 ? -1 : mu_p), ph = 0;
+    double hz[3];
+    for (int q = 0; q < 3; ++q)
+        hz[q] = -r->dir[q] - mu_p * m->up[q];
+    const double hn = sqrt(dot3(hz, hz));
+    if (m->has_bh && hn > 1e-12) {
+        const double c = dot3(hz, m->bh) / hn;
+        ph = acos(c > 1 ? 1 : c < -1 ? -1 : c);
+    }
+    dir_w dw;
+    const double fi = th / PI * (MS_NT - 1), fj = ph / PI * (MS_NP - 1);
+    int i0 = (int) fi, j0 = (int) fj;
+    i0 = i0 > MS_NT - 2 ? MS_NT - 2 : i0;
+    j0 = j0 > MS_NP - 2 ? MS_NP - 2 : j0;
+    const double u = fi - i0, v = fj - j0;
+    dw.at[0] = (size_t) i0 * MS_NP + j0;
+    dw.at[1] = dw.at[0] + 1;
+    dw.at[2] = dw.at[0] + MS_NP;
+    dw.at[3] = dw.at[2] + 1;
+    dw.w[0] = (1 - u) * (1 - v);
+    dw.w[1] = (1 - u) * v;
+    dw.w[2] = u * (1 - v);
+    dw.w[3] = u * v;
+    double tauc[3], sD[3];
+    ef_lit_tau_from(s, r->org, m->up, INFINITY, tauc);
+    ef_lit_tau_from(s, r->org, r->dir, r->dist, sD);
+    double res[3][2];
+    for (int t = 0; t < m->ntab; ++t) {
+        int k = 0;
+        while (m->tab_of[k] != t)
+            ++k;
+        if (m->tab[t].n > 1)
+            walk(&m->tab[t], &dw, tauc[k], mu_p, sD[k], res[t]);
+        else
+            res[t][0] = res[t][1] = 0;
+    }
+    for (int k = 0; k < 3; ++k) {
+        S[k] = m->E[k] * res[m->tab_of[k]][0];
+        if (E)
+            E[k] = m->E[k] * res[m->tab_of[k]][1];
+    }
+}

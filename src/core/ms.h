@@ -1,0 +1,116 @@
+/* Multiple scattering of a sun in fog that is the same along the ground
+ * (its density a function of height alone: exp, height, layered, a
+ * horizontal half-space): the plane-parallel problem in vertical optical
+ * depth, solved once per scene and light, independent of the pixels.
+ *
+ * The sun's beam propagates down; fog at vertical optical depth tau (from
+ * the top of the fog) scatters it once (exrfog's single scattering, exact
+ * elsewhere), and the diffuse light that results scatters again and again.
+ * What the view ray gathers of the second and later orders is
+ *
+ *   S_ms = int_0^{s_D} e^{-s} J(tau_c - mu_u s, -u) ds,
+ *
+ * s the view's own optical depth (in a plane-parallel medium the vertical
+ * depth changes by -mu_u per unit of it, mu_u the view direction's up
+ * component), J(tau, w) the source of orders 2 and up per unit extinction
+ * at depth tau in propagation direction w. J comes from the diffuse
+ * radiance of every order (discrete ordinates: double-Gauss directions,
+ * azimuthal Fourier modes of the phase functions' Legendre series, a
+ * piecewise-linear source between depth nodes integrated exactly along
+ * each direction), each mode by a direct banded solve or, where its
+ * scattering operator's norm is below MS_ITER_KAPPA, order by order with
+ * the bound of the orders left out. J is tabulated against depth and
+ * direction; the view gathers it exactly for a source linear between
+ * nodes. Pure C, no I/O.
+ *
+ * Errors, per pixel through ef_ms_gather's estimate:
+ *   - bound: the orders an iterated mode leaves out (sup norm of its last
+ *     order times kappa / (1 - kappa));
+ *   - estimate: the discretisation, as the difference from a second solve
+ *     at about half the resolution in depth and direction, plus the
+ *     bilinear interpolation of the direction table from its second
+ *     differences.
+ * Scattered light is not shadowed: a shadow map blocks single scattering
+ * only. The ground is black (ground=) or absent (the fog's own depth, to
+ * tau 10^4, takes the light). */
+#ifndef EF_MS_H
+#define EF_MS_H
+
+#include "error.h"
+
+struct ef_fog_scene;
+struct ef_light;
+struct ef_ray;
+
+typedef struct ef_ms ef_ms;
+
+/* One channel's problem, for the solver alone (tests, bench): nodes in
+ * vertical optical depth tau[0] = 0 < ... < tau[n-1] (the bottom, black
+ * below), and per node the albedo times the phase function's Legendre
+ * coefficients a[i * nl + l] = omega b_l (b_0 = 1; p(x) = sum_l (2l + 1)
+ * b_l P_l(x) / 4 pi); a sun of irradiance E whose beam falls at cosine
+ * mu_s > 0 from the vertical. */
+typedef struct ef_ms_slab {
+    int n;
+    const double *tau;
+    const double *a;
+    int nl;
+    double mu_s, E;
+} ef_ms_slab;
+
+/* Resolution of a solve: directions per hemisphere (nh, 4..64) and the
+ * depth grid's growth (a solve of ef_ms_build picks them; tests set
+ * them). max_order > 0 keeps orders 2..max_order only (every mode
+ * iterated), for tests against nested quadrature. */
+typedef struct ef_ms_res {
+    int nh;
+    int max_order;
+} ef_ms_res;
+
+/* The diffuse radiance's fluxes of a solve, for the energy check: up out
+ * of the top, down out of the bottom (diffuse only), per unit area. */
+typedef struct ef_ms_flux {
+    double up_top, down_bottom;
+} ef_ms_flux;
+
+/* Solves one slab: J of orders 2 and up at depth node k, propagation
+ * direction of up component mu (any in [-1, 1]) and azimuth dphi from the
+ * beam's, through ef_ms_slab_eval. Returns an opaque solve or NULL (out of
+ * memory). */
+typedef struct ef_ms_solve ef_ms_solve;
+ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_flux *flux);
+double ef_ms_slab_eval(const ef_ms_solve *so, int k, double mu, double dphi);
+/* The bound of the orders a solve left out, the largest over nodes and
+ * directions (0 where every mode was solved directly). */
+double ef_ms_slab_tail(const ef_ms_solve *so);
+void ef_ms_solve_free(ef_ms_solve *so);
+
+/* Builds the multiple scattering of sun l in scene s (l a sun; its
+ * ground= and the components' albedo and phases read), or *out = NULL
+ * when it adds nothing (the sun below the horizon, no fog above the
+ * ground). Returns 0, or -1 with a message: a component whose density is
+ * not a function of height along a common up (noise, a box, a tilted
+ * half-space), a planet sun, out of memory. */
+int ef_ms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_ms **out, ef_err *err);
+
+/* S_ms per channel along r (org anywhere, dir unit, r->dist possibly
+ * INFINITY), seen from r->org, and into E (may be NULL) its error
+ * estimate (the bound and estimates above); adds nothing where m is NULL. */
+void ef_ms_gather(const ef_ms *m, const struct ef_fog_scene *s, const struct ef_ray *r,
+                  double S[3], double E[3]);
+
+/* What the build chose and measured, for --explain and the bench: depth
+ * nodes, directions per hemisphere, modes solved directly and iterated,
+ * the largest tail bound and the largest discretisation estimate relative
+ * to the largest J, and the solve's time in seconds. */
+typedef struct ef_ms_info {
+    int nodes, nh, direct, iterated;
+    double tail_rel, disc_rel, seconds;
+} ef_ms_info;
+void ef_ms_get_info(const ef_ms *m, ef_ms_info *info);
+
+/* Shared, immutable once built: copies of a scene take references. */
+void ef_ms_ref(ef_ms *m);
+void ef_ms_unref(ef_ms *m);
+
+#endif
