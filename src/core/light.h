@@ -90,6 +90,10 @@ typedef struct ef_light {
     int multiple, has_ground;
     double ground;
     struct ef_ms *ms;
+    /* the bound camera's position and its vertical depth for ms
+     * (ef_scene_bind), so per-pixel work skips a per-view constant */
+    int ms_bound;
+    double ms_org[3], ms_tauc[3];
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

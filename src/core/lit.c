@@ -181,13 +181,15 @@ static int sun_closed(const ef_fog_component *c, const ef_light *l, const ef_ray
 
 /* Adds sun l's light scattered twice and more (scattering=multiple) along
  * r to S, and its error estimate to E (may be NULL). */
-static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
-                         double E[3])
+static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+                         const double *tv, double S[3], double E[3])
 {
     if (!l->ms)
         return;
     double Sm[3], Em[3];
-    ef_ms_gather(l->ms, s, r, Sm, Em);
+    const int cam = l->ms_bound && r->org[0] == l->ms_org[0] && r->org[1] == l->ms_org[1] &&
+                    r->org[2] == l->ms_org[2];
+    ef_ms_gather(l->ms, s, r, tv, cam ? l->ms_tauc : NULL, Sm, Em);
     for (int k = 0; k < 3; ++k) {
         S[k] += Sm[k];
         if (E)
@@ -211,7 +213,7 @@ void ef_light_sun_span_eval(const ef_fog_scene *s, const ef_light *l, const ef_r
     if (!(r->dist > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return;
     sun_closed(&s->comp[0], l, r, tv, S);
-    add_multiple(s, l, r, S, NULL);
+    add_multiple(s, l, r, tv, S, NULL);
 }
 
 /* Sun l's closed form over [a, b] of r in the scene's one component: T(0,
@@ -401,7 +403,7 @@ void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *
         if (iv != stack)
             free(iv);
     }
-    add_multiple(s, l, r, S, E);
+    add_multiple(s, l, r, NULL, S, E);
     if (err)
         for (int k = 0; k < 3; ++k)
             err[k] = E[k];

@@ -402,28 +402,37 @@ done:
     return so;
 }
 
-/* J's azimuthal modes at node k and propagation cosine mu into jm[0..L-1];
- * lam: scratch of L. */
-static void eval_modes(const ef_ms_solve *so, int k, double mu, double *jm, double *lam)
+/* Lambda_l^m(mu) for every m, l < L into lam[m * L + l]. */
+static void lambda_all(int L, double mu, double *lam)
+{
+    for (int m = 0; m < L; ++m)
+        lambda_m(m, L, mu, lam + (size_t) m * L);
+}
+
+/* J's azimuthal modes at node k into jm[0..L-1], lam from lambda_all at
+ * the direction's propagation cosine. */
+static void eval_modes(const ef_ms_solve *so, int k, const double *lam, double *jm)
 {
     const int L = so->L, n = so->n;
     const double *a = so->a + (size_t) k * L;
     for (int m = 0; m < L; ++m) {
-        lambda_m(m, L, mu, lam);
-        const double *Mk = so->M + ((size_t) m * n + k) * L;
+        const double *Mk = so->M + ((size_t) m * n + k) * L, *lm = lam + (size_t) m * L;
         double v = 0;
         for (int l = m; l < L; ++l)
-            v += (2 * l + 1) * a[l] * lam[l] * Mk[l];
+            v += (2 * l + 1) * a[l] * lm[l] * Mk[l];
         jm[m] = 0.5 * v;
     }
 }
 
 double ef_ms_slab_eval(const ef_ms_solve *so, int k, double mu, double dphi)
 {
-    double jm[128], lam[128];
-    if (so->L > 128 || k < 0 || k >= so->n)
-        return NAN;
-    eval_modes(so, k, mu, jm, lam);
+    double jm[128];
+    double *lam = calloc((size_t) so->L * so->L, sizeof *lam);
+    if (!lam || so->L > 128 || k < 0 || k >= so->n)
+        return free(lam), NAN;
+    lambda_all(so->L, mu, lam);
+    eval_modes(so, k, lam, jm);
+    free(lam);
     double v = 0;
     for (int m = 0; m < so->L; ++m)
         v += jm[m] * cos(m * dphi);
@@ -442,8 +451,9 @@ double ef_ms_slab_tail(const ef_ms_solve *so)
  * down (the gather's early stop). */
 typedef struct ms_tab {
     int n;
+    double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
-    float *v;        /* [n][MS_NT][MS_NP][2] */
+    float *v;        /* [MS_NT][MS_NP][n][2]: a direction's nodes side by side */
 } ms_tab;
 
 struct ef_ms {
@@ -606,23 +616,31 @@ static void node_coeffs(const ef_fog_scene *s, const double up[3], int k, const 
 /* The direction table of solve so at its nodes: [n][MS_NT][MS_NP]. */
 static float *dir_table(const ef_ms_solve *so)
 {
+    const int L = so->L;
     float *v = malloc(sizeof *v * (size_t) so->n * MS_NT * MS_NP);
-    double jm[128], lam[128], cs[MS_NP][128];
-    if (!v)
+    double *lam = malloc(sizeof *lam * (size_t) MS_NT * L * L);
+    double jm[128], cs[MS_NP][128];
+    if (!v || !lam || L > 128) {
+        free(lam);
+        free(v);
         return NULL;
+    }
     for (int j = 0; j < MS_NP; ++j)
-        for (int m = 0; m < so->L; ++m)
+        for (int m = 0; m < L; ++m)
             cs[j][m] = cos(m * (PI * j / (MS_NP - 1)));
+    for (int i = 0; i < MS_NT; ++i)
+        lambda_all(L, cos(PI * i / (MS_NT - 1)), lam + (size_t) i * L * L);
     for (int k = 0; k < so->n; ++k)
         for (int i = 0; i < MS_NT; ++i) {
-            eval_modes(so, k, cos(PI * i / (MS_NT - 1)), jm, lam);
+            eval_modes(so, k, lam + (size_t) i * L * L, jm);
             for (int j = 0; j < MS_NP; ++j) {
                 double x = 0;
-                for (int m = 0; m < so->L; ++m)
+                for (int m = 0; m < L; ++m)
                     x += jm[m] * cs[j][m];
                 v[((size_t) k * MS_NT + i) * MS_NP + j] = (float) x;
             }
         }
+    free(lam);
     return v;
 }
 
@@ -676,9 +694,18 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
                 double d2 = fabs(vq[i * MS_NP + jm] - 2 * J + vq[i * MS_NP + jp]);
                 if (i > 0 && i + 1 < MS_NT)
                     d2 += fabs(vq[(i - 1) * MS_NP + j] - 2 * J + vq[(i + 1) * MS_NP + j]);
+                /* and the linear interpolation between depth nodes, from
+                 * the second derivative the neighbours give */
+                if (q > 0 && q + 1 < nf) {
+                    const double hm = tab->tau[q] - tab->tau[q - 1], hp = tab->tau[q + 1] - tab->tau[q];
+                    const double J2 = 2 * ((vf[(q + 1) * plane + d] - J) / hp -
+                                           (J - vf[(q - 1) * plane + d]) / hm) / (hm + hp);
+                    d2 += fabs(J2) * fmax(hm, hp) * fmax(hm, hp);
+                }
                 const double e = fabs(J - Jc) + d2 / 8 + sf->tail;
-                tab->v[(q * plane + d) * 2] = (float) J;
-                tab->v[(q * plane + d) * 2 + 1] = (float) e;
+                tab->v[(d * (size_t) nf + q) * 2] = (float) J;
+                tab->v[(d * (size_t) nf + q) * 2 + 1] = (float) e;
+                tab->jmax = fmax(tab->jmax, J + e);
                 jmax = fmax(jmax, J);
                 dmax = fmax(dmax, fabs(J - Jc));
             }
@@ -840,11 +867,11 @@ typedef struct dir_w {
 /* J and its estimate at node q of tab for direction dw. */
 static void node_val(const ms_tab *tab, const dir_w *dw, int q, double *J, double *e)
 {
-    const float *v = tab->v + (size_t) q * MS_NT * MS_NP * 2;
+    const float *v = tab->v + (size_t) q * 2;
     double j = 0, x = 0;
     for (int c = 0; c < 4; ++c) {
-        j += dw->w[c] * v[dw->at[c] * 2];
-        x += dw->w[c] * v[dw->at[c] * 2 + 1];
+        j += dw->w[c] * v[dw->at[c] * (size_t) tab->n * 2];
+        x += dw->w[c] * v[dw->at[c] * (size_t) tab->n * 2 + 1];
     }
     *J = j;
     *e = x;
@@ -904,17 +931,27 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     else
         tend = tauc + q * sD;
     /* the first node past t0 the way the ray goes */
-    int next = 0;
-    while (next < tab->n && tab->tau[next] <= t0)
-        ++next;
-    if (q < 0) {
-        next = tab->n - 1;
-        while (next >= 0 && tab->tau[next] >= t0)
-            --next;
+    int lo = 0, hi = tab->n;   /* the first node above t0: in [lo, hi] */
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (tab->tau[mid] <= t0)
+            lo = mid + 1;
+        else
+            hi = mid;
     }
+    int next = lo;
+    if (q < 0)
+        for (next = lo - 1; next >= 0 && tab->tau[next] >= t0; --next)
+            ;
     tau_val(tab, dw, t0, &J0, &e0);
-    double s1 = s0, ta = t0;
-    for (int guard = 0; guard <= tab->n && s1 < sD && s1 < 40; ++guard) {
+    double s1 = s0, ta = t0, es = exp(-s0);
+    for (int guard = 0; guard <= tab->n && s1 < sD; ++guard) {
+        /* what is left past here is at most es jmax: stop once that is
+         * below 1e-6 of what was gathered, and count it as error */
+        if (es * tab->jmax <= 1e-6 * out[0]) {
+            out[1] += es * tab->jmax;
+            break;
+        }
         double tn;
         int at_node = 0;
         if (next >= 0 && next < tab->n && (q > 0 ? tab->tau[next] < tend : tab->tau[next] > tend)) {
@@ -928,10 +965,12 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
             node_val(tab, dw, next, &J1, &e1);
         else
             tau_val(tab, dw, tn, &J1, &e1);
-        const double x = fmax(0, (tn - ta) / q), a = -expm1(-x), g = w_slope(x), es = exp(-s1);
+        const double x = fmax(0, (tn - ta) / q), a = -expm1(-x);
+        const double g = x < 1e-3 ? w_slope(x) : (a - x * (1 - a)) / x;
         out[0] += es * (J0 * a + (J1 - J0) * g);
         out[1] += es * (e0 * a + (e1 - e0) * g);
         s1 += x;
+        es *= 1 - a;
         ta = tn;
         J0 = J1;
         e0 = e1;
@@ -941,7 +980,16 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     }
 }
 
-void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, double S[3], double E[3])
+void ef_ms_camera_depth(const ef_ms *m, const ef_fog_scene *s, const double org[3],
+                        double tauc[3])
+{
+    tauc[0] = tauc[1] = tauc[2] = 0;
+    if (m)
+        ef_lit_tau_from(s, org, m->up, INFINITY, tauc);
+}
+
+void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const double *tv,
+                  const double *tauc_in, double S[3], double E[3])
 {
     S[0] = S[1] = S[2] = 0;
     if (E)
@@ -974,8 +1022,14 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, double
     dw.w[2] = u * (1 - v);
     dw.w[3] = u * v;
     double tauc[3], sD[3];
-    ef_lit_tau_from(s, r->org, m->up, INFINITY, tauc);
-    ef_lit_tau_from(s, r->org, r->dir, r->dist, sD);
+    if (tauc_in)
+        memcpy(tauc, tauc_in, sizeof tauc);
+    else
+        ef_lit_tau_from(s, r->org, m->up, INFINITY, tauc);
+    if (tv)
+        memcpy(sD, tv, sizeof sD);
+    else
+        ef_lit_tau_from(s, r->org, r->dir, r->dist, sD);
     double res[3][2];
     for (int t = 0; t < m->ntab; ++t) {
         int k = 0;

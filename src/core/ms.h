@@ -95,9 +95,16 @@ int ef_ms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_ms **
 
 /* S_ms per channel along r (org anywhere, dir unit, r->dist possibly
  * INFINITY), seen from r->org, and into E (may be NULL) its error
- * estimate (the bound and estimates above); adds nothing where m is NULL. */
+ * estimate (the bound and estimates above); 0 where m is NULL. tv: r's
+ * optical depth per channel when the caller has it, tauc: r->org's
+ * vertical depth from ef_ms_camera_depth (both NULL: computed here; the
+ * same bits either way). */
 void ef_ms_gather(const ef_ms *m, const struct ef_fog_scene *s, const struct ef_ray *r,
-                  double S[3], double E[3]);
+                  const double *tv, const double *tauc, double S[3], double E[3]);
+/* The vertical optical depth per channel from org to the top of the fog,
+ * as ef_ms_gather reads it (a camera's, computed once per view). */
+void ef_ms_camera_depth(const ef_ms *m, const struct ef_fog_scene *s, const double org[3],
+                        double tauc[3]);
 
 /* What the build chose and measured, for --explain and the bench: depth
  * nodes, directions per hemisphere, modes solved directly and iterated,

@@ -107,6 +107,12 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
 {
     for (int i = 0; i < s->ncomp; ++i)
         ef_fog_bind(&s->comp[i], org);
+    for (int j = 0; j < s->nlight; ++j) {
+        ef_light *l = &s->light[j];
+        l->ms_bound = l->ms != NULL;
+        memcpy(l->ms_org, org, sizeof l->ms_org);
+        ef_ms_camera_depth(l->ms, s, org, l->ms_tauc);
+    }
     for (int j = 0; j < s->nlight && s->ncomp == 1; ++j) {
         const double *up = s->comp[0].up;
         ef_light_bind(&s->light[j], &s->comp[0], up[0] * org[0] + up[1] * org[1] + up[2] * org[2]);
