@@ -1,0 +1,98 @@
+#!/bin/bash
+# bench/ms.sh - multiple scattering (issue 44) against Blender Cycles with 128 volume bounces.
+#
+#   bench/ms.sh [BUILD_DIR] > bench/ms.md
+#
+# Over a grid of the fog's albedo (0.8, 0.95, 0.99), HG g (0, 0.5, 0.85) and the sun's
+# elevation (5, 30, 80 degrees) in a slab of vertical optical depth 2, and the slab's optical
+# depth (0.5, 8, 16; albedo 0.95, g 0.5, sun 30 degrees), bench/ms_compare.py renders
+# bench/ms_blender.py's scene with Cycles (volume bounces 0 and 128, MS_SPP samples, default
+# 4096, 64x36) and runs exrfog on its depth with scattering=single and =multiple. Errors are
+# per 8x8 block of pixels (Cycles' noise averaged down), relative to Cycles' radiance; its own
+# noise is the block mean's standard error. Then the cost at 1080p: the sun in height fog,
+# single against multiple, and the solve's time and size over the grid of g and albedo.
+set -u
+build="${1:-build}"
+spp="${MS_SPP:-4096}"
+here="$(cd "$(dirname "$0")" && pwd)"
+die() { echo "ms.sh: $*" >&2; exit 1; }
+[[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
+command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
+py=/usr/bin/python3
+tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-ms.XXXXXX")" || die "mktemp failed"
+trap 'rm -rf "$tmp"' EXIT
+load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+cases=()
+for a in 0.8 0.95 0.99; do
+    for g in 0 0.5 0.85; do
+        for e in 5 30 80; do
+            cases+=("$e 0.1 $a $g")
+        done
+    done
+done
+cases+=("30 0.025 0.95 0.5" "30 0.4 0.95 0.5" "30 0.8 0.95 0.5")
+for c in "${cases[@]}"; do
+    # shellcheck disable=SC2086
+    set -- $c
+    "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" "$1" "$2" "$3" "$4" 20 64 36 8 \
+        >>"$tmp/grid.jsonl" || die "case $c failed"
+done
+# the cost at 1080p: a sun in height fog, single against multiple, interleaved
+"$build/make_sample" "$tmp/hd.exr" --size 1920x1080 --view 5,-5,60 >/dev/null || die "make_sample"
+fog="height:density=0.05:falloff=0.1:base=0:albedo=0.9:phase=hg:g=0.6"
+sun="sun:towards=1,0.3,-1:intensity=3"
+for r in 1 2 3 4 5; do
+    for m in single multiple; do
+        /usr/bin/time -f "%e" -o "$tmp/t" "$build/exrfog" "$tmp/hd.exr" -o "$tmp/o.exr" --fog "$fog" \
+            --light "$sun:scattering=$m" --threads 2 || die "exrfog $m"
+        echo "$m $(cat "$tmp/t")" >>"$tmp/cost"
+    done
+    /usr/bin/time -f "%e" -o "$tmp/t" oiiotool "$tmp/hd.exr" -o "$tmp/o2.exr" || die oiiotool
+    echo "copy $(cat "$tmp/t")" >>"$tmp/cost"
+done
+"$build/ms_info" >"$tmp/solves" 2>&1 || die "ms_info"
+echo "## Multiple scattering against Cycles (issue 44)"
+echo
+echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
+echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples, 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_blender.py's slab (homogeneous, ground z = 0 black, top z = 20, 4 km wide), camera 2 up looking 8 degrees down, sun of strength 1 at azimuth 150 degrees"
+echo "- exrfog: halfspace:plane=0,0,1,-20 with the same density, albedo and HG g, the sun with scattering=multiple:ground=0, on the render's depth with colour 0 (the output is the fog's light alone)"
+echo "- errors per 8x8 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
+echo
+"$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'EOF'
+import json, sys, statistics as st
+rows = [json.loads(l) for l in open(sys.argv[1])]
+print("| sun elev | vertical tau | albedo | g | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
+print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+for r in rows:
+    print("| %g | %g | %g | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2f %% | %.0f %% |" % (
+        r["elev"], r["vertical_tau"], r["albedo"], r["g"], r["single_share_median"],
+        100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
+        100 * r["rel_signed_median"], 100 * r["noise_rel_median"], 100 * r["err_rel_median"],
+        100 * r["covered"]))
+med = st.median([r["rel_median"] for r in rows])
+worst = max(rows, key=lambda r: r["rel_p99"])
+print()
+print("Over the %d cases: the median of the per-case median errors %.2f %%, the worst 99th percentile %.2f %% (%s); covered in %d of %d cases on >= 99 %% of blocks." % (
+    len(rows), 100 * med, 100 * worst["rel_p99"], worst["case"],
+    sum(r["covered"] >= 0.99 for r in rows), len(rows)))
+cost = {}
+for l in open(sys.argv[2]):
+    k, v = l.split()
+    cost.setdefault(k, []).append(float(v))
+m = {k: st.median(v) for k, v in cost.items()}
+print()
+print("### Cost at 1080p (a sun in height fog, 2 threads, medians of 5 runs)")
+print()
+print("| run | wall s | / single | / oiiotool copy |")
+print("|---|---:|---:|---:|")
+for k in ("copy", "single", "multiple"):
+    print("| %s | %.3f | %.2fx | %.2fx |" % (k, m[k], m[k] / m["single"], m[k] / m["copy"]))
+print()
+print("### The solve over albedo and g (bench/ms_info: a sun 30 degrees up in height fog)")
+print()
+print("```")
+print(open(sys.argv[3]).read().rstrip())
+print("```")
+EOF

@@ -1,0 +1,370 @@
+/* Multiple scattering (ms.h) against independent references:
+ *   - the second order in a homogeneous slab by nested adaptive quadrature
+ *     over the sphere of directions, with the first order's depth integral
+ *     in closed form and the exact Henyey-Greenstein phase (not its
+ *     Legendre series);
+ *   - energy: at albedo 1 the light the slab sends up out of its top, down
+ *     out of its bottom and lets through unscattered is the sun's;
+ *   - the series bound: the orders above K are at most omega^K / (1 - omega)
+ *     times the largest single-scatter source, and the direct solve is the
+ *     series' limit;
+ *   - a view segment gathers only the fog in front of its end (no halo);
+ *   - what the solve refuses, and per-channel fog. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "gk15.h"
+#include "lit.h"
+#include "ms.h"
+#include "scene.h"
+
+#define PI 3.14159265358979323846
+
+/* ------------------------------------------------ nested quadrature */
+
+typedef struct ref2 {
+    double tau, tb, om, g, mus, mu, phi, mup;
+} ref2;
+
+static double hg(double g, double c)
+{
+    const double q = 1 + g * g - 2 * g * c;
+    return (1 - g * g) / (4 * PI * q * sqrt(q));
+}
+
+/* The first order's radiance at depth tau propagating at cosine mup, per
+ * unit of omega E p: the beam's scattering integrated along the line of
+ * sight in closed form. */
+static double first_depth(const ref2 *P, double mup)
+{
+    const double u = fabs(mup), tau = P->tau, mus = P->mus;
+    if (u == 0)
+        return 0;
+    if (mup < 0) {   /* from above: over [0, tau] */
+        const double q = 1 - u / mus;
+        if (fabs(q * tau / u) < 1e-8)
+            return tau / u * exp(-tau / mus);
+        return (exp(-tau / mus) - exp(-tau / u)) / q;
+    }
+    const double d = 1 / u + 1 / mus;   /* from below: over [tau, tb] */
+    return exp(-tau / mus) * -expm1(-(P->tb - tau) * d) / (1 + u / mus);
+}
+
+typedef double (*fn1)(void *, double);
+
+static double gk15(fn1 f, void *u, double a, double b, double *err)
+{
+    const double c = 0.5 * (a + b), h = 0.5 * (b - a), fc = f(u, c);
+    double rk = fc * (double) ef_gk15_wk[7], rg = fc * (double) ef_gk15_wg[3];
+    for (int j = 0; j < 7; ++j) {
+        const double x = h * (double) ef_gk15_x[j], f1 = f(u, c - x), f2 = f(u, c + x);
+        rk += (f1 + f2) * (double) ef_gk15_wk[j];
+        if (j & 1)
+            rg += (f1 + f2) * (double) ef_gk15_wg[j / 2];
+    }
+    *err = fabs((rk - rg) * h);
+    return rk * h;
+}
+
+static double adapt(fn1 f, void *u, double a, double b, double tol, int depth)
+{
+    double e;
+    const double r = gk15(f, u, a, b, &e);
+    if (e <= tol || depth > 30 || !(e == e))
+        return r;
+    const double m = 0.5 * (a + b);
+    return adapt(f, u, a, m, tol / 2, depth + 1) + adapt(f, u, m, b, tol / 2, depth + 1);
+}
+
+static double inner(void *u, double phip)
+{
+    const ref2 *P = u;
+    const double s = sqrt(fmax(0, 1 - P->mu * P->mu)), sp = sqrt(fmax(0, 1 - P->mup * P->mup));
+    const double cv = P->mu * P->mup + s * sp * cos(P->phi - phip);
+    const double cb = -P->mus * P->mup + sqrt(1 - P->mus * P->mus) * sp * cos(phip);
+    return hg(P->g, cv) * P->om * hg(P->g, cb);
+}
+
+static double outer(void *u, double mup)
+{
+    ref2 P = *(ref2 *) u;
+    P.mup = mup;
+    return adapt(inner, &P, -PI, PI, 1e-9, 0) * first_depth(&P, mup);
+}
+
+/* J_2 at depth tau, propagation cosine mu, azimuth phi from the beam's,
+ * for E = 1. */
+static double ref_J2(double tau, double tb, double om, double g, double mus, double mu, double phi)
+{
+    ref2 P = { tau, tb, om, g, mus, mu, phi, 0 };
+    return om * (adapt(outer, &P, -1, 0, 1e-8, 0) + adapt(outer, &P, 0, 1, 1e-8, 0));
+}
+
+/* A homogeneous slab of n nodes over [0, tb]. */
+typedef struct slab_buf {
+    double *tau, *a;
+    ef_ms_slab sl;
+} slab_buf;
+
+static void make_slab(slab_buf *b, double tb, int n, int nl, double om, double g, double mus)
+{
+    b->tau = malloc(sizeof *b->tau * (size_t) n);
+    b->a = malloc(sizeof *b->a * (size_t) n * nl);
+    assert_non_null(b->tau);
+    assert_non_null(b->a);
+    for (int k = 0; k < n; ++k) {
+        b->tau[k] = tb * k / (n - 1);
+        for (int l = 0; l < nl; ++l)
+            b->a[k * nl + l] = om * pow(g, l);
+    }
+    b->sl = (ef_ms_slab) { n, b->tau, b->a, nl, mus, 1.0 };
+}
+
+static void free_slab(slab_buf *b)
+{
+    free(b->tau);
+    free(b->a);
+}
+
+static void second_order_case(double tb, double g, double om, double mus, int nh, double tol)
+{
+    slab_buf b;
+    const int n = (int) ceil(tb / 0.01) + 1;
+    make_slab(&b, tb, n, 2 * nh, om, g, mus);
+    const ef_ms_res res = { nh, 2 };
+    ef_ms_solve *so = ef_ms_slab_solve(&b.sl, &res, NULL);
+    assert_non_null(so);
+    static const double pts[][3] = { { 0, 0.5, 0 },     { 0.5, -0.3, 1 },  { 0.5, -0.8, 0 },
+                                     { 1, 0.9, 2 },     { 0.25, 0.05, 0.3 }, { 0.75, -0.05, 3 } };
+    for (unsigned i = 0; i < sizeof pts / sizeof *pts; ++i) {
+        const int k = (int) lround(pts[i][0] * (n - 1));
+        const double J = ef_ms_slab_eval(so, k, pts[i][1], pts[i][2]);
+        const double R = ref_J2(b.tau[k], tb, om, g, mus, pts[i][1], pts[i][2]);
+        if (!(fabs(J - R) <= tol * R))
+            fail_msg("g %g: J_2 at tau %g mu %g phi %g: solve %.9g, nested quadrature %.9g (%.2e)",
+                     g, b.tau[k], pts[i][1], pts[i][2], J, R, (J - R) / R);
+    }
+    ef_ms_solve_free(so);
+    free_slab(&b);
+}
+
+/* The second order against nested quadrature: isotropic, g 0.5, and the
+ * forward-peaked g 0.85 with the sun low; within 3e-4 (the depth grid's
+ * 0.01 and the directions' quadrature). */
+static void test_second_order(void **state)
+{
+    (void) state;
+    second_order_case(1, 0, 0.9, 0.5, 16, 3e-4);
+    second_order_case(1, 0.5, 0.9, 0.5, 16, 3e-4);
+    second_order_case(2, 0.85, 0.9, 0.3, 24, 3e-4);
+}
+
+/* Albedo 1: up out of the top + down out of the bottom + the unscattered
+ * beam = the sun's flux mu_s E, to 1e-6 of it (every order, the direct
+ * solve; the depth grid's spacing 5e-4). */
+static void test_energy(void **state)
+{
+    (void) state;
+    static const double cases[][4] = { { 1, 0, 0.5, 16 }, { 1, 0.85, 0.5, 24 }, { 0.5, 0.5, 0.2, 16 } };
+    for (unsigned i = 0; i < sizeof cases / sizeof *cases; ++i) {
+        const double tb = cases[i][0], g = cases[i][1], mus = cases[i][2];
+        const int nh = (int) cases[i][3];
+        slab_buf b;
+        make_slab(&b, tb, (int) ceil(tb / 5e-4) + 1, 2 * nh, 1.0, g, mus);
+        const ef_ms_res res = { nh, 0 };
+        ef_ms_flux f;
+        ef_ms_solve *so = ef_ms_slab_solve(&b.sl, &res, &f);
+        assert_non_null(so);
+        const double out = f.up_top + f.down_bottom + mus * exp(-tb / mus);
+        if (!(fabs(out - mus) <= 1e-6 * mus))
+            fail_msg("tau %g g %g mu_s %g: out %.12g (up %.9g, down %.9g) against the sun's %.12g",
+                     tb, g, mus, out, f.up_top, f.down_bottom, mus);
+        assert_true(f.up_top > 0.05 * mus && f.down_bottom > 0.05 * mus);
+        ef_ms_solve_free(so);
+        free_slab(&b);
+    }
+}
+
+/* The series bound, and the direct solve as the series' limit. */
+static void test_series_bound(void **state)
+{
+    (void) state;
+    const double om = 0.9, g = 0.5, mus = 0.5, tb = 3;
+    slab_buf b;
+    make_slab(&b, tb, 151, 32, om, g, mus);
+    const ef_ms_res full = { 16, 0 };
+    ef_ms_solve *all = ef_ms_slab_solve(&b.sl, &full, NULL);
+    assert_non_null(all);
+    /* the largest single-scatter source: forward, at the top */
+    const double j1 = om * hg(g, 1);
+    static const int K[] = { 2, 4, 8, 16, 400 };
+    static const double pts[][3] = { { 0, 0.5, 0 }, { 75, -0.3, 1 }, { 150, 0.9, 2 }, { 30, 0.1, 0 } };
+    for (unsigned q = 0; q < sizeof K / sizeof *K; ++q) {
+        const ef_ms_res part = { 16, K[q] };
+        ef_ms_solve *so = ef_ms_slab_solve(&b.sl, &part, NULL);
+        assert_non_null(so);
+        const double bound = pow(om, K[q]) / (1 - om) * j1;
+        for (unsigned i = 0; i < sizeof pts / sizeof *pts; ++i) {
+            const int k = (int) pts[i][0];
+            const double Ja = ef_ms_slab_eval(all, k, pts[i][1], pts[i][2]);
+            const double Jk = ef_ms_slab_eval(so, k, pts[i][1], pts[i][2]);
+            /* (the full solve's iterated modes stop at their own tail) */
+            const double own = ef_ms_slab_tail(all) + 1e-15;
+            if (!(Ja - Jk >= -own && Ja - Jk <= bound + own))
+                fail_msg("orders above %d at node %d: %.6g left out, bound %.6g", K[q], k, Ja - Jk,
+                         bound);
+            if (K[q] == 400 && !(fabs(Ja - Jk) <= own + 1e-12 * Ja))
+                fail_msg("node %d: the direct solve %.12g is not the series' limit %.12g", k, Ja,
+                         Jk);
+        }
+        ef_ms_solve_free(so);
+    }
+    ef_ms_solve_free(all);
+    free_slab(&b);
+}
+
+/* ------------------------------------------------ the scene's solve */
+
+static void scene_with(ef_fog_scene *s, const char *fog, const char *light)
+{
+    ef_err err = { 0 };
+    ef_scene_init(s);
+    if (ef_scene_add(s, fog, &err) || ef_scene_add_light(s, light, &err) ||
+        ef_scene_prepare_lights(s, &err))
+        fail_msg("'%s' with '%s': %s", fog, light, err.msg);
+}
+
+static ef_ray ray(const double org[3], double dx, double dy, double dz, double dist)
+{
+    const double n = sqrt(dx * dx + dy * dy + dz * dz);
+    ef_ray r = { { dx / n, dy / n, dz / n }, dist, dist, { org[0], org[1], org[2] } };
+    return r;
+}
+
+/* Light in front of a surface only: a segment to a near wall gathers less
+ * than one to the sky, nothing at zero length, and [0, D] plus T(0, D)
+ * times [D, inf) is the whole ray (each pixel's multiple scattering is fog
+ * in front of its own depth: nothing behind a wall leaks over it). */
+static void test_no_halo(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "height:density=0.05:falloff=0.1:base=0:albedo=0.95:phase=hg:g=0.6",
+               "sun:towards=1,0.4,-1:intensity=3:scattering=multiple");
+    assert_non_null(s.light[0].ms);
+    const double cam[3] = { 0, 4, 0 };
+    static const double dirs[][3] = { { 0, -0.1, -1 }, { 1, 0.05, -1 }, { -1, 0.3, 0.2 }, { 0.2, -0.5, -1 } };
+    for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
+        const double D = 6;
+        ef_ray whole = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], INFINITY);
+        ef_ray near = whole, zero = whole, back = whole;
+        near.dist = near.planar = D;
+        zero.dist = zero.planar = 0;
+        for (int k = 0; k < 3; ++k)
+            back.org[k] = cam[k] + D * whole.dir[k];
+        /* the back segment from D to where the whole ray ends (the
+         * ground, y = 0, or the sky) */
+        double Sw[3], Sn[3], Sz[3], Sb[3], Ew[3], En[3], Eb[3], tau[3];
+        ef_ms_gather(s.light[0].ms, &s, &whole, NULL, NULL, Sw, Ew);
+        ef_ms_gather(s.light[0].ms, &s, &near, NULL, NULL, Sn, En);
+        ef_ms_gather(s.light[0].ms, &s, &zero, NULL, NULL, Sz, NULL);
+        ef_ms_gather(s.light[0].ms, &s, &back, NULL, NULL, Sb, Eb);
+        ef_fog_tau(&s.comp[0], &near, tau, NULL);
+        for (int k = 0; k < 3; ++k) {
+            assert_true(Sz[k] == 0);
+            assert_true(Sn[k] > 0 && Sn[k] < Sw[k]);
+            const double sum = Sn[k] + exp(-tau[k]) * Sb[k];
+            if (!(fabs(sum - Sw[k]) <= 1e-6 * Sw[k] + En[k] + Eb[k] + Ew[k]))
+                fail_msg("direction %u: [0,D] + T [D,inf) = %.9g, the whole ray %.9g", i, sum,
+                         Sw[k]);
+        }
+    }
+    ef_scene_free(&s);
+}
+
+/* Per-channel fog: channels with the same fog share a solve (the same
+ * bits), a denser one differs; the error estimate is positive and smaller
+ * than the light. */
+static void test_channels(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "height:density=0.05,0.05,0.1:falloff=0.1:base=0:albedo=0.9:phase=hg:g=0.5",
+               "sun:towards=0.5,1,0.2:color=1,1,1:intensity=2:scattering=multiple:ground=0");
+    const double cam[3] = { 0, 3, 0 };
+    ef_ray r = ray(cam, 0.1, -0.2, -1, 15);
+    double S[3], E[3];
+    ef_ms_gather(s.light[0].ms, &s, &r, NULL, NULL, S, E);
+    assert_true(S[0] == S[1]);
+    assert_true(S[2] != S[0] && S[2] > 0);
+    for (int k = 0; k < 3; ++k)
+        assert_true(E[k] > 0 && E[k] < 0.2 * S[k]);
+    /* the same through ef_light_inscatter: single scattering plus it */
+    ef_scene_free(&s);
+}
+
+/* What the solve does not take, with messages that say why. */
+static void test_refusals(void **state)
+{
+    (void) state;
+    /* (a tilted half-space alone is the same along its own plane: taken;
+     * beside height fog it is not) */
+    static const char *const fogs[][2] = {
+        { "noise:density=0.02:scale=10", NULL },
+        { "box:min=-1,-1,-1:max=1,1,1:density=0.1", NULL },
+        { "height:density=0.05:falloff=0.1", "halfspace:plane=0.3,1,0,-2:density=0.05" },
+    };
+    for (unsigned i = 0; i < sizeof fogs / sizeof *fogs; ++i) {
+        ef_fog_scene s;
+        ef_err err = { 0 };
+        ef_scene_init(&s);
+        assert_int_equal(ef_scene_add(&s, fogs[i][0], &err), 0);
+        if (fogs[i][1])
+            assert_int_equal(ef_scene_add(&s, fogs[i][1], &err), 0);
+        assert_int_equal(ef_scene_add_light(&s, "sun:towards=0,1,0:scattering=multiple", &err), 0);
+        assert_int_equal(ef_scene_prepare_lights(&s, &err), -1);
+        if (!strstr(err.msg, "same along the ground"))
+            fail_msg("'%s': %s", fogs[i][0], err.msg);
+        ef_scene_free(&s);
+    }
+    static const char *const lights[] = {
+        "point:position=0,1,0:scattering=multiple",
+        "sun:towards=0,1,0:ground=0",
+        "sun:towards=0,1,0:scattering=some",
+        "sun:towards=0,1,0:scattering=multiple:planet=earth",
+    };
+    for (unsigned i = 0; i < sizeof lights / sizeof *lights; ++i) {
+        ef_fog_scene s;
+        ef_err err = { 0 };
+        ef_scene_init(&s);
+        assert_int_equal(ef_scene_add(&s, "height:density=0.05:falloff=0.1", &err), 0);
+        if (ef_scene_add_light(&s, lights[i], &err) == 0)
+            fail_msg("'%s' was taken", lights[i]);
+        ef_scene_free(&s);
+    }
+    /* a sun below the horizon adds nothing (no direct light to scatter) */
+    ef_fog_scene s;
+    scene_with(&s, "height:density=0.05:falloff=0.1", "sun:towards=1,-0.2,0:scattering=multiple");
+    assert_null(s.light[0].ms);
+    ef_scene_free(&s);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_second_order),
+        cmocka_unit_test(test_energy),
+        cmocka_unit_test(test_series_bound),
+        cmocka_unit_test(test_no_halo),
+        cmocka_unit_test(test_channels),
+        cmocka_unit_test(test_refusals),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
