@@ -19,8 +19,10 @@
 #define MS_TAIL_REL 1e-7
 /* The deepest vertical optical depth solved without a ground. */
 #define MS_TAU_DEEP 1e4
-/* The direction table: polar angles of the propagation direction over
- * [0, pi] and azimuths from the beam's over [0, pi]. */
+/* The direction table: the propagation direction's sin(theta / 2) (theta
+ * its angle from up) and sin(phi / 2) (phi its azimuth from the beam's),
+ * each uniform over [0, 1]: fine near the zenith and the beam's azimuth,
+ * and no inverse cosine per pixel. */
 #define MS_NT 121
 #define MS_NP 61
 
@@ -627,9 +629,10 @@ static float *dir_table(const ef_ms_solve *so)
     }
     for (int j = 0; j < MS_NP; ++j)
         for (int m = 0; m < L; ++m)
-            cs[j][m] = cos(m * (PI * j / (MS_NP - 1)));
+            cs[j][m] = cos(m * 2 * asin((double) j / (MS_NP - 1)));
     for (int i = 0; i < MS_NT; ++i)
-        lambda_all(L, cos(PI * i / (MS_NT - 1)), lam + (size_t) i * L * L);
+        lambda_all(L, 1 - 2 * ((double) i / (MS_NT - 1)) * ((double) i / (MS_NT - 1)),
+                   lam + (size_t) i * L * L);
     for (int k = 0; k < so->n; ++k)
         for (int i = 0; i < MS_NT; ++i) {
             eval_modes(so, k, lam + (size_t) i * L * L, jm);
@@ -998,17 +1001,17 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const 
         return;
     /* the propagation direction towards the camera: -dir */
     const double mu_u = dot3(r->dir, m->up), mu_p = -mu_u;
-    double th = acos(mu_p > 1 ? 1 : mu_p < -1 ? -1 : mu_p), ph = 0;
-    double hz[3];
+    /* the table's coordinates: sin of half the polar angle and of half
+     * the azimuth from the beam's (fine where the forward peak is) */
+    double c = 1, hz[3];
     for (int q = 0; q < 3; ++q)
         hz[q] = -r->dir[q] - mu_p * m->up[q];
     const double hn = sqrt(dot3(hz, hz));
-    if (m->has_bh && hn > 1e-12) {
-        const double c = dot3(hz, m->bh) / hn;
-        ph = acos(c > 1 ? 1 : c < -1 ? -1 : c);
-    }
+    if (m->has_bh && hn > 1e-12)
+        c = dot3(hz, m->bh) / hn;
     dir_w dw;
-    const double fi = th / PI * (MS_NT - 1), fj = ph / PI * (MS_NP - 1);
+    const double fi = sqrt(fmax(0, fmin(1, 0.5 * (1 - mu_p)))) * (MS_NT - 1);
+    const double fj = sqrt(fmax(0, fmin(1, 0.5 * (1 - c)))) * (MS_NP - 1);
     int i0 = (int) fi, j0 = (int) fj;
     i0 = i0 > MS_NT - 2 ? MS_NT - 2 : i0;
     j0 = j0 > MS_NP - 2 ? MS_NP - 2 : j0;
