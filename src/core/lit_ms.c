@@ -453,6 +453,7 @@ double ef_ms_slab_tail(const ef_ms_solve *so)
  * down (the gather's early stop). */
 typedef struct ms_tab {
     int n;
+    double h0, r;    /* the nodes' spacing h0 + r tau (depth_grid) */
     double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
     float *v;        /* [MS_NT][MS_NP][n][2]: a direction's nodes side by side */
@@ -676,6 +677,8 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     if (!tab->v)
         goto out;
     tab->n = nf;
+    tab->h0 = h0;
+    tab->r = r;
     tab->tau = tf;
     tf = NULL;
     const size_t plane = (size_t) MS_NT * MS_NP;
@@ -880,28 +883,19 @@ static void node_val(const ms_tab *tab, const dir_w *dw, int q, double *J, doubl
     *e = x;
 }
 
-/* J and its estimate at depth tau (linear between nodes; 0 past the bottom). */
-static void tau_val(const ms_tab *tab, const dir_w *dw, double tau, double *J, double *e)
+/* The cell of tab's nodes that holds tau in [0, bottom]: i with tau[i] <=
+ * tau <= tau[i + 1], 0 <= i <= n - 2 (the nodes' own recurrence inverted,
+ * then checked against the stored nodes). */
+static int cell_of(const ms_tab *tab, double tau)
 {
     const int n = tab->n;
-    if (!(tau <= tab->tau[n - 1]) || tau < 0) {
-        *J = *e = 0;
-        return;
-    }
-    int lo = 0, hi = n - 1;
-    while (hi - lo > 1) {
-        const int mid = (lo + hi) / 2;
-        if (tab->tau[mid] <= tau)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    double J0, e0, J1, e1;
-    node_val(tab, dw, lo, &J0, &e0);
-    node_val(tab, dw, hi, &J1, &e1);
-    const double f = (tau - tab->tau[lo]) / (tab->tau[hi] - tab->tau[lo]);
-    *J = J0 + f * (J1 - J0);
-    *e = e0 + f * (e1 - e0);
+    int i = (int) (log1p(tab->r * tau / tab->h0) / log1p(tab->r));
+    i = i < 0 ? 0 : i > n - 2 ? n - 2 : i;
+    while (i > 0 && tab->tau[i] > tau)
+        --i;
+    while (i < n - 2 && tab->tau[i + 1] < tau)
+        ++i;
+    return i;
 }
 
 /* int_0^{sD} e^-s J(tauc + q s) ds and its estimate, J linear between the
@@ -910,68 +904,80 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
                  double out[2])
 {
     out[0] = out[1] = 0;
-    const double tbot = tab->tau[tab->n - 1];
-    double J0, e0;
-    if (fabs(q) * fmin(sD, 40) <= 1e-12 * (1 + tauc)) {
-        tau_val(tab, dw, tauc, &J0, &e0);
+    const int n = tab->n;
+    const double tbot = tab->tau[n - 1];
+    const int horiz = fabs(q) * fmin(sD, 40) <= 1e-12 * (1 + tauc);
+    /* the stretch of depth the ray covers inside [0, tbot] */
+    double t0 = tauc, s0 = 0, tend = tauc;
+    if (!horiz) {
+        if (q < 0 && t0 > tbot) {   /* rising from below the bottom */
+            s0 = (t0 - tbot) / -q;
+            t0 = tbot;
+        }
+        if ((q > 0 && t0 >= tbot) || s0 >= sD)
+            return;
+        tend = q > 0 ? tbot : 0;
+        const double sEnd = (tend - tauc) / q;   /* where the ray leaves it */
+        if (sEnd < sD)
+            sD = sEnd;
+        else
+            tend = tauc + q * sD;
+    } else if (!(t0 <= tbot)) {
+        return;
+    }
+    /* J at t0 from its cell; the first node the ray meets is one of its ends */
+    const int i = cell_of(tab, t0);
+    double Ja, ea, Jb, eb;
+    node_val(tab, dw, i, &Ja, &ea);
+    node_val(tab, dw, i + 1, &Jb, &eb);
+    const double f = (t0 - tab->tau[i]) / (tab->tau[i + 1] - tab->tau[i]);
+    double J0 = Ja + f * (Jb - Ja), e0 = ea + f * (eb - ea);
+    if (horiz) {
         const double a = isinf(sD) ? 1 : -expm1(-sD);
         out[0] = a * J0;
         out[1] = a * e0;
         return;
     }
-    /* the stretch of depth the ray covers inside [0, tbot] */
-    double t0 = tauc, s0 = 0;
-    if (q < 0 && t0 > tbot) {   /* rising from below the bottom */
-        s0 = (t0 - tbot) / -q;
-        t0 = tbot;
-    }
-    if ((q > 0 && t0 >= tbot) || s0 >= sD)
-        return;
-    double tend = q > 0 ? tbot : 0;
-    const double sEnd = fmin(sD, (tend - tauc) / q);   /* where the ray leaves it */
-    if (sEnd < sD)
-        sD = sEnd;
-    else
-        tend = tauc + q * sD;
-    /* the first node past t0 the way the ray goes */
-    int lo = 0, hi = tab->n;   /* the first node above t0: in [lo, hi] */
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (tab->tau[mid] <= t0)
-            lo = mid + 1;
+    int next;
+    double Jn, en;
+    if (q > 0) {
+        next = i + 1;
+        Jn = Jb;
+        en = eb;
+    } else if (tab->tau[i] < t0) {
+        next = i;
+        Jn = Ja;
+        en = ea;
+    } else {
+        next = i - 1;
+        if (next >= 0)
+            node_val(tab, dw, next, &Jn, &en);
         else
-            hi = mid;
+            Jn = en = 0;
     }
-    int next = lo;
-    if (q < 0)
-        for (next = lo - 1; next >= 0 && tab->tau[next] >= t0; --next)
-            ;
-    tau_val(tab, dw, t0, &J0, &e0);
     double s1 = s0, ta = t0, es = exp(-s0);
-    for (int guard = 0; guard <= tab->n && s1 < sD; ++guard) {
+    for (int guard = 0; guard <= n && s1 < sD; ++guard) {
         /* what is left past here is at most es jmax: stop once that is
          * below 1e-6 of what was gathered, and count it as error */
         if (es * tab->jmax <= 1e-6 * out[0]) {
             out[1] += es * tab->jmax;
             break;
         }
-        double tn;
-        int at_node = 0;
-        if (next >= 0 && next < tab->n && (q > 0 ? tab->tau[next] < tend : tab->tau[next] > tend)) {
-            tn = tab->tau[next];
-            at_node = 1;
-        } else {
-            tn = tend;
+        if (next < 0 || next >= n)
+            break;
+        const double tnode = tab->tau[next];
+        const int at_node = q > 0 ? tnode < tend : tnode > tend;
+        const double tn = at_node ? tnode : tend;
+        double J1 = Jn, e1 = en;
+        if (!at_node) {   /* the ray ends inside the cell: J linear across it */
+            const double g = (tn - ta) / (tnode - ta);
+            J1 = J0 + g * (Jn - J0);
+            e1 = e0 + g * (en - e0);
         }
-        double J1, e1;
-        if (at_node)
-            node_val(tab, dw, next, &J1, &e1);
-        else
-            tau_val(tab, dw, tn, &J1, &e1);
         const double x = fmax(0, (tn - ta) / q), a = -expm1(-x);
-        const double g = x < 1e-3 ? w_slope(x) : (a - x * (1 - a)) / x;
-        out[0] += es * (J0 * a + (J1 - J0) * g);
-        out[1] += es * (e0 * a + (e1 - e0) * g);
+        const double gs = x < 1e-3 ? w_slope(x) : (a - x * (1 - a)) / x;
+        out[0] += es * (J0 * a + (J1 - J0) * gs);
+        out[1] += es * (e0 * a + (e1 - e0) * gs);
         s1 += x;
         es *= 1 - a;
         ta = tn;
@@ -980,6 +986,8 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
         if (!at_node)
             break;
         next += q > 0 ? 1 : -1;
+        if (next >= 0 && next < n)
+            node_val(tab, dw, next, &Jn, &en);
     }
 }
 
