@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "ms.h"
 #include "sky_light.h"
 #include "aov.h"
 #include "job_impl.h"
@@ -114,6 +115,20 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
             fprintf(out, "  penumbra: %d directions over the sun's disc of %g degrees (filtered, "
                          "not exact)\n",
                     l->shadow->ntilt, l->shadow->angle * 180 / 3.14159265358979);
+        if (l->multiple) {
+            ef_ms_info in;
+            ef_ms_get_info(l->ms, &in);
+            if (!l->ms)
+                fprintf(out, "  multiple scattering: nothing to add (the sun at or below the "
+                             "horizon, or no fog its light reaches)\n");
+            else
+                fprintf(out, "  multiple scattering: plane-parallel solve over %d depth nodes to %s, "
+                             "%d directions per hemisphere, %d azimuthal modes solved directly and "
+                             "%d order by order; orders left out within %.1e and discretisation "
+                             "estimated at %.1e of the largest source; %.3f s\n",
+                        in.nodes, l->has_ground ? "the ground" : "the fog's own depth", in.nh,
+                        in.direct, in.iterated, in.tail_rel, in.disc_rel, in.seconds);
+        }
     }
     if (o->scene.sky_light)
         fprintf(out, "sky light: %s (%d x %d; %d phase convolution%s)\n", o->scene.sky_light_spec,
@@ -288,6 +303,21 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
             fputc('}', out);
         } else {
             fputs("null", out);
+        }
+        fputs(", \"scattering\": ", out);
+        json_str(out, l->multiple ? "multiple" : "single");
+        if (l->ms) {
+            ef_ms_info in;
+            ef_ms_get_info(l->ms, &in);
+            fprintf(out, ", \"multiple\": {\"nodes\": %d, \"directions\": %d, \"direct_modes\": %d, "
+                         "\"iterated_modes\": %d, \"tail_rel\": ", in.nodes, in.nh, in.direct,
+                    in.iterated);
+            json_num(out, in.tail_rel);
+            fputs(", \"discretisation_rel\": ", out);
+            json_num(out, in.disc_rel);
+            fputs(", \"seconds\": ", out);
+            json_num(out, in.seconds);
+            fputc('}', out);
         }
         fputc('}', out);
     }
