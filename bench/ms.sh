@@ -31,11 +31,13 @@ for a in 0.8 0.95 0.99; do
     done
 done
 cases+=("30 0.025 0.95 0.5" "30 0.4 0.95 0.5" "30 0.8 0.95 0.5")
+# layers whose albedo changes with height (three components: the mixture per depth node)
+cases+=("30 0.1 0.95 0.5 25:0.03:0.99:0.5,12:0.07:0.9:0.5,5:0.2:0.8:0.5")
 for c in "${cases[@]}"; do
     # shellcheck disable=SC2086
     set -- $c
     "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" "$1" "$2" "$3" "$4" 20 64 36 8 \
-        >>"$tmp/grid.jsonl" || die "case $c failed"
+        ${5:+"$5"} >>"$tmp/grid.jsonl" || die "case $c failed"
 done
 # the cost at 1080p: a sun in height fog, single against multiple, interleaved
 "$build/make_sample" "$tmp/hd.exr" --size 1920x1080 --view 5,-5,60 >/dev/null || die "make_sample"
@@ -66,8 +68,8 @@ rows = [json.loads(l) for l in open(sys.argv[1])]
 print("| sun elev | vertical tau | albedo | g | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
 print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
-    print("| %g | %g | %g | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2f %% | %.0f %% |" % (
-        r["elev"], r["vertical_tau"], r["albedo"], r["g"], r["single_share_median"],
+    print("| %g | %g | %s | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2f %% | %.0f %% |" % (
+        r["elev"], r["vertical_tau"], r["albedo"] if not r.get("layers") else "layers " + r["layers"], r["g"], r["single_share_median"],
         100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
         100 * r["rel_signed_median"], 100 * r["noise_rel_median"], 100 * r["err_rel_median"],
         100 * r["covered"]))

@@ -1,5 +1,5 @@
 """Runs inside Blender (blender -b --factory-startup --python THIS -- OUT SPP BOUNCES ELEV
-DENSITY ALBEDO G TOP WIDTH HEIGHT): the multiple-scattering reference scene of bench/ms.sh and
+DENSITY ALBEDO G TOP WIDTH HEIGHT [LAYERS]): the multiple-scattering reference scene of bench/ms.sh and
 tests/blender/blender_ms_run.py.
 
 A slab of homogeneous fog (Volume Scatter of density DENSITY * ALBEDO, HG anisotropy G, plus
@@ -22,6 +22,9 @@ plain = bounces < 0   # no fog: the depth alone (Cycles' Z inside fog is unrelia
 bounces = max(bounces, 0)
 elev, dens, albedo, g, top = (float(v) for v in args[3:8])
 width, height = int(args[8]), int(args[9])
+# LAYERS (optional): "TOP:DENSITY:ALBEDO:G,..." replaces the slab by nested boxes from z = -1
+# to each TOP, their densities adding where they overlap (exrfog: one half-space each)
+layers = [tuple(float(v) for v in l.split(":")) for l in args[10].split(",")] if len(args) > 10 else [(top, dens, albedo, g)]
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -55,28 +58,29 @@ gm.node_tree.nodes.clear()
 e = gm.node_tree.nodes.new('ShaderNodeEmission'); e.inputs[1].default_value = 0.0
 o = gm.node_tree.nodes.new('ShaderNodeOutputMaterial'); gm.node_tree.links.new(e.outputs[0], o.inputs[0])
 bpy.context.object.data.materials.append(gm)
-# the fog's box reaches below the ground (a face on the ground's plane would hide it)
-bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (top - 1) / 2))
-cube = bpy.context.object
-cube.scale = (4000, 4000, top + 1)
-if plain:
-    cube.hide_render = True
-m = bpy.data.materials.new("fog"); m.use_nodes = True
-nt = m.node_tree; nt.nodes.clear()
-s = nt.nodes.new('ShaderNodeVolumeScatter')
-s.inputs['Density'].default_value = dens * albedo
-s.inputs['Anisotropy'].default_value = g
-s.inputs['Color'].default_value = (1, 1, 1, 1)
-a = nt.nodes.new('ShaderNodeVolumeAbsorption')
-a.inputs['Density'].default_value = dens * (1 - albedo)
-a.inputs['Color'].default_value = (0, 0, 0, 1)
-add = nt.nodes.new('ShaderNodeAddShader')
-o = nt.nodes.new('ShaderNodeOutputMaterial')
-nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
-nt.links.new(add.outputs[0], o.inputs['Volume'])
-m.cycles.homogeneous_volume = True
-m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
-cube.data.materials.append(m)
+# the fog's boxes reach below the ground (a face on the ground's plane would hide it)
+for li, (ltop, ldens, lalb, lg) in enumerate(layers):
+    bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (ltop - 1) / 2))
+    cube = bpy.context.object
+    cube.scale = (4000 - li, 4000 - li, ltop + 1)
+    if plain:
+        cube.hide_render = True
+    m = bpy.data.materials.new("fog%d" % li); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    s = nt.nodes.new('ShaderNodeVolumeScatter')
+    s.inputs['Density'].default_value = ldens * lalb
+    s.inputs['Anisotropy'].default_value = lg
+    s.inputs['Color'].default_value = (1, 1, 1, 1)
+    a = nt.nodes.new('ShaderNodeVolumeAbsorption')
+    a.inputs['Density'].default_value = ldens * (1 - lalb)
+    a.inputs['Color'].default_value = (0, 0, 0, 1)
+    add = nt.nodes.new('ShaderNodeAddShader')
+    o = nt.nodes.new('ShaderNodeOutputMaterial')
+    nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
+    nt.links.new(add.outputs[0], o.inputs['Volume'])
+    m.cycles.homogeneous_volume = True
+    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    cube.data.materials.append(m)
 sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 1.0; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(90 - elev), 0, math.radians(150))

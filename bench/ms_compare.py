@@ -21,9 +21,11 @@ exrfog, blender, d = sys.argv[1], sys.argv[2], sys.argv[3]
 spp, elev, dens, albedo, g, top = sys.argv[4], *(float(v) for v in sys.argv[5:10])
 W, H = int(sys.argv[10]), int(sys.argv[11])
 block = int(sys.argv[12]) if len(sys.argv) > 12 else 4
+# LAYERS (optional, as bench/ms_blender.py's): nested slabs of their own albedo and g
+layers = sys.argv[13] if len(sys.argv) > 13 else None
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
-tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g)
+tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "")
 
 
 def render(bounces):
@@ -31,7 +33,8 @@ def render(bounces):
     t0 = time.time()
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                         here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
-                        str(dens), str(albedo), str(g), str(top), str(W), str(H)],
+                        str(dens), str(albedo), str(g), str(top), str(W), str(H)]
+                       + ([layers] if layers else []),
                        capture_output=True, text=True)
     if "ms_blender: rendered" not in r.stdout:
         raise SystemExit("ms_compare: Blender failed:\n" + r.stdout[-2000:] + r.stderr[-2000:])
@@ -55,10 +58,13 @@ inp[..., 4] = px[..., 4]
 ib = oiio.ImageBuf(spec)
 ib.set_pixels(oiio.ROI(), inp)
 ib.write("%s/%s_in.exr" % (d, tag))
-fog = "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-top, dens, albedo, g)
+fogs = []
+for l in (layers.split(",") if layers else ["%r:%r:%r:%r" % (top, dens, albedo, g)]):
+    lt, ld, la, lg = (float(v) for v in l.split(":"))
+    fogs += ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-lt, ld, la, lg)]
 common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world",
           ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]), "--near",
-          repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0", "--fog", fog,
+          repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0"] + fogs + [
           "--aov", "error"]
 sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
 times = {}
@@ -102,7 +108,7 @@ noise = block_se(cycm)
 ok = C > 1e-4
 rel = (EM - C)[ok] / C[ok]
 res = {
-    "case": tag, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
+    "case": tag, "layers": layers, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,
     "blocks": int(ok.sum()),
     "cycles_mean": float(C[ok].mean()), "cycles_single_mean": float(C0[ok].mean()),

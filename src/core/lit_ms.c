@@ -611,9 +611,20 @@ static void node_coeffs(const ef_fog_scene *s, const double up[3], int k, const 
         for (int c = 0; c < s->ncomp && sum > 0; ++c)
             for (int l = 0; l < nl; ++l)
                 ai[l] += w[c] / sum * albedo(&s->comp[c], k) * bl[c][l];
-        if (!(sum > 0) && i > 0)
-            memcpy(ai, ai - nl, sizeof *ai * (size_t) nl);
+        if (!(sum > 0))
+            ai[0] = NAN;   /* no fog at the node's height (the top, a gap): filled below */
     }
+    /* a node where the fog has no density (tau = 0 at the top lies above
+     * it) takes the mixture just below it, the nearest node's that has one */
+    for (int i = n - 2; i >= 0; --i)
+        if (isnan(a[(size_t) i * nl]) && !isnan(a[(size_t) (i + 1) * nl]))
+            memcpy(a + (size_t) i * nl, a + (size_t) (i + 1) * nl, sizeof *a * (size_t) nl);
+    for (int i = 1; i < n; ++i)
+        if (isnan(a[(size_t) i * nl]))
+            memcpy(a + (size_t) i * nl, a + (size_t) (i - 1) * nl, sizeof *a * (size_t) nl);
+    for (int i = 0; i < n; ++i)
+        if (isnan(a[(size_t) i * nl]))
+            memset(a + (size_t) i * nl, 0, sizeof *a * (size_t) nl);
 }
 
 /* The direction table of solve so at its nodes: [n][MS_NT][MS_NP]. */
