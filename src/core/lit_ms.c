@@ -453,7 +453,6 @@ double ef_ms_slab_tail(const ef_ms_solve *so)
  * down (the gather's early stop). */
 typedef struct ms_tab {
     int n;
-    double h0, r;    /* the nodes' spacing h0 + r tau (depth_grid) */
     double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
     float *v;        /* [MS_NT][MS_NP][n][2]: a direction's nodes side by side */
@@ -556,9 +555,11 @@ static double height_at(const ef_fog_scene *s, const double up[3], int k, double
     return 0.5 * (lo + hi);
 }
 
-/* Depth nodes from 0 to tb, spacing h0 + r tau; returns how many, into
- * *out (malloc'd), or -1. */
-static int depth_grid(double tb, double h0, double r, double **out)
+/* Depth nodes from 0 to tb, spacing h0 + r d, d the depth from the nearer
+ * end (the top, or a ground within MS_TAU_DEEP: the diffuse light has a
+ * boundary layer at each, as thin as the grazing directions' cosines);
+ * returns how many, into *out (malloc'd), or -1. */
+static int depth_grid(double tb, double h0, double r, int ground, double **out)
 {
     int cap = 64, n = 0;
     double *t = malloc(sizeof *t * (size_t) cap), x = 0;
@@ -566,8 +567,10 @@ static int depth_grid(double tb, double h0, double r, double **out)
         return -1;
     t[n++] = 0;
     while (x < tb) {
-        x += h0 + r * x;
-        if (x > tb * (1 - 1e-9) || tb - x < 0.3 * (h0 + r * x))
+        const double d = ground ? fmin(x, tb - x) : x;
+        x += h0 + r * d;
+        const double hn = h0 + r * (ground ? fmin(x, fmax(0, tb - x)) : x);
+        if (x > tb * (1 - 1e-9) || tb - x < 0.3 * hn)
             x = tb;
         if (n == cap) {
             double *nt = realloc(t, sizeof *t * (size_t) (cap *= 2));
@@ -661,14 +664,14 @@ static float *dir_table(const ef_ms_solve *so)
 
 /* One channel's table: the solve, a coarser one for the estimate. */
 static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu_s, double tb,
-                     double hlo, double hhi, int nh, ms_tab *tab, ef_ms_info *info)
+                     int ground, double hlo, double hhi, int nh, ms_tab *tab, ef_ms_info *info)
 {
     int nl = 2 * nh, ok = 0;
     const double h0 = 0.02 * fmin(1, 4 * mu_s), r = 0.08;
     double *tf = NULL, *tc = NULL, *af = NULL, *ac = NULL;
     ef_ms_solve *sf = NULL, *sc = NULL;
     float *vf = NULL, *vc = NULL;
-    const int nf = depth_grid(tb, h0, r, &tf), nc = depth_grid(tb, 2 * h0, 2 * r, &tc);
+    const int nf = depth_grid(tb, h0, r, ground, &tf), nc = depth_grid(tb, 2 * h0, 2 * r, ground, &tc);
     const int nhc = nh * 2 / 3 > 4 ? nh * 2 / 3 : 4;
     if (nf < 0 || nc < 0)
         goto out;
@@ -688,8 +691,6 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     if (!tab->v)
         goto out;
     tab->n = nf;
-    tab->h0 = h0;
-    tab->r = r;
     tab->tau = tf;
     tf = NULL;
     const size_t plane = (size_t) MS_NT * MS_NP;
@@ -862,7 +863,8 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
         const double tb = fmin(tbot[k], MS_TAU_DEEP);
         if (!(tb > 1e-9))
             continue;   /* no fog in this channel: an empty table */
-        if (build_tab(s, up, k, mu_s, tb, hlo, hhi, nh, tab, &m->info)) {
+        /* a ground (or the fog's end) within MS_TAU_DEEP: refined there too */
+        if (build_tab(s, up, k, mu_s, tb, tbot[k] <= MS_TAU_DEEP, hlo, hhi, nh, tab, &m->info)) {
             ef_ms_unref(m);
             return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
         }
@@ -895,18 +897,18 @@ static void node_val(const ms_tab *tab, const dir_w *dw, int q, double *J, doubl
 }
 
 /* The cell of tab's nodes that holds tau in [0, bottom]: i with tau[i] <=
- * tau <= tau[i + 1], 0 <= i <= n - 2 (the nodes' own recurrence inverted,
- * then checked against the stored nodes). */
+ * tau <= tau[i + 1], 0 <= i <= n - 2. */
 static int cell_of(const ms_tab *tab, double tau)
 {
-    const int n = tab->n;
-    int i = (int) (log1p(tab->r * tau / tab->h0) / log1p(tab->r));
-    i = i < 0 ? 0 : i > n - 2 ? n - 2 : i;
-    while (i > 0 && tab->tau[i] > tau)
-        --i;
-    while (i < n - 2 && tab->tau[i + 1] < tau)
-        ++i;
-    return i;
+    int lo = 0, hi = tab->n - 1;
+    while (hi - lo > 1) {
+        const int mid = (lo + hi) / 2;
+        if (tab->tau[mid] <= tau)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
 }
 
 /* int_0^{sD} e^-s J(tauc + q s) ds and its estimate, J linear between the
