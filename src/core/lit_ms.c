@@ -23,6 +23,10 @@
  * its angle from up) and sin(phi / 2) (phi its azimuth from the beam's),
  * each uniform over [0, 1]: fine near the zenith and the beam's azimuth,
  * and no inverse cosine per pixel. */
+/* The table keeps a depth node unless linear interpolation across at most
+ * MS_THIN_SPAN nodes reproduces it within MS_THIN (relative). */
+#define MS_THIN 1e-3
+#define MS_THIN_SPAN 16
 #define MS_NT 121
 #define MS_NP 61
 
@@ -453,6 +457,7 @@ double ef_ms_slab_tail(const ef_ms_solve *so)
  * down (the gather's early stop). */
 typedef struct ms_tab {
     int n;
+    double *invd;    /* [n - 1]: 1 / (tau[k + 1] - tau[k]) */
     double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
     float *v;        /* [MS_NT][MS_NP][n][2]: a direction's nodes side by side */
@@ -480,6 +485,7 @@ void ef_ms_unref(ef_ms *m)
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
     for (int t = 0; t < m->ntab; ++t) {
+        free(m->tab[t].invd);
         free(m->tab[t].tau);
         free(m->tab[t].v);
     }
@@ -670,7 +676,8 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     const double h0 = 0.02 * fmin(1, 4 * mu_s), r = 0.08;
     double *tf = NULL, *tc = NULL, *af = NULL, *ac = NULL;
     ef_ms_solve *sf = NULL, *sc = NULL;
-    float *vf = NULL, *vc = NULL;
+    float *vf = NULL, *vc = NULL, *ef = NULL;
+    int *keep = NULL;
     const int nf = depth_grid(tb, h0, r, ground, &tf), nc = depth_grid(tb, 2 * h0, 2 * r, ground, &tc);
     const int nhc = nh * 2 / 3 > 4 ? nh * 2 / 3 : 4;
     if (nf < 0 || nc < 0)
@@ -687,19 +694,17 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     sc = ef_ms_slab_solve(&slc, &rc, NULL);
     if (!sf || !sc || !(vf = dir_table(sf)) || !(vc = dir_table(sc)))
         goto out;
-    tab->v = malloc(sizeof *tab->v * (size_t) nf * MS_NT * MS_NP * 2);
-    if (!tab->v)
-        goto out;
-    tab->n = nf;
-    tab->tau = tf;
-    tf = NULL;
     const size_t plane = (size_t) MS_NT * MS_NP;
+    ef = malloc(sizeof *ef * (size_t) nf * plane);
+    keep = malloc(sizeof *keep * (size_t) nf);
+    if (!ef || !keep)
+        goto out;
     double jmax = 0, dmax = 0;
     int kc = 0;
     for (int q = 0; q < nf; ++q) {
-        while (kc + 2 < nc && tc[kc + 1] < tab->tau[q])
+        while (kc + 2 < nc && tc[kc + 1] < tf[q])
             ++kc;
-        const double f = (tab->tau[q] - tc[kc]) / (tc[kc + 1] - tc[kc]);
+        const double f = (tf[q] - tc[kc]) / (tc[kc + 1] - tc[kc]);
         const float *vq = vf + q * plane;
         for (int i = 0; i < MS_NT; ++i)
             for (int j = 0; j < MS_NP; ++j) {
@@ -715,20 +720,77 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
                 /* and the linear interpolation between depth nodes, from
                  * the second derivative the neighbours give */
                 if (q > 0 && q + 1 < nf) {
-                    const double hm = tab->tau[q] - tab->tau[q - 1], hp = tab->tau[q + 1] - tab->tau[q];
+                    const double hm = tf[q] - tf[q - 1], hp = tf[q + 1] - tf[q];
                     const double J2 = 2 * ((vf[(q + 1) * plane + d] - J) / hp -
                                            (J - vf[(q - 1) * plane + d]) / hm) / (hm + hp);
                     d2 += fabs(J2) * fmax(hm, hp) * fmax(hm, hp);
                 }
-                const double e = fabs(J - Jc) + d2 / 8 + sf->tail;
-                tab->v[(d * (size_t) nf + q) * 2] = (float) J;
-                tab->v[(d * (size_t) nf + q) * 2 + 1] = (float) e;
-                tab->jmax = fmax(tab->jmax, J + e);
+                ef[q * plane + d] = (float) (fabs(J - Jc) + d2 / 8 + sf->tail);
                 jmax = fmax(jmax, J);
                 dmax = fmax(dmax, fabs(J - Jc));
             }
     }
+    /* The gather walks the nodes the table keeps: drop those that linear
+     * interpolation between their neighbours kept reproduces within
+     * MS_THIN of the larger end (or 1e-6 of the largest J), in every
+     * direction; what they would have changed is added to the kept ends'
+     * estimates. */
+    int nk = 0;
+    keep[nk++] = 0;
+    for (int a = 0; a < nf - 1;) {
+        int b = a + 1;
+        while (b + 1 < nf && b - a < MS_THIN_SPAN) {
+            /* can a reach b + 1 directly? */
+            const int c = b + 1;
+            int ok2 = 1;
+            for (int m = a + 1; m < c && ok2; ++m) {
+                const double w = (tf[m] - tf[a]) / (tf[c] - tf[a]);
+                const float *va = vf + a * plane, *vm = vf + m * plane, *vcn = vf + c * plane;
+                for (size_t d = 0; d < plane; ++d) {
+                    const double lin = va[d] + w * (vcn[d] - va[d]);
+                    if (fabs(vm[d] - lin) > MS_THIN * fmax(fabs(va[d]), fabs(vcn[d])) + 1e-6 * jmax) {
+                        ok2 = 0;
+                        break;
+                    }
+                }
+            }
+            if (!ok2)
+                break;
+            b = c;
+        }
+        /* the dropped nodes' deviation, per direction, onto both ends */
+        for (int m = a + 1; m < b; ++m) {
+            const double w = (tf[m] - tf[a]) / (tf[b] - tf[a]);
+            for (size_t d = 0; d < plane; ++d) {
+                const double lin = vf[a * plane + d] + w * (vf[b * plane + d] - vf[a * plane + d]);
+                const float dev = (float) fabs(vf[m * plane + d] - lin) + ef[m * plane + d];
+                ef[a * plane + d] = fmaxf(ef[a * plane + d], dev);
+                ef[b * plane + d] = fmaxf(ef[b * plane + d], dev);
+            }
+        }
+        keep[nk++] = b;
+        a = b;
+    }
+    tab->v = malloc(sizeof *tab->v * (size_t) nk * plane * 2);
+    tab->tau = malloc(sizeof *tab->tau * (size_t) nk);
+    tab->invd = malloc(sizeof *tab->invd * (size_t) nk);
+    if (!tab->v || !tab->tau || !tab->invd)
+        goto out;
+    tab->n = nk;
+    for (int q = 0; q + 1 < nk; ++q)
+        tab->invd[q] = 1 / (tf[keep[q + 1]] - tf[keep[q]]);
+    for (int q = 0; q < nk; ++q) {
+        const int src = keep[q];
+        tab->tau[q] = tf[src];
+        for (size_t d = 0; d < plane; ++d) {
+            const float J = vf[src * plane + d], e = ef[src * plane + d];
+            tab->v[(d * (size_t) nk + q) * 2] = J;
+            tab->v[(d * (size_t) nk + q) * 2 + 1] = e;
+            tab->jmax = fmax(tab->jmax, (double) J + e);
+        }
+    }
     info->nodes = nf;
+    info->kept = nk;
     info->nh = nh;
     info->direct = sf->direct;
     info->iterated = sf->iterated;
@@ -738,6 +800,8 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     }
     ok = 1;
 out:
+    free(ef);
+    free(keep);
     free(tf);
     free(tc);
     free(af);
@@ -969,6 +1033,8 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
             Jn = en = 0;
     }
     double s1 = s0, ta = t0, es = exp(-s0);
+    const double iq = 1 / q, aq = fabs(q);
+    int ta_node = 0;
     for (int guard = 0; guard <= n && s1 < sD; ++guard) {
         /* what is left past here is at most es jmax: stop once that is
          * below 1e-6 of what was gathered, and count it as error */
@@ -987,13 +1053,22 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
             J1 = J0 + g * (Jn - J0);
             e1 = e0 + g * (en - e0);
         }
-        const double x = fmax(0, (tn - ta) / q), a = -expm1(-x);
-        const double gs = x < 1e-3 ? w_slope(x) : (a - x * (1 - a)) / x;
+        /* x and 1/x without a division between two nodes (the table's
+         * inverse spacings) */
+        const double x = fmax(0, (tn - ta) * iq), a = -expm1(-x);
+        double gs;
+        if (x < 1e-3)
+            gs = w_slope(x);
+        else if (at_node && ta_node)
+            gs = a * (aq * tab->invd[q > 0 ? next - 1 : next]) - (1 - a);
+        else
+            gs = a / x - (1 - a);
         out[0] += es * (J0 * a + (J1 - J0) * gs);
         out[1] += es * (e0 * a + (e1 - e0) * gs);
         s1 += x;
         es *= 1 - a;
         ta = tn;
+        ta_node = at_node;
         J0 = J1;
         e0 = e1;
         if (!at_node)

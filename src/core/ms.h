@@ -107,11 +107,12 @@ void ef_ms_camera_depth(const ef_ms *m, const struct ef_fog_scene *s, const doub
                         double tauc[3]);
 
 /* What the build chose and measured, for --explain and the bench: depth
- * nodes, directions per hemisphere, modes solved directly and iterated,
+ * nodes (and those the table keeps), directions per hemisphere, modes
+ * solved directly and iterated,
  * the largest tail bound and the largest discretisation estimate relative
  * to the largest J, and the solve's time in seconds. */
 typedef struct ef_ms_info {
-    int nodes, nh, direct, iterated;
+    int nodes, kept, nh, direct, iterated;
     double tail_rel, disc_rel, seconds;
 } ef_ms_info;
 void ef_ms_get_info(const ef_ms *m, ef_ms_info *info);

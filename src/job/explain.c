@@ -122,11 +122,12 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
                 fprintf(out, "  multiple scattering: nothing to add (the sun at or below the "
                              "horizon, or no fog its light reaches)\n");
             else
-                fprintf(out, "  multiple scattering: plane-parallel solve over %d depth nodes to %s, "
+                fprintf(out, "  multiple scattering: plane-parallel solve over %d depth nodes (%d kept "
+                             "in its table) to %s, "
                              "%d directions per hemisphere, %d azimuthal modes solved directly and "
                              "%d order by order; orders left out within %.1e and discretisation "
                              "estimated at %.1e of the largest source; %.3f s\n",
-                        in.nodes, l->has_ground ? "the ground" : "the fog's own depth", in.nh,
+                        in.nodes, in.kept, l->has_ground ? "the ground" : "the fog's own depth", in.nh,
                         in.direct, in.iterated, in.tail_rel, in.disc_rel, in.seconds);
         }
     }
@@ -309,9 +310,9 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
         if (l->ms) {
             ef_ms_info in;
             ef_ms_get_info(l->ms, &in);
-            fprintf(out, ", \"multiple\": {\"nodes\": %d, \"directions\": %d, \"direct_modes\": %d, "
-                         "\"iterated_modes\": %d, \"tail_rel\": ", in.nodes, in.nh, in.direct,
-                    in.iterated);
+            fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "
+                         "\"direct_modes\": %d, \"iterated_modes\": %d, \"tail_rel\": ",
+                    in.nodes, in.kept, in.nh, in.direct, in.iterated);
             json_num(out, in.tail_rel);
             fputs(", \"discretisation_rel\": ", out);
             json_num(out, in.disc_rel);
