@@ -2,6 +2,7 @@
 # bench/ms.sh - multiple scattering (issue 44) against Blender Cycles with 128 volume bounces.
 #
 #   bench/ms.sh [BUILD_DIR] > bench/ms.md
+#   MS_GRID=bench/ms_grid.jsonl bench/ms.sh [BUILD_DIR] > bench/ms.md   (re-time the cost alone)
 #
 # Over a grid of the fog's albedo (0.8, 0.95, 0.99), HG g (0, 0.5, 0.85) and the sun's
 # elevation (5, 30, 80 degrees) in a slab of vertical optical depth 2, and the slab's optical
@@ -33,12 +34,18 @@ done
 cases+=("30 0.025 0.95 0.5" "30 0.4 0.95 0.5" "30 0.8 0.95 0.5")
 # layers whose albedo changes with height (three components: the mixture per depth node)
 cases+=("30 0.1 0.95 0.5 25:0.03:0.99:0.5,12:0.07:0.9:0.5,5:0.2:0.8:0.5")
-for c in "${cases[@]}"; do
-    # shellcheck disable=SC2086
-    set -- $c
-    "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" "$1" "$2" "$3" "$4" 20 64 36 8 \
-        ${5:+"$5"} >>"$tmp/grid.jsonl" || die "case $c failed"
-done
+if [[ -n "${MS_GRID:-}" ]]; then
+    # the grid of an earlier run (its JSON lines), to re-time the cost alone
+    cp "$MS_GRID" "$tmp/grid.jsonl" || die "MS_GRID=$MS_GRID unreadable"
+else
+    for c in "${cases[@]}"; do
+        # shellcheck disable=SC2086
+        set -- $c
+        "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" "$1" "$2" "$3" "$4" 20 64 36 8 \
+            ${5:+"$5"} >>"$tmp/grid.jsonl" || die "case $c failed"
+    done
+    cp "$tmp/grid.jsonl" "$here/ms_grid.jsonl"
+fi
 # the cost at 1080p: a sun in height fog, single against multiple, interleaved
 "$build/make_sample" "$tmp/hd.exr" --size 1920x1080 --view 5,-5,60 >/dev/null || die "make_sample"
 fog="height:density=0.05:falloff=0.1:base=0:albedo=0.9:phase=hg:g=0.6"
