@@ -156,6 +156,7 @@ static void scatter(const mode_ws *w, const double *Lr, double *S)
     }
 }
 
+/* The largest magnitude of v[0..n). */
 static double sup(const double *v, size_t n)
 {
     double m = 0;
