@@ -372,6 +372,17 @@ static void test_refusals(void **state)
         "sun:towards=0,1,0:scattering=some",
         "sun:towards=0,1,0:scattering=multiple:planet=earth",
     };
+    {   /* a phase sharper than the solve holds */
+        ef_fog_scene s;
+        ef_err err = { 0 };
+        ef_scene_init(&s);
+        assert_int_equal(ef_scene_add(&s, "height:density=0.05:falloff=0.1:phase=hg:g=0.97", &err), 0);
+        assert_int_equal(ef_scene_add_light(&s, "sun:towards=0,1,0:scattering=multiple", &err), 0);
+        assert_int_equal(ef_scene_prepare_lights(&s, &err), -1);
+        if (!strstr(err.msg, "0.95"))
+            fail_msg("g 0.97: %s", err.msg);
+        ef_scene_free(&s);
+    }
     for (unsigned i = 0; i < sizeof lights / sizeof *lights; ++i) {
         ef_fog_scene s;
         ef_err err = { 0 };
