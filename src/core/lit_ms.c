@@ -32,6 +32,7 @@
 #define MS_THIN_SPAN 16
 #define MS_NT 121
 #define MS_NP 61
+#define MS_NPF 120
 
 /* ------------------------------------------------------------ helpers */
 
@@ -103,7 +104,9 @@ struct ef_ms_solve {
     int n, nh, N, L;
     double *tau;      /* [n] */
     double *a;        /* [n][L]: omega b_l */
-    double *M;        /* [L modes][n][L]: sum_j w_j Lambda_l^m(mu_j) L^m(k, j) */
+    double *M;        /* [2 parities][L modes][n][L]: sum_j w_j Lambda_l^m(mu_j) L^m(k, j),
+                       * the cos m phi modes, then (full) the sin m phi ones */
+    int full;         /* sin modes too: a sky, not symmetric about any plane */
     double tail;      /* bound of the orders left out, summed over modes */
     int direct, iterated;
     double resid;     /* largest relative change of a direct mode under one more sweep */
@@ -120,9 +123,10 @@ typedef struct mode_ws {
     double *cE, *cA, *cB;   /* [n-1][nh] cell weights */
 } mode_ws;
 
-/* L = the transport of source S (both [n][N]) with nothing entering at
- * the top or the bottom. */
-static void transport(const mode_ws *w, const double *S, double *Lr)
+/* L = the transport of source S (both [n][N]) with top[i] (NULL: 0)
+ * entering at the top in downward direction nh + i and nothing at the
+ * bottom. */
+static void transport(const mode_ws *w, const double *S, const double *top, double *Lr)
 {
     const int n = w->n, N = w->N, nh = w->nh;
     for (int i = 0; i < nh; ++i) {   /* up: from the bottom */
@@ -134,7 +138,7 @@ static void transport(const mode_ws *w, const double *S, double *Lr)
         }
     }
     for (int i = nh; i < N; ++i) {   /* down: from the top */
-        Lr[i] = 0;
+        Lr[i] = top ? top[i - nh] : 0;
         for (int k = 0; k + 1 < n; ++k) {
             const int c = k * nh + (i - nh);
             Lr[(k + 1) * N + i] = w->cE[c] * Lr[k * N + i] + w->cA[c] * S[k * N + i] +
@@ -173,7 +177,7 @@ static double sup(const double *v, size_t n)
  * coefficient is on the diagonal (diagonally dominant for omega <= 1 and
  * a positive kernel, so elimination needs no pivots). Returns 0, or -1
  * (out of memory). */
-static int solve_direct(const mode_ws *w, double *Lr)
+static int solve_direct(const mode_ws *w, const double *top, double *Lr)
 {
     const int n = w->n, N = w->N, nh = w->nh;
     const long nt = (long) n * N;
@@ -189,8 +193,11 @@ static int solve_direct(const mode_ws *w, double *Lr)
             double *rhs = &Lr[r];
             *rhs = 0;
             AT(r, r) = 1;
-            if ((up && k == n - 1) || (!up && k == 0))
-                continue;   /* nothing enters: L = 0 */
+            if ((up && k == n - 1) || (!up && k == 0)) {
+                if (!up && top)   /* what enters at the top */
+                    *rhs = top[i - nh];
+                continue;
+            }
             /* the cell that ends at k: from s (its start) to k */
             const int s = up ? k + 1 : k - 1, cell = up ? k : k - 1;
             const int ci = cell * nh + (up ? i : i - nh);
@@ -251,7 +258,8 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
     so->L = L;
     so->tau = malloc((size_t) n * sizeof *so->tau);
     so->a = calloc((size_t) n * L, sizeof *so->a);
-    so->M = calloc((size_t) L * n * L, sizeof *so->M);
+    so->full = sl->top != NULL;
+    so->M = calloc((size_t) 2 * L * n * L, sizeof *so->M);
     double *xg = malloc(sizeof(double) * (size_t) nh), *wg = malloc(sizeof(double) * (size_t) nh);
     double *mu = malloc(sizeof(double) * (size_t) N), *wt = malloc(sizeof(double) * (size_t) N);
     mode_ws w = { .n = n, .nh = nh, .N = N, .L = L };
@@ -296,7 +304,13 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
     }
     if (flux)
         flux->up_top = flux->down_bottom = 0;
-    for (int m = 0; m < L; ++m) {
+    for (int mp = 0; mp < 2 * L; ++mp) {
+        /* mode m, parity cs (0: cos m phi, 1: sin m phi; the beam's light
+         * is symmetric about its plane and has cos modes only) */
+        const int m = mp % L, cs = mp / L;
+        if (cs && (!so->full || m == 0))
+            continue;
+        const double *top = sl->top ? sl->top + (size_t) (m * 2 + cs) * nh : NULL;
         w.m = m;
         for (int i = 0; i < N; ++i)
             lambda_m(m, L, mu[i], w.lam + (size_t) i * L);
@@ -317,7 +331,7 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
         const double fm = (m == 0 ? 1.0 : 2.0) / (4 * PI);
         for (int k = 0; k < n; ++k) {
             const double *a = so->a + (size_t) k * L;
-            const double beam = sl->E * exp(-so->tau[k] / sl->mu_s);
+            const double beam = cs || !(sl->E > 0) ? 0 : sl->E * exp(-so->tau[k] / sl->mu_s);
             for (int i = 0; i < N; ++i) {
                 double v = 0;
                 for (int l = m; l < L; ++l)
@@ -325,7 +339,7 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
                 w.Q[k * N + i] = fm * beam * v;
             }
         }
-        const double qn = sup(w.Q, (size_t) n * N);
+        const double qn = fmax(sup(w.Q, (size_t) n * N), top ? sup(top, (size_t) nh) : 0);
         if (qn == 0)
             continue;
         double kappa = 0;
@@ -337,12 +351,13 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
                 kappa = fmax(kappa, r);
             }
         if (res->max_order > 0 || kappa < MS_ITER_KAPPA) {
-            /* order by order: L_1 from the beam's source, J_(n+1) = C L_n */
+            /* order by order: L_1 from the beam's source and the sky's
+             * light as it enters (its uncollided part), J_(n+1) = C L_n */
             memset(Lr, 0, sizeof(double) * (size_t) n * N);
             memcpy(S, w.Q, sizeof(double) * (size_t) n * N);
             double left = 0;
             for (int order = 1;; ++order) {
-                transport(&w, S, Ln);
+                transport(&w, S, order == 1 ? top : NULL, Ln);
                 for (size_t q = 0; q < (size_t) n * N; ++q)
                     Lr[q] += Ln[q];
                 scatter(&w, Ln, S);   /* J_(order + 1) */
@@ -358,7 +373,7 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
             so->tail += left;
             so->iterated++;
         } else {
-            if (solve_direct(&w, Lr)) {
+            if (solve_direct(&w, top, Lr)) {
                 ok = 0;
                 goto done;
             }
@@ -366,7 +381,7 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
             scatter(&w, Lr, S);
             for (size_t q = 0; q < (size_t) n * N; ++q)
                 S[q] += w.Q[q];
-            transport(&w, S, Ln);
+            transport(&w, S, top, Ln);
             double d = 0;
             for (size_t q = 0; q < (size_t) n * N; ++q)
                 d = fmax(d, fabs(Ln[q] - Lr[q]));
@@ -374,14 +389,14 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
             so->resid = fmax(so->resid, ln > 0 ? d / ln : 0);
             so->direct++;
         }
-        if (flux && m == 0)
+        if (flux && m == 0 && cs == 0)
             for (int i = 0; i < nh; ++i) {
                 flux->up_top += 2 * PI * wt[i] * mu[i] * Lr[i];
                 flux->down_bottom += 2 * PI * wt[nh + i] * xg[i] * Lr[(n - 1) * N + nh + i];
             }
         /* the moments the view's source is formed from */
         for (int k = 0; k < n; ++k) {
-            double *Mk = so->M + ((size_t) m * n + k) * L;
+            double *Mk = so->M + ((size_t) mp * n + k) * L;
             for (int l = m; l < L; ++l) {
                 double v = 0;
                 for (int j = 0; j < N; ++j)
@@ -419,24 +434,26 @@ static void lambda_all(int L, double mu, double *lam)
         lambda_m(m, L, mu, lam + (size_t) m * L);
 }
 
-/* J's azimuthal modes at node k into jm[0..L-1], lam from lambda_all at
- * the direction's propagation cosine. */
+/* J's azimuthal modes at node k into jm[0..L-1] (cos m phi) and, for a
+ * full solve, jm[L..2L-1] (sin m phi), lam from lambda_all at the
+ * direction's propagation cosine. */
 static void eval_modes(const ef_ms_solve *so, int k, const double *lam, double *jm)
 {
     const int L = so->L, n = so->n;
     const double *a = so->a + (size_t) k * L;
-    for (int m = 0; m < L; ++m) {
-        const double *Mk = so->M + ((size_t) m * n + k) * L, *lm = lam + (size_t) m * L;
+    for (int mp = 0; mp < (so->full ? 2 * L : L); ++mp) {
+        const int m = mp % L;
+        const double *Mk = so->M + ((size_t) mp * n + k) * L, *lm = lam + (size_t) m * L;
         double v = 0;
         for (int l = m; l < L; ++l)
             v += (2 * l + 1) * a[l] * lm[l] * Mk[l];
-        jm[m] = 0.5 * v;
+        jm[mp] = 0.5 * v;
     }
 }
 
 double ef_ms_slab_eval(const ef_ms_solve *so, int k, double mu, double dphi)
 {
-    double jm[128];
+    double jm[256];
     double *lam = calloc((size_t) so->L * so->L, sizeof *lam);
     if (!lam || so->L > 128 || k < 0 || k >= so->n)
         return free(lam), NAN;
@@ -445,7 +462,7 @@ double ef_ms_slab_eval(const ef_ms_solve *so, int k, double mu, double dphi)
     free(lam);
     double v = 0;
     for (int m = 0; m < so->L; ++m)
-        v += jm[m] * cos(m * dphi);
+        v += jm[m] * cos(m * dphi) + (so->full ? jm[so->L + m] * sin(m * dphi) : 0);
     return v;
 }
 
@@ -464,13 +481,14 @@ typedef struct ms_tab {
     double *invd;    /* [n - 1]: 1 / (tau[k + 1] - tau[k]) */
     double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
-    float *v;        /* [MS_NT][MS_NP][n][2]: a direction's nodes side by side */
+    float *v;        /* [MS_NT][np][n][2]: a direction's nodes side by side */
 } ms_tab;
 
 struct ef_ms {
     _Atomic int refs;
-    double up[3], bh[3];
+    double up[3], bh[3], e2[3];   /* bh: the azimuths' origin (a sky: e2 = up x bh) */
     int has_bh;
+    int full;                     /* a sky: azimuths over [0, 2 pi) */
     double E[3];
     int tab_of[3];
     int ntab;
@@ -640,47 +658,72 @@ static void node_coeffs(const ef_fog_scene *s, const double up[3], int k, const 
             memset(a + (size_t) i * nl, 0, sizeof *a * (size_t) nl);
 }
 
-/* The direction table of solve so at its nodes: [n][MS_NT][MS_NP]. */
+/* The table's azimuths: a sun's over [0, pi] (its light is symmetric
+ * about the beam's plane) at sin(phi / 2) = j / (MS_NP - 1); a sky's over
+ * [0, 2 pi) at 2 pi j / MS_NPF, periodic. */
+static int np_of(int full)
+{
+    return full ? MS_NPF : MS_NP;
+}
+
+static double phi_of(int full, int j)
+{
+    return full ? 2 * PI * j / MS_NPF : 2 * asin((double) j / (MS_NP - 1));
+}
+
+/* The direction table of solve so at its nodes: [n][MS_NT][np]. */
 static float *dir_table(const ef_ms_solve *so)
 {
-    const int L = so->L;
-    float *v = malloc(sizeof *v * (size_t) so->n * MS_NT * MS_NP);
+    const int L = so->L, np = np_of(so->full), nm = so->full ? 2 * L : L;
+    float *v = malloc(sizeof *v * (size_t) so->n * MS_NT * np);
     double *lam = malloc(sizeof *lam * (size_t) MS_NT * L * L);
-    double jm[128], cs[MS_NP][128];
-    if (!v || !lam || L > 128) {
+    double *cs = malloc(sizeof *cs * (size_t) np * 2 * L);
+    double jm[256];
+    if (!v || !lam || !cs || L > 128) {
+        free(cs);
         free(lam);
         free(v);
         return NULL;
     }
-    for (int j = 0; j < MS_NP; ++j)
-        for (int m = 0; m < L; ++m)
-            cs[j][m] = cos(m * 2 * asin((double) j / (MS_NP - 1)));
+    for (int j = 0; j < np; ++j)
+        for (int m = 0; m < L; ++m) {
+            cs[(size_t) j * 2 * L + m] = cos(m * phi_of(so->full, j));
+            cs[(size_t) j * 2 * L + L + m] = sin(m * phi_of(so->full, j));
+        }
     for (int i = 0; i < MS_NT; ++i)
         lambda_all(L, 1 - 2 * ((double) i / (MS_NT - 1)) * ((double) i / (MS_NT - 1)),
                    lam + (size_t) i * L * L);
     for (int k = 0; k < so->n; ++k)
         for (int i = 0; i < MS_NT; ++i) {
             eval_modes(so, k, lam + (size_t) i * L * L, jm);
-            for (int j = 0; j < MS_NP; ++j) {
+            for (int j = 0; j < np; ++j) {
                 double x = 0;
-                for (int m = 0; m < L; ++m)
-                    x += jm[m] * cs[j][m];
-                v[((size_t) k * MS_NT + i) * MS_NP + j] = (float) x;
+                for (int m = 0; m < nm; ++m)
+                    x += jm[m] * cs[(size_t) j * 2 * L + m];
+                v[((size_t) k * MS_NT + i) * np + j] = (float) x;
             }
         }
+    free(cs);
     free(lam);
     return v;
 }
 
 /* One channel's table: the solve, a coarser one for the estimate. */
-static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu_s, double tb,
-                     int ground, double hlo, double hhi, int nh, ms_tab *tab, ef_ms_info *info)
+/* A sky's radiance entering at the top for a solve of nh directions per
+ * hemisphere, channel k, as ef_ms_slab's top wants it (malloc'd; NULL: out
+ * of memory). */
+typedef double *(*top_fn)(const void *user, int nh, int k);
+
+static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu_s, double E,
+                     top_fn topf, const void *user, double tb, int ground, double hlo,
+                     double hhi, int nh, ms_tab *tab, ef_ms_info *info)
 {
     int nl = 2 * nh, ok = 0;
     const double h0 = 0.02 * fmin(1, 4 * mu_s), r = 0.08;
     double *tf = NULL, *tc = NULL, *af = NULL, *ac = NULL;
     ef_ms_solve *sf = NULL, *sc = NULL;
     float *vf = NULL, *vc = NULL, *ef = NULL;
+    double *topf_f = NULL, *topf_c = NULL;
     int *keep = NULL;
     const int nf = depth_grid(tb, h0, r, ground, &tf), nc = depth_grid(tb, 2 * h0, 2 * r, ground, &tc);
     const int nhc = nh * 2 / 3 > 4 ? nh * 2 / 3 : 4;
@@ -692,13 +735,17 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
         goto out;
     node_coeffs(s, up, k, tf, nf, nl, hlo, hhi, af);
     node_coeffs(s, up, k, tc, nc, nl, hlo, hhi, ac);
-    const ef_ms_slab slf = { nf, tf, af, nl, mu_s, 1.0 }, slc = { nc, tc, ac, nl, mu_s, 1.0 };
+    if (topf && (!(topf_f = topf(user, nh, k)) || !(topf_c = topf(user, nhc, k))))
+        goto out;
+    const ef_ms_slab slf = { nf, tf, af, nl, mu_s, E, topf_f };
+    const ef_ms_slab slc = { nc, tc, ac, nl, mu_s, E, topf_c };
     const ef_ms_res rf = { nh, 0 }, rc = { nhc, 0 };
     sf = ef_ms_slab_solve(&slf, &rf, NULL);
     sc = ef_ms_slab_solve(&slc, &rc, NULL);
     if (!sf || !sc || !(vf = dir_table(sf)) || !(vc = dir_table(sc)))
         goto out;
-    const size_t plane = (size_t) MS_NT * MS_NP;
+    const int full = sf->full, np = np_of(full);
+    const size_t plane = (size_t) MS_NT * np;
     ef = malloc(sizeof *ef * (size_t) nf * plane);
     keep = malloc(sizeof *keep * (size_t) nf);
     if (!ef || !keep)
@@ -711,16 +758,17 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
         const double f = (tf[q] - tc[kc]) / (tc[kc + 1] - tc[kc]);
         const float *vq = vf + q * plane;
         for (int i = 0; i < MS_NT; ++i)
-            for (int j = 0; j < MS_NP; ++j) {
-                const size_t d = (size_t) i * MS_NP + j;
+            for (int j = 0; j < np; ++j) {
+                const size_t d = (size_t) i * np + j;
                 const double J = vq[d];
                 const double Jc = (1 - f) * vc[kc * plane + d] + f * vc[(kc + 1) * plane + d];
                 /* the bilinear table's own error, from its second differences
-                 * (the azimuth mirrors at 0 and pi) */
-                const int jm = j > 0 ? j - 1 : 1, jp = j + 1 < MS_NP ? j + 1 : MS_NP - 2;
-                double d2 = fabs(vq[i * MS_NP + jm] - 2 * J + vq[i * MS_NP + jp]);
+                 * (a sun's azimuth mirrors at 0 and pi, a sky's wraps) */
+                const int jm = full ? (j + np - 1) % np : j > 0 ? j - 1 : 1;
+                const int jp = full ? (j + 1) % np : j + 1 < np ? j + 1 : np - 2;
+                double d2 = fabs(vq[i * np + jm] - 2 * J + vq[i * np + jp]);
                 if (i > 0 && i + 1 < MS_NT)
-                    d2 += fabs(vq[(i - 1) * MS_NP + j] - 2 * J + vq[(i + 1) * MS_NP + j]);
+                    d2 += fabs(vq[(i - 1) * np + j] - 2 * J + vq[(i + 1) * np + j]);
                 /* and the linear interpolation between depth nodes, from
                  * the second derivative the neighbours give */
                 if (q > 0 && q + 1 < nf) {
@@ -804,6 +852,8 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
     }
     ok = 1;
 out:
+    free(topf_f);
+    free(topf_c);
     free(ef);
     free(keep);
     free(tf);
@@ -937,7 +987,8 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
         if (!(tb > 1e-9))
             continue;   /* no fog in this channel: an empty table */
         /* a ground (or the fog's end) within MS_TAU_DEEP: refined there too */
-        if (build_tab(s, up, k, mu_s, tb, tbot[k] <= MS_TAU_DEEP, hlo, hhi, nh, tab, &m->info)) {
+        if (build_tab(s, up, k, mu_s, 1.0, NULL, NULL, tb, tbot[k] <= MS_TAU_DEEP, hlo, hhi, nh,
+                      tab, &m->info)) {
             ef_ms_unref(m);
             return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
         }
@@ -1106,25 +1157,37 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const 
         return;
     /* the propagation direction towards the camera: -dir */
     const double mu_u = dot3(r->dir, m->up), mu_p = -mu_u;
-    /* the table's coordinates: sin of half the polar angle and of half
-     * the azimuth from the beam's (fine where the forward peak is) */
-    double c = 1, hz[3];
+    /* the table's coordinates: sin of half the polar angle, and of half
+     * the azimuth from the beam's (a sun: fine where the forward peak is)
+     * or the azimuth itself from the sky's frame (a sky) */
+    double c = 1, hz[3], ph = 0;
     for (int q = 0; q < 3; ++q)
         hz[q] = -r->dir[q] - mu_p * m->up[q];
     const double hn = sqrt(dot3(hz, hz));
-    if (m->has_bh && hn > 1e-12)
+    if (m->has_bh && hn > 1e-12) {
         c = dot3(hz, m->bh) / hn;
+        if (m->full)
+            ph = atan2(dot3(hz, m->e2), dot3(hz, m->bh));
+    }
     dir_w dw;
+    const int np = np_of(m->full);
     const double fi = sqrt(fmax(0, fmin(1, 0.5 * (1 - mu_p)))) * (MS_NT - 1);
-    const double fj = sqrt(fmax(0, fmin(1, 0.5 * (1 - c)))) * (MS_NP - 1);
+    double fj;
+    if (m->full) {
+        fj = ph / (2 * PI) * np;
+        fj -= np * floor(fj / np);
+    } else {
+        fj = sqrt(fmax(0, fmin(1, 0.5 * (1 - c)))) * (np - 1);
+    }
     int i0 = (int) fi, j0 = (int) fj;
     i0 = i0 > MS_NT - 2 ? MS_NT - 2 : i0;
-    j0 = j0 > MS_NP - 2 ? MS_NP - 2 : j0;
+    j0 = m->full ? (j0 >= np ? np - 1 : j0) : j0 > np - 2 ? np - 2 : j0;
+    const int j1 = m->full ? (j0 + 1) % np : j0 + 1;
     const double u = fi - i0, v = fj - j0;
-    dw.at[0] = (size_t) i0 * MS_NP + j0;
-    dw.at[1] = dw.at[0] + 1;
-    dw.at[2] = dw.at[0] + MS_NP;
-    dw.at[3] = dw.at[2] + 1;
+    dw.at[0] = (size_t) i0 * np + j0;
+    dw.at[1] = (size_t) i0 * np + j1;
+    dw.at[2] = dw.at[0] + np;
+    dw.at[3] = dw.at[1] + np;
     dw.w[0] = (1 - u) * (1 - v);
     dw.w[1] = (1 - u) * v;
     dw.w[2] = u * (1 - v);

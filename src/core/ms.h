@@ -56,6 +56,12 @@ typedef struct ef_ms_slab {
     const double *a;
     int nl;
     double mu_s, E;
+    /* A sky (NULL: none): the radiance entering at the top per azimuthal
+     * mode m and parity cs (0: cos m phi, 1: sin m phi) for the downward
+     * direction of cosine -x_i (x_i the i-th Gauss node on [0, 1]):
+     * top[(m * 2 + cs) * nh + i], m < 2 nh. The solve then keeps sin modes
+     * too, and J holds the sky's orders 1 and up. */
+    const double *top;
 } ef_ms_slab;
 
 /* Resolution of a solve: directions per hemisphere (nh, 4..64) and the

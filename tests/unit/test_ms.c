@@ -124,7 +124,7 @@ static void make_slab(slab_buf *b, double tb, int n, int nl, double om, double g
         for (int l = 0; l < nl; ++l)
             b->a[k * nl + l] = om * pow(g, l);
     }
-    b->sl = (ef_ms_slab) { n, b->tau, b->a, nl, mus, 1.0 };
+    b->sl = (ef_ms_slab) { n, b->tau, b->a, nl, mus, 1.0, NULL };
 }
 
 static void free_slab(slab_buf *b)
