@@ -1,5 +1,5 @@
 """Runs inside Blender (blender -b --factory-startup --python THIS -- OUT SPP BOUNCES ELEV
-DENSITY ALBEDO G TOP WIDTH HEIGHT [LAYERS]): the multiple-scattering reference scene of bench/ms.sh and
+DENSITY ALBEDO G TOP WIDTH HEIGHT [LAYERS|- [sky]]): the multiple-scattering reference scene of bench/ms.sh and
 tests/blender/blender_ms_run.py.
 
 A slab of homogeneous fog (Volume Scatter of density DENSITY * ALBEDO, HG anisotropy G, plus
@@ -24,7 +24,10 @@ elev, dens, albedo, g, top = (float(v) for v in args[3:8])
 width, height = int(args[8]), int(args[9])
 # LAYERS (optional): "TOP:DENSITY:ALBEDO:G,..." replaces the slab by nested boxes from z = -1
 # to each TOP, their densities adding where they overlap (exrfog: one half-space each)
-layers = [tuple(float(v) for v in l.split(":")) for l in args[10].split(",")] if len(args) > 10 else [(top, dens, albedo, g)]
+layers = ([tuple(float(v) for v in l.split(":")) for l in args[10].split(",")]
+          if len(args) > 10 and args[10] != "-" else [(top, dens, albedo, g)])
+# "sky" (after LAYERS or "-"): a uniform sky of radiance 1 (the world), no sun
+sky = "sky" in args[11:]
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -49,7 +52,8 @@ sc.render.image_settings.use_zbuffer = True
 bpy.context.view_layer.use_pass_z = True
 sc.render.film_transparent = False
 w = bpy.data.worlds.new("black"); w.use_nodes = True
-w.node_tree.nodes["Background"].inputs[1].default_value = 0.0
+w.node_tree.nodes["Background"].inputs[0].default_value = (1, 1, 1, 1)
+w.node_tree.nodes["Background"].inputs[1].default_value = 1.0 if sky else 0.0
 sc.world = w
 # the ground: black, absorbing every ray (a material with no output)
 bpy.ops.mesh.primitive_plane_add(size=4000, location=(0, 0, 0))
@@ -81,7 +85,7 @@ for li, (ltop, ldens, lalb, lg) in enumerate(layers):
     m.cycles.homogeneous_volume = True
     m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
     cube.data.materials.append(m)
-sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 1.0; sun.angle = 0.0
+sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if sky else 1.0; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(90 - elev), 0, math.radians(150))
 cam = sc.camera

@@ -3,7 +3,7 @@
   ms_compare.py EXRFOG BLENDER DIR SPP ELEV DENSITY ALBEDO G TOP W H [BLOCK]
 
 Renders bench/ms_blender.py's slab twice (volume bounces 0 and 128), runs exrfog on the
-render's depth with colour 0 (so the output is the fog's light alone) with the same sun,
+render without fog (black under the sun, so the output is the fog's light alone) with the same sun,
 scattering=single and scattering=multiple:ground=0, and prints one line of JSON: per BLOCKxBLOCK
 block of pixels (noise averaged down), Cycles' radiance with every bounce against exrfog's
 single + multiple, the share single scattering alone gives, Cycles' own noise (the standard
@@ -22,10 +22,12 @@ spp, elev, dens, albedo, g, top = sys.argv[4], *(float(v) for v in sys.argv[5:10
 W, H = int(sys.argv[10]), int(sys.argv[11])
 block = int(sys.argv[12]) if len(sys.argv) > 12 else 4
 # LAYERS (optional, as bench/ms_blender.py's): nested slabs of their own albedo and g
-layers = sys.argv[13] if len(sys.argv) > 13 else None
+layers = sys.argv[13] if len(sys.argv) > 13 and sys.argv[13] != "-" else None
+# "sky": a uniform sky of radiance 1 in place of the sun (exrfog: --sky-light of a constant map)
+sky = len(sys.argv) > 14 and sys.argv[14] == "sky"
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
-tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "")
+tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") + ("_sky" if sky else "")
 
 
 def render(bounces):
@@ -34,7 +36,7 @@ def render(bounces):
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                         here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                         str(dens), str(albedo), str(g), str(top), str(W), str(H)]
-                       + ([layers] if layers else []),
+                       + [layers or "-"] + (["sky"] if sky else []),
                        capture_output=True, text=True)
     if "ms_blender: rendered" not in r.stdout:
         raise SystemExit("ms_compare: Blender failed:\n" + r.stdout[-2000:] + r.stderr[-2000:])
@@ -50,11 +52,11 @@ c0, t_c0 = render(0)
 cm, t_cm = render(128)
 cp, _ = render(-1)
 cam = json.load(open(cm + ".json"))
-# exrfog's input: colour 0, the depth of the render without fog
+# exrfog's input: the render without fog (black where the sun lights it; the
+# sky itself where the world does), with its depth
 px, spec = pixels(cp)
-inp = np.zeros_like(px)
+inp = px.copy()
 inp[..., 3] = 1
-inp[..., 4] = px[..., 4]
 ib = oiio.ImageBuf(spec)
 ib.set_pixels(oiio.ROI(), inp)
 ib.write("%s/%s_in.exr" % (d, tag))
@@ -67,11 +69,18 @@ common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world
           repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0"] + fogs + [
           "--aov", "error"]
 sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
+if sky:
+    env = np.ones((32, 64, 3), np.float32)
+    eb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
+    eb.set_pixels(oiio.ROI(), env)
+    eb.write("%s/env1.exr" % d)
 times = {}
 for mode, extra in (("single", ""), ("multiple", ":scattering=multiple:ground=0")):
     t0 = time.time()
-    r = subprocess.run([exrfog, "%s/%s_in.exr" % (d, tag), "-o", "%s/%s_ef_%s.exr" % (d, tag, mode),
-                        "--light", sun + extra] + common, capture_output=True, text=True)
+    light = (["--sky-light", "%s/env1.exr%s" % (d, extra or ":intensity=1")] if sky
+             else ["--light", sun + extra])
+    r = subprocess.run([exrfog, "%s/%s_in.exr" % (d, tag), "-o", "%s/%s_ef_%s.exr" % (d, tag, mode)]
+                       + light + common, capture_output=True, text=True)
     times[mode] = time.time() - t0
     if r.returncode:
         raise SystemExit("ms_compare: exrfog failed: " + r.stderr)
@@ -108,7 +117,7 @@ noise = block_se(cycm)
 ok = C > 1e-4
 rel = (EM - C)[ok] / C[ok]
 res = {
-    "case": tag, "layers": layers, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
+    "case": tag, "layers": layers, "sky": sky, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,
     "blocks": int(ok.sum()),
     "cycles_mean": float(C[ok].mean()), "cycles_single_mean": float(C0[ok].mean()),

@@ -1,4 +1,5 @@
 #include "apply.h"
+#include "ms.h"
 #include "sky_light.h"
 
 #include "exact.h"
@@ -166,6 +167,10 @@ static void sky_segment(const ef_fog_scene *s, const ef_ray *r, const double T[3
 {
     const double *up = s->ctx.up;
     out[0] = out[1] = out[2] = 0;
+    if (s->sky_multiple) {   /* carried through the fog, every order (ms.h) */
+        ef_ms_sky_segment(s, r, out, NULL);
+        return;
+    }
     int same = 1;
     for (int c = 1; c < s->ncomp; ++c) {
         const ef_fog_component *a = &s->comp[0], *b = &s->comp[c];
@@ -206,17 +211,24 @@ static void sky_segment(const ef_fog_scene *s, const ef_ray *r, const double T[3
  * (transmittance surf->T) plus (1 - a) S along the far one (inf->T). */
 static void add_sky(const ef_fog_scene *s, const ef_ray *r, const ef_fog_sample *surf,
                     const ef_fog_sample *inf, double a, int need_inf, double c[3],
-                    const ef_aov_out *aov, size_t i)
+                    const ef_aov_out *aov, size_t i, double lerr[3])
 {
-    double S[3], Sf[3] = { 0, 0, 0 };
+    double S[3], Sf[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 }, Ef[3] = { 0, 0, 0 };
     ef_ray far;
-    sky_segment(s, r, surf->T, S);
+    if (s->sky_multiple)
+        ef_ms_sky_segment(s, r, S, E);
+    else
+        sky_segment(s, r, surf->T, S);
     if (need_inf && a < 1.0) {
         if (ef_scene_far_ray(s, r, &far))
             far = *r;
-        sky_segment(s, &far, inf->T, Sf);
+        if (s->sky_multiple)
+            ef_ms_sky_segment(s, &far, Sf, Ef);
+        else
+            sky_segment(s, &far, inf->T, Sf);
     }
     for (int k = 0; k < 3; ++k) {
+        lerr[k] += coverage_sum(a, need_inf, E[k], Ef[k]);
         const double v = coverage_sum(a, need_inf, S[k], Sf[k]);
         c[k] += v;
         if (aov && aov->sky[k])
@@ -780,7 +792,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 if (s->nlight)
                     add_lights(s, &sp->r[j], a_in, sp->need_inf[j], c, aov, i, lerr, lc, j);
                 if (s->sky_light)
-                    add_sky(s, &sp->r[j], surf, inf, a_in, sp->need_inf[j], c, aov, i);
+                    add_sky(s, &sp->r[j], surf, inf, a_in, sp->need_inf[j], c, aov, i, lerr);
                 for (int k = 0; k < 3; ++k)
                     rgb[k][i] = to_float(c[k]);
                 if (alpha && !sp->bad_alpha[j])

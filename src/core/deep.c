@@ -1,6 +1,7 @@
 /* Deep pixels: the OpenEXR rules (split, merge, tidy, flatten) and the fog
  * as volume samples whose alpha and colour are exact integrals. */
 #include "deep.h"
+#include "ms.h"
 
 #include "lit.h"
 #include "sky_light.h"
@@ -617,7 +618,8 @@ static int emit(const ef_deep_layout *L, const ef_deep_fog *F, ef_deep_buf *fog,
             for (int k = 0; k < 3; ++k)
                 fog->lv[at + 3 * j + k] = Sl ? Sl[j][k] : 0;
         for (int k = 0; k < 3 && F->scene->sky_light; ++k)
-            fog->lv[at + 3 * nl + k] = csky[k] * al[k];
+            fog->lv[at + 3 * nl + k] = !F->scene->sky_multiple ? csky[k] * al[k]
+                                       : Sl ? Sl[nl][k] : 0;
     }
     /* colour per channel always (exact); alpha per channel where the
      * layout has AR/AG/AB, else A alone, the mean */
@@ -710,6 +712,16 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
             E[k] += e[k];
             if (per)
                 per[j][k] = v[k];
+        }
+    }
+    if (s->sky_light && s->sky_multiple) {   /* the sky's, after the lights */
+        double v[3], e[3];
+        ef_ms_sky_segment(s, &seg, v, e);
+        for (int k = 0; k < 3; ++k) {
+            S[k] += v[k];
+            E[k] += e[k];
+            if (per)
+                per[s->nlight][k] = v[k];
         }
     }
 }
@@ -834,7 +846,7 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
     piece stack[DEPTH + 2];
     /* with F->per_light, stack entry i's light per light, kept beside the
      * stack (not in each piece, which is copied as it moves) */
-    double sl[DEPTH + 2][EF_MAX_LIGHTS][3];
+    double sl[DEPTH + 2][EF_MAX_LIGHTS + 1][3];
 #define PER(i) (F->per_light ? sl[(i)] : NULL)
     int linear;
     stack[0] = make_piece(F, lt, r1, a, b, 0, &linear, PER(0), NULL);
@@ -970,7 +982,7 @@ static int fog_tail(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit 
         double *d = fog->v + (size_t) (fog->n - 1) * (size_t) fog->stride;
         const double za = d[L->nch], zb = d[L->nch + 1];
         double t[3], c[3], cs[3], e[3], S[3] = { 0, 0, 0 }, Se[3] = { 0, 0, 0 };
-        double Sl[EF_MAX_LIGHTS][3] = { { 0 } };
+        double Sl[EF_MAX_LIGHTS + 1][3] = { { 0 } };
         /* (its error replaces nothing: the piece it extends stays counted,
          * an over-estimate) */
         seg_tau(F->scene, lt, r1, za, INFINITY, t, c, cs, NULL, F->want_err ? e : NULL);
@@ -1034,7 +1046,10 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
         return -1;
     const double *B = fog->bnd;
     const ef_fog_scene *s = F->scene;
-    px_lit lt = { .lights = s->nlight > 0, .sky = s->sky_light != NULL };
+    /* a sky carried through the fog (scattering=multiple) is lit like a
+     * light, per sample; else its unattenuated light joins the colours */
+    px_lit lt = { .lights = s->nlight > 0 || (s->sky_light && s->sky_multiple),
+                  .sky = s->sky_light != NULL && !s->sky_multiple };
     for (int i = 0; lt.sky && i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         ef_sky_light_eval(s->sky_light, c->phase, c->g, s->ctx.up, r1.dir, lt.sky_c[i]);

@@ -5,11 +5,13 @@
 
 #include <math.h>
 #include <stdatomic.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "lit_int.h"
+#include "sky_light.h"
 
 /* A mode is iterated order by order while its scattering operator's norm
  * (on the node directions) is below this; else solved directly. */
@@ -30,6 +32,8 @@
  * MS_THIN_SPAN nodes reproduces it within MS_THIN (relative). */
 #define MS_THIN 1e-3
 #define MS_THIN_SPAN 16
+/* The fewest directions per hemisphere a solve takes. */
+#define MS_NH_MIN 8
 #define MS_NT 121
 #define MS_NP 61
 #define MS_NPF 120
@@ -867,19 +871,25 @@ out:
     return ok ? 0 : -1;
 }
 
-int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *err)
+/* What a solve of scene s needs whatever lights it: the fog's common up,
+ * the heights bracketing it (its top, and the ground or where the depth
+ * passes MS_TAU_DEEP), each channel's depth at the bottom, and the
+ * directions per hemisphere its phases need. */
+typedef struct pp_setup {
+    double up[3], hhi, hlo, tbot[3];
+    int nh;
+} pp_setup;
+
+/* Fills P for scene s, what (the light, for messages) with a ground at
+ * height ground when has_ground. Returns 1 (solve), 0 (nothing to add:
+ * no fog above the ground, or fog that thickens upwards without end), or
+ * -1 with a message (fog the solve does not take). */
+static int pp_prepare(const ef_fog_scene *s, const char *what, int has_ground, double ground,
+                      pp_setup *P, ef_err *err)
 {
-    *out = NULL;
-    if (ef_light_at_position(l))
-        return ef_fail(err, "light '%s': multiple scattering is solved for the sun only", l->name);
-    if (l->planet > 0)
-        return ef_fail(err, "light '%s': scattering=multiple is solved over flat ground (no "
-                       "planet=)", l->name);
-    const struct timespec t0 = { 0, 0 };
-    struct timespec ta = t0, tb_ = t0;
-    clock_gettime(CLOCK_MONOTONIC, &ta);
     /* the common up: every functional of every component along it */
-    double up[3] = { s->ctx.up[0], s->ctx.up[1], s->ctx.up[2] };
+    double *up = P->up;
+    memcpy(up, s->ctx.up, sizeof P->up);
     int have = 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
@@ -889,10 +899,10 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
         const int nf = c->model->functionals && !c->model->tau_info
                            ? c->model->functionals(c, fn, 16) : -1;
         if (nf < 0 || nf > 16)
-            return ef_fail(err, "fog '%s': multiple scattering (light '%s') is solved for fog "
-                           "that is the same along the ground (exp, height, layered, a "
-                           "horizontal half-space); this component's density changes across "
-                           "it", c->spec, l->name);
+            return ef_fail(err, "fog '%s': multiple scattering (%s) is solved for fog that is "
+                           "the same along the ground (exp, height, layered, a horizontal "
+                           "half-space); this component's density changes across it", c->spec,
+                           what);
         for (int f = 0; f < nf; ++f) {
             const double nn = sqrt(dot3(fn[f].n, fn[f].n));
             if (!(nn > 0))
@@ -905,17 +915,23 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
                 have = 1;
             }
             if (fabs(fabs(dot3(d, up)) - 1) > 1e-9)
-                return ef_fail(err, "fog '%s': multiple scattering (light '%s') is solved for "
-                               "fog that is the same along the ground (exp, height, layered, a "
+                return ef_fail(err, "fog '%s': multiple scattering (%s) is solved for fog that "
+                               "is the same along the ground (exp, height, layered, a "
                                "horizontal half-space); this component changes along another "
-                               "direction than the others' up", c->spec, l->name);
+                               "direction than the others' up", c->spec, what);
         }
     }
-    const double mu_s = dot3(l->dir, up);
-    if (!(mu_s > 1e-6) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
-        return 0;   /* no direct light in the plane-parallel fog */
-    /* heights bracketing the fog: its top (optical depth 0 above) and the
-     * ground, or where the depth passes MS_TAU_DEEP */
+    double gmax = 0;
+    for (int i = 0; i < s->ncomp; ++i)
+        if (s->comp[i].phase == EF_PHASE_HG || s->comp[i].phase == EF_PHASE_CS)
+            gmax = fmax(gmax, fabs(s->comp[i].g));
+    if (gmax > MS_G_MAX)
+        return ef_fail(err, "%s: scattering=multiple solves phases with |g| up to %g (64 "
+                       "Legendre terms: at g 0.98 they no longer hold the forward peak and the "
+                       "light comes out wrong); this fog has g %g (fog's is 0.8 to 0.9)",
+                       what, MS_G_MAX, gmax);
+    P->nh = (int) ceil(3 / (1 - fmin(gmax, 0.99)));
+    P->nh = P->nh < MS_NH_MIN ? MS_NH_MIN : P->nh > 32 ? 32 : P->nh;
     double hhi = 1, hlo = -1, t[3];
     for (int it = 0; it < 2100; ++it) {
         vtau(s, up, hhi, t);
@@ -925,9 +941,9 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
     }
     vtau(s, up, hhi, t);
     if (!(fmax(t[0], fmax(t[1], t[2])) < 1e-6))
-        return 0;   /* the fog thickens upwards without end: no sun arrives */
-    if (l->has_ground) {
-        hlo = l->ground;
+        return 0;   /* the fog thickens upwards without end: no light arrives */
+    if (has_ground) {
+        hlo = ground;
     } else {
         for (int it = 0; it < 2100; ++it) {
             vtau(s, up, hlo, t);
@@ -938,63 +954,202 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
     }
     if (!(hlo < hhi))
         return 0;
-    double tbot[3];
-    vtau(s, up, hlo, tbot);
-    double gmax = 0;
-    for (int i = 0; i < s->ncomp; ++i)
-        if (s->comp[i].phase == EF_PHASE_HG || s->comp[i].phase == EF_PHASE_CS)
-            gmax = fmax(gmax, fabs(s->comp[i].g));
-    if (gmax > MS_G_MAX)
-        return ef_fail(err, "light '%s': scattering=multiple solves phases with |g| up to %g "
-                       "(64 Legendre terms: at g 0.98 they no longer hold the forward peak and "
-                       "the light comes out wrong); this fog has g %g (fog's is 0.8 to 0.9)",
-                       l->name, MS_G_MAX, gmax);
-    int nh = (int) ceil(3 / (1 - fmin(gmax, 0.99)));
-    nh = nh < 8 ? 8 : nh > 32 ? 32 : nh;
-    ef_ms *m = calloc(1, sizeof *m);
-    if (!m)
-        return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
-    atomic_init(&m->refs, 1);
-    memcpy(m->up, up, sizeof m->up);
-    memcpy(m->E, l->e, sizeof m->E);
-    /* the beam's horizontal direction (propagation: away from the sun) */
-    for (int q = 0; q < 3; ++q)
-        m->bh[q] = -l->dir[q] + mu_s * up[q];
-    const double bn = sqrt(dot3(m->bh, m->bh));
-    m->has_bh = bn > 1e-12;
-    for (int q = 0; q < 3 && m->has_bh; ++q)
-        m->bh[q] /= bn;
-    /* channels share a table where their fog is the same */
+    P->hhi = hhi;
+    P->hlo = hlo;
+    vtau(s, up, hlo, P->tbot);
+    return 1;
+}
+
+/* Whether channels j and k of s see the same fog (so they may share a
+ * solve). */
+static int same_fog(const ef_fog_scene *s, const pp_setup *P, int j, int k)
+{
+    int same = P->tbot[j] == P->tbot[k];
+    for (int i = 0; i < s->ncomp && same; ++i)
+        same = albedo(&s->comp[i], j) == albedo(&s->comp[i], k);
+    for (int q = 0; q < 8 && same; ++q) {
+        double t[3];
+        vtau(s, P->up, P->hlo + (P->hhi - P->hlo) * q / 7.0, t);
+        same = t[j] == t[k];
+    }
+    return same;
+}
+
+/* The tables of m per channel (sharing where same(j, k) says the
+ * channels' solves are the same), each by build_tab; returns 0 or -1
+ * (out of memory). */
+static int build_tabs(const ef_fog_scene *s, const pp_setup *P, ef_ms *m, double mu_s,
+                      top_fn topf, const void *user, int (*same)(const void *, int, int),
+                      const void *same_user)
+{
     for (int k = 0; k < 3; ++k) {
         m->tab_of[k] = -1;
-        for (int j = 0; j < k && m->tab_of[k] < 0; ++j) {
-            int same = tbot[j] == tbot[k];
-            for (int i = 0; i < s->ncomp && same; ++i)
-                same = albedo(&s->comp[i], j) == albedo(&s->comp[i], k);
-            for (int q = 0; q < 8 && same; ++q) {
-                const double h = hlo + (hhi - hlo) * q / 7.0;
-                vtau(s, up, h, t);
-                same = t[j] == t[k];
-            }
-            if (same)
+        for (int j = 0; j < k && m->tab_of[k] < 0; ++j)
+            if (same(same_user, j, k))
                 m->tab_of[k] = m->tab_of[j];
-        }
         if (m->tab_of[k] >= 0)
             continue;
         ms_tab *tab = &m->tab[m->ntab];
         m->tab_of[k] = m->ntab++;
-        const double tb = fmin(tbot[k], MS_TAU_DEEP);
+        const double tb = fmin(P->tbot[k], MS_TAU_DEEP);
         if (!(tb > 1e-9))
             continue;   /* no fog in this channel: an empty table */
         /* a ground (or the fog's end) within MS_TAU_DEEP: refined there too */
-        if (build_tab(s, up, k, mu_s, 1.0, NULL, NULL, tb, tbot[k] <= MS_TAU_DEEP, hlo, hhi, nh,
-                      tab, &m->info)) {
-            ef_ms_unref(m);
-            return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+        if (build_tab(s, P->up, k, mu_s, 1.0, topf, user, tb, P->tbot[k] <= MS_TAU_DEEP, P->hlo,
+                      P->hhi, P->nh, tab, &m->info))
+            return -1;
+    }
+    return 0;
+}
+
+/* same() for a sun's solves. */
+typedef struct same_sun {
+    const ef_fog_scene *s;
+    const pp_setup *P;
+} same_sun;
+
+static int same_for_sun(const void *u, int j, int k)
+{
+    const same_sun *q = u;
+    return same_fog(q->s, q->P, j, k);
+}
+
+static double seconds_since(const struct timespec *t0)
+{
+    struct timespec t1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    return (double) (t1.tv_sec - t0->tv_sec) + 1e-9 * (double) (t1.tv_nsec - t0->tv_nsec);
+}
+
+int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *err)
+{
+    *out = NULL;
+    if (ef_light_at_position(l))
+        return ef_fail(err, "light '%s': multiple scattering is solved for the sun only", l->name);
+    if (l->planet > 0)
+        return ef_fail(err, "light '%s': scattering=multiple is solved over flat ground (no "
+                       "planet=)", l->name);
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    char what[96];
+    snprintf(what, sizeof what, "light '%s'", l->name);
+    pp_setup P;
+    const int r = pp_prepare(s, what, l->has_ground, l->ground, &P, err);
+    if (r <= 0)
+        return r;
+    const double mu_s = dot3(l->dir, P.up);
+    if (!(mu_s > 1e-6) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
+        return 0;   /* no direct light in the plane-parallel fog */
+    ef_ms *m = calloc(1, sizeof *m);
+    if (!m)
+        return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+    atomic_init(&m->refs, 1);
+    memcpy(m->up, P.up, sizeof m->up);
+    memcpy(m->E, l->e, sizeof m->E);
+    /* the beam's horizontal direction (propagation: away from the sun) */
+    for (int q = 0; q < 3; ++q)
+        m->bh[q] = -l->dir[q] + mu_s * P.up[q];
+    const double bn = sqrt(dot3(m->bh, m->bh));
+    m->has_bh = bn > 1e-12;
+    for (int q = 0; q < 3 && m->has_bh; ++q)
+        m->bh[q] /= bn;
+    const same_sun ss = { s, &P };
+    if (build_tabs(s, &P, m, mu_s, NULL, NULL, same_for_sun, &ss)) {
+        ef_ms_unref(m);
+        return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+    }
+    m->info.seconds = seconds_since(&t0);
+    *out = m;
+    return 0;
+}
+
+/* The sky's radiance entering at the top, per azimuthal mode. */
+typedef struct sky_top {
+    const ef_fog_scene *s;
+    const pp_setup *P;
+    double e1[3], e2[3];
+} sky_top;
+
+/* top_fn for a sky: the environment towards each downward direction's
+ * source (the light propagates down, so it comes from above), in Fourier
+ * modes of the azimuth about up from e1 (towards e2), by NQ samples. */
+static double *sky_top_modes(const void *user, int nh, int k)
+{
+    enum { NQ = 512 };
+    const sky_top *q = user;
+    const int L = 2 * nh;
+    double *top = calloc((size_t) L * 2 * nh, sizeof *top), x[64], w[64];
+    if (!top || nh > 64)
+        return free(top), NULL;
+    gauss01(nh, x, w);
+    for (int i = 0; i < nh; ++i) {
+        const double st = sqrt(fmax(0, 1 - x[i] * x[i]));
+        double Lq[NQ];
+        for (int j = 0; j < NQ; ++j) {
+            const double ph = 2 * PI * j / NQ, cp = cos(ph), sp = sin(ph);
+            double d[3], v[3];
+            for (int c = 0; c < 3; ++c)   /* from where the light comes: -Omega */
+                d[c] = -st * (cp * q->e1[c] + sp * q->e2[c]) + x[i] * q->P->up[c];
+            ef_sky_light_env(q->s->sky_light, q->P->up, d, v);
+            Lq[j] = v[k];
+        }
+        for (int m = 0; m < L; ++m) {
+            double a = 0, b = 0;
+            for (int j = 0; j < NQ; ++j) {
+                const double ph = 2 * PI * j / NQ;
+                a += Lq[j] * cos(m * ph);
+                b += Lq[j] * sin(m * ph);
+            }
+            top[(size_t) (m * 2) * nh + i] = (m ? 2.0 : 1.0) * a / NQ;
+            top[(size_t) (m * 2 + 1) * nh + i] = m ? 2.0 * b / NQ : 0;
         }
     }
-    clock_gettime(CLOCK_MONOTONIC, &tb_);
-    m->info.seconds = (double) (tb_.tv_sec - ta.tv_sec) + 1e-9 * (double) (tb_.tv_nsec - ta.tv_nsec);
+    return top;
+}
+
+/* same() for a sky's solves: the same fog and the same environment. */
+static int same_for_sky(const void *u, int j, int k)
+{
+    const sky_top *q = u;
+    const ef_sky_light *sk = q->s->sky_light;
+    return same_fog(q->s, q->P, j, k) &&
+           !memcmp(sk->env[j], sk->env[k], sizeof(float) * EF_SKY_ENV_W * EF_SKY_ENV_H);
+}
+
+int ef_ms_build_sky(const ef_fog_scene *s, ef_ms **out, ef_err *err)
+{
+    *out = NULL;
+    if (!s->sky_light)
+        return 0;
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    pp_setup P;
+    const int r = pp_prepare(s, "the sky light", s->sky_has_ground, s->sky_ground, &P, err);
+    if (r <= 0)
+        return r;
+    if (fabs(dot3(P.up, s->ctx.up) - 1) > 1e-9)
+        return ef_fail(err, "the sky light's multiple scattering needs fog that is the same along "
+                       "the scene's ground (--up-axis); this fog's layers lie across another "
+                       "axis");
+    ef_ms *m = calloc(1, sizeof *m);
+    if (!m)
+        return ef_fail(err, "out of memory for the sky light's multiple scattering");
+    atomic_init(&m->refs, 1);
+    memcpy(m->up, P.up, sizeof m->up);
+    m->E[0] = m->E[1] = m->E[2] = 1;
+    m->full = 1;
+    sky_top st = { s, &P, { 0 }, { 0 } };
+    ef_sky_frame(P.up, st.e1, st.e2);
+    memcpy(m->bh, st.e1, sizeof m->bh);
+    memcpy(m->e2, st.e2, sizeof m->e2);
+    m->has_bh = 1;
+    /* the sky's light reaches the top at every angle: the depth nodes as
+     * fine at the top as for a sun 3.6 degrees up */
+    if (build_tabs(s, &P, m, 0.0625, sky_top_modes, &st, same_for_sky, &st)) {
+        ef_ms_unref(m);
+        return ef_fail(err, "out of memory for the sky light's multiple scattering");
+    }
+    m->info.seconds = seconds_since(&t0);
     *out = m;
     return 0;
 }
@@ -1216,4 +1371,11 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const 
         if (E)
             E[k] = m->E[k] * res[m->tab_of[k]][1];
     }
+}
+
+void ef_ms_sky_segment(const ef_fog_scene *s, const ef_ray *r, double S[3], double E[3])
+{
+    const int cam = s->sky_ms_bound && r->org[0] == s->sky_ms_org[0] &&
+                    r->org[1] == s->sky_ms_org[1] && r->org[2] == s->sky_ms_org[2];
+    ef_ms_gather(s->sky_ms, s, r, NULL, cam ? s->sky_ms_tauc : NULL, S, E);
 }

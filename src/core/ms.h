@@ -99,6 +99,14 @@ void ef_ms_solve_free(ef_ms_solve *so);
  * half-space), a planet sun, out of memory. */
 int ef_ms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_ms **out, ef_err *err);
 
+/* Builds the sky light's transport through the fog (s->sky_light with
+ * scattering=multiple; s->sky_ground when s->sky_has_ground): the
+ * plane-parallel solve with the environment entering at the top, every
+ * order (its single scattering, attenuated, included); *out = NULL when
+ * there is no fog above the ground. Returns 0, or -1 with a message (as
+ * ef_ms_build, or fog whose up is not the scene's). */
+int ef_ms_build_sky(const struct ef_fog_scene *s, ef_ms **out, ef_err *err);
+
 /* S_ms per channel along r (org anywhere, dir unit, r->dist possibly
  * INFINITY), seen from r->org, and into E (may be NULL) its error
  * estimate (the bound and estimates above); 0 where m is NULL. tv: r's
@@ -107,6 +115,11 @@ int ef_ms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_ms **
  * same bits either way). */
 void ef_ms_gather(const ef_ms *m, const struct ef_fog_scene *s, const struct ef_ray *r,
                   const double *tv, const double *tauc, double S[3], double E[3]);
+/* The sky light's light along r (s->sky_multiple: its solve s->sky_ms,
+ * nothing where that is NULL), seen from r->org, and its estimate into E
+ * (may be NULL): ef_ms_gather with the bound camera's depth. */
+void ef_ms_sky_segment(const struct ef_fog_scene *s, const struct ef_ray *r, double S[3],
+                       double E[3]);
 /* The vertical optical depth per channel from org to the top of the fog,
  * as ef_ms_gather reads it (a camera's, computed once per view). */
 void ef_ms_camera_depth(const ef_ms *m, const struct ef_fog_scene *s, const double org[3],

@@ -113,6 +113,9 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
         memcpy(l->ms_org, org, sizeof l->ms_org);
         ef_ms_camera_depth(l->ms, s, org, l->ms_tauc);
     }
+    s->sky_ms_bound = s->sky_ms != NULL;
+    memcpy(s->sky_ms_org, org, sizeof s->sky_ms_org);
+    ef_ms_camera_depth(s->sky_ms, s, org, s->sky_ms_tauc);
     for (int j = 0; j < s->nlight && s->ncomp == 1; ++j) {
         const double *up = s->comp[0].up;
         ef_light_bind(&s->light[j], &s->comp[0], up[0] * org[0] + up[1] * org[1] + up[2] * org[2]);
@@ -144,6 +147,14 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     }
     dst->sky_light = src->sky_light;
     ef_sky_light_ref(dst->sky_light);
+    dst->sky_multiple = src->sky_multiple;
+    dst->sky_has_ground = src->sky_has_ground;
+    dst->sky_ground = src->sky_ground;
+    dst->sky_ms = src->sky_ms;
+    ef_ms_ref(dst->sky_ms);
+    dst->sky_ms_bound = src->sky_ms_bound;
+    memcpy(dst->sky_ms_org, src->sky_ms_org, sizeof dst->sky_ms_org);
+    memcpy(dst->sky_ms_tauc, src->sky_ms_tauc, sizeof dst->sky_ms_tauc);
     memcpy(dst->sky_light_spec, src->sky_light_spec, sizeof dst->sky_light_spec);
     for (int i = 0; i < src->ncomp; ++i) {
         ef_fog_component *d = &dst->comp[i];
@@ -192,6 +203,8 @@ void ef_scene_free(ef_fog_scene *s)
     }
     ef_sky_light_unref(s->sky_light);
     s->sky_light = NULL;
+    ef_ms_unref(s->sky_ms);
+    s->sky_ms = NULL;
     s->ncomp = 0;
     s->nlight = 0;
     s->any_color = 0;
@@ -207,7 +220,8 @@ int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
     if (!path || !path[0])
         return ef_fail(err, "--sky-light '%s': no file (write --sky-light ENV.exr[:rotate=DEG]"
                        "[:intensity=K])", spec);
-    double rotate = 0, intensity = 1;
+    double rotate = 0, intensity = 1, ground = 0;
+    int multiple = 0;
     unsigned seen = 0;
     for (char *tok = strtok_r(NULL, ":", &save); tok; tok = strtok_r(NULL, ":", &save)) {
         char *eq = strchr(tok, '=');
@@ -219,17 +233,32 @@ int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
                 dst = &rotate, bit = 1;
             else if (!strcmp(tok, "intensity"))
                 dst = &intensity, bit = 2;
+            else if (!strcmp(tok, "ground"))
+                dst = &ground, bit = 4;
+            else if (!strcmp(tok, "scattering"))
+                bit = 8;
         }
-        if (!dst)
-            return ef_fail(err, "--sky-light '%s': '%s' is not rotate=DEG or intensity=K", spec,
-                           tok);
+        if (!dst && bit != 8)
+            return ef_fail(err, "--sky-light '%s': '%s' is not rotate=DEG, intensity=K, "
+                           "scattering=single|multiple or ground=H", spec, tok);
         if (seen & bit)
             return ef_fail(err, "--sky-light '%s': key '%s' is given twice", spec, tok);
         seen |= bit;
+        if (bit == 8) {
+            if (strcmp(eq + 1, "single") && strcmp(eq + 1, "multiple"))
+                return ef_fail(err, "--sky-light '%s': scattering='%s' is not single or "
+                               "multiple", spec, eq + 1);
+            multiple = eq[1] == 'm';
+            continue;
+        }
         if (ef_parse_numbers(eq + 1, dst, 1) || !isfinite(*dst) || (bit == 2 && !(*dst >= 0)))
             return ef_fail(err, "--sky-light '%s': %s='%s' is not %s", spec, tok, eq + 1,
-                           bit == 1 ? "an angle in degrees" : "a number >= 0");
+                           bit == 1 ? "an angle in degrees" : bit == 2 ? "a number >= 0"
+                                                                     : "a height (scene units)");
     }
+    if ((seen & 4) && !multiple)
+        return ef_fail(err, "--sky-light '%s': ground= is where multiple scattering stops: it "
+                       "needs scattering=multiple", spec);
     /* a turn is a turn: in radians a rotate of 1e308 degrees overflows
      * and turned every pixel NaN (fmod is exact) */
     rotate = fmod(rotate, 360);
@@ -248,6 +277,16 @@ int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
     ef_sky_light_unref(s->sky_light);
     s->sky_light = k;
     snprintf(s->sky_light_spec, sizeof s->sky_light_spec, "%s", spec);
+    s->sky_multiple = multiple;
+    s->sky_has_ground = (seen & 4) != 0;
+    s->sky_ground = ground;
+    ef_ms_unref(s->sky_ms);
+    s->sky_ms = NULL;
+    if (multiple && ef_ms_build_sky(s, &s->sky_ms, err)) {
+        ef_sky_light_unref(s->sky_light);
+        s->sky_light = NULL;
+        return -1;
+    }
     return 0;
 }
 
@@ -418,5 +457,9 @@ int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err)
         if (l->multiple && ef_ms_build(s, l, &l->ms, err))
             return -1;
     }
+    ef_ms_unref(s->sky_ms);
+    s->sky_ms = NULL;
+    if (s->sky_light && s->sky_multiple && ef_ms_build_sky(s, &s->sky_ms, err))
+        return -1;
     return 0;
 }

@@ -24,6 +24,15 @@ typedef struct ef_fog_scene {
      * NULL, and its SPEC */
     struct ef_sky_light *sky_light;
     char sky_light_spec[512];
+    /* --sky-light ...:scattering=multiple[:ground=H]: the sky's light
+     * carried through the fog, every order (ms.h), in place of its
+     * unattenuated single scattering; sky_ms its solve (shared, counted),
+     * built by ef_scene_prepare_lights; the bound camera's vertical depth */
+    int sky_multiple, sky_has_ground;
+    double sky_ground;
+    struct ef_ms *sky_ms;
+    int sky_ms_bound;
+    double sky_ms_org[3], sky_ms_tauc[3];
 } ef_fog_scene;
 
 /* The documented default fog colour. */
@@ -49,9 +58,10 @@ int ef_scene_add_light(ef_fog_scene *s, const char *spec, ef_err *err);
 int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err);
 
 /* Solves what the lights need from the whole scene once its components
- * are final: the multiple scattering of each scattering=multiple sun
- * (ms.h). Call again after the components change. Returns 0, or -1 with a
- * message (a component the solve does not take). */
+ * are final: the multiple scattering of each scattering=multiple sun and
+ * of a scattering=multiple sky light (ms.h). Call again after the
+ * components change. Returns 0, or -1 with a message (a component the
+ * solve does not take). */
 int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err);
 
 /* Whether the scene has any light (--light or --sky-light). */

@@ -12,6 +12,13 @@
 
 /* e1, the world axis most across up made perpendicular to it, and
  * e2 = up x e1. */
+static void frame_of(const double up[3], double e1[3], double e2[3]);
+
+void ef_sky_frame(const double up[3], double e1[3], double e2[3])
+{
+    frame_of(up, e1, e2);
+}
+
 static void frame_of(const double up[3], double e1[3], double e2[3])
 {
     int a = 0;
@@ -270,11 +277,12 @@ ef_sky_light *ef_sky_light_build(const ef_env_src *src, double rotate_deg, doubl
     }
     /* One pass over the source's rows (a file streams them): each row
      * reduced to every grid's columns, then each grid's rows averaged. */
-    double *rows[EF_SKY_MAX_PHASES] = { NULL };
+    double *rows[EF_SKY_MAX_PHASES] = { NULL }, *erows = NULL;
     float *line = NULL;
     int bad = 0, failed_row = 0;
     for (int j = 0; j < k->nconv; ++j)
         bad |= !(rows[j] = malloc((size_t) k->conv[j].w * (size_t) src->h * 3 * sizeof **rows));
+    bad |= !(erows = malloc((size_t) EF_SKY_ENV_W * (size_t) src->h * 3 * sizeof *erows));
     if (!src->rgb[0])
         bad |= !(line = malloc((size_t) src->w * 3 * sizeof *line));
     for (int y = 0; !bad && y < src->h; ++y) {
@@ -293,8 +301,14 @@ ef_sky_light *ef_sky_light_build(const ef_env_src *src, double rotate_deg, doubl
         }
         for (int j = 0; j < k->nconv; ++j)
             horiz_row(row, src->w, src->h, y, k->conv[j].w, rows[j]);
+        horiz_row(row, src->w, src->h, y, EF_SKY_ENV_W, erows);
     }
     free(line);
+    for (int c = 0; !bad && c < 3; ++c)
+        bad |= !(k->env[c] = malloc((size_t) EF_SKY_ENV_W * EF_SKY_ENV_H * sizeof(float)));
+    if (!bad)
+        vert_rows(erows, src->h, EF_SKY_ENV_W, EF_SKY_ENV_H, k->env);
+    free(erows);
     for (int j = 0; !bad && j < k->nconv; ++j) {
         ef_sky_conv *cv = &k->conv[j];
         float *avg[3] = { NULL, NULL, NULL };
@@ -343,7 +357,39 @@ void ef_sky_light_unref(ef_sky_light *k)
     for (int i = 0; i < k->nconv; ++i)
         for (int c = 0; c < 3; ++c)
             free(k->conv[i].c[c]);
+    for (int c = 0; c < 3; ++c)
+        free(k->env[c]);
     free(k);
+}
+
+void ef_sky_light_env(const ef_sky_light *k, const double up[3], const double d[3],
+                      double out[3])
+{
+    double e1[3], e2[3];
+    frame_of(up, e1, e2);
+    const double cu = d[0] * up[0] + d[1] * up[1] + d[2] * up[2];
+    const double a = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2];
+    const double b = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2];
+    const double th = acos(cu > 1 ? 1 : cu < -1 ? -1 : cu), ph = atan2(b, a) - k->rotate;
+    double fx = (PI - ph) / (2 * PI);
+    fx -= floor(fx);
+    const int w = EF_SKY_ENV_W, h = EF_SKY_ENV_H;
+    const double x = fx * w - 0.5, y = th / PI * h - 0.5;
+    const int x0 = (int) floor(x), y0 = (int) floor(y);
+    const double tx = x - x0, ty = y - y0;
+    for (int c = 0; c < 3; ++c) {
+        double v = 0;
+        for (int dy = 0; dy < 2; ++dy) {
+            int yy = y0 + dy;
+            yy = yy < 0 ? 0 : yy >= h ? h - 1 : yy;
+            for (int dx = 0; dx < 2; ++dx) {
+                const int xx = ((x0 + dx) % w + w) % w;
+                v += (dx ? tx : 1 - tx) * (dy ? ty : 1 - ty) *
+                     k->env[c][(size_t) yy * (size_t) w + (size_t) xx];
+            }
+        }
+        out[c] = k->intensity * v;
+    }
 }
 
 int ef_sky_light_eval(const ef_sky_light *k, int phase, double g, const double up[3],

@@ -66,8 +66,25 @@ typedef struct ef_sky_light {
     int src_w, src_h;
     int nconv;
     ef_sky_conv conv[EF_SKY_MAX_PHASES];
+    /* the environment itself averaged to EF_SKY_ENV_W x EF_SKY_ENV_H texels
+     * per channel (rows top-down, as the map), for multiple scattering's
+     * solve (ms.h) */
+    float *env[3];
     char aov[3][80];          /* fog_light.sky.R/G/B */
 } ef_sky_light;
+
+#define EF_SKY_ENV_W 256
+#define EF_SKY_ENV_H 128
+
+/* The environment's frame about up: e1 the world axis most across up,
+ * e2 = up x e1 (the orientation above). */
+void ef_sky_frame(const double up[3], double e1[3], double e2[3]);
+
+/* The environment's radiance per channel towards direction d (unit; the
+ * light arrives from d), times the intensity: bilinear in the averaged
+ * grid. */
+void ef_sky_light_env(const ef_sky_light *k, const double up[3], const double d[3],
+                      double out[3]);
 
 /* Builds the sky light from src for the phase functions phases[i], g[i]
  * (n of them, at most EF_SKY_MAX_PHASES). Returns it (one reference), or

@@ -135,6 +135,20 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
         fprintf(out, "sky light: %s (%d x %d; %d phase convolution%s)\n", o->scene.sky_light_spec,
                 o->scene.sky_light->src_w, o->scene.sky_light->src_h, o->scene.sky_light->nconv,
                 o->scene.sky_light->nconv == 1 ? "" : "s");
+    if (o->scene.sky_light && o->scene.sky_multiple) {
+        ef_ms_info in;
+        ef_ms_get_info(o->scene.sky_ms, &in);
+        if (!o->scene.sky_ms)
+            fprintf(out, "  multiple scattering: nothing to add (no fog above the ground)\n");
+        else
+            fprintf(out, "  multiple scattering: the sky carried through the fog, every order "
+                         "(in place of its unattenuated single scattering): %d depth nodes (%d "
+                         "kept) to %s, %d directions per hemisphere, %d azimuthal modes solved "
+                         "directly and %d order by order; discretisation estimated at %.1e of "
+                         "the largest source; %.3f s\n",
+                    in.nodes, in.kept, o->scene.sky_has_ground ? "the ground" : "the fog's own depth",
+                    in.nh, in.direct, in.iterated, in.disc_rel, in.seconds);
+    }
     fprintf(out, "fog colour: %g, %g, %g (working space)\n", o->scene.color[0], o->scene.color[1],
            o->scene.color[2]);
     fprintf(out, "up axis: %g, %g, %g; %g scene units per metre%s%s\n", o->scene.ctx.up[0],

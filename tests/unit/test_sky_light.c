@@ -368,7 +368,7 @@ static void test_cli(void **state)
     assert_non_null(strstr(tu_err, "/nonexistent/e.exr"));
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light '%s':spin=3", in,
                              out2, envp), 2);
-    assert_non_null(strstr(tu_err, "not rotate=DEG or intensity=K"));
+    assert_non_null(strstr(tu_err, "is not rotate=DEG, intensity=K, scattering=single|multiple or ground=H"));
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light '%s' --sky-light "
                              "'%s'", in, out2, envp, envp), 2);
     assert_int_equal(tu_runf("'%s' -o '%s' --fog exp:density=0.02 --sky-light '%s' --light "
