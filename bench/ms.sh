@@ -34,6 +34,13 @@ done
 cases+=("30 0.025 0.95 0.5" "30 0.4 0.95 0.5" "30 0.8 0.95 0.5")
 # layers whose albedo changes with height (three components: the mixture per depth node)
 cases+=("30 0.1 0.95 0.5 25:0.03:0.99:0.5,12:0.07:0.9:0.5,5:0.2:0.8:0.5")
+# a uniform sky of radiance 1 in place of the sun (--sky-light ...:scattering=multiple)
+for a in 0.8 0.95 0.99; do
+    for g in 0 0.85; do
+        cases+=("30 0.1 $a $g - sky")
+    done
+done
+cases+=("30 0.025 0.95 0.5 - sky" "30 0.4 0.95 0.5 - sky")
 if [[ -n "${MS_GRID:-}" ]]; then
     # the grid of an earlier run (its JSON lines), to re-time the cost alone
     cp "$MS_GRID" "$tmp/grid.jsonl" || die "MS_GRID=$MS_GRID unreadable"
@@ -42,7 +49,7 @@ else
         # shellcheck disable=SC2086
         set -- $c
         "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" "$1" "$2" "$3" "$4" 20 64 36 8 \
-            ${5:+"$5"} >>"$tmp/grid.jsonl" || die "case $c failed"
+            ${5:+"$5"} ${6:+"$6"} >>"$tmp/grid.jsonl" || die "case $c failed"
     done
     cp "$tmp/grid.jsonl" "$here/ms_grid.jsonl"
 fi
@@ -66,26 +73,32 @@ echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
 echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
 echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples, 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_blender.py's slab (homogeneous, ground z = 0 black, top z = 20, 4 km wide), camera 2 up looking 8 degrees down, sun of strength 1 at azimuth 150 degrees"
-echo "- exrfog: halfspace:plane=0,0,1,-20 with the same density, albedo and HG g, the sun with scattering=multiple:ground=0, on the render's depth with colour 0 (the output is the fog's light alone)"
+echo "- exrfog: halfspace:plane=0,0,1,-20 with the same density, albedo and HG g, the sun with scattering=multiple:ground=0 (or --sky-light of a constant map of 1 with scattering=multiple:ground=0 against Cycles' uniform world of strength 1), on the render without fog (black where the sun lights it: the output is the fog's light alone)"
 echo "- errors per 8x8 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
 echo
 "$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'EOF'
 import json, sys, statistics as st
 rows = [json.loads(l) for l in open(sys.argv[1])]
-print("| sun elev | vertical tau | albedo | g | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
-print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+print("| light | sun elev | vertical tau | albedo | g | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
+print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
-    print("| %g | %g | %s | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2f %% | %.0f %% |" % (
-        r["elev"], r["vertical_tau"], r["albedo"] if not r.get("layers") else "layers " + r["layers"], r["g"], r["single_share_median"],
-        100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
-        100 * r["rel_signed_median"], 100 * r["noise_rel_median"], 100 * r["err_rel_median"],
-        100 * r["covered"]))
-med = st.median([r["rel_median"] for r in rows])
-worst = max(rows, key=lambda r: r["rel_p99"])
-print()
-print("Over the %d cases: the median of the per-case median errors %.2f %%, the worst 99th percentile %.2f %% (%s); covered in %d of %d cases on >= 99 %% of blocks." % (
-    len(rows), 100 * med, 100 * worst["rel_p99"], worst["case"],
-    sum(r["covered"] >= 0.99 for r in rows), len(rows)))
+    sky = r.get("sky")
+    print("| %s | %s | %g | %s | %g | %s | %s | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2f %% | %.0f %% |" % (
+        "sky" if sky else "sun", "-" if sky else "%g" % r["elev"], r["vertical_tau"],
+        r["albedo"] if not r.get("layers") else "layers " + r["layers"], r["g"],
+        "-" if sky else "%.3f" % r["single_share_median"],
+        "-" if sky else "%+.2f %%" % (100 * r["single_check_median"]), 100 * r["rel_median"],
+        100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
+        100 * r["err_rel_median"], 100 * r["covered"]))
+for name, sel in (("sun", [r for r in rows if not r.get("sky")]), ("sky", [r for r in rows if r.get("sky")])):
+    if not sel:
+        continue
+    med = st.median([r["rel_median"] for r in sel])
+    worst = max(sel, key=lambda r: r["rel_p99"])
+    print()
+    print("The %s, %d cases: the median of the per-case median errors %.2f %%, the worst 99th percentile %.2f %% (%s); the error output covers >= 99 %% of blocks in %d cases, >= 90 %% in %d." % (
+        name, len(sel), 100 * med, 100 * worst["rel_p99"], worst["case"],
+        sum(r["covered"] >= 0.99 for r in sel), sum(r["covered"] >= 0.9 for r in sel)))
 cost = {}
 for l in open(sys.argv[2]):
     k, v = l.split()
