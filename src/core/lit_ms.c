@@ -1,6 +1,6 @@
-/* Multiple scattering of a sun in fog that is the same along the ground:
- * the plane-parallel solve and the view's gather (ms.h says what is
- * computed and how far it may be off). */
+/* Multiple scattering of a sun or a sky light in fog that is the same
+ * along the ground: the plane-parallel solve and the view's gather (ms.h
+ * says what is computed and how far it may be off). */
 #include "ms.h"
 
 #include <math.h>
@@ -24,16 +24,17 @@
 #define MS_G_MAX 0.95
 /* The deepest vertical optical depth solved without a ground. */
 #define MS_TAU_DEEP 1e4
-/* The direction table: the propagation direction's sin(theta / 2) (theta
- * its angle from up) and sin(phi / 2) (phi its azimuth from the beam's),
- * each uniform over [0, 1]: fine near the zenith and the beam's azimuth,
- * and no inverse cosine per pixel. */
 /* The table keeps a depth node unless linear interpolation across at most
  * MS_THIN_SPAN nodes reproduces it within MS_THIN (relative). */
 #define MS_THIN 1e-3
 #define MS_THIN_SPAN 16
 /* The fewest directions per hemisphere a solve takes. */
 #define MS_NH_MIN 8
+/* The direction table: MS_NT values of the propagation direction's
+ * sin(theta / 2) (theta its angle from up), uniform over [0, 1]; a sun's
+ * MS_NP values of sin(phi / 2) (phi its azimuth from the beam's, [0, pi]:
+ * fine where the forward peak is), a sky's MS_NPF azimuths over the full
+ * circle; no inverse cosine per pixel for a sun. */
 #define MS_NT 121
 #define MS_NP 61
 #define MS_NPF 120

@@ -1,7 +1,8 @@
-/* Multiple scattering of a sun in fog that is the same along the ground
- * (its density a function of height alone: exp, height, layered, a
- * horizontal half-space): the plane-parallel problem in vertical optical
- * depth, solved once per scene and light, independent of the pixels.
+/* Multiple scattering of a sun (and of a sky light: ef_ms_build_sky) in
+ * fog that is the same along the ground (its density a function of height
+ * alone: exp, height, layered, a horizontal half-space): the
+ * plane-parallel problem in vertical optical depth, solved once per scene
+ * and light, independent of the pixels.
  *
  * The sun's beam propagates down; fog at vertical optical depth tau (from
  * the top of the fog) scatters it once (exrfog's single scattering, exact
