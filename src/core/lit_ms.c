@@ -82,6 +82,11 @@ static void gauss01(int n, double *x, double *w)
     }
 }
 
+void ef_ms_directions(int n, double *x, double *w)
+{
+    gauss01(n, x, w);
+}
+
 /* Lambda_l^m(mu) = sqrt((l-m)!/(l+m)!) P_l^m(mu) for l = m..L-1 into
  * out[l] (out[l] = 0 for l < m). */
 static void lambda_m(int m, int L, double mu, double *out)

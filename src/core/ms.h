@@ -80,6 +80,11 @@ typedef struct ef_ms_flux {
     double up_top, down_bottom;
 } ef_ms_flux;
 
+/* The solve's directions per hemisphere: the n Gauss-Legendre nodes on
+ * [0, 1] (cosines from up) and weights (summing to 1), as ef_ms_slab's
+ * top indexes them. */
+void ef_ms_directions(int n, double *x, double *w);
+
 /* Solves one slab: J of orders 2 and up at depth node k, propagation
  * direction of up component mu (any in [-1, 1]) and azimuth dphi from the
  * beam's, through ef_ms_slab_eval. Returns an opaque solve or NULL (out of

@@ -362,18 +362,19 @@ void ef_sky_light_unref(ef_sky_light *k)
     free(k);
 }
 
-void ef_sky_light_env(const ef_sky_light *k, const double up[3], const double d[3],
-                      double out[3])
+/* A lat-long grid of w x h texels per channel (rows top-down, k's
+ * orientation) bilinear at direction u, times k's intensity, into out. */
+static void grid_at(const ef_sky_light *k, float *const c3[3], int w, int h, const double up[3],
+                    const double u[3], double out[3])
 {
     double e1[3], e2[3];
     frame_of(up, e1, e2);
-    const double cu = d[0] * up[0] + d[1] * up[1] + d[2] * up[2];
-    const double a = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2];
-    const double b = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2];
+    const double cu = u[0] * up[0] + u[1] * up[1] + u[2] * up[2];
+    const double a = u[0] * e1[0] + u[1] * e1[1] + u[2] * e1[2];
+    const double b = u[0] * e2[0] + u[1] * e2[1] + u[2] * e2[2];
     const double th = acos(cu > 1 ? 1 : cu < -1 ? -1 : cu), ph = atan2(b, a) - k->rotate;
     double fx = (PI - ph) / (2 * PI);
     fx -= floor(fx);
-    const int w = EF_SKY_ENV_W, h = EF_SKY_ENV_H;
     const double x = fx * w - 0.5, y = th / PI * h - 0.5;
     const int x0 = (int) floor(x), y0 = (int) floor(y);
     const double tx = x - x0, ty = y - y0;
@@ -385,11 +386,17 @@ void ef_sky_light_env(const ef_sky_light *k, const double up[3], const double d[
             for (int dx = 0; dx < 2; ++dx) {
                 const int xx = ((x0 + dx) % w + w) % w;
                 v += (dx ? tx : 1 - tx) * (dy ? ty : 1 - ty) *
-                     k->env[c][(size_t) yy * (size_t) w + (size_t) xx];
+                     c3[c][(size_t) yy * (size_t) w + (size_t) xx];
             }
         }
         out[c] = k->intensity * v;
     }
+}
+
+void ef_sky_light_env(const ef_sky_light *k, const double up[3], const double d[3],
+                      double out[3])
+{
+    grid_at(k, (float *const *) k->env, EF_SKY_ENV_W, EF_SKY_ENV_H, up, d, out);
 }
 
 int ef_sky_light_eval(const ef_sky_light *k, int phase, double g, const double up[3],
@@ -407,29 +414,6 @@ int ef_sky_light_eval(const ef_sky_light *k, int phase, double g, const double u
             out[c] = k->intensity * cv->c[c][0];
         return 0;
     }
-    double e1[3], e2[3];
-    frame_of(up, e1, e2);
-    const double cu = u[0] * up[0] + u[1] * up[1] + u[2] * up[2];
-    const double a = u[0] * e1[0] + u[1] * e1[1] + u[2] * e1[2];
-    const double b = u[0] * e2[0] + u[1] * e2[1] + u[2] * e2[2];
-    const double th = acos(cu > 1 ? 1 : cu < -1 ? -1 : cu), ph = atan2(b, a) - k->rotate;
-    double fx = (PI - ph) / (2 * PI);
-    fx -= floor(fx);
-    const double x = fx * cv->w - 0.5, y = th / PI * cv->h - 0.5;
-    const int x0 = (int) floor(x), y0 = (int) floor(y);
-    const double tx = x - x0, ty = y - y0;
-    for (int c = 0; c < 3; ++c) {
-        double v = 0;
-        for (int dy = 0; dy < 2; ++dy) {
-            int yy = y0 + dy;
-            yy = yy < 0 ? 0 : yy >= cv->h ? cv->h - 1 : yy;
-            for (int dx = 0; dx < 2; ++dx) {
-                const int xx = ((x0 + dx) % cv->w + cv->w) % cv->w;
-                v += (dx ? tx : 1 - tx) * (dy ? ty : 1 - ty) *
-                     cv->c[c][(size_t) yy * (size_t) cv->w + (size_t) xx];
-            }
-        }
-        out[c] = k->intensity * v;
-    }
+    grid_at(k, cv->c, cv->w, cv->h, up, u, out);
     return 0;
 }

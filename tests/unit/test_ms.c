@@ -279,28 +279,13 @@ static double *sky_top(int nh)
 {
     double *top = calloc((size_t) 4 * nh * nh, sizeof *top), x[64], w[64];
     assert_non_null(top);
-    /* the Gauss nodes on [0, 1] the solver uses, found the same way
-     * (Newton on P_n), independently written */
+    ef_ms_directions(nh, x, w);
     for (int i = 0; i < nh; ++i) {
-        double z = cos(PI * (i + 0.75) / (nh + 0.5)), dp = 1;
-        for (int it = 0; it < 100; ++it) {
-            double p0 = 1, p1 = z;
-            for (int l = 2; l <= nh; ++l) {
-                const double p2 = ((2 * l - 1) * z * p1 - (l - 1) * p0) / l;
-                p0 = p1;
-                p1 = p2;
-            }
-            dp = nh * (z * p1 - p0) / (z * z - 1);
-            z -= p1 / dp;
-        }
-        x[i] = 0.5 * (1 + z);
-        w[i] = 0;
         const double st = sqrt(1 - x[i] * x[i]);
         top[(0 * 2 + 0) * nh + i] = 1;
         top[(1 * 2 + 0) * nh + i] = -0.5 * st;
         top[(1 * 2 + 1) * nh + i] = -0.3 * st;
     }
-    (void) w;
     return top;
 }
 
