@@ -1169,13 +1169,27 @@ typedef struct dir_w {
 } dir_w;
 
 /* J and its estimate at node q of tab for direction dw. */
-static void node_val(const ms_tab *tab, const dir_w *dw, int q, double *J, double *e)
+/* A direction's four corners in one table: where their depth rows start,
+ * and their weights. */
+typedef struct corners {
+    const float *row[4];
+    double w[4];
+} corners;
+
+static void corners_of(const ms_tab *tab, const dir_w *dw, corners *cn)
 {
-    const float *v = tab->v + (size_t) q * 2;
+    for (int c = 0; c < 4; ++c) {
+        cn->row[c] = tab->v + dw->at[c] * (size_t) tab->n * 2;
+        cn->w[c] = dw->w[c];
+    }
+}
+
+static void node_val(const corners *cn, int q, double *J, double *e)
+{
     double j = 0, x = 0;
     for (int c = 0; c < 4; ++c) {
-        j += dw->w[c] * v[dw->at[c] * (size_t) tab->n * 2];
-        x += dw->w[c] * v[dw->at[c] * (size_t) tab->n * 2 + 1];
+        j += cn->w[c] * cn->row[c][2 * q];
+        x += cn->w[c] * cn->row[c][2 * q + 1];
     }
     *J = j;
     *e = x;
@@ -1223,11 +1237,13 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     } else if (!(t0 <= tbot)) {
         return;
     }
+    corners cn;
+    corners_of(tab, dw, &cn);
     /* J at t0 from its cell; the first node the ray meets is one of its ends */
     const int i = cell_of(tab, t0);
     double Ja, ea, Jb, eb;
-    node_val(tab, dw, i, &Ja, &ea);
-    node_val(tab, dw, i + 1, &Jb, &eb);
+    node_val(&cn, i, &Ja, &ea);
+    node_val(&cn, i + 1, &Jb, &eb);
     const double f = (t0 - tab->tau[i]) / (tab->tau[i + 1] - tab->tau[i]);
     double J0 = Ja + f * (Jb - Ja), e0 = ea + f * (eb - ea);
     if (horiz) {
@@ -1249,7 +1265,7 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     } else {
         next = i - 1;
         if (next >= 0)
-            node_val(tab, dw, next, &Jn, &en);
+            node_val(&cn, next, &Jn, &en);
         else
             Jn = en = 0;
     }
@@ -1296,7 +1312,7 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
             break;
         next += q > 0 ? 1 : -1;
         if (next >= 0 && next < n)
-            node_val(tab, dw, next, &Jn, &en);
+            node_val(&cn, next, &Jn, &en);
     }
 }
 
