@@ -348,6 +348,59 @@ static void test_sky_energy(void **state)
     free_slab(&b);
 }
 
+/* A uniform sky is the sum of suns from every direction above: the sky's
+ * solve (every order) against suns of irradiance dOmega from 24 Gauss
+ * elevations and 64 azimuths, each its single scattering (by hand) plus
+ * its solve's orders 2 and up, within 1e-4. */
+static void test_sky_is_suns(void **state)
+{
+    (void) state;
+    const double om = 0.95, g = 0.5;
+    const int nh = 16;
+    slab_buf b;
+    make_slab(&b, 2, 201, 2 * nh, om, g, 0.5);
+    double *top = calloc((size_t) 4 * nh * nh, sizeof *top);
+    assert_non_null(top);
+    for (int i = 0; i < nh; ++i)
+        top[i] = 1;
+    b.sl.top = top;
+    b.sl.E = 0;
+    const ef_ms_res res = { nh, 0 };
+    ef_ms_solve *sky = ef_ms_slab_solve(&b.sl, &res, NULL);
+    assert_non_null(sky);
+    b.sl.top = NULL;
+    b.sl.E = 1;
+    enum { NS = 24, NPH = 64, NPT = 5 };
+    static const int ks[NPT] = { 0, 50, 100, 180, 200 };
+    static const double mus[NPT] = { 0.6, -0.4, 0.1, -0.9, 0.3 };
+    double xs[NS], ws[NS], acc[NPT] = { 0 };
+    ef_ms_directions(NS, xs, ws);
+    for (int q = 0; q < NS; ++q) {
+        b.sl.mu_s = xs[q];
+        ef_ms_solve *sun = ef_ms_slab_solve(&b.sl, &res, NULL);
+        assert_non_null(sun);
+        for (int p = 0; p < NPH; ++p) {
+            const double ph = 2 * PI * (p + 0.5) / NPH;
+            for (int t = 0; t < NPT; ++t) {
+                const double mu = mus[t], tau = b.tau[ks[t]];
+                /* the view's propagation (mu, 0) against the beam's (-x, ph) */
+                const double c = -mu * xs[q] + sqrt(1 - mu * mu) * sqrt(1 - xs[q] * xs[q]) * cos(ph);
+                const double j1 = om * hg(g, c) * exp(-tau / xs[q]);
+                acc[t] += (j1 + ef_ms_slab_eval(sun, ks[t], mu, -ph)) * ws[q] * (2 * PI / NPH);
+            }
+        }
+        ef_ms_solve_free(sun);
+    }
+    for (int t = 0; t < NPT; ++t) {
+        const double J = ef_ms_slab_eval(sky, ks[t], mus[t], 0);
+        if (!(fabs(J - acc[t]) <= 1e-4 * acc[t]))
+            fail_msg("tau %g mu %g: the sky %.9g, the suns %.9g", b.tau[ks[t]], mus[t], J, acc[t]);
+    }
+    ef_ms_solve_free(sky);
+    free(top);
+    free_slab(&b);
+}
+
 /* ------------------------------------------------ the scene's solve */
 
 static void scene_with(ef_fog_scene *s, const char *fog, const char *light)
@@ -597,6 +650,7 @@ int main(void)
         cmocka_unit_test(test_series_bound),
         cmocka_unit_test(test_sky_first_order),
         cmocka_unit_test(test_sky_energy),
+        cmocka_unit_test(test_sky_is_suns),
         cmocka_unit_test(test_no_halo),
         cmocka_unit_test(test_channels),
         cmocka_unit_test(test_split_component),
