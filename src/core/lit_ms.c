@@ -1001,8 +1001,9 @@ static int build_tabs(const ef_fog_scene *s, const pp_setup *P, ef_ms *m, double
         if (!(tb > 1e-9))
             continue;   /* no fog in this channel: an empty table */
         /* a ground (or the fog's end) within MS_TAU_DEEP: refined there too */
-        if (build_tab(s, P->up, k, mu_s, 1.0, topf, user, tb, P->tbot[k] <= MS_TAU_DEEP, P->hlo,
-                      P->hhi, P->nh, tab, &m->info))
+        /* a sun's beam of unit irradiance; none beside a sky's light */
+        if (build_tab(s, P->up, k, mu_s, topf ? 0.0 : 1.0, topf, user, tb,
+                      P->tbot[k] <= MS_TAU_DEEP, P->hlo, P->hhi, P->nh, tab, &m->info))
             return -1;
     }
     return 0;
