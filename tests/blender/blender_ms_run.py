@@ -8,10 +8,8 @@ single + multiple Cycles' with every bounce: median within 2 %, every block
 within 5 % plus twice Cycles' noise, the error output covering the
 difference (beyond the noise) on 80 % of blocks at least. Then the same slab
 under a uniform sky of radiance 1 (Cycles' world; exrfog's --sky-light of a
-constant map with scattering=multiple), every bounce against every order:
-median within 2 %, every block within 5 % plus twice the noise (measured
-+1.0 % median: the fog near the ground 1-4 % above Cycles', unexplained
-and not covered by the error output on about a fifth of the blocks).
+constant map with scattering=multiple), every bounce against every order,
+held alike (measured at 4096 samples: median 0.27 %, covered 100 %).
 Exits 77 (skipped) without Blender."""
 import json
 import os
@@ -49,10 +47,7 @@ with tempfile.TemporaryDirectory(prefix="exrfog-ms-") as d:
             bad.append(what + "median error %.2f %%" % (100 * res["rel_median"]))
         if not res["rel_p99"] < 0.05 + 2 * res["noise_rel_median"]:
             bad.append(what + "99th percentile error %.2f %%" % (100 * res["rel_p99"]))
-        # (the sky's fog near the ground comes out 1-4 % above Cycles', a
-        # difference no finer solve changes and the error output does not
-        # carry: its coverage is reported, not held)
-        if not extra and not res["covered"] >= 0.8:
+        if not res["covered"] >= 0.8:
             bad.append(what + "the error output covers %.0f %% of blocks"
                        % (100 * res["covered"]))
 if bad:
