@@ -11,6 +11,7 @@
  *                four rays at a time (lit.c holds a lamp's geometry along a
  *                ray and the uniform medium it sees)
  *   lit_noise.c  lit fog through a rough (noise) component
+ *   lit_ms.c     multiple scattering of a sun or a sky light (ms.h)
  */
 #ifndef EF_LIT_INT_H
 #define EF_LIT_INT_H
