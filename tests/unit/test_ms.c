@@ -514,6 +514,32 @@ static void test_split_component(void **state)
     ef_scene_free(&two);
 }
 
+/* Scene fog with a sky light of radiance 1 everywhere (as the map a sky
+ * light holds, built by hand: the core reads no files) carried through it
+ * (scattering=multiple) over a black ground at height 0. */
+static void uniform_sky_scene(ef_fog_scene *s, const char *fog)
+{
+    ef_err err = { 0 };
+    ef_scene_init(s);
+    assert_int_equal(ef_scene_add(s, fog, &err), 0);
+    ef_sky_light *k = calloc(1, sizeof *k);
+    assert_non_null(k);
+    atomic_init(&k->refs, 1);
+    k->intensity = 1;
+    for (int c = 0; c < 3; ++c) {
+        k->env[c] = malloc(sizeof(float) * EF_SKY_ENV_W * EF_SKY_ENV_H);
+        assert_non_null(k->env[c]);
+        for (int i = 0; i < EF_SKY_ENV_W * EF_SKY_ENV_H; ++i)
+            k->env[c][i] = 1;
+    }
+    s->sky_light = k;
+    s->sky_multiple = 1;
+    s->sky_has_ground = 1;
+    s->sky_ground = 0;
+    assert_int_equal(ef_scene_prepare_lights(s, &err), 0);
+    assert_non_null(s->sky_ms);
+}
+
 /* E_2(tau) = int_0^1 e^(-tau/u) du, by adaptive quadrature. */
 static double e2_at(void *u, double x)
 {
@@ -549,25 +575,7 @@ static void test_sky_scene(void **state)
 {
     (void) state;
     ef_fog_scene s;
-    ef_err err = { 0 };
-    ef_scene_init(&s);
-    assert_int_equal(ef_scene_add(&s, "halfspace:plane=0,1,0,-10:density=0.1:albedo=0.001", &err), 0);
-    ef_sky_light *k = calloc(1, sizeof *k);
-    assert_non_null(k);
-    atomic_init(&k->refs, 1);
-    k->intensity = 1;
-    for (int c = 0; c < 3; ++c) {
-        k->env[c] = malloc(sizeof(float) * EF_SKY_ENV_W * EF_SKY_ENV_H);
-        assert_non_null(k->env[c]);
-        for (int i = 0; i < EF_SKY_ENV_W * EF_SKY_ENV_H; ++i)
-            k->env[c][i] = 1;
-    }
-    s.sky_light = k;
-    s.sky_multiple = 1;
-    s.sky_has_ground = 1;
-    s.sky_ground = 0;
-    assert_int_equal(ef_scene_prepare_lights(&s, &err), 0);
-    assert_non_null(s.sky_ms);
+    uniform_sky_scene(&s, "halfspace:plane=0,1,0,-10:density=0.1:albedo=0.001");
     const double cam[3] = { 0, 5, 0 };
     static const double dirs[][4] = { { 0, 1, 0, INFINITY }, { 1, 0.2, 0, INFINITY },
                                       { 0, -1, 0.3, 4 }, { 0.3, -0.4, 1, 9 } };
@@ -597,24 +605,7 @@ static void test_sky_scene_is_suns(void **state)
     (void) state;
     const char *fog = "halfspace:plane=0,1,0,-20:density=0.1:albedo=0.95:phase=hg:g=0.5";
     ef_fog_scene s;
-    ef_err err = { 0 };
-    ef_scene_init(&s);
-    assert_int_equal(ef_scene_add(&s, fog, &err), 0);
-    ef_sky_light *k = calloc(1, sizeof *k);
-    assert_non_null(k);
-    atomic_init(&k->refs, 1);
-    k->intensity = 1;
-    for (int c = 0; c < 3; ++c) {
-        k->env[c] = malloc(sizeof(float) * EF_SKY_ENV_W * EF_SKY_ENV_H);
-        assert_non_null(k->env[c]);
-        for (int i = 0; i < EF_SKY_ENV_W * EF_SKY_ENV_H; ++i)
-            k->env[c][i] = 1;
-    }
-    s.sky_light = k;
-    s.sky_multiple = 1;
-    s.sky_has_ground = 1;
-    s.sky_ground = 0;
-    assert_int_equal(ef_scene_prepare_lights(&s, &err), 0);
+    uniform_sky_scene(&s, fog);
     const double cam[3] = { 0, 2, 0 };
     enum { ND = 3, NS = 8, NPH = 24 };
     ef_ray r[ND] = { ray(cam, 0, -0.4, 1, 5.4), ray(cam, 0, 0.2, 1, INFINITY),
