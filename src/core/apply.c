@@ -162,13 +162,16 @@ static void add_lights(const ef_fog_scene *s, const ef_ray *r, double a, int nee
 
 /* The sky light scattered in along a segment of direction r->dir whose
  * transmittance is T (r: for the components' optical depths when they
- * scatter differently): sum_c albedo_c C_c(u) (share_c of 1 - T). */
-static void sky_segment(const ef_fog_scene *s, const ef_ray *r, const double T[3], double out[3])
+ * scatter differently): sum_c albedo_c C_c(u) (share_c of 1 - T); with
+ * scattering=multiple, the sky carried through the fog instead, and its
+ * estimate into err (may be NULL; else untouched). */
+static void sky_segment(const ef_fog_scene *s, const ef_ray *r, const double T[3], double out[3],
+                        double err[3])
 {
     const double *up = s->ctx.up;
     out[0] = out[1] = out[2] = 0;
     if (s->sky_multiple) {   /* carried through the fog, every order (ms.h) */
-        ef_ms_sky_segment(s, r, out, NULL);
+        ef_ms_gather_view(s->sky_ms, &s->sky_ms_view, s, r, NULL, out, err);
         return;
     }
     int same = 1;
@@ -215,17 +218,11 @@ static void add_sky(const ef_fog_scene *s, const ef_ray *r, const ef_fog_sample 
 {
     double S[3], Sf[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 }, Ef[3] = { 0, 0, 0 };
     ef_ray far;
-    if (s->sky_multiple)
-        ef_ms_sky_segment(s, r, S, E);
-    else
-        sky_segment(s, r, surf->T, S);
+    sky_segment(s, r, surf->T, S, E);
     if (need_inf && a < 1.0) {
         if (ef_scene_far_ray(s, r, &far))
             far = *r;
-        if (s->sky_multiple)
-            ef_ms_sky_segment(s, &far, Sf, Ef);
-        else
-            sky_segment(s, &far, inf->T, Sf);
+        sky_segment(s, &far, inf->T, Sf, Ef);
     }
     for (int k = 0; k < 3; ++k) {
         lerr[k] += coverage_sum(a, need_inf, E[k], Ef[k]);
@@ -602,13 +599,13 @@ EF_MULTIVERSION static void fast_block(const ef_fog_pass *pass, int x0, int y0, 
                     const int shows = sp->shows[j];
                     const double Tj[3] = { T[0][j], T[1][j], T[2][j] };
                     double S[3], Sf[3] = { 0, 0, 0 };
-                    sky_segment(s, &sp->r[j], Tj, S);
+                    sky_segment(s, &sp->r[j], Tj, S, NULL);
                     if (shows && a < 1.0) {
                         ef_ray far;
                         if (ef_scene_far_ray(s, &sp->r[j], &far))
                             far = sp->r[j];
                         const double Tf[3] = { Ti[0][j], Ti[1][j], Ti[2][j] };
-                        sky_segment(s, &far, Tf, Sf);
+                        sky_segment(s, &far, Tf, Sf, NULL);
                     }
                     for (int k = 0; k < 3; ++k)
                         sp->add[k][j] = coverage_sum(a, shows, S[k], Sf[k]);

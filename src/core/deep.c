@@ -716,7 +716,7 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
     }
     if (s->sky_light && s->sky_multiple) {   /* the sky's, after the lights */
         double v[3], e[3];
-        ef_ms_sky_segment(s, &seg, v, e);
+        ef_ms_gather_view(s->sky_ms, &s->sky_ms_view, s, &seg, NULL, v, e);
         for (int k = 0; k < 3; ++k) {
             S[k] += v[k];
             E[k] += e[k];

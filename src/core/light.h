@@ -26,6 +26,7 @@
 #define EF_LIGHT_H
 
 #include "fog.h"
+#include "ms.h"
 #include "shadow.h"
 
 /* Chebyshev terms of a planet sun's table. */
@@ -90,10 +91,7 @@ typedef struct ef_light {
     int multiple, has_ground;
     double ground;
     struct ef_ms *ms;
-    /* the bound camera's position and its vertical depth for ms
-     * (ef_scene_bind), so per-pixel work skips a per-view constant */
-    int ms_bound;
-    double ms_org[3], ms_tauc[3];
+    ef_ms_view ms_view;              /* ms bound to the scene's camera (ef_scene_bind) */
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

@@ -187,9 +187,7 @@ static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray 
     if (!l->ms)
         return;
     double Sm[3], Em[3];
-    const int cam = l->ms_bound && r->org[0] == l->ms_org[0] && r->org[1] == l->ms_org[1] &&
-                    r->org[2] == l->ms_org[2];
-    ef_ms_gather(l->ms, s, r, tv, cam ? l->ms_tauc : NULL, Sm, Em);
+    ef_ms_gather_view(l->ms, &l->ms_view, s, r, tv, Sm, Em);
     for (int k = 0; k < 3; ++k) {
         S[k] += Sm[k];
         if (E)

@@ -119,7 +119,6 @@ struct ef_ms_solve {
     int full;         /* sin modes too: a sky, not symmetric about any plane */
     double tail;      /* bound of the orders left out, summed over modes */
     int direct, iterated;
-    double resid;     /* largest relative change of a direct mode under one more sweep */
 };
 
 /* What a mode's solve works with. */
@@ -387,16 +386,6 @@ ef_ms_solve *ef_ms_slab_solve(const ef_ms_slab *sl, const ef_ms_res *res, ef_ms_
                 ok = 0;
                 goto done;
             }
-            /* the check: one more sweep changes it by rounding alone */
-            scatter(&w, Lr, S);
-            for (size_t q = 0; q < (size_t) n * N; ++q)
-                S[q] += w.Q[q];
-            transport(&w, S, top, Ln);
-            double d = 0;
-            for (size_t q = 0; q < (size_t) n * N; ++q)
-                d = fmax(d, fabs(Ln[q] - Lr[q]));
-            const double ln = sup(Lr, (size_t) n * N);
-            so->resid = fmax(so->resid, ln > 0 ? d / ln : 0);
             so->direct++;
         }
         if (flux && m == 0 && cs == 0)
@@ -1317,12 +1306,22 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     }
 }
 
-void ef_ms_camera_depth(const ef_ms *m, const ef_fog_scene *s, const double org[3],
-                        double tauc[3])
+void ef_ms_bind(const ef_ms *m, const ef_fog_scene *s, const double org[3], ef_ms_view *v)
 {
-    tauc[0] = tauc[1] = tauc[2] = 0;
-    if (m)
-        ef_lit_tau_from(s, org, m->up, INFINITY, tauc);
+    memset(v, 0, sizeof *v);
+    if (!m)
+        return;
+    v->bound = 1;
+    memcpy(v->org, org, sizeof v->org);
+    ef_lit_tau_from(s, org, m->up, INFINITY, v->tauc);
+}
+
+void ef_ms_gather_view(const ef_ms *m, const ef_ms_view *v, const ef_fog_scene *s,
+                       const ef_ray *r, const double *tv, double S[3], double E[3])
+{
+    const int cam = v->bound && r->org[0] == v->org[0] && r->org[1] == v->org[1] &&
+                    r->org[2] == v->org[2];
+    ef_ms_gather(m, s, r, tv, cam ? v->tauc : NULL, S, E);
 }
 
 void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const double *tv,
@@ -1394,11 +1393,4 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const 
         if (E)
             E[k] = m->E[k] * res[m->tab_of[k]][1];
     }
-}
-
-void ef_ms_sky_segment(const ef_fog_scene *s, const ef_ray *r, double S[3], double E[3])
-{
-    const int cam = s->sky_ms_bound && r->org[0] == s->sky_ms_org[0] &&
-                    r->org[1] == s->sky_ms_org[1] && r->org[2] == s->sky_ms_org[2];
-    ef_ms_gather(s->sky_ms, s, r, NULL, cam ? s->sky_ms_tauc : NULL, S, E);
 }

@@ -117,19 +117,24 @@ int ef_ms_build_sky(const struct ef_fog_scene *s, ef_ms **out, ef_err *err);
  * INFINITY), seen from r->org, and into E (may be NULL) its error
  * estimate (the bound and estimates above); 0 where m is NULL. tv: r's
  * optical depth per channel when the caller has it, tauc: r->org's
- * vertical depth from ef_ms_camera_depth (both NULL: computed here; the
+ * vertical depth as ef_ms_bind keeps it (both NULL: computed here; the
  * same bits either way). */
 void ef_ms_gather(const ef_ms *m, const struct ef_fog_scene *s, const struct ef_ray *r,
                   const double *tv, const double *tauc, double S[3], double E[3]);
-/* The sky light's light along r (s->sky_multiple: its solve s->sky_ms,
- * nothing where that is NULL), seen from r->org, and its estimate into E
- * (may be NULL): ef_ms_gather with the bound camera's depth. */
-void ef_ms_sky_segment(const struct ef_fog_scene *s, const struct ef_ray *r, double S[3],
-                       double E[3]);
-/* The vertical optical depth per channel from org to the top of the fog,
- * as ef_ms_gather reads it (a camera's, computed once per view). */
-void ef_ms_camera_depth(const ef_ms *m, const struct ef_fog_scene *s, const double org[3],
-                        double tauc[3]);
+/* A solve bound to a camera: the camera's vertical optical depth per
+ * channel, which every ray from it would otherwise compute again. */
+typedef struct ef_ms_view {
+    int bound;
+    double org[3], tauc[3];
+} ef_ms_view;
+
+/* Binds m (may be NULL: nothing bound) to the camera at org of scene s. */
+void ef_ms_bind(const ef_ms *m, const struct ef_fog_scene *s, const double org[3],
+                ef_ms_view *v);
+
+/* ef_ms_gather with v's depth where r starts at v's camera: the same bits. */
+void ef_ms_gather_view(const ef_ms *m, const ef_ms_view *v, const struct ef_fog_scene *s,
+                       const struct ef_ray *r, const double *tv, double S[3], double E[3]);
 
 /* What the build chose and measured, for --explain and the bench: depth
  * nodes (and those the table keeps), directions per hemisphere, modes

@@ -107,15 +107,9 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
 {
     for (int i = 0; i < s->ncomp; ++i)
         ef_fog_bind(&s->comp[i], org);
-    for (int j = 0; j < s->nlight; ++j) {
-        ef_light *l = &s->light[j];
-        l->ms_bound = l->ms != NULL;
-        memcpy(l->ms_org, org, sizeof l->ms_org);
-        ef_ms_camera_depth(l->ms, s, org, l->ms_tauc);
-    }
-    s->sky_ms_bound = s->sky_ms != NULL;
-    memcpy(s->sky_ms_org, org, sizeof s->sky_ms_org);
-    ef_ms_camera_depth(s->sky_ms, s, org, s->sky_ms_tauc);
+    for (int j = 0; j < s->nlight; ++j)
+        ef_ms_bind(s->light[j].ms, s, org, &s->light[j].ms_view);
+    ef_ms_bind(s->sky_ms, s, org, &s->sky_ms_view);
     for (int j = 0; j < s->nlight && s->ncomp == 1; ++j) {
         const double *up = s->comp[0].up;
         ef_light_bind(&s->light[j], &s->comp[0], up[0] * org[0] + up[1] * org[1] + up[2] * org[2]);
@@ -140,8 +134,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     dst->sky_distance = src->sky_distance;
     dst->nlight = src->nlight;
     memcpy(dst->light, src->light, (size_t) src->nlight * sizeof src->light[0]);
-    for (int j = 0; j < dst->nlight; ++j)
-    {
+    for (int j = 0; j < dst->nlight; ++j) {
         ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
         ef_ms_ref(dst->light[j].ms);
     }
@@ -152,9 +145,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     dst->sky_ground = src->sky_ground;
     dst->sky_ms = src->sky_ms;
     ef_ms_ref(dst->sky_ms);
-    dst->sky_ms_bound = src->sky_ms_bound;
-    memcpy(dst->sky_ms_org, src->sky_ms_org, sizeof dst->sky_ms_org);
-    memcpy(dst->sky_ms_tauc, src->sky_ms_tauc, sizeof dst->sky_ms_tauc);
+    dst->sky_ms_view = src->sky_ms_view;
     memcpy(dst->sky_light_spec, src->sky_light_spec, sizeof dst->sky_light_spec);
     for (int i = 0; i < src->ncomp; ++i) {
         ef_fog_component *d = &dst->comp[i];
@@ -280,13 +271,8 @@ int ef_scene_set_sky_light(ef_fog_scene *s, const char *spec, ef_err *err)
     s->sky_multiple = multiple;
     s->sky_has_ground = (seen & 4) != 0;
     s->sky_ground = ground;
-    ef_ms_unref(s->sky_ms);
+    ef_ms_unref(s->sky_ms);   /* ef_scene_prepare_lights solves it */
     s->sky_ms = NULL;
-    if (multiple && ef_ms_build_sky(s, &s->sky_ms, err)) {
-        ef_sky_light_unref(s->sky_light);
-        s->sky_light = NULL;
-        return -1;
-    }
     return 0;
 }
 

@@ -27,12 +27,11 @@ typedef struct ef_fog_scene {
     /* --sky-light ...:scattering=multiple[:ground=H]: the sky's light
      * carried through the fog, every order (ms.h), in place of its
      * unattenuated single scattering; sky_ms its solve (shared, counted),
-     * built by ef_scene_prepare_lights; the bound camera's vertical depth */
+     * built by ef_scene_prepare_lights, and bound to the camera */
     int sky_multiple, sky_has_ground;
     double sky_ground;
     struct ef_ms *sky_ms;
-    int sky_ms_bound;
-    double sky_ms_org[3], sky_ms_tauc[3];
+    ef_ms_view sky_ms_view;
 } ef_fog_scene;
 
 /* The documented default fog colour. */

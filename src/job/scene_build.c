@@ -147,8 +147,6 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
     }
     if (r == EF_PARSE_RUN && ef_lights_check(s, err))
         r = EF_PARSE_USAGE;
-    if (r == EF_PARSE_RUN && ef_scene_prepare_lights(s, err))
-        r = EF_PARSE_USAGE;
     /* after the components: the sky light is convolved with their phases */
     const char *sky_light = d->sky_light ? d->sky_light : sf.sky_light;
     if (r == EF_PARSE_RUN && sky_light && ef_scene_set_sky_light(s, sky_light, err)) {
@@ -161,6 +159,10 @@ ef_parse_result ef_scene_build(ef_fog_scene *s, const ef_scene_desc *d, ef_colou
             r = EF_PARSE_FAIL;
         }
     }
+    /* the solves the lights need from the final scene (ms.h), the sky's
+     * included */
+    if (r == EF_PARSE_RUN && ef_scene_prepare_lights(s, err))
+        r = EF_PARSE_USAGE;
 out:
     ef_scene_file_free(&sf);
     return r;
