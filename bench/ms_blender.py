@@ -6,7 +6,8 @@ A slab of homogeneous fog (Volume Scatter of density DENSITY * ALBEDO, HG anisot
 Volume Absorption of the rest) from the ground z = 0 to z = TOP (its box reaches 1 below), 4 km wide (so that it is
 the same along the ground for what the camera sees), a black ground that only absorbs (no
 emission, no BSDF: exrfog's black ground=0), a black world, a sun of strength 1 at ELEV
-degrees above the horizon, the camera 2 units up looking 8 degrees down. BOUNCES volume
+degrees above the horizon, the camera 2 units up looking 8 degrees down (camz=Z: Z up, and
+20 degrees down when above the fog's top). BOUNCES volume
 bounces (0: single scattering; 128: every order the issue asks for; -1: no fog, for the depth), max bounces as many,
 transparent bounces left at their default. Writes OUT (RGBA + Z, 32-bit) and OUT.json (the
 camera and the direction towards the sun)."""
@@ -28,6 +29,8 @@ layers = ([tuple(float(v) for v in l.split(":")) for l in args[10].split(",")]
           if len(args) > 10 and args[10] != "-" else [(top, dens, albedo, g)])
 # "sky" (after LAYERS or "-"): a uniform sky of radiance 1 (the world), no sun
 sky = "sky" in args[11:]
+# "camz=Z": the camera Z units up (default 2; above TOP it looks down into the fog from above)
+camz = float(next((a[5:] for a in args[11:] if a.startswith("camz=")), "2"))
 sc = bpy.context.scene
 for o in list(bpy.data.objects):
     if o.type in ('MESH', 'LIGHT'):
@@ -89,7 +92,8 @@ sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if sky else 1.0; sun.a
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(90 - elev), 0, math.radians(150))
 cam = sc.camera
-cam.location = (0, 0, 2.0); cam.rotation_euler = (math.radians(82), 0, 0)
+cam.location = (0, 0, camz)
+cam.rotation_euler = (math.radians(82 if camz <= top else 70), 0, 0)
 cam.data.sensor_fit = 'HORIZONTAL'
 cam.data.angle = math.radians(60)
 cam.data.clip_start, cam.data.clip_end = 0.05, 10000.0

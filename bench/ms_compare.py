@@ -24,10 +24,13 @@ block = int(sys.argv[12]) if len(sys.argv) > 12 else 4
 # LAYERS (optional, as bench/ms_blender.py's): nested slabs of their own albedo and g
 layers = sys.argv[13] if len(sys.argv) > 13 and sys.argv[13] != "-" else None
 # "sky": a uniform sky of radiance 1 in place of the sun (exrfog: --sky-light of a constant map)
-sky = len(sys.argv) > 14 and sys.argv[14] == "sky"
+sky = "sky" in sys.argv[14:]
+# "camz=Z": the camera's height (bench/ms_blender.py)
+camz = next((a for a in sys.argv[14:] if a.startswith("camz=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
-tag = "e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") + ("_sky" if sky else "")
+tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
+       ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else ""))
 
 
 def render(bounces):
@@ -36,7 +39,7 @@ def render(bounces):
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                         here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                         str(dens), str(albedo), str(g), str(top), str(W), str(H)]
-                       + [layers or "-"] + (["sky"] if sky else []),
+                       + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else []),
                        capture_output=True, text=True)
     if "ms_blender: rendered" not in r.stdout:
         raise SystemExit("ms_compare: Blender failed:\n" + r.stdout[-2000:] + r.stderr[-2000:])
@@ -117,7 +120,8 @@ noise = block_se(cycm)
 ok = C > 1e-4
 rel = (EM - C)[ok] / C[ok]
 res = {
-    "case": tag, "layers": layers, "sky": sky, "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
+    "case": tag, "layers": layers, "sky": sky, "camz": float(camz[5:]) if camz else 2.0,
+    "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,
     "blocks": int(ok.sum()),
     "cycles_mean": float(C[ok].mean()), "cycles_single_mean": float(C0[ok].mean()),
