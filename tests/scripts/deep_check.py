@@ -727,6 +727,53 @@ for spec_text, model, step in (
     # half alpha (11 bits) adds its rounding, amplified by e^(tau-1)/tau <= 1.36 at tau 2
     check(worst <= 1e-3 + 1e-3, "holdout splits of %s within --deep-tol + half rounding" % spec_text)
 
+# Multiple scattering in every deep mode (issue 44): a sun with
+# scattering=multiple over a half-space layer, and a sky light of a constant
+# map carried through it. Each deep sample gathers its own share of the
+# solve, so the three ways to a flat image (--deep flatten, --deep samples
+# flattened by OIIO, the fog element deep-merged by OIIO) must agree within
+# half precision; and the multiple scattering must take effect: the sun's
+# adds light, the sky's replaces its unattenuated single scattering (a test
+# of the plumbing, not the values: test_ms and blender_ms hold those).
+env1 = os.path.join(tmp, "env_one.exr")
+eb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
+eb.set_pixels(oiio.ROI(), np.ones((32, 64, 3), np.float32))
+check(eb.write(env1), "writes a constant environment")
+ms_fog = ["--fog", "halfspace:plane=0,1,0,-3:density=0.1:albedo=0.95:phase=hg:g=0.6"]
+for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scattering=multiple"]),
+                    ("sky", ["--sky-light", env1 + ":scattering=multiple"])):
+    mo = {}
+    for mode in ("samples", "fog", "flatten"):
+        mo[mode] = os.path.join(tmp, "deep_ms_%s_%s.exr" % (what, mode))
+        check(run([src] + ms_fog + light + ["--deep", mode, "-o", mo[mode]]) == 0,
+              "multiple scattering (%s): --deep %s runs" % (what, mode))
+    single = os.path.join(tmp, "deep_ms_%s_single.exr" % what)
+    single_light = [a.replace("scattering=multiple", "scattering=single") for a in light]
+    check(run([src] + ms_fog + single_light + ["--deep", "flatten", "-o", single]) == 0,
+          "single scattering (%s): --deep flatten runs" % what)
+    fs = os.path.join(tmp, "deep_ms_%s_samples_flat.exr" % what)
+    fm = os.path.join(tmp, "deep_ms_%s_merge_flat.exr" % what)
+    check(oiiotool([mo["samples"], "--flatten", "-o", fs]) == 0, "oiiotool flattens the samples")
+    check(oiiotool([src, mo["fog"], "--deepmerge", "--flatten", "-o", fm]) == 0,
+          "oiiotool deep-merges the fog element")
+    base = flat_pixels(mo["flatten"])
+    one = flat_pixels(single)
+    gain = max(base[p][0] - one[p][0] for p in range(W * H))
+    change = max(abs(base[p][0] - one[p][0]) for p in range(W * H))
+    print("multiple scattering (%s) in deep: adds up to %.3f to a pixel, changes one by up to "
+          "%.3f" % (what, gain, change))
+    if what == "sun":
+        check(gain > 0.01, "multiple scattering (sun) adds light on deep input")
+    else:
+        check(change > 0.01, "multiple scattering (sky) replaces the unattenuated sky on deep input")
+    for name, path in (("samples + oiio flatten", fs), ("fog element + oiio deepmerge", fm)):
+        got = flat_pixels(path)
+        worst = max(abs(got[p][ch] - base[p][ch]) / (1e-2 + abs(base[p][ch]))
+                    for p in range(W * H) for ch in range(4))
+        print("multiple scattering (%s): %s against --deep flatten: %.2e" % (what, name, worst))
+        check(worst < 4e-3, "multiple scattering (%s): %s within half precision of --deep "
+              "flatten" % (what, name))
+
 # Lit fog in every deep mode (issue 25): a white point lamp of 5 W/sr in
 # front of the Arnold frame's objects (camera at z 7.26, objects about the
 # origin) lights exp fog of density 0.05. Every mode's flatten against the
