@@ -1,13 +1,18 @@
 """Compares exrfog's multiple scattering with Cycles' (bench/ms.sh, the suite's blender_ms):
 
-  ms_compare.py EXRFOG BLENDER DIR SPP ELEV DENSITY ALBEDO G TOP W H [BLOCK]
+  ms_compare.py EXRFOG BLENDER DIR SPP ELEV DENSITY ALBEDO G TOP W H [BLOCK [LAYERS|- [sky]
+                [camz=Z] [lamp=DIST [wall=D]]]]
 
 Renders bench/ms_blender.py's slab twice (volume bounces 0 and 128), runs exrfog on the
 render without fog (black under the sun, so the output is the fog's light alone) with the same sun,
 scattering=single and scattering=multiple:ground=0, and prints one line of JSON: per BLOCKxBLOCK
 block of pixels (noise averaged down), Cycles' radiance with every bounce against exrfog's
 single + multiple, the share single scattering alone gives, Cycles' own noise (the standard
-error of the block mean from its pixels), exrfog's error output, and the times."""
+error of the block mean from its pixels), exrfog's error output, and the times.
+
+lamp=DIST: bench/ms_lamp_blender.py's point lamp DIST units ahead in fog everywhere (ELEV and TOP
+unused; exrfog: exp fog and the lamp with scattering=multiple); wall=D adds its black wall over
+the frame's left half (the glow must stop at it)."""
 import json
 import os
 import subprocess
@@ -27,21 +32,29 @@ layers = sys.argv[13] if len(sys.argv) > 13 and sys.argv[13] != "-" else None
 sky = "sky" in sys.argv[14:]
 # "camz=Z": the camera's height (bench/ms_blender.py)
 camz = next((a for a in sys.argv[14:] if a.startswith("camz=")), None)
+lamp = next((float(a[5:]) for a in sys.argv[14:] if a.startswith("lamp=")), None)
+wall = next((a for a in sys.argv[14:] if a.startswith("wall=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
        ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else ""))
+if lamp is not None:
+    tag = "lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
 
 
 def render(bounces):
     out = "%s/%s_%s.exr" % (d, tag, "b%d" % bounces if bounces >= 0 else "plain")
     t0 = time.time()
-    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
-                        here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
-                        str(dens), str(albedo), str(g), str(top), str(W), str(H)]
-                       + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else []),
-                       capture_output=True, text=True)
-    if "ms_blender: rendered" not in r.stdout:
+    if lamp is not None:
+        script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else [])
+    else:
+        script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
+                   str(dens), str(albedo), str(g), str(top), str(W), str(H)]
+                  + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else []))
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
+                       + script, capture_output=True, text=True)
+    if "blender: rendered" not in r.stdout:
         raise SystemExit("ms_compare: Blender failed:\n" + r.stdout[-2000:] + r.stderr[-2000:])
     return out, time.time() - t0
 
@@ -64,21 +77,26 @@ ib = oiio.ImageBuf(spec)
 ib.set_pixels(oiio.ROI(), inp)
 ib.write("%s/%s_in.exr" % (d, tag))
 fogs = []
-for l in (layers.split(",") if layers else ["%r:%r:%r:%r" % (top, dens, albedo, g)]):
+for l in ([] if lamp is not None else layers.split(",") if layers else ["%r:%r:%r:%r" % (top, dens, albedo, g)]):
     lt, ld, la, lg = (float(v) for v in l.split(":"))
     fogs += ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-lt, ld, la, lg)]
 common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world",
           ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]), "--near",
           repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0"] + fogs + [
           "--aov", "error"]
-sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
+if lamp is not None:
+    fogs = ["--fog", "exp:density=%r:albedo=%r:phase=hg:g=%r" % (dens, albedo, g)]
+    common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
+    sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
+else:
+    sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
 if sky:
     env = np.ones((32, 64, 3), np.float32)
     eb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
     eb.set_pixels(oiio.ROI(), env)
     eb.write("%s/env1.exr" % d)
 times = {}
-for mode, extra in (("single", ""), ("multiple", ":scattering=multiple:ground=0")):
+for mode, extra in (("single", ""), ("multiple", ":scattering=multiple" + ("" if lamp is not None else ":ground=0"))):
     t0 = time.time()
     light = (["--sky-light", "%s/env1.exr%s" % (d, extra or ":intensity=1")] if sky
              else ["--light", sun + extra])
@@ -120,7 +138,8 @@ noise = block_se(cycm)
 ok = C > 1e-4
 rel = (EM - C)[ok] / C[ok]
 res = {
-    "case": tag, "layers": layers, "sky": sky, "camz": float(camz[5:]) if camz else 2.0,
+    "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
+    "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,
     "blocks": int(ok.sum()),

@@ -705,8 +705,18 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
             }
             done = dense_light(&lt->dense[j], a, b, Ta, v, e);
         }
-        if (!done)
+        if (!done) {
             ef_light_inscatter(s, &s->light[j], &seg, v, e);
+        } else if (s->light[j].lms) {
+            /* the dense output is the single scattering: a point lamp's
+             * multiple scattering over the segment besides it */
+            double vm[3], em[3];
+            ef_lms_gather(s->light[j].lms, &seg, 0, seg.dist, vm, em);
+            for (int k = 0; k < 3; ++k) {
+                v[k] += vm[k];
+                e[k] += em[k];
+            }
+        }
         for (int k = 0; k < 3; ++k) {
             S[k] += v[k];
             E[k] += e[k];

@@ -50,7 +50,7 @@ const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND] = {
                        "towards, color, intensity, angle, planet, name, shadow, shadow-camera, "
                        "bias, slope, outside, penumbra, scattering, ground",
                        0, 0, 1 },
-    [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name", 1, 0, 0 },
+    [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name, scattering", 1, 0, 0 },
     [EF_LIGHT_SPOT] = { "spot",
                         "position, aim, cone, blend, cosine, color, intensity, radius, name, "
                         "shadow, shadow-camera, bias, slope, outside",
@@ -167,10 +167,13 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             return ef_fail(err, "--light '%s': %s='%s' is out of range (numbers are 0 or between "
                            "2.2e-308 and 1.8e308 in magnitude)", spec, key, val);
         int ok = strstr(keys, key) != NULL;
-        if (!strcmp(key, "scattering") && K->at_position)
-            return ef_fail(err, "--light '%s': scattering= is the sun's so far: multiple "
-                           "scattering is solved for a sun in fog that is the same along the "
-                           "ground; a %s lamp's light is scattered once", spec, kind);
+        if (!strcmp(key, "scattering") && K->cone)
+            return ef_fail(err, "--light '%s': scattering= is the sun's and a point lamp's so "
+                           "far: a %s's cone breaks the symmetry about the lamp its multiple "
+                           "scattering is solved with; its light is scattered once", spec, kind);
+        if (!strcmp(key, "ground") && K->at_position)
+            return ef_fail(err, "--light '%s': ground= is the sun's: a point lamp's multiple "
+                           "scattering is solved in unbounded uniform fog", spec);
         if (!strcmp(key, "shadow") && !K->shadow)
             return ef_fail(err, "--light '%s': a point lamp takes no shadow= map (it shines "
                            "every way; a spot's or the sun's map covers one view)", spec);
@@ -226,7 +229,7 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
                 return ef_fail(err, "--light '%s': angle='%s' is not the sun's angular diameter "
                                "in degrees, from 0 to below 180", spec, val);
             l->angle *= PI / 180;
-        } else if (!strcmp(key, "scattering") && !K->at_position) {
+        } else if (!strcmp(key, "scattering")) {
             bit = S_SCATTER;
             if (!strcmp(val, "single") || !strcmp(val, "multiple"))
                 l->multiple = val[0] == 'm';
@@ -337,6 +340,9 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
     if ((seen & S_GROUND) && !l->multiple)
         return ef_fail(err, "--light '%s': ground= is where multiple scattering stops: it needs "
                        "scattering=multiple", spec);
+    if (l->multiple && ef_light_kinds[l->kind].at_position && l->radius > 0)
+        return ef_fail(err, "--light '%s': scattering=multiple is solved for a lamp of radius 0 "
+                       "(a point); drop radius= or scattering=multiple", spec);
     if (l->multiple && (seen & S_PLANET))
         return ef_fail(err, "--light '%s': scattering=multiple is solved over flat ground; "
                        "drop planet= or scattering=multiple", spec);

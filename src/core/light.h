@@ -84,7 +84,7 @@ typedef struct ef_light {
     ef_shadow_opts shadow_opts;
     char shadow_path[256];
     char shadow_camera[256];  /* shadow-camera=: the map's camera file, "" for its header */
-    /* sun: scattering=multiple adds the light scattered twice and more
+    /* sun, point: scattering=multiple adds the light scattered twice and more
      * (ms.h), over a black ground at height ground (has_ground) along the
      * fog's up; ms: its solve (shared, counted like the shadow map), built
      * by ef_scene_prepare_lights, NULL before or where it adds nothing */
@@ -92,6 +92,9 @@ typedef struct ef_light {
     double ground;
     struct ef_ms *ms;
     ef_ms_view ms_view;              /* ms bound to the scene's camera (ef_scene_bind) */
+    /* point lamp: scattering=multiple's solve in uniform fog (ms.h's
+     * ef_lms; shared and counted as ms) */
+    struct ef_lms *lms;
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

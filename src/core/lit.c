@@ -179,15 +179,19 @@ static int sun_closed(const ef_fog_component *c, const ef_light *l, const ef_ray
     return c->model->sun(c, &sl, r, tv, S);
 }
 
-/* Adds sun l's light scattered twice and more (scattering=multiple) along
- * r to S, and its error estimate to E (may be NULL). */
+/* Adds sun or point lamp l's light scattered twice and more
+ * (scattering=multiple) along r to S, and its error estimate to E (may be
+ * NULL). */
 static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
                          const double *tv, double S[3], double E[3])
 {
-    if (!l->ms)
+    if (!l->ms && !l->lms)
         return;
     double Sm[3], Em[3];
-    ef_ms_gather_view(l->ms, &l->ms_view, s, r, tv, Sm, Em);
+    if (l->lms)
+        ef_lms_gather(l->lms, r, 0, r->dist, Sm, Em);
+    else
+        ef_ms_gather_view(l->ms, &l->ms_view, s, r, tv, Sm, Em);
     for (int k = 0; k < 3; ++k) {
         S[k] += Sm[k];
         if (E)
@@ -353,8 +357,23 @@ void ef_light_rays(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, in
                                 E ? E[2] + j0 : NULL };
         int left[EF_SPAN];
         const int nl = ef_lit_lamp_span(l, sig, scat, r + j0, m, Sj, E ? Ej : NULL, left);
-        for (int i = 0; i < nl; ++i)
+        unsigned char whole[EF_SPAN];   /* one_ray adds the multiple scattering itself */
+        memset(whole, 0, sizeof whole);
+        for (int i = 0; i < nl; ++i) {
             one_ray(s, l, r + j0, left[i], Sj, E ? Ej : NULL);
+            whole[left[i]] = 1;
+        }
+        for (int j = 0; l->lms && j < m; ++j) {
+            if (whole[j])
+                continue;
+            double v[3] = { 0, 0, 0 }, e[3] = { 0, 0, 0 };
+            add_multiple(s, l, &r[j0 + j], NULL, v, e);
+            for (int k = 0; k < 3; ++k) {
+                Sj[k][j] += v[k];
+                if (E)
+                    Ej[k][j] += e[k];
+            }
+        }
     }
 }
 

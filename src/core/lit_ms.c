@@ -527,7 +527,7 @@ static double dot3(const double a[3], const double b[3])
 }
 
 /* The Legendre coefficients b_0..b_{L-1} of phase function (phase, g). */
-static void phase_legendre(int phase, double g, int L, double *b)
+void ef_ms_phase_legendre(int phase, double g, int L, double *b)
 {
     for (int l = 0; l < L; ++l)
         b[l] = 0;
@@ -617,7 +617,7 @@ static void node_coeffs(const ef_fog_scene *s, const double up[3], int k, const 
 {
     double bl[EF_FOG_MAX_COMPONENTS][128];
     for (int c = 0; c < s->ncomp; ++c)
-        phase_legendre(s->comp[c].phase, s->comp[c].g, nl, bl[c]);
+        ef_ms_phase_legendre(s->comp[c].phase, s->comp[c].g, nl, bl[c]);
     for (int i = 0; i < n; ++i) {
         double *ai = a + (size_t) i * nl;
         memset(ai, 0, sizeof *ai * (size_t) nl);

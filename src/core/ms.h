@@ -151,4 +151,47 @@ void ef_ms_get_info(const ef_ms *m, ef_ms_info *info);
 void ef_ms_ref(ef_ms *m);
 void ef_ms_unref(ef_ms *m);
 
+/* The phase's Legendre coefficients b_0..b_{L-1} (b_0 = 1; p(x) = sum_l
+ * (2l + 1) b_l P_l(x) / 4 pi), L <= 128. */
+void ef_ms_phase_legendre(int phase, double g, int L, double *b);
+
+/* ---- a point lamp in uniform fog (lit_lamp_ms.c) ----
+ *
+ * The light of a point lamp scattered twice and more in fog of uniform
+ * extinction (one exp component): the problem is symmetric about the
+ * lamp, so it is solved once per albedo and phase in optical units, as a
+ * table of the source Q(r, nu) of orders 2 and up against the distance
+ * from the lamp and the direction from the outward radial, and gathered
+ * along each view ray by adaptive quadrature about the ray's closest
+ * approach to the lamp. Errors, through ef_lms_gather's estimate: the
+ * difference from a second solve at about 2/3 the resolution and 0.8 of
+ * the domain (an estimate), GMRES's residual through the series (a bound
+ * for the linear solve) and the gather's quadrature (an estimate).
+ * Scattered light is not shadowed. */
+typedef struct ef_lms ef_lms;
+
+/* Builds point lamp l's multiple scattering in scene s (its one
+ * component uniform; albedo and phase read). Returns 0, or -1 with a
+ * message (fog that is not uniform, |g| > 0.9, out of memory). */
+int ef_lms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_lms **out,
+                 ef_err *err);
+/* The light of orders 2 and up scattered towards r->org along [a, b) of r
+ * (seen from r->org: attenuated from there), per channel, and into E
+ * (may be NULL) its estimate. */
+void ef_lms_gather(const ef_lms *m, const struct ef_ray *r, double a, double b, double S[3],
+                   double E[3]);
+void ef_lms_ref(ef_lms *m);
+void ef_lms_unref(ef_lms *m);
+void ef_lms_get_info(const ef_lms *m, ef_ms_info *info);
+
+/* For tests: the solve alone in optical units (a lamp of intensity 1,
+ * extinction 1) for albedo omega (max_order 2: order 2 alone), its r Q at
+ * (r, nu) through ef_lms_eval, and with phi0/phi1 ([nr] each) the scalar
+ * flux of orders 2 and up and of order 1 at the radial nodes
+ * ef_lms_rho(nr, lg, i). */
+int ef_lms_build_albedo(double omega, int phase, double g, int max_order, ef_lms **out,
+                        double *phi0, double *phi1, int *nr, double *lg);
+double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
+double ef_lms_rho(int nr, double lg, int i);
+
 #endif

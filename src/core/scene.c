@@ -137,6 +137,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
     for (int j = 0; j < dst->nlight; ++j) {
         ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
         ef_ms_ref(dst->light[j].ms);
+        ef_lms_ref(dst->light[j].lms);
     }
     dst->sky_light = src->sky_light;
     ef_sky_light_ref(dst->sky_light);
@@ -191,6 +192,8 @@ void ef_scene_free(ef_fog_scene *s)
         s->light[j].shadow = NULL;
         ef_ms_unref(s->light[j].ms);
         s->light[j].ms = NULL;
+        ef_lms_unref(s->light[j].lms);
+        s->light[j].lms = NULL;
     }
     ef_sky_light_unref(s->sky_light);
     s->sky_light = NULL;
@@ -440,7 +443,10 @@ int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err)
         ef_light *l = &s->light[j];
         ef_ms_unref(l->ms);
         l->ms = NULL;
-        if (l->multiple && ef_ms_build(s, l, &l->ms, err))
+        ef_lms_unref(l->lms);
+        l->lms = NULL;
+        if (l->multiple && (ef_light_at_position(l) ? ef_lms_build(s, l, &l->lms, err)
+                                                     : ef_ms_build(s, l, &l->ms, err)))
             return -1;
     }
     ef_ms_unref(s->sky_ms);

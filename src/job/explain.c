@@ -115,7 +115,15 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
             fprintf(out, "  penumbra: %d directions over the sun's disc of %g degrees (filtered, "
                          "not exact)\n",
                     l->shadow->ntilt, l->shadow->angle * 180 / 3.14159265358979);
-        if (l->multiple) {
+        if (l->multiple && l->lms) {
+            ef_ms_info in;
+            ef_lms_get_info(l->lms, &in);
+            fprintf(out, "  multiple scattering: solved about the lamp in uniform fog over %d "
+                         "radial nodes and %d directions, %d Legendre terms, orders 3 and up "
+                         "by GMRES in %d iterations (residual %.1e); discretisation estimated "
+                         "at %.1e of the largest source; %.3f s\n",
+                    in.nodes, in.kept, in.nh, in.iterated, in.tail_rel, in.disc_rel, in.seconds);
+        } else if (l->multiple) {
             ef_ms_info in;
             ef_ms_get_info(l->ms, &in);
             if (!l->ms)
@@ -321,7 +329,19 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
         }
         fputs(", \"scattering\": ", out);
         json_str(out, l->multiple ? "multiple" : "single");
-        if (l->ms) {
+        if (l->lms) {
+            ef_ms_info in;
+            ef_lms_get_info(l->lms, &in);
+            fprintf(out, ", \"multiple\": {\"radial_nodes\": %d, \"directions\": %d, "
+                         "\"legendre_terms\": %d, \"gmres_iterations\": %d, \"residual\": ",
+                    in.nodes, in.kept, in.nh, in.iterated);
+            json_num(out, in.tail_rel);
+            fputs(", \"discretisation_rel\": ", out);
+            json_num(out, in.disc_rel);
+            fputs(", \"seconds\": ", out);
+            json_num(out, in.seconds);
+            fputc('}', out);
+        } else if (l->ms) {
             ef_ms_info in;
             ef_ms_get_info(l->ms, &in);
             fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "

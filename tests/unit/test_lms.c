@@ -1,0 +1,324 @@
+/* A point lamp's multiple scattering in uniform fog (ms.h's ef_lms)
+ * against independent references:
+ *   - energy: in an unbounded medium every photon's path is one mean free
+ *     path per flight, so the scalar flux of order n integrates over space
+ *     to 4 pi omega^n (a lamp of intensity 1): order 1 and the sum of
+ *     orders 2 and up, 4 pi omega^2 / (1 - omega);
+ *   - the second order's source by nested adaptive quadrature: over the
+ *     sphere of directions about the point (in a frame whose pole is the
+ *     lamp), the once-scattered radiance along each direction integrated
+ *     in distance, with the exact Henyey-Greenstein phase (the solve uses
+ *     its Legendre series and tables);
+ *   - a view segment gathers only the fog in front of its end (no halo),
+ *     and a wall between the camera and the lamp cuts the glow off;
+ *   - what is refused, with messages. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "gk15.h"
+#include "light.h"
+#include "lit.h"
+#include "ms.h"
+#include "scene.h"
+
+#define PI 3.14159265358979323846
+
+static double hg(double g, double c)
+{
+    const double q = 1 + g * g - 2 * g * c;
+    return (1 - g * g) / (4 * PI * q * sqrt(q));
+}
+
+typedef double (*fn1)(void *, double);
+
+static double gk15(fn1 f, void *u, double a, double b, double *err)
+{
+    const double c = 0.5 * (a + b), h = 0.5 * (b - a), fc = f(u, c);
+    double rk = fc * (double) ef_gk15_wk[7], rg = fc * (double) ef_gk15_wg[3];
+    for (int j = 0; j < 7; ++j) {
+        const double x = h * (double) ef_gk15_x[j], f1 = f(u, c - x), f2 = f(u, c + x);
+        rk += (f1 + f2) * (double) ef_gk15_wk[j];
+        if (j & 1)
+            rg += (f1 + f2) * (double) ef_gk15_wg[j / 2];
+    }
+    *err = fabs((rk - rg) * h);
+    return rk * h;
+}
+
+static double adapt(fn1 f, void *u, double a, double b, double tol, int depth)
+{
+    double e;
+    const double r = gk15(f, u, a, b, &e);
+    if (e <= tol || depth > 24 || !(e == e))
+        return r;
+    const double m = 0.5 * (a + b);
+    return adapt(f, u, a, m, tol / 2, depth + 1) + adapt(f, u, m, b, tol / 2, depth + 1);
+}
+
+/* int_a^b f to about rel of itself (the tolerance from a first rule's
+ * size: the integrands here span many orders of magnitude). */
+static double adapt_rel(fn1 f, void *u, double a, double b, double rel)
+{
+    double e;
+    const double r = gk15(f, u, a, b, &e);
+    return adapt(f, u, a, b, rel * fabs(r) + 1e-300, 0);
+}
+
+/* ------------------------------------------------------------- energy */
+
+static void energy_case(double om, double g, double tol1, double tol2)
+{
+    double phi0[256], phi1[256], lg;
+    int nr;
+    ef_lms *m = NULL;
+    assert_int_equal(ef_lms_build_albedo(om, EF_PHASE_HG, g, 0, &m, phi0, phi1, &nr, &lg), 0);
+    /* 4 pi r^2 phi over r, by the trapezoid rule in the grid's own
+     * variable u (r = rs (e^(u lg) - 1): dr/du = (r + rs) lg) */
+    double I0 = 0, I1 = 0;
+    const double rs = ef_lms_rho(nr, 1, 1) / expm1(1.0 / (nr - 1));
+    for (int i = 1; i < nr; ++i) {
+        const double ra = ef_lms_rho(nr, lg, i - 1), rb = ef_lms_rho(nr, lg, i);
+        const double ja = (ra + rs) * lg / (nr - 1), jb = (rb + rs) * lg / (nr - 1);
+        I0 += 0.5 * 4 * PI * (ra * ra * phi0[i - 1] * ja + rb * rb * phi0[i] * jb);
+        I1 += 0.5 * 4 * PI * (ra * ra * phi1[i - 1] * ja + rb * rb * phi1[i] * jb);
+    }
+    const double e1 = 4 * PI * om, e2 = 4 * PI * om * om / (1 - om);
+    printf("omega %g g %g: order 1 %.7g (exact %.7g, %.1e), orders 2 and up %.7g (exact %.7g, "
+           "%.1e)\n", om, g, I1, e1, (I1 - e1) / e1, I0, e2, (I0 - e2) / e2);
+    if (!(fabs(I1 - e1) <= tol1 * e1) || !(fabs(I0 - e2) <= tol2 * e2))
+        fail_msg("omega %g g %g: the scattered energy is off", om, g);
+    ef_lms_unref(m);
+}
+
+static void test_energy(void **state)
+{
+    (void) state;
+    energy_case(0.8, 0, 1e-5, 1e-3);
+    energy_case(0.95, 0.5, 1e-5, 1e-3);
+    energy_case(0.99, 0.85, 1e-5, 2e-3);
+}
+
+/* ----------------------------------------------- the second order */
+
+typedef struct sec {
+    double om, g;
+    double x[3];     /* the point (the lamp at the origin) */
+    double w[3];     /* the propagation direction of Q_2 */
+    double e1[3], e2[3], e3[3];   /* the frame: e3 towards the lamp */
+    double beta, phi;
+    double d[3];     /* the direction of the once-scattered light arriving */
+} sec;
+
+/* The once-scattered radiance arriving at x travelling along d: light
+ * scattered at y = x - s d from the lamp's beam, omega p(d . y/|y|)
+ * e^-|y| / |y|^2, carried e^-s (intensity 1, extinction 1). */
+static double psi1_s(void *u, double s)
+{
+    const sec *q = u;
+    double y[3], r2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        y[k] = q->x[k] - s * q->d[k];
+        r2 += y[k] * y[k];
+    }
+    const double r = sqrt(r2), c = (y[0] * q->d[0] + y[1] * q->d[1] + y[2] * q->d[2]) / r;
+    return exp(-s - r) * q->om * hg(q->g, c) / r2;
+}
+
+static double over_phi(void *u, double phi)
+{
+    sec *q = u;
+    const double sb = sin(q->beta), cb = cos(q->beta);
+    /* looking back along -d towards the lamp (beta = 0): d = -(cos beta e3 + ...) */
+    for (int k = 0; k < 3; ++k)
+        q->d[k] = -(cb * q->e3[k] + sb * (cos(phi) * q->e1[k] + sin(phi) * q->e2[k]));
+    /* the distance along the line: split at its closest approach to the lamp */
+    const double sc = -(q->x[0] * q->d[0] + q->x[1] * q->d[1] + q->x[2] * q->d[2]);
+    double r = 0;
+    if (sc > 0)
+        r = adapt_rel(psi1_s, q, 0, sc, 1e-9) + adapt_rel(psi1_s, q, sc, sc + 40, 1e-9);
+    else
+        r = adapt_rel(psi1_s, q, 0, 40, 1e-9);
+    const double c = q->w[0] * q->d[0] + q->w[1] * q->d[1] + q->w[2] * q->d[2];
+    return hg(q->g, c) * r;
+}
+
+static double over_beta(void *u, double beta)
+{
+    sec *q = u;
+    q->beta = beta;
+    return sin(beta) * adapt_rel(over_phi, q, -PI, PI, 1e-8);
+}
+
+/* Q_2 at distance r from the lamp, propagation cosine nu from the outward
+ * radial (the direction turned about the radial by 0.3 radians). */
+static double ref_Q2(double om, double g, double r, double nu)
+{
+    sec q;
+    memset(&q, 0, sizeof q);
+    q.om = om;
+    q.g = g;
+    q.x[0] = 0.3 * r;
+    q.x[1] = -0.2 * r;
+    q.x[2] = sqrt(1 - 0.13) * r;
+    double rh[3];
+    for (int k = 0; k < 3; ++k) {
+        rh[k] = q.x[k] / r;
+        q.e3[k] = -rh[k];
+    }
+    /* e1, e2 about e3 */
+    const double t[3] = { 1, 0, 0 };
+    double dt = t[0] * q.e3[0];
+    for (int k = 0; k < 3; ++k)
+        q.e1[k] = t[k] - dt * q.e3[k];
+    const double n1 = sqrt(q.e1[0] * q.e1[0] + q.e1[1] * q.e1[1] + q.e1[2] * q.e1[2]);
+    for (int k = 0; k < 3; ++k)
+        q.e1[k] /= n1;
+    q.e2[0] = q.e3[1] * q.e1[2] - q.e3[2] * q.e1[1];
+    q.e2[1] = q.e3[2] * q.e1[0] - q.e3[0] * q.e1[2];
+    q.e2[2] = q.e3[0] * q.e1[1] - q.e3[1] * q.e1[0];
+    /* w: at cosine nu from the outward radial rh */
+    const double sn = sqrt(fmax(0, 1 - nu * nu));
+    for (int k = 0; k < 3; ++k)
+        q.w[k] = nu * rh[k] + sn * (cos(0.3) * q.e1[k] + sin(0.3) * q.e2[k]);
+    /* beta from the lamp's direction; psi_1 grows as 1 / beta near it and
+     * sin beta takes that out: pieces finer there */
+    const double cuts[] = { 0, 1e-3, 1e-2, 0.05, 0.2, 0.6, 1.4, PI };
+    double sum = 0;
+    for (int i = 0; i + 1 < (int) (sizeof cuts / sizeof *cuts); ++i)
+        sum += adapt_rel(over_beta, &q, cuts[i], cuts[i + 1], 1e-7);
+    return om * sum;
+}
+
+static void test_second_order(void **state)
+{
+    (void) state;
+    static const double cases[][4] = {
+        /* omega, g, r, nu */
+        { 0.9, 0.0, 0.7, 0.3 },
+        { 0.9, 0.5, 0.35, 0.9 },
+        { 0.9, 0.5, 2.3, -0.6 },
+        { 0.8, 0.85, 1.3, 0.97 },
+        { 0.8, 0.85, 4.1, 0.0 },
+    };
+    for (unsigned i = 0; i < sizeof cases / sizeof *cases; ++i) {
+        const double om = cases[i][0], g = cases[i][1], r = cases[i][2], nu = cases[i][3];
+        ef_lms *m = NULL;
+        assert_int_equal(ef_lms_build_albedo(om, EF_PHASE_HG, g, 2, &m, NULL, NULL, NULL, NULL), 0);
+        double e;
+        const double got = ef_lms_eval(m, r, nu, &e) / r, want = ref_Q2(om, g, r, nu);
+        printf("omega %g g %g r %g nu %g: Q_2 %.8g, nested quadrature %.8g (%.1e; estimate "
+               "%.1e)\n", om, g, r, nu, got, want, (got - want) / want, e / r / want);
+        if (!(fabs(got - want) <= 2e-3 * want))
+            fail_msg("case %u: Q_2 %.9g against %.9g", i, got, want);
+        ef_lms_unref(m);
+    }
+}
+
+/* ------------------------------------------------- the scene's gather */
+
+static void scene_with(ef_fog_scene *s, const char *fog, const char *light)
+{
+    ef_err err = { 0 };
+    ef_scene_init(s);
+    if (ef_scene_add(s, fog, &err) || ef_scene_add_light(s, light, &err) ||
+        ef_scene_prepare_lights(s, &err))
+        fail_msg("'%s' with '%s': %s", fog, light, err.msg);
+}
+
+static ef_ray ray(const double org[3], double dx, double dy, double dz, double dist)
+{
+    const double n = sqrt(dx * dx + dy * dy + dz * dz);
+    ef_ray r = { { dx / n, dy / n, dz / n }, dist, dist, { org[0], org[1], org[2] } };
+    return r;
+}
+
+/* Light in front of a surface only: a wall between the camera and the
+ * lamp takes the glow off the wall's pixels except for the fog in front
+ * of it, and [0, D] plus T(0, D) times [D, inf) is the whole ray; the
+ * light of every order exceeds the single scattering. */
+static void test_no_halo(void **state)
+{
+    (void) state;
+    ef_fog_scene s1, sm;
+    const char *fog = "exp:density=0.2:albedo=0.9:phase=hg:g=0.5";
+    scene_with(&s1, fog, "point:position=1,0.5,10:intensity=8");
+    scene_with(&sm, fog, "point:position=1,0.5,10:intensity=8:scattering=multiple");
+    assert_non_null(sm.light[0].lms);
+    const double cam[3] = { 0, 0, 0 };
+    static const double dirs[][3] = { { 0.12, 0.05, 1 }, { 0, 0, 1 }, { -0.5, 0.1, 1 }, { 1, -0.2, 0.3 } };
+    for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
+        const double D = 4;   /* the wall, before the lamp */
+        ef_ray whole = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], INFINITY);
+        ef_ray wall = whole, back = whole;
+        wall.dist = wall.planar = D;
+        for (int k = 0; k < 3; ++k)
+            back.org[k] = cam[k] + D * whole.dir[k];
+        double Sw[3], Sn[3], Sb[3], Ew[3], En[3], Eb[3], S1[3];
+        ef_light_inscatter(&sm, &sm.light[0], &whole, Sw, Ew);
+        ef_light_inscatter(&sm, &sm.light[0], &wall, Sn, En);
+        ef_light_inscatter(&sm, &sm.light[0], &back, Sb, Eb);
+        ef_light_inscatter(&s1, &s1.light[0], &whole, S1, NULL);
+        const double T = exp(-0.2 * D);
+        for (int k = 0; k < 3; ++k) {
+            if (!(Sn[k] > 0 && Sn[k] < Sw[k] && Sw[k] > S1[k]))
+                fail_msg("direction %u: wall %.9g whole %.9g single %.9g", i, Sn[k], Sw[k], S1[k]);
+            const double sum = Sn[k] + T * Sb[k];
+            if (!(fabs(sum - Sw[k]) <= 1e-6 * Sw[k] + En[k] + Eb[k] + Ew[k]))
+                fail_msg("direction %u: [0,D] + T [D,inf) = %.9g, the whole ray %.9g", i, sum,
+                         Sw[k]);
+        }
+    }
+    ef_scene_free(&s1);
+    ef_scene_free(&sm);
+}
+
+/* What is refused, each with its reason. */
+static void test_refusals(void **state)
+{
+    (void) state;
+    static const struct {
+        const char *fog, *light, *why;
+        int at_parse;
+    } cases[] = {
+        { "height:density=0.05:falloff=0.1", "point:position=0,1,0:scattering=multiple",
+          "uniform", 0 },
+        { "exp:density=0.05:phase=hg:g=0.93", "point:position=0,1,0:scattering=multiple",
+          "0.9", 0 },
+        { "exp:density=0.05", "spot:position=0,1,0:aim=0,0,1:scattering=multiple", "cone", 1 },
+        { "exp:density=0.05", "point:position=0,1,0:radius=0.1:scattering=multiple", "radius", 1 },
+        { "exp:density=0.05", "point:position=0,1,0:scattering=multiple:ground=0", "ground", 1 },
+    };
+    for (unsigned i = 0; i < sizeof cases / sizeof *cases; ++i) {
+        ef_fog_scene s;
+        ef_err err = { 0 };
+        ef_scene_init(&s);
+        assert_int_equal(ef_scene_add(&s, cases[i].fog, &err), 0);
+        const int parsed = ef_scene_add_light(&s, cases[i].light, &err) == 0;
+        if (parsed == cases[i].at_parse)
+            fail_msg("'%s': refused %s", cases[i].light, parsed ? "later" : "at parse");
+        if (parsed)
+            assert_int_equal(ef_scene_prepare_lights(&s, &err), -1);
+        if (!strstr(err.msg, cases[i].why))
+            fail_msg("'%s' in '%s': %s", cases[i].light, cases[i].fog, err.msg);
+        ef_scene_free(&s);
+    }
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_energy),
+        cmocka_unit_test(test_second_order),
+        cmocka_unit_test(test_no_halo),
+        cmocka_unit_test(test_refusals),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
