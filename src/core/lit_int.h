@@ -12,6 +12,7 @@
  *                ray and the uniform medium it sees)
  *   lit_noise.c  lit fog through a rough (noise) component
  *   lit_ms.c     multiple scattering of a sun or a sky light (ms.h)
+ *   lit_lamp_ms.c  multiple scattering of a point lamp in uniform fog (ms.h)
  */
 #ifndef EF_LIT_INT_H
 #define EF_LIT_INT_H

@@ -728,20 +728,25 @@ for spec_text, model, step in (
     check(worst <= 1e-3 + 1e-3, "holdout splits of %s within --deep-tol + half rounding" % spec_text)
 
 # Multiple scattering in every deep mode (issue 44): a sun with
-# scattering=multiple over a half-space layer, and a sky light of a constant
-# map carried through it. Each deep sample gathers its own share of the
+# scattering=multiple over a half-space layer, a sky light of a constant
+# map carried through it, and a point lamp in exp fog (its multiple
+# scattering beside the dense output of its single scattering). Each deep sample gathers its own share of the
 # solve, so the three ways to a flat image (--deep flatten, --deep samples
 # flattened by OIIO, the fog element deep-merged by OIIO) must agree within
 # half precision; and the multiple scattering must take effect: the sun's
-# adds light, the sky's replaces its unattenuated single scattering (a test
-# of the plumbing, not the values: test_ms and blender_ms hold those).
+# and the lamp's add light, the sky's replaces its unattenuated single
+# scattering (a test of the plumbing, not the values: test_ms, test_lms and
+# blender_ms hold those).
 env1 = os.path.join(tmp, "env_one.exr")
 eb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
 eb.set_pixels(oiio.ROI(), np.ones((32, 64, 3), np.float32))
 check(eb.write(env1), "writes a constant environment")
-ms_fog = ["--fog", "halfspace:plane=0,1,0,-3:density=0.1:albedo=0.95:phase=hg:g=0.6"]
+ms_fog_layer = ["--fog", "halfspace:plane=0,1,0,-3:density=0.1:albedo=0.95:phase=hg:g=0.6"]
+lamp_fog = ["--fog", "exp:density=0.05:albedo=0.95:phase=hg:g=0.6"]
 for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scattering=multiple"]),
-                    ("sky", ["--sky-light", env1 + ":scattering=multiple"])):
+                    ("sky", ["--sky-light", env1 + ":scattering=multiple"]),
+                    ("lamp", ["--light", "point:position=0.5,1,3:intensity=5:scattering=multiple"])):
+    ms_fog = lamp_fog if what == "lamp" else ms_fog_layer
     mo = {}
     for mode in ("samples", "fog", "flatten"):
         mo[mode] = os.path.join(tmp, "deep_ms_%s_%s.exr" % (what, mode))
@@ -762,8 +767,8 @@ for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scatt
     change = max(abs(base[p][0] - one[p][0]) for p in range(W * H))
     print("multiple scattering (%s) in deep: adds up to %.3f to a pixel, changes one by up to "
           "%.3f" % (what, gain, change))
-    if what == "sun":
-        check(gain > 0.01, "multiple scattering (sun) adds light on deep input")
+    if what in ("sun", "lamp"):
+        check(gain > 0.01, "multiple scattering (%s) adds light on deep input" % what)
     else:
         check(change > 0.01, "multiple scattering (sky) replaces the unattenuated sky on deep input")
     for name, path in (("samples + oiio flatten", fs), ("fog element + oiio deepmerge", fm)):
