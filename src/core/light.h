@@ -95,6 +95,7 @@ typedef struct ef_light {
     /* point lamp: scattering=multiple's solve in uniform fog (ms.h's
      * ef_lms; shared and counted as ms) */
     struct ef_lms *lms;
+    struct ef_lms_view *lms_view;    /* lms bound to the scene's camera (ef_scene_bind) */
     char spec[512];                  /* as written, for messages */
 } ef_light;
 

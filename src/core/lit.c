@@ -189,7 +189,7 @@ static void add_multiple(const ef_fog_scene *s, const ef_light *l, const ef_ray 
         return;
     double Sm[3], Em[3];
     if (l->lms)
-        ef_lms_gather(l->lms, r, 0, r->dist, Sm, Em);
+        ef_lms_gather_view(l->lms, l->lms_view, r, 0, r->dist, Sm, Em);
     else
         ef_ms_gather_view(l->ms, &l->ms_view, s, r, tv, Sm, Em);
     for (int k = 0; k < 3; ++k) {

@@ -976,3 +976,244 @@ void ef_lms_gather(const ef_lms *m, const ef_ray *r, double a, double b, double 
             E[k] = m->scale[k] * res[k][1];
     }
 }
+
+/* ------------------------------------------------- bound to a camera */
+
+/* Every ray from one camera is fixed, for a lamp's gather, by its angle
+ * alpha from the direction to the lamp and its depth: the gather along it
+ * is tabulated once per camera against alpha (LV_NA nodes uniform in z =
+ * asinh(alpha / a0) + LV_K alpha: relative steps of about 6 % towards the
+ * lamp, where the glow grows as log(1 / alpha), and under a degree beyond)
+ * and, per
+ * alpha, against the hyperbolic angle w about the ray's closest approach
+ * to the lamp, in two pieces (camera to closest approach, on to the
+ * reach) of LV_NP nodes each, so that the camera, the closest approach
+ * and the reach sit at the same nodes for every alpha. A pixel then reads
+ * G cubic (Hermite) in w and linear in alpha. */
+#define LV_NA 320
+#define LV_NP 64
+#define LV_K 3.0
+
+typedef struct lv_group {
+    double sig;
+    const lms_tab *t;
+    double a0, zlo, zhi; /* nodes uniform in z(alpha) over [zlo, zhi] */
+    double *G;           /* [LV_NA][2][LV_NP + 1][3]: G, dG/df, estimate */
+} lv_group;
+
+struct ef_lms_view {
+    _Atomic int refs;
+    double org[3], dhat[3], DL;
+    int ng, group_of[3];
+    lv_group g[3];
+};
+
+void ef_lms_view_ref(ef_lms_view *v)
+{
+    if (v)
+        atomic_fetch_add(&v->refs, 1);
+}
+
+void ef_lms_view_unref(ef_lms_view *v)
+{
+    if (!v || atomic_fetch_sub(&v->refs, 1) != 1)
+        return;
+    for (int i = 0; i < v->ng; ++i)
+        free(v->g[i].G);
+    free(v);
+}
+
+/* A ray's geometry about the lamp at alpha: closest approach sc, distance
+ * h, and its pieces' ends in w: [w0, w1] (camera to closest approach,
+ * empty when the lamp is behind) and [w1, w2] (on to the reach). */
+static void lv_geom(double sDL, double alpha, double *sc, double *h, double w[3])
+{
+    *sc = sDL * cos(alpha);
+    *h = fmax(sDL * sin(alpha), 1e-12 * (1 + sDL));
+    w[0] = asinh(-*sc / *h);
+    w[1] = fmax(w[0], 0);
+    w[2] = fmax(w[1], asinh((LMS_REACH - *sc) / *h));
+}
+
+static double lv_z(const lv_group *g, double alpha)
+{
+    return asinh(alpha / g->a0) + LV_K * alpha;
+}
+
+/* alpha at node i (z increases with alpha: bisection) */
+static double lv_alpha(const lv_group *g, int i)
+{
+    const double z = g->zlo + (g->zhi - g->zlo) * i / (LV_NA - 1);
+    double lo = 0, hi = PI;
+    for (int it = 0; it < 80; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        if (lv_z(g, mid) < z)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+int ef_lms_bind(const ef_lms *m, const double org[3], ef_lms_view **out)
+{
+    ef_lms_view_unref(*out);
+    *out = NULL;
+    if (!m)
+        return 0;
+    ef_lms_view *v = calloc(1, sizeof *v);
+    if (!v)
+        return -1;
+    atomic_init(&v->refs, 1);
+    memcpy(v->org, org, sizeof v->org);
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        v->dhat[k] = m->pos[k] - org[k];
+        d2 += v->dhat[k] * v->dhat[k];
+    }
+    v->DL = sqrt(d2);
+    if (!(v->DL > 0)) {   /* the camera at the lamp: every ray integrates */
+        free(v);
+        return 0;
+    }
+    for (int k = 0; k < 3; ++k)
+        v->dhat[k] /= v->DL;
+    for (int k = 0; k < 3; ++k) {
+        v->group_of[k] = -1;
+        if (m->tab_of[k] < 0)
+            continue;
+        int gi = 0;
+        while (gi < v->ng && !(v->g[gi].t == &m->tab[m->tab_of[k]] && v->g[gi].sig == m->sig[k]))
+            ++gi;
+        if (gi == v->ng) {
+            lv_group *g = &v->g[v->ng++];
+            g->sig = m->sig[k];
+            g->t = &m->tab[m->tab_of[k]];
+            const double sDL = g->sig * v->DL;
+            /* h = sDL sin alpha reaches 1e-3 optical depths at a0 */
+            g->a0 = fmin(0.5, 1e-3 / sDL);
+            g->zlo = lv_z(g, 2e-6 / sDL);
+            g->zhi = lv_z(g, PI);
+            g->G = malloc((size_t) LV_NA * 2 * (LV_NP + 1) * 3 * sizeof *g->G);
+            if (!g->G) {
+                ef_lms_view_unref(v);
+                return -1;
+            }
+            for (int i = 0; i < LV_NA; ++i) {
+                double sc, h, w[3];
+                lv_geom(sDL, lv_alpha(g, i), &sc, &h, w);
+                g_q q = { g->t, sc, h };
+                double acc = 0, acce = 0;
+                for (int p = 0; p < 2; ++p) {
+                    double *row = g->G + ((size_t) i * 2 + p) * (LV_NP + 1) * 3;
+                    const double wa = w[p], wb = w[p + 1], dw = (wb - wa) / LV_NP;
+                    for (int j = 0; j <= LV_NP; ++j) {
+                        const double wj = wa + dw * j;
+                        if (j > 0 && dw > 0) {
+                            double R, E, X;
+                            g_gk(&q, wj - dw, wj, &R, &E, &X);
+                            acc += R;
+                            acce += X + E;
+                        }
+                        double ev;
+                        row[3 * j] = acc;
+                        row[3 * j + 1] = dw > 0 ? g_f(&q, wj, &ev) * (wb - wa) : 0;
+                        row[3 * j + 2] = acce;
+                    }
+                }
+            }
+            /* the linear interpolation in alpha: its second differences
+             * (at the same node of w) into the estimate */
+            for (int i = 1; i + 1 < LV_NA; ++i)
+                for (size_t a = 0; a < 2 * (LV_NP + 1); ++a) {
+                    const double *lo = g->G + ((size_t) (i - 1) * 2 * (LV_NP + 1) + a) * 3;
+                    const double *mi = g->G + ((size_t) i * 2 * (LV_NP + 1) + a) * 3;
+                    const double *hi = g->G + ((size_t) (i + 1) * 2 * (LV_NP + 1) + a) * 3;
+                    g->G[((size_t) i * 2 * (LV_NP + 1) + a) * 3 + 2] +=
+                        0.5 * fabs(lo[0] - 2 * mi[0] + hi[0]);
+                }
+        }
+        v->group_of[k] = gi;
+    }
+    *out = v;
+    return 0;
+}
+
+/* G and its estimate at fraction f of piece p of alpha node i (Hermite in
+ * f from the nodes' values and slopes). */
+static void lv_read(const lv_group *g, int i, int p, double f, double *G, double *X)
+{
+    const double *row = g->G + ((size_t) i * 2 + p) * (LV_NP + 1) * 3;
+    double x = f * LV_NP;
+    int j = (int) x;
+    if (j > LV_NP - 1)
+        j = LV_NP - 1;
+    if (j < 0)
+        j = 0;
+    const double t = x - j, h = 1.0 / LV_NP;
+    const double *a = row + 3 * j, *b = a + 3;
+    const double t2 = t * t, t3 = t2 * t;
+    *G = (2 * t3 - 3 * t2 + 1) * a[0] + (t3 - 2 * t2 + t) * h * a[1] + (-2 * t3 + 3 * t2) * b[0] +
+         (t3 - t2) * h * b[1];
+    *X = a[2] + t * (b[2] - a[2]);
+}
+
+void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, double a,
+                        double b, double S[3], double E[3])
+{
+    if (!v || !(a == 0) || r->org[0] != v->org[0] || r->org[1] != v->org[1] ||
+        r->org[2] != v->org[2]) {
+        ef_lms_gather(m, r, a, b, S, E);
+        return;
+    }
+    S[0] = S[1] = S[2] = 0;
+    if (E)
+        E[0] = E[1] = E[2] = 0;
+    if (!(b > 0))
+        return;
+    const double c = r->dir[0] * v->dhat[0] + r->dir[1] * v->dhat[1] + r->dir[2] * v->dhat[2];
+    const double ts = sqrt(fmax(0, fmin(1, 0.5 * (1 - c))));
+    const double alpha = 2 * asin(ts);
+    double res[3][2];
+    for (int gi = 0; gi < v->ng; ++gi) {
+        const lv_group *g = &v->g[gi];
+        const double sDL = g->sig * v->DL;
+        double fi = (lv_z(g, alpha) - g->zlo) / (g->zhi - g->zlo) * (LV_NA - 1);
+        if (!(fi >= 0))
+            fi = 0;
+        int i = (int) fi;
+        if (i > LV_NA - 2)
+            i = LV_NA - 2;
+        const double fa = fi - i;
+        /* the pixel's own place along its ray: its piece and the fraction
+         * of it, read at the same fraction at both alpha nodes */
+        double sc, h, w[3];
+        lv_geom(sDL, alpha, &sc, &h, w);
+        const double sD = g->sig * b;
+        int p = 1;
+        double f = 1;
+        if (sD < LMS_REACH) {
+            const double wD = asinh((sD - sc) / h);
+            if (wD < w[1]) {
+                p = 0;
+                f = w[1] > w[0] ? (wD - w[0]) / (w[1] - w[0]) : 1;
+            } else {
+                f = w[2] > w[1] ? (wD - w[1]) / (w[2] - w[1]) : 1;
+            }
+            f = fmax(0, fmin(1, f));
+        }
+        double G0, X0, G1, X1;
+        lv_read(g, i, p, f, &G0, &X0);
+        lv_read(g, i + 1, p, f, &G1, &X1);
+        res[gi][0] = (1 - fa) * G0 + fa * G1;
+        res[gi][1] = (1 - fa) * X0 + fa * X1;
+    }
+    for (int k = 0; k < 3; ++k) {
+        const int gi = v->group_of[k];
+        if (gi < 0)
+            continue;
+        S[k] = m->scale[k] * res[gi][0];
+        if (E)
+            E[k] = m->scale[k] * res[gi][1];
+    }
+}

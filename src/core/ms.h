@@ -180,6 +180,20 @@ int ef_lms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_lms 
  * (may be NULL) its estimate. */
 void ef_lms_gather(const ef_lms *m, const struct ef_ray *r, double a, double b, double S[3],
                    double E[3]);
+/* A lamp's solve bound to a camera at org: the gather of every ray from
+ * there tabulated against the ray's angle from the lamp and its depth
+ * (ef_lms_gather_view reads it; rays from elsewhere integrate). *v is
+ * replaced (the old one unreffed; NULL when m is). Returns 0, or -1 out
+ * of memory (*v NULL: every ray integrates). */
+typedef struct ef_lms_view ef_lms_view;
+int ef_lms_bind(const ef_lms *m, const double org[3], ef_lms_view **v);
+void ef_lms_view_ref(ef_lms_view *v);
+void ef_lms_view_unref(ef_lms_view *v);
+/* ef_lms_gather through v where r starts at v's camera and a is 0 (the
+ * table: cubic in depth, linear in angle, its interpolation in the
+ * estimate), else ef_lms_gather. */
+void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const struct ef_ray *r, double a,
+                        double b, double S[3], double E[3]);
 void ef_lms_ref(ef_lms *m);
 void ef_lms_unref(ef_lms *m);
 void ef_lms_get_info(const ef_lms *m, ef_ms_info *info);

@@ -107,8 +107,11 @@ void ef_scene_bind(ef_fog_scene *s, const double org[3])
 {
     for (int i = 0; i < s->ncomp; ++i)
         ef_fog_bind(&s->comp[i], org);
-    for (int j = 0; j < s->nlight; ++j)
+    for (int j = 0; j < s->nlight; ++j) {
         ef_ms_bind(s->light[j].ms, s, org, &s->light[j].ms_view);
+        /* out of memory: no table, every ray integrates (the same light) */
+        (void) ef_lms_bind(s->light[j].lms, org, &s->light[j].lms_view);
+    }
     ef_ms_bind(s->sky_ms, s, org, &s->sky_ms_view);
     for (int j = 0; j < s->nlight && s->ncomp == 1; ++j) {
         const double *up = s->comp[0].up;
@@ -138,6 +141,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
         ef_shadow_ref(dst->light[j].shadow);   /* immutable: shared */
         ef_ms_ref(dst->light[j].ms);
         ef_lms_ref(dst->light[j].lms);
+        ef_lms_view_ref(dst->light[j].lms_view);
     }
     dst->sky_light = src->sky_light;
     ef_sky_light_ref(dst->sky_light);
@@ -194,6 +198,8 @@ void ef_scene_free(ef_fog_scene *s)
         s->light[j].ms = NULL;
         ef_lms_unref(s->light[j].lms);
         s->light[j].lms = NULL;
+        ef_lms_view_unref(s->light[j].lms_view);
+        s->light[j].lms_view = NULL;
     }
     ef_sky_light_unref(s->sky_light);
     s->sky_light = NULL;
@@ -445,6 +451,8 @@ int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err)
         l->ms = NULL;
         ef_lms_unref(l->lms);
         l->lms = NULL;
+        ef_lms_view_unref(l->lms_view);
+        l->lms_view = NULL;
         if (l->multiple && (ef_light_at_position(l) ? ef_lms_build(s, l, &l->lms, err)
                                                      : ef_ms_build(s, l, &l->ms, err)))
             return -1;

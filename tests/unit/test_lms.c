@@ -11,6 +11,7 @@
  *     its Legendre series and tables);
  *   - a view segment gathers only the fog in front of its end (no halo),
  *     and a wall between the camera and the lamp cuts the glow off;
+ *   - the table bound to a camera against the gather it tabulates;
  *   - what is refused, with messages. */
 #include <math.h>
 #include <setjmp.h>
@@ -280,6 +281,51 @@ static void test_no_halo(void **state)
     ef_scene_free(&sm);
 }
 
+/* The table bound to a camera reads what the gather integrates along each
+ * ray (rays from the camera at every angle from the lamp, through it
+ * nearly, and to surfaces before, at and past the lamp's distance), within
+ * its own estimate (its interpolation in angle and depth). */
+static void test_view(void **state)
+{
+    (void) state;
+    ef_fog_scene s;
+    scene_with(&s, "exp:density=0.15:albedo=0.95:phase=hg:g=0.6",
+               "point:position=1,0.5,10:intensity=8:scattering=multiple");
+    const ef_lms *m = s.light[0].lms;
+    ef_lms_view *v = NULL;
+    const double cam[3] = { 0.2, 0.1, -0.5 };
+    assert_int_equal(ef_lms_bind(m, cam, &v), 0);
+    assert_non_null(v);
+    uint64_t x = 88172645463325252u;
+    double worst = 0;
+    for (int n = 0; n < 3000; ++n) {
+        double d[3];
+        for (int k = 0; k < 3; ++k) {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            d[k] = (double) (x >> 11) / 9007199254740992.0 * 2 - 1;
+        }
+        if (n % 3 == 0)   /* near the lamp's direction */
+            for (int k = 0; k < 3; ++k)
+                d[k] = 0.02 * d[k] + (s.light[0].pos[k] - cam[k]) / 10.6;
+        const double dists[] = { 0.5, 6, 10.6, 11, 30, INFINITY };
+        ef_ray r = ray(cam, d[0], d[1], d[2], dists[n % 6]);
+        double Sv[3], Ev[3], Sd[3], Ed[3];
+        ef_lms_gather_view(m, v, &r, 0, r.dist, Sv, Ev);
+        ef_lms_gather(m, &r, 0, r.dist, Sd, Ed);
+        const double diff = fabs(Sv[0] - Sd[0]);
+        if (!(diff <= Ev[0] + Ed[0]))
+            fail_msg("ray %d (dist %g, dir %g %g %g): the table %.9g, the gather %.9g, estimates "
+                     "%.2g %.2g", n, r.dist, r.dir[0], r.dir[1], r.dir[2], Sv[0], Sd[0], Ev[0], Ed[0]);
+        worst = fmax(worst, diff / Sd[0]);
+    }
+    printf("bound to the camera: within %.1e of the gather (relative), each within the estimates\n",
+           worst);
+    ef_lms_view_unref(v);
+    ef_scene_free(&s);
+}
+
 /* What is refused, each with its reason. */
 static void test_refusals(void **state)
 {
@@ -318,6 +364,7 @@ int main(void)
         cmocka_unit_test(test_energy),
         cmocka_unit_test(test_second_order),
         cmocka_unit_test(test_no_halo),
+        cmocka_unit_test(test_view),
         cmocka_unit_test(test_refusals),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
