@@ -149,6 +149,8 @@ res = {
     "single_check_median": float(np.median((E1[ok] - C0[ok]) / C0[ok])),
     "rel_median": float(np.median(np.abs(rel))), "rel_p99": float(np.percentile(np.abs(rel), 99)),
     "rel_signed_median": float(np.median(rel)),
+    # each block's error beyond twice its own noise (the reference's share)
+    "beyond_noise_p99": float(np.percentile(np.maximum(0, np.abs(rel) - 2 * noise[ok] / C[ok]), 99)),
     "noise_rel_median": float(np.median(noise[ok] / C[ok])),
     "covered": float(np.mean(np.abs(EM - C)[ok] <= ER[ok] + 2 * noise[ok])),
     "err_rel_median": float(np.median(ER[ok] / C[ok])),

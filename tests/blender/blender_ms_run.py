@@ -11,10 +11,11 @@ under a uniform sky of radiance 1 (Cycles' world; exrfog's --sky-light of a
 constant map with scattering=multiple), every bounce against every order,
 held alike (measured at 4096 samples: median 0.27 %, covered 100 %). And a
 point lamp 10 units ahead in fog everywhere (density 0.2: the lamp's optical
-depth 2; albedo 0.9, g 0.5; bench/ms_lamp_blender.py), its single scattering
-against bounces 0 and single + multiple against every bounce, held alike
-(measured at 16384 samples per 4x4 block: median 0.95 % against Cycles' noise
-of 1.07 %).
+depth 2; albedo 0.9, g 0.5; bench/ms_lamp_blender.py) at 4096 samples (its
+blocks are noisier: 2 % at 1024), its single scattering against bounces 0 and
+single + multiple against every bounce, held alike, the 99th percentile as
+each block's error beyond twice its own noise (measured at 16384 samples per
+4x4 block: median 0.95 % against Cycles' noise of 1.07 %).
 Exits 77 (skipped) without Blender."""
 import json
 import os
@@ -32,10 +33,10 @@ if not blender:
 bad = []
 with tempfile.TemporaryDirectory(prefix="exrfog-ms-") as d:
     slab = ["30", "0.1", "0.95", "0.5", "20"]
-    for case, extra in ((slab, []), (slab, ["-", "sky"]),
-                        (["0", "0.2", "0.9", "0.5", "0"], ["-", "lamp=10"])):
+    for spp, case, extra in (("1024", slab, []), ("1024", slab, ["-", "sky"]),
+                             ("4096", ["0", "0.2", "0.9", "0.5", "0"], ["-", "lamp=10"])):
         r = subprocess.run(["/usr/bin/python3", os.path.join(src, "bench", "ms_compare.py"),
-                            exrfog, blender, d, "1024"] + case + ["64", "36", "8"] + extra,
+                            exrfog, blender, d, spp] + case + ["64", "36", "8"] + extra,
                            capture_output=True, text=True)
         if r.returncode:
             raise SystemExit("blender_ms: FAILED: " + r.stdout + r.stderr)
@@ -56,8 +57,12 @@ with tempfile.TemporaryDirectory(prefix="exrfog-ms-") as d:
                        "test multiple" % (100 * res["single_share_median"]))
         if not res["rel_median"] < 0.02:
             bad.append(what + "median error %.2f %%" % (100 * res["rel_median"]))
-        if not res["rel_p99"] < 0.05 + 2 * res["noise_rel_median"]:
-            bad.append(what + "99th percentile error %.2f %%" % (100 * res["rel_p99"]))
+        # (a lamp's blocks beside it are far noisier than the median block:
+        # each block's error beyond twice its own noise)
+        if not (res["beyond_noise_p99"] < 0.05 if extra and not sky
+                else res["rel_p99"] < 0.05 + 2 * res["noise_rel_median"]):
+            bad.append(what + "99th percentile error %.2f %% (beyond the noise %.2f %%)"
+                       % (100 * res["rel_p99"], 100 * res["beyond_noise_p99"]))
         if not res["covered"] >= 0.8:
             bad.append(what + "the error output covers %.0f %% of blocks"
                        % (100 * res["covered"]))
