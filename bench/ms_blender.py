@@ -13,9 +13,13 @@ transparent bounces left at their default. Writes OUT (RGBA + Z, 32-bit) and OUT
 camera and the direction towards the sun)."""
 import json
 import math
+import os
 import sys
 
 import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import ms_scene  # noqa: E402
 
 args = sys.argv[sys.argv.index("--") + 1:]
 out, spp, bounces = args[0], int(args[1]), int(args[2])
@@ -31,40 +35,10 @@ layers = ([tuple(float(v) for v in l.split(":")) for l in args[10].split(",")]
 sky = "sky" in args[11:]
 # "camz=Z": the camera Z units up (default 2; above TOP it looks down into the fog from above)
 camz = float(next((a[5:] for a in args[11:] if a.startswith("camz=")), "2"))
-sc = bpy.context.scene
-for o in list(bpy.data.objects):
-    if o.type in ('MESH', 'LIGHT'):
-        bpy.data.objects.remove(o, do_unlink=True)
-sc.render.engine = 'CYCLES'
-sc.cycles.device = 'CPU'
-sc.cycles.samples = spp
-sc.cycles.use_denoising = False
-sc.cycles.use_adaptive_sampling = False
-sc.cycles.max_bounces = max(bounces, 1)
-sc.cycles.volume_bounces = bounces
-sc.cycles.diffuse_bounces = 0
-sc.cycles.glossy_bounces = 0
-sc.cycles.transmission_bounces = 0
-sc.cycles.sample_clamp_direct = 0
-sc.cycles.sample_clamp_indirect = 0
-sc.cycles.seed = 11
-sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = width, height, 100
-sc.render.image_settings.file_format = 'OPEN_EXR'
-sc.render.image_settings.color_depth = '32'
-sc.render.image_settings.use_zbuffer = True
-bpy.context.view_layer.use_pass_z = True
-sc.render.film_transparent = False
-w = bpy.data.worlds.new("black"); w.use_nodes = True
-w.node_tree.nodes["Background"].inputs[0].default_value = (1, 1, 1, 1)
-w.node_tree.nodes["Background"].inputs[1].default_value = 1.0 if sky else 0.0
-sc.world = w
+sc = ms_scene.setup(spp, bounces, width, height, 11, 1.0 if sky else 0.0)
 # the ground: black, absorbing every ray (a material with no output)
 bpy.ops.mesh.primitive_plane_add(size=4000, location=(0, 0, 0))
-gm = bpy.data.materials.new("ground"); gm.use_nodes = True
-gm.node_tree.nodes.clear()
-e = gm.node_tree.nodes.new('ShaderNodeEmission'); e.inputs[1].default_value = 0.0
-o = gm.node_tree.nodes.new('ShaderNodeOutputMaterial'); gm.node_tree.links.new(e.outputs[0], o.inputs[0])
-bpy.context.object.data.materials.append(gm)
+bpy.context.object.data.materials.append(ms_scene.black())
 # the fog's boxes reach below the ground (a face on the ground's plane would hide it)
 for li, (ltop, ldens, lalb, lg) in enumerate(layers):
     bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (ltop - 1) / 2))
@@ -72,32 +46,12 @@ for li, (ltop, ldens, lalb, lg) in enumerate(layers):
     cube.scale = (4000 - li, 4000 - li, ltop + 1)
     if plain:
         cube.hide_render = True
-    m = bpy.data.materials.new("fog%d" % li); m.use_nodes = True
-    nt = m.node_tree; nt.nodes.clear()
-    s = nt.nodes.new('ShaderNodeVolumeScatter')
-    s.inputs['Density'].default_value = ldens * lalb
-    s.inputs['Anisotropy'].default_value = lg
-    s.inputs['Color'].default_value = (1, 1, 1, 1)
-    a = nt.nodes.new('ShaderNodeVolumeAbsorption')
-    a.inputs['Density'].default_value = ldens * (1 - lalb)
-    a.inputs['Color'].default_value = (0, 0, 0, 1)
-    add = nt.nodes.new('ShaderNodeAddShader')
-    o = nt.nodes.new('ShaderNodeOutputMaterial')
-    nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
-    nt.links.new(add.outputs[0], o.inputs['Volume'])
-    m.cycles.homogeneous_volume = True
-    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    m = ms_scene.fog("fog%d" % li, ldens, lalb, lg)
     cube.data.materials.append(m)
 sun = bpy.data.lights.new("sun", 'SUN'); sun.energy = 0.0 if sky else 1.0; sun.angle = 0.0
 so = bpy.data.objects.new("sun", sun); sc.collection.objects.link(so)
 so.rotation_euler = (math.radians(90 - elev), 0, math.radians(150))
-cam = sc.camera
-cam.location = (0, 0, camz)
-cam.rotation_euler = (math.radians(82 if camz <= top else 70), 0, 0)
-cam.data.sensor_fit = 'HORIZONTAL'
-cam.data.angle = math.radians(60)
-cam.data.clip_start, cam.data.clip_end = 0.05, 10000.0
-bpy.context.view_layer.update()
+cam = ms_scene.camera(sc, (0, 0, camz), (82 if camz <= top else 70, 0, 0))
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
 mw = cam.matrix_world

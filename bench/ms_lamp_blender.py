@@ -14,9 +14,13 @@ default; BOUNCES -1: no fog (the depth alone). Writes OUT (RGBA + Z, 32-bit) and
 (camera, lamp position and intensity)."""
 import json
 import math
+import os
 import sys
 
 import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import ms_scene  # noqa: E402
 
 args = sys.argv[sys.argv.index("--") + 1:]
 out, spp, bounces = args[0], int(args[1]), int(args[2])
@@ -25,74 +29,24 @@ bounces = max(bounces, 0)
 dens, albedo, g, dist = (float(v) for v in args[3:7])
 width, height = int(args[7]), int(args[8])
 wall = float(next((a[5:] for a in args[9:] if a.startswith("wall=")), "0"))
-sc = bpy.context.scene
-for o in list(bpy.data.objects):
-    if o.type in ('MESH', 'LIGHT'):
-        bpy.data.objects.remove(o, do_unlink=True)
-sc.render.engine = 'CYCLES'
-sc.cycles.device = 'CPU'
-sc.cycles.samples = spp
-sc.cycles.use_denoising = False
-sc.cycles.use_adaptive_sampling = False
-sc.cycles.max_bounces = max(bounces, 1)
-sc.cycles.volume_bounces = bounces
-sc.cycles.diffuse_bounces = 0
-sc.cycles.glossy_bounces = 0
-sc.cycles.transmission_bounces = 0
-sc.cycles.sample_clamp_direct = 0
-sc.cycles.sample_clamp_indirect = 0
-sc.cycles.seed = 7
-sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = width, height, 100
-sc.render.image_settings.file_format = 'OPEN_EXR'
-sc.render.image_settings.color_depth = '32'
-sc.render.image_settings.use_zbuffer = True
-bpy.context.view_layer.use_pass_z = True
-sc.render.film_transparent = False
-w = bpy.data.worlds.new("black"); w.use_nodes = True
-w.node_tree.nodes["Background"].inputs[1].default_value = 0.0
-sc.world = w
+sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
     bpy.ops.mesh.primitive_plane_add(size=1, location=(-2000, wall, 0), rotation=(math.radians(90), 0, 0))
     wo = bpy.context.object
     wo.scale = (4000, 4000, 1)
-    wm = bpy.data.materials.new("wall"); wm.use_nodes = True
-    wm.node_tree.nodes.clear()
-    e = wm.node_tree.nodes.new('ShaderNodeEmission'); e.inputs[1].default_value = 0.0
-    o = wm.node_tree.nodes.new('ShaderNodeOutputMaterial')
-    wm.node_tree.links.new(e.outputs[0], o.inputs[0])
-    wo.data.materials.append(wm)
+    wo.data.materials.append(ms_scene.black())
 bpy.ops.mesh.primitive_cube_add(size=4000, location=(0, 0, 0))
 cube = bpy.context.object
 if plain:
     cube.hide_render = True
-m = bpy.data.materials.new("fog"); m.use_nodes = True
-nt = m.node_tree; nt.nodes.clear()
-s = nt.nodes.new('ShaderNodeVolumeScatter')
-s.inputs['Density'].default_value = dens * albedo
-s.inputs['Anisotropy'].default_value = g
-s.inputs['Color'].default_value = (1, 1, 1, 1)
-a = nt.nodes.new('ShaderNodeVolumeAbsorption')
-a.inputs['Density'].default_value = dens * (1 - albedo)
-a.inputs['Color'].default_value = (0, 0, 0, 1)
-add = nt.nodes.new('ShaderNodeAddShader')
-o = nt.nodes.new('ShaderNodeOutputMaterial')
-nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
-nt.links.new(add.outputs[0], o.inputs['Volume'])
-m.cycles.homogeneous_volume = True
-m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+m = ms_scene.fog("fog", dens, albedo, g)
 cube.data.materials.append(m)
 pos = (0.15 * dist, dist, 0.1 * dist)
 pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = 100.0; pl.shadow_soft_size = 0.0
 po = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(po)
 po.location = pos
-cam = sc.camera
-cam.location = (0, 0, 0)
-cam.rotation_euler = (math.radians(90), 0, 0)
-cam.data.sensor_fit = 'HORIZONTAL'
-cam.data.angle = math.radians(60)
-cam.data.clip_start, cam.data.clip_end = 0.05, 10000.0
-bpy.context.view_layer.update()
+cam = ms_scene.camera(sc, (0, 0, 0), (90, 0, 0))
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
 mw = cam.matrix_world

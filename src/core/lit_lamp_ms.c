@@ -115,14 +115,44 @@ static void legendre(int L, double x, double *P)
 
 /* --------------------------------------------- the first order, exactly */
 
+/* An integrand of the Kronrod rule below: its value at x, and into *e a
+ * second function integrated alongside (an estimate's). */
+typedef double (*gk_fn)(const void *q, double x, double *e);
+
+/* One Kronrod rule over [a, b]: the integral into R, |K - G| into E and
+ * the second function's integral into X. */
+static void gk15_rule(gk_fn f, const void *q, double a, double b, double *R, double *E, double *X)
+{
+    const double c = 0.5 * (a + b), hw = 0.5 * (b - a);
+    double ec;
+    const double fc = f(q, c, &ec);
+    double rk = (double) ef_gk15_wk[7] * fc, rg = (double) ef_gk15_wg[3] * fc,
+           xk = (double) ef_gk15_wk[7] * ec;
+    for (int j = 0; j < 7; ++j) {
+        const double dx = hw * (double) ef_gk15_x[j];
+        double e1, e2;
+        const double f1 = f(q, c - dx, &e1), f2 = f(q, c + dx, &e2);
+        rk += (double) ef_gk15_wk[j] * (f1 + f2);
+        xk += (double) ef_gk15_wk[j] * (e1 + e2);
+        if (j & 1)
+            rg += (double) ef_gk15_wg[j / 2] * (f1 + f2);
+    }
+    *R = rk * hw;
+    *E = fabs((rk - rg) * hw);
+    *X = xk * hw;
+}
+
 typedef struct p1_q {
     int phase;
     double g, sc, h;
 } p1_q;
 
-/* e^-s p(-sin th) e^-(h / cos th), s = sc + h tan th */
-static double p1_f(const p1_q *q, double th)
+/* e^-s p(-sin th) e^-(h / cos th), s = sc + h tan th (gk_fn; no second
+ * function) */
+static double p1_f(const void *qv, double th, double *e)
 {
+    const p1_q *q = qv;
+    *e = 0;
     const double c = cos(th);
     if (!(c > 0))
         return 0;
@@ -132,18 +162,9 @@ static double p1_f(const p1_q *q, double th)
 
 static double p1_gk(const p1_q *q, double a, double b, double *err)
 {
-    const double c = 0.5 * (a + b), hw = 0.5 * (b - a);
-    const double fc = p1_f(q, c);
-    double rk = (double) ef_gk15_wk[7] * fc, rg = (double) ef_gk15_wg[3] * fc;
-    for (int j = 0; j < 7; ++j) {
-        const double dx = hw * (double) ef_gk15_x[j];
-        const double f1 = p1_f(q, c - dx), f2 = p1_f(q, c + dx);
-        rk += (double) ef_gk15_wk[j] * (f1 + f2);
-        if (j & 1)
-            rg += (double) ef_gk15_wg[j / 2] * (f1 + f2);
-    }
-    *err = fabs((rk - rg) * hw);
-    return rk * hw;
+    double R, X;
+    gk15_rule(p1_f, q, a, b, &R, err, &X);
+    return R;
 }
 
 /* psi_1(r, beta) / omega: the once-scattered radiance of a lamp of
@@ -846,8 +867,9 @@ typedef struct g_q {
 } g_q;
 
 /* e^-s (r Q)(r, nu) at s = sc + h sinh w, and its estimate into e */
-static double g_f(const g_q *q, double w, double *e)
+static double g_f(const void *qv, double w, double *e)
 {
+    const g_q *q = qv;
     const double sh = sinh(w), ch = sqrt(1 + sh * sh);
     const double s = q->sc + q->h * sh, r = q->h * ch, ex = exp(-s);
     double ev;
@@ -856,27 +878,10 @@ static double g_f(const g_q *q, double w, double *e)
     return ex * v;
 }
 
-/* One Kronrod rule over [a, b] in w: the integral into R, |K - G| into E
- * and the table's estimate gathered into X. */
+/* One Kronrod rule over [a, b] in w (gk15_rule of g_f). */
 static void g_gk(const g_q *q, double a, double b, double *R, double *E, double *X)
 {
-    const double c = 0.5 * (a + b), hw = 0.5 * (b - a);
-    double ec;
-    const double fc = g_f(q, c, &ec);
-    double rk = (double) ef_gk15_wk[7] * fc, rg = (double) ef_gk15_wg[3] * fc,
-           xk = (double) ef_gk15_wk[7] * ec;
-    for (int j = 0; j < 7; ++j) {
-        const double dx = hw * (double) ef_gk15_x[j];
-        double e1, e2;
-        const double f1 = g_f(q, c - dx, &e1), f2 = g_f(q, c + dx, &e2);
-        rk += (double) ef_gk15_wk[j] * (f1 + f2);
-        xk += (double) ef_gk15_wk[j] * (e1 + e2);
-        if (j & 1)
-            rg += (double) ef_gk15_wg[j / 2] * (f1 + f2);
-    }
-    *R = rk * hw;
-    *E = fabs((rk - rg) * hw);
-    *X = xk * hw;
+    gk15_rule(g_f, q, a, b, R, E, X);
 }
 
 /* int_a^b e^-s Q ds of table t along a ray whose closest approach to the

@@ -329,24 +329,19 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
         }
         fputs(", \"scattering\": ", out);
         json_str(out, l->multiple ? "multiple" : "single");
-        if (l->lms) {
+        if (l->lms || l->ms) {
             ef_ms_info in;
-            ef_lms_get_info(l->lms, &in);
-            fprintf(out, ", \"multiple\": {\"radial_nodes\": %d, \"directions\": %d, "
-                         "\"legendre_terms\": %d, \"gmres_iterations\": %d, \"residual\": ",
-                    in.nodes, in.kept, in.nh, in.iterated);
-            json_num(out, in.tail_rel);
-            fputs(", \"discretisation_rel\": ", out);
-            json_num(out, in.disc_rel);
-            fputs(", \"seconds\": ", out);
-            json_num(out, in.seconds);
-            fputc('}', out);
-        } else if (l->ms) {
-            ef_ms_info in;
-            ef_ms_get_info(l->ms, &in);
-            fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "
-                         "\"direct_modes\": %d, \"iterated_modes\": %d, \"tail_rel\": ",
-                    in.nodes, in.kept, in.nh, in.direct, in.iterated);
+            if (l->lms) {
+                ef_lms_get_info(l->lms, &in);
+                fprintf(out, ", \"multiple\": {\"radial_nodes\": %d, \"directions\": %d, "
+                             "\"legendre_terms\": %d, \"gmres_iterations\": %d, \"residual\": ",
+                        in.nodes, in.kept, in.nh, in.iterated);
+            } else {
+                ef_ms_get_info(l->ms, &in);
+                fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "
+                             "\"direct_modes\": %d, \"iterated_modes\": %d, \"tail_rel\": ",
+                        in.nodes, in.kept, in.nh, in.direct, in.iterated);
+            }
             json_num(out, in.tail_rel);
             fputs(", \"discretisation_rel\": ", out);
             json_num(out, in.disc_rel);

@@ -24,54 +24,14 @@
 
 #include <cmocka.h>
 
-#include "gk15.h"
+#include "nested_quad.h"
 #include "light.h"
 #include "lit.h"
 #include "ms.h"
 #include "scene.h"
+#include "lit_scene.h"
 
 #define PI 3.14159265358979323846
-
-static double hg(double g, double c)
-{
-    const double q = 1 + g * g - 2 * g * c;
-    return (1 - g * g) / (4 * PI * q * sqrt(q));
-}
-
-typedef double (*fn1)(void *, double);
-
-static double gk15(fn1 f, void *u, double a, double b, double *err)
-{
-    const double c = 0.5 * (a + b), h = 0.5 * (b - a), fc = f(u, c);
-    double rk = fc * (double) ef_gk15_wk[7], rg = fc * (double) ef_gk15_wg[3];
-    for (int j = 0; j < 7; ++j) {
-        const double x = h * (double) ef_gk15_x[j], f1 = f(u, c - x), f2 = f(u, c + x);
-        rk += (f1 + f2) * (double) ef_gk15_wk[j];
-        if (j & 1)
-            rg += (f1 + f2) * (double) ef_gk15_wg[j / 2];
-    }
-    *err = fabs((rk - rg) * h);
-    return rk * h;
-}
-
-static double adapt(fn1 f, void *u, double a, double b, double tol, int depth)
-{
-    double e;
-    const double r = gk15(f, u, a, b, &e);
-    if (e <= tol || depth > 24 || !(e == e))
-        return r;
-    const double m = 0.5 * (a + b);
-    return adapt(f, u, a, m, tol / 2, depth + 1) + adapt(f, u, m, b, tol / 2, depth + 1);
-}
-
-/* int_a^b f to about rel of itself (the tolerance from a first rule's
- * size: the integrands here span many orders of magnitude). */
-static double adapt_rel(fn1 f, void *u, double a, double b, double rel)
-{
-    double e;
-    const double r = gk15(f, u, a, b, &e);
-    return adapt(f, u, a, b, rel * fabs(r) + 1e-300, 0);
-}
 
 /* ------------------------------------------------------------- energy */
 
@@ -224,22 +184,6 @@ static void test_second_order(void **state)
 }
 
 /* ------------------------------------------------- the scene's gather */
-
-static void scene_with(ef_fog_scene *s, const char *fog, const char *light)
-{
-    ef_err err = { 0 };
-    ef_scene_init(s);
-    if (ef_scene_add(s, fog, &err) || ef_scene_add_light(s, light, &err) ||
-        ef_scene_prepare_lights(s, &err))
-        fail_msg("'%s' with '%s': %s", fog, light, err.msg);
-}
-
-static ef_ray ray(const double org[3], double dx, double dy, double dz, double dist)
-{
-    const double n = sqrt(dx * dx + dy * dy + dz * dz);
-    ef_ray r = { { dx / n, dy / n, dz / n }, dist, dist, { org[0], org[1], org[2] } };
-    return r;
-}
 
 /* Light in front of a surface only: a wall between the camera and the
  * lamp takes the glow off the wall's pixels except for the fog in front
