@@ -35,6 +35,10 @@
 /* |g| above this: the phase's Legendre series needs more than LMS_L_MAX
  * terms (0.9^128 = 1.4e-6). */
 #define LMS_G_MAX 0.9
+/* Albedo above this: in unbounded fog light that is hardly absorbed
+ * wanders without end (at 1 the scattered energy has no bound and the
+ * solve does not converge; 0.999 takes 600 GMRES iterations). */
+#define LMS_ALBEDO_MAX 0.999
 #define LMS_L_MAX 128
 /* The radial grid: r = RS (e^(u lg) - 1), u uniform on [0, 1]. */
 #define LMS_RS 0.05
@@ -808,6 +812,11 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         return ef_fail(err, "--light '%s': a lamp's multiple scattering takes |g| up to %g "
                        "(the phase's series needs more terms beyond); the fog's g is %g",
                        l->spec, LMS_G_MAX, c->g);
+    for (int k = 0; k < 3; ++k)
+        if (albedo(c, k) > LMS_ALBEDO_MAX && sig[k] > 0)
+            return ef_fail(err, "--light '%s': a lamp's multiple scattering takes albedo up to "
+                           "%g in unbounded fog (light that is never absorbed wanders without "
+                           "end); the fog's albedo is %g", l->spec, LMS_ALBEDO_MAX, albedo(c, k));
     ef_lms *m = calloc(1, sizeof *m);
     if (!m)
         return ef_fail(err, "out of memory for a lamp's multiple scattering");

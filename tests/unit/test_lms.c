@@ -282,6 +282,7 @@ static void test_refusals(void **state)
           "uniform", 0 },
         { "exp:density=0.05:phase=hg:g=0.93", "point:position=0,1,0:scattering=multiple",
           "0.9", 0 },
+        { "exp:density=0.05", "point:position=0,1,0:scattering=multiple", "albedo up to", 0 },
         { "exp:density=0.05", "spot:position=0,1,0:aim=0,0,1:scattering=multiple", "cone", 1 },
         { "exp:density=0.05", "point:position=0,1,0:radius=0.1:scattering=multiple", "radius", 1 },
         { "exp:density=0.05", "point:position=0,1,0:scattering=multiple:ground=0", "ground", 1 },
