@@ -36,24 +36,34 @@ static inline double gk15(fn1 f, void *u, double a, double b, double *err)
 }
 
 /* int_a^b f, bisected until each piece's estimate is within its share of
- * tol (or 30 levels deep). */
-static inline double adapt(fn1 f, void *u, double a, double b, double tol, int depth)
+ * tol (or maxdepth levels deep). */
+static inline double adapt_to(fn1 f, void *u, double a, double b, double tol, int depth,
+                              int maxdepth)
 {
     double e;
     const double r = gk15(f, u, a, b, &e);
-    if (e <= tol || depth > 30 || !(e == e))
+    if (e <= tol || depth > maxdepth || !(e == e))
         return r;
     const double m = 0.5 * (a + b);
-    return adapt(f, u, a, m, tol / 2, depth + 1) + adapt(f, u, m, b, tol / 2, depth + 1);
+    return adapt_to(f, u, a, m, tol / 2, depth + 1, maxdepth) +
+           adapt_to(f, u, m, b, tol / 2, depth + 1, maxdepth);
+}
+
+/* adapt_to, 30 levels at most. */
+static inline double adapt(fn1 f, void *u, double a, double b, double tol, int depth)
+{
+    return adapt_to(f, u, a, b, tol, depth, 30);
 }
 
 /* int_a^b f to about rel of itself (the tolerance from a first rule's
- * size: integrands that span many orders of magnitude). */
+ * size: integrands that span many orders of magnitude), 24 levels at most
+ * (the lamp's integrands, nested three deep, would otherwise spend minutes
+ * under the sanitizers where a piece cannot meet its share). */
 static inline double adapt_rel(fn1 f, void *u, double a, double b, double rel)
 {
     double e;
     const double r = gk15(f, u, a, b, &e);
-    return adapt(f, u, a, b, rel * fabs(r) + 1e-300, 0);
+    return adapt_to(f, u, a, b, rel * fabs(r) + 1e-300, 0, 24);
 }
 
 #endif
