@@ -669,6 +669,18 @@ void ef_lms_get_info(const ef_lms *m, ef_ms_info *info)
         *info = m->info;
 }
 
+/* The phase's Legendre coefficients into b (LMS_L_MAX of them) and how
+ * many the solve keeps: up to the last above 1e-7, at least 2. */
+static int phase_terms(int phase, double g, double *b)
+{
+    ef_ms_phase_legendre(phase, g, LMS_L_MAX, b);
+    int L = 2;
+    for (int l = 2; l < LMS_L_MAX; ++l)
+        if (fabs(b[l]) > 1e-7)
+            L = l + 1;
+    return L;
+}
+
 /* The solve's resolution for albedo omega and L Legendre terms (fine: the
  * table; coarse: the estimate's second solve). */
 static lms_res res_for(double omega, double g, int L, int coarse)
@@ -745,14 +757,7 @@ int ef_lms_build_albedo(double omega, int phase, double g, int max_order, ef_lms
         return -1;
     atomic_init(&m->refs, 1);
     double b[LMS_L_MAX];
-    ef_ms_phase_legendre(phase, g, LMS_L_MAX, b);
-    int L = 1;
-    for (int l = 0; l < LMS_L_MAX; ++l)
-        if (fabs(b[l]) > 1e-7)
-            L = l + 1;
-    if (L < 2)
-        L = 2;
-    m->L = L;
+    const int L = m->L = phase_terms(phase, g, b);
     m->ntab = 1;
     m->tab_of[0] = m->tab_of[1] = m->tab_of[2] = 0;
     m->sig[0] = m->sig[1] = m->sig[2] = 1;
@@ -823,14 +828,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     atomic_init(&m->refs, 1);
     memcpy(m->pos, l->pos, sizeof m->pos);
     double b[LMS_L_MAX];
-    ef_ms_phase_legendre(c->phase, c->g, LMS_L_MAX, b);
-    int L = 1;
-    for (int k = 0; k < LMS_L_MAX; ++k)
-        if (fabs(b[k]) > 1e-7)
-            L = k + 1;
-    if (L < 2)
-        L = 2;
-    m->L = L;
+    const int L = m->L = phase_terms(c->phase, c->g, b);
     for (int k = 0; k < 3; ++k) {
         m->sig[k] = sig[k];
         m->scale[k] = l->e[k] * sig[k] * sig[k];
