@@ -82,6 +82,7 @@ struct ef_lms {
 
 /* ------------------------------------------------------------ the grids */
 
+/* The radius of node i of nr on the grid of growth lg (node 0: the lamp). */
 static double rho_at(double lg, int nr, int i)
 {
     return LMS_RS * expm1(lg * i / (nr - 1));
@@ -93,6 +94,7 @@ static double rho_at(double lg, int nr, int i)
 static const double lms_panel[] = { 0, 0.01, 0.05, 0.2, 0.6, 1.4, PI };
 #define LMS_NPANEL 6
 
+/* npp Gauss nodes on each panel: angles into beta, weights into W. */
 static void beta_nodes(int npp, double *beta, double *W)
 {
     double x[256], w[256];
@@ -241,6 +243,7 @@ typedef struct lms_sys {
     double *tq, *psi;/* scratch: table [nr][nx], radiance [nr][nb] */
 } lms_sys;
 
+/* Frees what sys_init allocated (any of it may be NULL). */
 static void sys_free(lms_sys *S)
 {
     free(S->beta);
@@ -358,6 +361,9 @@ static int build_samples(lms_sys *S, int nw)
     return 0;
 }
 
+/* The grids, the moment and synthesis matrices and every characteristic's
+ * samples of one resolution. Returns 0, or -1 without memory (sys_free
+ * then). */
 static int sys_init(lms_sys *S, double omega, const double *b, int L, const lms_res *res)
 {
     memset(S, 0, sizeof *S);
@@ -702,6 +708,7 @@ static lms_res res_for(double omega, double g, int L, int coarse)
     return r;
 }
 
+/* Monotonic seconds since t0. */
 static double seconds_since(const struct timespec *t0)
 {
     struct timespec t1;
@@ -1047,6 +1054,7 @@ static void lv_geom(double sDL, double alpha, double *sc, double *h, double w[3]
     w[2] = fmax(w[1], asinh((LMS_REACH - *sc) / *h));
 }
 
+/* The table's angular coordinate of alpha (increasing). */
 static double lv_z(const lv_group *g, double alpha)
 {
     return asinh(alpha / g->a0) + LV_K * alpha;
