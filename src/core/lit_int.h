@@ -17,6 +17,8 @@
 #ifndef EF_LIT_INT_H
 #define EF_LIT_INT_H
 
+#include <time.h>
+
 #include "light.h"
 #include "lit.h"
 #include "scene.h"
@@ -46,6 +48,14 @@ static inline int is_uniform(const ef_fog_component *c)
 static inline double albedo(const ef_fog_component *c, int k)
 {
     return c->has_albedo ? c->albedo[k] : 1.0;
+}
+
+/* Monotonic seconds since t0 (the solves' times for --explain). */
+static inline double ef_lit_seconds_since(const struct timespec *t0)
+{
+    struct timespec t1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    return (double) (t1.tv_sec - t0->tv_sec) + 1e-9 * (double) (t1.tv_nsec - t0->tv_nsec);
 }
 
 /* qsort's order of doubles. */

@@ -109,16 +109,6 @@ static void beta_nodes(int npp, double *beta, double *W)
     }
 }
 
-/* P_0..P_{L-1}(x) into P. */
-static void legendre(int L, double x, double *P)
-{
-    P[0] = 1;
-    if (L > 1)
-        P[1] = x;
-    for (int l = 2; l < L; ++l)
-        P[l] = ((2 * l - 1) * x * P[l - 1] - (l - 1) * P[l - 2]) / l;
-}
-
 /* --------------------------------------------- the first order, exactly */
 
 /* An integrand of the Kronrod rule below: its value at x, and into *e a
@@ -385,13 +375,13 @@ static int sys_init(lms_sys *S, double omega, const double *b, int L, const lms_
     beta_nodes(res->npp, S->beta, S->W);
     double P[LMS_L_MAX];
     for (int j = 0; j < S->nb; ++j) {
-        legendre(L, cos(S->beta[j]), P);
+        ef_ms_legendre(L, cos(S->beta[j]), P);
         for (int l = 0; l < L; ++l)
             S->Pm[(size_t) l * S->nb + j] = S->W[j] * P[l];
     }
     for (int k = 0; k < S->nx; ++k) {
         const double x = (double) k / (S->nx - 1), nu = 1 - 2 * x * x;
-        legendre(L, nu, P);
+        ef_ms_legendre(L, nu, P);
         for (int l = 0; l < L; ++l)
             S->Ps[(size_t) l * S->nx + k] = omega * (2 * l + 1) * b[l] / (4 * PI) * P[l];
     }
@@ -708,14 +698,6 @@ static lms_res res_for(double omega, double g, int L, int coarse)
     return r;
 }
 
-/* Monotonic seconds since t0. */
-static double seconds_since(const struct timespec *t0)
-{
-    struct timespec t1;
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    return (double) (t1.tv_sec - t0->tv_sec) + 1e-9 * (double) (t1.tv_nsec - t0->tv_nsec);
-}
-
 /* One albedo's table with its estimate: the fine solve, and the
  * difference from the coarse one at each node. */
 static int build_tab(lms_tab *t, double omega, int phase, double g, const double *b, int L,
@@ -868,7 +850,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
             qmax = fmax(qmax, fabs(m->tab[t].q[a]));
         }
     m->info.disc_rel = qmax > 0 ? emax / qmax : 0;
-    m->info.seconds = seconds_since(&t0);
+    m->info.seconds = ef_lit_seconds_since(&t0);
     *out = m;
     return 0;
 }

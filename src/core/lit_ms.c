@@ -108,6 +108,11 @@ static void lambda_m(int m, int L, double mu, double *out)
                  sqrt((double) (l + m) * (l - m));
 }
 
+void ef_ms_legendre(int L, double x, double *P)
+{
+    lambda_m(0, L, x, P);
+}
+
 /* ------------------------------------------------------------ the solve */
 
 struct ef_ms_solve {
@@ -548,10 +553,7 @@ void ef_ms_phase_legendre(int phase, double g, int L, double *b)
         for (int h = 0; h < 2; ++h)
             for (int q = 0; q < NQ; ++q) {
                 const double c = h ? x[q] : -x[q], f = 2 * PI * w[q] * ef_phase_eval(phase, g, c);
-                P[0] = 1;
-                P[1] = c;
-                for (int l = 2; l < L && l < 128; ++l)
-                    P[l] = ((2 * l - 1) * c * P[l - 1] - (l - 1) * P[l - 2]) / l;
+                ef_ms_legendre(L < 128 ? L : 128, c, P);
                 for (int l = 1; l < L && l < 128; ++l)
                     b[l] += f * P[l];
             }
@@ -1010,13 +1012,6 @@ static int same_for_sun(const void *u, int j, int k)
     return same_fog(q->s, q->P, j, k);
 }
 
-static double seconds_since(const struct timespec *t0)
-{
-    struct timespec t1;
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    return (double) (t1.tv_sec - t0->tv_sec) + 1e-9 * (double) (t1.tv_nsec - t0->tv_nsec);
-}
-
 int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *err)
 {
     *out = NULL;
@@ -1054,7 +1049,7 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
         ef_ms_unref(m);
         return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
     }
-    m->info.seconds = seconds_since(&t0);
+    m->info.seconds = ef_lit_seconds_since(&t0);
     *out = m;
     return 0;
 }
@@ -1145,7 +1140,7 @@ int ef_ms_build_sky(const ef_fog_scene *s, ef_ms **out, ef_err *err)
         ef_ms_unref(m);
         return ef_fail(err, "out of memory for the sky light's multiple scattering");
     }
-    m->info.seconds = seconds_since(&t0);
+    m->info.seconds = ef_lit_seconds_since(&t0);
     *out = m;
     return 0;
 }

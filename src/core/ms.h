@@ -151,6 +151,9 @@ void ef_ms_get_info(const ef_ms *m, ef_ms_info *info);
 void ef_ms_ref(ef_ms *m);
 void ef_ms_unref(ef_ms *m);
 
+/* Legendre polynomials P_0..P_{L-1} at x into P. */
+void ef_ms_legendre(int L, double x, double *P);
+
 /* The phase's Legendre coefficients b_0..b_{L-1} (b_0 = 1; p(x) = sum_l
  * (2l + 1) b_l P_l(x) / 4 pi), L <= 128. */
 void ef_ms_phase_legendre(int phase, double g, int L, double *b);
