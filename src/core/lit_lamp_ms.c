@@ -699,9 +699,10 @@ static lms_res res_for(double omega, double g, int L, int coarse)
 }
 
 /* One albedo's table with its estimate: the fine solve, and the
- * difference from the coarse one at each node. */
+ * difference from the coarse one at each node; the fine solve's scalar
+ * fluxes into phi0 and phi1 (may be NULL; ef_lms_build_albedo's). */
 static int build_tab(lms_tab *t, double omega, int phase, double g, const double *b, int L,
-                     int max_order)
+                     int max_order, double *phi0, double *phi1)
 {
     const lms_res rf = res_for(omega, g, L, 0), rc = res_for(omega, g, L, 1);
     t->omega = omega;
@@ -714,7 +715,7 @@ static int build_tab(lms_tab *t, double omega, int phase, double g, const double
     double *qc = malloc((size_t) rc.nr * rc.nx * sizeof *qc), rc_res;
     int its_c;
     if (!t->q || !t->e || !qc ||
-        solve(omega, phase, g, b, L, &rf, max_order, t->q, NULL, NULL, &t->resid, &t->iters) ||
+        solve(omega, phase, g, b, L, &rf, max_order, t->q, phi0, phi1, &t->resid, &t->iters) ||
         solve(omega, phase, g, b, L, &rc, max_order, qc, NULL, NULL, &rc_res, &its_c)) {
         free(qc);
         return -1;
@@ -752,26 +753,17 @@ int ef_lms_build_albedo(double omega, int phase, double g, int max_order, ef_lms
     m->sig[0] = m->sig[1] = m->sig[2] = 1;
     m->scale[0] = m->scale[1] = m->scale[2] = 1;
     lms_tab *t = &m->tab[0];
-    if (build_tab(t, omega, phase, g, b, L, max_order)) {
+    if (build_tab(t, omega, phase, g, b, L, max_order, phi0, phi1)) {
         ef_lms_unref(m);
         return -1;
     }
     m->info.iterated = t->iters;
     m->info.tail_rel = t->resid;
     m->info.nodes = t->nr;
-    if (phi0 || phi1) {
-        const lms_res rf = res_for(omega, g, L, 0);
-        double *tq = malloc((size_t) rf.nr * rf.nx * sizeof *tq), res;
-        int its;
-        if (!tq || solve(omega, phase, g, b, L, &rf, max_order, tq, phi0, phi1, &res, &its)) {
-            free(tq);
-            ef_lms_unref(m);
-            return -1;
-        }
-        free(tq);
-        *nr = rf.nr;
-        *lg = log1p(rf.rmax / LMS_RS);
-    }
+    if (nr)
+        *nr = t->nr;
+    if (lg)
+        *lg = t->lg;
     *out = m;
     return 0;
 }
@@ -830,7 +822,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
                 m->tab_of[k] = -1;
                 continue;
             }
-            if (build_tab(&m->tab[t], om, c->phase, c->g, b, L, 0)) {
+            if (build_tab(&m->tab[t], om, c->phase, c->g, b, L, 0, NULL, NULL)) {
                 ef_lms_unref(m);
                 return ef_fail(err, "out of memory for a lamp's multiple scattering");
             }

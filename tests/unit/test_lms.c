@@ -44,6 +44,7 @@ static void energy_case(double om, double g, double tol1, double tol2)
     /* 4 pi r^2 phi over r, by the trapezoid rule in the grid's own
      * variable u (r = rs (e^(u lg) - 1): dr/du = (r + rs) lg) */
     double I0 = 0, I1 = 0;
+    /* the grid's scale rs, read back from its first node at growth 1 */
     const double rs = ef_lms_rho(nr, 1, 1) / expm1(1.0 / (nr - 1));
     for (int i = 1; i < nr; ++i) {
         const double ra = ef_lms_rho(nr, lg, i - 1), rb = ef_lms_rho(nr, lg, i);
