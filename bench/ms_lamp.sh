@@ -12,7 +12,8 @@
 # and runs exrfog on its depth (every pixel sky, or the wall) with the lamp's
 # scattering=single and =multiple. Errors per 4x4 block (Cycles' noise averaged down),
 # relative to Cycles' radiance with every bounce. Two cases add a black wall over the
-# frame's left half between the camera and the lamp (the glow must stop at it). Then the cost
+# frame's left half between the camera and the lamp (the glow must stop at it), and two put the
+# lamp behind the camera (only the fog it lights is in frame). Then the cost
 # at 1080p: the lamp in exp fog, single against multiple, on 2 threads.
 set -u
 build="${1:-build}"
@@ -35,6 +36,8 @@ for d in 0.2 0.05 0.8; do
     done
 done
 cases+=("0.2 0.95 0.5 wall=4" "0.05 0.95 0.5 wall=4")
+# the lamp behind the camera: the frame shows only the fog it lights
+cases+=("0.05 0.95 0.5 behind" "0.2 0.95 0.5 behind")
 if [[ -n "${MS_LAMP_GRID:-}" ]]; then
     cp "$MS_LAMP_GRID" "$tmp/grid.jsonl" || die "MS_LAMP_GRID=$MS_LAMP_GRID unreadable"
 else
@@ -69,18 +72,19 @@ echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
 echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
 echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
-echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples (or as the table says), 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_lamp_blender.py: homogeneous fog in a cube 4 km wide about the camera, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1)"
+echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples (or as the table says), 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_lamp_blender.py: homogeneous fog in a cube 4 km wide about the camera, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1), or at (1.5, -10, 1) behind the camera"
 echo "- exrfog: exp fog of the same density, albedo and HG g, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple, on the render without fog (every pixel sky, or the black wall)"
 echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
 echo
 "$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'EOF'
 import json, sys, statistics as st
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
-print("| lamp tau | wall | albedo | g | Cycles samples | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
+print("| lamp tau | wall / lamp | albedo | g | Cycles samples | single / Cycles (median) | exrfog single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered |")
 print("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
     print("| %g | %s | %g | %g | %d | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% |" % (
-        r["lamp_tau"], "at %g" % r["wall"] if r["wall"] else "-", r["albedo"], r["g"], r["spp"],
+        r["lamp_tau"], "wall at %g" % r["wall"] if r["wall"] else "behind the camera" if r.get("behind") else "-",
+        r["albedo"], r["g"], r["spp"],
         r["single_share_median"], 100 * r["single_check_median"], 100 * r["rel_median"],
         100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
         r["err_rel_median"], 100 * r["covered"]))

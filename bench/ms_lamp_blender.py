@@ -1,12 +1,13 @@
 """Runs inside Blender (blender -b --factory-startup --python THIS -- OUT SPP BOUNCES DENSITY
-ALBEDO G DIST WIDTH HEIGHT [wall=D]): the point lamp's multiple-scattering reference scene of
+ALBEDO G DIST WIDTH HEIGHT [wall=D] [behind]): the point lamp's multiple-scattering reference scene of
 bench/ms.sh and tests/blender/blender_ms_run.py.
 
 Homogeneous fog everywhere that matters (a cube 4 km wide about the camera: Volume Scatter of
 density DENSITY * ALBEDO with HG anisotropy G plus Volume Absorption of the rest), a black
 world, the camera at the origin looking along +y with a 60 degree field of view, and a point
 lamp of 100 W (radius 0: I = 100 / (4 pi) W/sr) DIST units ahead, 0.15 DIST to the right and
-0.1 DIST up (its own optical depth to the camera is about DENSITY * DIST). With wall=D, a
+0.1 DIST up (its own optical depth to the camera is about DENSITY * DIST); with behind, DIST
+units behind the camera instead (the frame shows only the fog it lights). With wall=D, a
 black wall (it only absorbs) D units ahead covers the frame's left half, between the camera
 and the lamp when D < DIST: the glow must stop at it (no halo). BOUNCES volume bounces (0:
 single scattering; 128: every order), max bounces as many, transparent bounces at their
@@ -29,6 +30,7 @@ bounces = max(bounces, 0)
 dens, albedo, g, dist = (float(v) for v in args[3:7])
 width, height = int(args[7]), int(args[8])
 wall = float(next((a[5:] for a in args[9:] if a.startswith("wall=")), "0"))
+behind = "behind" in args[9:]
 sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
@@ -42,7 +44,7 @@ if plain:
     cube.hide_render = True
 m = ms_scene.fog("fog", dens, albedo, g)
 cube.data.materials.append(m)
-pos = (0.15 * dist, dist, 0.1 * dist)
+pos = (0.15 * dist, -dist if behind else dist, 0.1 * dist)
 pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = 100.0; pl.shadow_soft_size = 0.0
 po = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(po)
 po.location = pos
