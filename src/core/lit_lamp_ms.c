@@ -156,11 +156,43 @@ static double p1_f(const void *qv, double th, double *e)
     return exp(-s - rp) * ef_phase_eval(q->phase, q->g, -sin(th));
 }
 
-static double p1_gk(const p1_q *q, double a, double b, double *err)
+/* int f over the pieces [cut[i], cut[i+1]] (nc cuts) by global adaptive
+ * Gauss-Kronrod, the worst piece bisected until the summed |K - G| is at
+ * most rel of the result (or NI pieces); the second function's integral
+ * plus that estimate into *e. */
+static double gk15_adapt(gk_fn f, const void *q, const double *cut, int nc, double rel, double *e)
 {
-    double R, X;
-    gk15_rule(p1_f, q, a, b, &R, err, &X);
-    return R;
+    enum { NI = 200 };
+    double A[NI], B[NI], R[NI], E[NI], X[NI];
+    int n = 0;
+    for (int i = 0; i + 1 < nc; ++i, ++n) {
+        A[n] = cut[i];
+        B[n] = cut[i + 1];
+        gk15_rule(f, q, A[n], B[n], &R[n], &E[n], &X[n]);
+    }
+    double tot, et, xt;
+    for (;;) {
+        tot = et = xt = 0;
+        int worst = 0;
+        for (int k = 0; k < n; ++k) {
+            tot += R[k];
+            et += E[k];
+            xt += X[k];
+            if (E[k] > E[worst])
+                worst = k;
+        }
+        if (et <= rel * fabs(tot) || n >= NI)
+            break;
+        const double mid = 0.5 * (A[worst] + B[worst]);
+        A[n] = mid;
+        B[n] = B[worst];
+        B[worst] = mid;
+        gk15_rule(f, q, A[worst], B[worst], &R[worst], &E[worst], &X[worst]);
+        gk15_rule(f, q, A[n], B[n], &R[n], &E[n], &X[n]);
+        ++n;
+    }
+    *e = xt + et;
+    return tot;
 }
 
 /* psi_1(r, beta) / omega: the once-scattered radiance of a lamp of
@@ -174,9 +206,6 @@ static double psi1(int phase, double g, double r, double beta)
     if (!(q.h > 0))
         q.h = 1e-300;
     const double ta = atan2(-q.sc, q.h), tb = atan2(LMS_REACH - q.sc, q.h);
-    enum { NI = 200 };
-    double A[NI], B[NI], R[NI], E[NI];
-    int n = 0;
     /* the closest approach and the forward peak's side apart */
     double cut[3] = { ta, tb, tb };
     int nc = 2;
@@ -184,31 +213,8 @@ static double psi1(int phase, double g, double r, double beta)
         cut[1] = 0;
         nc = 3;
     }
-    for (int i = 0; i + 1 < nc; ++i) {
-        A[n] = cut[i];
-        B[n] = cut[i + 1];
-        R[n] = p1_gk(&q, A[n], B[n], &E[n]);
-        ++n;
-    }
-    for (;;) {
-        double tot = 0, et = 0;
-        int worst = 0;
-        for (int i = 0; i < n; ++i) {
-            tot += R[i];
-            et += E[i];
-            if (E[i] > E[worst])
-                worst = i;
-        }
-        if (et <= 1e-10 * fabs(tot) || n >= NI)
-            return tot / q.h;
-        const double m = 0.5 * (A[worst] + B[worst]);
-        A[n] = m;
-        B[n] = B[worst];
-        B[worst] = m;
-        R[worst] = p1_gk(&q, A[worst], B[worst], &E[worst]);
-        R[n] = p1_gk(&q, A[n], B[n], &E[n]);
-        ++n;
-    }
+    double e;
+    return gk15_adapt(p1_f, &q, cut, nc, 1e-10, &e) / q.h;
 }
 
 /* ------------------------------------------------------------ the solve */
@@ -880,49 +886,14 @@ static void g_gk(const g_q *q, double a, double b, double *R, double *E, double 
 static double gather_tab(const lms_tab *t, double sc, double h, double a, double b, double *e)
 {
     g_q q = { t, sc, fmax(h, 1e-12 * (1 + fabs(sc))) };
-    enum { NI = 64 };
-    double A[NI], B[NI], R[NI], E[NI], X[NI];
-    int n = 0;
     const double wa = asinh((a - sc) / q.h), wb = asinh((b - sc) / q.h);
+    double cut[3] = { wa, wb, wb };
+    int nc = 2;
     if (a < sc && sc < b) {
-        A[0] = wa;
-        B[0] = A[1] = 0;
-        B[1] = wb;
-        n = 2;
-    } else {
-        A[0] = wa;
-        B[0] = wb;
-        n = 1;
+        cut[1] = 0;
+        nc = 3;
     }
-    for (int i = 0; i < n; ++i)
-        g_gk(&q, A[i], B[i], &R[i], &E[i], &X[i]);
-    for (;;) {
-        double tot = 0, et = 0;
-        int worst = 0;
-        for (int k = 0; k < n; ++k) {
-            tot += R[k];
-            et += E[k];
-            if (E[k] > E[worst])
-                worst = k;
-        }
-        if (et <= 1e-6 * fabs(tot) || n >= NI)
-            break;
-        const double mid = 0.5 * (A[worst] + B[worst]);
-        A[n] = mid;
-        B[n] = B[worst];
-        B[worst] = mid;
-        g_gk(&q, A[worst], B[worst], &R[worst], &E[worst], &X[worst]);
-        g_gk(&q, A[n], B[n], &R[n], &E[n], &X[n]);
-        ++n;
-    }
-    double tot = 0, et = 0, xt = 0;
-    for (int k = 0; k < n; ++k) {
-        tot += R[k];
-        et += E[k];
-        xt += X[k];
-    }
-    *e = xt + et;
-    return tot;
+    return gk15_adapt(g_f, &q, cut, nc, 1e-6, e);
 }
 
 void ef_lms_gather(const ef_lms *m, const ef_ray *r, double a, double b, double S[3],
