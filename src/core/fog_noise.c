@@ -386,6 +386,7 @@ static int finish_noise(ef_fog_component *c, const ef_fog_context *ctx, ef_err *
             s.fslot[s.axis[k]] = k;
         s.fpoly_off = (int) (head + ntab + nmerged + nhash + nclamp);
         ef_nz_factor_tables(&s, arr + s.fpoly_off);
+        ef_nz_sep_stats(&s, arr + s.fpoly_off);
     }
     if (nclamp) {
         s.clamp_off = (int) (head + ntab + nmerged + nhash);
@@ -513,7 +514,40 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         mean = (double) ef_nz_env_integral(s, R.h0, R.hs, t0, opaque ? tend : t1);
     const double tol = s->ttol > 0 && s->method == M_ADAPTIVE && !(tol_over > 0)
                            ? ef_nz_ttol_budget(&R, t0, tend, L, envmax, linear) : stol;
-    switch (s->method) {
+    /* noise-separable under ttol where the clamp cannot bind: its own
+     * walk (noise_sep.c), unless the kept octaves' pieces would pass its
+     * cap */
+    int done = 0;
+    if (s->separable && !s->clamp && s->fpoly_off && s->method == M_ADAPTIVE && s->ttol > 0 &&
+        !(tol_over > 0) && (s->k == 0 || (isfinite(R.kh0) && isfinite(R.khs)))) {
+        double est;
+        long double cut_at, tfast = tend;
+        /* where the ray has surely stopped: its lower value (the least
+         * factors over the mean fog) past the stop */
+        const double cut_unit = ef_nz_tau_stop(s) / ef_nz_rho_min(s);
+        const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
+        int surely = 0;
+        if (lo1 > 0) {
+            const long double reach = ef_nz_env_reach(&R, t0, cut_unit / pow(lo1, s->naxes));
+            if (reach < tend)
+                tfast = reach, surely = 1;
+        }
+        const double v = ef_nz_separable_fast(&R, t0, tfast, tol, cut_unit, &est, &cut_at,
+                                              &info->dropped);
+        if (!isnan(v)) {
+            done = 1;
+            if (cut_at >= 0 || surely) {
+                const double lower = cut_at >= 0 ? v - est : fmax(v - est, cut_unit);
+                unit = ef_nz_stop_report(s, lower, (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1),
+                                         stop_err);
+                stopped = 1;
+            } else {
+                unit = v;
+                err = est + tail;
+            }
+        }
+    }
+    if (!done) switch (s->method) {
     case M_EXACT:
     case M_ADAPTIVE: {
         /* Chunk by chunk when the fog may turn opaque on the way (its upper

@@ -11,6 +11,7 @@
  *   noise_plan.c    the adaptive planner: nodes per octave, octaves dropped
  *   noise_linear.c  the default method: segments, the clamp's share, the stop
  *   noise_preint.c  noise-separable's preintegrated evaluation
+ *   noise_sep.c     noise-separable's default method where the clamp cannot bind
  *
  * The static inline helpers here are on every hot path; the ef_nz_
  * functions cross files (those defined EF_MULTIVERSION are declared here
@@ -93,6 +94,12 @@ typedef struct nstate {
      * (ef_nz_factor_tables: [axis slot][octave][cell][7]), and axis a's
      * slot; 0 when none */
     int fpoly_off, fslot[3];
+    /* noise-separable, per axis slot and octave: the mean of the factor
+     * octave over its period, and the largest variance per cell of a
+     * window's sum of its cell integrals, and its mean square
+     * (ef_nz_sep_stats) */
+    double sep_mu[3][EF_FBM_MAX_OCTAVES], sep_r[3][EF_FBM_MAX_OCTAVES];
+    double sep_ms[3][EF_FBM_MAX_OCTAVES];
 } nstate;
 
 /* lod=pixel's fade of an octave at x = s / S: 1 up to x = 1 (the cell at
@@ -394,6 +401,20 @@ double ef_nz_march(rayc *R, long double t0, long double t1, int n);
 /* A bound on the march's error. */
 double ef_nz_march_bound(const rayc *R, long double t0, long double t1, int n, double unit);
 
+/* ---- noise_sep.c: noise-separable where the clamp cannot bind ---- */
+
+/* Fills sep_mu and sep_r from the factor cell polynomials tab. */
+void ef_nz_sep_stats(nstate *s, const double *tab);
+/* integral of env * shape over [t0, tend] with the octaves whose cells
+ * are many dropped while SEP_SIGMAS standard deviations of their sum fit
+ * 3/4 of tol (tau / rho units), the rest piece by piece; *est the
+ * estimate of the error (the dropped octaves', and a bound of the
+ * quadrature's); *dropped the factor octaves dropped. With cut_unit finite, stops where the value reached less
+ * *est passes it (*cut_at >= 0 then). NAN when the kept octaves would
+ * take more than its piece cap (the caller's general path then). */
+double ef_nz_separable_fast(rayc *R, long double t0, long double tend, double tol,
+                            double cut_unit, double *est, long double *cut_at, double *dropped);
+
 /* ---- noise_plan.c: nodes per octave and octaves kept ---- */
 
 /* What octave i can add over a stretch of length L (hard bound or sigmas sd). */
@@ -417,6 +438,8 @@ double ef_nz_rest_estimate(const nstate *s, int only, double L);
 /* Under ttol, the error of tau this ray may have. */
 double ef_nz_ttol_budget(const rayc *R, long double t0, long double t1, double L, double envmax,
                          int linear);
+/* The same for a ray whose tau / rho is at least lo. */
+double ef_nz_ttol_dtau(const nstate *s, double lo);
 
 /* ---- noise_linear.c: the default method, segment by segment ---- */
 

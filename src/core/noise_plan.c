@@ -345,6 +345,11 @@ double ef_nz_ttol_budget(const rayc *R, long double t0, long double t1, double L
         const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
         lo = lo1 > 0 ? pow(lo1, s->separable ? s->naxes : 1) * m : 0;
     }
+    return ef_nz_ttol_dtau(s, lo);
+}
+
+double ef_nz_ttol_dtau(const nstate *s, double lo)
+{
     if (!(lo > 0))
         lo = 0;
     double tol = INFINITY;
