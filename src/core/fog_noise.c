@@ -515,8 +515,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
     const double tol = s->ttol > 0 && s->method == M_ADAPTIVE && !(tol_over > 0)
                            ? ef_nz_ttol_budget(&R, t0, tend, L, envmax, linear) : stol;
     /* noise-separable under ttol where the clamp cannot bind: its own
-     * walk (noise_sep.c), unless the kept octaves' pieces would pass its
-     * cap */
+     * walk (noise_sep.c) */
     int done = 0;
     if (s->separable && !s->clamp && s->fpoly_off && s->method == M_ADAPTIVE && s->ttol > 0 &&
         !(tol_over > 0) && (s->k == 0 || (isfinite(R.kh0) && isfinite(R.khs)))) {
@@ -533,18 +532,16 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
                 tfast = reach, surely = 1;
         }
         const double v = ef_nz_separable_fast(&R, t0, tfast, tol, cut_unit, &est, &cut_at,
-                                              &info->dropped);
-        if (!isnan(v)) {
-            done = 1;
-            if (cut_at >= 0 || surely) {
-                const double lower = cut_at >= 0 ? v - est : fmax(v - est, cut_unit);
-                unit = ef_nz_stop_report(s, lower, (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1),
-                                         stop_err);
-                stopped = 1;
-            } else {
-                unit = v;
-                err = est + tail;
-            }
+                                              &info->dropped, &info->over);
+        done = 1;
+        if (cut_at >= 0 || surely) {
+            const double lower = cut_at >= 0 ? v - est : fmax(v - est, cut_unit);
+            unit = ef_nz_stop_report(s, lower, (double) ef_nz_env_integral(s, R.h0, R.hs, t0, t1),
+                                     stop_err);
+            stopped = 1;
+        } else {
+            unit = v;
+            err = est + tail;
         }
     }
     if (!done) switch (s->method) {

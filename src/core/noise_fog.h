@@ -407,13 +407,15 @@ double ef_nz_march_bound(const rayc *R, long double t0, long double t1, int n, d
 void ef_nz_sep_stats(nstate *s, const double *tab);
 /* integral of env * shape over [t0, tend] with the octaves whose cells
  * are many dropped while SEP_SIGMAS standard deviations of their sum fit
- * 3/4 of tol (tau / rho units), the rest piece by piece; *est the
- * estimate of the error (the dropped octaves', and a bound of the
- * quadrature's); *dropped the factor octaves dropped. With cut_unit finite, stops where the value reached less
- * *est passes it (*cut_at >= 0 then). NAN when the kept octaves would
- * take more than its piece cap (the caller's general path then). */
+ * 9/10 of tol (in tau of the densest channel), segment by segment, the
+ * rest piece by piece; *est the estimate of the error (the dropped
+ * octaves', and a bound of the quadrature's); *dropped the factor
+ * octaves the first segment dropped; *over whether the work bound made
+ * later segments drop more. With cut_unit finite, stops where the value
+ * reached less *est passes it (*cut_at >= 0 then). */
 double ef_nz_separable_fast(rayc *R, long double t0, long double tend, double tol,
-                            double cut_unit, double *est, long double *cut_at, double *dropped);
+                            double cut_unit, double *est, long double *cut_at, double *dropped,
+                            int *over);
 
 /* ---- noise_plan.c: nodes per octave and octaves kept ---- */
 

@@ -19,10 +19,12 @@
 /* The sigmas of the dropped octaves' sum the estimate reports (the
  * calibration: bench/noise_sep_calibrate in bench/noise_sweep.md). */
 #define SEP_SIGMAS 3.0
-/* Pieces a ray may take; past them the rest is marched in SEP_MARCH steps
- * with the march's bound as its error (the work bound). */
-#define SEP_PIECE_CAP 40000
-#define SEP_MARCH 1024
+/* The work bound: past this many factor octave evaluations (each a
+ * polynomial of degree 6 from its cell's table, about a fourteenth of a
+ * noise evaluation's work: 400,000 take about 0.7 ms of one core) a ray's
+ * further segments drop every octave they may, whatever the budget, with
+ * their estimate in the error output, and the ray is counted over it. */
+#define SEP_EVAL_CAP 400000
 /* envelope exponent over a piece beyond which the piece is split */
 #define SEP_ENV_STEP 0.5
 
@@ -72,21 +74,29 @@ void ef_nz_sep_stats(nstate *s, const double *tab)
         }
 }
 
-/* e^(-a (t - start)) at fraction x1 of a sub-piece of length h (ah = a h),
- * by its Taylor series where |a h| is small (no exp per node). */
-static inline double env_node(double ah, double x1)
+/* e^(-a (t - start)) at the n Gauss nodes x of a sub-piece of length h
+ * (ah = a h) into e: by its Taylor series where |a h| is small, a loop
+ * across the nodes (no exp per node). */
+static inline void env_nodes(double ah, const double *x, int n, double *e)
 {
-    const double y = ah * x1;   /* a (t - start), |y| <= SEP_ENV_STEP */
+    double y[GL_MAX];
+    for (int g = 0; g < n; ++g) {
+        y[g] = ah * (1 + x[g]) / 2;   /* a (t - start), |y| <= SEP_ENV_STEP */
+        e[g] = 1;
+    }
+    if (ah == 0)
+        return;
     if (fabs(ah) <= SEP_ENV_STEP * (1 + 1e-12)) {
         /* e^-y to degree 11: 0.5^12 / 12! = 5e-13 relative at most */
         static const double inv[12] = { 1, 1, 1. / 2, 1. / 3, 1. / 4, 1. / 5, 1. / 6, 1. / 7,
                                         1. / 8, 1. / 9, 1. / 10, 1. / 11 };
-        double e = 1;
         for (int j = 11; j >= 1; --j)
-            e = 1 - y * inv[j] * e;
-        return e;
+            for (int g = 0; g < n; ++g)
+                e[g] = 1 - y[g] * inv[j] * e[g];
+        return;
     }
-    return exp(-y);
+    for (int g = 0; g < n; ++g)
+        e[g] = exp(-y[g]);
 }
 
 typedef struct sep_line {
@@ -120,8 +130,9 @@ typedef struct sep_plan {
 
 /* Plans [P->ta, P->tb]: drops the factor octaves with the most cells
  * first while the root sum of their estimates' squares stays within
- * sqrt(budget2). H[k]: the root mean square of what multiplies factor k. */
-static void plan_segment(const rayc *R, const double H[3], double budget2, sep_plan *P)
+ * sqrt(budget2) (every one it may with force). H[k]: the root mean square
+ * of what multiplies factor k. */
+static void plan_segment(const rayc *R, const double H[3], double budget2, int force, sep_plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves, M = s->naxes;
@@ -165,7 +176,7 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, sep_p
     P->ndrop = 0;
     for (int p = 0; p < n; ++p) {
         const int j = order[p];
-        if (!(P->var + e2[j] <= budget2))
+        if (!(P->var + e2[j] <= budget2) && !(force && isfinite(e2[j])))
             break;
         P->var += e2[j];
         P->drop[j] = 1;
@@ -187,14 +198,16 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, sep_p
     }
 }
 
-/* Segments of a ray whose envelope decays: each where it falls by e^SEP_SEG
- * (at most SEP_SEGS; the last takes the rest). */
+/* Segments: each where the envelope falls by at most e^SEP_SEG and the
+ * finest factor octave crosses at most SEP_SEG_CELLS cells (at most
+ * SEP_SEGS of equal length). */
 #define SEP_SEG 1.0
-#define SEP_SEGS 48
+#define SEP_SEG_CELLS 4096
+#define SEP_SEGS 256
 
 EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long double tendl, double tol,
                                             double cut_unit, double *est, long double *cut_at,
-                                            double *dropped)
+                                            double *dropped, int *over_out)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves, M = s->naxes;
@@ -228,14 +241,16 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
      * envelope's square, its share only with the envelope: far segments
      * drop more. */
     const double a = s->k > 0 ? R->khs : 0;
-    int nseg = a > 0 ? (int) ceil(a * L / SEP_SEG) : 1;
-    if (nseg > SEP_SEGS)
-        nseg = SEP_SEGS;
-    if (nseg < 1)
-        nseg = 1;
+    double dmax = 0;
+    for (int k = 0; k < M; ++k)
+        for (int i = 0; i < N; ++i)
+            dmax = fmax(dmax, fabs(R->u[s->axis[k] * N + i].dd));
+    const double nenv = a > 0 ? a * L / SEP_SEG : 1, ncell = dmax * L / SEP_SEG_CELLS;
+    const int nseg = (int) fmax(1, fmin(SEP_SEGS, ceil(fmax(nenv, ncell))));
     const double lo1 = 1 - fabs(c) * EF_NOISE_BOUND;
     const double least = lo1 > 0 ? pow(lo1, M) : 0;   /* the shape's least value */
-    double var = 0, pieces = 0, march = 0;
+    double var = 0;
+    int over = 0;
     /* A product of M polynomials of degree 6: 3M + 1 nodes are exact; 2
      * more take the envelope's first terms exactly too. */
     const int ng = a != 0 ? 3 * M + 3 : 3 * M + 1;
@@ -247,8 +262,9 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
     sep_line ln[3 * EF_FBM_MAX_OCTAVES];
     for (int sg = 0; sg < nseg && *cut_at < 0; ++sg) {
     sep_plan plan, *P = &plan;
-    P->ta = sg == 0 ? t0 : t0 + sg * SEP_SEG / a;
-    P->tb = sg == nseg - 1 ? tend : t0 + (sg + 1) * SEP_SEG / a;
+    P->ta = sg == 0 ? t0 : t0 + L * sg / nseg;
+    P->tb = sg == nseg - 1 ? tend : t0 + L * (sg + 1) / nseg;
+    over |= R->evals > SEP_EVAL_CAP;
     {
         const double rest = (double) ef_nz_env_integral(s, R->h0, R->hs, P->ta, tendl);
         const double seg = (double) ef_nz_env_integral(s, R->h0, R->hs, P->ta, P->tb);
@@ -256,19 +272,11 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
         const double B = sg == 0 ? tol : fmax(tol, ef_nz_ttol_dtau(s, lo));
         const double b = 0.9 * B / s->rho_max;   /* B is in tau of the densest channel */
         const double left = b * b - var;
-        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, P);
+        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over, P);
     }
     if (sg == 0)
         *dropped = P->ndrop;
     var += P->var;
-    pieces += P->pieces;
-    if (pieces > SEP_PIECE_CAP) {
-        /* the work bound: the rest marched, with the march's bound */
-        const double v = ef_nz_march(R, P->ta, tendl, SEP_MARCH);
-        kadd(&acc, v);
-        march = ef_nz_march_bound(R, P->ta, tendl, SEP_MARCH, v);
-        break;
-    }
     const double *konst = P->konst;
     double Q[3] = { 0, 0, 0 };   /* integral of h_k^2 env^2 over the segment, per factor */
     int m = 0;
@@ -315,9 +323,10 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
                 /* the nodes' offsets from ta and their weights times the
                  * envelope's change from za */
                 double dt[GL_MAX], wt[GL_MAX], w2[GL_MAX], F[3][GL_MAX];
+                env_nodes(a * hs, gx, ng, wt);
                 for (int g = 0; g < ng; ++g) {
-                    const double x1 = (1 + gx[g]) / 2, en = a != 0 ? env_node(a * hs, x1) : 1;
-                    dt[g] = z * hs + x1 * hs;
+                    const double en = wt[g];
+                    dt[g] = z * hs + (1 + gx[g]) / 2 * hs;
                     wt[g] = gw[g] * en;
                     w2[g] = wt[g] * en;
                 }
@@ -394,6 +403,7 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
     var += post - P->var;
     }
     /* rounding: as the exact method's, 1e-13 of tau */
-    *est = sqrt(var) + quad + march + 1e-13 * fabs(kval(&acc));
+    *over_out = over;
+    *est = sqrt(var) + quad + 1e-13 * fabs(kval(&acc));
     return kval(&acc);
 }
