@@ -678,6 +678,49 @@ static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], 
     return 1;
 }
 
+/* T(0, a) along r1 per channel into Ta, unless Ta[0] >= 0 says it is there. */
+static void seg_ta(const ef_fog_scene *s, const ef_ray *r1, double a, double Ta[3])
+{
+    if (Ta[0] >= 0)
+        return;
+    double tau[3] = { 0, 0, 0 };
+    for (int i = 0; i < s->ncomp; ++i) {
+        double t[3];
+        comp_tau(&s->comp[i], r1, 0, a, t, NULL);
+        for (int k = 0; k < 3; ++k)
+            tau[k] += t[k];
+    }
+    for (int k = 0; k < 3; ++k)
+        Ta[k] = exp(-tau[k]);
+}
+
+/* A point lamp's multiple scattering over [a, b) of r1 seen from a, with
+ * its estimate: where r1 starts at the camera the lamp is bound to, from
+ * the camera's table, G(b) - G(a) over T(0, a) (G the gather from the
+ * camera, which the table holds; the two estimates, over T(0, a), in the
+ * estimate), else integrated along the segment seg. A deep pixel's many
+ * samples then cost two lookups each, not a quadrature each. Where T(0,
+ * a) is below 1e-6 the difference would lose its digits: integrated. */
+static void lms_segment(const ef_light *l, const ef_ray *r1, const ef_ray *seg, double a, double b,
+                        const double Ta[3], double vm[3], double em[3])
+{
+    if (a == 0) {   /* from the camera: the table itself (or integrated off it) */
+        ef_lms_gather_view(l->lms, l->lms_view, r1, 0, b, vm, em);
+        return;
+    }
+    if (!l->lms_view || !(Ta[0] >= 1e-6 && Ta[1] >= 1e-6 && Ta[2] >= 1e-6)) {
+        ef_lms_gather(l->lms, seg, 0, seg->dist, vm, em);
+        return;
+    }
+    double Gb[3], Eb[3], Ga[3], Ea[3];
+    ef_lms_gather_view(l->lms, l->lms_view, r1, 0, b, Gb, Eb);
+    ef_lms_gather_view(l->lms, l->lms_view, r1, 0, a, Ga, Ea);
+    for (int k = 0; k < 3; ++k) {
+        vm[k] = (Gb[k] - Ga[k]) / Ta[k];
+        em[k] = (Eb[k] + Ea[k]) / Ta[k];
+    }
+}
+
 /* The lights' in-scatter over [a, b) of r1 (b may be INFINITY), seen from
  * a (T counted from there), summed over the scene's lights, into S, and
  * their error estimates into E. Ta: T(0, a) per channel when known (the
@@ -691,27 +734,25 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
     for (int j = 0; j < s->nlight; ++j) {
         double v[3], e[3];
         int done = 0;
+        const ef_light *l = &s->light[j];
         if (lt && (lt->dmask >> j & 1) && b <= lt->dend) {
-            if (Ta[0] < 0) {
-                double tau[3] = { 0, 0, 0 };
-                for (int i = 0; i < s->ncomp; ++i) {
-                    double t[3];
-                    comp_tau(&s->comp[i], r1, 0, a, t, NULL);
-                    for (int k = 0; k < 3; ++k)
-                        tau[k] += t[k];
-                }
-                for (int k = 0; k < 3; ++k)
-                    Ta[k] = exp(-tau[k]);
-            }
+            seg_ta(s, r1, a, Ta);
             done = dense_light(&lt->dense[j], a, b, Ta, v, e);
         }
-        if (!done) {
-            ef_light_inscatter(s, &s->light[j], &seg, v, e);
-        } else if (s->light[j].lms) {
-            /* the dense output is the single scattering: a point lamp's
-             * multiple scattering over the segment besides it */
+        if (!done && l->lms) {
+            /* the single scattering here, the multiple below */
+            ef_light single = *l;
+            single.lms = NULL;
+            ef_light_inscatter(s, &single, &seg, v, e);
+        } else if (!done) {
+            ef_light_inscatter(s, l, &seg, v, e);
+        }
+        if (l->lms) {
+            /* the dense output or the segment's inscatter is the single
+             * scattering: a point lamp's multiple scattering beside it */
             double vm[3], em[3];
-            ef_lms_gather(s->light[j].lms, &seg, 0, seg.dist, vm, em);
+            seg_ta(s, r1, a, Ta);
+            lms_segment(l, r1, &seg, a, b, Ta, vm, em);
             for (int k = 0; k < 3; ++k) {
                 v[k] += vm[k];
                 e[k] += em[k];
