@@ -198,87 +198,29 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, int f
     }
 }
 
-/* Segments: each where the envelope falls by at most e^SEP_SEG and the
- * finest factor octave crosses at most SEP_SEG_CELLS cells (at most
- * SEP_SEGS of equal length). */
-#define SEP_SEG 1.0
-#define SEP_SEG_CELLS 4096
-#define SEP_SEGS 256
+/* One ray's walk: the running value, the estimate's square so far, the
+ * quadrature's bound, and the cut. */
+typedef struct sep_walk {
+    ksum acc;
+    double var, quad, cut_unit;
+    long double cut_at;
+} sep_walk;
 
-EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long double tendl, double tol,
-                                            double cut_unit, double *est, long double *cut_at,
-                                            double *dropped, int *over_out)
+/* Walks segment P of R piece by piece between the kept octaves' faces,
+ * ng Gauss nodes a piece, adding to W's value and quadrature bound, and
+ * into Q per factor the integral of h_k^2 env^2 (what the dropped
+ * octaves' estimate needs); stops where W's value less its estimate
+ * passes W->cut_unit (W->cut_at >= 0 then). Inlined into the caller,
+ * so each of its builds (EF_MULTIVERSION) has its own. */
+EF_INLINE void walk_segment(rayc *R, const sep_plan *P, int ng, sep_walk *W, double Q[3])
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves, M = s->naxes;
-    const double t0 = (double) t0l, tend = (double) tendl, L = tend - t0;
-    const double c = s->contrast;
-    *cut_at = -1;
-    *est = 0;
-    *dropped = 0;
-    if (!(L > 0))
-        return 0;
-    /* What multiplies a dropped octave of factor k: every other factor,
-     * independent of it, whose mean square is 1 + c^2 sum_i w_i^2 ms_i
-     * (octaves independent, means 0). */
-    double H[3];
-    for (int k = 0; k < M; ++k) {
-        H[k] = 1;
-        for (int o = 0; o < M; ++o) {
-            double v = 1;
-            for (int i = 0; o != k && i < N; ++i)
-                v += c * c * s->fbm.weight[i] * s->fbm.weight[i] * s->sep_ms[o][i];
-            H[k] *= v;
-        }
-        H[k] = sqrt(H[k]);
-    }
-    /* The segments: where the envelope decays, each where it falls by
-     * e^SEP_SEG. Each is planned when the walk reaches it, with its share
-     * of the budget's square (its part of the envelope's integral still
-     * to come) out of what the segments before left: the budget itself
-     * grows with the lower value of tau reached (an error past it moves T
-     * by T times as much). A dropped octave's square falls with the
-     * envelope's square, its share only with the envelope: far segments
-     * drop more. */
-    const double a = s->k > 0 ? R->khs : 0;
-    double dmax = 0;
-    for (int k = 0; k < M; ++k)
-        for (int i = 0; i < N; ++i)
-            dmax = fmax(dmax, fabs(R->u[s->axis[k] * N + i].dd));
-    const double nenv = a > 0 ? a * L / SEP_SEG : 1, ncell = dmax * L / SEP_SEG_CELLS;
-    const int nseg = (int) fmax(1, fmin(SEP_SEGS, ceil(fmax(nenv, ncell))));
-    const double lo1 = 1 - fabs(c) * EF_NOISE_BOUND;
-    const double least = lo1 > 0 ? pow(lo1, M) : 0;   /* the shape's least value */
-    double var = 0;
-    int over = 0;
-    /* A product of M polynomials of degree 6: 3M + 1 nodes are exact; 2
-     * more take the envelope's first terms exactly too. */
-    const int ng = a != 0 ? 3 * M + 3 : 3 * M + 1;
-    const double *gx = s->glx[ng], *gw = s->glw[ng];
-    ksum acc = { 0, 0 };
-    double quad = 0;
+    const double c = s->contrast, a = s->k > 0 ? R->khs : 0;
+    const double *gx = s->glx[ng], *gw = s->glw[ng], *konst = P->konst;
     double frac0[3 * EF_FBM_MAX_OCTAVES];
     const double *cp[3 * EF_FBM_MAX_OCTAVES];
     sep_line ln[3 * EF_FBM_MAX_OCTAVES];
-    for (int sg = 0; sg < nseg && *cut_at < 0; ++sg) {
-    sep_plan plan, *P = &plan;
-    P->ta = sg == 0 ? t0 : t0 + L * sg / nseg;
-    P->tb = sg == nseg - 1 ? tend : t0 + L * (sg + 1) / nseg;
-    over |= R->evals > SEP_EVAL_CAP;
-    {
-        const double rest = (double) ef_nz_env_integral(s, R->h0, R->hs, P->ta, tendl);
-        const double seg = (double) ef_nz_env_integral(s, R->h0, R->hs, P->ta, P->tb);
-        const double lo = kval(&acc) - sqrt(var) - quad + least * rest;
-        const double B = sg == 0 ? tol : fmax(tol, ef_nz_ttol_dtau(s, lo));
-        const double b = 0.9 * B / s->rho_max;   /* B is in tau of the densest channel */
-        const double left = b * b - var;
-        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over, P);
-    }
-    if (sg == 0)
-        *dropped = P->ndrop;
-    var += P->var;
-    const double *konst = P->konst;
-    double Q[3] = { 0, 0, 0 };   /* integral of h_k^2 env^2 over the segment, per factor */
     int m = 0;
     for (int k = 0; k < M; ++k)
         for (int i = 0; i < N; ++i) {
@@ -366,7 +308,7 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
             }
             R->evals += (double) ng * sub * m;
             R->cells += 1;
-            kadd(&acc, piece);
+            kadd(&W->acc, piece);
             if (a != 0) {
                 /* The rule is exact for the product times the envelope's
                  * Taylor terms to degree 2 ng - 1 - 6 M = 5; the next,
@@ -374,7 +316,7 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
                  * and the integral each take at most once. */
                 const double y = fabs(a) * hs;
                 const double y3 = y * y * y;
-                quad += 2 * y3 * y3 / 720 * s->bound * h * emax;
+                W->quad += 2 * y3 * y3 / 720 * s->bound * h * emax;
             }
         }
         for (int q = 0; q < m; ++q)
@@ -383,27 +325,103 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
                 ln[q].next = line_exit(&ln[q]);
             }
         ta = tb;
-        if (cut_unit < INFINITY && ta < tend && kval(&acc) - sqrt(var) - quad >= cut_unit) {
-            *cut_at = ta;
+        if (W->cut_unit < INFINITY && ta < te && kval(&W->acc) - sqrt(W->var) - W->quad >= W->cut_unit) {
+            W->cut_at = ta;
             break;
         }
     }
-    /* the segment's estimate from the factors the walk met (what
-     * multiplies a dropped octave on this ray, not its mean over rays),
-     * in place of the plan's */
-    double post = 0;
-    for (int k = 0; k < M; ++k)
-        for (int i = 0; i < N; ++i) {
-            const int j = k * N + i;
-            if (P->drop[j]) {
-                const double x = fmin(SEP_SIGMAS * sqrt(P->coef[j] * Q[k]), P->hard[j]);
-                post += x * x;
-            }
+}
+
+/* Segments: each where the envelope falls by at most e^SEP_SEG and the
+ * finest factor octave crosses at most SEP_SEG_CELLS cells (at most
+ * SEP_SEGS of equal length). */
+#define SEP_SEG 1.0
+#define SEP_SEG_CELLS 4096
+#define SEP_SEGS 256
+
+EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long double tendl, double tol,
+                                            double cut_unit, double *est, long double *cut_at,
+                                            double *dropped, int *over_out)
+{
+    const nstate *s = R->s;
+    const int N = s->fbm.octaves, M = s->naxes;
+    const double t0 = (double) t0l, tend = (double) tendl, L = tend - t0;
+    const double c = s->contrast;
+    *cut_at = -1;
+    *est = 0;
+    *dropped = 0;
+    if (!(L > 0))
+        return 0;
+    /* What multiplies a dropped octave of factor k: every other factor,
+     * independent of it, whose mean square is 1 + c^2 sum_i w_i^2 ms_i
+     * (octaves independent, means 0). */
+    double H[3];
+    for (int k = 0; k < M; ++k) {
+        H[k] = 1;
+        for (int o = 0; o < M; ++o) {
+            double v = 1;
+            for (int i = 0; o != k && i < N; ++i)
+                v += c * c * s->fbm.weight[i] * s->fbm.weight[i] * s->sep_ms[o][i];
+            H[k] *= v;
         }
-    var += post - P->var;
+        H[k] = sqrt(H[k]);
     }
-    /* rounding: as the exact method's, 1e-13 of tau */
+    /* The segments: where the envelope decays, each where it falls by
+     * e^SEP_SEG. Each is planned when the walk reaches it, with its share
+     * of the budget's square (its part of the envelope's integral still
+     * to come) out of what the segments before left: the budget itself
+     * grows with the lower value of tau reached (an error past it moves T
+     * by T times as much). A dropped octave's square falls with the
+     * envelope's square, its share only with the envelope: far segments
+     * drop more. */
+    const double a = s->k > 0 ? R->khs : 0;
+    double dmax = 0;
+    for (int k = 0; k < M; ++k)
+        for (int i = 0; i < N; ++i)
+            dmax = fmax(dmax, fabs(R->u[s->axis[k] * N + i].dd));
+    const double nenv = a > 0 ? a * L / SEP_SEG : 1, ncell = dmax * L / SEP_SEG_CELLS;
+    const int nseg = (int) fmax(1, fmin(SEP_SEGS, ceil(fmax(nenv, ncell))));
+    const double lo1 = 1 - fabs(c) * EF_NOISE_BOUND;
+    const double least = lo1 > 0 ? pow(lo1, M) : 0;   /* the shape's least value */
+    int over = 0;
+    /* A product of M polynomials of degree 6: 3M + 1 nodes are exact; 2
+     * more take the envelope's first terms exactly too. */
+    const int ng = a != 0 ? 3 * M + 3 : 3 * M + 1;
+    sep_walk W = { { 0, 0 }, 0, 0, cut_unit, -1 };
+    for (int sg = 0; sg < nseg && W.cut_at < 0; ++sg) {
+        sep_plan P;
+        P.ta = sg == 0 ? t0 : t0 + L * sg / nseg;
+        P.tb = sg == nseg - 1 ? tend : t0 + L * (sg + 1) / nseg;
+        over |= R->evals > SEP_EVAL_CAP;
+        const double rest = (double) ef_nz_env_integral(s, R->h0, R->hs, P.ta, tendl);
+        const double seg = (double) ef_nz_env_integral(s, R->h0, R->hs, P.ta, P.tb);
+        const double lo = kval(&W.acc) - sqrt(W.var) - W.quad + least * rest;
+        const double B = sg == 0 ? tol : fmax(tol, ef_nz_ttol_dtau(s, lo));
+        const double b = 0.9 * B / s->rho_max;   /* B is in tau of the densest channel */
+        const double left = b * b - W.var;
+        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over, &P);
+        if (sg == 0)
+            *dropped = P.ndrop;
+        W.var += P.var;
+        double Q[3] = { 0, 0, 0 };
+        walk_segment(R, &P, ng, &W, Q);
+        /* the segment's estimate from the factors the walk met (what
+         * multiplies a dropped octave on this ray, not its mean over
+         * rays), in place of the plan's */
+        double post = 0;
+        for (int k = 0; k < M; ++k)
+            for (int i = 0; i < N; ++i) {
+                const int j = k * N + i;
+                if (P.drop[j]) {
+                    const double x = fmin(SEP_SIGMAS * sqrt(P.coef[j] * Q[k]), P.hard[j]);
+                    post += x * x;
+                }
+            }
+        W.var += post - P.var;
+    }
+    *cut_at = W.cut_at;
     *over_out = over;
-    *est = sqrt(var) + quad + 1e-13 * fabs(kval(&acc));
-    return kval(&acc);
+    /* rounding: as the exact method's, 1e-13 of tau */
+    *est = sqrt(W.var) + W.quad + 1e-13 * fabs(kval(&W.acc));
+    return kval(&W.acc);
 }
