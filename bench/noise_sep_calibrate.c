@@ -5,11 +5,13 @@
  *   noise_sep_calibrate [SPECS [RAYS]]     (default 48 and 200)
  *
  * Draws SPECS random noise-separable fogs from a fixed seed (one to three
- * axes, 2 to 8 octaves, scale 0.5 to 40, |contrast| up to 0.96 where the
- * clamp cannot bind, falloff 0 to 0.1 for half of them, density so that a
+ * axes, 2 to 7 octaves, scale 0.5 to 40, |contrast| up to 0.96 where the
+ * clamp cannot bind, for half of them an envelope falling by e over 2 to
+ * 20 scales, density so that a
  * ray's tau is 0.05 to 10), and per fog RAYS rays (an origin within two
  * scales of the lattice's origin, isotropic, axis-parallel or in a
- * coordinate plane, 2 to 60 scales long, a tenth to the sky). Per ray the
+ * coordinate plane, 0.1 to 40 scales long, a tenth to the sky at 11
+ * degrees or more where the envelope falls). Per ray the
  * default method's T and error output against ef_ref_tau_long. Prints,
  * over the rays whose octaves were dropped (where the estimate is a
  * statistical one): the share of rays whose |dT| exceeds the error output
@@ -59,12 +61,13 @@ int main(int argc, char **argv)
     static const char *const axes[] = { "x", "y", "z", "xz", "xy", "yz", "xyz" };
     for (int sp = 0; sp < nspec; ++sp) {
         const char *ax = axes[(int) uni(0, 7)];
-        const int m = (int) strlen(ax), oct = (int) uni(2, 9);
+        const int m = (int) strlen(ax), oct = (int) uni(2, 8);
         const double scale = exp(uni(log(0.5), log(40)));
         const double c = uni(-0.96, 0.96) / 1.0363538;
-        const double fall = uni(0, 1) < 0.5 ? 0 : uni(0, 0.1);
+        /* an envelope that falls by e over 2 to 20 scales */
+        const double fall = uni(0, 1) < 0.5 ? 0 : 1 / (uni(2, 20) * scale);
         const double tau_target = exp(uni(log(0.05), log(10)));
-        const double len = uni(2, 60) * scale;
+        const double len = uni(2, 40) * scale;
         const double rho = tau_target / len;
         char spec[256];
         snprintf(spec, sizeof spec, "noise-separable:density=%.6g:scale=%.6g:octaves=%d:contrast=%.4g:axes=%s%s",
@@ -102,8 +105,15 @@ int main(int argc, char **argv)
             for (int a = 0; a < 3; ++a)
                 r.dir[a] = d[a] / sqrt(n2);
             r.dist = r.planar = uni(0, 1) < 0.1 && fall > 0 ? INFINITY : uni(0.05, 1) * len;
-            if (isinf(r.dist) && fabs(r.dir[1]) < 0.05)
-                r.dir[1] = r.dir[1] < 0 ? -0.05 : 0.05;   /* sky rays climb or fall */
+            if (isinf(r.dist) && fabs(r.dir[1]) < 0.2) {   /* sky rays climb or fall */
+                r.dir[1] = r.dir[1] < 0 ? -0.2 : 0.2;
+                const double h = sqrt(r.dir[0] * r.dir[0] + r.dir[2] * r.dir[2]);
+                const double sc = sqrt(1 - 0.04) / (h > 0 ? h : 1);
+                r.dir[0] *= h > 0 ? sc : 0;
+                r.dir[2] *= h > 0 ? sc : 0;
+                if (!(h > 0))
+                    r.dir[1] = r.dir[1] < 0 ? -1 : 1;
+            }
             double tau[3];
             ef_tau_info info;
             ef_fog_tau(&comp, &r, tau, &info);
