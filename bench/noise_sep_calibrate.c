@@ -82,7 +82,7 @@ int main(int argc, char **argv)
             return 1;
         }
         (void) m;
-        int sd = 0, su = 0;
+        int sd = 0, su = 0, so = 0;
         for (int k = 0; k < nray; ++k) {
             ef_ray r;
             memset(&r, 0, sizeof r);
@@ -127,8 +127,12 @@ int main(int argc, char **argv)
             ++all;
             const double dtau = fabs((double) (ref[0] - tau[0]));
             const double dT = (double) fabsl(expl(-(long double) tau[0]) - expl(-ref[0]));
-            if (dT > 0x1p-12)
-                ++over;
+            if (dT > 0x1p-12) {
+                ++over, ++so;
+                if (getenv("CALIBRATE_DEBUG"))
+                    fprintf(stderr, "  over: dir %.17g %.17g %.17g dist %g: tau %.12g ref %.12Lg err %.3g dropped %g evals %g\n",
+                            r.dir[0], r.dir[1], r.dir[2], r.dist, tau[0], ref[0], info.err[0], info.dropped, info.evals);
+            }
             if (!(info.dropped > 0))
                 continue;
             ++sd;
@@ -145,7 +149,7 @@ int main(int argc, char **argv)
                             ref[0], info.err[0], info.dropped);
             }
         }
-        printf("%-100s rays with octaves dropped %3d, uncovered %d\n", spec, sd, su);
+        printf("%-100s rays with octaves dropped %3d, uncovered %d, |dT| > 2^-12 %d\n", spec, sd, su, so);
         fflush(stdout);
         ef_fog_free(&comp);
     }

@@ -409,8 +409,8 @@ void ef_nz_sep_stats(nstate *s, const double *tab);
  * are many dropped while SEP_SIGMAS standard deviations of their sum fit
  * 9/10 of tol (in tau of the densest channel), segment by segment, the
  * rest piece by piece; *est the estimate of the error (the dropped
- * octaves', and a bound of the quadrature's); *dropped the factor
- * octaves the first segment dropped; *over whether the work bound made
+ * octaves', and a bound of the quadrature's); *dropped the most
+ * factor octaves a segment dropped; *over whether the work bound made
  * later segments drop more. With cut_unit finite, stops where the value
  * reached less *est passes it (*cut_at >= 0 then). */
 double ef_nz_separable_fast(rayc *R, long double t0, long double tend, double tol,

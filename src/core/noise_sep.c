@@ -21,10 +21,13 @@
 #define SEP_SIGMAS 3.0
 /* The work bound: past this many factor octave evaluations (each a
  * polynomial of degree 6 from its cell's table, about a fourteenth of a
- * noise evaluation's work: 400,000 take about 0.7 ms of one core) a ray's
- * further segments drop every octave they may, whatever the budget, with
- * their estimate in the error output, and the ray is counted over it. */
+ * noise evaluation's work: 400,000 take about 0.8 ms of one core) a ray's
+ * further segments drop the octaves with the most cells, whatever the
+ * budget, until the rest take at most SEP_FORCE_PIECES pieces a segment,
+ * with their estimate in the error output, and the ray is counted over
+ * it. */
 #define SEP_EVAL_CAP 400000
+#define SEP_FORCE_PIECES 64
 /* envelope exponent over a piece beyond which the piece is split */
 #define SEP_ENV_STEP 0.5
 
@@ -130,7 +133,8 @@ typedef struct sep_plan {
 
 /* Plans [P->ta, P->tb]: drops the factor octaves with the most cells
  * first while the root sum of their estimates' squares stays within
- * sqrt(budget2) (every one it may with force). H[k]: the root mean square
+ * sqrt(budget2) (with force, past the work bound, also beyond it while
+ * the rest take more than SEP_FORCE_PIECES pieces). H[k]: the root mean square
  * of what multiplies factor k. */
 static void plan_segment(const rayc *R, const double H[3], double budget2, int force, sep_plan *P)
 {
@@ -174,10 +178,16 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, int f
     memset(P->drop, 0, sizeof P->drop);
     P->var = 0;
     P->ndrop = 0;
+    double left = 0;   /* the pieces the octaves not yet dropped take */
+    for (int p = 0; p < n; ++p)
+        left += cost[p] + 1;
     for (int p = 0; p < n; ++p) {
         const int j = order[p];
-        if (!(P->var + e2[j] <= budget2) && !(force && isfinite(e2[j])))
+        /* past the work bound: dropped while the rest take more than
+         * SEP_FORCE_PIECES, whatever their estimate */
+        if (!(P->var + e2[j] <= budget2) && !(force && isfinite(e2[j]) && left > SEP_FORCE_PIECES))
             break;
+        left -= cost[j] + 1;
         P->var += e2[j];
         P->drop[j] = 1;
         P->ndrop += 1;
@@ -400,8 +410,8 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
         const double b = 0.9 * B / s->rho_max;   /* B is in tau of the densest channel */
         const double left = b * b - W.var;
         plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over, &P);
-        if (sg == 0)
-            *dropped = P.ndrop;
+        if (P.ndrop > *dropped)
+            *dropped = P.ndrop;   /* the most any segment dropped */
         W.var += P.var;
         double Q[3] = { 0, 0, 0 };
         walk_segment(R, &P, ng, &W, Q);
