@@ -114,6 +114,10 @@ int main(int argc, char **argv)
                 if (!(h > 0))
                     r.dir[1] = r.dir[1] < 0 ? -1 : 1;
             }
+            /* CALIBRATE_ONLY=I: fog I alone (the same draws) */
+            const char *only = getenv("CALIBRATE_ONLY");
+            if (only && atoi(only) != sp + 1)
+                continue;
             double tau[3];
             ef_tau_info info;
             ef_fog_tau(&comp, &r, tau, &info);

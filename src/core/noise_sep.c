@@ -346,7 +346,7 @@ EF_INLINE void walk_segment(rayc *R, const sep_plan *P, int ng, sep_walk *W, dou
  * finest factor octave crosses at most SEP_SEG_CELLS cells (at most
  * SEP_SEGS of equal length). */
 #define SEP_SEG 1.0
-#define SEP_SEG_CELLS 4096
+#define SEP_SEG_CELLS 1024
 #define SEP_SEGS 256
 
 EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long double tendl, double tol,
