@@ -21,11 +21,12 @@
 #define SEP_SIGMAS 3.0
 /* The work bound: past this many factor octave evaluations (each a
  * polynomial of degree 6 from its cell's table, about a fourteenth of a
- * noise evaluation's work: 400,000 take about 0.8 ms of one core) a ray's
- * further segments drop the octaves with the most cells, whatever the
- * budget, until the rest take at most SEP_FORCE_PIECES pieces a segment,
- * with their estimate in the error output, and the ray is counted over
- * it. */
+ * noise evaluation's work: 400,000 take about 0.8 ms of one core), or
+ * where a segment would take a ray past 1.25 times that, the rest of the
+ * ray is one last segment that drops the octaves with the most cells,
+ * whatever the budget, until what it takes fits that (at least
+ * SEP_FORCE_PIECES pieces), with their estimate in the error output, and
+ * the ray is counted over the bound. */
 #define SEP_EVAL_CAP 400000
 #define SEP_FORCE_PIECES 64
 /* envelope exponent over a piece beyond which the piece is split */
@@ -133,10 +134,10 @@ typedef struct sep_plan {
 
 /* Plans [P->ta, P->tb]: drops the factor octaves with the most cells
  * first while the root sum of their estimates' squares stays within
- * sqrt(budget2) (with force, past the work bound, also beyond it while
- * the rest take more than SEP_FORCE_PIECES pieces). H[k]: the root mean square
+ * sqrt(budget2) (with force > 0, past the work bound, also beyond it
+ * while the rest take more than force pieces). H[k]: the root mean square
  * of what multiplies factor k. */
-static void plan_segment(const rayc *R, const double H[3], double budget2, int force, sep_plan *P)
+static void plan_segment(const rayc *R, const double H[3], double budget2, double force, sep_plan *P)
 {
     const nstate *s = R->s;
     const int N = s->fbm.octaves, M = s->naxes;
@@ -185,7 +186,7 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, int f
         const int j = order[p];
         /* past the work bound: dropped while the rest take more than
          * SEP_FORCE_PIECES, whatever their estimate */
-        if (!(P->var + e2[j] <= budget2) && !(force && isfinite(e2[j]) && left > SEP_FORCE_PIECES))
+        if (!(P->var + e2[j] <= budget2) && !(force > 0 && isfinite(e2[j]) && left > force))
             break;
         left -= cost[j] + 1;
         P->var += e2[j];
@@ -403,13 +404,31 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
         P.ta = sg == 0 ? t0 : t0 + L * sg / nseg;
         P.tb = sg == nseg - 1 ? tend : t0 + L * (sg + 1) / nseg;
         over |= R->evals > SEP_EVAL_CAP;
+        if (over) {   /* the rest of the ray as one last segment */
+            P.tb = tend;
+            sg = nseg - 1;
+        }
         const double rest = (double) ef_nz_env_integral(s, R->h0, R->hs, P.ta, tendl);
         const double seg = (double) ef_nz_env_integral(s, R->h0, R->hs, P.ta, P.tb);
         const double lo = kval(&W.acc) - sqrt(W.var) - W.quad + least * rest;
         const double B = sg == 0 ? tol : fmax(tol, ef_nz_ttol_dtau(s, lo));
         const double b = 0.9 * B / s->rho_max;   /* B is in tau of the densest channel */
         const double left = b * b - W.var;
-        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over, &P);
+        /* past the work bound: what the rest may still take, a quarter
+         * of it, in pieces of every line */
+        const double allow = fmax(SEP_FORCE_PIECES, (SEP_EVAL_CAP * 1.25 - R->evals) / (ng * M * N));
+        plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over ? allow : 0, &P);
+        int kept = 0;
+        for (int j = 0; j < M * N; ++j)
+            kept += !P.drop[j];
+        if (!over && R->evals + P.pieces * ng * kept > SEP_EVAL_CAP * 1.25) {
+            /* this segment would pass the work bound by more than a
+             * quarter: the rest as one last segment, held to that */
+            over = 1;
+            P.tb = tend;
+            sg = nseg - 1;
+            plan_segment(R, H, left > 0 ? left : 0, allow, &P);
+        }
         if (P.ndrop > *dropped)
             *dropped = P.ndrop;   /* the most any segment dropped */
         W.var += P.var;
