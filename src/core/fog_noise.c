@@ -527,13 +527,7 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         /* where the ray has surely stopped: its lower value (the least
          * factors over the mean fog) past the stop */
         const double cut_unit = ef_nz_tau_stop(s) / ef_nz_rho_min(s);
-        const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
-        int surely = 0;
-        if (lo1 > 0) {
-            const long double reach = ef_nz_env_reach(&R, t0, cut_unit / pow(lo1, s->naxes));
-            if (reach < tend)
-                tfast = reach, surely = 1;
-        }
+        const int surely = ef_nz_sure_cut(&R, t0, ef_nz_tau_stop(s), &tfast);
         const double v = ef_nz_separable_fast(&R, t0, tfast, tol, cut_unit, &est, &cut_at,
                                               &info->dropped, &info->over);
         done = 1;

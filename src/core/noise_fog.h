@@ -134,6 +134,13 @@ static inline const nstate *state(const ef_fog_component *c)
  * gradient-number pairs (grid_hash). */
 #define GRID_HASH_WORDS (65536 + 512)
 
+/* A factor octave's cell polynomial (ef_nz_cell_poly's 7 coefficients)
+ * at fraction y of its cell. */
+static inline double cell_poly_at(const double *p, double y)
+{
+    return (((((p[6] * y + p[5]) * y + p[4]) * y + p[3]) * y + p[2]) * y + p[1]) * y + p[0];
+}
+
 /* ---- lattice coordinates along a ray ---- */
 
 /* A noise coordinate along the ray: u(t) = b + t d, b reduced modulo 256. */
@@ -357,6 +364,9 @@ double ef_nz_rho_min(const nstate *s);
 long double ef_nz_env_reach(const rayc *R, long double t0, long double need);
 /* Moves *tend to where the fog is certainly opaque; 1 if it cut. */
 int ef_nz_opaque_cut(const rayc *R, long double t0, long double *tend);
+/* Moves *tend to where tau's lower bound (rho_min (1 - |c| bound)^m times
+ * the envelope's integral) reaches tau, if sooner; 1 if it cut. */
+int ef_nz_sure_cut(const rayc *R, long double t0, double tau, long double *tend);
 /* Whether the envelope passes e^690 on [t0, t1]. */
 int ef_nz_env_overflows(const nstate *s, double h0, double hs, double t0, double t1);
 /* Binds the camera at org: each octave's lattice lines and noise there. */

@@ -153,7 +153,7 @@ double ef_nz_factor_octave(const nstate *s, int a, int i, double u)
         const double *p = (const double *) (const void *) s + s->fpoly_off +
                           (((size_t) s->fslot[a] * (size_t) s->fbm.octaves + (size_t) i) * 256 +
                            (size_t) (x & 255)) * 7;
-        return (((((p[6] * f + p[5]) * f + p[4]) * f + p[3]) * f + p[2]) * f + p[1]) * f + p[0];
+        return cell_poly_at(p, f);
     }
     return factor_octave_at(s, a, i, x, f);
 }
@@ -266,12 +266,18 @@ long double ef_nz_env_reach(const rayc *R, long double t0, long double need)
  * it cut. */
 int ef_nz_opaque_cut(const rayc *R, long double t0, long double *tend)
 {
+    return ef_nz_sure_cut(R, t0, OPAQUE_TAU, tend);
+}
+
+/* Moves *tend to where that lower bound reaches tau, if sooner; 1 if it cut. */
+int ef_nz_sure_cut(const rayc *R, long double t0, double tau, long double *tend)
+{
     const nstate *s = R->s;
     const double lo1 = 1 - fabs(s->contrast) * EF_NOISE_BOUND;
     if (!(lo1 > 0))
         return 0;
     const double rho_lo = ef_nz_rho_min(s);
-    const long double need = OPAQUE_TAU / (rho_lo * pow(lo1, s->separable ? s->naxes : 1));
+    const long double need = tau / (rho_lo * pow(lo1, s->separable ? s->naxes : 1));
     const long double tc = ef_nz_env_reach(R, t0, need);
     if (!(tc < *tend))
         return 0;

@@ -69,7 +69,7 @@ void ef_nz_sep_stats(nstate *s, const double *tab)
             for (int m = 0; m < 256; ++m)
                 for (int g = 0; g < 16; ++g) {
                     const double y = (g + 0.5) / 16, *q = p + 7 * m;
-                    const double v = (((((q[6] * y + q[5]) * y + q[4]) * y + q[3]) * y + q[2]) * y + q[1]) * y + q[0];
+                    const double v = cell_poly_at(q, y);
                     q2 += v * v;
                 }
             s->sep_ms[k][i] = q2 / 4096;
@@ -185,7 +185,7 @@ static void plan_segment(const rayc *R, const double H[3], double budget2, doubl
     for (int p = 0; p < n; ++p) {
         const int j = order[p];
         /* past the work bound: dropped while the rest take more than
-         * SEP_FORCE_PIECES, whatever their estimate */
+         * force pieces, whatever their estimate */
         if (!(P->var + e2[j] <= budget2) && !(force > 0 && isfinite(e2[j]) && left > force))
             break;
         left -= cost[j] + 1;
@@ -293,7 +293,7 @@ EF_INLINE void walk_segment(rayc *R, const sep_plan *P, int ng, sep_walk *W, dou
                         double y = f0 + dt[g] * d;
                         y = y < 0 ? 0 : y;
                         y = y > 1 ? 1 : y;
-                        Fk[g] += w * ((((((p[6] * y + p[5]) * y + p[4]) * y + p[3]) * y + p[2]) * y + p[1]) * y + p[0]);
+                        Fk[g] += w * cell_poly_at(p, y);
                     }
                 }
                 double sum = 0, q[3] = { 0, 0, 0 };
@@ -418,10 +418,7 @@ EF_MULTIVERSION double ef_nz_separable_fast(rayc *R, long double t0l, long doubl
          * of it, in pieces of every line */
         const double allow = fmax(SEP_FORCE_PIECES, (SEP_EVAL_CAP * 1.25 - R->evals) / (ng * M * N));
         plan_segment(R, H, left > 0 && rest > 0 ? left * fmin(1, seg / rest) : 0, over ? allow : 0, &P);
-        int kept = 0;
-        for (int j = 0; j < M * N; ++j)
-            kept += !P.drop[j];
-        if (!over && R->evals + P.pieces * ng * kept > SEP_EVAL_CAP * 1.25) {
+        if (!over && R->evals + P.pieces * ng * (M * N - P.ndrop) > SEP_EVAL_CAP * 1.25) {
             /* this segment would pass the work bound by more than a
              * quarter: the rest as one last segment, held to that */
             over = 1;
