@@ -111,7 +111,8 @@ typedef struct ef_chunk {
     int nextra;
     /* With ef_stream_opts.halo, the rows just outside the unit as read
      * (0: row y0 - 1, 1: row y0 + h; w values each), NULL where the data
-     * window ends or the part is tiled; read-only. */
+     * window ends; read-only. A tiled part is then walked a row of tiles
+     * per unit (x0 and w the data window's). */
     const float *halo_rgb[2][3], *halo_alpha[2], *halo_depth[2];
 } ef_chunk;
 

@@ -20,8 +20,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* The encoded chunks of one unit, in write order. */
-#define EF_UNIT_MAX_CHUNKS 64
+/* The encoded chunks of one unit, in write order (a row of tiles under
+ * --edges: up to 1,024 tiles). */
+#define EF_UNIT_MAX_CHUNKS 1024
 typedef struct ef_unit_buf {
     uint8_t *data;
     size_t len, cap;

@@ -27,6 +27,10 @@ typedef struct part_geom {
     exr_attr_box2i_t dw;
     int width, height;
     int tiled, tw, th, ntx;
+    /* tiled, walked a row of tiles per unit (the halo's: a unit then has
+     * its left and right neighbours in it, and its rows above and below in
+     * the units above and below, as scanline units do) */
+    int tile_rows;
     int in_rows;              /* scanlines per input chunk */
     int unit_rows;            /* scanline: rows per unit (a multiple of both chunkings) */
     int nunits;
@@ -62,10 +66,22 @@ static int geom_init(exr_const_context_t ctx, int p, int out_rows, part_geom *g)
     return 0;
 }
 
+/* Walks tiled part g a row of tiles per unit. */
+static void geom_tile_rows(part_geom *g)
+{
+    g->tile_rows = 1;
+    g->nunits = (g->height + g->th - 1) / g->th;
+}
+
 /* The rectangle of unit u, in absolute pixels. */
 static void unit_rect(const part_geom *g, int u, int *x0, int *y0, int *w, int *h)
 {
-    if (g->tiled) {
+    if (g->tile_rows) {
+        *x0 = g->dw.min.x;
+        *y0 = g->dw.min.y + u * g->th;
+        *w = g->width;
+        *h = g->dw.max.y + 1 - *y0 < g->th ? g->dw.max.y + 1 - *y0 : g->th;
+    } else if (g->tiled) {
         int tx = u % g->ntx, ty = u / g->ntx;
         *x0 = g->dw.min.x + tx * g->tw;
         *y0 = g->dw.min.y + ty * g->th;
@@ -77,6 +93,18 @@ static void unit_rect(const part_geom *g, int u, int *x0, int *y0, int *w, int *
         *w = g->width;
         *h = g->dw.max.y + 1 - *y0 < g->unit_rows ? g->dw.max.y + 1 - *y0 : g->unit_rows;
     }
+}
+
+/* The most pixels a unit holds (a unit never exceeds the data window,
+ * whatever the tile size claims). */
+static size_t unit_pixels(const part_geom *g)
+{
+    const size_t th = (size_t) (g->th < g->height ? g->th : g->height);
+    if (g->tile_rows)
+        return (size_t) g->width * th;
+    if (g->tiled)
+        return (size_t) (g->tw < g->width ? g->tw : g->width) * th;
+    return (size_t) g->width * (size_t) g->unit_rows;
 }
 
 /* Planes hold uint channels as uint32, so ids pass through exactly, unless
@@ -582,8 +610,8 @@ static void job_fail(part_job *j, const char *file, const char *fmt, int a, cons
 
 /* Packs and compresses one output chunk, copying the bytes into o. */
 static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
-                        const exr_chunk_info_t *ci, int cy, void **planes, int stride, int oy,
-                        ef_unit_buf *o, int key_y, int key_ty, half_scratch *hs)
+                        const exr_chunk_info_t *ci, int cx, int cy, void **planes, int stride,
+                        int ox, int oy, ef_unit_buf *o, int key_y, int key_ty, half_scratch *hs)
 {
     exr_result_t rv = *ready ? exr_encoding_update(j->out, j->part, ci, enc)
                              : exr_encoding_initialize(j->out, j->part, ci, enc);
@@ -601,7 +629,8 @@ static int encode_chunk(part_job *j, exr_encode_pipeline_t *enc, int *ready,
             ++k;
         if (k == j->nch + j->nextra)
             return -1;
-        ch->encode_from_ptr = (const uint8_t *) planes[k] + 4 * (size_t) (cy - oy) * (size_t) stride;
+        ch->encode_from_ptr = (const uint8_t *) planes[k] +
+                              4 * ((size_t) (cy - oy) * (size_t) stride + (size_t) (cx - ox));
         ch->user_data_type = k < j->nch ? plane_type(ch->data_type, j->as_float[k]) : EXR_PIXEL_FLOAT;
         ch->user_bytes_per_element = 4;
         ch->user_pixel_stride = 4;
@@ -795,9 +824,7 @@ static void *worker(void *arg)
     half_scratch hs = { NULL, 0, ef_half_fast() };
     float *depth[EF_MAX_VIEWS] = { NULL };
     /* A unit never exceeds the data window, whatever the tile size claims. */
-    size_t cap = j->g.tiled ? (size_t) (j->g.tw < j->g.width ? j->g.tw : j->g.width) *
-                                  (size_t) (j->g.th < j->g.height ? j->g.th : j->g.height)
-                            : (size_t) j->g.width * (size_t) j->g.unit_rows;
+    size_t cap = unit_pixels(&j->g);
     const int nplanes = j->nch + j->nextra;
     void **planes = calloc((size_t) nplanes, sizeof *planes);
     int ok = planes != NULL;
@@ -823,7 +850,7 @@ static void *worker(void *arg)
     }
     /* The halo (opts->halo): per side a reader of this part whose chunk
      * cache serves the units that share it, and per target its rows. */
-    const int halo = j->halo && !j->g.tiled;
+    const int halo = j->halo && (!j->g.tiled || j->g.tile_rows);
     depth_reader hr[2];
     memset(hr, 0, sizeof hr);
     float *hbuf = NULL;
@@ -860,17 +887,18 @@ static void *worker(void *arg)
         double t0 = ef_now();
         /* decode (unless the unit above left this unit's planes) */
         const int pre = halo && pre_take(j, u, planes, (size_t) w * (size_t) h * 4);
-        for (int y = y0; !pre && y < y0 + h; y += j->g.tiled ? h : j->g.in_rows) {
-            exr_chunk_info_t ci;
-            int cx, cy;
-            if (chunk_at(j->in, j->part, &j->g, x0, y, &ci, &cx, &cy) ||
-                decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0, y0,
-                             j->as_float, j->codec, &hs)) {
-                job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is truncated or "
-                            "corrupt", y, ef_exr_last_core_message());
-                goto out;
+        for (int y = y0; !pre && y < y0 + h; y += j->g.tiled ? h : j->g.in_rows)
+            for (int x = x0; x < x0 + w; x += j->g.tiled ? j->g.tw : w) {
+                exr_chunk_info_t ci;
+                int cx, cy;
+                if (chunk_at(j->in, j->part, &j->g, x, y, &ci, &cx, &cy) ||
+                    decode_chunk(j->in, j->part, &ci, cx, cy, &dec, &dec_ready, planes, w, x0,
+                                 y0, j->as_float, j->codec, &hs)) {
+                    job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is "
+                                "truncated or corrupt", y, ef_exr_last_core_message());
+                    goto out;
+                }
             }
-        }
         for (int t = 0; t < j->ntarget; ++t)
             if (j->t[t].depth_local < 0 && depth_read(&dr[t], x0, y0, w, h, depth[t])) {
                 job_fail(j, j->depth_path,
@@ -977,22 +1005,23 @@ static void *worker(void *arg)
         ob.n = 0;
         ob.len = 0;
         int step = j->g.tiled ? h : j->out_rows;
-        for (int y = y0; y < y0 + h; y += step) {
-            exr_chunk_info_t ci;
-            exr_result_t rv;
-            int tx = (x0 - j->g.dw.min.x) / (j->g.tiled ? j->g.tw : 1);
-            int ty = (y0 - j->g.dw.min.y) / (j->g.tiled ? j->g.th : 1);
-            if (j->g.tiled)
-                rv = exr_write_tile_chunk_info(j->out, j->part, tx, ty, 0, 0, &ci);
-            else
-                rv = exr_write_scanline_chunk_info(j->out, j->part, y, &ci);
-            if (rv || encode_chunk(j, &enc, &enc_ready, &ci, y, planes, w, y0, &ob,
-                                   j->g.tiled ? tx : y, ty, &hs)) {
-                job_fail(j, j->out_path, "cannot encode the output chunk at scanline %d", y,
-                         ef_exr_last_core_message());
-                goto out;
+        for (int y = y0; y < y0 + h; y += step)
+            for (int x = x0; x < x0 + w; x += j->g.tiled ? j->g.tw : w) {
+                exr_chunk_info_t ci;
+                exr_result_t rv;
+                int tx = (x - j->g.dw.min.x) / (j->g.tiled ? j->g.tw : 1);
+                int ty = (y0 - j->g.dw.min.y) / (j->g.tiled ? j->g.th : 1);
+                if (j->g.tiled)
+                    rv = exr_write_tile_chunk_info(j->out, j->part, tx, ty, 0, 0, &ci);
+                else
+                    rv = exr_write_scanline_chunk_info(j->out, j->part, y, &ci);
+                if (rv || encode_chunk(j, &enc, &enc_ready, &ci, x, y, planes, w, x0, y0, &ob,
+                                       j->g.tiled ? tx : y, ty, &hs)) {
+                    job_fail(j, j->out_path, "cannot encode the output chunk at scanline %d", y,
+                             ef_exr_last_core_message());
+                    goto out;
+                }
             }
-        }
         double t3 = ef_now();
         te += t3 - t2;
         /* park; the ring writes it in unit order */
@@ -1228,6 +1257,19 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
         j.out_rows = 1;
     if (geom_init(in->ctx, p, j.out_rows, &j.g))
         return ef_fail(err, "part %d: cannot read its chunk layout", p);
+    /* --edges on a tiled part: a row of tiles per unit, so pixels at a
+     * tile's border see their neighbours (a row of tiles holds at most
+     * EF_UNIT_MAX_CHUNKS tiles: one output chunk each) */
+    if (j.halo && j.g.tiled) {
+        if (j.g.ntx > EF_UNIT_MAX_CHUNKS) {
+            ef_fail(err, "part %d: a row of its tiles holds %d tiles, more than the %d "
+                    "--edges can read at once; rewrite it as scanlines (oiiotool IN "
+                    "--scanline -o OUT) or with larger tiles", p, j.g.ntx, EF_UNIT_MAX_CHUNKS);
+            err->file = in->path;
+            return -1;
+        }
+        geom_tile_rows(&j.g);
+    }
     exr_get_channels(in->ctx, p, &j.cl);
     j.nch = j.cl->num_channels;
     j.as_float = calloc((size_t) j.nch, 1);
@@ -1256,9 +1298,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
         /* Memory per worker: a unit of every plane, decoded and packed,
          * and its share of the ring: ef_ring_slots(1) + 1 encoded units,
          * each at most the unit's raw size. */
-        const uint64_t px = j.g.tiled ? (uint64_t) (j.g.tw < j.g.width ? j.g.tw : j.g.width) *
-                                            (uint64_t) (j.g.th < j.g.height ? j.g.th : j.g.height)
-                                      : (uint64_t) j.g.width * (uint64_t) j.g.unit_rows;
+        const uint64_t px = unit_pixels(&j.g);
         const uint64_t per = px * ((uint64_t) j.nch + (uint64_t) j.nextra + 1) * 4 *
                              (2 + (uint64_t) ef_ring_slots(1) + 1);
         const uint64_t fit = per ? EF_STREAM_BYTES / per : (uint64_t) nt;
@@ -1266,7 +1306,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
             nt = fit < 1 ? 1 : (int) fit;
     }
     int halo_ok = 1;
-    if (j.halo && !j.g.tiled) {
+    if (j.halo) {
         pthread_mutex_init(&j.halo_mx, NULL);
         pthread_cond_init(&j.halo_cv, NULL);
         j.halo_sync = 1;
@@ -1280,7 +1320,7 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
                                     sizeof(float));
             /* the decoded planes of a unit too, within 64 MB for all slots
              * (without them, the halo decodes its chunks itself) */
-            j.pre_plane = (size_t) j.g.width * (size_t) j.g.unit_rows * 4;
+            j.pre_plane = unit_pixels(&j.g) * 4;
             if ((uint64_t) j.pre_plane * (uint64_t) j.nch * (uint64_t) j.nslot <= (64u << 20))
                 j.slot[i].pre = malloc(j.pre_plane * (size_t) j.nch);
             halo_ok &= j.slot[i].rows != NULL;

@@ -62,6 +62,27 @@ if r.returncode == 77:
     print("Weta's deep elements are missing: part 1 skipped")
 else:
     judge(r, "Weta, closest Z", 0.30, 0.25, 0.95)
+    # A tiled copy of the flat render (16 x 16 tiles: a tile border every
+    # 16 pixels both ways) must give the scanline file's pixels and error
+    # output: pixels at a tile's border see the neighbouring tiles' (before
+    # units of a row of tiles, they saw only their own tile, and 4,504
+    # pixels differed, by up to 0.12).
+    wd = os.path.join(work, "weta")
+    flat = os.path.join(wd, "flat_closest.exr")
+    tiled = os.path.join(wd, "flat_tiled16.exr")
+    subprocess.run(["oiiotool", flat, "--tile", "16", "16", "-o", tiled], check=True)
+    cam = ["--fov", "50", "--world-to-camera", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1", "-d", "float",
+           "--edges", "unmix", "--aov", "error", "--fog", "exp:density=0.02"]
+    outs = []
+    for name, inp, th in (("scan", flat, "2"), ("tiled1", tiled, "1"), ("tiled3", tiled, "3")):
+        o = os.path.join(wd, "tiles_%s.exr" % name)
+        rr = subprocess.run([exrfog, inp, "-o", o, "--threads", th] + cam, capture_output=True,
+                            text=True)
+        check(rr.returncode == 0, "tiled run %s (%s)" % (name, rr.stderr.strip()[-200:]))
+        outs.append(o)
+    same = all(subprocess.run(["oiiotool", outs[0], o, "--diff"], capture_output=True,
+                              text=True).returncode == 0 for o in outs[1:])
+    check(same, "--edges: a 16x16-tiled copy gives the scanline file's pixels (1 and 3 threads)")
 
 # 2. Blender's render with the fog in the scene
 blender = shutil.which("blender")
@@ -111,6 +132,15 @@ if os.path.exists(deep):
                        capture_output=True, text=True)
     check(r.returncode == 2 and "--edges applies to flat input" in r.stderr and
           not os.path.exists(out), "deep input with --edges: refused (%s)" % r.stderr.strip())
+# a row of more tiles than --edges reads at once: refused, nothing written
+wide, wout = os.path.join(work, "wide.exr"), os.path.join(work, "wide_out.exr")
+subprocess.run(["oiiotool", "--create", "16400x16", "5", "--chnames", "R,G,B,A,Z", "--tile", "16",
+                "16", "-d", "float", "-o", wide], check=True)
+r = subprocess.run([exrfog, wide, "-o", wout, "--fog", "exp:density=0.1", "--fov", "50",
+                    "--world-to-camera", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1", "--edges", "unmix"],
+                   capture_output=True, text=True)
+check(r.returncode == 1 and "wide.exr: part 0: a row of its tiles holds 1025 tiles" in r.stderr and
+      not os.path.exists(wout), "--edges on 1,025 tiles a row: refused (%s)" % r.stderr.strip())
 r = subprocess.run([exrfog, "in.exr", "-o", "out.exr", "--fog", "exp:density=0.1", "--edges",
                     "blur"], capture_output=True, text=True)
 check(r.returncode == 2 and "--edges 'blur' is not unmix or off" in r.stderr,
