@@ -33,10 +33,28 @@ void ef_edge_work_free(ef_edge_work *wk)
     memset(wk, 0, sizeof *wk);
 }
 
-/* The rows of u, r = -1 (above) .. h (below): depth, colour and alpha. */
+#define HR EF_EDGE_HALO
+
+/* Whether row r of u (-nup .. h + ndn - 1) is there. */
+static int row_there(const ef_edge_rows *u, int r)
+{
+    return r < 0 ? r >= -u->nup && u->up_rgb[0] && u->up_depth
+                 : r < u->h || (r < u->h + u->ndn && u->dn_rgb[0] && u->dn_depth);
+}
+
+/* Offset of row r's first pixel in its plane (the unit's, or the halo's
+ * above or below). */
+static size_t row_off(const ef_edge_rows *u, int r)
+{
+    const int i = r < 0 ? r + u->nup : r >= u->h ? r - u->h : r;
+    return (size_t) i * (size_t) u->w;
+}
+
+/* The rows of u, r = -nup (above) .. h + ndn - 1 (below): depth. */
 static const float *row_depth(const ef_edge_rows *u, int r)
 {
-    return r < 0 ? u->up_depth : r >= u->h ? u->dn_depth : u->depth + (size_t) r * (size_t) u->w;
+    const float *d = r < 0 ? u->up_depth : r >= u->h ? u->dn_depth : u->depth;
+    return d ? d + row_off(u, r) : NULL;
 }
 
 /* Pixel (x, r)'s premultiplied RGB and alpha (1 without alpha; a value
@@ -45,7 +63,7 @@ static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
 {
     const float *const *rgb = r < 0 ? u->up_rgb : r >= u->h ? u->dn_rgb : u->rgb;
     const float *a = r < 0 ? u->up_alpha : r >= u->h ? u->dn_alpha : u->alpha;
-    const size_t off = (r < 0 || r >= u->h) ? (size_t) x : (size_t) r * (size_t) u->w + (size_t) x;
+    const size_t off = row_off(u, r) + (size_t) x;
     for (int k = 0; k < 3; ++k)
         c[k] = rgb[k] ? rgb[k][off] : 0;
     c[3] = a ? a[off] : 1.0;
@@ -54,16 +72,17 @@ static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
             c[k] = 0;
 }
 
-/* 1 / planar depth of every pixel of rows -1..h (0 for sky, NaN where the
- * row is missing or the depth unusable) into wk->iz, (h + 2) rows of w. */
+/* 1 / planar depth of every pixel of rows -HR..h + HR - 1 (0 for sky, NaN
+ * where the row is missing or the depth unusable) into wk->iz, (h + 2 HR)
+ * rows of w. */
 static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, double *iz)
 {
     double planar[EF_RECON_SPAN];
     unsigned char sky[EF_RECON_SPAN];
-    for (int r = -1; r <= u->h; ++r) {
-        double *out = iz + (size_t) (r + 1) * (size_t) u->w;
-        const float *d = row_depth(u, r);
-        if (!d || (r < 0 && !u->up_rgb[0]) || (r >= u->h && !u->dn_rgb[0])) {
+    for (int r = -HR; r < u->h + HR; ++r) {
+        double *out = iz + (size_t) (r + HR) * (size_t) u->w;
+        const float *d = row_there(u, r) ? row_depth(u, r) : NULL;
+        if (!d) {
             for (int x = 0; x < u->w; ++x)
                 out[x] = NAN;
             continue;
@@ -150,9 +169,9 @@ static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigne
         Ls[m].n = 0;
     for (int q = 0; q < 24; ++q) {
         const int xx = x + ring_cells[q][0], rr = r + ring_cells[q][1];
-        if (xx < 0 || xx >= w || rr < -1 || rr > u->h)
+        if (xx < 0 || xx >= w)
             continue;
-        const size_t k = (size_t) (rr + 1) * (size_t) w + (size_t) xx;
+        const size_t k = (size_t) (rr + HR) * (size_t) w + (size_t) xx;
         const double v = iz[k];
         if (isnan(v))
             continue;
@@ -219,9 +238,9 @@ static int window_layers(const ef_edge_rows *u, const double *iz, int x, int r, 
     for (int dr = -1; dr <= 1; ++dr)
         for (int dx = -1; dx <= 1; ++dx) {
             const int xx = x + dx, rr = r + dr;
-            if (xx < 0 || xx >= w || rr < -1 || rr > u->h || (dx == 0 && dr == 0))
+            if (xx < 0 || xx >= w || (dx == 0 && dr == 0))
                 continue;
-            const double q = iz[(size_t) (rr + 1) * (size_t) w + (size_t) xx];
+            const double q = iz[(size_t) (rr + HR) * (size_t) w + (size_t) xx];
             if (isnan(q))
                 continue;
             int m = 0;
@@ -371,7 +390,7 @@ static int split_keep(const double C[4], double izp, const layer *Ls, int nl, sp
 int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, ef_edge_work *wk)
 {
     const int w = u->w, h = u->h;
-    const size_t n = (size_t) (h + 2) * (size_t) w;
+    const size_t n = (size_t) (h + 2 * HR) * (size_t) w;
     if (n > wk->cap) {
         double *iz = realloc(wk->iz, n * sizeof *iz);
         if (!iz)
@@ -386,17 +405,31 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     double *iz = wk->iz;
     unsigned char *edge = wk->edge;
     inverse_depths(pass, u, iz);
-    for (int r = -1; r <= h; ++r) {
-        const double *mid = iz + (size_t) (r + 1) * (size_t) w;
-        const double *up = r > -1 ? mid - w : NULL, *dn = r < h ? mid + w : NULL;
-        unsigned char *e = edge + (size_t) (r + 1) * (size_t) w;
+    /* edges on the rows the 5x5 windows reach (missing rows are NaN,
+     * which bends_at skips; the outermost rows have no test) */
+    memset(edge, 0, (size_t) w);
+    memset(edge + (size_t) (h + 2 * HR - 1) * (size_t) w, 0, (size_t) w);
+    for (int r = 1 - HR; r < h + HR - 1; ++r) {
+        const double *mid = iz + (size_t) (r + HR) * (size_t) w;
+        unsigned char *e = edge + (size_t) (r + HR) * (size_t) w;
         for (int x = 0; x < w; ++x)
-            e[x] = (unsigned char) bends_at(up, mid, dn, w, x);
+            e[x] = (unsigned char) bends_at(mid - w, mid, mid + w, w, x);
     }
-    int count = 0, seen = 0, seen_between = 0;
+    /* per 16-row band of the unit: edge pixels seen, and those whose
+     * depth lies between layers */
+    const int nband = (h + 15) / 16;
+    int band_seen[64] = { 0 }, band_between[64] = { 0 };
+    int *seen_b = band_seen, *between_b = band_between;
+    if (nband > 64) {
+        seen_b = calloc((size_t) 2 * (size_t) nband, sizeof *seen_b);
+        if (!seen_b)
+            return -1;
+        between_b = seen_b + nband;
+    }
+    int count = 0;
     for (int r = 0; r < h; ++r)
         for (int x = 0; x < w; ++x) {
-            const size_t k = (size_t) (r + 1) * (size_t) w + (size_t) x;
+            const size_t k = (size_t) (r + HR) * (size_t) w + (size_t) x;
             if (!edge[k])
                 continue;
             layer Ls[MAXL];
@@ -412,8 +445,8 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                     own = m;
             double C[4];
             pixel_colour(u, r, x, C);
-            ++seen;
-            seen_between += own < 0;
+            seen_b[r / 16]++;
+            between_b[r / 16] += own < 0;
             split sp;
             const int found = own >= 0 ? split_by_colour(C, Ls, nl, own, &sp)
                                        : split_by_depth(izp, Ls, nl, &sp);
@@ -426,8 +459,11 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             if ((size_t) count >= wk->pxcap) {
                 const size_t cap = wk->pxcap ? 2 * wk->pxcap : 256;
                 ef_edge_px *p = realloc(wk->px, cap * sizeof *p);
-                if (!p)
+                if (!p) {
+                    if (seen_b != band_seen)
+                        free(seen_b);
                     return -1;
+                }
                 wk->px = p;
                 wk->pxcap = cap;
             }
@@ -447,18 +483,20 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
                 e->pure[1][c] = sp.pb[c];
             }
         }
-    /* A unit whose edge pixels mostly lie between layers has a filtered
+    /* A band whose edge pixels mostly lie between layers has a filtered
      * Z: there a pixel whose depth is a layer is that surface's (nearly)
      * alone, and its colour's likeness to a mix is the texture's. */
-    if (seen_between > seen / 5) {
-        int k = 0;
-        for (int m = 0; m < count; ++m)
-            if (wk->px[m].between || want_err) {
-                wk->px[k] = wk->px[m];
-                wk->px[k++].keep |= !wk->px[m].between;
-            }
-        count = k;
+    int k = 0;
+    for (int m = 0; m < count; ++m) {
+        const int b = wk->px[m].i / w / 16;
+        if (between_b[b] > seen_b[b] / 5 && !wk->px[m].between && !want_err)
+            continue;
+        wk->px[k] = wk->px[m];
+        wk->px[k++].keep |= between_b[b] > seen_b[b] / 5 && !wk->px[m].between;
     }
+    count = k;
+    if (seen_b != band_seen)
+        free(seen_b);
     return count;
 }
 

@@ -34,13 +34,24 @@
 
 #define EF_EDGE_REL 0.05
 
-/* One unit of rows and the rows just outside it (NULL where the frame or
- * the stream has none). alpha and the rows' alphas may be NULL (1). */
+/* The rows outside a unit an edge pixel's result depends on: its 5x5
+ * window's (2), and their own edge test's 3x3 window (1 more). */
+#define EF_EDGE_HALO 3
+
+/* One unit of rows and the rows just outside it: nup rows above (rows
+ * y0 - nup .. y0 - 1, top first) and ndn below (y0 + h .. y0 + h + ndn -
+ * 1), each w long, 0 to EF_EDGE_HALO of each where the frame or the
+ * stream has fewer (the pointers then NULL). alpha and the rows' alphas
+ * may be NULL (1). Whether an edge pixel is unmixed depends only on its
+ * own rows and these, and on the 16-row band of the unit it lies in (a
+ * band whose edge pixels mostly lie between layers has a filtered Z):
+ * units that start on the same 16-row grid give the same pixels. */
 typedef struct ef_edge_rows {
     int x0, y0, w, h;
     const float *rgb[3], *alpha, *depth;
-    const float *up_rgb[3], *up_alpha, *up_depth;   /* row y0 - 1 */
-    const float *dn_rgb[3], *dn_alpha, *dn_depth;   /* row y0 + h */
+    const float *up_rgb[3], *up_alpha, *up_depth;
+    const float *dn_rgb[3], *dn_alpha, *dn_depth;
+    int nup, ndn;
 } ef_edge_rows;
 
 /* An edge pixel's two parts: part 0 near, part 1 far. */

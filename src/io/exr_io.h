@@ -109,12 +109,18 @@ typedef struct ef_chunk {
     const float *depth;
     float *extra[EF_MAX_EXTRA_CHANNELS];
     int nextra;
-    /* With ef_stream_opts.halo, the rows just outside the unit as read
-     * (0: row y0 - 1, 1: row y0 + h; w values each), NULL where the data
-     * window ends; read-only. A tiled part is then walked a row of tiles
-     * per unit (x0 and w the data window's). */
+    /* With ef_stream_opts.halo, the rows just outside the unit as read:
+     * halo_rows[0] rows above (rows y0 - n .. y0 - 1, top first) and
+     * halo_rows[1] below (from row y0 + h), w values each: EF_STREAM_HALO
+     * of each, fewer where the data window ends (0: NULL); read-only. A
+     * tiled part is then walked a row of tiles per unit (x0 and w the
+     * data window's). */
     const float *halo_rgb[2][3], *halo_alpha[2], *halo_depth[2];
+    int halo_rows[2];
 } ef_chunk;
+
+/* The rows on each side of a unit that ef_stream_opts.halo reads. */
+#define EF_STREAM_HALO 3
 
 /* Edits the colour of one unit in place; called from worker threads, so it
  * must only touch the unit and read-only shared state. */

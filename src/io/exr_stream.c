@@ -569,7 +569,8 @@ typedef struct part_job {
     int codec;                /* EF_CODEC_* */
     int halo;                 /* opts->halo (scanline parts only) */
     /* The halo's shared rows: unit u, once decoded, leaves its first and
-     * last rows of every target (rgb, alpha, depth) in slot u % nslot, so
+     * last EF_STREAM_HALO rows of every target (rgb, alpha, depth) in slot
+     * u % nslot, so
      * the units above and below it take them instead of decoding its
      * chunks again; a slot another unit has taken over is a miss (the
      * reader decodes). */
@@ -580,7 +581,8 @@ typedef struct part_job {
     struct halo_slot {
         pthread_mutex_t lock;
         int unit;                 /* -1: empty */
-        float *rows;              /* [first, last][target][5][width] */
+        float *rows;              /* [first, last][target][5][EF_STREAM_HALO][width]; the
+                                   * last rows end at the block's end */
         int pre_unit;             /* -1, or the unit whose decoded planes pre holds */
         uint8_t *pre;             /* nch planes of a unit, as the worker decodes them, or NULL */
     } *slot;
@@ -710,18 +712,22 @@ typedef struct halo_src {
     const float *p[5];
 } halo_src;
 
-/* Leaves unit u's first and last rows (h rows of w) in its slot. */
+/* Leaves unit u's first and last rows (of its h rows of w: EF_STREAM_HALO
+ * each, or h where fewer) in its slot. */
 static void halo_publish(part_job *j, int u, int w, int h, const halo_src *src)
 {
     struct halo_slot *sl = &j->slot[u % j->nslot];
+    const int n = h < EF_STREAM_HALO ? h : EF_STREAM_HALO;
     pthread_mutex_lock(&sl->lock);
     for (int side = 0; side < 2; ++side)
         for (int t = 0; t < j->ntarget; ++t)
             for (int k = 0; k < 5; ++k) {
-                float *d = sl->rows + ((size_t) ((side * j->ntarget + t) * 5 + k)) * (size_t) w;
+                float *d = sl->rows +
+                           ((size_t) ((side * j->ntarget + t) * 5 + k) * EF_STREAM_HALO +
+                            (size_t) (side ? EF_STREAM_HALO - n : 0)) * (size_t) w;
                 if (src[t].p[k])
-                    memcpy(d, src[t].p[k] + (size_t) (side ? h - 1 : 0) * (size_t) w,
-                           (size_t) w * sizeof *d);
+                    memcpy(d, src[t].p[k] + (size_t) (side ? h - n : 0) * (size_t) w,
+                           (size_t) n * (size_t) w * sizeof *d);
             }
     sl->unit = u;
     pthread_mutex_unlock(&sl->lock);
@@ -764,8 +770,9 @@ static int pre_take(part_job *j, int u, void **planes, size_t bytes)
 
 static int halo_take_now(part_job *j, int u, int side, int w, float *out);
 
-/* Unit u's first (side 0) or last row of every target into out ([target]
- * [5][w]), when its slot holds it: 1, else 0. A unit another thread has
+/* Unit u's first (side 0) or last rows of every target into out ([target]
+ * [5][EF_STREAM_HALO][w], the last rows ending at each block's end), when
+ * its slot holds them: 1, else 0. A unit another thread has
  * claimed but not yet decoded is waited for (it publishes right after its
  * decode, before anything that could wait on this unit), up to 50 ms. */
 static int halo_take(part_job *j, int u, int side, int w, float *out)
@@ -806,8 +813,8 @@ static int halo_take_now(part_job *j, int u, int side, int w, float *out)
     pthread_mutex_lock(&sl->lock);
     const int hit = sl->unit == u;
     if (hit)
-        memcpy(out, sl->rows + (size_t) (side * j->ntarget) * 5 * (size_t) w,
-               (size_t) j->ntarget * 5 * (size_t) w * sizeof *out);
+        memcpy(out, sl->rows + (size_t) (side * j->ntarget) * 5 * EF_STREAM_HALO * (size_t) w,
+               (size_t) j->ntarget * 5 * EF_STREAM_HALO * (size_t) w * sizeof *out);
     pthread_mutex_unlock(&sl->lock);
     return hit;
 }
@@ -868,8 +875,8 @@ static void *worker(void *arg)
             memcpy(r->as_float, j->as_float, (size_t) r->nch);
     }
     if (ok && halo)
-        ok = (hbuf = malloc((size_t) 2 * (size_t) j->ntarget * 5 * (size_t) j->g.width *
-                            sizeof *hbuf)) != NULL;
+        ok = (hbuf = malloc((size_t) 2 * (size_t) j->ntarget * 5 * EF_STREAM_HALO *
+                            (size_t) j->g.width * sizeof *hbuf)) != NULL;
     if (!ok)
         job_fail(j, j->out_path, "out of memory for part %d", j->part, NULL);
 
@@ -913,6 +920,11 @@ static void *worker(void *arg)
         /* the halo rows: colour, alpha and depth of each target, from the
          * neighbouring units' slots where they are there, else decoded */
         int have[2] = { 0, 0 };
+        /* rows there above and below (the data window ends) */
+        const int nside[2] = {
+            y0 - j->g.dw.min.y < EF_STREAM_HALO ? y0 - j->g.dw.min.y : EF_STREAM_HALO,
+            j->g.dw.max.y + 1 - (y0 + h) < EF_STREAM_HALO ? j->g.dw.max.y + 1 - (y0 + h)
+                                                           : EF_STREAM_HALO };
         if (halo) {
             halo_src src[EF_MAX_VIEWS];
             for (int t = 0; t < j->ntarget; ++t) {
@@ -924,35 +936,40 @@ static void *worker(void *arg)
             }
             halo_publish(j, u, w, h, src);
         }
+        /* one plane's block of rows in hbuf: EF_STREAM_HALO rows of w */
+        const size_t blk = EF_STREAM_HALO * (size_t) w;
         for (int side = 0; halo && side < 2; ++side) {
-            const int y = side ? y0 + h : y0 - 1;
-            if (y < j->g.dw.min.y || y > j->g.dw.max.y)
+            const int n = nside[side];
+            if (n <= 0)
                 continue;
-            if (halo_take(j, side ? u + 1 : u - 1, !side,  w,
-                          hbuf + (size_t) (side * j->ntarget) * 5 * (size_t) w)) {
+            if (halo_take(j, side ? u + 1 : u - 1, !side, w,
+                          hbuf + (size_t) (side * j->ntarget) * 5 * blk)) {
                 have[side] = 1;
                 continue;
             }
+            /* the rows above end at a block's end, those below start it */
+            const int y = side ? y0 + h : y0 - n;
+            const size_t at = side ? 0 : (size_t) (EF_STREAM_HALO - n) * (size_t) w;
             for (int t = 0; t < j->ntarget; ++t) {
                 const ef_channel_plan *pl = j->t[t].pl;
-                float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * (size_t) w;
+                float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * blk + at;
                 int more[4], nm = 0;
                 float *mo[4];
                 for (int k = 1; k < 3; ++k) {
                     more[nm] = pl->rgb[k].index;
-                    mo[nm++] = b + (size_t) k * (size_t) w;
+                    mo[nm++] = b + (size_t) k * blk;
                 }
                 if (pl->alpha.part >= 0) {
                     more[nm] = pl->alpha.index;
-                    mo[nm++] = b + 3 * (size_t) w;
+                    mo[nm++] = b + 3 * blk;
                 }
                 if (j->t[t].depth_local >= 0) {
                     more[nm] = j->t[t].depth_local;
-                    mo[nm++] = b + 4 * (size_t) w;
+                    mo[nm++] = b + 4 * blk;
                 }
                 hr[side].chan = pl->rgb[0].index;
-                if (depth_read_n(&hr[side], x0, y, w, 1, b, more, mo, nm) ||
-                    (j->t[t].depth_local < 0 && depth_read(&dr[t], x0, y, w, 1, b + 4 * (size_t) w))) {
+                if (depth_read_n(&hr[side], x0, y, w, n, b, more, mo, nm) ||
+                    (j->t[t].depth_local < 0 && depth_read(&dr[t], x0, y, w, n, b + 4 * blk))) {
                     job_fail(j, j->in_path, "cannot decode the chunk at scanline %d, the file is "
                                 "truncated or corrupt", y, ef_exr_last_core_message());
                     goto out;
@@ -991,11 +1008,14 @@ static void *worker(void *arg)
             for (int side = 0; side < 2; ++side) {
                 if (!have[side])
                     continue;
-                const float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * (size_t) w;
+                const size_t blk = EF_STREAM_HALO * (size_t) w;
+                const float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * blk +
+                                 (side ? 0 : (size_t) (EF_STREAM_HALO - nside[0]) * (size_t) w);
                 for (int k = 0; k < 3; ++k)
-                    ck.halo_rgb[side][k] = b + (size_t) k * (size_t) w;
-                ck.halo_alpha[side] = pl->alpha.part >= 0 ? b + 3 * (size_t) w : NULL;
-                ck.halo_depth[side] = b + 4 * (size_t) w;
+                    ck.halo_rgb[side][k] = b + (size_t) k * blk;
+                ck.halo_alpha[side] = pl->alpha.part >= 0 ? b + 3 * blk : NULL;
+                ck.halo_depth[side] = b + 4 * blk;
+                ck.halo_rows[side] = nside[side];
             }
             j->fn(j->user, &ck);
         }
@@ -1316,8 +1336,8 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
             pthread_mutex_init(&j.slot[i].lock, NULL);
             j.slot[i].unit = -1;
             j.slot[i].pre_unit = -1;
-            j.slot[i].rows = malloc((size_t) 2 * (size_t) j.ntarget * 5 * (size_t) j.g.width *
-                                    sizeof(float));
+            j.slot[i].rows = malloc((size_t) 2 * (size_t) j.ntarget * 5 * EF_STREAM_HALO *
+                                    (size_t) j.g.width * sizeof(float));
             /* the decoded planes of a unit too, within 64 MB for all slots
              * (without them, the halo decodes its chunks itself) */
             j.pre_plane = unit_pixels(&j.g) * 4;

@@ -164,12 +164,14 @@ static void fog_chunk(void *user, const ef_chunk *ck)
     ef_edge_work wk = { 0 };
     int nedge = 0;
     if (j->edges) {
+        _Static_assert(EF_STREAM_HALO >= EF_EDGE_HALO, "the stream reads the rows edges need");
         const ef_edge_rows u = { ck->x0, ck->y0, ck->w, ck->h,
                                  { ck->rgb[0], ck->rgb[1], ck->rgb[2] }, ck->alpha, ck->depth,
                                  { ck->halo_rgb[0][0], ck->halo_rgb[0][1], ck->halo_rgb[0][2] },
                                  ck->halo_alpha[0], ck->halo_depth[0],
                                  { ck->halo_rgb[1][0], ck->halo_rgb[1][1], ck->halo_rgb[1][2] },
-                                 ck->halo_alpha[1], ck->halo_depth[1] };
+                                 ck->halo_alpha[1], ck->halo_depth[1],
+                                 ck->halo_rows[0], ck->halo_rows[1] };
         nedge = ef_edge_find(&j->pass[ck->view], &u, (j->aov & EF_AOV_ERROR) != 0, &wk);
         if (nedge < 0) {
             atomic_store(&j->edge_oom, 1);

@@ -62,27 +62,38 @@ if r.returncode == 77:
     print("Weta's deep elements are missing: part 1 skipped")
 else:
     judge(r, "Weta, closest Z", 0.30, 0.25, 0.95)
-    # A tiled copy of the flat render (16 x 16 tiles: a tile border every
-    # 16 pixels both ways) must give the scanline file's pixels and error
-    # output: pixels at a tile's border see the neighbouring tiles' (before
-    # units of a row of tiles, they saw only their own tile, and 4,504
-    # pixels differed, by up to 0.12).
+    # However the file is cut into chunks, an edge pixel sees the same
+    # rows: copies tiled 16 x 16 and 64 x 64 (a row of tiles per unit; a
+    # tile's border pixels see the next tiles: before, they saw only their
+    # own tile, and the 16 x 16 copy differed in 4,504 pixels, by up to
+    # 0.12) and PIZ (32-row units where ZIP has 16; with one row read
+    # outside a unit, pixels two rows from a unit's border lost part of
+    # their 5 x 5 window: 294 pixels of a 1080p frame differed between 16-
+    # and 64-row units) must give the ZIP file's pixels and error output,
+    # on 1 and 3 threads.
     wd = os.path.join(work, "weta")
     flat = os.path.join(wd, "flat_closest.exr")
-    tiled = os.path.join(wd, "flat_tiled16.exr")
-    subprocess.run(["oiiotool", flat, "--tile", "16", "16", "-o", tiled], check=True)
+    copies = {"tiled16": ["--tile", "16", "16"], "tiled64": ["--tile", "64", "64"],
+              "piz": ["--compression", "piz"]}
+    for name, how in copies.items():
+        subprocess.run(["oiiotool", flat] + how + ["-o", os.path.join(wd, "flat_%s.exr" % name)],
+                       check=True)
     cam = ["--fov", "50", "--world-to-camera", "1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1", "-d", "float",
            "--edges", "unmix", "--aov", "error", "--fog", "exp:density=0.02"]
+    runs = [("zip", flat, "2"), ("tiled16_1", "tiled16", "1"), ("tiled16_3", "tiled16", "3"),
+            ("tiled64_2", "tiled64", "2"), ("piz_1", "piz", "1"), ("piz_3", "piz", "3")]
     outs = []
-    for name, inp, th in (("scan", flat, "2"), ("tiled1", tiled, "1"), ("tiled3", tiled, "3")):
-        o = os.path.join(wd, "tiles_%s.exr" % name)
-        rr = subprocess.run([exrfog, inp, "-o", o, "--threads", th] + cam, capture_output=True,
-                            text=True)
-        check(rr.returncode == 0, "tiled run %s (%s)" % (name, rr.stderr.strip()[-200:]))
-        outs.append(o)
-    same = all(subprocess.run(["oiiotool", outs[0], o, "--diff"], capture_output=True,
-                              text=True).returncode == 0 for o in outs[1:])
-    check(same, "--edges: a 16x16-tiled copy gives the scanline file's pixels (1 and 3 threads)")
+    for name, inp, th in runs:
+        src_file = inp if inp == flat else os.path.join(wd, "flat_%s.exr" % inp)
+        o = os.path.join(wd, "cut_%s.exr" % name)
+        rr = subprocess.run([exrfog, src_file, "-o", o, "--threads", th] + cam,
+                            capture_output=True, text=True)
+        check(rr.returncode == 0, "run %s (%s)" % (name, rr.stderr.strip()[-200:]))
+        outs.append((name, o))
+    for name, o in outs[1:]:
+        same = subprocess.run(["oiiotool", outs[0][1], o, "--diff"], capture_output=True,
+                              text=True).returncode == 0
+        check(same, "--edges: the %s copy gives the ZIP file's pixels and error output" % name)
 
 # 2. Blender's render with the fog in the scene
 blender = shutil.which("blender")
