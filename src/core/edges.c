@@ -1,6 +1,7 @@
 /* Fog at the edges of flat renders: the unmixing (edges.h). */
 #include "edges.h"
 
+#include "ddouble.h"
 #include "recon.h"
 
 #include <math.h>
@@ -99,35 +100,33 @@ static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, doubl
     }
 }
 
-/* Whether 1/z bends at (x, r) over a pair of opposite neighbours (the
- * rows up, mid and dn of 1/z, up or dn NULL where missing). */
-static inline int bends_at(const double *up, const double *mid, const double *dn, int w, int x)
+/* Whether 1/z bends from A through c to B: by more than EF_EDGE_REL of
+ * the largest (false where any is NaN: a missing row or depth). */
+EF_INLINE int bends3(double A, double c, double B)
 {
-    const double c = mid[x];
-    if (isnan(c))
-        return 0;
-    const int l = x > 0, rr = x + 1 < w;
-    double pa[4], pb[4];
-    int n = 0;
-    if (l && rr) {
-        pa[n] = mid[x - 1], pb[n++] = mid[x + 1];
-        if (up && dn) {
-            pa[n] = up[x - 1], pb[n++] = dn[x + 1];
-            pa[n] = dn[x - 1], pb[n++] = up[x + 1];
-        }
+    double m = c > A ? c : A;
+    m = m > B ? m : B;
+    return fabs(A - 2 * c + B) > EF_EDGE_REL * m;
+}
+
+/* The edge flags of a row: whether 1/z bends at each x over a pair of
+ * opposite neighbours (the rows up, mid and dn of 1/z; a missing row is
+ * NaN). Without branches, so the loop vectorises. */
+EF_MULTIVERSION static void bends_row(const double *up, const double *mid, const double *dn,
+                                      int w, unsigned char *e)
+{
+    if (w < 3) {
+        for (int x = 0; x < w; ++x)
+            e[x] = (unsigned char) bends3(up[x], mid[x], dn[x]);
+        return;
     }
-    if (up && dn)
-        pa[n] = up[x], pb[n++] = dn[x];
-    for (int k = 0; k < n; ++k) {
-        const double A = pa[k], B = pb[k];
-        if (isnan(A) || isnan(B))
-            continue;
-        double m = c > A ? c : A;
-        m = m > B ? m : B;
-        if (fabs(A - 2 * c + B) > EF_EDGE_REL * m)
-            return 1;
+    e[0] = (unsigned char) bends3(up[0], mid[0], dn[0]);
+    for (int x = 1; x < w - 1; ++x) {
+        const double c = mid[x];
+        e[x] = (unsigned char) (bends3(mid[x - 1], c, mid[x + 1]) | bends3(up[x - 1], c, dn[x + 1]) |
+                                bends3(dn[x - 1], c, up[x + 1]) | bends3(up[x], c, dn[x]));
     }
-    return 0;
+    e[w - 1] = (unsigned char) bends3(up[w - 1], mid[w - 1], dn[w - 1]);
 }
 
 /* Whether 1/z value q belongs to the layer of 1/z value l. */
@@ -411,9 +410,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     memset(edge + (size_t) (h + 2 * HR - 1) * (size_t) w, 0, (size_t) w);
     for (int r = 1 - HR; r < h + HR - 1; ++r) {
         const double *mid = iz + (size_t) (r + HR) * (size_t) w;
-        unsigned char *e = edge + (size_t) (r + HR) * (size_t) w;
-        for (int x = 0; x < w; ++x)
-            e[x] = (unsigned char) bends_at(mid - w, mid, mid + w, w, x);
+        bends_row(mid - w, mid, mid + w, w, edge + (size_t) (r + HR) * (size_t) w);
     }
     /* per 16-row band of the unit: edge pixels seen, and those whose
      * depth lies between layers */
