@@ -5,6 +5,7 @@
 #include "recon.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -45,22 +46,34 @@ static int row_there(const ef_edge_rows *u, int r)
 
 /* Offset of row r's first pixel in its plane (the unit's, or the halo's
  * above or below). */
-static size_t row_off(const ef_edge_rows *u, int r)
+EF_INLINE size_t row_off(const ef_edge_rows *u, int r)
 {
     const int i = r < 0 ? r + u->nup : r >= u->h ? r - u->h : r;
     return (size_t) i * (size_t) u->w;
 }
 
 /* The rows of u, r = -nup (above) .. h + ndn - 1 (below): depth. */
-static const float *row_depth(const ef_edge_rows *u, int r)
+EF_INLINE const float *row_depth(const ef_edge_rows *u, int r)
 {
     const float *d = r < 0 ? u->up_depth : r >= u->h ? u->dn_depth : u->depth;
     return d ? d + row_off(u, r) : NULL;
 }
 
+/* The larger and the smaller of two finite values, without libm's call
+ * (fmax and fmin take care of NaN, which these never see). */
+EF_INLINE double max2(double a, double b)
+{
+    return a > b ? a : b;
+}
+
+EF_INLINE double min2(double a, double b)
+{
+    return a < b ? a : b;
+}
+
 /* Pixel (x, r)'s premultiplied RGB and alpha (1 without alpha; a value
  * that is not finite counts as 0). */
-static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
+EF_INLINE void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
 {
     const float *const *rgb = r < 0 ? u->up_rgb : r >= u->h ? u->dn_rgb : u->rgb;
     const float *a = r < 0 ? u->up_alpha : r >= u->h ? u->dn_alpha : u->alpha;
@@ -71,6 +84,19 @@ static void pixel_colour(const ef_edge_rows *u, int r, int x, double c[4])
     for (int k = 0; k < 4; ++k)
         if (!isfinite(c[k]))
             c[k] = 0;
+}
+
+/* out[j] = 1 / planar[j] (0 for sky, NaN where the depth is not positive
+ * and finite), without branches, so the loop vectorises. */
+EF_MULTIVERSION static void inverse_span(const double *planar, const unsigned char *sky, int n,
+                                         double *out)
+{
+    for (int j = 0; j < n; ++j) {
+        const double p = planar[j];
+        const double inv = 1.0 / p;
+        const double v = p > 0 && p < INFINITY ? inv : NAN;
+        out[j] = sky[j] ? 0.0 : v;
+    }
 }
 
 /* 1 / planar depth of every pixel of rows -HR..h + HR - 1 (0 for sky, NaN
@@ -92,10 +118,7 @@ static void inverse_depths(const ef_fog_pass *pass, const ef_edge_rows *u, doubl
             const int n = u->w - xs < EF_RECON_SPAN ? u->w - xs : EF_RECON_SPAN;
             ef_reconstruct_dist(pass->cam, pass->conv, u->x0 + xs, u->y0 + r, n, d + xs, 0, planar,
                                 NULL, sky);
-            for (int j = 0; j < n; ++j) {
-                const double p = planar[j];
-                out[xs + j] = sky[j] ? 0.0 : p > 0 && isfinite(p) ? 1.0 / p : NAN;
-            }
+            inverse_span(planar, sky, n, out + xs);
         }
     }
 }
@@ -209,7 +232,7 @@ static int unmix(const double C[4], const double a[4], const double b[4], double
         dd += d * d;
         dot += (C[c] - b[c]) * d;
         if (c < 3)
-            mag = fmax(mag, fmax(fabs(a[c]), fabs(b[c])));
+            mag = max2(mag, max2(fabs(a[c]), fabs(b[c])));
     }
     const double rgb2 = dd - (a[3] - b[3]) * (a[3] - b[3]);
     if (!(rgb2 > CONTRAST_MIN * CONTRAST_MIN * mag * mag) && !(fabs(a[3] - b[3]) > CONTRAST_MIN))
@@ -278,10 +301,10 @@ static int split_by_colour(const double C[4], const layer *Ls, int nl, int own, 
     for (int c = 0; c < 4 && inside; ++c) {
         double lo = O->c[0][c], hi = lo;
         for (int ia = 1; ia < O->npure; ++ia) {
-            lo = fmin(lo, O->c[ia][c]);
-            hi = fmax(hi, O->c[ia][c]);
+            lo = min2(lo, O->c[ia][c]);
+            hi = max2(hi, O->c[ia][c]);
         }
-        const double tol = 0.01 * fmax(fabs(lo), fabs(hi)) + 1e-6;
+        const double tol = 0.01 * max2(fabs(lo), fabs(hi)) + 1e-6;
         inside = C[c] >= lo - tol && C[c] <= hi + tol;
     }
     if (inside)
@@ -427,6 +450,15 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     for (int r = 0; r < h; ++r)
         for (int x = 0; x < w; ++x) {
             const size_t k = (size_t) (r + HR) * (size_t) w + (size_t) x;
+            /* most pixels are no edge: eight flags at a time */
+            if (!(x & 7) && x + 8 <= w) {
+                uint64_t eight;
+                memcpy(&eight, edge + k, sizeof eight);
+                if (!eight) {
+                    x += 7;
+                    continue;
+                }
+            }
             if (!edge[k])
                 continue;
             layer Ls[MAXL];
