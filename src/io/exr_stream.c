@@ -584,7 +584,9 @@ typedef struct part_job {
         float *rows;              /* [first, last][target][5][EF_STREAM_HALO][width]; the
                                    * last rows end at the block's end */
         int pre_unit;             /* -1, or the unit whose decoded planes pre holds */
-        uint8_t *pre;             /* nch planes of a unit, as the worker decodes them, or NULL */
+        void **pre;               /* nch planes of a unit, as the worker decodes them, each
+                                   * pre_plane bytes; or NULL. Handed over by swapping
+                                   * pointers with buffers of the same size. */
     } *slot;
     size_t pre_plane;             /* bytes of one plane in pre */
     ef_ring ring;             /* pending encoded units, written in order */
@@ -738,30 +740,40 @@ static void halo_publish(part_job *j, int u, int w, int h, const halo_src *src)
 
 /* A unit's decoded planes, left by the unit above it, which decoded its
  * chunk for its own halo (a ZIP chunk of 16 rows is the whole unit): the
- * unit then need not decode it again. */
-static void pre_publish(part_job *j, int u, void *const *planes, size_t bytes)
+ * unit then need not decode it again. The reader's planes (each
+ * pre_plane bytes) go to the slot, and the slot's spare ones to the
+ * reader, whose chunk cache is then empty. */
+static void pre_publish(part_job *j, int u, depth_reader *r)
 {
     struct halo_slot *sl = &j->slot[u % j->nslot];
-    if (!sl->pre || bytes > j->pre_plane)
+    if (!sl->pre || r->plane_cap * 4 != j->pre_plane)
         return;
     pthread_mutex_lock(&sl->lock);
-    for (int k = 0; k < j->nch; ++k)
-        memcpy(sl->pre + (size_t) k * j->pre_plane, planes[k], bytes);
+    for (int k = 0; k < j->nch; ++k) {
+        void *t = sl->pre[k];
+        sl->pre[k] = r->planes[k];
+        r->planes[k] = t;
+    }
     sl->pre_unit = u;
     pthread_mutex_unlock(&sl->lock);
+    r->cached = 0;
 }
 
-/* Unit u's planes from its slot into planes (bytes each): 1, else 0. */
-static int pre_take(part_job *j, int u, void **planes, size_t bytes)
+/* Unit u's planes from its slot into planes (each pre_plane bytes, swapped
+ * with the slot's): 1, else 0. */
+static int pre_take(part_job *j, int u, void **planes)
 {
     struct halo_slot *sl = &j->slot[u % j->nslot];
-    if (!sl->pre || bytes > j->pre_plane)
+    if (!sl->pre)
         return 0;
     pthread_mutex_lock(&sl->lock);
     const int hit = sl->pre_unit == u;
     if (hit) {
-        for (int k = 0; k < j->nch; ++k)
-            memcpy(planes[k], sl->pre + (size_t) k * j->pre_plane, bytes);
+        for (int k = 0; k < j->nch; ++k) {
+            void *t = sl->pre[k];
+            sl->pre[k] = planes[k];
+            planes[k] = t;
+        }
         sl->pre_unit = -1;
     }
     pthread_mutex_unlock(&sl->lock);
@@ -873,6 +885,12 @@ static void *worker(void *arg)
              (r->as_float = malloc((size_t) r->nch)) != NULL;
         if (ok)
             memcpy(r->as_float, j->as_float, (size_t) r->nch);
+        /* a unit's worth each (no chunk is larger), so that its planes and
+         * a slot's can change hands (pre_publish) */
+        for (int k = 0; ok && k < r->nch; ++k)
+            ok = (r->planes[k] = malloc(cap * 4)) != NULL;
+        if (ok)
+            r->plane_cap = cap;
     }
     if (ok && halo)
         ok = (hbuf = malloc((size_t) 2 * (size_t) j->ntarget * 5 * EF_STREAM_HALO *
@@ -893,7 +911,7 @@ static void *worker(void *arg)
         unit_rect(&j->g, u, &x0, &y0, &w, &h);
         double t0 = ef_now();
         /* decode (unless the unit above left this unit's planes) */
-        const int pre = halo && pre_take(j, u, planes, (size_t) w * (size_t) h * 4);
+        const int pre = halo && pre_take(j, u, planes);
         for (int y = y0; !pre && y < y0 + h; y += j->g.tiled ? h : j->g.in_rows)
             for (int x = x0; x < x0 + w; x += j->g.tiled ? j->g.tw : w) {
                 exr_chunk_info_t ci;
@@ -979,9 +997,9 @@ static void *worker(void *arg)
             if (side && u + 1 < j->g.nunits) {
                 int nx0, ny0, nw, nh;
                 unit_rect(&j->g, u + 1, &nx0, &ny0, &nw, &nh);
-                const depth_reader *r = &hr[1];
+                depth_reader *r = &hr[1];
                 if (r->cached && r->cy == ny0 && r->ch == nh && r->cx == nx0 && r->cw == nw)
-                    pre_publish(j, u + 1, r->planes, (size_t) nw * (size_t) nh * 4);
+                    pre_publish(j, u + 1, r);
             }
             have[side] = 1;
         }
@@ -1239,6 +1257,8 @@ static void halo_free(part_job *j)
     for (int i = 0; j->slot && i < j->nslot; ++i) {
         pthread_mutex_destroy(&j->slot[i].lock);
         free(j->slot[i].rows);
+        for (int k = 0; j->slot[i].pre && k < j->nch; ++k)
+            free(j->slot[i].pre[k]);
         free(j->slot[i].pre);
     }
     free(j->slot);
@@ -1341,8 +1361,10 @@ static int run_part(const ef_exr_file *in, const ef_exr_file *df, exr_context_t 
             /* the decoded planes of a unit too, within 64 MB for all slots
              * (without them, the halo decodes its chunks itself) */
             j.pre_plane = unit_pixels(&j.g) * 4;
-            if ((uint64_t) j.pre_plane * (uint64_t) j.nch * (uint64_t) j.nslot <= (64u << 20))
-                j.slot[i].pre = malloc(j.pre_plane * (size_t) j.nch);
+            if ((uint64_t) j.pre_plane * (uint64_t) j.nch * (uint64_t) j.nslot <= (64u << 20) &&
+                (j.slot[i].pre = calloc((size_t) j.nch, sizeof *j.slot[i].pre)) != NULL)
+                for (int k = 0; k < j.nch; ++k)
+                    halo_ok &= (j.slot[i].pre[k] = malloc(j.pre_plane)) != NULL;
             halo_ok &= j.slot[i].rows != NULL;
         }
         if (!j.slot || !halo_ok) {
