@@ -567,13 +567,12 @@ typedef struct part_job {
     void *user;
     const _Atomic int *cancel;    /* opts->cancel: stop at the next unit */
     int codec;                /* EF_CODEC_* */
-    int halo;                 /* opts->halo (scanline parts only) */
+    int halo;                 /* opts->halo (a tiled part: a row of tiles per unit) */
     /* The halo's shared rows: unit u, once decoded, leaves its first and
      * last EF_STREAM_HALO rows of every target (rgb, alpha, depth) in slot
-     * u % nslot, so
-     * the units above and below it take them instead of decoding its
-     * chunks again; a slot another unit has taken over is a miss (the
-     * reader decodes). */
+     * u % nslot, so the units above and below it take them instead of
+     * decoding its chunks again; a slot another unit has taken over is a
+     * miss (the reader decodes). */
     int nslot;
     int halo_sync;                /* halo_mx and halo_cv made */
     pthread_mutex_t halo_mx;      /* with halo_cv: a slot was filled */
