@@ -179,6 +179,8 @@ void ef_tau_stats_add(ef_tau_stats *s, const ef_tau_info *info, const double *T)
     s->cells += info->cells;
     s->dropped += info->dropped;
     s->over += info->over;
+    s->quad += info->kind == EF_ERR_QUAD;
+    s->stat += info->kind == EF_ERR_STAT;
     s->evals_hist[ef_stats_bin(info->evals)]++;
     if (info->evals > s->evals_max)
         s->evals_max = info->evals;
@@ -216,6 +218,8 @@ void ef_tau_stats_merge(ef_tau_stats *a, const ef_tau_stats *b)
     a->cells += b->cells;
     a->dropped += b->dropped;
     a->over += b->over;
+    a->quad += b->quad;
+    a->stat += b->stat;
     a->evals_max = fmax(a->evals_max, b->evals_max);
     a->err_max = fmax(a->err_max, b->err_max);
     a->dT_max = fmax(a->dT_max, b->dT_max);

@@ -87,6 +87,8 @@ typedef struct ef_tau_stats {
     double err_max;           /* max over pixels and channels of info.err (tau) */
     double err_sum, err_sum_lo;     /* sum of the per-pixel max over channels, compensated */
     double over;              /* pixels where the work bound dropped octaves */
+    double quad, stat;        /* pixels whose error is an estimate of a quadrature's, or
+                               * a statistical one (the rest: bounds; ef_tau_info.kind) */
     double dT_max;            /* max over pixels and channels of T expm1(err), the error AOV */
     /* Log-binned counts (ef_stats_bin) of evaluations per pixel and, when
      * clock_ns is set, of the fog's time per pixel in ns (all components

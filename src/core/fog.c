@@ -44,10 +44,8 @@ void ef_fog_tau(const ef_fog_component *c, const ef_ray *r, double tau[3], ef_ta
         return;
     }
     c->model->tau(c, r, tau);
-    if (info) {
-        info->err[0] = info->err[1] = info->err[2] = 0.0;
-        info->evals = info->cells = info->dropped = 0.0;
-    }
+    if (info)
+        memset(info, 0, sizeof *info);   /* exact: a bound of 0 */
 }
 
 void ef_fog_tau_add(const ef_fog_component *c, const ef_ray *r, int n, double (*acc)[3])

@@ -125,7 +125,16 @@ typedef struct ef_tau_info {
     double cells;       /* lattice cells walked, over all octaves */
     double dropped;     /* octaves left out by the tolerance rule */
     int over;           /* the work bound dropped octaves beyond the tolerance */
+    int kind;           /* what err is: EF_ERR_BOUND, _QUAD or _STAT */
 } ef_tau_info;
+
+/* What an optical depth's error (ef_tau_info.err) is: a bound (closed
+ * forms, method=exact, steps, preintegrated, the separable walk where it
+ * dropped nothing), an estimate of a quadrature's error with every octave
+ * integrated (the default method's node plans), or a statistical estimate
+ * (octaves dropped by the tolerance rule or the work bound, the clamp's
+ * share, a ttol stop's lower value). */
+enum { EF_ERR_BOUND = 0, EF_ERR_QUAD, EF_ERR_STAT };
 
 /* A sun as a model's closed form sees it (the sun hook): towards the sun
  * (unit), and per channel the weight albedo p(theta) E, formed by lit fog

@@ -508,6 +508,10 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
         }
         info->evals = R.evals;
         info->cells = R.cells;
+        /* the node plans' errors are estimates; dropped octaves, the
+         * clamp's share and the stop's lower value come from statistics */
+        info->kind = info->dropped > 0 || info->over || s->clamp || R.stopped ? EF_ERR_STAT
+                                                                               : EF_ERR_QUAD;
         return;
     }
     const double L = (double) (tend - t0);
@@ -735,6 +739,13 @@ static void tau_noise_at(const ef_fog_component *c, const ef_ray *r, double tau[
     }
     info->evals = R.evals;
     info->cells = R.cells;
+    /* exact, steps and preintegrated: bounds; the separable walk's
+     * quadrature is bounded too; the general adaptive walk's rule pairs
+     * and node plans are estimates; dropped octaves and the ttol stop's
+     * lower value come from statistics */
+    if (s->method == M_ADAPTIVE)
+        info->kind = info->dropped > 0 || info->over || stopped ? EF_ERR_STAT
+                     : done ? EF_ERR_BOUND : EF_ERR_QUAD;
 }
 
 static void tau_noise_info(const ef_fog_component *c, const ef_ray *r, double tau[3],

@@ -212,6 +212,7 @@ typedef struct rayc {
     double evals, cells;
     double org[3], dir[3];           /* the ray (lod=pixel's distance from the camera) */
     int cam;                         /* starts at the bound camera (its lines, cam_n, cam_g) */
+    int stopped;                     /* adaptive_linear ended at the ttol stop */
 } rayc;
 
 /* The envelope at t, in long double. */

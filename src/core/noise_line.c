@@ -73,6 +73,7 @@ void ef_nz_ray_setup(const nstate *s, const ef_ray *r, rayc *R)
     R->s = s;
     R->evals = R->cells = 0;
     R->cam = 0;
+    R->stopped = 0;
     memcpy(R->org, r->org, sizeof R->org);
     memcpy(R->dir, r->dir, sizeof R->dir);
     const ef_fog_functional up = { { s->up[0], s->up[1], s->up[2] }, -s->base };

@@ -689,6 +689,7 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
         e_t = e_tb;
     }
     info->dropped = dropped > __builtin_popcount(over) ? dropped : __builtin_popcount(over);
+    R->stopped = stop;
     const double E = sqrt(E2);
     const double mean_to = (double) ef_nz_env_integral(s, R->h0, R->hs, t0, opaque ? t : t1);
     double unit = mean_to + s->contrast * kval(&noise) + kval(&corr);

@@ -414,10 +414,13 @@ void ef_print_tau_stats(ef_job *J, const ef_fog_scene *s, const ef_tau_stats *st
                 "exrfog: stats: fog[%d] %.60s%s: %.0f pixels; per pixel: noise evaluations mean "
                 "%.1f p99.9 %.3g max %.0f, cells walked mean %.1f, octaves dropped mean %.2f, "
                 "over the work bound %.0f pixels; error estimate (tau) max %.3g mean %.3g, "
-                "(|dT|, as --aov error) max %.3g\n",
+                "(|dT|, as --aov error) max %.3g; the error output a bound on %.0f pixels, "
+                "a quadrature's estimate on %.0f, a statistical estimate on %.0f (octaves "
+                "dropped, the clamp's share or a stop)\n",
                 i, c->spec, strlen(c->spec) > 60 ? "..." : "", t->pixels, t->evals / n,
                 ef_stats_quantile(t->evals_hist, t->pixels, 0.999), t->evals_max,
                 t->cells / n, t->dropped / n, t->over, t->err_max,
-                (t->err_sum + t->err_sum_lo) / n, t->dT_max);
+                (t->err_sum + t->err_sum_lo) / n, t->dT_max, t->pixels - t->quad - t->stat,
+                t->quad, t->stat);
     }
 }

@@ -785,6 +785,31 @@ static void test_stats(void **state)
     assert_run(0, "'%s' -o '%s' --fog %s --stats", in, out, noise);
     snprintf(want, sizeof want, "fog[0] %s: %d pixels;", noise, W * H);
     assert_contains(tu_err, want);
+    /* What the error output is, pixel by pixel (the man page's kinds): the
+     * default method's node plans are estimates, and where it drops
+     * octaves statistical ones, so only the sky's pixels have a bound
+     * (with no falloff a sky ray is opaque: T = 0 exactly); method=steps
+     * bounds every pixel; with the clamp able to bind (contrast 1.5) every
+     * ground pixel's error involves the clamp's statistics. */
+    {
+        long b = -1, q = -1, st = -1;
+        const char *at = strstr(tu_err, "the error output a bound on ");
+        assert_true(at && sscanf(at, "the error output a bound on %ld pixels, a quadrature's "
+                                     "estimate on %ld, a statistical estimate on %ld",
+                                 &b, &q, &st) == 3);
+        assert_int_equal(b, nsky);
+        assert_int_equal(q + st, W * H - nsky);
+    }
+    assert_run(0, "'%s' -o '%s' --fog %s:method=steps --stats", in, out, noise);
+    snprintf(want, sizeof want,
+             "the error output a bound on %d pixels, a quadrature's estimate on 0, a statistical "
+             "estimate on 0 ", W * H);
+    assert_contains(tu_err, want);
+    assert_run(0, "'%s' -o '%s' --fog %s:contrast=1.5 --stats", in, out, noise);
+    snprintf(want, sizeof want,
+             "the error output a bound on %ld pixels, a quadrature's estimate on 0, a statistical "
+             "estimate on %ld ", nsky, (long) (W * H) - nsky);
+    assert_contains(tu_err, want);
     /* The costliest pixel re-timed: measured, and no more than the
      * slowest single timing it was taken from allows (its least of three
      * is at most that one; the plain maximum caps a pixel by its span's
