@@ -551,9 +551,16 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
     /* the pilot, where the mean fog alone would stop the ray but neither
      * lower value of the rest can show it (the clamp) */
     pilot PL = { 0, { 0 }, { 0 } };
-    if (!lod && 1 - fabs(s->contrast) * EF_NOISE_BOUND < 0.25 &&
-        rmin * (double) ef_nz_env_integral(s, R->h0, R->hs, t0, tend) >= tau_stop)
-        pilot_run(R, (double) t0, (double) tend, (tau_stop + 25) / rmin, &PL);
+    if (!lod && 1 - fabs(s->contrast) * EF_NOISE_BOUND < 0.25) {
+        const double mean = (double) ef_nz_env_integral(s, R->h0, R->hs, t0, tend);
+        const double emax = fmax(env_d(R, (double) t0), env_d(R, (double) tend));
+        const double lo_rest = fmax(mean - fabs(s->contrast) * noise_sigma4(R, emax,
+                                                                           (double) (tend - t0),
+                                                                           mean),
+                                    (1 - fabs(s->contrast) * EF_NOISE_BOUND) * mean);
+        if (rmin * mean >= tau_stop && !(rmin * lo_rest >= tau_stop))
+            pilot_run(R, (double) t0, (double) tend, (tau_stop + 25) / rmin, &PL);
+    }
     /* The envelope at the segment's start, carried from the previous
      * segment's end, and at the end of the stretch (the planning's
      * exponentials, one or two per segment). */

@@ -768,7 +768,7 @@ static void test_stats(void **state)
     const char *noise = "noise:density=0.1:scale=3:octaves=3";
     assert_run(0, "'%s' -o '%s' --fog exp:density=0.05 --fog %s --sky keep --stats --threads 1",
                in, out, noise);
-    char want[128], line1[1024], line2[1024];
+    char want[256], line1[1024], line2[1024];
     snprintf(want, sizeof want, "fog[1] %s: %ld pixels; per pixel: noise evaluations mean ", noise,
              (long) (W * H - nsky));
     assert_contains(tu_err, want);
