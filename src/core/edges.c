@@ -31,6 +31,7 @@ void ef_edge_work_free(ef_edge_work *wk)
 {
     free(wk->iz);
     free(wk->edge);
+    free(wk->band);
     free(wk->px);
     memset(wk, 0, sizeof *wk);
 }
@@ -428,7 +429,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     unsigned char *edge = wk->edge;
     inverse_depths(pass, u, iz);
     /* edges on the rows the 5x5 windows reach (missing rows are NaN,
-     * which bends_at skips; the outermost rows have no test) */
+     * which fails every bends3; the outermost rows have no test) */
     memset(edge, 0, (size_t) w);
     memset(edge + (size_t) (h + 2 * HR - 1) * (size_t) w, 0, (size_t) w);
     for (int r = 1 - HR; r < h + HR - 1; ++r) {
@@ -437,15 +438,16 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     }
     /* per 16-row band of the unit: edge pixels seen, and those whose
      * depth lies between layers */
-    const int nband = (h + 15) / 16;
-    int band_seen[64] = { 0 }, band_between[64] = { 0 };
-    int *seen_b = band_seen, *between_b = band_between;
-    if (nband > 64) {
-        seen_b = calloc((size_t) 2 * (size_t) nband, sizeof *seen_b);
-        if (!seen_b)
+    const size_t nband = (size_t) (h + 15) / 16;
+    if (2 * nband > wk->bandcap) {
+        int *b = realloc(wk->band, 2 * nband * sizeof *b);
+        if (!b)
             return -1;
-        between_b = seen_b + nband;
+        wk->band = b;
+        wk->bandcap = 2 * nband;
     }
+    int *const seen_b = wk->band, *const between_b = wk->band + nband;
+    memset(wk->band, 0, 2 * nband * sizeof *wk->band);
     int count = 0;
     for (int r = 0; r < h; ++r)
         for (int x = 0; x < w; ++x) {
@@ -488,11 +490,8 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             if ((size_t) count >= wk->pxcap) {
                 const size_t cap = wk->pxcap ? 2 * wk->pxcap : 256;
                 ef_edge_px *p = realloc(wk->px, cap * sizeof *p);
-                if (!p) {
-                    if (seen_b != band_seen)
-                        free(seen_b);
+                if (!p)
                     return -1;
-                }
                 wk->px = p;
                 wk->pxcap = cap;
             }
@@ -518,15 +517,13 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
     int k = 0;
     for (int m = 0; m < count; ++m) {
         const int b = wk->px[m].i / w / 16;
-        if (between_b[b] > seen_b[b] / 5 && !wk->px[m].between && !want_err)
+        const int texture = between_b[b] > seen_b[b] / 5 && !wk->px[m].between;
+        if (texture && !want_err)
             continue;
         wk->px[k] = wk->px[m];
-        wk->px[k++].keep |= between_b[b] > seen_b[b] / 5 && !wk->px[m].between;
+        wk->px[k++].keep |= texture;
     }
-    count = k;
-    if (seen_b != band_seen)
-        free(seen_b);
-    return count;
+    return k;
 }
 
 /* The mixable planes of an AOV binding (not fog_P, not fog_distance), in a

@@ -68,9 +68,11 @@ typedef struct ef_edge_px {
 
 /* Scratch kept between units by one thread. */
 typedef struct ef_edge_work {
-    double *iz;              /* 1 / planar depth of the unit and its two outer rows */
+    double *iz;              /* 1 / planar depth of the unit and its outer rows */
     unsigned char *edge;
     size_t cap;
+    int *band;               /* per 16-row band: edge pixels seen, then those between layers */
+    size_t bandcap;
     ef_edge_px *px;
     size_t pxcap;
 } ef_edge_work;

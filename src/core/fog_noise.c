@@ -22,9 +22,9 @@
  *             independent cell errors, or the worst case if smaller) fits,
  *             fine octaves dropped while 3 sigma of their line integrals (or
  *             their hard bound) fits, every pixel's error estimate reported;
-             noise-separable where the clamp cannot bind has its own walk
-             (noise_sep.c: exact per piece, factor octaves dropped by
-             their period's statistics).
+ *             noise-separable where the clamp cannot bind has its own walk
+ *             (noise_sep.c: exact per piece, factor octaves dropped by
+ *             their period's statistics).
  *   steps     the uniform midpoint ray-march of game engines (steps=N).
  *   preintegrated  (noise-separable) the seed's evaluation: per-axis prefix
  *             integrals and the product of the factors' means over K pieces.

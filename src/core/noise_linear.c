@@ -410,6 +410,16 @@ typedef struct pilot {
     double a[PILOT_N], v[PILOT_N];   /* a stretch's start and its lower bound (tau / rho) */
 } pilot;
 
+/* A lower value of tau / rho over a stretch of length L whose envelope is
+ * at most emax and whose mean fog is m: m less four standard deviations of
+ * its noise (noise_sigma4), or (1 - |c| B) m, whichever is larger (either
+ * may be negative: nothing known). */
+static double rest_lower(const rayc *R, double emax, double L, double m)
+{
+    const double ac = fabs(R->s->contrast);
+    return fmax(m - ac * noise_sigma4(R, emax, L, m), (1 - ac * EF_NOISE_BOUND) * m);
+}
+
 /* Fills P over [t0, t1] (finite) until its sum reaches goal. */
 static void pilot_run(rayc *R, double t0, double t1, double goal, pilot *P)
 {
@@ -553,11 +563,9 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
     pilot PL = { 0, { 0 }, { 0 } };
     if (!lod && 1 - fabs(s->contrast) * EF_NOISE_BOUND < 0.25) {
         const double mean = (double) ef_nz_env_integral(s, R->h0, R->hs, t0, tend);
-        const double emax = fmax(env_d(R, (double) t0), env_d(R, (double) tend));
-        const double lo_rest = fmax(mean - fabs(s->contrast) * noise_sigma4(R, emax,
-                                                                           (double) (tend - t0),
-                                                                           mean),
-                                    (1 - fabs(s->contrast) * EF_NOISE_BOUND) * mean);
+        const double lo_rest =
+            rest_lower(R, fmax(env_d(R, (double) t0), env_d(R, (double) tend)),
+                       (double) (tend - t0), mean);
         if (rmin * mean >= tau_stop && !(rmin * lo_rest >= tau_stop))
             pilot_run(R, (double) t0, (double) tend, (tau_stop + 25) / rmin, &PL);
     }
@@ -572,13 +580,8 @@ double ef_nz_adaptive_linear(rayc *R, long double t0, long double tend, long dou
             decay_int(a_env > 0 ? e_t : e_tend, fabs(a_env), (double) (tend - t));
         const double E = sqrt(E2);
         const double ulo = mean_sofar + s->contrast * kval(&noise) + kval(&corr) - E;
-        /* lo: ulo plus the rest's lower value, its mean less four standard
-         * deviations of its noise (noise_sigma4), or (1 - |c| B) times its
-         * mean, whichever is larger. */
-        const double lo_rest =
-            fmax(rest - fabs(s->contrast) * noise_sigma4(R, fmax(e_t, e_tend),
-                                                         (double) (tend - t), rest),
-                 (1 - fabs(s->contrast) * EF_NOISE_BOUND) * rest);
+        /* lo: ulo plus the rest's lower value (rest_lower, or the pilot's) */
+        const double lo_rest = rest_lower(R, fmax(e_t, e_tend), (double) (tend - t), rest);
         const double lo_pilot = PL.n ? pilot_rest(&PL, (double) t) : 0;
         const double lo = ulo + fmax(lo_rest > 0 ? lo_rest : 0, lo_pilot);
         /* done: T_k = e^-(rho_k ulo) <= eps/4 in every channel; W: the

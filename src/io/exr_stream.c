@@ -1025,7 +1025,6 @@ static void *worker(void *arg)
             for (int side = 0; side < 2; ++side) {
                 if (!have[side])
                     continue;
-                const size_t blk = EF_STREAM_HALO * (size_t) w;
                 const float *b = hbuf + ((size_t) (side * j->ntarget + t) * 5) * blk +
                                  (side ? 0 : (size_t) (EF_STREAM_HALO - nside[0]) * (size_t) w);
                 for (int k = 0; k < 3; ++k)
