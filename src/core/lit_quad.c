@@ -58,7 +58,8 @@ static void sigma_at(const ef_fog_component *c, const double x[3], double out[3]
 
 /* ----------------------------------------------------- the quadrature */
 
-typedef void (*lit_fn)(const void *q, double u, double out[3]);
+/* An integrand at n nodes u into out[j] per channel. */
+typedef void (*lit_fn)(const void *q, const double *u, int n, double (*out)[3]);
 
 typedef struct gk_iv {
     double a, b, r[3], e[3];
@@ -69,22 +70,24 @@ typedef struct gk_iv {
 static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo)
 {
     const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
-    double fv[15][3], rk[3], rg[3];
-    f(q, c, fv[7]);
+    double fv[15][3], u[15], rk[3], rg[3];
+    u[7] = c;
+    for (int j = 0; j < 7; ++j) {
+        const double dx = h * (double) ef_gk15_x[j];
+        u[j] = c - dx;
+        u[14 - j] = c + dx;
+    }
+    f(q, u, 15, fv);
     for (int k = 0; k < 3; ++k) {
         rk[k] = (double) ef_gk15_wk[7] * fv[7][k];
         rg[k] = (double) ef_gk15_wg[3] * fv[7][k];
     }
-    for (int j = 0; j < 7; ++j) {
-        const double dx = h * (double) ef_gk15_x[j];
-        f(q, c - dx, fv[j]);
-        f(q, c + dx, fv[14 - j]);
+    for (int j = 0; j < 7; ++j)
         for (int k = 0; k < 3; ++k) {
             rk[k] += (double) ef_gk15_wk[j] * (fv[j][k] + fv[14 - j][k]);
             if (j & 1)
                 rg[k] += (double) ef_gk15_wg[j / 2] * (fv[j][k] + fv[14 - j][k]);
         }
-    }
     /* QUADPACK's qk15 estimate: |K - G| scaled by (200 |K - G| / resasc)^1.5
      * (resasc: the integral of |f - its mean|), which on a smooth piece
      * tracks the Kronrod rule's own error rather than the Gauss rule's */
@@ -196,41 +199,26 @@ typedef struct lit_q {
     int uniform;              /* every component uniform: sig per channel */
     double sig[3];
 } lit_q;
-/* sum_c sigma_c albedo_c p_c(cos) per channel at x. */
-static void scatter_at(const ef_fog_scene *s, const double x[3], double cos_theta, double acc[3])
+/* One node's geometry: t along the ray, the substitution's weight, the
+ * lamp's distance dl (INFINITY for the sun), the phase's cosine and the
+ * direction to the light; 0 where the node carries no light. For a lamp,
+ * its distance and the phase's angle come from u - ts and the line's
+ * distance h (both exact at the closest approach), not from a world point
+ * rounded to double, whose rounding (an ulp of the ray's length) would be
+ * a large share of d where the lamp is near the ray. */
+static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double *dlp,
+                     double *cthp, double ld[3])
 {
-    acc[0] = acc[1] = acc[2] = 0;
-    for (int i = 0; i < s->ncomp; ++i) {
-        const ef_fog_component *c = &s->comp[i];
-        double sg[3];
-        sigma_at(c, x, sg);
-        if (sg[0] == 0 && sg[1] == 0 && sg[2] == 0)
-            continue;
-        const double p = ef_phase_eval(c->phase, c->g, cos_theta);
-        for (int k = 0; k < 3; ++k)
-            acc[k] += sg[k] == 0 ? 0 : sg[k] * albedo(c, k) * p;
-    }
-}
-
-/* The integrand at u (t or xi), light included. For a lamp, its distance
- * and the phase's angle come from u - ts and the line's distance h (both
- * exact at the closest approach), not from a world point rounded to
- * double, whose rounding (an ulp of the ray's length) would be a large
- * share of d where the lamp is near the ray. */
-static void lit_integrand(const void *qv, double u, double out[3])
-{
-    const lit_q *q = qv;
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     double t = u, ur = 0, wgt = 1;
-    out[0] = out[1] = out[2] = 0;
     if (q->equi == 1) {
         ur = q->hq * tan(u);
         t = q->ts + ur;
         wgt = 1 / q->hq;
     } else if (q->equi == 2) {
         if (!(u < 1))
-            return;
+            return 0;
         ur = q->ua + q->lam * u / (1 - u);
         t = q->ts + ur;
         wgt = q->lam / ((1 - u) * (1 - u)) / (ur * ur + q->hq * q->hq);
@@ -243,14 +231,14 @@ static void lit_integrand(const void *qv, double u, double out[3])
     }
     if (!(t >= 0))
         t = 0;
-    double ld[3], dl = INFINITY, cth;
+    double dl = INFINITY, cth;
     if (!ef_light_at_position(l)) {
-        memcpy(ld, l->dir, sizeof ld);
+        memcpy(ld, l->dir, 3 * sizeof *ld);
         cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
     } else {
         dl = sqrt(ur * ur + q->h * q->h);
         if (!(dl > 0))
-            return;
+            return 0;
         cth = -ur / dl;
         double y[3], yn = 0;
         for (int a = 0; a < 3; ++a) {
@@ -263,49 +251,171 @@ static void lit_integrand(const void *qv, double u, double out[3])
         if (ef_light_coned(l)) {
             wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
             if (wgt == 0)
-                return;
+                return 0;
         }
     }
-    if (q->uniform) {
-        /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
-         * exponential per distinct density */
-        double a[3] = { 0, 0, 0 };
-        for (int i = 0; i < q->s->ncomp; ++i) {
-            const ef_fog_component *c = &q->s->comp[i];
-            const double p = ef_phase_eval(c->phase, c->g, cth);
-            double sg[3];
-            uniform_sigma(c, sg);
+    *tp = t;
+    *wgtp = wgt;
+    *dlp = dl;
+    *cthp = cth;
+    return 1;
+}
+
+/* Exponential strata (fog.h's strata: rho e^(-k (up.x - base)), k > 0)
+ * at the m nodes t[j] of the view ray, in plain double as sigma_at: the
+ * density factor E[j] = e^(-k (height - base)), the view's optical depth
+ * from the camera and the light's from the node (dl[j], direction ld[j];
+ * INFINITY for the sun) added per channel to tv and tl. One expm1 gives a
+ * node's density and its view depth (both e^(-k s t) from the camera's
+ * height), one more its light depth: rho E dl phi(k dh), phi(c) = (1 -
+ * e^-c) / c of either sign, dh the light's height over the node's. The
+ * model's own optical depths (double-double heights, the saturation's
+ * care) cost four times this for nothing the quadrature's 1e-10 can see;
+ * returns 0 (nothing added) where an exponent leaves +-700, for the
+ * model to answer. */
+static int strata_legs(const ef_fog_component *c, const lit_q *q, const double rho[3], double k,
+                       double base, int m, const double *t, const double (*ld)[3],
+                       const double *dl, double *E, double (*tv)[3], double (*tl)[3])
+{
+    const ef_ray *r = q->r;
+    const double *up = c->up;
+    const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
+    const double sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
+    const double x0 = -k * h0;
+    const int lamp = ef_light_at_position(q->l);
+    /* the lamp's height over the camera's: w is lamp - camera */
+    const double wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
+    double em[15];
+    for (int j = 0; j < m; ++j) {
+        const double b = k * sv * t[j];
+        if (!(fabs(x0) < 700 && fabs(x0 - b) < 700))
+            return 0;
+        em[j] = expm1(-b);
+    }
+    const double E0 = exp(x0);
+    for (int j = 0; j < m; ++j) {
+        const double b = k * sv * t[j];
+        E[j] = E0 * (1 + em[j]);
+        const double lv = b == 0 ? t[j] : -em[j] / (k * sv);   /* the view's length factor */
+        double ll;                                               /* the light's */
+        if (lamp) {
+            const double cc = k * (wu - t[j] * sv);
+            ll = cc == 0 ? dl[j] : dl[j] * (-expm1(-cc) / cc);
+        } else {
+            const double sl = up[0] * ld[j][0] + up[1] * ld[j][1] + up[2] * ld[j][2];
+            ll = sl > 0 ? 1 / (k * sl) : INFINITY;
+        }
+        for (int ch = 0; ch < 3; ++ch)
+            if (rho[ch] != 0) {
+                tv[j][ch] += rho[ch] * E0 * lv;
+                tl[j][ch] += rho[ch] * E[j] * ll;
+            }
+    }
+    return 1;
+}
+
+/* The integrand at the n <= 15 nodes u (t or xi), light included, into
+ * out. The general fog's optical depths come a rule's nodes at a time:
+ * strata from strata_legs, other models from ef_fog_tau_add (the view's
+ * along one ray to every node, the light's from every node). */
+static void lit_integrand(const void *qv, const double *u, int n, double (*out)[3])
+{
+    const lit_q *q = qv;
+    const ef_light *l = q->l;
+    const ef_ray *r = q->r;
+    const ef_fog_scene *s = q->s;
+    double tn[15], wgt[15], dl[15], cth[15], ld[15][3];
+    int live[15], m = 0;
+    for (int j = 0; j < n; ++j) {
+        out[j][0] = out[j][1] = out[j][2] = 0;
+        if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m], ld[m]))
+            continue;
+        if (q->uniform) {
+            /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
+             * exponential per distinct density */
+            const double t = tn[m], d = dl[m];
+            double a[3] = { 0, 0, 0 };
+            for (int i = 0; i < s->ncomp; ++i) {
+                const ef_fog_component *c = &s->comp[i];
+                const double p = ef_phase_eval(c->phase, c->g, cth[m]);
+                double sg[3];
+                uniform_sigma(c, sg);
+                for (int k = 0; k < 3; ++k)
+                    if (sg[k] > 0)
+                        a[k] += sg[k] * albedo(c, k) * p;
+            }
+            double e[3];
+            e[0] = exp(-q->sig[0] * (t + d));
+            e[1] = q->sig[1] == q->sig[0] ? e[0] : exp(-q->sig[1] * (t + d));
+            e[2] = q->sig[2] == q->sig[0] ? e[0] : exp(-q->sig[2] * (t + d));
+            /* the transmittance first: where it is 0 a dense fog's sigma
+             * times a near lamp's weight may overflow, and inf * 0 is no
+             * answer */
             for (int k = 0; k < 3; ++k)
-                if (sg[k] > 0)
-                    a[k] += sg[k] * albedo(c, k) * p;
+                out[j][k] = q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt[m] * l->e[k];
+            continue;
         }
-        double e[3];
-        e[0] = exp(-q->sig[0] * (t + dl));
-        e[1] = q->sig[1] == q->sig[0] ? e[0] : exp(-q->sig[1] * (t + dl));
-        e[2] = q->sig[2] == q->sig[0] ? e[0] : exp(-q->sig[2] * (t + dl));
-        /* the transmittance first: where it is 0 a dense fog's sigma times
-         * a near lamp's weight may overflow, and inf * 0 is no answer */
-        for (int k = 0; k < 3; ++k)
-            out[k] = q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt * l->e[k];
-        return;
+        live[m++] = j;
     }
-    double x[3], acc[3];
-    for (int a = 0; a < 3; ++a)
-        x[a] = r->org[a] + t * r->dir[a];
-    scatter_at(q->s, x, cth, acc);
-    if (acc[0] == 0 && acc[1] == 0 && acc[2] == 0)
+    if (m == 0)
         return;
-    double tv[3], tl[3];
-    ef_lit_tau_from(q->s, r->org, r->dir, t, tv);
-    if (!ef_light_at_position(l) && l->planet > 0)
-        ef_lit_sun_planet_tau(q->s, l, x, tl);
-    else
-        ef_lit_tau_from(q->s, x, ld, dl, tl);
-    /* where either leg is opaque the density may have overflowed too:
-     * no light, not inf * 0 */
-    for (int k = 0; k < 3; ++k) {
-        const double e = exp(-(tv[k] + tl[k]));
-        out[k] = acc[k] == 0 || e == 0 ? 0 : acc[k] * e * wgt * l->e[k];
+    /* per node: the scattering (acc), the view's and the light's optical
+     * depths, component by component */
+    const int planet = !ef_light_at_position(l) && l->planet > 0;
+    double acc[15][3], tv[15][3], tl[15][3], x[15][3];
+    memset(acc, 0, sizeof acc[0] * (size_t) m);
+    memset(tv, 0, sizeof tv[0] * (size_t) m);
+    memset(tl, 0, sizeof tl[0] * (size_t) m);
+    for (int j = 0; j < m; ++j)
+        for (int a = 0; a < 3; ++a)
+            x[j][a] = r->org[a] + tn[j] * r->dir[a];
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        double rho[3], k, base, E[15];
+        if (c->model->strata && c->model->strata(c, rho, &k, &base) &&
+            strata_legs(c, q, rho, k, base, m, tn, (const double(*)[3]) ld, dl, E, tv,
+                        tl)) {
+            for (int j = 0; j < m; ++j) {
+                const double p = ef_phase_eval(c->phase, c->g, cth[j]);
+                for (int ch = 0; ch < 3; ++ch)
+                    acc[j][ch] += rho[ch] == 0 ? 0 : rho[ch] * E[j] * albedo(c, ch) * p;
+            }
+            continue;
+        }
+        ef_ray vr[15], lr[15];
+        for (int j = 0; j < m; ++j) {
+            double sg[3];
+            sigma_at(c, x[j], sg);
+            if (sg[0] != 0 || sg[1] != 0 || sg[2] != 0) {
+                const double p = ef_phase_eval(c->phase, c->g, cth[j]);
+                for (int ch = 0; ch < 3; ++ch)
+                    acc[j][ch] += sg[ch] == 0 ? 0 : sg[ch] * albedo(c, ch) * p;
+            }
+            vr[j] = (ef_ray) { { r->dir[0], r->dir[1], r->dir[2] }, tn[j], tn[j],
+                               { r->org[0], r->org[1], r->org[2] } };
+            lr[j] = (ef_ray) { { ld[j][0], ld[j][1], ld[j][2] }, dl[j], dl[j],
+                               { x[j][0], x[j][1], x[j][2] } };
+        }
+        ef_fog_tau_add(c, vr, m, tv);
+        if (!planet)
+            ef_fog_tau_add(c, lr, m, tl);
+    }
+    for (int j = 0; j < m; ++j) {
+        if (acc[j][0] == 0 && acc[j][1] == 0 && acc[j][2] == 0)
+            continue;
+        if (planet)
+            ef_lit_sun_planet_tau(s, l, x[j], tl[j]);
+        /* where either leg is opaque the density may have overflowed too:
+         * no light, not inf * 0 */
+        double tau[3], e[3];
+        for (int k = 0; k < 3; ++k)
+            tau[k] = tv[j][k] + tl[j][k];
+        e[0] = exp(-tau[0]);
+        e[1] = tau[1] == tau[0] ? e[0] : exp(-tau[1]);
+        e[2] = tau[2] == tau[0] ? e[0] : exp(-tau[2]);
+        for (int k = 0; k < 3; ++k)
+            out[live[j]][k] =
+                acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * l->e[k];
     }
 }
 

@@ -477,6 +477,39 @@ static void test_general(void **state)
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-9);
 }
 
+/* The general quadrature's exponential strata (height fog's optical
+ * depths in plain double, a rule's nodes at a time) against the reference
+ * integrator where they are easiest to get wrong: a lamp below the ray
+ * (the light's height factor of the other sign), a camera far from the
+ * origin, falloffs whose exponents pass 700 (the model answers there),
+ * channels of zero density, a spot, the sun through mixed fog from above
+ * and from below the view, and two strata at once. */
+static void test_strata(void **state)
+{
+    (void) state;
+    const lit_case cs[] = {
+        { { "height:density=0.05:falloff=0.3:base=0" }, "point:position=1,-4,-20:intensity=100",
+          { 0, 1.7, 0 }, { 0.05, -0.02, -1 }, 60 },
+        { { "height:density=0.05:falloff=0.3:base=2" }, "point:position=100003,9,-199975:intensity=80",
+          { 1e5, 1.7, -2e5 }, { 0.1, 0.05, 1 }, INFINITY },
+        { { "height:density=0.05:falloff=30:base=0" }, "point:position=0,0.5,-10:intensity=50",
+          { 0, 30, 0 }, { 0, -1, -0.4 }, 40 },
+        { { "height:density=0.05:falloff=3:base=0" }, "point:position=0,0.5,-10:intensity=50",
+          { 0, 30, 0 }, { 0, -1, -0.4 }, 40 },
+        { { "height:density=0.05,0,0.02:falloff=0.2:base=0:albedo=0.9,1,0.5" },
+          "point:position=-2,5,-15:intensity=60:color=1,0.5,0.2", { 0, 1.7, 0 }, { 0, 0.2, -1 },
+          INFINITY },
+        { { "height:density=0.05:falloff=0.3:base=0:phase=hg:g=0.7" },
+          "spot:position=0,6,-20:aim=0,-1,0.2:cone=40:blend=0.2:intensity=100", { 0, 1.7, 0 },
+          { 0, 0, -1 }, 100 },
+        { { "height:density=0.05:falloff=0.3:base=0", "box:min=-3,0,-40:max=3,4,-25:density=0.5" },
+          "sun:towards=0.5,-0.6,-1:intensity=3", { 0, 1.7, 0 }, { 0.05, 0.02, -1 }, INFINITY },
+        { { "height:density=0.05:falloff=0.3:base=0", "height:density=0.01:falloff=0.02:base=-5" },
+          "point:position=3,8,-30:intensity=100", { 0, 1.7, 0 }, { 0, 0.1, -1 }, INFINITY },
+    };
+    check_cases(cs, sizeof cs / sizeof cs[0], 1e-9);
+}
+
 /* The dense output (lit.h): one quadrature along a whole ray, from which
  * a deep fog sample's light over [a, b) is (J(b) - J(a)) / T(0, a). Against
  * ef_light_inscatter over each segment on its own (the per-segment
@@ -992,6 +1025,7 @@ int main(void)
         cmocka_unit_test(test_sun_halfspace), cmocka_unit_test(test_sun_planet),
         cmocka_unit_test(test_point_uniform), cmocka_unit_test(test_rays_batch),
         cmocka_unit_test(test_general),
+        cmocka_unit_test(test_strata),
         cmocka_unit_test(test_dense),
         cmocka_unit_test(test_sun_convex),
         cmocka_unit_test(test_by_hand),      cmocka_unit_test(test_composite),
