@@ -247,9 +247,9 @@ static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double 
             y[a] = q->w[a] - t * r->dir[a];
             yn += y[a] * y[a];
         }
-        yn = sqrt(yn);
+        const double iy = yn > 0 ? 1 / sqrt(yn) : 0;
         for (int a = 0; a < 3; ++a)
-            ld[a] = yn > 0 ? y[a] / yn : 0;
+            ld[a] = y[a] * iy;
         if (ef_light_coned(l)) {
             wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
             if (wgt == 0)
@@ -288,6 +288,7 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
     /* the lamp's height over the camera's: w is lamp - camera */
     const double wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
     double em[15];
+    const double iks = sv != 0 ? -1 / (k * sv) : 0;   /* (a level view: b is 0) */
     for (int j = 0; j < m; ++j) {
         const double b = k * sv * t[j];
         if (!(fabs(x0) < 700 && fabs(x0 - b) < 700))
@@ -298,7 +299,7 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
     for (int j = 0; j < m; ++j) {
         const double b = k * sv * t[j];
         E[j] = E0 * (1 + em[j]);
-        const double lv = b == 0 ? t[j] : -em[j] / (k * sv);   /* the view's length factor */
+        const double lv = b == 0 ? t[j] : em[j] * iks;   /* the view's length factor */
         double ll;                                               /* the light's */
         if (lamp) {
             const double cc = k * (wu - t[j] * sv);
