@@ -800,6 +800,19 @@ static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1
  * their rate instead, |d sigma/dt| <= D on the slab giving h^2 D / 8.
  * Models without dsigma_max are monotone between the crossings of their
  * jump and kink features (fog.h), which fog_interval splits at first. */
+/* split_bound's term for one monotone component from its optical depths
+ * over the slab (tb) and its front half (tm). */
+static double split_dev(const double tb[3], const double tm[3])
+{
+    double dev = 0;
+    for (int k = 0; k < 3; ++k) {
+        if (isinf(tb[k]))
+            return INFINITY;
+        dev = fmax(dev, fabs(tm[k] - 0.5 * tb[k]));
+    }
+    return 2 * dev;
+}
+
 static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, double b)
 {
     const double m = 0.5 * (a + b), h = b - a;
@@ -816,13 +829,7 @@ static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, dou
         double tb[3], tm[3];
         comp_tau(c, r1, a, b, tb, NULL);
         comp_tau(c, r1, a, m, tm, NULL);
-        double dev = 0;
-        for (int k = 0; k < 3; ++k) {
-            if (isinf(tb[k]))
-                return INFINITY;
-            dev = fmax(dev, fabs(tm[k] - 0.5 * tb[k]));
-        }
-        sum += 2 * dev;
+        sum += split_dev(tb, tm);
     }
     return sum;
 }
@@ -900,6 +907,8 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
     double sl[DEPTH + 2][EF_MAX_LIGHTS + 1][3];
 #define PER(i) (F->per_light ? sl[(i)] : NULL)
     int linear;
+    const ef_fog_scene *sc = F->scene;
+    const int one = sc->ncomp == 1 && !sc->comp[0].model->dsigma_max;
     stack[0] = make_piece(F, lt, r1, a, b, 0, &linear, PER(0), NULL);
     int sp = 1;
     while (sp > 0) {
@@ -911,16 +920,27 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
                         *Tf > F->tol;
         int split = can && max3(p.tau) > F->tau_cap;
         double est = 0;
-        if (!split && !linear && *Tf > F->tol && isfinite(max3(p.tau))) {
-            /* |dT| of any later split <= T(0, a) times the slab's bound */
-            est = *Tf * split_bound(F->scene, r1, sa, sb);
-            split = can && est > F->tol;
-        }
         piece front;
         int have_front = 0;
+        if (!split && !linear && *Tf > F->tol && isfinite(max3(p.tau))) {
+            /* |dT| of any later split <= T(0, a) times the slab's bound;
+             * with one monotone component, from the slab's optical depths
+             * and its front half's, which a split or the colour's estimate
+             * needs anyway (split_bound would compute both again) */
+            if (can && one) {
+                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1),
+                                   p.Ta[0] >= 0 ? p.Ta : NULL);
+                have_front = 1;
+                est = *Tf * split_dev(p.tau, front.tau);
+            } else {
+                est = *Tf * split_bound(F->scene, r1, sa, sb);
+            }
+            split = can && est > F->tol;
+        }
         if (!split && can && lt->lights && lt->scale > 0 && isfinite(max3(p.S))) {
-            front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1),
-                               p.Ta[0] >= 0 ? p.Ta : NULL);
+            if (!have_front)
+                front = make_piece(F, lt, r1, sa, m, p.depth + 1, NULL, PER(sp + 1),
+                                   p.Ta[0] >= 0 ? p.Ta : NULL);
             have_front = 1;
             const double ec = color_est(&p, &front, *Tf, lt->scale);
             est = fmax(est, ec);
