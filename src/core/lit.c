@@ -543,10 +543,13 @@ static void dense_at(const ef_lit_dense *d, double t, double J[3], double E[3], 
         pm1 = pm;
         pm = pn;
     }
+    double v = 0;
     for (int k = 0; k < 3; ++k) {
-        double v = 0;
-        for (int m = EF_LIT_DENSE_NC - 1; m >= 0; --m)
-            v += f->c[k][m] * I[m];
+        if (k == 0 || !f->grey) {   /* a grey leaf's sum serves every channel */
+            v = 0;
+            for (int m = EF_LIT_DENSE_NC - 1; m >= 0; --m)
+                v += f->c[k][m] * I[m];
+        }
         J[k] = f->J0[k] + h * v;
         E[k] = f->E0[k] + f->e[k];
         Elo[k] = f->E0[k];

@@ -56,6 +56,7 @@ typedef struct ef_lit_leaf {
     int mode;                 /* how u maps to t (lit_quad.c's equi; 3: u = t) */
     double ts, hq, ua, lam;   /* the mapping's constants */
     double c[3][EF_LIT_DENSE_NC];   /* the integrand's Legendre coefficients on [u0, u1] */
+    int grey;                 /* the three channels' coefficients are the same */
     double J0[3], E0[3];      /* J and the summed error estimates at t0 */
     double r[3], e[3];        /* the leaf's integral and its estimate */
 } ef_lit_leaf;

@@ -535,6 +535,8 @@ static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
                 f->c[k][m] = rec->w * c;
             }
         }
+        f->grey = !memcmp(f->c[0], f->c[1], sizeof f->c[0]) &&
+                  !memcmp(f->c[0], f->c[2], sizeof f->c[0]);
     }
 }
 
