@@ -18,17 +18,8 @@ static void sigma_at(const ef_fog_component *c, const double x[3], double out[3]
 {
     if (uniform_sigma(c, out))
         return;
-    /* Exponential strata in double: the model's long double density cost
-     * half of a lamp's quadrature in height fog, for nothing the 1e-10 of
-     * the quadrature can see (where exp overflows, the view's optical
-     * depth has already made the light 0). */
-    double rho[3], k, base;
-    if (c->model->strata && c->model->strata(c, rho, &k, &base)) {
-        const double e = exp(-k * (c->up[0] * x[0] + c->up[1] * x[1] + c->up[2] * x[2] - base));
-        for (int ch = 0; ch < 3; ++ch)
-            out[ch] = rho[ch] == 0 ? 0 : rho[ch] * e;
-        return;
-    }
+    /* (exponential strata take theirs from strata_legs, in plain double;
+     * they come here only where its exponents leave +-700) */
     ef_fog_functional fs[64], *f = fs;
     long double vs[64], *v = vs;
     const int n = c->model->functionals(c, NULL, 0);
@@ -202,14 +193,14 @@ typedef struct lit_q {
     double sig[3];
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
- * lamp's distance dl (INFINITY for the sun), the phase's cosine and the
- * direction to the light; 0 where the node carries no light. For a lamp,
+ * lamp's distance dl (INFINITY for the sun) and the phase's cosine; 0
+ * where the node carries no light. For a lamp,
  * its distance and the phase's angle come from u - ts and the line's
  * distance h (both exact at the closest approach), not from a world point
  * rounded to double, whose rounding (an ulp of the ray's length) would be
  * a large share of d where the lamp is near the ray. */
 static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double *dlp,
-                     double *cthp, double ld[3])
+                     double *cthp)
 {
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
@@ -235,21 +226,12 @@ static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double 
         t = 0;
     double dl = INFINITY, cth;
     if (!ef_light_at_position(l)) {
-        memcpy(ld, l->dir, 3 * sizeof *ld);
-        cth = ld[0] * r->dir[0] + ld[1] * r->dir[1] + ld[2] * r->dir[2];
+        cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     } else {
         dl = sqrt(ur * ur + q->h * q->h);
         if (!(dl > 0))
             return 0;
         cth = -ur / dl;
-        double y[3], yn = 0;
-        for (int a = 0; a < 3; ++a) {
-            y[a] = q->w[a] - t * r->dir[a];
-            yn += y[a] * y[a];
-        }
-        const double iy = yn > 0 ? 1 / sqrt(yn) : 0;
-        for (int a = 0; a < 3; ++a)
-            ld[a] = y[a] * iy;
         if (ef_light_coned(l)) {
             wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
             if (wgt == 0)
@@ -263,30 +245,53 @@ static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double 
     return 1;
 }
 
+/* The unit direction from the node at t towards the light (the sun's
+ * own; for a lamp from w, lamp - camera), for the models whose optical
+ * depth to the light takes a ray. */
+static void light_dir(const lit_q *q, double t, double ld[3])
+{
+    if (!ef_light_at_position(q->l)) {
+        memcpy(ld, q->l->dir, 3 * sizeof *ld);
+        return;
+    }
+    double y[3], yn = 0;
+    for (int a = 0; a < 3; ++a) {
+        y[a] = q->w[a] - t * q->r->dir[a];
+        yn += y[a] * y[a];
+    }
+    const double iy = yn > 0 ? 1 / sqrt(yn) : 0;
+    for (int a = 0; a < 3; ++a)
+        ld[a] = y[a] * iy;
+}
+
 /* Exponential strata (fog.h's strata: rho e^(-k (up.x - base)), k > 0)
- * at the m nodes t[j] of the view ray, in plain double as sigma_at: the
- * density factor E[j] = e^(-k (height - base)), the view's optical depth
- * from the camera and the light's from the node (dl[j], direction ld[j];
- * INFINITY for the sun) added per channel to tv and tl. One expm1 gives a
+ * at the m nodes t[j] of the view ray, in plain double: the density
+ * factor E[j] = e^(-k (height - base)), the view's optical depth from the
+ * camera added per channel to tv, and (tl not NULL) the light's from the
+ * node (a lamp at dl[j]; the sun to infinity) to tl. One expm1 gives a
  * node's density and its view depth (both e^(-k s t) from the camera's
- * height), one more its light depth: rho E dl phi(k dh), phi(c) = (1 -
- * e^-c) / c of either sign, dh the light's height over the node's. The
- * model's own optical depths (double-double heights, the saturation's
- * care) cost four times this for nothing the quadrature's 1e-10 can see;
- * returns 0 (nothing added) where an exponent leaves +-700, for the
- * model to answer. */
+ * height), one more a lamp's depth: rho E dl phi(k dh), phi(c) = (1 -
+ * e^-c) / c of either sign, dh the lamp's height over the node's; the
+ * sun's is rho E / (k s_l). The model's own optical depths (double-double
+ * heights, the saturation's care) cost four times this for nothing the
+ * quadrature's 1e-10 can see; returns 0 (nothing added) where an
+ * exponent leaves +-700, for the model to answer. */
 static int strata_legs(const ef_fog_component *c, const lit_q *q, const double rho[3], double k,
-                       double base, int m, const double *t, const double (*ld)[3],
-                       const double *dl, double *E, double (*tv)[3], double (*tl)[3])
+                       double base, int m, const double *t, const double *dl, double *E,
+                       double (*tv)[3], double (*tl)[3])
 {
     const ef_ray *r = q->r;
+    const ef_light *l = q->l;
     const double *up = c->up;
     const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
     const double sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
     const double x0 = -k * h0;
-    const int lamp = ef_light_at_position(q->l);
-    /* the lamp's height over the camera's: w is lamp - camera */
+    const int lamp = ef_light_at_position(l);
+    /* the lamp's height over the camera's (w is lamp - camera); the sun's
+     * length factor, the same at every node */
     const double wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
+    const double sl = up[0] * l->dir[0] + up[1] * l->dir[1] + up[2] * l->dir[2];
+    const double lsun = sl > 0 ? 1 / (k * sl) : INFINITY;
     double em[15];
     const double iks = sv != 0 ? -1 / (k * sv) : 0;   /* (a level view: b is 0) */
     for (int j = 0; j < m; ++j) {
@@ -300,19 +305,19 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
         const double b = k * sv * t[j];
         E[j] = E0 * (1 + em[j]);
         const double lv = b == 0 ? t[j] : em[j] * iks;   /* the view's length factor */
-        double ll;                                               /* the light's */
+        for (int ch = 0; ch < 3; ++ch)
+            if (rho[ch] != 0)
+                tv[j][ch] += rho[ch] * E0 * lv;
+        if (!tl)
+            continue;
+        double ll = lsun;   /* the light's */
         if (lamp) {
             const double cc = k * (wu - t[j] * sv);
             ll = cc == 0 ? dl[j] : dl[j] * (-expm1(-cc) / cc);
-        } else {
-            const double sl = up[0] * ld[j][0] + up[1] * ld[j][1] + up[2] * ld[j][2];
-            ll = sl > 0 ? 1 / (k * sl) : INFINITY;
         }
         for (int ch = 0; ch < 3; ++ch)
-            if (rho[ch] != 0) {
-                tv[j][ch] += rho[ch] * E0 * lv;
+            if (rho[ch] != 0)
                 tl[j][ch] += rho[ch] * E[j] * ll;
-            }
     }
     return 1;
 }
@@ -320,18 +325,19 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
 /* The integrand at the n <= 15 nodes u (t or xi), light included, into
  * out. The general fog's optical depths come a rule's nodes at a time:
  * strata from strata_legs, other models from ef_fog_tau_add (the view's
- * along one ray to every node, the light's from every node). */
+ * along one ray to every node, the light's from every node); a planet
+ * sun's light leg from ef_lit_sun_planet_tau alone. */
 static void lit_integrand(const void *qv, const double *u, int n, double (*out)[3])
 {
     const lit_q *q = qv;
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     const ef_fog_scene *s = q->s;
-    double tn[15], wgt[15], dl[15], cth[15], ld[15][3];
+    double tn[15], wgt[15], dl[15], cth[15];
     int live[15], m = 0;
     for (int j = 0; j < n; ++j) {
         out[j][0] = out[j][1] = out[j][2] = 0;
-        if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m], ld[m]))
+        if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m]))
             continue;
         if (q->uniform) {
             /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
@@ -376,8 +382,7 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
         const ef_fog_component *c = &s->comp[i];
         double rho[3], k, base, E[15];
         if (c->model->strata && c->model->strata(c, rho, &k, &base) &&
-            strata_legs(c, q, rho, k, base, m, tn, (const double(*)[3]) ld, dl, E, tv,
-                        tl)) {
+            strata_legs(c, q, rho, k, base, m, tn, dl, E, tv, planet ? NULL : tl)) {
             for (int j = 0; j < m; ++j) {
                 const double p = ef_phase_eval(c->phase, c->g, cth[j]);
                 for (int ch = 0; ch < 3; ++ch)
@@ -396,8 +401,12 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
             }
             vr[j] = (ef_ray) { { r->dir[0], r->dir[1], r->dir[2] }, tn[j], tn[j],
                                { r->org[0], r->org[1], r->org[2] } };
-            lr[j] = (ef_ray) { { ld[j][0], ld[j][1], ld[j][2] }, dl[j], dl[j],
-                               { x[j][0], x[j][1], x[j][2] } };
+            if (!planet) {
+                double ld[3];
+                light_dir(q, tn[j], ld);
+                lr[j] = (ef_ray) { { ld[0], ld[1], ld[2] }, dl[j], dl[j],
+                                   { x[j][0], x[j][1], x[j][2] } };
+            }
         }
         ef_fog_tau_add(c, vr, m, tv);
         if (!planet)
