@@ -791,15 +791,6 @@ static piece make_piece(const ef_deep_fog *F, const px_lit *lt, const ef_ray *r1
     return p;
 }
 
-/* A bound on what a later split of the slab [a, b) can change: the
- * largest |tau(a, a + x h) - x tau(a, b)| over x in [0, 1] and the
- * channels, summed over the components (h = b - a). For a density monotone
- * along the slab that difference is convex or concave in x and zero at
- * both ends, so it is at most twice its value at x = 1/2 (certified, from
- * two exact optical depths); models that are not monotone (noise) bound
- * their rate instead, |d sigma/dt| <= D on the slab giving h^2 D / 8.
- * Models without dsigma_max are monotone between the crossings of their
- * jump and kink features (fog.h), which fog_interval splits at first. */
 /* split_bound's term for one monotone component from its optical depths
  * over the slab (tb) and its front half (tm). */
 static double split_dev(const double tb[3], const double tm[3])
@@ -813,6 +804,15 @@ static double split_dev(const double tb[3], const double tm[3])
     return 2 * dev;
 }
 
+/* A bound on what a later split of the slab [a, b) can change: the
+ * largest |tau(a, a + x h) - x tau(a, b)| over x in [0, 1] and the
+ * channels, summed over the components (h = b - a). For a density monotone
+ * along the slab that difference is convex or concave in x and zero at
+ * both ends, so it is at most twice its value at x = 1/2 (certified, from
+ * two exact optical depths); models that are not monotone (noise) bound
+ * their rate instead, |d sigma/dt| <= D on the slab giving h^2 D / 8.
+ * Models without dsigma_max are monotone between the crossings of their
+ * jump and kink features (fog.h), which fog_interval splits at first. */
 static double split_bound(const ef_fog_scene *s, const ef_ray *r1, double a, double b)
 {
     const double m = 0.5 * (a + b), h = b - a;

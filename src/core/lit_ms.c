@@ -1275,19 +1275,20 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
             J1 = J0 + g * (Jn - J0);
             e1 = e0 + g * (en - e0);
         }
-        /* x and 1/x without a division between two nodes (the table's
-         * inverse spacings) */
-        /* a = 1 - e^-x: from exp where x >= 1e-3, whose relative error
-         * there (an ulp over x, 1e-13) the table's own (1e-2) dwarfs, at
-         * half expm1's cost */
-        const double x = fmax(0, (tn - ta) * iq), a = x < 1e-3 ? -expm1(-x) : 1 - exp(-x);
-        double gs;
-        if (x < 1e-3)
+        /* a = 1 - e^-x, from exp where x >= 1e-3 (its relative error
+         * there, an ulp over x, 1e-13, the table's own 1e-2 dwarfs, at
+         * half expm1's cost); 1/x without a division between two nodes
+         * (the table's inverse spacings) */
+        const double x = fmax(0, (tn - ta) * iq);
+        double a, gs;
+        if (x < 1e-3) {
+            a = -expm1(-x);
             gs = w_slope(x);
-        else if (at_node && ta_node)
-            gs = a * (aq * tab->invd[q > 0 ? next - 1 : next]) - (1 - a);
-        else
-            gs = a / x - (1 - a);
+        } else {
+            a = 1 - exp(-x);
+            gs = at_node && ta_node ? a * (aq * tab->invd[q > 0 ? next - 1 : next]) - (1 - a)
+                                    : a / x - (1 - a);
+        }
         out[0] += es * (J0 * a + (J1 - J0) * gs);
         out[1] += es * (e0 * a + (e1 - e0) * gs);
         s1 += x;

@@ -514,8 +514,8 @@ static void test_strata(void **state)
  * a deep fog sample's light over [a, b) is (J(b) - J(a)) / T(0, a). Against
  * ef_light_inscatter over each segment on its own (the per-segment
  * quadrature, or a lamp's closed form in uniform fog): lamps and a spot in
- * height, mixed and uniform fog, a lamp with a radius, finite and infinite
- * rays, 300 random segments each (a few reaching infinity). Where the
+ * height, mixed and uniform fog, a lamp with a radius, coloured fog and
+ * light, finite and infinite rays, 300 random segments each (a few reaching infinity). Where the
  * segment's front is still visible (T(0, a) >= 1e-3, where deep fog
  * samples are split), the two agree within 1e-7 of the segment's light
  * plus 1e-10 of the whole ray's seen from a. */
@@ -536,6 +536,9 @@ static void test_dense(void **state)
           "point:position=-1,1,-8:intensity=30:radius=0.5", { 0, -0.03, -1 }, INFINITY },
         { { "box:min=-10,0,-60:max=10,8,-10:density=0.1", NULL },
           "point:position=2,3,-20:intensity=100", { 0, 0, -1 }, 80 },
+        /* channels apart (leaves that are not grey) */
+        { { "height:density=0.05,0.03,0.02:falloff=0.3:base=0:albedo=0.9,1,0.6", NULL },
+          "point:position=1,3,-20:intensity=100:color=1,0.5,0.2", { 0.05, -0.02, -1 }, 100 },
     };
     uint64_t seed = 12345;
     double worst_piece = 0, worst_total = 0;
