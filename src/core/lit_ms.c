@@ -12,6 +12,7 @@
 
 #include "lit_int.h"
 #include "sky_light.h"
+#include "vmath.h"
 
 /* A mode is iterated order by order while its scattering operator's norm
  * (on the node directions) is below this; else solved directly. */
@@ -48,15 +49,6 @@ static double w_far(double x)
     if (x < 1e-3)
         return x * (0.5 - x * (1.0 / 6 - x * (1.0 / 24 - x / 120)));
     return 1 + expm1(-x) / x;
-}
-
-/* (a - x e^-x) / x, a = 1 - e^-x: the slope term of a linear source
- * integrated against e^-y over [0, x]. */
-static double w_slope(double x)
-{
-    if (x < 1e-3)
-        return x * (0.5 - x * (1.0 / 3 - x * (1.0 / 8 - x / 30)));
-    return (-expm1(-x) - x * exp(-x)) / x;
 }
 
 /* Gauss-Legendre nodes and weights on [0, 1], n of them. */
@@ -485,7 +477,7 @@ typedef struct ms_tab {
     double *invd;    /* [n - 1]: 1 / (tau[k + 1] - tau[k]) */
     double jmax;     /* the largest J + error: what a cut-off walk leaves */
     double *tau;
-    float *v;        /* [MS_NT][np][n][2]: a direction's nodes side by side */
+    float *v;        /* [MS_NT][np][2][n]: a direction's J at its nodes, then their estimates */
 } ms_tab;
 
 struct ef_ms {
@@ -824,9 +816,11 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
         keep[nk++] = b;
         a = b;
     }
-    tab->v = malloc(sizeof *tab->v * (size_t) nk * plane * 2);
-    tab->tau = malloc(sizeof *tab->tau * (size_t) nk);
-    tab->invd = malloc(sizeof *tab->invd * (size_t) nk);
+    /* slack past the last row and node: the gather loads nodes four at a
+     * time, the lanes past a walk's end unused */
+    tab->v = calloc((size_t) nk * plane * 2 + 8, sizeof *tab->v);
+    tab->tau = calloc((size_t) nk + 8, sizeof *tab->tau);
+    tab->invd = calloc((size_t) nk + 8, sizeof *tab->invd);
     if (!tab->v || !tab->tau || !tab->invd)
         goto out;
     tab->n = nk;
@@ -837,8 +831,8 @@ static int build_tab(const ef_fog_scene *s, const double up[3], int k, double mu
         tab->tau[q] = tf[src];
         for (size_t d = 0; d < plane; ++d) {
             const float J = vf[src * plane + d], e = ef[src * plane + d];
-            tab->v[(d * (size_t) nk + q) * 2] = J;
-            tab->v[(d * (size_t) nk + q) * 2 + 1] = e;
+            tab->v[(d * 2 * (size_t) nk) + q] = J;
+            tab->v[(d * 2 * (size_t) nk) + nk + q] = e;
             tab->jmax = fmax(tab->jmax, (double) J + e);
         }
     }
@@ -1153,52 +1147,162 @@ typedef struct dir_w {
     double w[4];
 } dir_w;
 
-/* J and its estimate at node q of tab for direction dw. */
-/* A direction's four corners in one table: where their depth rows start,
- * and their weights. */
+/* A direction's four corners in one table: where their rows of J and of
+ * its estimate start, and their weights. */
 typedef struct corners {
-    const float *row[4];
+    const float *J[4], *e[4];
     double w[4];
 } corners;
 
 static void corners_of(const ms_tab *tab, const dir_w *dw, corners *cn)
 {
     for (int c = 0; c < 4; ++c) {
-        cn->row[c] = tab->v + dw->at[c] * (size_t) tab->n * 2;
+        cn->J[c] = tab->v + dw->at[c] * (size_t) tab->n * 2;
+        cn->e[c] = cn->J[c] + tab->n;
         cn->w[c] = dw->w[c];
     }
 }
 
-static void node_val(const corners *cn, int q, double *J, double *e)
+/* J and its estimate at node q of tab for the direction of cn. */
+EF_INLINE void node_val(const corners *cn, int q, double *J, double *e)
 {
-    double j = 0, x = 0;
+    *J = cn->w[0] * cn->J[0][q] + cn->w[1] * cn->J[1][q] + cn->w[2] * cn->J[2][q] +
+         cn->w[3] * cn->J[3][q];
+    *e = cn->w[0] * cn->e[0][q] + cn->w[1] * cn->e[1][q] + cn->w[2] * cn->e[2][q] +
+         cn->w[3] * cn->e[3][q];
+}
+
+/* The cell of tab's nodes that holds tau in [0, bottom]: i with tau[i] <=
+ * tau <= tau[i + 1], 0 <= i <= n - 2. Without branches on the data (the
+ * compiler's conditional moves): every ray starts and ends its walk with
+ * one, and a binary search's mispredictions cost more than its loads. */
+static int cell_of(const ms_tab *tab, double tau)
+{
+    int base = 0, len = tab->n - 1;
+    while (len > 1) {
+        const int half = len / 2;
+        base = tab->tau[base + half] <= tau ? base + half : base;
+        len -= half;
+    }
+    return base;
+}
+
+/* One cell of a walk, from a point where e^-s is es to one an optical
+ * depth x further, J and its estimate linear from (J0, e0) to (J1, e1):
+ * adds es int_0^x e^-y J dy to o[0] (the estimate's to o[1]); returns
+ * e^-s at the far end. Below x = 1e-3 from series, where 1 - e^-x and the
+ * slope weight (1 - e^-x) / x - e^-x cancel. */
+EF_INLINE double cell1(double es, double x, double J0, double J1, double e0, double e1, double o[2])
+{
+    double a, gs;
+    if (x < 1e-3) {
+        a = x * (1 - x * (0.5 - x * (1.0 / 6 - x * (1.0 / 24 - x / 120))));
+        gs = x * (0.5 - x * (1.0 / 3 - x * (1.0 / 8 - x / 30)));
+    } else {
+        a = 1 - exp(-x);
+        gs = a / x - (1 - a);
+    }
+    o[0] += es * (J0 * a + (J1 - J0) * gs);
+    o[1] += es * (e0 * a + (e1 - e0) * gs);
+    return es * (1 - a);
+}
+
+typedef float v4f __attribute__((vector_size(16)));
+
+/* J and its estimate (if est, else 0) at nodes k .. k + 3 for the
+ * direction of cn, in the order node_val sums them. */
+EF_INLINE void nodes4(const corners *cn, int k, int est, v4d *J, v4d *e)
+{
+    v4d j = { 0, 0, 0, 0 }, x = { 0, 0, 0, 0 };
     for (int c = 0; c < 4; ++c) {
-        j += cn->w[c] * cn->row[c][2 * q];
-        x += cn->w[c] * cn->row[c][2 * q + 1];
+        v4f fj;
+        memcpy(&fj, cn->J[c] + k, sizeof fj);
+        j += cn->w[c] * __builtin_convertvector(fj, v4d);
+        if (est) {
+            v4f fe;
+            memcpy(&fe, cn->e[c] + k, sizeof fe);
+            x += cn->w[c] * __builtin_convertvector(fe, v4d);
+        }
     }
     *J = j;
     *e = x;
 }
 
-/* The cell of tab's nodes that holds tau in [0, bottom]: i with tau[i] <=
- * tau <= tau[i + 1], 0 <= i <= n - 2. */
-static int cell_of(const ms_tab *tab, double tau)
+/* Up to four cells between consecutive nodes at once: cell l spans nodes
+ * k + l and k + l + 1 (l < cnt), walked upwards in the table when up (q >
+ * 0: deeper), else downwards, aq = |q|; J and its estimate at the cells'
+ * lower nodes are JA and eA, at their upper ones JB and eB; es is e^-s
+ * where the ray meets the block. Adds what cell1 would over the cells to o
+ * (the estimate's part only if est); returns e^-s at the block's far end. e^-x from v_exp (x at most 700 there: e^-700 lies
+ * far below any cell nearer the camera), e^-s at each cell by the product
+ * of those before it, 1 / x from the table's inverse spacings; lanes past
+ * cnt are cells of no width. */
+EF_INLINE double cells4(const ms_tab *tab, const v4d *JA, const v4d *JB, const v4d *eA,
+                        const v4d *eB, int k, int cnt, int up, int est, double aq, double es,
+                        double o[2])
 {
-    int lo = 0, hi = tab->n - 1;
-    while (hi - lo > 1) {
-        const int mid = (lo + hi) / 2;
-        if (tab->tau[mid] <= tau)
-            lo = mid;
-        else
-            hi = mid;
+    v4d TA, TB, ID;
+    memcpy(&TA, tab->tau + k, sizeof TA);
+    memcpy(&TB, tab->tau + k + 1, sizeof TB);
+    memcpy(&ID, tab->invd + k, sizeof ID);
+    const double iaq = 1 / aq;
+    const v4d zero = { 0, 0, 0, 0 }, one = { 1, 1, 1, 1 }, cap = { 700, 700, 700, 700 };
+    const v4d lane = { 0, 1, 2, 3 }, vc = { cnt, cnt, cnt, cnt };
+    v4di m = lane < vc;
+    v4d vx = (TB - TA) * iaq;
+    v_sel(&vx, &m, &vx, &zero);
+    v4d nx, ex;
+    m = vx > cap;
+    v_sel(&nx, &m, &cap, &vx);
+    nx = -nx;
+    v_exp(&nx, &ex);
+    v4d a = 1 - ex, gs = a * (ID * aq) - ex;
+    const v4d lim = { 1e-3, 1e-3, 1e-3, 1e-3 };
+    m = vx < lim;
+    if (v_any(&m)) {
+        const v4d as = vx * (1 - vx * (0.5 - vx * (1.0 / 6 - vx * (1.0 / 24 - vx / 120))));
+        const v4d gss = vx * (0.5 - vx * (1.0 / 3 - vx * (1.0 / 8 - vx / 30)));
+        v_sel(&a, &m, &as, &a);
+        v_sel(&gs, &m, &gss, &gs);
+        ex = one - a;
     }
-    return lo;
+    /* e^-s at each cell's near end: the products of e^-x over the cells
+     * the ray met before it in the block (a scan in the order it meets
+     * them), and at the block's far end */
+    v4d P, Js, Jf, es0, ef0;
+    double all;
+    if (up) {
+        const v4d y = ex * __builtin_shuffle(ex, one, (v4di) { 4, 0, 1, 2 });
+        const v4d z = y * __builtin_shuffle(y, one, (v4di) { 4, 4, 0, 1 });
+        P = __builtin_shuffle(z, one, (v4di) { 4, 0, 1, 2 });
+        all = z[3];
+        Js = *JA, Jf = *JB, es0 = *eA, ef0 = *eB;
+    } else {
+        const v4d y = ex * __builtin_shuffle(ex, one, (v4di) { 1, 2, 3, 4 });
+        const v4d z = y * __builtin_shuffle(y, one, (v4di) { 2, 3, 4, 4 });
+        P = __builtin_shuffle(z, one, (v4di) { 1, 2, 3, 4 });
+        all = z[0];
+        Js = *JB, Jf = *JA, es0 = *eB, ef0 = *eA;
+    }
+    const v4d w = es * P;
+    const v4d t0v = w * (Js * a + (Jf - Js) * gs);
+    o[0] += (t0v[0] + t0v[1]) + (t0v[2] + t0v[3]);
+    if (est) {
+        const v4d t1v = w * (es0 * a + (ef0 - es0) * gs);
+        o[1] += (t1v[0] + t1v[1]) + (t1v[2] + t1v[3]);
+    }
+    return es * all;
 }
 
-/* int_0^{sD} e^-s J(tauc + q s) ds and its estimate, J linear between the
- * table's nodes (q: the change of vertical depth per unit of the view's). */
-static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, double sD,
-                 double out[2])
+/* int_0^{sD} e^-s J(tauc + q s) ds and its estimate (est; else 0 for a
+ * caller that does not want it), J linear between the table's nodes (q:
+ * the change of vertical depth per unit of the view's).
+ * The cells between nodes go four at a time, the two partial ones at the
+ * ends alone; past a block of cells, once what is left (at most e^-s
+ * jmax) is below 1e-6 of what was gathered, the walk stops and counts it
+ * as error. */
+EF_INLINE void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, double sD,
+                    int est, double out[2])
 {
     out[0] = out[1] = 0;
     const int n = tab->n;
@@ -1224,85 +1328,119 @@ static void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, doub
     }
     corners cn;
     corners_of(tab, dw, &cn);
-    /* J at t0 from its cell; the first node the ray meets is one of its ends */
+    /* J at t0 from its cell */
     const int i = cell_of(tab, t0);
     double Ja, ea, Jb, eb;
     node_val(&cn, i, &Ja, &ea);
     node_val(&cn, i + 1, &Jb, &eb);
     const double f = (t0 - tab->tau[i]) / (tab->tau[i + 1] - tab->tau[i]);
-    double J0 = Ja + f * (Jb - Ja), e0 = ea + f * (eb - ea);
+    const double J0 = Ja + f * (Jb - Ja), e0 = ea + f * (eb - ea);
     if (horiz) {
         const double a = isinf(sD) ? 1 : -expm1(-sD);
         out[0] = a * J0;
         out[1] = a * e0;
         return;
     }
-    int next;
-    double Jn, en;
-    if (q > 0) {
-        next = i + 1;
-        Jn = Jb;
-        en = eb;
-    } else if (tab->tau[i] < t0) {
-        next = i;
-        Jn = Ja;
-        en = ea;
-    } else {
-        next = i - 1;
-        if (next >= 0)
-            node_val(&cn, next, &Jn, &en);
-        else
-            Jn = en = 0;
-    }
-    double s1 = s0, ta = t0, es = exp(-s0);
-    const double iq = 1 / q, aq = fabs(q);
-    int ta_node = 0;
-    for (int guard = 0; guard <= n && s1 < sD; ++guard) {
-        /* what is left past here is at most es jmax: stop once that is
-         * below 1e-6 of what was gathered, and count it as error */
-        if (es * tab->jmax <= 1e-6 * out[0]) {
-            out[1] += es * tab->jmax;
-            break;
-        }
-        if (next < 0 || next >= n)
-            break;
-        const double tnode = tab->tau[next];
-        const int at_node = q > 0 ? tnode < tend : tnode > tend;
-        const double tn = at_node ? tnode : tend;
-        double J1 = Jn, e1 = en;
-        if (!at_node) {   /* the ray ends inside the cell: J linear across it */
-            const double g = (tn - ta) / (tnode - ta);
-            J1 = J0 + g * (Jn - J0);
-            e1 = e0 + g * (en - e0);
-        }
-        /* a = 1 - e^-x, from exp where x >= 1e-3 (its relative error
-         * there, an ulp over x, 1e-13, the table's own 1e-2 dwarfs, at
-         * half expm1's cost); 1/x without a division between two nodes
-         * (the table's inverse spacings) */
-        const double x = fmax(0, (tn - ta) * iq);
-        double a, gs;
-        if (x < 1e-3) {
-            a = -expm1(-x);
-            gs = w_slope(x);
+    const double iq = 1 / q;
+    const int up = q > 0;
+    /* the nodes strictly between t0 and tend: lo .. hi, in the order of
+     * the table (none: hi < lo) */
+    int lo, hi;
+    {
+        const int c = cell_of(tab, tend);   /* tau[c] <= tend <= tau[c + 1] */
+        if (up) {
+            lo = i + 1;
+            hi = tab->tau[c] < tend ? c : c - 1;
         } else {
-            a = 1 - exp(-x);
-            gs = at_node && ta_node ? a * (aq * tab->invd[q > 0 ? next - 1 : next]) - (1 - a)
-                                    : a / x - (1 - a);
+            hi = tab->tau[i] < t0 ? i : i - 1;
+            lo = tab->tau[c + 1] > tend ? c + 1 : c + 2;
         }
-        out[0] += es * (J0 * a + (J1 - J0) * gs);
-        out[1] += es * (e0 * a + (e1 - e0) * gs);
-        s1 += x;
-        es *= 1 - a;
-        ta = tn;
-        ta_node = at_node;
-        J0 = J1;
-        e0 = e1;
-        if (!at_node)
-            break;
-        next += q > 0 ? 1 : -1;
-        if (next >= 0 && next < n)
-            node_val(&cn, next, &Jn, &en);
     }
+    double es = s0 > 0 ? exp(-s0) : 1;
+    /* J at the last node before tend (Jl; t0's where there is none), and
+     * at tend, linear in its cell between that point and the node past it */
+    double Jl = J0, el = e0, Jend, eend;
+    const int kl = up ? hi : lo;
+    {
+        const int last = up ? hi + 1 : lo - 1;   /* the node past tend, or at it */
+        double Tl = t0;
+        if (hi >= lo) {
+            Tl = tab->tau[kl];
+            node_val(&cn, kl, &Jl, &el);
+        }
+        if (last >= 0 && last < n) {
+            double Jn, en;
+            if (last == i + 1)
+                Jn = Jb, en = eb;
+            else if (last == i)
+                Jn = Ja, en = ea;
+            else
+                node_val(&cn, last, &Jn, &en);
+            const double g = tab->tau[last] == Tl ? 1 : (tend - Tl) / (tab->tau[last] - Tl);
+            Jend = Jl + g * (Jn - Jl);
+            eend = el + g * (en - el);
+        } else {
+            Jend = Jl;
+            eend = el;
+        }
+    }
+    if (hi < lo) {   /* no node between: one cell */
+        cell1(es, fmax(0, (tend - t0) * iq), J0, Jend, e0, eend, out);
+        return;
+    }
+    /* t0 to the first node (i + 1 going down in the table, i or i - 1 up) */
+    {
+        const int k = up ? lo : hi;
+        double Jk, ek;
+        if (k == i + 1)
+            Jk = Jb, ek = eb;
+        else if (k == i)
+            Jk = Ja, ek = ea;
+        else
+            node_val(&cn, k, &Jk, &ek);
+        es = cell1(es, fmax(0, (tab->tau[k] - t0) * iq), J0, Jk, e0, ek, out);
+    }
+    /* the cells between nodes, in the order the ray meets them */
+    /* (blocks of four from the ray's far end: the first it meets holds
+     * what is left over; each block's nodes past its upper end are the
+     * next block's lower ones, up, or the one before's, down) */
+    const int ncell = hi - lo;
+    const v4di sh = { 1, 2, 3, 4 };
+    v4d JL, eL, JU, eU;
+    if (up) {
+        nodes4(&cn, lo, est, &JL, &eL);
+        for (int k = lo; k < hi; k += 4) {
+            if (es * tab->jmax <= 1e-6 * out[0]) {
+                out[1] += es * tab->jmax;
+                return;
+            }
+            nodes4(&cn, k + 4, est, &JU, &eU);
+            const v4d JB = __builtin_shuffle(JL, JU, sh), eB = __builtin_shuffle(eL, eU, sh);
+            es = cells4(tab, &JL, &JB, &eL, &eB, k, hi - k < 4 ? hi - k : 4, 1, est, fabs(q), es, out);
+            JL = JU;
+            eL = eU;
+        }
+    } else {
+        const int first = ncell % 4 ? ncell % 4 : 4;
+        nodes4(&cn, hi - first + 4, est, &JU, &eU);
+        for (int k = hi - first, cnt = first; k >= lo; k -= 4, cnt = 4) {
+            if (es * tab->jmax <= 1e-6 * out[0]) {
+                out[1] += es * tab->jmax;
+                return;
+            }
+            nodes4(&cn, k, est, &JL, &eL);
+            const v4d JB = __builtin_shuffle(JL, JU, sh), eB = __builtin_shuffle(eL, eU, sh);
+            es = cells4(tab, &JL, &JB, &eL, &eB, k, cnt, 0, est, fabs(q), es, out);
+            JU = JL;
+            eU = eL;
+        }
+    }
+    if (es * tab->jmax <= 1e-6 * out[0]) {
+        out[1] += es * tab->jmax;
+        return;
+    }
+    /* the last node to tend */
+    cell1(es, fmax(0, (tend - tab->tau[kl]) * iq), Jl, Jend, el, eend, out);
 }
 
 void ef_ms_bind(const ef_ms *m, const ef_fog_scene *s, const double org[3], ef_ms_view *v)
@@ -1323,7 +1461,7 @@ void ef_ms_gather_view(const ef_ms *m, const ef_ms_view *v, const ef_fog_scene *
     ef_ms_gather(m, s, r, tv, cam ? v->tauc : NULL, S, E);
 }
 
-void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const double *tv,
+EF_MULTIVERSION void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const double *tv,
                   const double *tauc_in, double S[3], double E[3])
 {
     S[0] = S[1] = S[2] = 0;
@@ -1382,8 +1520,11 @@ void ef_ms_gather(const ef_ms *m, const ef_fog_scene *s, const ef_ray *r, const 
         int k = 0;
         while (m->tab_of[k] != t)
             ++k;
-        if (m->tab[t].n > 1)
-            walk(&m->tab[t], &dw, tauc[k], mu_p, sD[k], res[t]);
+        /* the estimate's half of the walk only where it is wanted */
+        if (m->tab[t].n > 1 && E)
+            walk(&m->tab[t], &dw, tauc[k], mu_p, sD[k], 1, res[t]);
+        else if (m->tab[t].n > 1)
+            walk(&m->tab[t], &dw, tauc[k], mu_p, sD[k], 0, res[t]);
         else
             res[t][0] = res[t][1] = 0;
     }

@@ -59,27 +59,24 @@ EF_INLINE void v_sqrt(const v4d *x, v4d *o)
 
 /* e^x for |x| <= 708 (normal results): x = k ln 2 + r, |r| <= ln 2 / 2,
  * ln 2 in two parts (the high one of 32 bits, so k ln2_hi is exact), e^r
- * by its Taylor series to r^13 (the next term below 4.2e-18), times 2^k
- * built in the exponent field. */
+ * = 1 + (r + r^2 q(r)), q by its Taylor series to r^11 (e^r's to r^13, the
+ * next term below 4.2e-18) in Estrin's scheme: five dependent steps rather
+ * than thirteen, so a caller's exponentials overlap; q's rounding is
+ * scaled by r^2 <= 0.12. Times 2^k built in the exponent field. */
 EF_INLINE void v_exp(const v4d *x, v4d *o)
 {
     const v4d magic = { EF_V_MAGIC, EF_V_MAGIC, EF_V_MAGIC, EF_V_MAGIC };
     const v4d t = *x * 1.4426950408889634 + magic;
     const v4d k = t - magic;
     const v4d r = (*x - k * 0.6931471803691238) - k * 1.9082149292705877e-10;
-    v4d p = r * 1.6059043836821613e-10 + 2.08767569878681e-09;
-    p = p * r + 2.505210838544172e-08;
-    p = p * r + 2.755731922398589e-07;
-    p = p * r + 2.7557319223985893e-06;
-    p = p * r + 2.48015873015873e-05;
-    p = p * r + 0.0001984126984126984;
-    p = p * r + 0.001388888888888889;
-    p = p * r + 0.008333333333333333;
-    p = p * r + 0.041666666666666664;
-    p = p * r + 0.16666666666666666;
-    p = p * r + 0.5;
-    p = p * r + 1.0;
-    p = p * r + 1.0;
+    const v4d r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
+    const v4d q0 = (0.5 + r * 0.16666666666666666) + r2 * (0.041666666666666664 + r * 0.008333333333333333);
+    const v4d q1 = (0.001388888888888889 + r * 0.0001984126984126984) +
+                   r2 * (2.48015873015873e-05 + r * 2.7557319223985893e-06);
+    const v4d q2 = (2.755731922398589e-07 + r * 2.505210838544172e-08) +
+                   r2 * (2.08767569878681e-09 + r * 1.6059043836821613e-10);
+    const v4d q = (q0 + r4 * q1) + r8 * q2;
+    const v4d p = 1.0 + (r + r2 * q);
     const v4u ki = (v4u) t - (v4u) magic;
     *o = p * (v4d) ((ki + 1023) << 52);
 }

@@ -530,8 +530,15 @@ static void test_sky_scene(void **state)
     ef_fog_scene s;
     uniform_sky_scene(&s, "halfspace:plane=0,1,0,-10:density=0.1:albedo=0.001");
     const double cam[3] = { 0, 5, 0 };
-    static const double dirs[][4] = { { 0, 1, 0, INFINITY }, { 1, 0.2, 0, INFINITY },
-                                      { 0, -1, 0.3, 4 }, { 0.3, -0.4, 1, 9 } };
+    /* up, sideways and down; ending in the layer after a few depth nodes
+     * or many (down to just above the ground, y = 0), grazing the
+     * camera's height */
+    static const double dirs[][4] = { { 0, 1, 0, INFINITY },    { 1, 0.2, 0, INFINITY },
+                                      { 0, -1, 0.3, 4 },         { 0.3, -0.4, 1, 9 },
+                                      { 1, 0.01, 0, INFINITY },  { 1, -0.02, 0.1, 200 },
+                                      { 0.1, -1, 0, 4.9 },       { 0.2, -1, 0.1, 5.1 },
+                                      { 1, 0.7, 0.2, 0.3 },      { -1, 0.05, 0.5, 37 },
+                                      { 0, 1, 1e-3, 2.5 },       { 0.5, -0.15, -1, 37 } };
     for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
         ef_ray r = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], dirs[i][3]);
         double S[3], E[3], tv[3];
