@@ -1251,12 +1251,27 @@ EF_INLINE double cells4(const ms_tab *tab, const v4d *JA, const v4d *JB, const v
     v4di m = lane < vc;
     v4d vx = (TB - TA) * iaq;
     v_sel(&vx, &m, &vx, &zero);
-    v4d nx, ex;
-    m = vx > cap;
-    v_sel(&nx, &m, &cap, &vx);
-    nx = -nx;
-    v_exp(&nx, &ex);
-    v4d a = 1 - ex, gs = a * (ID * aq) - ex;
+    v4d ex, a;
+    const v4d near = { 0.125, 0.125, 0.125, 0.125 };
+    m = vx > near;
+    if (v_any(&m)) {
+        v4d nx;
+        m = vx > cap;
+        v_sel(&nx, &m, &cap, &vx);
+        nx = -nx;
+        v_exp(&nx, &ex);
+        a = 1 - ex;
+    } else {
+        /* every cell thin: 1 - e^-x by its series to x^10 (the next term
+         * below 3e-18 of it), in Estrin's scheme */
+        const v4d x2 = vx * vx, x4 = x2 * x2, x8 = x4 * x4;
+        const v4d p0 = (1 - vx * 0.5) + x2 * (1.0 / 6 - vx * (1.0 / 24));
+        const v4d p1 = (1.0 / 120 - vx * (1.0 / 720)) + x2 * (1.0 / 5040 - vx * (1.0 / 40320));
+        const v4d p2 = 1.0 / 362880 - vx * (1.0 / 3628800);
+        a = vx * ((p0 + x4 * p1) + x8 * p2);
+        ex = 1 - a;
+    }
+    v4d gs = a * (ID * aq) - ex;
     const v4d lim = { 1e-3, 1e-3, 1e-3, 1e-3 };
     m = vx < lim;
     if (v_any(&m)) {
