@@ -26,11 +26,16 @@
 /* A mix of the two colours leaving a residual above this fraction of
  * their difference explains nothing (texture, or a third surface). */
 #define RES_MAX 0.35
+/* A pixel whose depth is none of its neighbours' has their colour when it
+ * lies within their range per channel widened by this much of the
+ * largest (the render's noise and a blurred thing's faint share). */
+#define OUTLIER_TOL 0.02
 
 void ef_edge_work_free(ef_edge_work *wk)
 {
     free(wk->iz);
     free(wk->edge);
+    free(wk->outl);
     free(wk->band);
     free(wk->px);
     memset(wk, 0, sizeof *wk);
@@ -181,9 +186,9 @@ static const signed char ring_cells[24][2] = {
 /* Up to MAXC colours of each of the nl layers Ls in one pass over the 5x5
  * window of (x, r): a layer's pixels that are not edges themselves,
  * nearest first; where it has none, its other pixels of the 3x3 window
- * (the edge pixel itself excepted). */
+ * (the edge pixel itself excepted); never an outlier's. */
 static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigned char *edge,
-                          int x, int r, layer *Ls, int nl)
+                          const unsigned char *outl, int x, int r, layer *Ls, int nl)
 {
     const int w = u->w;
     int nmix[MAXL] = { 0 };
@@ -196,7 +201,7 @@ static void layer_colours(const ef_edge_rows *u, const double *iz, const unsigne
             continue;
         const size_t k = (size_t) (rr + HR) * (size_t) w + (size_t) xx;
         const double v = iz[k];
-        if (isnan(v))
+        if (isnan(v) || outl[k])
             continue;
         int m = 0;
         while (m < nl && !same_layer(v, Ls[m].iz))
@@ -252,9 +257,10 @@ static int unmix(const double C[4], const double a[4], const double b[4], double
 }
 
 /* The layers the 8 neighbours of (x, r) show (1/z clusters; the pixel's
- * own depth may be none of them), each with one stored depth value:
- * their count. */
-static int window_layers(const ef_edge_rows *u, const double *iz, int x, int r, layer *Ls)
+ * own depth may be none of them; outliers' depths are none), each with
+ * one stored depth value: their count. */
+static int window_layers(const ef_edge_rows *u, const double *iz, const unsigned char *outl,
+                         int x, int r, layer *Ls)
 {
     const int w = u->w;
     int nl = 0;
@@ -263,8 +269,9 @@ static int window_layers(const ef_edge_rows *u, const double *iz, int x, int r, 
             const int xx = x + dx, rr = r + dr;
             if (xx < 0 || xx >= w || (dx == 0 && dr == 0))
                 continue;
-            const double q = iz[(size_t) (rr + HR) * (size_t) w + (size_t) xx];
-            if (isnan(q))
+            const size_t kq = (size_t) (rr + HR) * (size_t) w + (size_t) xx;
+            const double q = iz[kq];
+            if (isnan(q) || outl[kq])
                 continue;
             int m = 0;
             while (m < nl && !same_layer(q, Ls[m].iz) && !same_layer(Ls[m].iz, q))
@@ -389,6 +396,87 @@ static int split_by_depth(double izp, const layer *Ls, int nl, split *sp)
     return 1;
 }
 
+/* Whether (x, r)'s depth is an outlier: at most one neighbour's depth is
+ * its layer (a pair of such pixels), it lies in front of all the others
+ * or behind them all, and its colour is theirs (within OUTLIER_TOL of
+ * their range per channel). A depth sample that struck something the
+ * pixel hardly shows (a fast thing's motion blur, a hair, a grain of
+ * foliage), or missed the surface it shows; not a thing of its own as
+ * small as a pixel or two, nor the end of a line, whose colour stands
+ * out. Reads rows r - 1 .. r + 1. */
+static int is_outlier(const ef_edge_rows *u, const double *iz, int x, int r)
+{
+    const int w = u->w;
+    const double izp = iz[(size_t) (r + HR) * (size_t) w + (size_t) x];
+    if (isnan(izp))
+        return 0;
+    double lo[4] = { 0, 0, 0, 0 }, hi[4] = { 0, 0, 0, 0 };
+    int nn = 0, front = 0, behind = 0, shared = 0;
+    for (int dr = -1; dr <= 1; ++dr)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, rr = r + dr;
+            if (xx < 0 || xx >= w || (dx == 0 && dr == 0))
+                continue;
+            const double q = iz[(size_t) (rr + HR) * (size_t) w + (size_t) xx];
+            if (isnan(q))
+                continue;
+            if (same_layer(q, izp) || same_layer(izp, q)) {
+                if (++shared > 1)
+                    return 0;
+                continue;
+            }
+            front += izp > q;
+            behind += izp < q;
+            double c[4];
+            pixel_colour(u, rr, xx, c);
+            for (int k = 0; k < 4; ++k) {
+                lo[k] = nn ? min2(lo[k], c[k]) : c[k];
+                hi[k] = nn ? max2(hi[k], c[k]) : c[k];
+            }
+            ++nn;
+        }
+    if (nn < 3 || (front && behind))
+        return 0;
+    double C[4], mag = 0;
+    pixel_colour(u, r, x, C);
+    for (int k = 0; k < 3; ++k)
+        mag = max2(mag, max2(fabs(lo[k]), fabs(hi[k])));
+    for (int k = 0; k < 4; ++k) {
+        const double tol = OUTLIER_TOL * (k < 3 ? mag : 1) + 1e-6;
+        if (!(C[k] >= lo[k] - tol && C[k] <= hi[k] + tol))
+            return 0;
+    }
+    return 1;
+}
+
+/* An outlier's split (is_outlier): its own depth's share 0, its colour
+ * all the layer's whose colours lie nearest it, DU_FLOOR the share's
+ * uncertainty. 0 where no layer shows a colour. */
+static int split_outlier(const double C[4], const layer *Ls, int nl, split *sp)
+{
+    int b = -1;
+    double dmin = INFINITY;
+    for (int m = 0; m < nl; ++m)
+        for (int q = 0; q < Ls[m].n; ++q) {
+            double d2 = 0;
+            for (int k = 0; k < 4; ++k)
+                d2 += (C[k] - Ls[m].c[q][k]) * (C[k] - Ls[m].c[q][k]);
+            if (d2 < dmin) {
+                dmin = d2;
+                b = m;
+            }
+        }
+    if (b < 0)
+        return 0;
+    sp->a = -1;
+    sp->b = b;
+    sp->s = 0;
+    sp->du = DU_FLOOR;
+    memcpy(sp->pa, C, sizeof sp->pa);
+    memcpy(sp->pb, C, sizeof sp->pb);
+    return 1;
+}
+
 /* The pass's result stands (all of it the pixel's own surface, as far as
  * the colours tell); for the error output, what a share DU_KEEP of the
  * layer farthest from its own would move it by. 0 where that layer shows
@@ -423,10 +511,14 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
         if (!e)
             return -1;
         wk->edge = e;
+        unsigned char *o = realloc(wk->outl, n);
+        if (!o)
+            return -1;
+        wk->outl = o;
         wk->cap = n;
     }
     double *iz = wk->iz;
-    unsigned char *edge = wk->edge;
+    unsigned char *edge = wk->edge, *outl = wk->outl;
     inverse_depths(pass, u, iz);
     /* edges on the rows the 5x5 windows reach (missing rows are NaN,
      * which fails every bends3; the outermost rows have no test) */
@@ -436,6 +528,14 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
         const double *mid = iz + (size_t) (r + HR) * (size_t) w;
         bends_row(mid - w, mid, mid + w, w, edge + (size_t) (r + HR) * (size_t) w);
     }
+    /* outliers on the rows the 5x5 windows reach (each is an edge: its
+     * 1/z bends against every neighbour) */
+    memset(outl, 0, n);
+    for (int r = 1 - HR; r < h + HR - 1; ++r)
+        for (int x = 0; x < w; ++x) {
+            const size_t k = (size_t) (r + HR) * (size_t) w + (size_t) x;
+            outl[k] = edge[k] && is_outlier(u, iz, x, r);
+        }
     /* per 16-row band of the unit: edge pixels seen, and those whose
      * depth lies between layers */
     const size_t nband = (size_t) (h + 15) / 16;
@@ -464,12 +564,12 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             if (!edge[k])
                 continue;
             layer Ls[MAXL];
-            const int nl = window_layers(u, iz, x, r, Ls);
-            if (nl < 2)
-                continue;   /* curvature, not two layers */
+            const int nl = window_layers(u, iz, outl, x, r, Ls);
             const double izp = iz[k];
+            if (nl < 1 || (nl == 1 && same_layer(izp, Ls[0].iz)))
+                continue;   /* curvature, not two layers (one: the pixel's own depth another) */
             const float vp = u->depth[(size_t) r * (size_t) w + (size_t) x];
-            layer_colours(u, iz, edge, x, r, Ls, nl);
+            layer_colours(u, iz, edge, outl, x, r, Ls, nl);
             int own = -1;
             for (int m = 0; m < nl; ++m)
                 if (same_layer(izp, Ls[m].iz) && (own < 0 || (Ls[m].npure && !Ls[own].npure)))
@@ -477,10 +577,15 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             double C[4];
             pixel_colour(u, r, x, C);
             seen_b[r / 16]++;
-            between_b[r / 16] += own < 0;
             split sp;
-            const int found = own >= 0 ? split_by_colour(C, Ls, nl, own, &sp)
-                                       : split_by_depth(izp, Ls, nl, &sp);
+            int found, outlier = 0;
+            if (own >= 0) {
+                found = split_by_colour(C, Ls, nl, own, &sp);
+            } else {
+                outlier = outl[k];
+                found = outlier ? split_outlier(C, Ls, nl, &sp) : split_by_depth(izp, Ls, nl, &sp);
+                between_b[r / 16] += !outlier && found;
+            }
             int kept = 0;
             if (!found || (sp.a == own && sp.s >= 1)) {
                 if (!want_err || !split_keep(C, izp, Ls, nl, &sp))
@@ -501,7 +606,7 @@ int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, e
             e->v[1] = sp.b == own ? vp : Ls[sp.b].v;
             e->w = sp.s;
             e->du = sp.du;
-            e->between = own < 0 && !kept;
+            e->between = own < 0 && !kept && !outlier;
             e->keep = kept;
             for (int c = 0; c < 4; ++c) {
                 const double res = C[c] - (sp.s * sp.pa[c] + (1 - sp.s) * sp.pb[c]);

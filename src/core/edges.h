@@ -70,6 +70,7 @@ typedef struct ef_edge_px {
 typedef struct ef_edge_work {
     double *iz;              /* 1 / planar depth of the unit and its outer rows */
     unsigned char *edge;
+    unsigned char *outl;     /* depth outliers (edges.c is_outlier) */
     size_t cap;
     int *band;               /* per 16-row band: edge pixels seen, then those between layers */
     size_t bandcap;
