@@ -293,6 +293,20 @@ typedef struct split {
     double pa[4], pb[4];
 } split;
 
+/* sp as the pixel's own depth's part (share s, colour pa: the pixel's
+ * own) and layer b's (colour pb), du the share's uncertainty; returns 1. */
+static int set_split(split *sp, int b, double s, double du, const double pa[4],
+                     const double pb[4])
+{
+    sp->a = -1;
+    sp->b = b;
+    sp->s = s;
+    sp->du = du;
+    memcpy(sp->pa, pa, sizeof sp->pa);
+    memcpy(sp->pb, pb, sizeof sp->pb);
+    return 1;
+}
+
 /* The pixel's own depth is layer own (a closest-sample or one-sample Z):
  * the share from the colours. A colour within the range its own layer's
  * pure pixels span is that surface's texture, not a mix. Else the own
@@ -468,13 +482,7 @@ static int split_outlier(const double C[4], const layer *Ls, int nl, split *sp)
         }
     if (b < 0)
         return 0;
-    sp->a = -1;
-    sp->b = b;
-    sp->s = 0;
-    sp->du = DU_FLOOR;
-    memcpy(sp->pa, C, sizeof sp->pa);
-    memcpy(sp->pb, C, sizeof sp->pb);
-    return 1;
+    return set_split(sp, b, 0, DU_FLOOR, C, C);
 }
 
 /* The pass's result stands (all of it the pixel's own surface, as far as
@@ -489,13 +497,7 @@ static int split_keep(const double C[4], double izp, const layer *Ls, int nl, sp
             b = m;
     if (Ls[b].n == 0)
         return 0;
-    sp->a = -1;
-    sp->b = b;
-    sp->s = 1;
-    sp->du = DU_KEEP;
-    memcpy(sp->pa, C, sizeof sp->pa);
-    memcpy(sp->pb, Ls[b].c[0], sizeof sp->pb);
-    return 1;
+    return set_split(sp, b, 1, DU_KEEP, C, Ls[b].c[0]);
 }
 
 int ef_edge_find(const ef_fog_pass *pass, const ef_edge_rows *u, int want_err, ef_edge_work *wk)

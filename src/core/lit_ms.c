@@ -1172,6 +1172,18 @@ EF_INLINE void node_val(const corners *cn, int q, double *J, double *e)
          cn->w[3] * cn->e[3][q];
 }
 
+/* J and its estimate at node k, from ab (J and estimate at nodes i and i
+ * + 1, already read) where k is one of them. */
+EF_INLINE void node_at(const corners *cn, int k, int i, const double ab[4], double *J, double *e)
+{
+    if (k == i || k == i + 1) {
+        *J = ab[2 * (k - i)];
+        *e = ab[2 * (k - i) + 1];
+    } else {
+        node_val(cn, k, J, e);
+    }
+}
+
 /* The cell of tab's nodes that holds tau in [0, bottom]: i with tau[i] <=
  * tau <= tau[i + 1], 0 <= i <= n - 2. Without branches on the data (the
  * compiler's conditional moves): every ray starts and ends its walk with
@@ -1362,6 +1374,7 @@ EF_INLINE void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, d
     node_val(&cn, i + 1, &Jb, &eb);
     const double f = (t0 - tab->tau[i]) / (tab->tau[i + 1] - tab->tau[i]);
     const double J0 = Ja + f * (Jb - Ja), e0 = ea + f * (eb - ea);
+    const double ab[4] = { Ja, ea, Jb, eb };   /* nodes i and i + 1, known */
     if (horiz) {
         const double a = isinf(sD) ? 1 : -expm1(-sD);
         out[0] = a * J0;
@@ -1397,12 +1410,7 @@ EF_INLINE void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, d
         }
         if (last >= 0 && last < n) {
             double Jn, en;
-            if (last == i + 1)
-                Jn = Jb, en = eb;
-            else if (last == i)
-                Jn = Ja, en = ea;
-            else
-                node_val(&cn, last, &Jn, &en);
+            node_at(&cn, last, i, ab, &Jn, &en);
             const double g = tab->tau[last] == Tl ? 1 : (tend - Tl) / (tab->tau[last] - Tl);
             Jend = Jl + g * (Jn - Jl);
             eend = el + g * (en - el);
@@ -1419,12 +1427,7 @@ EF_INLINE void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, d
     {
         const int k = up ? lo : hi;
         double Jk, ek;
-        if (k == i + 1)
-            Jk = Jb, ek = eb;
-        else if (k == i)
-            Jk = Ja, ek = ea;
-        else
-            node_val(&cn, k, &Jk, &ek);
+        node_at(&cn, k, i, ab, &Jk, &ek);
         es = cell1(es, fmax(0, (tab->tau[k] - t0) * iq), J0, Jk, e0, ek, out);
     }
     /* the cells between nodes, in the order the ray meets them */
