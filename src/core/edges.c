@@ -312,6 +312,53 @@ static int set_split(split *sp, int b, double s, double du, const double pa[4],
     return 1;
 }
 
+/* The index of the colour of c[0 .. n) nearest ref (far: farthest), in
+ * RGB and alpha; its squared distance into *d2 (may be NULL). n >= 1. */
+static int pick(const double (*c)[4], int n, const double ref[4], int far, double *d2)
+{
+    int best = 0;
+    double bd = far ? -1 : INFINITY;
+    for (int q = 0; q < n; ++q) {
+        double d = 0;
+        for (int k = 0; k < 4; ++k)
+            d += (c[q][k] - ref[k]) * (c[q][k] - ref[k]);
+        if (far ? d > bd : d < bd) {
+            bd = d;
+            best = q;
+        }
+    }
+    if (d2)
+        *d2 = bd;
+    return best;
+}
+
+/* The colour a thing thinner than the filter has, from its most distinct
+ * pixel `through`, a mix with `from` in which it holds a share w: taken
+ * beyond itself to out, its alpha kept in [0, 1]. */
+static void beyond(const double from[4], const double through[4], double w, double out[4])
+{
+    for (int k = 0; k < 4; ++k)
+        out[k] = from[k] + (through[k] - from[k]) / w;
+    out[3] = out[3] > 1 ? 1 : out[3] < 0 ? 0 : out[3];
+}
+
+/* C as a mix of colour a (the pixel's own layer) and b (layer mb): kept
+ * in sp where its residual is the least so far (*best, and *bdd the two
+ * colours' squared difference). */
+static void try_mix(const double C[4], const double a[4], const double b[4], int mb, split *sp,
+                    double *best, double *bdd)
+{
+    double sm, r2, dd;
+    if (!unmix(C, a, b, &sm, &r2, &dd) || !(r2 < *best))
+        return;
+    *best = r2;
+    *bdd = dd;
+    sp->s = sm;
+    sp->b = mb;
+    memcpy(sp->pa, a, sizeof sp->pa);
+    memcpy(sp->pb, b, sizeof sp->pb);
+}
+
 /* The pixel's own depth is layer own (a closest-sample or one-sample Z):
  * the share from the colours. A colour within the range its own layer's
  * pure pixels span is that surface's texture, not a mix. Else the own
@@ -336,76 +383,32 @@ static int split_by_colour(const double C[4], const layer *Ls, int nl, int own, 
     }
     if (inside)
         return 0;
-    int near = 0;
-    double dmin = INFINITY;
-    for (int ia = 0; ia < O->n; ++ia) {
-        double d2 = 0;
-        for (int c = 0; c < 4; ++c)
-            d2 += (C[c] - O->c[ia][c]) * (C[c] - O->c[ia][c]);
-        if (d2 < dmin) {
-            dmin = d2;
-            near = ia;
-        }
-    }
+    const int near = pick(O->c, O->n, C, 0, NULL);
     double best = INFINITY, bdd = 1;
     sp->a = own;
     sp->b = -1;
     for (int mb = 0; mb < nl; ++mb) {
         if (mb == own)
             continue;
+        if (O->npure && !Ls[mb].npure) {
+            /* the other layer thinner than the filter (no pure pixel of
+             * it: a gap, a sliver): its most distinct pixel taken beyond
+             * itself at W_THIN_OTHER, as the own layer's is at W_THIN
+             * when it is the thin one */
+            const double *a = O->c[near];
+            double bx[4];
+            beyond(a, Ls[mb].c[pick(Ls[mb].c, Ls[mb].n, a, 1, NULL)], W_THIN_OTHER, bx);
+            try_mix(C, a, bx, mb, sp, &best, &bdd);
+            continue;
+        }
         for (int ib = 0; ib < Ls[mb].n; ++ib) {
             const double *bc = Ls[mb].c[ib];
-            int ia = near;
-            if (O->npure == 0) {
-                double dmax = -1;
-                for (int q = 0; q < O->n; ++q) {
-                    double d2 = 0;
-                    for (int c = 0; c < 4; ++c)
-                        d2 += (O->c[q][c] - bc[c]) * (O->c[q][c] - bc[c]);
-                    if (d2 > dmax) {
-                        dmax = d2;
-                        ia = q;
-                    }
-                }
-            }
-            double a[4], bx[4];
-            for (int c = 0; c < 4; ++c)
-                a[c] = O->npure ? O->c[ia][c] : bc[c] + (O->c[ia][c] - bc[c]) / W_THIN;
-            if (!O->npure && (a[3] > 1 || a[3] < 0))
-                a[3] = a[3] > 1 ? 1 : 0;
-            memcpy(bx, bc, sizeof bx);
-            if (O->npure && !Ls[mb].npure) {
-                /* the other layer thinner than the filter (no pure pixel
-                 * of it: a gap, a sliver): its most distinct pixel taken
-                 * beyond itself at W_THIN_OTHER, as the own layer's is at
-                 * W_THIN when it is the thin one */
-                int ib2 = 0;
-                double dmax = -1;
-                for (int q = 0; q < Ls[mb].n; ++q) {
-                    double d2 = 0;
-                    for (int c = 0; c < 4; ++c)
-                        d2 += (Ls[mb].c[q][c] - a[c]) * (Ls[mb].c[q][c] - a[c]);
-                    if (d2 > dmax) {
-                        dmax = d2;
-                        ib2 = q;
-                    }
-                }
-                if (ib != ib2)
-                    continue;   /* one candidate: the most distinct */
-                for (int c = 0; c < 4; ++c)
-                    bx[c] = a[c] + (Ls[mb].c[ib2][c] - a[c]) / W_THIN_OTHER;
-                if (bx[3] > 1 || bx[3] < 0)
-                    bx[3] = bx[3] > 1 ? 1 : 0;
-            }
-            double sm, r2, dd;
-            if (!unmix(C, a, bx, &sm, &r2, &dd) || !(r2 < best))
-                continue;
-            best = r2;
-            bdd = dd;
-            sp->s = sm;
-            sp->b = mb;
-            memcpy(sp->pa, a, sizeof sp->pa);
-            memcpy(sp->pb, bx, sizeof sp->pb);
+            double a[4];
+            if (O->npure)
+                memcpy(a, O->c[near], sizeof a);
+            else
+                beyond(bc, O->c[pick(O->c, O->n, bc, 1, NULL)], W_THIN, a);
+            try_mix(C, a, bc, mb, sp, &best, &bdd);
         }
     }
     if (sp->b < 0 || sqrt(best / bdd) > RES_MAX)
@@ -499,16 +502,16 @@ static int split_outlier(const double C[4], const layer *Ls, int nl, split *sp)
 {
     int b = -1;
     double dmin = INFINITY;
-    for (int m = 0; m < nl; ++m)
-        for (int q = 0; q < Ls[m].n; ++q) {
-            double d2 = 0;
-            for (int k = 0; k < 4; ++k)
-                d2 += (C[k] - Ls[m].c[q][k]) * (C[k] - Ls[m].c[q][k]);
-            if (d2 < dmin) {
-                dmin = d2;
-                b = m;
-            }
+    for (int m = 0; m < nl; ++m) {
+        if (Ls[m].n == 0)
+            continue;
+        double d2;
+        pick(Ls[m].c, Ls[m].n, C, 0, &d2);
+        if (d2 < dmin) {
+            dmin = d2;
+            b = m;
         }
+    }
     if (b < 0)
         return 0;
     return set_split(sp, b, 0, DU_FLOOR, C, C);
