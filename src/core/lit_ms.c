@@ -1199,33 +1199,27 @@ static int cell_of(const ms_tab *tab, double tau)
     return base;
 }
 
-/* 1 - e^-x for 0 <= x <= 1/8 by its series to x^10 (the next term below
- * 3e-18 of it), in Estrin's scheme: no call, where most cells of a walk
- * through thin fog lie. */
-EF_INLINE double one_minus_exp_series(double x)
-{
-    const double x2 = x * x, x4 = x2 * x2, x8 = x4 * x4;
-    const double p0 = (1 - x * 0.5) + x2 * (1.0 / 6 - x * (1.0 / 24));
-    const double p1 = (1.0 / 120 - x * (1.0 / 720)) + x2 * (1.0 / 5040 - x * (1.0 / 40320));
-    const double p2 = 1.0 / 362880 - x * (1.0 / 3628800);
-    return x * ((p0 + x4 * p1) + x8 * p2);
-}
+/* The two series of a walk's cell, written once for a double and for a
+ * v4d (GCC's vector operators take a scalar beside a vector):
+ * SERIES_A: 1 - e^-x for 0 <= x <= 1/8, to x^10 (the next term below 3e-18
+ * of it), in Estrin's scheme (x2, x4, x8 its powers): no call, where most
+ * cells of a walk through thin fog lie; SERIES_SLOPE: the slope weight (1
+ * - e^-x) / x - e^-x below x = 1e-3, where its two terms cancel. */
+#define SERIES_A(x, x2, x4, x8)                                                                    \
+    ((x) * ((((1 - (x) * 0.5) + (x2) * (1.0 / 6 - (x) * (1.0 / 24))) +                             \
+             (x4) * ((1.0 / 120 - (x) * (1.0 / 720)) + (x2) * (1.0 / 5040 - (x) * (1.0 / 40320)))) + \
+            (x8) * (1.0 / 362880 - (x) * (1.0 / 3628800))))
+#define SERIES_SLOPE(x) ((x) * (0.5 - (x) * (1.0 / 3 - (x) * (1.0 / 8 - (x) / 30))))
 
 /* One cell of a walk, from a point where e^-s is es to one an optical
  * depth x further, J and its estimate linear from (J0, e0) to (J1, e1):
  * adds es int_0^x e^-y J dy to o[0] (the estimate's to o[1]); returns
- * e^-s at the far end. Below x = 1e-3 from series, where 1 - e^-x and the
- * slope weight (1 - e^-x) / x - e^-x cancel. */
+ * e^-s at the far end. */
 EF_INLINE double cell1(double es, double x, double J0, double J1, double e0, double e1, double o[2])
 {
-    double a, gs;
-    if (x < 1e-3) {
-        a = x * (1 - x * (0.5 - x * (1.0 / 6 - x * (1.0 / 24 - x / 120))));
-        gs = x * (0.5 - x * (1.0 / 3 - x * (1.0 / 8 - x / 30)));
-    } else {
-        a = x < 0.125 ? one_minus_exp_series(x) : 1 - exp(-x);
-        gs = a / x - (1 - a);
-    }
+    const double x2 = x * x, x4 = x2 * x2;
+    const double a = x < 0.125 ? SERIES_A(x, x2, x4, x4 * x4) : 1 - exp(-x);
+    const double gs = x < 1e-3 ? SERIES_SLOPE(x) : a / x - (1 - a);
     o[0] += es * (J0 * a + (J1 - J0) * gs);
     o[1] += es * (e0 * a + (e1 - e0) * gs);
     return es * (1 - a);
@@ -1257,10 +1251,11 @@ EF_INLINE void nodes4(const corners *cn, int k, int est, v4d *J, v4d *e)
  * 0: deeper), else downwards, aq = |q|; J and its estimate at the cells'
  * lower nodes are JA and eA, at their upper ones JB and eB; es is e^-s
  * where the ray meets the block. Adds what cell1 would over the cells to o
- * (the estimate's part only if est); returns e^-s at the block's far end. e^-x from v_exp (x at most 700 there: e^-700 lies
- * far below any cell nearer the camera), e^-s at each cell by the product
- * of those before it, 1 / x from the table's inverse spacings; lanes past
- * cnt are cells of no width. */
+ * (the estimate's part only if est); returns e^-s at the block's far end.
+ * e^-x as cell1 takes it (v_exp's x at most 700: e^-700 lies far below any
+ * cell nearer the camera), e^-s at each cell by the product of those
+ * before it, 1 / x from the table's inverse spacings; lanes past cnt are
+ * cells of no width. */
 EF_INLINE double cells4(const ms_tab *tab, const v4d *JA, const v4d *JB, const v4d *eA,
                         const v4d *eB, int k, int cnt, int up, int est, double aq, double es,
                         double o[2])
@@ -1275,35 +1270,28 @@ EF_INLINE double cells4(const ms_tab *tab, const v4d *JA, const v4d *JB, const v
     v4di m = lane < vc;
     v4d vx = (TB - TA) * iaq;
     v_sel(&vx, &m, &vx, &zero);
-    v4d ex, a;
+    /* 1 - e^-x from its series where x < 1/8 (every lane of most
+     * blocks), from v_exp in the others */
+    const v4d x2 = vx * vx, x4 = x2 * x2;
+    v4d a = SERIES_A(vx, x2, x4, x4 * x4), ex = one - a;
     const v4d near = { 0.125, 0.125, 0.125, 0.125 };
     m = vx > near;
     if (v_any(&m)) {
-        v4d nx;
-        m = vx > cap;
-        v_sel(&nx, &m, &cap, &vx);
+        v4d nx, ev;
+        const v4di big = vx > cap;
+        v_sel(&nx, &big, &cap, &vx);
         nx = -nx;
-        v_exp(&nx, &ex);
-        a = 1 - ex;
-    } else {
-        /* every cell thin: 1 - e^-x by its series to x^10 (the next term
-         * below 3e-18 of it), in Estrin's scheme */
-        const v4d x2 = vx * vx, x4 = x2 * x2, x8 = x4 * x4;
-        const v4d p0 = (1 - vx * 0.5) + x2 * (1.0 / 6 - vx * (1.0 / 24));
-        const v4d p1 = (1.0 / 120 - vx * (1.0 / 720)) + x2 * (1.0 / 5040 - vx * (1.0 / 40320));
-        const v4d p2 = 1.0 / 362880 - vx * (1.0 / 3628800);
-        a = vx * ((p0 + x4 * p1) + x8 * p2);
-        ex = 1 - a;
+        v_exp(&nx, &ev);   /* e^-x itself, not 1 - a: far cells' e^-x is tiny */
+        const v4d ae = 1 - ev;
+        v_sel(&a, &m, &ae, &a);
+        v_sel(&ex, &m, &ev, &ex);
     }
     v4d gs = a * (ID * aq) - ex;
     const v4d lim = { 1e-3, 1e-3, 1e-3, 1e-3 };
     m = vx < lim;
     if (v_any(&m)) {
-        const v4d as = vx * (1 - vx * (0.5 - vx * (1.0 / 6 - vx * (1.0 / 24 - vx / 120))));
-        const v4d gss = vx * (0.5 - vx * (1.0 / 3 - vx * (1.0 / 8 - vx / 30)));
-        v_sel(&a, &m, &as, &a);
+        const v4d gss = SERIES_SLOPE(vx);
         v_sel(&gs, &m, &gss, &gs);
-        ex = one - a;
     }
     /* e^-s at each cell's near end: the products of e^-x over the cells
      * the ray met before it in the block (a scan in the order it meets
