@@ -15,17 +15,10 @@
 # height fog with a box volume). Every run on 2 threads, LQ_ROUNDS rounds
 # (default 2) interleaved, medians.
 set -u
-before="${1:?before exrfog}"
-after="${2:?after exrfog}"
-build="${3:-build}"
-size="${LQ_SIZE:-480x270}"
-rounds="${LQ_ROUNDS:-2}"
-die() { echo "lit_quad_sweep.sh: $*" >&2; exit 1; }
-for b in "$before" "$after" "$build/make_sample"; do [[ -x "$b" ]] || die "$b missing"; done
+# shellcheck source=bench/sweep_lib.sh
+. "$(dirname "$0")/sweep_lib.sh"
+sweep_setup lit_quad_sweep.sh LQ 480x270 "$@"
 [[ -x /usr/bin/time ]] || die "/usr/bin/time not found (apt-get install -y time)"
-py=/usr/bin/python3
-tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-lqs.XXXXXX")" || die "mktemp failed"
-trap 'rm -rf "$tmp"' EXIT
 views=("horizon:1.7,-4,60" "30up:30,-8,60" "120up:120,-20,60" "sky:12,2,60" "300up:300,-10,60")
 lights=("lamp-ahead:point:position=0,3,-20:intensity=100"
         "lamp-behind:point:position=1,4,12:intensity=100"
@@ -34,11 +27,7 @@ lights=("lamp-ahead:point:position=0,3,-20:intensity=100"
 fogs=("steep:--fog height:density=0.05:falloff=0.3:base=0"
       "gentle:--fog height:density=0.01:falloff=0.01:base=0"
       "box:--fog height:density=0.05:falloff=0.3:base=0 --fog box:min=-10,0,-60:max=10,8,-10:density=0.1")
-for v in "${views[@]}"; do
-    "$build/make_sample" "$tmp/${v%%:*}.exr" --size "$size" --view "${v#*:}" >/dev/null ||
-        die "make_sample ${v%%:*}"
-done
-median() { tr ' ' '\n' | grep . | sort -g | awk '{a[NR]=$1} END {print (NR%2 ? a[(NR+1)/2] : (a[NR/2]+a[NR/2+1])/2)}'; }
+sweep_frames "${views[@]}"
 echo "## The general lit quadrature over a sweep of shots"
 echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
@@ -67,13 +56,7 @@ for v in "${views[@]}"; do
                 done
             done
             mb=$(echo "$tb" | median) ma=$(echo "$ta" | median)
-            diff=$("$py" - "$tmp/before.exr" "$tmp/after.exr" <<'EOF'
-import sys, numpy as np, OpenImageIO as oiio
-a = oiio.ImageBuf(sys.argv[1]).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
-b = oiio.ImageBuf(sys.argv[2]).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
-print("%.1e" % (np.abs(b - a) / np.maximum(np.abs(a), 1e-3)).max())
-EOF
-)
+            diff=$(max_rel_diff "$tmp/before.exr" "$tmp/after.exr")
             echo "| $vn | $ln | $fn | $mb | $ma | $(awk -v b="$mb" -v a="$ma" 'BEGIN {printf "%.2fx", b / a}') | $diff |"
         done
     done

@@ -18,16 +18,10 @@
 # the before build's multiple; then the two multiple outputs once more in
 # float, untimed, for their difference.
 set -u
-before="${1:?before exrfog}"
-after="${2:?after exrfog}"
-build="${3:-build}"
-size="${MS_SIZE:-1920x1080}"
-rounds="${MS_ROUNDS:-2}"
-die() { echo "ms_sweep.sh: $*" >&2; exit 1; }
-for b in "$before" "$after" "$build/make_sample"; do [[ -x "$b" ]] || die "$b missing"; done
+# shellcheck source=bench/sweep_lib.sh
+. "$(dirname "$0")/sweep_lib.sh"
+sweep_setup ms_sweep.sh MS 1920x1080 "$@"
 py=/usr/bin/python3
-tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-mss.XXXXXX")" || die "mktemp failed"
-trap 'rm -rf "$tmp"' EXIT
 views=("horizon:1.7,-4,60" "5up:5,-5,60" "30up:30,-8,60" "60up:60,-20,60" "120up:120,-20,60"
        "sky:12,2,60" "300up:300,-10,60")
 suns=("low:sun:towards=1,0.09,-1:intensity=3" "mid:sun:towards=1,0.3,-1:intensity=3"
@@ -35,11 +29,7 @@ suns=("low:sun:towards=1,0.09,-1:intensity=3" "mid:sun:towards=1,0.3,-1:intensit
 fogs=("steep:height:density=0.05:falloff=0.1:base=0:albedo=0.9:phase=hg:g=0.6"
       "gentle:height:density=0.01:falloff=0.01:base=0:albedo=0.95:phase=hg:g=0.5"
       "slab:halfspace:plane=0,1,0,-20:density=0.05:albedo=0.99:phase=hg:g=0.85")
-for v in "${views[@]}"; do
-    "$build/make_sample" "$tmp/${v%%:*}.exr" --size "$size" --view "${v#*:}" >/dev/null ||
-        die "make_sample ${v%%:*}"
-done
-median() { tr ' ' '\n' | grep . | sort -g | awk '{a[NR]=$1} END {print (NR%2 ? a[(NR+1)/2] : (a[NR/2]+a[NR/2+1])/2)}'; }
+sweep_frames "${views[@]}"
 wall() {   # wall seconds of one run (its arguments), to the millisecond
     local s e
     s=$(date +%s.%N)
@@ -73,15 +63,7 @@ for v in "${views[@]}"; do
             "$after" "$tmp/$vn.exr" -o "$tmp/a.exr" --fog "$fog" --light "$sun:scattering=multiple:ground=0" -d float >/dev/null 2>&1 || die "float run"
             "$before" "$tmp/$vn.exr" -o "$tmp/b.exr" --fog "$fog" --light "$sun:scattering=multiple:ground=0" -d float >/dev/null 2>&1 || die "float run"
             s=$(echo "$ts" | median) m=$(echo "$tm" | median) b=$(echo "$tb" | median)
-            d=$("$py" - "$tmp/a.exr" "$tmp/b.exr" <<'EOF'
-import sys
-import numpy as np
-import OpenImageIO as oiio
-a = oiio.ImageBuf(sys.argv[1]).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
-b = oiio.ImageBuf(sys.argv[2]).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
-print("%.2g" % float((np.abs(a - b) / np.maximum(np.abs(b), 1e-3)).max()))
-EOF
-)
+            d=$(max_rel_diff "$tmp/b.exr" "$tmp/a.exr")
             ra=$(awk -v a="$m" -v b="$s" 'BEGIN {printf "%.2f", a / b}')
             rb=$(awk -v a="$b" -v b="$s" 'BEGIN {printf "%.2f", a / b}')
             echo "$vn/$sn/$fn $ra $rb" >>"$tmp/ratios"
