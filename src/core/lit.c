@@ -533,22 +533,19 @@ static void dense_at(const ef_lit_dense *d, double t, double J[3], double E[3], 
     const double h = 0.5 * (f->u1 - f->u0);
     double y = h > 0 ? (u - 0.5 * (f->u0 + f->u1)) / h : 1;
     y = y < -1 ? -1 : y > 1 ? 1 : y;
-    /* integral over [-1, y] of P_m: y + 1 for m = 0, else
-     * (P_{m+1}(y) - P_{m-1}(y)) / (2m + 1) */
-    double I[EF_LIT_DENSE_NC], pm1 = 1, pm = y;   /* P_{m-1}, P_m from m = 1 */
-    I[0] = y + 1;
-    for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
-        const double pn = lg_A[m] * y * pm - lg_B[m] * pm1;
-        I[m] = (pn - pm1) * lg_I[m];
-        pm1 = pm;
-        pm = pn;
-    }
+    _Static_assert(EF_LIT_DENSE_NA == 16, "Estrin below takes 16 coefficients");
+    /* the leaf's antiderivative, by Estrin's scheme (a short dependency
+     * chain: a deep pixel asks this for every sample's two ends) */
+    const double y2 = y * y, y4 = y2 * y2, y8 = y4 * y4;
     double v = 0;
     for (int k = 0; k < 3; ++k) {
         if (k == 0 || !f->grey) {   /* a grey leaf's sum serves every channel */
-            v = 0;
-            for (int m = EF_LIT_DENSE_NC - 1; m >= 0; --m)
-                v += f->c[k][m] * I[m];
+            const double *a = f->c[k];
+            const double q0 = (a[0] + a[1] * y) + (a[2] + a[3] * y) * y2,
+                         q1 = (a[4] + a[5] * y) + (a[6] + a[7] * y) * y2,
+                         q2 = (a[8] + a[9] * y) + (a[10] + a[11] * y) * y2,
+                         q3 = (a[12] + a[13] * y) + (a[14] + a[15] * y) * y2;
+            v = (q0 + q1 * y4) + (q2 + q3 * y4) * y8;
         }
         J[k] = f->J0[k] + h * v;
         E[k] = f->E0[k] + f->e[k];

@@ -50,12 +50,17 @@ int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double
  * samples instead of one or more per sample. Owned by the caller (one per
  * thread, reused: ef_lit_dense_free releases it). */
 #define EF_LIT_DENSE_NC 15
+/* The antiderivative's monomial coefficients per leaf (degree 15). */
+#define EF_LIT_DENSE_NA (EF_LIT_DENSE_NC + 1)
 typedef struct ef_lit_leaf {
     double t0, t1;            /* its stretch of the ray, in t */
     double u0, u1;            /* in the quadrature's variable */
     int mode;                 /* how u maps to t (lit_quad.c's equi; 3: u = t) */
     double ts, hq, ua, lam;   /* the mapping's constants */
-    double c[3][EF_LIT_DENSE_NC];   /* the integrand's Legendre coefficients on [u0, u1] */
+    /* the integrand's series integrated from u0, as a polynomial in y (y
+     * from -1 at u0 to 1 at u1; times half the width in u): monomial
+     * coefficients, so a lookup is one short polynomial */
+    double c[3][EF_LIT_DENSE_NA];
     int grey;                 /* the three channels' coefficients are the same */
     double J0[3], E0[3];      /* J and the summed error estimates at t0 */
     double r[3], e[3];        /* the leaf's integral and its estimate */
@@ -67,6 +72,10 @@ typedef struct ef_lit_dense {
     double total[3];          /* J to the ray's end */
     double *fv;               /* scratch: 45 values per interval of one adaptive run */
     int fvcap;
+    /* a leaf's c from its 15 Kronrod values: c[n] = h sum_i fv_i q[i][n]
+     * (constants, made at the first build; qready says they are there) */
+    double q[15][EF_LIT_DENSE_NA];
+    int qready;
     /* ef_lit_dense_at's last answers (a deep pixel's samples share ends):
      * t, then J, E and Elo */
     double memo[4][10];

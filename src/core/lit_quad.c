@@ -274,8 +274,12 @@ static void light_dir(const lit_q *q, double t, double ld[3])
  * e^-c) / c of either sign, dh the lamp's height over the node's; the
  * sun's is rho E / (k s_l). The model's own optical depths (double-double
  * heights, the saturation's care) cost four times this for nothing the
- * quadrature's 1e-10 can see; returns 0 (nothing added) where an
- * exponent leaves +-700, for the model to answer. */
+ * quadrature's 1e-10 can see. A node far above the base (its density
+ * factor below e^-700, where sky rays' last nodes lie) keeps this path:
+ * there a lamp's leg is rho dl (E - E_lamp) / (k dh) from the lamp's own
+ * factor, which stays finite where phi's would overflow. Returns 0
+ * (nothing added) where the camera's or the lamp's factor, or a node's
+ * below them, leaves e^+-700, for the model to answer. */
 static int strata_legs(const ef_fog_component *c, const lit_q *q, const double rho[3], double k,
                        double base, int m, const double *t, const double *dl, double *E,
                        double (*tv)[3], double (*tl)[3])
@@ -294,30 +298,200 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
     const double lsun = sl > 0 ? 1 / (k * sl) : INFINITY;
     double em[15];
     const double iks = sv != 0 ? -1 / (k * sv) : 0;   /* (a level view: b is 0) */
+    const double xl = x0 - k * wu;   /* the lamp's exponent */
+    if (!(fabs(x0) < 700) || (lamp && tl && !(fabs(xl) < 700)))
+        return 0;
     for (int j = 0; j < m; ++j) {
         const double b = k * sv * t[j];
-        if (!(fabs(x0) < 700 && fabs(x0 - b) < 700))
+        if (!(x0 - b < 700))
             return 0;
         em[j] = expm1(-b);
     }
-    const double E0 = exp(x0);
+    const double E0 = exp(x0), EL = lamp && tl ? exp(xl) : 0;
     for (int j = 0; j < m; ++j) {
         const double b = k * sv * t[j];
-        E[j] = E0 * (1 + em[j]);
+        /* 1 + em loses e^b of its digits for b > 0: e^(x0 - b) there */
+        E[j] = b > 0.5 ? exp(x0 - b) : E0 * (1 + em[j]);
         const double lv = b == 0 ? t[j] : em[j] * iks;   /* the view's length factor */
         for (int ch = 0; ch < 3; ++ch)
             if (rho[ch] != 0)
                 tv[j][ch] += rho[ch] * E0 * lv;
         if (!tl)
             continue;
-        double ll = lsun;   /* the light's */
+        double EL_ = lsun * E[j];   /* the light's length factor times E */
         if (lamp) {
+            /* E phi(cc), or above the lamp (cc < -1/2) from the lamp's own
+             * factor, (E_lamp - E) / -cc: there E phi may overflow, and E
+             * underflow where the lamp's leg is still dense (another
+             * component's light then crosses it) */
             const double cc = k * (wu - t[j] * sv);
-            ll = cc == 0 ? dl[j] : dl[j] * (-expm1(-cc) / cc);
+            EL_ = cc == 0 ? dl[j] * E[j]
+                  : cc > -0.5 ? dl[j] * E[j] * (-expm1(-cc) / cc)
+                              : dl[j] * (EL - E[j]) / (-cc);
         }
         for (int ch = 0; ch < 3; ++ch)
             if (rho[ch] != 0)
-                tl[j][ch] += rho[ch] * E[j] * ll;
+                tl[j][ch] += rho[ch] * EL_;
+    }
+    return 1;
+}
+
+/* The phase function at cosines c, four lanes: ef_phase_eval's
+ * expressions in its order (the same values but for sqrt's lanes, which
+ * are correctly rounded alike). */
+EF_INLINE void v_phase(int phase, double g, const v4d *c, v4d *o)
+{
+    const double pi = 3.14159265358979323846;
+    if (phase == EF_PHASE_RAYLEIGH) {
+        *o = 3 / (16 * pi) * (1 + *c * *c);
+        return;
+    }
+    if (phase != EF_PHASE_HG && phase != EF_PHASE_CS) {
+        const double iso = 1 / (4 * pi);
+        *o = (v4d) { iso, iso, iso, iso };
+        return;
+    }
+    const double ag = fabs(g), om = (1 - ag) * (1 - ag);
+    v4d ac, qa, qb, qq, sq, d;
+    v_abs(c, &ac);
+    qa = om + 2 * ag * (1 - ac);
+    qb = 1 + g * g - 2 * g * *c;
+    const v4di pos = g * *c >= 0;
+    v_sel(&qq, &pos, &qa, &qb);
+    v_sqrt(&qq, &sq);
+    d = qq * sq;
+    if (phase == EF_PHASE_HG)
+        *o = (1 - g * g) / (4 * pi * d);
+    else
+        *o = 3 / (8 * pi) * (1 - g * g) * (1 + *c * *c) / ((2 + g * g) * d);
+}
+
+/* lit_integrand for a lamp in one component of exponential strata, four
+ * nodes at a time on vectors (node_geom, strata_legs and the transmittance
+ * there, with vmath.h's tan, expm1 and exp for libm's: a few ulp apart,
+ * far below the quadrature's 1e-10). Returns 0, having written nothing,
+ * where an exponent leaves the range strata_legs keeps (the scalar path
+ * answers). */
+EF_MULTIVERSION static int lamp_strata_v(const lit_q *q, const ef_fog_component *c,
+                                         const double rho[3], double k, double base,
+                                         const double *u, int n, double (*out)[3])
+{
+    const ef_ray *r = q->r;
+    const ef_light *l = q->l;
+    const double *up = c->up;
+    const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
+    const double sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
+    const double wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
+    const double x0 = -k * h0, xl = x0 - k * wu;
+    if (!(fabs(x0) < 700) || !(fabs(xl) < 700))
+        return 0;
+    const double iks = sv != 0 ? -1 / (k * sv) : 0;
+    const double ksv = k * sv;
+    enum { NV = 4 };
+    v4d T[NV], W[NV], UR[NV];
+    v4di dead[NV];
+    for (int g = 0; g * 4 < n; ++g) {
+        v4d U;
+        for (int i = 0; i < 4; ++i)
+            U[i] = u[4 * g + i < n ? 4 * g + i : 4 * g];
+        v4d ur = U, t, wgt = { 1, 1, 1, 1 };
+        v4di dd = { 0, 0, 0, 0 };
+        if (q->equi == 1) {
+            v4d tn;
+            v_tan(&U, &tn);
+            ur = q->hq * tn;
+            const double iw = 1 / q->hq;
+            wgt = (v4d) { iw, iw, iw, iw };
+        } else if (q->equi == 2) {
+            dd = ~(U < 1.0);
+            const v4d um = 1.0 - U;
+            ur = q->ua + q->lam * U / um;
+            wgt = q->lam / (um * um) / (ur * ur + q->hq * q->hq);
+        } else {
+            wgt = 1 / (ur * ur + q->hq * q->hq);
+        }
+        t = q->ts + ur;
+        const v4di neg = ~(t >= 0.0);
+        const v4d zero = { 0, 0, 0, 0 };
+        v_sel(&t, &neg, &zero, &t);
+        /* a node whose exponent leaves the range: the scalar path */
+        const v4d b = ksv * t;
+        const v4di off = ~(x0 - b < 700.0) | ~(-b < 700.0);
+        for (int i = 0; i < 4; ++i)
+            if (off[i] && !dd[i])
+                return 0;
+        T[g] = t;
+        W[g] = wgt;
+        UR[g] = ur;
+        dead[g] = dd;
+    }
+    const double E0 = exp(x0), EL = exp(xl);
+    const int coned = ef_light_coned(l);
+    for (int g = 0; g * 4 < n; ++g) {
+        const v4d t = T[g], ur = UR[g];
+        v4d wgt = W[g], dl, cth;
+        v4di dd = dead[g];
+        const v4d d2 = ur * ur + q->h * q->h;
+        v_sqrt(&d2, &dl);
+        dd |= ~(dl > 0.0);
+        cth = -ur / dl;
+        if (coned)
+            for (int i = 0; i < 4; ++i)
+                if (!dd[i]) {
+                    wgt[i] *= ef_spot_share(l, -(q->wa - t[i] * q->va) / dl[i]);
+                    dd[i] = wgt[i] == 0 ? -1 : 0;
+                }
+        if (dd[0] && dd[1] && dd[2] && dd[3]) {   /* (outside a spot's cone) */
+            for (int i = 0; i < 4 && 4 * g + i < n; ++i)
+                out[4 * g + i][0] = out[4 * g + i][1] = out[4 * g + i][2] = 0;
+            continue;
+        }
+        /* the density factor and the view's length factor */
+        const v4d b = ksv * t, mb = -b;
+        v4d em, xb = x0 - b, eb;
+        v_expm1(&mb, &em);
+        v4d E = E0 * (1 + em);
+        /* past b = 1/2, e^(x0 - b) (1 + em loses digits); below -708, 0 */
+        const v4di under = xb < -708.0, bpos = b > 0.5;
+        const v4d m708 = { -708, -708, -708, -708 }, zero = { 0, 0, 0, 0 };
+        if (v_any(&bpos)) {
+            v_sel(&xb, &under, &m708, &xb);
+            v_exp(&xb, &eb);
+            v_sel(&eb, &under, &zero, &eb);
+            v_sel(&E, &bpos, &eb, &E);
+        }
+        v4d lv = em * iks;
+        const v4di b0 = b == 0.0;
+        v_sel(&lv, &b0, &t, &lv);
+        /* the lamp's leg times E */
+        const v4d cc = k * (wu - t * sv), mc = -cc;
+        v4d ec;
+        v_expm1(&mc, &ec);
+        v4d le = dl * E * (-ec / cc);
+        const v4d far = dl * (EL - E) / mc;
+        const v4di isfar = ~(cc > -0.5), c0 = cc == 0.0;
+        v_sel(&le, &isfar, &far, &le);
+        const v4d dE = dl * E;
+        v_sel(&le, &c0, &dE, &le);
+        v4d p;
+        v_phase(c->phase, c->g, &cth, &p);
+        v4d et;
+        v4di gone;
+        for (int ch = 0; ch < 3; ++ch) {
+            if (ch == 0 || rho[ch] != rho[ch - 1]) {
+                const v4d tau = rho[ch] * E0 * lv + rho[ch] * le;
+                /* e^-tau (0 past 708, where the light is gone anyway);
+                 * grey fog's channels share it */
+                v4d mt = -tau;
+                gone = ~(tau <= 708.0);
+                v_sel(&mt, &gone, &m708, &mt);
+                v_exp(&mt, &et);
+            }
+            const v4d acc = rho[ch] * E * albedo(c, ch) * p;
+            const v4d o = acc * et * wgt * l->e[ch];
+            for (int i = 0; i < 4 && 4 * g + i < n; ++i)
+                out[4 * g + i][ch] = dd[i] || gone[i] || rho[ch] == 0 || acc[i] == 0 ? 0 : o[i];
+        }
     }
     return 1;
 }
@@ -333,6 +507,14 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     const ef_fog_scene *s = q->s;
+    if (!q->uniform && s->ncomp == 1 && ef_light_at_position(l)) {
+        /* a lamp in one height fog (most lit fog): on vectors */
+        const ef_fog_component *c = &s->comp[0];
+        double rho[3], k, base;
+        if (c->model->strata && c->model->strata(c, rho, &k, &base) &&
+            lamp_strata_v(q, c, rho, k, base, u, n, out))
+            return;
+    }
     double tn[15], wgt[15], dl[15], cth[15];
     int live[15], m = 0;
     for (int j = 0; j < n; ++j) {
@@ -471,9 +653,58 @@ static double leaf_t(const ef_lit_leaf *f, double u)
     }
 }
 
+/* q[i][n]: node i's part in the y^n coefficient of a leaf's
+ * antiderivative. The integrand's Legendre series has coefficients
+ * c_m = (2m + 1) / 2 sum_i w_i f_i P_m(y_i) over the 15 Kronrod nodes; its
+ * integral from -1 to y is sum_m c_m I_m(y), I_0 = y + 1 and
+ * I_m = (P_{m+1} - P_{m-1}) / (2m + 1), written here in powers of y (the
+ * series converges on every kept leaf, so its high terms are small and
+ * the powers' larger coefficients cost no digits that matter: test_light's
+ * dense tests hold it to the segment quadrature). */
+static void dense_node_weights(double q[15][EF_LIT_DENSE_NA])
+{
+    /* Legendre's polynomials P_0 .. P_NC in powers of y */
+    double P[EF_LIT_DENSE_NC + 1][EF_LIT_DENSE_NA] = { { 0 } };
+    P[0][0] = 1;
+    P[1][1] = 1;
+    for (int m = 1; m < EF_LIT_DENSE_NC; ++m)
+        for (int n = 0; n < EF_LIT_DENSE_NA; ++n)
+            P[m + 1][n] = (n > 0 ? lg_A[m] * P[m][n - 1] : 0) - lg_B[m] * P[m - 1][n];
+    double I[EF_LIT_DENSE_NC][EF_LIT_DENSE_NA] = { { 0 } };
+    I[0][0] = I[0][1] = 1;
+    for (int m = 1; m < EF_LIT_DENSE_NC; ++m)
+        for (int n = 0; n < EF_LIT_DENSE_NA; ++n)
+            I[m][n] = (P[m + 1][n] - P[m - 1][n]) * lg_I[m];
+    double y[15], W[15];
+    for (int j = 0; j < 7; ++j) {
+        y[j] = -(double) ef_gk15_x[j];
+        y[14 - j] = (double) ef_gk15_x[j];
+        W[j] = W[14 - j] = (double) ef_gk15_wk[j];
+    }
+    y[7] = 0;
+    W[7] = (double) ef_gk15_wk[7];
+    for (int i = 0; i < 15; ++i) {
+        /* w_i (2m + 1) / 2 P_m(y_i), by the recurrence */
+        double pm[EF_LIT_DENSE_NC], p0 = 1, p1 = y[i];
+        pm[0] = 0.5 * W[i];
+        for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
+            pm[m] = p1 * 0.5 * W[i] / lg_I[m];
+            const double pn = lg_A[m] * y[i] * p1 - lg_B[m] * p0;
+            p0 = p1;
+            p1 = pn;
+        }
+        for (int n = 0; n < EF_LIT_DENSE_NA; ++n) {
+            double v = 0;
+            for (int m = 0; m < EF_LIT_DENSE_NC; ++m)
+                v += pm[m] * I[m][n];
+            q[i][n] = v;
+        }
+    }
+}
+
 /* Appends an adaptive run's final intervals to the record as leaves, in
- * order along the ray, each with its integrand's Legendre series
- * c_n = (2n + 1) / 2 sum_i w_i f_i P_n(y_i) over the 15 Kronrod nodes. */
+ * order along the ray, each with its integrand's integral from the leaf's
+ * start as a polynomial in y (dense_node_weights). */
 static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
 {
     ef_lit_dense *d = rec->d;
@@ -501,26 +732,9 @@ static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
         }
     const lit_q *q = rec->q;
     const int mode = q->equi == 1 ? 1 : q->equi == 2 ? 2 : ef_light_at_position(q->l) ? 0 : 3;
-    double y[15], W[15];
-    for (int j = 0; j < 7; ++j) {
-        y[j] = -(double) ef_gk15_x[j];
-        y[14 - j] = (double) ef_gk15_x[j];
-        W[j] = W[14 - j] = (double) ef_gk15_wk[j];
-    }
-    y[7] = 0;
-    W[7] = (double) ef_gk15_wk[7];
-    /* P_m at the nodes, times the rule's weight and (2m + 1) / 2 */
-    double P[15][EF_LIT_DENSE_NC];
-    for (int i = 0; i < 15; ++i) {
-        double p0 = 1, p1 = y[i];
-        P[i][0] = 0.5 * W[i];
-        for (int m = 1; m < EF_LIT_DENSE_NC; ++m) {
-            P[i][m] = p1 * 0.5 * W[i] / lg_I[m];
-            const double pn = lg_A[m] * y[i] * p1 - lg_B[m] * p0;
-            p0 = p1;
-            p1 = pn;
-        }
-    }
+    if (!d->qready)
+        dense_node_weights(d->q);
+    d->qready = 1;
     for (int o = 0; o < n; ++o) {
         const gk_iv *v = &iv[ord[o]];
         const double *fv = d->fv + (size_t) ord[o] * 45;
@@ -537,10 +751,10 @@ static void dense_keep(dense_rec *rec, const gk_iv *iv, int n)
         for (int k = 0; k < 3; ++k) {
             f->r[k] = rec->w * v->r[k];
             f->e[k] = rec->w * v->e[k];
-            for (int m = 0; m < EF_LIT_DENSE_NC; ++m) {
+            for (int m = 0; m < EF_LIT_DENSE_NA; ++m) {
                 double c = 0;
                 for (int i = 0; i < 15; ++i)
-                    c += fv[3 * i + k] * P[i][m];
+                    c += fv[3 * i + k] * d->q[i][m];
                 f->c[k][m] = rec->w * c;
             }
         }

@@ -1,4 +1,4 @@
-/* exp, log, log1p, atan2 and sincos on four lanes at once, in plain IEEE
+/* exp, expm1, log, log1p, atan2, sincos and tan on four lanes at once, in plain IEEE
  * arithmetic (no fma, no table beyond nine constants, no libm call), for
  * the lamp's closed form across a span of rays. Plain arithmetic because
  * strict C11 contracts nothing: each lane's value is the same bits in the
@@ -79,6 +79,37 @@ EF_INLINE void v_exp(const v4d *x, v4d *o)
     const v4d p = 1.0 + (r + r2 * q);
     const v4u ki = (v4u) t - (v4u) magic;
     *o = p * (v4d) ((ki + 1023) << 52);
+}
+
+/* e^x - 1 for x <= 700 (-1 below -708): below 1/2 in magnitude x + x^2
+ * q(x), q by e^x's Taylor series from x^2 / 2! to x^17 / 17! (the next
+ * term below 1.6e-17 of x^2 at 1/2) in Estrin's scheme, so small x keep
+ * every digit; beyond, v_exp less 1 (|e^x - 1| >= 0.39 there, so the
+ * subtraction costs at most 3 ulp). */
+EF_INLINE void v_expm1(const v4d *x, v4d *o)
+{
+    const v4d x1 = *x, x2 = x1 * x1, x4 = x2 * x2, x8 = x4 * x4;
+    const v4d p0 = (0.5 + x1 * 0.16666666666666666) +
+                   (0.041666666666666664 + x1 * 0.008333333333333333) * x2;
+    const v4d p1 = (0.001388888888888889 + x1 * 0.0001984126984126984) +
+                   (2.48015873015873e-05 + x1 * 2.7557319223985893e-06) * x2;
+    const v4d p2 = (2.755731922398589e-07 + x1 * 2.505210838544172e-08) +
+                   (2.08767569878681e-09 + x1 * 1.6059043836821613e-10) * x2;
+    const v4d p3 = (1.1470745597729725e-11 + x1 * 7.647163731819816e-13) +
+                   (4.779477332387385e-14 + x1 * 2.8114572543455206e-15) * x2;
+    const v4d q = (p0 + p1 * x4) + (p2 + p3 * x4) * x8;
+    const v4d small = x1 + x2 * q;
+    v4d xc = x1;
+    const v4di lo = xc < -708.0;
+    const v4d m708 = { -708.0, -708.0, -708.0, -708.0 };
+    v_sel(&xc, &lo, &m708, &xc);
+    v4d e;
+    v_exp(&xc, &e);
+    const v4d big = e - 1.0;
+    v4d ax;
+    v_abs(&x1, &ax);
+    const v4di near = ax < 0.5;
+    v_sel(o, &near, &small, &big);
 }
 
 /* log x for x normal, positive and finite: x = 2^e m, m in [sqrt(1/2),
@@ -191,6 +222,28 @@ EF_INLINE void v_sincos(const v4d *x, v4d *sn, v4d *cs)
     c = c * x2 - 0.041666666666666664;
     c = c * x2 + 0.5;
     *cs = 1.0 - x2 * c;
+}
+
+/* tan x for |x| <= pi/2 (the double nearest it included): sin x / cos x
+ * up to pi/4, beyond cos w / sin w with w = pi/2 - |x| (exact by
+ * Sterbenz's lemma from pi/2's double, its low part added), so the large
+ * values near pi/2 keep their relative accuracy; a few ulp. */
+EF_INLINE void v_tan(const v4d *x, v4d *o)
+{
+    v4d ax;
+    v_abs(x, &ax);
+    const v4di big = ax > 0.7853981633974483;
+    const v4d w = (1.5707963267948966 - ax) + 6.123233995736766e-17;
+    v4d a;
+    v_sel(&a, &big, &w, &ax);
+    v4d sn, cs;
+    v_sincos(&a, &sn, &cs);
+    const v4d tn = sn / cs, ct = cs / sn;
+    v4d r;
+    v_sel(&r, &big, &ct, &tn);
+    const v4d neg = -r;
+    const v4di xn = *x < 0.0;
+    v_sel(o, &xn, &neg, &r);
 }
 
 #endif

@@ -1,4 +1,4 @@
-/* vmath.h's four-lane exp, log, log1p, atan2 and sincos against libm's
+/* vmath.h's four-lane exp, expm1, log, log1p, atan2, sincos and tan against libm's
  * scalar functions (glibc's, within an ulp of the true value), over the
  * ranges their callers feed them, with random and edge arguments: each
  * within a few ulp. And each lane's value the same bits whatever the other
@@ -22,6 +22,16 @@ static void f_exp(const v4d *x, const v4d *y, v4d *o)
 {
     (void) y;
     v_exp(x, o);
+}
+static void f_expm1(const v4d *x, const v4d *y, v4d *o)
+{
+    (void) y;
+    v_expm1(x, o);
+}
+static void f_tan(const v4d *x, const v4d *y, v4d *o)
+{
+    (void) y;
+    v_tan(x, o);
 }
 static void f_log(const v4d *x, const v4d *y, v4d *o)
 {
@@ -62,6 +72,8 @@ static double l_atan2(double x, double y)
         return f(x);                                                                             \
     }
 LIBM1(exp)
+LIBM1(expm1)
+LIBM1(tan)
 LIBM1(log)
 LIBM1(log1p)
 LIBM1(sin)
@@ -123,6 +135,26 @@ static void g_exp(double *x, double *y)
     const double u = uniform();
     *x = u < 0.1 ? 1e-3 * (2 * uniform() - 1) : 1416 * uniform() - 708;
 }
+/* expm1 where lit fog takes it: tiny, around the series' edge at 1/2,
+ * and out to -708 .. 700 */
+static void g_expm1(double *x, double *y)
+{
+    *y = 0;
+    const double u = uniform();
+    *x = u < 0.2 ? 1e-9 * (2 * uniform() - 1)
+       : u < 0.5 ? 0.52 * (2 * uniform() - 1)
+       : u < 0.6 ? -800 * uniform()
+                 : 1408 * uniform() - 708;
+}
+/* tan over the quadrature's angles (-pi/2, pi/2), many near the ends */
+static void g_tan(double *x, double *y)
+{
+    *y = 0;
+    const double u = uniform(), pio2 = 1.5707963267948966;
+    *x = u < 0.3 ? (2 * uniform() - 1) * pio2
+       : u < 0.6 ? (uniform() < 0.5 ? -1 : 1) * (pio2 - pow(10, -15 * uniform()))
+       : (2 * uniform() - 1) * 1e-6;
+}
 static void g_log(double *x, double *y)
 {
     *y = 0;
@@ -168,9 +200,13 @@ static void test_accuracy(void **state)
      * needs it absolute, against |V|) */
     const double s = worst(f_sin, l_sin, g_trig, n, 4);
     const double c = worst(f_cos, l_cos, g_trig, n, 4);
+    const double em = worst(f_expm1, l_expm1, g_expm1, n, 0);
+    const double t = worst(f_tan, l_tan, g_tan, n, 0);
     printf("worst ulps against libm: exp %.2f, log %.2f, log1p %.2f, atan2 %.2f, sin %.2f, "
-           "cos %.2f\n",
-           e, l, l1, a, s, c);
+           "cos %.2f, expm1 %.2f, tan %.2f\n",
+           e, l, l1, a, s, c, em, t);
+    assert_true(em <= 4);
+    assert_true(t <= 4);
     assert_true(e <= 3);
     assert_true(l <= 3);
     assert_true(l1 <= 4);
@@ -210,6 +246,17 @@ static void test_edges(void **state)
     assert_true(sn[0] == 0.0 && cs[0] == 1.0 && sn[3] == 1e-10 && cs[3] == 1.0);
     assert_true(ulps(sn[1], 0.9974949866040544) <= 2 && fabs(cs[1] - 0.0707372016677029) <= 0x1p-52);
     assert_true(ulps(sn[2], -0.9995736030415051) <= 2);
+    /* expm1 at 0, its smallest and largest arguments, and -0.5 (the
+     * series' edge); tan at 0, pi/4, pi/2's double (1.633e16) and the
+     * one below it */
+    const v4d mx = { 0.0, -800.0, 700.0, -0.5 };
+    v_expm1(&mx, &o);
+    assert_true(o[0] == 0.0 && o[1] == -1.0);
+    assert_true(ulps(o[2], expm1(700.0)) <= 3 && ulps(o[3], -0.3934693402873666) <= 2);
+    const v4d tx = { 0.0, 0.7853981633974483, 1.5707963267948966, -1.5707963267948963 };
+    v_tan(&tx, &o);
+    assert_true(o[0] == 0.0 && ulps(o[1], 0.99999999999999989) <= 2);
+    assert_true(ulps(o[2], 1.633123935319537e16) <= 2 && ulps(o[3], -3530114321217157.5) <= 4);
 }
 
 int main(void)
