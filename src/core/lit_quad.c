@@ -366,35 +366,66 @@ EF_INLINE void v_phase(int phase, double g, const v4d *c, v4d *o)
         *o = 3 / (8 * pi) * (1 - g * g) * (1 + *c * *c) / ((2 + g * g) * d);
 }
 
-/* lit_integrand for a lamp in one component of exponential strata, four
- * nodes at a time on vectors (node_geom, strata_legs and the transmittance
- * there, with vmath.h's tan, expm1 and exp for libm's: a few ulp apart,
- * far below the quadrature's 1e-10). Returns 0, having written nothing,
- * where an exponent leaves the range strata_legs keeps (the scalar path
- * answers). */
-EF_MULTIVERSION static int lamp_strata_v(const lit_q *q, const ef_fog_component *c,
-                                         const double rho[3], double k, double base,
-                                         const double *u, int n, double (*out)[3])
+/* A component as lamp_v takes it: exponential strata (its factor at the
+ * camera and at the lamp, e^x0 and e^xl) or uniform (rho its extinction). */
+typedef struct vcomp {
+    int strata;
+    double rho[3], k, x0, xl, E0, EL, iks, ksv, sv, wu;
+} vcomp;
+
+/* Whether every component of s is exponential strata or uniform, with
+ * exponents in the range strata_legs keeps: their constants into vc. */
+static int lamp_v_comps(const lit_q *q, vcomp *vc)
 {
+    const ef_fog_scene *s = q->s;
     const ef_ray *r = q->r;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        vcomp *v = &vc[i];
+        double base;
+        if (uniform_sigma(c, v->rho)) {
+            v->strata = 0;
+            continue;
+        }
+        if (!c->model->strata || !c->model->strata(c, v->rho, &v->k, &base))
+            return 0;
+        const double *up = c->up;
+        const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
+        v->strata = 1;
+        v->sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
+        v->wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
+        v->x0 = -v->k * h0;
+        v->xl = v->x0 - v->k * v->wu;
+        if (!(fabs(v->x0) < 700) || !(fabs(v->xl) < 700))
+            return 0;
+        v->E0 = exp(v->x0);
+        v->EL = exp(v->xl);
+        v->iks = v->sv != 0 ? -1 / (v->k * v->sv) : 0;
+        v->ksv = v->k * v->sv;
+    }
+    return 1;
+}
+
+/* lit_integrand for a lamp in fog whose components are all exponential
+ * strata or uniform (most lit fog), four nodes at a time on vectors:
+ * node_geom, strata_legs' legs (a uniform component's are its extinction
+ * times the lengths) and the transmittance, with vmath.h's tan, expm1 and
+ * exp for libm's (a few ulp apart, far below the quadrature's 1e-10).
+ * Returns 0 where a node's exponent leaves the range strata_legs keeps;
+ * the scalar path then answers (it writes every node again). */
+EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double *u, int n,
+                                  double (*out)[3])
+{
+    const ef_fog_scene *s = q->s;
     const ef_light *l = q->l;
-    const double *up = c->up;
-    const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
-    const double sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
-    const double wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
-    const double x0 = -k * h0, xl = x0 - k * wu;
-    if (!(fabs(x0) < 700) || !(fabs(xl) < 700))
-        return 0;
-    const double iks = sv != 0 ? -1 / (k * sv) : 0;
-    const double ksv = k * sv;
-    enum { NV = 4 };
-    v4d T[NV], W[NV], UR[NV];
-    v4di dead[NV];
+    const int coned = ef_light_coned(l);
+    const v4d m708 = { -708, -708, -708, -708 }, zero = { 0, 0, 0, 0 };
     for (int g = 0; g * 4 < n; ++g) {
         v4d U;
         for (int i = 0; i < 4; ++i)
             U[i] = u[4 * g + i < n ? 4 * g + i : 4 * g];
-        v4d ur = U, t, wgt = { 1, 1, 1, 1 };
+        /* the node's place, the lamp's distance and the phase's cosine */
+        v4d ur = U, t, wgt;
         v4di dd = { 0, 0, 0, 0 };
         if (q->equi == 1) {
             v4d tn;
@@ -412,29 +443,12 @@ EF_MULTIVERSION static int lamp_strata_v(const lit_q *q, const ef_fog_component 
         }
         t = q->ts + ur;
         const v4di neg = ~(t >= 0.0);
-        const v4d zero = { 0, 0, 0, 0 };
         v_sel(&t, &neg, &zero, &t);
-        /* a node whose exponent leaves the range: the scalar path */
-        const v4d b = ksv * t;
-        const v4di off = ~(x0 - b < 700.0) | ~(-b < 700.0);
-        for (int i = 0; i < 4; ++i)
-            if (off[i] && !dd[i])
-                return 0;
-        T[g] = t;
-        W[g] = wgt;
-        UR[g] = ur;
-        dead[g] = dd;
-    }
-    const double E0 = exp(x0), EL = exp(xl);
-    const int coned = ef_light_coned(l);
-    for (int g = 0; g * 4 < n; ++g) {
-        const v4d t = T[g], ur = UR[g];
-        v4d wgt = W[g], dl, cth;
-        v4di dd = dead[g];
+        v4d dl;
         const v4d d2 = ur * ur + q->h * q->h;
         v_sqrt(&d2, &dl);
         dd |= ~(dl > 0.0);
-        cth = -ur / dl;
+        const v4d cth = -ur / dl;
         if (coned)
             for (int i = 0; i < 4; ++i)
                 if (!dd[i]) {
@@ -446,51 +460,72 @@ EF_MULTIVERSION static int lamp_strata_v(const lit_q *q, const ef_fog_component 
                 out[4 * g + i][0] = out[4 * g + i][1] = out[4 * g + i][2] = 0;
             continue;
         }
-        /* the density factor and the view's length factor */
-        const v4d b = ksv * t, mb = -b;
-        v4d em, xb = x0 - b, eb;
-        v_expm1(&mb, &em);
-        v4d E = E0 * (1 + em);
-        /* past b = 1/2, e^(x0 - b) (1 + em loses digits); below -708, 0 */
-        const v4di under = xb < -708.0, bpos = b > 0.5;
-        const v4d m708 = { -708, -708, -708, -708 }, zero = { 0, 0, 0, 0 };
-        if (v_any(&bpos)) {
-            v_sel(&xb, &under, &m708, &xb);
-            v_exp(&xb, &eb);
-            v_sel(&eb, &under, &zero, &eb);
-            v_sel(&E, &bpos, &eb, &E);
+        /* per component: the scattering, the view's and the lamp's legs */
+        v4d acc[3] = { zero, zero, zero }, tau[3] = { zero, zero, zero };
+        for (int i = 0; i < s->ncomp; ++i) {
+            const ef_fog_component *c = &s->comp[i];
+            const vcomp *v = &vc[i];
+            v4d p;
+            v_phase(c->phase, c->g, &cth, &p);
+            if (!v->strata) {
+                for (int ch = 0; ch < 3; ++ch)
+                    if (v->rho[ch] > 0) {
+                        acc[ch] += v->rho[ch] * albedo(c, ch) * p;
+                        tau[ch] += v->rho[ch] * t + v->rho[ch] * dl;
+                    }
+                continue;
+            }
+            const v4d b = v->ksv * t, mb = -b;
+            const v4di off = ~(v->x0 - b < 700.0) | ~(mb < 700.0);
+            for (int k = 0; k < 4; ++k)
+                if (off[k] && !dd[k])
+                    return 0;
+            v4d em, xb = v->x0 - b, eb;
+            v_expm1(&mb, &em);
+            /* the density factor: past b = 1/2, e^(x0 - b) (1 + em loses
+             * digits there); below e^-708, 0 */
+            v4d E = v->E0 * (1 + em);
+            const v4di under = xb < -708.0, bpos = b > 0.5;
+            if (v_any(&bpos)) {
+                v_sel(&xb, &under, &m708, &xb);
+                v_exp(&xb, &eb);
+                v_sel(&eb, &under, &zero, &eb);
+                v_sel(&E, &bpos, &eb, &E);
+            }
+            v4d lv = em * v->iks;   /* the view's length factor */
+            const v4di b0 = b == 0.0;
+            v_sel(&lv, &b0, &t, &lv);
+            /* the lamp's leg times E: E phi(cc), or above the lamp
+             * (E_lamp - E) / -cc (strata_legs) */
+            const v4d cc = v->k * (v->wu - t * v->sv), mc = -cc;
+            v4d ec;
+            v_expm1(&mc, &ec);
+            v4d le = dl * E * (-ec / cc);
+            const v4d far = dl * (v->EL - E) / mc, dE = dl * E;
+            const v4di isfar = ~(cc > -0.5), c0 = cc == 0.0;
+            v_sel(&le, &isfar, &far, &le);
+            v_sel(&le, &c0, &dE, &le);
+            for (int ch = 0; ch < 3; ++ch)
+                if (v->rho[ch] != 0) {
+                    acc[ch] += v->rho[ch] * E * albedo(c, ch) * p;
+                    tau[ch] += v->rho[ch] * v->E0 * lv + v->rho[ch] * le;
+                }
         }
-        v4d lv = em * iks;
-        const v4di b0 = b == 0.0;
-        v_sel(&lv, &b0, &t, &lv);
-        /* the lamp's leg times E */
-        const v4d cc = k * (wu - t * sv), mc = -cc;
-        v4d ec;
-        v_expm1(&mc, &ec);
-        v4d le = dl * E * (-ec / cc);
-        const v4d far = dl * (EL - E) / mc;
-        const v4di isfar = ~(cc > -0.5), c0 = cc == 0.0;
-        v_sel(&le, &isfar, &far, &le);
-        const v4d dE = dl * E;
-        v_sel(&le, &c0, &dE, &le);
-        v4d p;
-        v_phase(c->phase, c->g, &cth, &p);
-        v4d et;
-        v4di gone;
+        v4d et = zero;
+        v4di gone = { 0, 0, 0, 0 };
         for (int ch = 0; ch < 3; ++ch) {
-            if (ch == 0 || rho[ch] != rho[ch - 1]) {
-                const v4d tau = rho[ch] * E0 * lv + rho[ch] * le;
+            if (ch == 0 || tau[ch][0] != tau[ch - 1][0] || tau[ch][1] != tau[ch - 1][1] ||
+                tau[ch][2] != tau[ch - 1][2] || tau[ch][3] != tau[ch - 1][3]) {
                 /* e^-tau (0 past 708, where the light is gone anyway);
                  * grey fog's channels share it */
-                v4d mt = -tau;
-                gone = ~(tau <= 708.0);
+                v4d mt = -tau[ch];
+                gone = ~(tau[ch] <= 708.0);
                 v_sel(&mt, &gone, &m708, &mt);
                 v_exp(&mt, &et);
             }
-            const v4d acc = rho[ch] * E * albedo(c, ch) * p;
-            const v4d o = acc * et * wgt * l->e[ch];
+            const v4d o = acc[ch] * et * wgt * l->e[ch];
             for (int i = 0; i < 4 && 4 * g + i < n; ++i)
-                out[4 * g + i][ch] = dd[i] || gone[i] || rho[ch] == 0 || acc[i] == 0 ? 0 : o[i];
+                out[4 * g + i][ch] = dd[i] || gone[i] || acc[ch][i] == 0 ? 0 : o[i];
         }
     }
     return 1;
@@ -507,12 +542,10 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     const ef_fog_scene *s = q->s;
-    if (!q->uniform && s->ncomp == 1 && ef_light_at_position(l)) {
-        /* a lamp in one height fog (most lit fog): on vectors */
-        const ef_fog_component *c = &s->comp[0];
-        double rho[3], k, base;
-        if (c->model->strata && c->model->strata(c, rho, &k, &base) &&
-            lamp_strata_v(q, c, rho, k, base, u, n, out))
+    if (!q->uniform && ef_light_at_position(l)) {
+        /* a lamp in height (and uniform) fog, most lit fog: on vectors */
+        vcomp vc[EF_FOG_MAX_COMPONENTS];
+        if (lamp_v_comps(q, vc) && lamp_v(q, vc, u, n, out))
             return;
     }
     double tn[15], wgt[15], dl[15], cth[15];

@@ -506,6 +506,21 @@ static void test_strata(void **state)
           "sun:towards=0.5,-0.6,-1:intensity=3", { 0, 1.7, 0 }, { 0.05, 0.02, -1 }, INFINITY },
         { { "height:density=0.05:falloff=0.3:base=0", "height:density=0.01:falloff=0.02:base=-5" },
           "point:position=3,8,-30:intensity=100", { 0, 1.7, 0 }, { 0, 0.1, -1 }, INFINITY },
+        /* two coloured strata and a lamp behind the camera, sky rays
+         * climbing slowly: the steep one's factor underflows far out
+         * while the gentle one still scatters there, across the lamp's
+         * leg through the steep one */
+        { { "height:density=0.05,0.03,0.02:falloff=0.3:albedo=0.9,1,0.6:phase=hg:g=0.7",
+            "height:density=0.01:falloff=0.02:base=-5" },
+          "point:position=1,3,20:intensity=100:color=1,0.5,0.2", { 0, 1.7, 0 }, { 0.1, 0.15, -1 },
+          INFINITY },
+        { { "height:density=0.05,0.03,0.02:falloff=0.3:albedo=0.9,1,0.6:phase=hg:g=0.7",
+            "height:density=0.01:falloff=0.02:base=-5" },
+          "point:position=1,3,20:intensity=100:color=1,0.5,0.2", { 0, 1.7, 0 }, { -0.2, 0.03, -1 },
+          INFINITY },
+        /* height fog and uniform fog together, a lamp ahead */
+        { { "height:density=0.05:falloff=0.3:base=0", "exp:density=0.01" },
+          "point:position=0,3,-20:intensity=50", { 0, 1.7, 0 }, { 0.02, 0.04, -1 }, INFINITY },
     };
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-9);
 }
