@@ -11,8 +11,8 @@
 # looking 20 degrees down, 12 up looking 2 degrees up so half the frame is
 # sky, 300 up), times four lights (a lamp ahead near the ground, a lamp
 # behind the camera, a lamp high and far, a spot looking down), times
-# three fogs (steep height fog, gentle height fog whose rays run long, and
-# height fog with a box volume). Every run on 2 threads, LQ_ROUNDS rounds
+# four fogs (steep height fog, gentle height fog whose rays run long,
+# height fog with a box volume, and height fog over a thin uniform mist). Every run on 2 threads, LQ_ROUNDS rounds
 # (default 2) interleaved, medians.
 set -u
 # shellcheck source=bench/sweep_lib.sh
@@ -26,7 +26,8 @@ lights=("lamp-ahead:point:position=0,3,-20:intensity=100"
         "spot:spot:position=0,10,-30:aim=0,-1,0.1:cone=40:blend=0.2:intensity=300")
 fogs=("steep:--fog height:density=0.05:falloff=0.3:base=0"
       "gentle:--fog height:density=0.01:falloff=0.01:base=0"
-      "box:--fog height:density=0.05:falloff=0.3:base=0 --fog box:min=-10,0,-60:max=10,8,-10:density=0.1")
+      "box:--fog height:density=0.05:falloff=0.3:base=0 --fog box:min=-10,0,-60:max=10,8,-10:density=0.1"
+      "mist:--fog height:density=0.05:falloff=0.3:base=0 --fog exp:density=0.005")
 sweep_frames "${views[@]}"
 echo "## The general lit quadrature over a sweep of shots"
 echo

@@ -234,6 +234,11 @@ typedef struct ef_fog_model {
      * rho e^(-k (up.x - base)) with k > 0 (exponential strata along the
      * component's up), with rho per channel, k and base; else 0. */
     int (*strata)(const ef_fog_component *c, double rho[3], double *k, double *base);
+    /* Optional, for lit fog: 1 when the density is rho per channel inside
+     * a convex volume and 0 outside, with the volume's *n planes (A, B, C,
+     * D each, a unit normal, fog where A x + B y + C z + D < 0) at *planes
+     * (the component's own array); else 0. */
+    int (*convex)(const ef_fog_component *c, double rho[3], const double **planes, int *n);
     /* Optional, for lit fog: a sun's single scattering along r when this
      * component is the scene's only one, in closed form: S[ch] = sl->w[ch]
      * times the model's own factors (the view ray's optical depth, the

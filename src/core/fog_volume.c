@@ -865,6 +865,16 @@ static void sun_planes(const ef_fog_component *c, const ef_sun_light *sl, const 
     }
 }
 
+/* The convex hook (fog.h): the planes c->arr starts with. */
+static int convex_volume(const ef_fog_component *c, double rho[3], const double **planes, int *n)
+{
+    for (int k = 0; k < 3; ++k)
+        rho[k] = c->p[P_RHO + k];
+    *planes = c->arr;
+    *n = nplanes(c);
+    return 1;
+}
+
 /* The sun hook: in closed form up to 64 planes (lit fog integrates more). */
 static int sun_volume(const ef_fog_component *c, const ef_sun_light *sl, const ef_ray *r,
                       const double *tv, double S[3])
@@ -880,10 +890,10 @@ const ef_fog_model ef_fog_box = { .name = "box", .keys = box_keys, .set = set_bo
                                   .tau_add = tau_add_volume, .bind = bind_volume,
                                   .functionals = functionals_volume,
                                   .features = features_volume, .density = density_volume,
-                                  .sun = sun_volume };
+                                  .sun = sun_volume, .convex = convex_volume };
 const ef_fog_model ef_fog_convex = { .name = "convex", .keys = convex_keys, .set = set_convex,
                                      .finish = finish_convex, .tau = tau_volume,
                                      .tau_add = tau_add_volume, .bind = bind_volume,
                                      .functionals = functionals_volume,
                                      .features = features_volume, .density = density_volume,
-                                     .sun = sun_volume };
+                                     .sun = sun_volume, .convex = convex_volume };

@@ -366,12 +366,40 @@ EF_INLINE void v_phase(int phase, double g, const v4d *c, v4d *o)
         *o = 3 / (8 * pi) * (1 - g * g) * (1 + *c * *c) / ((2 + g * g) * d);
 }
 
-/* A component as lamp_v takes it: exponential strata (its factor at the
- * camera and at the lamp, e^x0 and e^xl) or uniform (rho its extinction). */
+/* A component as lamp_v takes it: uniform (rho its extinction),
+ * exponential strata (its factor at the camera and at the lamp, e^x0 and
+ * e^xl) or a convex volume of constant rho (its planes, and the view
+ * ray's stretch inside, [tin, tout]). */
+enum { VC_UNIFORM, VC_STRATA, VC_CONVEX };
 typedef struct vcomp {
-    int strata;
+    int kind;
     double rho[3], k, x0, xl, E0, EL, iks, ksv, sv, wu;
+    const double *pl;
+    int np;
+    double tin, tout;
 } vcomp;
+
+/* The stretch [*tin, *tout] of r (t >= 0) inside the np planes pl (fog
+ * where A x + B y + C z + D < 0); *tin > *tout where it misses. */
+static void convex_span(const double *pl, int np, const ef_ray *r, double *tin, double *tout)
+{
+    double a = 0, b = INFINITY;
+    for (int i = 0; i < np; ++i) {
+        const double *P = pl + 4 * i;
+        const double h0 = P[0] * r->org[0] + P[1] * r->org[1] + P[2] * r->org[2] + P[3];
+        const double sv = P[0] * r->dir[0] + P[1] * r->dir[1] + P[2] * r->dir[2];
+        if (sv == 0) {
+            if (!(h0 < 0))
+                b = -1;
+        } else if (sv > 0) {
+            b = fmin(b, -h0 / sv);
+        } else {
+            a = fmax(a, -h0 / sv);
+        }
+    }
+    *tin = a;
+    *tout = b;
+}
 
 /* Whether every component of s is exponential strata or uniform, with
  * exponents in the range strata_legs keeps: their constants into vc. */
@@ -384,14 +412,19 @@ static int lamp_v_comps(const lit_q *q, vcomp *vc)
         vcomp *v = &vc[i];
         double base;
         if (uniform_sigma(c, v->rho)) {
-            v->strata = 0;
+            v->kind = VC_UNIFORM;
+            continue;
+        }
+        if (c->model->convex && c->model->convex(c, v->rho, &v->pl, &v->np)) {
+            v->kind = VC_CONVEX;
+            convex_span(v->pl, v->np, r, &v->tin, &v->tout);
             continue;
         }
         if (!c->model->strata || !c->model->strata(c, v->rho, &v->k, &base))
             return 0;
         const double *up = c->up;
         const double h0 = up[0] * r->org[0] + up[1] * r->org[1] + up[2] * r->org[2] - base;
-        v->strata = 1;
+        v->kind = VC_STRATA;
         v->sv = up[0] * r->dir[0] + up[1] * r->dir[1] + up[2] * r->dir[2];
         v->wu = up[0] * q->w[0] + up[1] * q->w[1] + up[2] * q->w[2];
         v->x0 = -v->k * h0;
@@ -404,6 +437,56 @@ static int lamp_v_comps(const lit_q *q, vcomp *vc)
         v->ksv = v->k * v->sv;
     }
     return 1;
+}
+
+/* A convex volume v at the nodes t of q's ray, four lanes: *in 1 where a
+ * node lies inside (else 0), *len the length of the view's leg [0, t] and
+ * of the lamp's leg from the node (dl long) inside it (plain double: the quadrature
+ * cuts at the faces, so no node sits on one). */
+EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v4d *dl, v4d *in,
+                             v4d *len)
+{
+    const ef_ray *r = q->r;
+    const v4d zero = { 0, 0, 0, 0 }, one = { 1, 1, 1, 1 };
+    /* the view's leg: [max(0, tin), min(t, tout)] */
+    v4d hi = *t, lo = { v->tin, v->tin, v->tin, v->tin };
+    const v4d tout = { v->tout, v->tout, v->tout, v->tout };
+    const v4di past = hi > tout;
+    v_sel(&hi, &past, &tout, &hi);
+    v4d lv = hi - lo;
+    const v4di none = ~(lv > 0.0);
+    v_sel(&lv, &none, &zero, &lv);
+    /* the lamp's leg x + s (L - x), s in [0, 1]: the planes it enters and
+     * leaves by */
+    v4d sin = zero, sout = one;
+    v4di inside = { -1, -1, -1, -1 }, empty = { 0, 0, 0, 0 };
+    for (int i = 0; i < v->np; ++i) {
+        const double *P = v->pl + 4 * i;
+        const double h0 = P[0] * r->org[0] + P[1] * r->org[1] + P[2] * r->org[2] + P[3];
+        const double sv = P[0] * r->dir[0] + P[1] * r->dir[1] + P[2] * r->dir[2];
+        const double hl = h0 + P[0] * q->w[0] + P[1] * q->w[1] + P[2] * q->w[2];
+        const v4d hx = h0 + sv * *t;
+        const v4di xin = hx < 0.0;
+        inside &= xin;
+        const v4d ss = hx / (hx - hl);
+        if (hl < 0) {   /* the lamp inside this plane: entered where x is out */
+            v4d m = sin;
+            const v4di gt = ss > sin;
+            v_sel(&m, &gt, &ss, &sin);
+            v_sel(&sin, &xin, &sin, &m);
+        } else {        /* the lamp outside: left where x is in, else empty */
+            v4d m = sout;
+            const v4di lt = ss < sout;
+            v_sel(&m, &lt, &ss, &sout);
+            v_sel(&sout, &xin, &m, &sout);
+            empty |= ~xin;
+        }
+    }
+    v4d ll = sout - sin;
+    const v4di no = empty | ~(ll > 0.0);
+    v_sel(&ll, &no, &zero, &ll);
+    *len = lv + ll * *dl;
+    v_sel(in, &inside, &one, &zero);
 }
 
 /* lit_integrand for a lamp in fog whose components are all exponential
@@ -467,11 +550,21 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
             const vcomp *v = &vc[i];
             v4d p;
             v_phase(c->phase, c->g, &cth, &p);
-            if (!v->strata) {
+            if (v->kind == VC_UNIFORM) {
                 for (int ch = 0; ch < 3; ++ch)
                     if (v->rho[ch] > 0) {
                         acc[ch] += v->rho[ch] * albedo(c, ch) * p;
                         tau[ch] += v->rho[ch] * t + v->rho[ch] * dl;
+                    }
+                continue;
+            }
+            if (v->kind == VC_CONVEX) {
+                v4d in, len;
+                convex_legs(q, v, &t, &dl, &in, &len);
+                for (int ch = 0; ch < 3; ++ch)
+                    if (v->rho[ch] > 0) {
+                        acc[ch] += v->rho[ch] * albedo(c, ch) * p * in;
+                        tau[ch] += v->rho[ch] * len;
                     }
                 continue;
             }

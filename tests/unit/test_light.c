@@ -521,6 +521,19 @@ static void test_strata(void **state)
         /* height fog and uniform fog together, a lamp ahead */
         { { "height:density=0.05:falloff=0.3:base=0", "exp:density=0.01" },
           "point:position=0,3,-20:intensity=50", { 0, 1.7, 0 }, { 0.02, 0.04, -1 }, INFINITY },
+        /* convex volumes with height fog (lamp_v's clipped legs): a lamp
+         * inside a box the ray crosses, one outside it behind the camera,
+         * a coloured box seen from inside, a tilted convex volume */
+        { { "height:density=0.05:falloff=0.3:base=0", "box:min=-10,0,-60:max=10,8,-10:density=0.1" },
+          "point:position=2,3,-20:intensity=100", { 0, 1.7, 0 }, { 0.05, 0.02, -1 }, INFINITY },
+        { { "height:density=0.05:falloff=0.3:base=0", "box:min=-10,0,-60:max=10,8,-10:density=0.1" },
+          "point:position=1,4,12:intensity=100", { 0, 1.7, 0 }, { -0.1, -0.02, -1 }, 80 },
+        { { "box:min=-10,0,-60:max=10,8,5:density=0.1,0.05,0.02:albedo=0.9,0.8,1" },
+          "spot:position=0,7,-30:aim=0,-1,0.1:cone=40:blend=0.2:intensity=300", { 0, 1.7, 0 },
+          { 0.1, 0.1, -1 }, INFINITY },
+        { { "convex:planes=1,1,0,-20,-1,0,0,-15,0,-1,0,0,0,0,1,5,0,0,-1,-80:density=0.08",
+            "height:density=0.02:falloff=0.1:base=0" },
+          "point:position=-3,2,-30:intensity=80", { 0, 1.7, 0 }, { 0.2, -0.01, -1 }, 120 },
     };
     check_cases(cs, sizeof cs / sizeof cs[0], 1e-9);
 }
