@@ -490,9 +490,10 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
 }
 
 /* lit_integrand for a lamp in fog whose components are all exponential
- * strata or uniform (most lit fog), four nodes at a time on vectors:
- * node_geom, strata_legs' legs (a uniform component's are its extinction
- * times the lengths) and the transmittance, with vmath.h's tan, expm1 and
+ * strata, uniform or convex volumes (most lit fog), four nodes at a time
+ * on vectors: node_geom, strata_legs' legs (a uniform component's are its
+ * extinction times the lengths, a volume's its density times the lengths
+ * inside) and the transmittance, with vmath.h's tan, expm1 and
  * exp for libm's (a few ulp apart, far below the quadrature's 1e-10).
  * Returns 0 where a node's exponent leaves the range strata_legs keeps;
  * the scalar path then answers (it writes every node again). */
@@ -635,8 +636,8 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     const ef_fog_scene *s = q->s;
-    if (!q->uniform && ef_light_at_position(l)) {
-        /* a lamp in height (and uniform) fog, most lit fog: on vectors */
+    if (ef_light_at_position(l)) {
+        /* a lamp in height, uniform and convex fog, most lit fog: on vectors */
         vcomp vc[EF_FOG_MAX_COMPONENTS];
         if (lamp_v_comps(q, vc) && lamp_v(q, vc, u, n, out))
             return;
