@@ -180,6 +180,19 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
 
 /* ------------------------------------------------------ the integrands */
 
+/* A component as lamp_v takes it: uniform (rho its extinction),
+ * exponential strata (its factor at the camera and at the lamp, e^x0 and
+ * e^xl) or a convex volume of constant rho (its planes, and the view
+ * ray's stretch inside, [tin, tout]). */
+enum { VC_UNIFORM, VC_STRATA, VC_CONVEX };
+typedef struct vcomp {
+    int kind;
+    double rho[3], k, x0, xl, E0, EL, iks, ksv, sv, wu;
+    const double *pl;
+    int np;
+    double tin, tout;
+} vcomp;
+
 typedef struct lit_q {
     const ef_fog_scene *s;
     const ef_light *l;
@@ -191,6 +204,7 @@ typedef struct lit_q {
     double ua, lam;           /* an infinite ray's tail: u = ua + lam v / (1 - v) */
     int uniform;              /* every component uniform: sig per channel */
     double sig[3];
+    const vcomp *vc;          /* a lamp whose fog lamp_v takes: its components (else NULL) */
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
  * lamp's distance dl (INFINITY for the sun) and the phase's cosine; 0
@@ -303,7 +317,7 @@ static int strata_legs(const ef_fog_component *c, const lit_q *q, const double r
         return 0;
     for (int j = 0; j < m; ++j) {
         const double b = k * sv * t[j];
-        if (!(x0 - b < 700))
+        if (!(x0 - b < 700) || !(-b < 700))   /* (em would overflow) */
             return 0;
         em[j] = expm1(-b);
     }
@@ -365,19 +379,6 @@ EF_INLINE void v_phase(int phase, double g, const v4d *c, v4d *o)
     else
         *o = 3 / (8 * pi) * (1 - g * g) * (1 + *c * *c) / ((2 + g * g) * d);
 }
-
-/* A component as lamp_v takes it: uniform (rho its extinction),
- * exponential strata (its factor at the camera and at the lamp, e^x0 and
- * e^xl) or a convex volume of constant rho (its planes, and the view
- * ray's stretch inside, [tin, tout]). */
-enum { VC_UNIFORM, VC_STRATA, VC_CONVEX };
-typedef struct vcomp {
-    int kind;
-    double rho[3], k, x0, xl, E0, EL, iks, ksv, sv, wu;
-    const double *pl;
-    int np;
-    double tin, tout;
-} vcomp;
 
 /* The stretch [*tin, *tout] of r (t >= 0) inside the np planes pl (fog
  * where A x + B y + C z + D < 0); *tin > *tout where it misses. */
@@ -636,12 +637,8 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
     const ef_fog_scene *s = q->s;
-    if (ef_light_at_position(l)) {
-        /* a lamp in height, uniform and convex fog, most lit fog: on vectors */
-        vcomp vc[EF_FOG_MAX_COMPONENTS];
-        if (lamp_v_comps(q, vc) && lamp_v(q, vc, u, n, out))
-            return;
-    }
+    if (q->vc && lamp_v(q, q->vc, u, n, out))
+        return;   /* a lamp in height, uniform and convex fog, most lit fog */
     double tn[15], wgt[15], dl[15], cth[15];
     int live[15], m = 0;
     for (int j = 0; j < n; ++j) {
@@ -981,7 +978,8 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
 static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double S[3], double E[3], ef_lit_dense *dense, double vis)
 {
-    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 } };
+    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 }, NULL };
+    vcomp vc[EF_FOG_MAX_COMPONENTS];
     dense_rec rec_ = { dense, &q, vis }, *rec = dense ? &rec_ : NULL;
     for (int i = 0; i < s->ncomp; ++i) {
         double sg[3];
@@ -1009,6 +1007,9 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         q.hq = ef_lit_len2(q.h, l->radius);
         if (!(q.hq <= DBL_MAX / 64) || !isfinite(q.ts))
             return;   /* a lamp beyond 1e306 units: e / d^2 is no light at all */
+        /* the components' constants for the vector integrand, once per ray */
+        if (lamp_v_comps(&q, vc))
+            q.vc = vc;
         if (q.hq == 0) {
             if (q.ts >= a && q.ts <= D) {
                 /* a lamp of radius 0 on the segment: its 1/d^2 does not
