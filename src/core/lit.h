@@ -72,8 +72,9 @@ typedef struct ef_lit_dense {
     double total[3];          /* J to the ray's end */
     double *fv;               /* scratch: 45 values per interval of one adaptive run */
     int fvcap;
-    /* a leaf's c from its 15 Kronrod values: c[n] = h sum_i fv_i q[i][n]
-     * (constants, made at the first build; qready says they are there) */
+    /* a leaf's c from its 15 Kronrod values: c[n] = w sum_i fv_i q[i][n],
+     * w the leaves' visibility (constants, made at the first build; qready
+     * says they are there) */
     double q[15][EF_LIT_DENSE_NA];
     int qready;
     /* ef_lit_dense_at's last answers (a deep pixel's samples share ends):
