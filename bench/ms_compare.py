@@ -12,7 +12,9 @@ error of the block mean from its pixels), exrfog's error output, and the times.
 
 lamp=DIST: bench/ms_lamp_blender.py's point lamp DIST units ahead in fog everywhere (ELEV and TOP
 unused; exrfog: exp fog and the lamp with scattering=multiple); wall=D adds its black wall over
-the frame's left half (the glow must stop at it); behind puts the lamp behind the camera."""
+the frame's left half (the glow must stop at it); behind puts the lamp behind the camera;
+falloff=K makes the fog exponential height fog, DENSITY exp(-K z) over the camera's height
+(exrfog: height:density=DENSITY:falloff=K with --up-axis z)."""
 import json
 import os
 import subprocess
@@ -35,13 +37,14 @@ camz = next((a for a in sys.argv[14:] if a.startswith("camz=")), None)
 lamp = next((float(a[5:]) for a in sys.argv[14:] if a.startswith("lamp=")), None)
 wall = next((a for a in sys.argv[14:] if a.startswith("wall=")), None)
 behind = "behind" in sys.argv[14:]
+falloff = next((a for a in sys.argv[14:] if a.startswith("falloff=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
        ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else ""))
 if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
-           + ("_behind" if behind else ""))
+           + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else ""))
 
 
 def render(bounces):
@@ -49,7 +52,7 @@ def render(bounces):
     t0 = time.time()
     if lamp is not None:
         script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
-                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else [])
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else [])
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
@@ -88,6 +91,8 @@ common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world
           "--aov", "error"]
 if lamp is not None:
     fogs = ["--fog", "exp:density=%r:albedo=%r:phase=hg:g=%r" % (dens, albedo, g)]
+    if falloff:
+        fogs = ["--fog", "height:density=%r:%s:albedo=%r:phase=hg:g=%r" % (dens, falloff, albedo, g)]
     common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
     sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
 else:
@@ -141,7 +146,7 @@ ok = C > 1e-4
 rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
-    "behind": behind,
+    "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

@@ -11,7 +11,11 @@ units behind the camera instead (the frame shows only the fog it lights). With w
 black wall (it only absorbs) D units ahead covers the frame's left half, between the camera
 and the lamp when D < DIST: the glow must stop at it (no halo). BOUNCES volume bounces (0:
 single scattering; 128: every order), max bounces as many, transparent bounces at their
-default; BOUNCES -1: no fog (the depth alone). Writes OUT (RGBA + Z, 32-bit) and OUT.json
+default; BOUNCES -1: no fog (the depth alone). With falloff=K, exponential height fog
+instead: density DENSITY exp(-K z) over world z (up; the camera at z = 0), in a box 600 units
+wide from z = -4 / K to 15 / K (e^-15 of the density at the top; below the bottom the fog is
+already e^4 times denser, which takes what light reaches it), marched by Cycles in steps of
+about a fiftieth of the scale height 1 / K. Writes OUT (RGBA + Z, 32-bit) and OUT.json
 (camera, lamp position and intensity)."""
 import json
 import math
@@ -31,6 +35,7 @@ dens, albedo, g, dist = (float(v) for v in args[3:7])
 width, height = int(args[7]), int(args[8])
 wall = float(next((a[5:] for a in args[9:] if a.startswith("wall=")), "0"))
 behind = "behind" in args[9:]
+falloff = float(next((a[8:] for a in args[9:] if a.startswith("falloff=")), "0"))
 sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
@@ -38,11 +43,21 @@ if wall > 0:
     wo = bpy.context.object
     wo.scale = (4000, 4000, 1)
     wo.data.materials.append(ms_scene.black())
-bpy.ops.mesh.primitive_cube_add(size=4000, location=(0, 0, 0))
-cube = bpy.context.object
+if falloff > 0:
+    zlo, zhi = -4 / falloff, 15 / falloff
+    bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5 * (zlo + zhi)))
+    cube = bpy.context.object
+    cube.scale = (600, 600, zhi - zlo)
+    # Cycles' automatic step for a procedural volume is a tenth of the bounds' mean size
+    step = 0.1 * (600 + 600 + zhi - zlo) / 3
+    m = ms_scene.height_fog("fog", dens, albedo, g, falloff, (0.02 / falloff) / step)
+    sc.cycles.volume_max_steps = 100000
+else:
+    bpy.ops.mesh.primitive_cube_add(size=4000, location=(0, 0, 0))
+    cube = bpy.context.object
+    m = ms_scene.fog("fog", dens, albedo, g)
 if plain:
     cube.hide_render = True
-m = ms_scene.fog("fog", dens, albedo, g)
 cube.data.materials.append(m)
 pos = (0.15 * dist, -dist if behind else dist, 0.1 * dist)
 pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = 100.0; pl.shadow_soft_size = 0.0

@@ -81,3 +81,39 @@ def camera(sc, location, rotation_deg):
     cam.data.clip_start, cam.data.clip_end = 0.05, 10000.0
     bpy.context.view_layer.update()
     return cam
+
+
+def height_fog(name, dens, albedo, g, falloff, step_rate):
+    """Exponential height fog over world z: density DENS * exp(-FALLOFF z) (Geometry's world
+    position), split as fog() splits it, marched at STEP_RATE times Cycles' automatic step."""
+    m = bpy.data.materials.new(name); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    geo = nt.nodes.new('ShaderNodeNewGeometry')
+    sep = nt.nodes.new('ShaderNodeSeparateXYZ')
+    nt.links.new(geo.outputs['Position'], sep.inputs[0])
+    mul = nt.nodes.new('ShaderNodeMath'); mul.operation = 'MULTIPLY'
+    mul.inputs[1].default_value = -falloff
+    nt.links.new(sep.outputs['Z'], mul.inputs[0])
+    ex = nt.nodes.new('ShaderNodeMath'); ex.operation = 'EXPONENT'
+    nt.links.new(mul.outputs[0], ex.inputs[0])
+    ds = nt.nodes.new('ShaderNodeMath'); ds.operation = 'MULTIPLY'
+    ds.inputs[1].default_value = dens * albedo
+    nt.links.new(ex.outputs[0], ds.inputs[0])
+    da = nt.nodes.new('ShaderNodeMath'); da.operation = 'MULTIPLY'
+    da.inputs[1].default_value = dens * (1 - albedo)
+    nt.links.new(ex.outputs[0], da.inputs[0])
+    s = nt.nodes.new('ShaderNodeVolumeScatter')
+    s.inputs['Anisotropy'].default_value = g
+    s.inputs['Color'].default_value = (1, 1, 1, 1)
+    nt.links.new(ds.outputs[0], s.inputs['Density'])
+    a = nt.nodes.new('ShaderNodeVolumeAbsorption')
+    a.inputs['Color'].default_value = (0, 0, 0, 1)
+    nt.links.new(da.outputs[0], a.inputs['Density'])
+    add = nt.nodes.new('ShaderNodeAddShader')
+    o = nt.nodes.new('ShaderNodeOutputMaterial')
+    nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
+    nt.links.new(add.outputs[0], o.inputs['Volume'])
+    m.cycles.homogeneous_volume = False
+    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    m.cycles.volume_step_rate = step_rate
+    return m

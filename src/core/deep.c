@@ -735,11 +735,14 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
         double v[3], e[3];
         int done = 0;
         const ef_light *l = &s->light[j];
+        /* a lamp's multiple scattering in fog that is not uniform is part
+         * of its quadrature's integrand (ms.h), as its single scattering */
+        const int gather = l->lms && !ef_lms_is_local(l->lms);
         if (lt && (lt->dmask >> j & 1) && b <= lt->dend) {
             seg_ta(s, r1, a, Ta);
             done = dense_light(&lt->dense[j], a, b, Ta, v, e);
         }
-        if (!done && l->lms) {
+        if (!done && gather) {
             /* the single scattering here, the multiple below */
             ef_light single = *l;
             single.lms = NULL;
@@ -747,7 +750,7 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
         } else if (!done) {
             ef_light_inscatter(s, l, &seg, v, e);
         }
-        if (l->lms) {
+        if (gather) {
             /* the dense output or the segment's inscatter is the single
              * scattering: a point lamp's multiple scattering beside it */
             double vm[3], em[3];
@@ -1154,6 +1157,10 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
                     return -1;
                 if (rc == 0)
                     lt.dmask |= 1u << j;
+                /* a lamp's multiple scattering's estimate in fog that is
+                 * not uniform, over the whole visible ray (lit.h) */
+                for (int k = 0; rc == 0 && st && k < 3; ++k)
+                    st->pix_light_err[k] += fog->dense[j].aux[k];
             }
             lt.dense = fog->dense;
             lt.dend = end;

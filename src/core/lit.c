@@ -435,6 +435,7 @@ int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     d->failed = 0;
     d->nmemo = d->next = 0;
     d->total[0] = d->total[1] = d->total[2] = 0;
+    d->aux[0] = d->aux[1] = d->aux[2] = 0;
     if (!ef_light_at_position(l) || s->ncomp == 0)
         return 1;   /* a sun: its closed forms per segment are cheaper */
     for (int i = 0; i < s->ncomp; ++i)

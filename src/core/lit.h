@@ -70,6 +70,10 @@ typedef struct ef_lit_dense {
     int n, cap;
     int failed;               /* 1: not usable (a lamp on the ray itself), 2: out of memory */
     double total[3];          /* J to the ray's end */
+    /* the estimate of a lamp's multiple scattering in fog that is not
+     * uniform over the whole ray (ms.h's local mode; not in the leaves'
+     * estimates, which steer the quadrature) */
+    double aux[3];
     double *fv;               /* scratch: 45 values per interval of one adaptive run */
     int fvcap;
     /* a leaf's c from its 15 Kronrod values: c[n] = w sum_i fv_i q[i][n],

@@ -71,6 +71,10 @@ typedef struct lms_tab {
 
 struct ef_lms {
     _Atomic int refs;
+    /* 1: fog that is not uniform; the table is read at each node of the
+     * lit quadrature with the optical distance from the lamp
+     * (ef_lms_local_node), and the gathers below add nothing */
+    int local;
     int ntab, tab_of[3];
     lms_tab tab[3];
     double sig[3];   /* extinction per channel */
@@ -789,21 +793,70 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err)
     return v;
 }
 
+/* Whether every component of s is uniform: their extinctions summed into
+ * sig. */
+static int all_uniform(const ef_fog_scene *s, double sig[3])
+{
+    sig[0] = sig[1] = sig[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        double sg[3];
+        if (!uniform_sigma(&s->comp[i], sg))
+            return 0;
+        for (int k = 0; k < 3; ++k)
+            sig[k] += sg[k];
+    }
+    return s->ncomp > 0;
+}
+
+/* Why s's fog has no lamp's multiple scattering (its message into err),
+ * or 0: the components must scatter alike (one albedo per channel, one
+ * phase), since one table serves the medium they make together; fog that
+ * is not uniform (local) takes no shadow map. */
+static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_err *err)
+{
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i], *c0 = &s->comp[0];
+        if (c->model->tau_info)
+            return ef_fail(err, "--light '%s': a lamp's multiple scattering is not solved in "
+                           "noise fog (its light is integrated per ray, with no field about "
+                           "the lamp to carry further orders); use scattering=single with "
+                           "this fog", l->spec);
+        int same = c->phase == c0->phase && c->g == c0->g;
+        for (int k = 0; k < 3; ++k)
+            same &= albedo(c, k) == albedo(c0, k);
+        if (!same)
+            return ef_fail(err, "--light '%s': a lamp's multiple scattering takes fog whose "
+                           "components share one albedo and one phase (one table of the "
+                           "scattered light serves them all); give them the same albedo=, "
+                           "phase= and g=, or use scattering=single", l->spec);
+    }
+    if (local && l->shadow)
+        return ef_fail(err, "--light '%s': a lamp's multiple scattering in fog that is not "
+                       "uniform is read along the quadrature a shadow map cuts (it would be "
+                       "shadowed with the single scattering); drop shadow= or use uniform "
+                       "(exp) fog", l->spec);
+    return 0;
+}
+
 int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err *err)
 {
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     *out = NULL;
     double sig[3];
-    if (s->ncomp != 1 || !uniform_sigma(&s->comp[0], sig))
-        return ef_fail(err, "--light '%s': a lamp's multiple scattering is solved in uniform "
-                       "fog (one exp component) so far: its light is symmetric about the lamp "
-                       "only there; use scattering=single with this fog", l->spec);
+    if (s->ncomp == 0)
+        return ef_fail(err, "--light '%s': scattering=multiple needs fog (--fog)", l->spec);
+    const int local = !all_uniform(s, sig);
+    if ((local || s->ncomp > 1) && lms_refuse(s, l, local, err))
+        return -1;
     const ef_fog_component *c = &s->comp[0];
     if (fabs(c->g) > LMS_G_MAX && (c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS))
         return ef_fail(err, "--light '%s': a lamp's multiple scattering takes |g| up to %g "
                        "(the phase's series needs more terms beyond); the fog's g is %g",
                        l->spec, LMS_G_MAX, c->g);
+    if (local)   /* a table for every channel that scatters anywhere */
+        for (int k = 0; k < 3; ++k)
+            sig[k] = 1;
     for (int k = 0; k < 3; ++k)
         if (albedo(c, k) > LMS_ALBEDO_MAX && sig[k] > 0)
             return ef_fail(err, "--light '%s': a lamp's multiple scattering takes albedo up to "
@@ -813,6 +866,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     if (!m)
         return ef_fail(err, "out of memory for a lamp's multiple scattering");
     atomic_init(&m->refs, 1);
+    m->local = local;
     memcpy(m->pos, l->pos, sizeof m->pos);
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
@@ -902,7 +956,7 @@ void ef_lms_gather(const ef_lms *m, const ef_ray *r, double a, double b, double 
     S[0] = S[1] = S[2] = 0;
     if (E)
         E[0] = E[1] = E[2] = 0;
-    if (!m || !(b > a))
+    if (!m || m->local || !(b > a))
         return;
     double d[3], along = 0, perp2 = 0;
     for (int k = 0; k < 3; ++k) {
@@ -1024,7 +1078,7 @@ int ef_lms_bind(const ef_lms *m, const double org[3], ef_lms_view **out)
 {
     ef_lms_view_unref(*out);
     *out = NULL;
-    if (!m)
+    if (!m || m->local)
         return 0;
     ef_lms_view *v = calloc(1, sizeof *v);
     if (!v)
@@ -1181,4 +1235,36 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
         if (E)
             E[k] = m->scale[k] * res[gi][1];
     }
+}
+
+/* ------------------------------------------- fog that is not uniform */
+
+int ef_lms_is_local(const ef_lms *m)
+{
+    return m && m->local;
+}
+
+int ef_lms_same_table(const ef_lms *m, int j, int k)
+{
+    return m->tab_of[j] == m->tab_of[k];
+}
+
+double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
+                         double *est)
+{
+    *est = 0;
+    const int t = m->tab_of[k];
+    if (t < 0 || !(sg > 0) || !(tl > 0) || !(d > 0))
+        return 0;
+    const lms_tab *tb = &m->tab[t];
+    double ev;
+    /* the light's optical distance from the lamp, its mean extinction
+     * tl / d for the 1 / d^2 that sets the field's scale */
+    const double v = sg * tl * tab_at(tb->q, tb->nr, tb->nx, tb->lg, tl, nu, &ev, tb->e);
+    /* the local medium's own scale instead: the spread of the two is the
+     * estimate of what a field that is not symmetric about the lamp does */
+    const double sd = sg * d;
+    const double w = sg * sd * tab_at(tb->q, tb->nr, tb->nx, tb->lg, sd, nu, NULL, NULL);
+    *est = fabs(v - w) + sg * tl * ev;
+    return v;
 }

@@ -5,6 +5,7 @@
  * from the models and the optical depths from their closed forms. */
 #include "lit_int.h"
 #include "gk15.h"
+#include "ms.h"
 #include "shadow.h"
 #include "vmath.h"
 
@@ -54,14 +55,36 @@ typedef void (*lit_fn)(const void *q, const double *u, int n, double (*out)[3]);
 
 typedef struct gk_iv {
     double a, b, r[3], e[3];
+    double x[3];   /* the Kronrod rule of the integrand's side values (aux) */
 } gk_iv;
 
+/* The Kronrod and Gauss sums of the 15 values v (times h: the rules). */
+static void kg_sums(const double (*v)[3], double rk[3], double rg[3])
+{
+    for (int k = 0; k < 3; ++k) {
+        rk[k] = (double) ef_gk15_wk[7] * v[7][k];
+        rg[k] = (double) ef_gk15_wg[3] * v[7][k];
+    }
+    for (int j = 0; j < 7; ++j)
+        for (int k = 0; k < 3; ++k) {
+            rk[k] += (double) ef_gk15_wk[j] * (v[j][k] + v[14 - j][k]);
+            if (j & 1)
+                rg[k] += (double) ef_gk15_wg[j / 2] * (v[j][k] + v[14 - j][k]);
+        }
+}
+
 /* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel; the 15
- * values, in node order (fvo[3 i + k]), into fvo when not NULL. */
-static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo)
+ * values, in node order (fvo[3 i + k]), into fvo when not NULL. With aux
+ * (30 rows f fills beside its values: a lamp's multiple scattering in fog
+ * that is not uniform, its estimate at each node in rows 0-14 and its
+ * part of the value in rows 15-29), e is the rest's alone and x takes the
+ * estimate's Kronrod integral plus that part's |K - G|: the table it
+ * reads is linear in direction between columns, and a rule held to the
+ * single scattering's 1e-10 would chase every column's kink. */
+static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo, const double (*aux)[3])
 {
     const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
-    double fv[15][3], u[15], rk[3], rg[3];
+    double fv[15][3], u[15], rk[3], rg[3], dv[15][3], dk[3], dg[3];
     u[7] = c;
     for (int j = 0; j < 7; ++j) {
         const double dx = h * (double) ef_gk15_x[j];
@@ -69,26 +92,29 @@ static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo)
         u[14 - j] = c + dx;
     }
     f(q, u, 15, fv);
-    for (int k = 0; k < 3; ++k) {
-        rk[k] = (double) ef_gk15_wk[7] * fv[7][k];
-        rg[k] = (double) ef_gk15_wg[3] * fv[7][k];
+    kg_sums((const double (*)[3]) fv, rk, rg);
+    /* what steers the refinement: the values less the side part */
+    const double (*d)[3] = (const double (*)[3]) fv;
+    if (aux) {
+        for (int j = 0; j < 15; ++j)
+            for (int k = 0; k < 3; ++k)
+                dv[j][k] = fv[j][k] - aux[15 + j][k];
+        kg_sums((const double (*)[3]) dv, dk, dg);
+        d = (const double (*)[3]) dv;
+    } else {
+        memcpy(dk, rk, sizeof dk);
+        memcpy(dg, rg, sizeof dg);
     }
-    for (int j = 0; j < 7; ++j)
-        for (int k = 0; k < 3; ++k) {
-            rk[k] += (double) ef_gk15_wk[j] * (fv[j][k] + fv[14 - j][k]);
-            if (j & 1)
-                rg[k] += (double) ef_gk15_wg[j / 2] * (fv[j][k] + fv[14 - j][k]);
-        }
     /* QUADPACK's qk15 estimate: |K - G| scaled by (200 |K - G| / resasc)^1.5
      * (resasc: the integral of |f - its mean|), which on a smooth piece
      * tracks the Kronrod rule's own error rather than the Gauss rule's */
     for (int k = 0; k < 3; ++k) {
-        const double mean = rk[k] * 0.5;
-        double asc = (double) ef_gk15_wk[7] * fabs(fv[7][k] - mean);
+        const double mean = dk[k] * 0.5;
+        double asc = (double) ef_gk15_wk[7] * fabs(d[7][k] - mean);
         for (int j = 0; j < 7; ++j)
-            asc += (double) ef_gk15_wk[j] * (fabs(fv[j][k] - mean) + fabs(fv[14 - j][k] - mean));
+            asc += (double) ef_gk15_wk[j] * (fabs(d[j][k] - mean) + fabs(d[14 - j][k] - mean));
         asc *= fabs(h);
-        double e = fabs((rk[k] - rg[k]) * h);
+        double e = fabs((dk[k] - dg[k]) * h);
         if (asc != 0 && e != 0) {
             const double x = 200 * e / asc;   /* x^1.5 as x sqrt(x): no pow per channel */
             e = asc * fmin(1, x * sqrt(x));
@@ -98,11 +124,19 @@ static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo)
     }
     if (fvo)
         memcpy(fvo, fv, sizeof fv);
+    for (int k = 0; k < 3; ++k) {
+        double x = 0;
+        for (int j = 0; aux && j < 15; ++j)
+            x += (double) ef_gk15_wk[j < 8 ? j : 14 - j] * aux[j][k];
+        if (aux)
+            x += fabs((rk[k] - dk[k]) - (rg[k] - dg[k]));
+        iv->x[k] = x * fabs(h);
+    }
 }
 
-static void gk15(lit_fn f, const void *q, gk_iv *iv)
+static void gk15(lit_fn f, const void *q, gk_iv *iv, const double (*aux)[3])
 {
-    gk15_fv(f, q, iv, NULL);
+    gk15_fv(f, q, iv, NULL, aux);
 }
 
 #define GK_MAX 512
@@ -117,9 +151,11 @@ static double *rec_fv(dense_rec *rec, int i);
 /* Global adaptive Gauss-Kronrod over the pieces [cut[i], cut[i+1]] until
  * the summed error estimate is at most rel of the result plus S in every
  * channel (or GK_MAX intervals): adds the result to S and its estimate to
- * E, and with rec its final intervals as leaves (dense_keep). */
+ * E, and with rec its final intervals as leaves (dense_keep); with aux
+ * (gk15_fv's), the final intervals' side integrals to X. */
 static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, double rel,
-                         double S[3], double E[3], dense_rec *rec)
+                         double S[3], double E[3], dense_rec *rec, const double (*aux)[3],
+                         double X[3])
 {
     gk_iv iv[GK_MAX];
     int n = 0;
@@ -128,7 +164,7 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
             continue;
         iv[n].a = cut[i];
         iv[n].b = cut[i + 1];
-        gk15_fv(f, q, &iv[n], rec_fv(rec, n));
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux);
         ++n;
     }
     for (;;) {
@@ -163,6 +199,8 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
             for (int k = 0; k < 3; ++k) {
                 S[k] += R[k];
                 E[k] += Er[k];
+                for (int i = 0; aux && i < n; ++i)
+                    X[k] += iv[i].x[k];
             }
             if (rec)
                 dense_keep(rec, iv, n);
@@ -170,10 +208,10 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
         }
         const double a = iv[worst].a, b = iv[worst].b, m = 0.5 * (a + b);
         iv[worst].b = m;
-        gk15_fv(f, q, &iv[worst], rec_fv(rec, worst));
+        gk15_fv(f, q, &iv[worst], rec_fv(rec, worst), aux);
         iv[n].a = m;
         iv[n].b = b;
-        gk15_fv(f, q, &iv[n], rec_fv(rec, n));
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux);
         ++n;
     }
 }
@@ -205,6 +243,11 @@ typedef struct lit_q {
     int uniform;              /* every component uniform: sig per channel */
     double sig[3];
     const vcomp *vc;          /* a lamp whose fog lamp_v takes: its components (else NULL) */
+    /* a lamp's multiple scattering in fog that is not uniform (ms.h's
+     * local mode: its table read at every node), else NULL; its estimate
+     * and its part of the value per node into aux (gk15_fv's 30 rows) */
+    const ef_lms *lms;
+    double (*aux)[3];
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
  * lamp's distance dl (INFINITY for the sun) and the phase's cosine; 0
@@ -442,10 +485,11 @@ static int lamp_v_comps(const lit_q *q, vcomp *vc)
 
 /* A convex volume v at the nodes t of q's ray, four lanes: *in 1 where a
  * node lies inside (else 0), *len the length of the view's leg [0, t] and
- * of the lamp's leg from the node (dl long) inside it (plain double: the quadrature
- * cuts at the faces, so no node sits on one). */
+ * of the lamp's leg from the node (dl long) inside it, *llen the lamp's
+ * alone (plain double: the quadrature cuts at the faces, so no node sits
+ * on one). */
 EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v4d *dl, v4d *in,
-                             v4d *len)
+                             v4d *len, v4d *llen)
 {
     const ef_ray *r = q->r;
     const v4d zero = { 0, 0, 0, 0 }, one = { 1, 1, 1, 1 };
@@ -486,8 +530,39 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
     v4d ll = sout - sin;
     const v4di no = empty | ~(ll > 0.0);
     v_sel(&ll, &no, &zero, &ll);
-    *len = lv + ll * *dl;
+    *llen = ll * *dl;
+    *len = lv + *llen;
     v_sel(in, &inside, &one, &zero);
+}
+
+/* A lamp's multiple scattering at one node in fog that is not uniform
+ * (q->lms, ms.h's local mode), per channel: the view's optical depth tv to
+ * the node, the lamp's tl from it, the extinction there sg, the lamp's
+ * distance d and the cosine nu (the phase's: the light leaving towards
+ * the camera against the outward radial), wgt the substitution's weight
+ * (1 / d^2 and the Jacobian). Its value into v and its estimate into e,
+ * both attenuated to the camera; a channel like the one before it (grey
+ * fog) copies it. */
+static void lms_node(const lit_q *q, const double tv[3], const double tl[3], const double sg[3],
+                     double d, double nu, double wgt, double v[3], double e[3])
+{
+    const ef_light *l = q->l;
+    for (int k = 0; k < 3; ++k) {
+        if (k > 0 && tv[k] == tv[k - 1] && tl[k] == tl[k - 1] && sg[k] == sg[k - 1] &&
+            l->e[k] == l->e[k - 1] && ef_lms_same_table(q->lms, k, k - 1)) {
+            v[k] = v[k - 1];
+            e[k] = e[k - 1];
+            continue;
+        }
+        v[k] = e[k] = 0;
+        if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
+            continue;
+        double est;
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, &est);
+        const double w = exp(-tv[k]) * wgt * l->e[k];
+        v[k] = f * w;
+        e[k] = est * w;
+    }
 }
 
 /* lit_integrand for a lamp in fog whose components are all exponential
@@ -540,13 +615,19 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                     wgt[i] *= ef_spot_share(l, -(q->wa - t[i] * q->va) / dl[i]);
                     dd[i] = wgt[i] == 0 ? -1 : 0;
                 }
+        for (int i = 0; q->aux && i < 4 && 4 * g + i < n; ++i)
+            for (int k = 0; k < 3; ++k)
+                q->aux[4 * g + i][k] = q->aux[15 + 4 * g + i][k] = 0;
         if (dd[0] && dd[1] && dd[2] && dd[3]) {   /* (outside a spot's cone) */
             for (int i = 0; i < 4 && 4 * g + i < n; ++i)
                 out[4 * g + i][0] = out[4 * g + i][1] = out[4 * g + i][2] = 0;
             continue;
         }
-        /* per component: the scattering, the view's and the lamp's legs */
+        /* per component: the scattering, the view's and the lamp's legs
+         * (the lamp's and the extinction apart for a lamp's multiple
+         * scattering) */
         v4d acc[3] = { zero, zero, zero }, tau[3] = { zero, zero, zero };
+        v4d tlv[3] = { zero, zero, zero }, sgv[3] = { zero, zero, zero };
         for (int i = 0; i < s->ncomp; ++i) {
             const ef_fog_component *c = &s->comp[i];
             const vcomp *v = &vc[i];
@@ -557,16 +638,20 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                     if (v->rho[ch] > 0) {
                         acc[ch] += v->rho[ch] * albedo(c, ch) * p;
                         tau[ch] += v->rho[ch] * t + v->rho[ch] * dl;
+                        tlv[ch] += v->rho[ch] * dl;
+                        sgv[ch] += v->rho[ch];
                     }
                 continue;
             }
             if (v->kind == VC_CONVEX) {
-                v4d in, len;
-                convex_legs(q, v, &t, &dl, &in, &len);
+                v4d in, len, llen;
+                convex_legs(q, v, &t, &dl, &in, &len, &llen);
                 for (int ch = 0; ch < 3; ++ch)
                     if (v->rho[ch] > 0) {
                         acc[ch] += v->rho[ch] * albedo(c, ch) * p * in;
                         tau[ch] += v->rho[ch] * len;
+                        tlv[ch] += v->rho[ch] * llen;
+                        sgv[ch] += v->rho[ch] * in;
                     }
                 continue;
             }
@@ -604,6 +689,8 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 if (v->rho[ch] != 0) {
                     acc[ch] += v->rho[ch] * E * albedo(c, ch) * p;
                     tau[ch] += v->rho[ch] * v->E0 * lv + v->rho[ch] * le;
+                    tlv[ch] += v->rho[ch] * le;
+                    sgv[ch] += v->rho[ch] * E;
                 }
         }
         v4d et = zero;
@@ -621,6 +708,22 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
             const v4d o = acc[ch] * et * wgt * l->e[ch];
             for (int i = 0; i < 4 && 4 * g + i < n; ++i)
                 out[4 * g + i][ch] = dd[i] || gone[i] || acc[ch][i] == 0 ? 0 : o[i];
+        }
+        for (int i = 0; q->lms && i < 4 && 4 * g + i < n; ++i) {
+            if (dd[i])
+                continue;
+            double tv[3], tl[3], sg[3], mv[3], me[3];
+            for (int ch = 0; ch < 3; ++ch) {
+                tv[ch] = tau[ch][i] - tlv[ch][i];
+                tl[ch] = tlv[ch][i];
+                sg[ch] = sgv[ch][i];
+            }
+            lms_node(q, tv, tl, sg, dl[i], cth[i], wgt[i], mv, me);
+            for (int ch = 0; ch < 3; ++ch) {
+                out[4 * g + i][ch] += mv[ch];
+                q->aux[4 * g + i][ch] = me[ch];
+                q->aux[15 + 4 * g + i][ch] = mv[ch];
+            }
         }
     }
     return 1;
@@ -643,6 +746,9 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     int live[15], m = 0;
     for (int j = 0; j < n; ++j) {
         out[j][0] = out[j][1] = out[j][2] = 0;
+        if (q->aux)
+            for (int k = 0; k < 3; ++k)
+                q->aux[j][k] = q->aux[15 + j][k] = 0;
         if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m]))
             continue;
         if (q->uniform) {
@@ -677,8 +783,9 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     /* per node: the scattering (acc), the view's and the light's optical
      * depths, component by component */
     const int planet = !ef_light_at_position(l) && l->planet > 0;
-    double acc[15][3], tv[15][3], tl[15][3], x[15][3];
+    double acc[15][3], tv[15][3], tl[15][3], x[15][3], sgt[15][3];
     memset(acc, 0, sizeof acc[0] * (size_t) m);
+    memset(sgt, 0, sizeof sgt[0] * (size_t) m);
     memset(tv, 0, sizeof tv[0] * (size_t) m);
     memset(tl, 0, sizeof tl[0] * (size_t) m);
     for (int j = 0; j < m; ++j)
@@ -691,8 +798,10 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
             strata_legs(c, q, rho, k, base, m, tn, dl, E, tv, planet ? NULL : tl)) {
             for (int j = 0; j < m; ++j) {
                 const double p = ef_phase_eval(c->phase, c->g, cth[j]);
-                for (int ch = 0; ch < 3; ++ch)
+                for (int ch = 0; ch < 3; ++ch) {
                     acc[j][ch] += rho[ch] == 0 ? 0 : rho[ch] * E[j] * albedo(c, ch) * p;
+                    sgt[j][ch] += rho[ch] == 0 ? 0 : rho[ch] * E[j];
+                }
             }
             continue;
         }
@@ -702,8 +811,10 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
             sigma_at(c, x[j], sg);
             if (sg[0] != 0 || sg[1] != 0 || sg[2] != 0) {
                 const double p = ef_phase_eval(c->phase, c->g, cth[j]);
-                for (int ch = 0; ch < 3; ++ch)
+                for (int ch = 0; ch < 3; ++ch) {
                     acc[j][ch] += sg[ch] == 0 ? 0 : sg[ch] * albedo(c, ch) * p;
+                    sgt[j][ch] += sg[ch];
+                }
             }
             vr[j] = (ef_ray) { { r->dir[0], r->dir[1], r->dir[2] }, tn[j], tn[j],
                                { r->org[0], r->org[1], r->org[2] } };
@@ -734,6 +845,15 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
         for (int k = 0; k < 3; ++k)
             out[live[j]][k] =
                 acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * l->e[k];
+        if (q->lms) {
+            double mv[3], me[3];
+            lms_node(q, tv[j], tl[j], sgt[j], dl[j], cth[j], wgt[j], mv, me);
+            for (int k = 0; k < 3; ++k) {
+                out[live[j]][k] += mv[k];
+                q->aux[live[j]][k] = me[k];
+                q->aux[15 + live[j]][k] = mv[k];
+            }
+        }
     }
 }
 
@@ -978,8 +1098,14 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
 static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double S[3], double E[3], ef_lit_dense *dense, double vis)
 {
-    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 }, NULL };
+    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 }, NULL, NULL,
+                NULL };
     vcomp vc[EF_FOG_MAX_COMPONENTS];
+    double aux[30][3], X[3] = { 0, 0, 0 };
+    if (ef_lms_is_local(l->lms) && ef_light_at_position(l)) {
+        q.lms = l->lms;
+        q.aux = aux;
+    }
     dense_rec rec_ = { dense, &q, vis }, *rec = dense ? &rec_ : NULL;
     for (int i = 0; i < s->ncomp; ++i) {
         double sg[3];
@@ -1039,7 +1165,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
              * the closed form's 1e-13 (else the pieces below). */
             if (isfinite(D)) {
                 gk_iv iv = { .a = a - q.ts, .b = D - q.ts };
-                gk15(lit_integrand, &q, &iv);
+                gk15(lit_integrand, &q, &iv, NULL);
                 int ok = 1;
                 for (int k = 0; k < 3; ++k)
                     ok &= iv.e[k] <= REL_UNIFORM * fabs(iv.r[k]) && isfinite(iv.r[k]);
@@ -1089,7 +1215,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
                 run[m++] = in ? atan((cut[j + 1] - q.ts) / q.hq) : cut[j + 1] - q.ts;
             }
             q.equi = in;
-            gk_adapt_rec(lit_integrand, &q, run, m, rel, S, E, rec);
+            gk_adapt_rec(lit_integrand, &q, run, m, rel, S, E, rec, q.aux, X);
             i = j;
         }
         if (!isfinite(D)) {
@@ -1097,18 +1223,18 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
             q.ua = cut[n - 1] - q.ts;
             q.lam = fmax(fabs(q.ua), q.hq);
             const double v[2] = { 0, 1 };
-            gk_adapt_rec(lit_integrand, &q, v, 2, rel, S, E, rec);
+            gk_adapt_rec(lit_integrand, &q, v, 2, rel, S, E, rec, q.aux, X);
         }
     } else if (isfinite(D)) {
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        gk_adapt_rec(lit_integrand, &q, cut, n, rel, S, E, rec);
+        gk_adapt_rec(lit_integrand, &q, cut, n, rel, S, E, rec, q.aux, X);
     } else {
         /* The sun on an infinite ray: pieces doubling in length past the
          * last cut until what is left is below the tolerance: its integral
          * is at most max(albedo p) E T(0,t) (1 - T(t,inf)) per channel,
          * which joins the error estimate. */
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        gk_adapt_rec(lit_integrand, &q, cut, n, REL_GENERAL, S, E, rec);
+        gk_adapt_rec(lit_integrand, &q, cut, n, REL_GENERAL, S, E, rec, q.aux, X);
         const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
         double pmax = 0;
         for (int i = 0; i < s->ncomp; ++i)
@@ -1131,10 +1257,17 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
                 break;
             }
             const double piece[2] = { ta, ta + len };
-            gk_adapt_rec(lit_integrand, &q, piece, 2, REL_GENERAL, S, E, rec);
+            gk_adapt_rec(lit_integrand, &q, piece, 2, REL_GENERAL, S, E, rec, q.aux, X);
             ta += len;
             len *= 2;
         }
+    }
+    /* the multiple scattering's estimate in fog that is not uniform: the
+     * segment's error; a dense output keeps the whole ray's apart */
+    for (int k = 0; k < 3; ++k) {
+        E[k] += X[k];
+        if (dense)
+            dense->aux[k] += vis * X[k];
     }
 }
 

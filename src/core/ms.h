@@ -173,9 +173,11 @@ void ef_ms_phase_legendre(int phase, double g, int L, double *b);
  * Scattered light is not shadowed. */
 typedef struct ef_lms ef_lms;
 
-/* Builds point lamp l's multiple scattering in scene s (its one
- * component uniform; albedo and phase read). Returns 0, or -1 with a
- * message (fog that is not uniform, |g| > 0.9, out of memory). */
+/* Builds point lamp l's multiple scattering in scene s (uniform fog, or
+ * any fog but noise whose components share albedo and phase: the local
+ * mode below; albedo and phase read). Returns 0, or -1 with a message
+ * (noise fog, components that scatter differently, a shadow map in fog
+ * that is not uniform, |g| > 0.9, out of memory). */
 int ef_lms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_lms **out,
                  ef_err *err);
 /* The light of orders 2 and up scattered towards r->org along [a, b) of r
@@ -209,6 +211,24 @@ void ef_lms_get_info(const ef_lms *m, ef_ms_info *info);
 int ef_lms_build_albedo(double omega, int phase, double g, int max_order, ef_lms **out,
                         double *phi0, double *phi1, int *nr, double *lg);
 double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
+
+/* Fog that is not uniform (ef_lms_build's local mode; the gathers then
+ * add nothing and the lit quadrature reads the table at its nodes).
+ * Uniform fog's field about the lamp, Q = sigma^3 Q1(sigma r, nu) in
+ * optical units, scaled to the medium the lamp's light crossed: at a node
+ * of extinction sg in channel k, distance d from the lamp and optical
+ * distance tl from it along the straight line, Q = sg (tl / d)^2 Q1(tl,
+ * nu), the mean extinction of the line setting the field's scale (exact
+ * in uniform fog). Returns d^2 Q (the quadrature's weights carry 1 /
+ * d^2 and the lamp's intensity), and into *est the spread from the same
+ * field scaled by the node's own extinction (sg^3 Q1(sg d, nu)) plus the
+ * table's estimate: an estimate, calibrated against nested quadrature of
+ * the second order and against Cycles (bench/ms_lamp.md). */
+int ef_lms_is_local(const ef_lms *m);
+/* Whether channels j and k read the same table (one albedo). */
+int ef_lms_same_table(const ef_lms *m, int j, int k);
+double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
+                         double *est);
 double ef_lms_rho(int nr, double lg, int i);
 
 #endif

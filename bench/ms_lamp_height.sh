@@ -1,0 +1,65 @@
+#!/bin/bash
+# bench/ms_lamp_height.sh - a point lamp's multiple scattering in height fog (issue 44: lamps in
+# fog that is not uniform, ms.h's local mode) against Blender Cycles with 128 volume bounces.
+#
+#   bench/ms_lamp_height.sh [BUILD_DIR] > bench/ms_lamp_height.md
+#   MS_LAMP_GRID=bench/ms_lamp_height_grid.jsonl bench/ms_lamp_height.sh [BUILD_DIR]  (re-print)
+#
+# bench/ms_compare.py with falloff=K: bench/ms_lamp_blender.py's lamp 10 units ahead in
+# exponential height fog DENSITY exp(-K z) (Cycles marches it in steps of a fiftieth of the
+# scale height), volume bounces 0 and 128, MS_LAMP_SPP samples (default 2048), 64x36; exrfog's
+# height fog of the same density, falloff, albedo and HG g with the lamp's scattering=single
+# and =multiple. Errors per 4x4 block relative to Cycles' radiance with every bounce, and the
+# multiple scattering alone (exrfog's multiple less its single, against Cycles' 128 bounces
+# less its 0).
+set -u
+build="${1:-build}"
+spp="${MS_LAMP_SPP:-2048}"
+here="$(cd "$(dirname "$0")" && pwd)"
+die() { echo "ms_lamp_height.sh: $*" >&2; exit 1; }
+[[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
+command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
+py=/usr/bin/python3
+tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-mslh.XXXXXX")" || die "mktemp failed"
+trap 'rm -rf "$tmp"' EXIT
+load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+# density albedo g falloff
+cases=("0.05 0.95 0.5 0.1" "0.2 0.95 0.5 0.1" "0.2 0.8 0 0.1" "0.1 0.95 0.5 0.3" "0.2 0.99 0.85 0.1")
+if [[ -n "${MS_LAMP_GRID:-}" ]]; then
+    cp "$MS_LAMP_GRID" "$tmp/grid.jsonl" || die "MS_LAMP_GRID=$MS_LAMP_GRID unreadable"
+else
+    for c in "${cases[@]}"; do
+        # shellcheck disable=SC2086
+        set -- $c
+        "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" 0 "$1" "$2" "$3" 0 64 36 4 \
+            - lamp=10 "falloff=$4" >>"$tmp/grid.jsonl" || die "case $c failed"
+    done
+    cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
+fi
+echo "## A point lamp's multiple scattering in height fog against Cycles (issue 44)"
+echo
+echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
+echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, 64x36, volume bounces 0 and 128; bench/ms_lamp_blender.py with falloff=K: height fog DENSITY exp(-K z) in a box 600 wide from z = -4/K to 15/K, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1)"
+echo "- exrfog: height:density=DENSITY:falloff=K with the same albedo and HG g, --up-axis z, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple"
+echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
+echo
+"$py" - "$tmp/grid.jsonl" <<'PYEOF'
+import json, sys, statistics as st
+rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+print("| density | falloff | lamp tau (at its height) | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
+print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+for r in rows:
+    ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
+    ms_c = r["cycles_mean"] - r["cycles_single_mean"]
+    print("| %g | %g | %.2f | %g | %g | %d | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
+        r["density"], r["falloff"], r["lamp_tau"], r["albedo"], r["g"], r["spp"],
+        r["single_share_median"], 100 * r["single_check_median"], 100 * r["rel_median"],
+        100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
+        r["err_rel_median"], 100 * r["covered"], ms_e / ms_c if ms_c > 0 else float("nan")))
+med = [r["rel_median"] for r in rows]
+print()
+print("- %d cases: median of the per-case median errors %.2f %% (worst %.2f %%); Cycles' noise per block median %.2f %%" % (
+    len(rows), 100 * st.median(med), 100 * max(med), 100 * st.median(r["noise_rel_median"] for r in rows)))
+PYEOF
