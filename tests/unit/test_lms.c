@@ -21,6 +21,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include <cmocka.h>
 
@@ -218,7 +219,9 @@ static void test_second_order(void **state)
  * the seed's closed form. The model is an approximation: what is asserted
  * is that its estimate (the spread of two scalings and the table's) covers
  * the difference on every case, the gradient from gentle (k 0.1 per mean
- * free path) to steep (1), points above, below and level with the lamp. */
+ * free path) to steep (1), points above and below the lamp (more cases,
+ * level and forward-peaked ones among them, cost minutes under the
+ * sanitizers; bench/ms_lamp_height.md takes the comparison to Cycles). */
 static void test_local_second_order(void **state)
 {
     (void) state;
@@ -226,9 +229,8 @@ static void test_local_second_order(void **state)
         /* omega, g, k, r, nu, direction of the point from the lamp */
         { 0.9, 0.0, 0.1, 0.7, 0.3, 0.3, -0.2, 0.93 },
         { 0.9, 0.5, 0.3, 1.5, -0.6, 0.2, 0.1, -0.97 },
-        { 0.8, 0.85, 0.1, 1.3, 0.97, 0.8, 0.6, 0.0 },
-        { 0.9, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0 },
-        { 0.95, 0.5, 1.0, 2.0, -0.3, 0.6, 0.0, -0.8 },
+        { 0.9, 0.0, 1.0, 1.0, 0.0, 0.6, 0.0, 0.8 },
+        { 0.95, 0.5, 1.0, 1.2, -0.3, 0.6, 0.0, -0.8 },
     };
     double worst = 0;
     for (unsigned i = 0; i < sizeof cases / sizeof *cases; ++i) {
@@ -248,10 +250,11 @@ static void test_local_second_order(void **state)
         const double got = ef_lms_local_node(m, 0, tau_h(k, o, x), exp(-k * x[2]), r, nu, &est) /
                            (r * r);
         est /= r * r;
+        const clock_t c0 = clock();
         const double want = ref_Q2_at(om, g, k, r, nu, xh);
         printf("omega %g g %g k %g r %g nu %g (up %+.2f): Q_2 %.6g, nested quadrature %.6g "
-               "(%+.1e; estimate %.1e)\n", om, g, k, r, nu, xh[2], got, want, (got - want) / want,
-               est / want);
+               "(%+.1e; estimate %.1e; %.1f s)\n", om, g, k, r, nu, xh[2], got, want,
+               (got - want) / want, est / want, (double) (clock() - c0) / CLOCKS_PER_SEC);
         worst = fmax(worst, fabs(got - want) / want);
         if (!(fabs(got - want) <= est + 2e-3 * want))
             fail_msg("case %u: Q_2 %.9g against %.9g, estimate %.3g", i, got, want, est);
