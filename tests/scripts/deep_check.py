@@ -729,8 +729,9 @@ for spec_text, model, step in (
 
 # Multiple scattering in every deep mode (issue 44): a sun with
 # scattering=multiple over a half-space layer, a sky light of a constant
-# map carried through it, and a point lamp in exp fog (its multiple
-# scattering beside the dense output of its single scattering). Each deep sample gathers its own share of the
+# map carried through it, a point lamp in exp fog (its multiple
+# scattering beside the dense output of its single scattering) and one in
+# height fog (ms.h's local mode: inside the dense output's integrand). Each deep sample gathers its own share of the
 # solve, so the three ways to a flat image (--deep flatten, --deep samples
 # flattened by OIIO, the fog element deep-merged by OIIO) must agree within
 # half precision; and the multiple scattering must take effect: the sun's
@@ -743,21 +744,24 @@ eb.set_pixels(oiio.ROI(), np.ones((32, 64, 3), np.float32))
 check(eb.write(env1), "writes a constant environment")
 ms_fog_layer = ["--fog", "halfspace:plane=0,1,0,-3:density=0.1:albedo=0.95:phase=hg:g=0.6"]
 lamp_fog = ["--fog", "exp:density=0.05:albedo=0.95:phase=hg:g=0.6"]
+height_fog = ["--fog", "height:density=0.1:falloff=0.3:base=-1:albedo=0.95:phase=hg:g=0.6"]
+lamp_ms = ["--light", "point:position=0.5,1,3:intensity=5:scattering=multiple"]
 for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scattering=multiple"]),
                     ("sky", ["--sky-light", env1 + ":scattering=multiple"]),
-                    ("lamp", ["--light", "point:position=0.5,1,3:intensity=5:scattering=multiple"])):
-    ms_fog = lamp_fog if what == "lamp" else ms_fog_layer
+                    ("lamp", lamp_ms), ("lamp in height fog", lamp_ms)):
+    ms_fog = (lamp_fog if what == "lamp" else height_fog if what == "lamp in height fog"
+              else ms_fog_layer)
     mo = {}
     for mode in ("samples", "fog", "flatten"):
-        mo[mode] = os.path.join(tmp, "deep_ms_%s_%s.exr" % (what, mode))
+        mo[mode] = os.path.join(tmp, "deep_ms_%s_%s.exr" % (what.replace(" ", "_"), mode))
         check(run([src] + ms_fog + light + ["--deep", mode, "-o", mo[mode]]) == 0,
               "multiple scattering (%s): --deep %s runs" % (what, mode))
-    single = os.path.join(tmp, "deep_ms_%s_single.exr" % what)
+    single = os.path.join(tmp, "deep_ms_%s_single.exr" % what.replace(" ", "_"))
     single_light = [a.replace("scattering=multiple", "scattering=single") for a in light]
     check(run([src] + ms_fog + single_light + ["--deep", "flatten", "-o", single]) == 0,
           "single scattering (%s): --deep flatten runs" % what)
-    fs = os.path.join(tmp, "deep_ms_%s_samples_flat.exr" % what)
-    fm = os.path.join(tmp, "deep_ms_%s_merge_flat.exr" % what)
+    fs = os.path.join(tmp, "deep_ms_%s_samples_flat.exr" % what.replace(" ", "_"))
+    fm = os.path.join(tmp, "deep_ms_%s_merge_flat.exr" % what.replace(" ", "_"))
     check(oiiotool([mo["samples"], "--flatten", "-o", fs]) == 0, "oiiotool flattens the samples")
     check(oiiotool([src, mo["fog"], "--deepmerge", "--flatten", "-o", fm]) == 0,
           "oiiotool deep-merges the fog element")
@@ -767,7 +771,7 @@ for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scatt
     change = max(abs(base[p][0] - one[p][0]) for p in range(W * H))
     print("multiple scattering (%s) in deep: adds up to %.3f to a pixel, changes one by up to "
           "%.3f" % (what, gain, change))
-    if what in ("sun", "lamp"):
+    if what != "sky":
         check(gain > 0.01, "multiple scattering (%s) adds light on deep input" % what)
     else:
         check(change > 0.01, "multiple scattering (sky) replaces the unattenuated sky on deep input")
