@@ -276,23 +276,30 @@ static void rows4(double u, int nr, int *row0, double w[4])
     *row0 = r0;
 }
 
-/* Table value r Q at (r, nu), cubic in the radial position and linear in
- * direction; 0 past rmax. */
-static double tab_at(const double *tq, int nr, int nx, double lg, double r, double nu, double *ev,
-                     const double *te)
+/* The table's direction column k and the fraction fx towards k + 1 for
+ * cosine nu (x = sin(beta / 2) uniform over nx columns). */
+static void tab_col(int nx, double nu, int *k, double *fx)
 {
-    const double u = log1p(r / LMS_RS) / lg * (nr - 1);
-    if (!(u <= nr - 1)) {
-        if (ev)
-            *ev = 0;
-        return 0;
-    }
     const double x = sqrt(fmax(0, fmin(1, 0.5 * (1 - nu)))) * (nx - 1);
-    int k = (int) x, r0;
-    if (k > nx - 2)
-        k = nx - 2;
-    const double fx = x - k;
+    *k = (int) x;
+    if (*k > nx - 2)
+        *k = nx - 2;
+    *fx = x - *k;
+}
+
+/* Table value r Q at radius r in column (k, fx), cubic in the radial
+ * position; with ev, te's the same way (its absolute value); 0 past
+ * rmax. */
+static double tab_row(const double *tq, int nr, int nx, double lg, double r, int k, double fx,
+                      double *ev, const double *te)
+{
+    if (ev)
+        *ev = 0;
+    const double u = log1p(r / LMS_RS) / lg * (nr - 1);
+    if (!(u <= nr - 1))
+        return 0;
     double w[4];
+    int r0;
     rows4(u, nr, &r0, w);
     double v = 0, e = 0;
     for (int j = 0; j < 4; ++j) {
@@ -304,6 +311,17 @@ static double tab_at(const double *tq, int nr, int nx, double lg, double r, doub
     if (ev)
         *ev = fabs(e);
     return v;
+}
+
+/* Table value r Q at (r, nu), cubic in the radial position and linear in
+ * direction; 0 past rmax. */
+static double tab_at(const double *tq, int nr, int nx, double lg, double r, double nu, double *ev,
+                     const double *te)
+{
+    int k;
+    double fx;
+    tab_col(nx, nu, &k, &fx);
+    return tab_row(tq, nr, nx, lg, r, k, fx, ev, te);
 }
 
 /* The samples of every characteristic (they depend on the grids alone). */
@@ -1259,12 +1277,15 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
     const lms_tab *tb = &m->tab[t];
     double ev;
     /* the light's optical distance from the lamp, its mean extinction
-     * tl / d for the 1 / d^2 that sets the field's scale */
-    const double v = sg * tl * tab_at(tb->q, tb->nr, tb->nx, tb->lg, tl, nu, &ev, tb->e);
-    /* the local medium's own scale instead: the spread of the two is the
-     * estimate of what a field that is not symmetric about the lamp does */
+     * tl / d for the 1 / d^2 that sets the field's scale; and the local
+     * medium's own scale instead: the spread of the two is the estimate of
+     * what a field that is not symmetric about the lamp does */
     const double sd = sg * d;
-    const double w = sg * sd * tab_at(tb->q, tb->nr, tb->nx, tb->lg, sd, nu, NULL, NULL);
+    int col;
+    double fx;
+    tab_col(tb->nx, nu, &col, &fx);
+    const double v = sg * tl * tab_row(tb->q, tb->nr, tb->nx, tb->lg, tl, col, fx, &ev, tb->e);
+    const double w = sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
     *est = fabs(v - w) + sg * tl * ev;
     return v;
 }
