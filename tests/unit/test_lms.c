@@ -265,17 +265,20 @@ static void test_local_second_order(void **state)
 }
 
 /* Fog that is not uniform in the limit of none (height fog of falloff
- * 1e-9): the local mode, read at the lit quadrature's nodes, against the
- * uniform fog's gather, a different integration of the same table along
- * rays through, beside, before and behind the lamp. */
+ * 1e-9, on the vector path; a half-space whose plane is 1000 units away,
+ * on the scalar one): the local mode, read at the lit quadrature's nodes,
+ * against the uniform fog's gather, a different integration of the same
+ * table along rays through, beside, before and behind the lamp. */
 static void test_local_uniform_limit(void **state)
 {
     (void) state;
-    ef_fog_scene su, sh;
+    ef_fog_scene su, sh, sp;
     const char *light = "point:position=1,0.5,10:intensity=8:scattering=multiple";
     scene_with(&su, "exp:density=0.15:albedo=0.9:phase=hg:g=0.5", light);
     scene_with(&sh, "height:density=0.15:falloff=1e-9:albedo=0.9:phase=hg:g=0.5", light);
+    scene_with(&sp, "halfspace:plane=0,1,0,-1000:density=0.15:albedo=0.9:phase=hg:g=0.5", light);
     assert_true(ef_lms_is_local(sh.light[0].lms));
+    assert_true(ef_lms_is_local(sp.light[0].lms));
     assert_false(ef_lms_is_local(su.light[0].lms));
     const double cam[3] = { 0, 0, 0 };
     static const double dirs[][4] = { { 0.11, 0.05, 1, INFINITY }, { 0, 0, 1, 6 },
@@ -284,18 +287,23 @@ static void test_local_uniform_limit(void **state)
     double worst = 0;
     for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
         ef_ray r = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], dirs[i][3]);
-        double Su[3], Eu[3], Sh[3], Eh[3];
+        double Su[3], Eu[3], Sh[3], Eh[3], Sp[3], Ep[3];
         ef_light_inscatter(&su, &su.light[0], &r, Su, Eu);
         ef_light_inscatter(&sh, &sh.light[0], &r, Sh, Eh);
-        const double d = fabs(Sh[0] - Su[0]);
-        worst = fmax(worst, d / Su[0]);
+        ef_light_inscatter(&sp, &sp.light[0], &r, Sp, Ep);
+        const double d = fabs(Sh[0] - Su[0]), dp = fabs(Sp[0] - Su[0]);
+        worst = fmax(worst, fmax(d, dp) / Su[0]);
         if (!(d <= 1e-4 * Su[0]) || !(d <= Eu[0] + Eh[0]))
             fail_msg("ray %u: height fog of falloff 1e-9 %.9g, uniform fog %.9g (estimates %.2g, "
                      "%.2g)", i, Sh[0], Su[0], Eh[0], Eu[0]);
+        if (!(dp <= 1e-4 * Su[0]) || !(dp <= Eu[0] + Ep[0]))
+            fail_msg("ray %u: a half-space 1000 units deep %.9g, uniform fog %.9g (estimates "
+                     "%.2g, %.2g)", i, Sp[0], Su[0], Ep[0], Eu[0]);
     }
     printf("the local mode in the limit of uniform fog: within %.1e of the gather\n", worst);
     ef_scene_free(&su);
     ef_scene_free(&sh);
+    ef_scene_free(&sp);
 }
 
 /* ------------------------------------------------- the scene's gather */
