@@ -11,13 +11,15 @@
 # height fog of the same density, falloff, albedo and HG g with the lamp's scattering=single
 # and =multiple. Errors per 4x4 block relative to Cycles' radiance with every bounce, and the
 # multiple scattering alone (exrfog's multiple less its single, against Cycles' 128 bounces
-# less its 0).
+# less its 0). Then the cost at 1080p: a lamp in height fog, single against multiple, on 2
+# threads, and the solve's own time (once per scene).
 set -u
 build="${1:-build}"
 spp="${MS_LAMP_SPP:-2048}"
 here="$(cd "$(dirname "$0")" && pwd)"
 die() { echo "ms_lamp_height.sh: $*" >&2; exit 1; }
 [[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
+[[ -x "$build/make_sample" ]] || die "$build/make_sample not built"
 command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
 py=/usr/bin/python3
 tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-mslh.XXXXXX")" || die "mktemp failed"
@@ -36,6 +38,22 @@ else
     done
     cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
 fi
+"$build/make_sample" "$tmp/f.exr" --size 1920x1080 --view 2,-3,60 >/dev/null || die "make_sample"
+for fog in "height:density=0.1:falloff=0.1:albedo=0.9" "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
+    "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"; do
+    for r in 1 2 3 4 5; do
+        for m in single multiple; do
+            /usr/bin/time -f "%e" -o "$tmp/t" "$build/exrfog" "$tmp/f.exr" -o "$tmp/o.exr" --fog "$fog" \
+                --light "point:position=2,3,25:intensity=40:scattering=$m" --threads 2 ||
+                die "exrfog $m"
+            echo "$fog/$m $(cat "$tmp/t")" >>"$tmp/cost"
+        done
+    done
+    "$build/exrfog" "$tmp/f.exr" --fog "$fog" --explain \
+        --light "point:position=2,3,25:intensity=40:scattering=multiple" >"$tmp/explain.txt" 2>&1
+    grep 'multiple scattering: solved' "$tmp/explain.txt" | grep -o '[0-9.]* s$' | head -1 |
+        sed "s|^|$fog/solve |" >>"$tmp/solves"
+done
 echo "## A point lamp's multiple scattering in height fog against Cycles (issue 44)"
 echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
@@ -45,10 +63,10 @@ echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycl
 echo "- exrfog: height:density=DENSITY:falloff=K with the same albedo and HG g, --up-axis z, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple"
 echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
 echo
-"$py" - "$tmp/grid.jsonl" <<'PYEOF'
+"$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'PYEOF'
 import json, sys, statistics as st
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
-print("| density | falloff | lamp tau (at its height) | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
+print("| density | falloff | density x 10 (the lamp's distance) | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
 print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
     ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
@@ -62,4 +80,19 @@ med = [r["rel_median"] for r in rows]
 print()
 print("- %d cases: median of the per-case median errors %.2f %% (worst %.2f %%); Cycles' noise per block median %.2f %%" % (
     len(rows), 100 * st.median(med), 100 * max(med), 100 * st.median(r["noise_rel_median"] for r in rows)))
+cost = {}
+for l in open(sys.argv[2]):
+    k, v = l.rsplit(" ", 1)
+    cost.setdefault(k, []).append(float(v))
+m = {k: st.median(v) for k, v in cost.items()}
+solve = dict(l.strip().split("/solve ") for l in open(sys.argv[3]) if "/solve " in l)
+print()
+print("### Cost at 1080p (a point lamp in height fog, 2 threads, medians of 5 runs)")
+print()
+print("| fog | single s | multiple s | / single | the solve (once per scene) | / single without the solve |")
+print("|---|---:|---:|---:|---:|---:|")
+for fog in sorted({k.rsplit("/", 1)[0] for k in m}):
+    s1, sm = m[fog + "/single"], m[fog + "/multiple"]
+    sv = float(solve.get(fog, "0 s").split()[0])
+    print("| `%s` | %.2f | %.2f | %.2fx | %.2f s | %.2fx |" % (fog, s1, sm, sm / s1, sv, (sm - sv) / s1))
 PYEOF

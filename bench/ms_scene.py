@@ -53,20 +53,27 @@ def fog(name, dens, albedo, g):
     Absorption of the rest."""
     m = bpy.data.materials.new(name); m.use_nodes = True
     nt = m.node_tree; nt.nodes.clear()
-    s = nt.nodes.new('ShaderNodeVolumeScatter')
+    s, a = _scatter_absorb(nt, g)
     s.inputs['Density'].default_value = dens * albedo
+    a.inputs['Density'].default_value = dens * (1 - albedo)
+    m.cycles.homogeneous_volume = True
+    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    return m
+
+
+def _scatter_absorb(nt, g):
+    """Volume Scatter (white, HG anisotropy G) plus black Volume Absorption into the material
+    output of node tree NT; returns the two nodes, their densities for the caller."""
+    s = nt.nodes.new('ShaderNodeVolumeScatter')
     s.inputs['Anisotropy'].default_value = g
     s.inputs['Color'].default_value = (1, 1, 1, 1)
     a = nt.nodes.new('ShaderNodeVolumeAbsorption')
-    a.inputs['Density'].default_value = dens * (1 - albedo)
     a.inputs['Color'].default_value = (0, 0, 0, 1)
     add = nt.nodes.new('ShaderNodeAddShader')
     o = nt.nodes.new('ShaderNodeOutputMaterial')
     nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
     nt.links.new(add.outputs[0], o.inputs['Volume'])
-    m.cycles.homogeneous_volume = True
-    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
-    return m
+    return s, a
 
 
 def camera(sc, location, rotation_deg):
@@ -102,17 +109,9 @@ def height_fog(name, dens, albedo, g, falloff, step_rate):
     da = nt.nodes.new('ShaderNodeMath'); da.operation = 'MULTIPLY'
     da.inputs[1].default_value = dens * (1 - albedo)
     nt.links.new(ex.outputs[0], da.inputs[0])
-    s = nt.nodes.new('ShaderNodeVolumeScatter')
-    s.inputs['Anisotropy'].default_value = g
-    s.inputs['Color'].default_value = (1, 1, 1, 1)
+    s, a = _scatter_absorb(nt, g)
     nt.links.new(ds.outputs[0], s.inputs['Density'])
-    a = nt.nodes.new('ShaderNodeVolumeAbsorption')
-    a.inputs['Color'].default_value = (0, 0, 0, 1)
     nt.links.new(da.outputs[0], a.inputs['Density'])
-    add = nt.nodes.new('ShaderNodeAddShader')
-    o = nt.nodes.new('ShaderNodeOutputMaterial')
-    nt.links.new(s.outputs[0], add.inputs[0]); nt.links.new(a.outputs[0], add.inputs[1])
-    nt.links.new(add.outputs[0], o.inputs['Volume'])
     m.cycles.homogeneous_volume = False
     m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
     m.cycles.volume_step_rate = step_rate
