@@ -50,23 +50,10 @@ else
     cp "$tmp/grid.jsonl" "$here/ms_lamp_grid.jsonl"
 fi
 # the cost at 1080p: a point lamp in exp fog in front of the camera, single against multiple
-"$build/make_sample" "$tmp/f.exr" --size 1920x1080 --view 2,-3,60 >/dev/null || die "make_sample"
-for fog in "exp:density=0.1:albedo=0.9" "exp:density=0.1:albedo=0.9:phase=hg:g=0.5" \
-    "exp:density=0.1:albedo=0.99:phase=hg:g=0.85"; do
-    for r in 1 2 3 4 5; do
-        for m in single multiple; do
-            /usr/bin/time -f "%e" -o "$tmp/t" "$build/exrfog" "$tmp/f.exr" -o "$tmp/o.exr" --fog "$fog" \
-                --light "point:position=2,3,25:intensity=40:scattering=$m" --threads 2 ||
-                die "exrfog $m"
-            echo "$fog/$m $(cat "$tmp/t")" >>"$tmp/cost"
-        done
-        /usr/bin/time -f "%e" -o "$tmp/t" oiiotool "$tmp/f.exr" -o "$tmp/o2.exr" || die oiiotool
-        echo "$fog/copy $(cat "$tmp/t")" >>"$tmp/cost"
-    done
-    "$build/exrfog" "$tmp/f.exr" --fog "$fog" --explain \
-        --light "point:position=2,3,25:intensity=40:scattering=multiple" >"$tmp/explain.txt" 2>&1
-    grep 'multiple scattering' "$tmp/explain.txt" | grep -o '[0-9.]* s$' | head -1 | sed "s|^|$fog/solve |" >>"$tmp/solves"
-done
+# shellcheck source=bench/ms_lib.sh
+. "$here/ms_lib.sh"
+lamp_cost "exp:density=0.1:albedo=0.9" "exp:density=0.1:albedo=0.9:phase=hg:g=0.5" \
+    "exp:density=0.1:albedo=0.99:phase=hg:g=0.85"
 echo "## A point lamp's multiple scattering against Cycles (issue 44)"
 echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"

@@ -38,22 +38,10 @@ else
     done
     cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
 fi
-"$build/make_sample" "$tmp/f.exr" --size 1920x1080 --view 2,-3,60 >/dev/null || die "make_sample"
-for fog in "height:density=0.1:falloff=0.1:albedo=0.9" "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
-    "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"; do
-    for r in 1 2 3 4 5; do
-        for m in single multiple; do
-            /usr/bin/time -f "%e" -o "$tmp/t" "$build/exrfog" "$tmp/f.exr" -o "$tmp/o.exr" --fog "$fog" \
-                --light "point:position=2,3,25:intensity=40:scattering=$m" --threads 2 ||
-                die "exrfog $m"
-            echo "$fog/$m $(cat "$tmp/t")" >>"$tmp/cost"
-        done
-    done
-    "$build/exrfog" "$tmp/f.exr" --fog "$fog" --explain \
-        --light "point:position=2,3,25:intensity=40:scattering=multiple" >"$tmp/explain.txt" 2>&1
-    grep 'multiple scattering: solved' "$tmp/explain.txt" | grep -o '[0-9.]* s$' | head -1 |
-        sed "s|^|$fog/solve |" >>"$tmp/solves"
-done
+# shellcheck source=bench/ms_lib.sh
+. "$here/ms_lib.sh"
+lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
+    "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"
 echo "## A point lamp's multiple scattering in height fog against Cycles (issue 44)"
 echo
 echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
