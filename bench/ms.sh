@@ -13,16 +13,10 @@
 # noise is the block mean's standard error. Then the cost at 1080p: the sun in height fog,
 # single against multiple, and the solve's time and size over the grid of g and albedo.
 set -u
-build="${1:-build}"
-spp="${MS_SPP:-4096}"
 here="$(cd "$(dirname "$0")" && pwd)"
-die() { echo "ms.sh: $*" >&2; exit 1; }
-[[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
-command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
-py=/usr/bin/python3
-tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-ms.XXXXXX")" || die "mktemp failed"
-trap 'rm -rf "$tmp"' EXIT
-load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+# shellcheck source=bench/ms_lib.sh
+. "$here/ms_lib.sh"
+ms_setup ms.sh MS_SPP 4096 "${1:-build}"
 cases=()
 for a in 0.8 0.95 0.99; do
     for g in 0 0.5 0.85; do
@@ -77,11 +71,7 @@ for v in low:5,-5,60 high:60,-20,60; do
     done
 done
 "$build/ms_info" >"$tmp/solves" 2>&1 || die "ms_info"
-echo "## Multiple scattering against Cycles (issue 44)"
-echo
-echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
-echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+ms_header "Multiple scattering against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples, 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_blender.py's slab (homogeneous, ground z = 0 black, top z = 20, 4 km wide), camera 2 up looking 8 degrees down (or 10 up, or 40 up looking 20 degrees down: above the fog), sun of strength 1 at azimuth 150 degrees"
 echo "- exrfog: halfspace:plane=0,0,1,-20 with the same density, albedo and HG g, the sun with scattering=multiple:ground=0 (or --sky-light of a constant map of 1 with scattering=multiple:ground=0 against Cycles' uniform world of strength 1), on the render without fog (black where the sun lights it: the output is the fog's light alone)"
 echo "- errors per 8x8 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"

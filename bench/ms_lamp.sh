@@ -16,17 +16,10 @@
 # lamp behind the camera (only the fog it lights is in frame). Then the cost
 # at 1080p: the lamp in exp fog, single against multiple, on 2 threads.
 set -u
-build="${1:-build}"
-spp="${MS_LAMP_SPP:-4096}"
 here="$(cd "$(dirname "$0")" && pwd)"
-die() { echo "ms_lamp.sh: $*" >&2; exit 1; }
-[[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
-[[ -x "$build/make_sample" ]] || die "$build/make_sample not built"
-command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
-py=/usr/bin/python3
-tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-mslamp.XXXXXX")" || die "mktemp failed"
-trap 'rm -rf "$tmp"' EXIT
-load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+# shellcheck source=bench/ms_lib.sh
+. "$here/ms_lib.sh"
+ms_setup ms_lamp.sh MS_LAMP_SPP 4096 "${1:-build}"
 cases=()
 for d in 0.2 0.05 0.8; do
     for a in 0.8 0.95 0.99; do
@@ -50,15 +43,9 @@ else
     cp "$tmp/grid.jsonl" "$here/ms_lamp_grid.jsonl"
 fi
 # the cost at 1080p: a point lamp in exp fog in front of the camera, single against multiple
-# shellcheck source=bench/ms_lib.sh
-. "$here/ms_lib.sh"
 lamp_cost "exp:density=0.1:albedo=0.9" "exp:density=0.1:albedo=0.9:phase=hg:g=0.5" \
     "exp:density=0.1:albedo=0.99:phase=hg:g=0.85"
-echo "## A point lamp's multiple scattering against Cycles (issue 44)"
-echo
-echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
-echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+ms_header "A point lamp's multiple scattering against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples (or as the table says), 64x36, volume bounces 0 and 128 (max bounces 128, transparent at the default); bench/ms_lamp_blender.py: homogeneous fog in a cube 4 km wide about the camera, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1), or at (1.5, -10, 1) behind the camera"
 echo "- exrfog: exp fog of the same density, albedo and HG g, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple, on the render without fog (every pixel sky, or the black wall)"
 echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"

@@ -14,17 +14,10 @@
 # less its 0). Then the cost at 1080p: a lamp in height fog, single against multiple, on 2
 # threads, and the solve's own time (once per scene).
 set -u
-build="${1:-build}"
-spp="${MS_LAMP_SPP:-2048}"
 here="$(cd "$(dirname "$0")" && pwd)"
-die() { echo "ms_lamp_height.sh: $*" >&2; exit 1; }
-[[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
-[[ -x "$build/make_sample" ]] || die "$build/make_sample not built"
-command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
-py=/usr/bin/python3
-tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-mslh.XXXXXX")" || die "mktemp failed"
-trap 'rm -rf "$tmp"' EXIT
-load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+# shellcheck source=bench/ms_lib.sh
+. "$here/ms_lib.sh"
+ms_setup ms_lamp_height.sh MS_LAMP_SPP 2048 "${1:-build}"
 # density albedo g falloff
 cases=("0.05 0.95 0.5 0.1" "0.2 0.95 0.5 0.1" "0.2 0.8 0 0.1" "0.1 0.95 0.5 0.3" "0.2 0.99 0.85 0.1")
 if [[ -n "${MS_LAMP_GRID:-}" ]]; then
@@ -38,15 +31,9 @@ else
     done
     cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
 fi
-# shellcheck source=bench/ms_lib.sh
-. "$here/ms_lib.sh"
 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
     "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"
-echo "## A point lamp's multiple scattering in height fog against Cycles (issue 44)"
-echo
-echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
-echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+ms_header "A point lamp's multiple scattering in height fog against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, 64x36, volume bounces 0 and 128; bench/ms_lamp_blender.py with falloff=K: height fog DENSITY exp(-K z) in a box 600 wide from z = -4/K to 15/K, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1)"
 echo "- exrfog: height:density=DENSITY:falloff=K with the same albedo and HG g, --up-axis z, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple"
 echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"

@@ -1,4 +1,33 @@
-# bench/ms_lib.sh - what bench/ms_lamp.sh and bench/ms_lamp_height.sh share (sourced).
+# bench/ms_lib.sh - what bench/ms.sh, ms_lamp.sh and ms_lamp_height.sh share (sourced).
+
+# ms_setup NAME SPP_VAR DEFAULT_SPP [BUILD_DIR]: the globals build (default
+# build), spp (the variable SPP_VAR or the default), py, tmp (removed on
+# exit), load0 and die (messages prefixed NAME); checks exrfog, make_sample
+# and Blender.
+ms_setup() {
+    ms_name=$1
+    local sv=$2
+    build="${4:-build}"
+    spp="${!sv:-$3}"
+    die() { echo "$ms_name: $*" >&2; exit 1; }
+    [[ -x "$build/exrfog" ]] || die "$build/exrfog not built"
+    [[ -x "$build/make_sample" ]] || die "$build/make_sample not built"
+    command -v blender >/dev/null || die "blender not found (apt-get install -y blender)"
+    py=/usr/bin/python3
+    tmp="$(mktemp -d "${TMPDIR:-/tmp}/exrfog-${ms_name%.sh}.XXXXXX")" || die "mktemp failed"
+    trap 'rm -rf "$tmp"' EXIT
+    load0="$(cut -d' ' -f1-3 /proc/loadavg)"
+}
+
+# ms_header TITLE: the report's title and its date, machine (with the load
+# ms_setup read and the load now) and build lines (needs here).
+ms_header() {
+    echo "## $1"
+    echo
+    echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+    echo "- machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), load $load0 before, $(cut -d' ' -f1-3 /proc/loadavg) after"
+    echo "- build: $build, source $(git -C "$here" rev-parse --short HEAD 2>/dev/null)"
+}
 
 # lamp_cost FOG...: per fog, 5 rounds on the 1080p frame $tmp/f.exr (made
 # here): exrfog with a point lamp scattering=single and =multiple on 2
