@@ -18,21 +18,28 @@ here="$(cd "$(dirname "$0")" && pwd)"
 # shellcheck source=bench/ms_lib.sh
 . "$here/ms_lib.sh"
 ms_setup ms_lamp_height.sh MS_LAMP_SPP 2048 "${1:-build}"
-# density albedo g falloff
-cases=("0.05 0.95 0.5 0.1" "0.2 0.95 0.5 0.1" "0.2 0.8 0 0.1" "0.1 0.95 0.5 0.3" "0.2 0.99 0.85 0.1")
+# density albedo g falloff [samples behind]: the last, the lamp 10 units behind the camera
+cases=("0.05 0.95 0.5 0.1" "0.2 0.95 0.5 0.1" "0.2 0.8 0 0.1" "0.1 0.95 0.5 0.3" "0.2 0.99 0.85 0.1"
+       "0.1 0.95 0.5 0.1 1024 behind")
 if [[ -n "${MS_LAMP_GRID:-}" ]]; then
     cp "$MS_LAMP_GRID" "$tmp/grid.jsonl" || die "MS_LAMP_GRID=$MS_LAMP_GRID unreadable"
 else
     for c in "${cases[@]}"; do
         # shellcheck disable=SC2086
         set -- $c
-        "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" 0 "$1" "$2" "$3" 0 64 36 4 \
-            - lamp=10 "falloff=$4" >>"$tmp/grid.jsonl" || die "case $c failed"
+        "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "${5:-$spp}" 0 "$1" "$2" "$3" 0 64 36 4 \
+            - lamp=10 "falloff=$4" ${6:+"$6"} >>"$tmp/grid.jsonl" || die "case $c failed"
     done
     cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
 fi
-lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
+lc_tag="camera 2 up, lamp ahead" lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
+    "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
     "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"
+# a lamp behind the camera, and a camera 60 up looking 20 degrees down on a lamp below it
+lc_tag="camera 2 up, lamp behind" lc_lamp=2,3,-15 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
+    "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5"
+lc_tag="camera 60 up, 20 degrees down" lc_view=60,-20,60 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
+    "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5"
 ms_header "A point lamp's multiple scattering in height fog against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, 64x36, volume bounces 0 and 128; bench/ms_lamp_blender.py with falloff=K: height fog DENSITY exp(-K z) in a box 600 wide from z = -4/K to 15/K, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1)"
 echo "- exrfog: height:density=DENSITY:falloff=K with the same albedo and HG g, --up-axis z, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple"
@@ -41,13 +48,14 @@ echo
 "$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'PYEOF'
 import json, sys, statistics as st
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
-print("| density | falloff | density x 10 (the lamp's distance) | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
-print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+print("| density | falloff | density x 10 (the lamp's distance) | lamp | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
+print("|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
     ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
     ms_c = r["cycles_mean"] - r["cycles_single_mean"]
-    print("| %g | %g | %.2f | %g | %g | %d | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
-        r["density"], r["falloff"], r["lamp_tau"], r["albedo"], r["g"], r["spp"],
+    print("| %g | %g | %.2f | %s | %g | %g | %d | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
+        r["density"], r["falloff"], r["lamp_tau"], "behind the camera" if r.get("behind") else "ahead",
+        r["albedo"], r["g"], r["spp"],
         r["single_share_median"], 100 * r["single_check_median"], 100 * r["rel_median"],
         100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
         r["err_rel_median"], 100 * r["covered"], ms_e / ms_c if ms_c > 0 else float("nan")))
@@ -64,7 +72,7 @@ solve = dict(l.strip().split("/solve ") for l in open(sys.argv[3]) if "/solve " 
 print()
 print("### Cost at 1080p (a point lamp in height fog, 2 threads, medians of 5 runs)")
 print()
-print("| fog | single s | multiple s | / single | the solve (once per scene) | / single without the solve |")
+print("| shot and fog | single s | multiple s | / single | the solve (once per scene) | / single without the solve |")
 print("|---|---:|---:|---:|---:|---:|")
 for fog in sorted({k.rsplit("/", 1)[0] for k in m}):
     s1, sm = m[fog + "/single"], m[fog + "/multiple"]
