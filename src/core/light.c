@@ -53,7 +53,7 @@ const ef_light_kind_info ef_light_kinds[EF_LIGHT_NKIND] = {
     [EF_LIGHT_POINT] = { "point", "position, color, intensity, radius, name, scattering", 1, 0, 0 },
     [EF_LIGHT_SPOT] = { "spot",
                         "position, aim, cone, blend, cosine, color, intensity, radius, name, "
-                        "shadow, shadow-camera, bias, slope, outside",
+                        "shadow, shadow-camera, bias, slope, outside, scattering",
                         1, 1, 1 },
 };
 
@@ -167,10 +167,6 @@ int ef_light_parse(const char *spec, const ef_fog_context *ctx, ef_light *l, ef_
             return ef_fail(err, "--light '%s': %s='%s' is out of range (numbers are 0 or between "
                            "2.2e-308 and 1.8e308 in magnitude)", spec, key, val);
         int ok = strstr(keys, key) != NULL;
-        if (!strcmp(key, "scattering") && K->cone)
-            return ef_fail(err, "--light '%s': scattering= is the sun's and a point lamp's so "
-                           "far: a %s's cone breaks the symmetry about the lamp its multiple "
-                           "scattering is solved with; its light is scattered once", spec, kind);
         if (!strcmp(key, "ground") && K->at_position)
             return ef_fail(err, "--light '%s': ground= is the sun's: a point lamp's multiple "
                            "scattering is solved in unbounded uniform fog", spec);

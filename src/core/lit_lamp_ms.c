@@ -61,12 +61,19 @@ typedef struct lms_res {
 
 typedef struct lms_tab {
     double omega;
+    int phase, max_order;
+    double g;
     int nr, nx;
     double lg, rmax;
     double *q;       /* [nr][nx]: r Q(r, x) of orders 2 and up */
     double *e;       /* [nr][nx]: its error estimate */
     double resid;    /* GMRES's relative residual */
     int iters;
+    /* a spot's (ef_lms_spot): the cone's share averaged over where the
+     * light reaching a point first scattered, and its estimate, against
+     * the optical distance and the angle from the axis ([SPOT_NR][SPOT_NA]) */
+    double *fb, *fbe;
+    double *qb;      /* [nr][2]: r Q's mean over directions (both columns) */
 } lms_tab;
 
 struct ef_lms {
@@ -82,6 +89,9 @@ struct ef_lms {
     double pos[3];
     int L;
     ef_ms_info info;
+    /* a spot (ef_lms_spot): its aim and cone, for the share (light.h) */
+    int spot, scaled;   /* scaled: the fog is not uniform */
+    ef_light cone;
 };
 
 /* ------------------------------------------------------------ the grids */
@@ -682,6 +692,9 @@ void ef_lms_unref(ef_lms *m)
     for (int t = 0; t < m->ntab; ++t) {
         free(m->tab[t].q);
         free(m->tab[t].e);
+        free(m->tab[t].fb);
+        free(m->tab[t].fbe);
+        free(m->tab[t].qb);
     }
     free(m);
 }
@@ -734,6 +747,9 @@ static int build_tab(lms_tab *t, double omega, int phase, double g, const double
 {
     const lms_res rf = res_for(omega, g, L, 0), rc = res_for(omega, g, L, 1);
     t->omega = omega;
+    t->phase = phase;
+    t->g = g;
+    t->max_order = max_order;
     t->nr = rf.nr;
     t->nx = rf.nx;
     t->rmax = rf.rmax;
@@ -848,6 +864,10 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
                            "scattered light serves them all); give them the same albedo=, "
                            "phase= and g=, or use scattering=single", l->spec);
     }
+    if (local && l->shadow && ef_light_coned(l))
+        return ef_fail(err, "--light '%s': a spot's multiple scattering is read along the "
+                       "quadrature a shadow map cuts (it would be shadowed with the single "
+                       "scattering); drop shadow= or use scattering=single", l->spec);
     if (local && l->shadow)
         return ef_fail(err, "--light '%s': a lamp's multiple scattering in fog that is not "
                        "uniform is read along the quadrature a shadow map cuts (it would be "
@@ -864,7 +884,9 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     double sig[3];
     if (s->ncomp == 0)
         return ef_fail(err, "--light '%s': scattering=multiple needs fog (--fog)", l->spec);
-    const int local = !all_uniform(s, sig);
+    /* a spot's cone breaks the symmetry the gather needs: read at the
+     * lit quadrature's nodes as fog that is not uniform is */
+    const int local = !all_uniform(s, sig) || ef_light_coned(l);
     if ((local || s->ncomp > 1) && lms_refuse(s, l, local, err))
         return -1;
     const ef_fog_component *c = &s->comp[0];
@@ -885,6 +907,8 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         return ef_fail(err, "out of memory for a lamp's multiple scattering");
     atomic_init(&m->refs, 1);
     m->local = local;
+    double sig_u[3];
+    m->scaled = !all_uniform(s, sig_u);
     memcpy(m->pos, l->pos, sizeof m->pos);
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
@@ -907,6 +931,10 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
             ++m->ntab;
         }
         m->tab_of[k] = t;
+    }
+    if (ef_light_coned(l) && ef_lms_spot(m, l)) {
+        ef_lms_unref(m);
+        return ef_fail(err, "out of memory for a spot's multiple scattering");
     }
     m->info.nodes = m->tab[0].nr;
     m->info.kept = m->tab[0].nx;
@@ -1255,11 +1283,204 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
     }
 }
 
+/* ------------------------------------------------------------- spots */
+
+/* A spot's light is a point lamp's times its cone's share f(omega) of the
+ * direction it leaves in. Transport is linear, so the source of orders 2
+ * and up at x is the point lamp's, Q, times the mean of f over the
+ * directions in which the light that reaches x first left the lamp,
+ * weighted by what each first scattering point y contributes to x:
+ *
+ *   w(y) = e^-s p(y) [omega p_x e^-d / d^2 + Q(d)]   (s = |y|, d = |x - y|)
+ *
+ * (optical units; p(y) the phase at y towards x, the bracket what a point
+ * lamp at y sends to x: its once-scattered light and Q). With isotropic
+ * phase that is exact: the light leaving y is a point lamp's. With a
+ * phase that is not, its multiple part takes p(y) too (light leaving
+ * towards x), and the spread from taking 1 / (4 pi) there instead is the
+ * estimate. Tabulated against |x| and the angle of x from the axis: y's
+ * angle theta from x's direction has the marginal
+ *
+ *   K(theta) = (2 pi / r) int e^-s p(y) [omega p_x e^-d + d^2 Q(d)] dpsi
+ *
+ * (s = r cos theta + h tan psi, d = h / cos psi, h = r sin theta), and f
+ * averaged about x's direction at theta is A(alpha, theta). p_x and Q are
+ * their means over directions (the table's direction is left as the point
+ * lamp's). An order-2 table (max_order 2) keeps the once-scattered term
+ * alone: Q then is the third order. */
+#define SPOT_NR 40       /* optical distances, log-spaced from SPOT_RMIN to rmax */
+#define SPOT_RMIN 1e-3
+#define SPOT_NA 256      /* angles from the axis, 0 to pi */
+#define SPOT_NT 512      /* kernel angles (midpoints) */
+#define SPOT_NPHI 128    /* azimuths of A (midpoints over [0, pi]) */
+#define SPOT_NPSI 24     /* Gauss nodes on each of psi's pieces */
+#define SPOT_NV 7        /* the weightings (spot_kernel's var) */
+
+/* K(theta_j) of table t at r for SPOT_NT midpoints into K (the constant
+ * 2 pi / r dropped). var 0: as above; 1: the multiple part with 1 / (4
+ * pi) for p(y); 2 and 3: p_x of the light travelling outwards along the
+ * radial, or back (a view along the lamp's line, against the mean over
+ * views); 4: isotropic phase throughout (how much the phase moves it at
+ * all); 5 and 6: p_x of a view across the radial, the light's sideways
+ * part towards it or away (a halo beside the cone is seen so). qb: the table's r Q averaged over directions ([nr][2], both
+ * alike). */
+static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, const double *gx,
+                        const double *gw, double *K)
+{
+    const double pm = 1 / (4 * PI);
+    const int iso = var == 1;
+    for (int j = 0; j < SPOT_NT; ++j) {
+        const double th = (j + 0.5) * PI / SPOT_NT, c = cos(th), h = r * sin(th);
+        const double p0 = atan2(-r * c, h);
+        /* psi's pieces: from the lamp (s = 0) to x's foot, and on to pi/2 */
+        const double piece[3] = { p0, fmax(p0, 0), PI / 2 };
+        double sum = 0;
+        for (int pc = 0; pc < 2; ++pc) {
+            const double a = piece[pc], b = piece[pc + 1];
+            for (int i = 0; b > a && i < SPOT_NPSI; ++i) {
+                const double ps = a + (b - a) * gx[i], cp = cos(ps);
+                if (!(cp > 0))
+                    continue;
+                const double s = fmax(0, r * c + h * tan(ps)), d = h / cp;
+                const double py = var == 4 ? pm : ef_phase_eval(t->phase, t->g, -sin(ps));
+                /* the once-scattered light's direction at x against the
+                 * outward radial: (r - s cos theta) / d */
+                const double ux = (r - s * c) / d;
+                /* (5 and 6: a view across the radial, the light's
+                 * sideways part towards it or away) */
+                const double uy = sqrt(fmax(0, 1 - ux * ux));
+                const double px = var < 2 || var == 4 ? pm
+                                  : var < 4 ? ef_phase_eval(t->phase, t->g, var == 2 ? ux : -ux)
+                                            : ef_phase_eval(t->phase, t->g, var == 5 ? uy : -uy);
+                double v = t->omega * px * exp(-(s + d));
+                if (t->max_order != 2) {
+                    const double rq = tab_row(qb, t->nr, 2, t->lg, d, 0, 0, NULL, NULL);
+                    v += exp(-s) * d * rq * (iso ? pm / py : 1);
+                }
+                sum += (b - a) * gw[i] * py * v;
+            }
+        }
+        K[j] = sum > 0 ? sum : 0;
+    }
+}
+
+int ef_lms_spot(ef_lms *m, const ef_light *l)
+{
+    m->spot = 1;
+    m->local = 1;
+    m->cone = (ef_light) { .kind = l->kind, .cos_outer = l->cos_outer, .smooth = l->smooth,
+                           .cosine = l->cosine };
+    double gx[SPOT_NPSI], gw[SPOT_NPSI];
+    ef_ms_directions(SPOT_NPSI, gx, gw);
+    /* A(alpha_i, theta_j): the share about a direction at alpha from the
+     * axis, averaged over the circle at theta from it */
+    double *A = malloc((size_t) SPOT_NA * SPOT_NT * sizeof *A);
+    double *K = malloc(SPOT_NV * SPOT_NT * sizeof *K);
+    if (!A || !K) {
+        free(A);
+        free(K);
+        return -1;
+    }
+    double cph[SPOT_NPHI];
+    for (int k = 0; k < SPOT_NPHI; ++k)
+        cph[k] = cos((k + 0.5) * PI / SPOT_NPHI);
+    for (int i = 0; i < SPOT_NA; ++i) {
+        const double al = i * PI / (SPOT_NA - 1), ca = cos(al), sa = sin(al);
+        for (int j = 0; j < SPOT_NT; ++j) {
+            const double th = (j + 0.5) * PI / SPOT_NT, c = ca * cos(th), sn = sa * sin(th);
+            double sum = 0;
+            for (int k = 0; k < SPOT_NPHI; ++k)
+                sum += ef_spot_share(&m->cone, c + sn * cph[k]);
+            A[(size_t) i * SPOT_NT + j] = sum / SPOT_NPHI;
+        }
+    }
+    int rc = 0;
+    for (int ti = 0; ti < m->ntab && !rc; ++ti) {
+        lms_tab *t = &m->tab[ti];
+        double *qb = t->qb = malloc((size_t) t->nr * 2 * sizeof *qb);
+        t->fb = malloc((size_t) SPOT_NR * SPOT_NA * sizeof *t->fb);
+        t->fbe = malloc((size_t) SPOT_NR * SPOT_NA * sizeof *t->fbe);
+        if (!qb || !t->fb || !t->fbe) {
+            rc = -1;
+            break;
+        }
+        /* r Q's mean over directions: columns at x = sin(beta / 2) uniform,
+         * nu = 1 - 2 x^2, the mean (1/2) int dnu = int 2 x dx (trapezoid) */
+        for (int i = 0; i < t->nr; ++i) {
+            double sum = 0;
+            for (int k = 0; k + 1 < t->nx; ++k) {
+                const double x0 = (double) k / (t->nx - 1), x1 = (double) (k + 1) / (t->nx - 1);
+                sum += (x1 - x0) * (x0 * t->q[(size_t) i * t->nx + k] +
+                                    x1 * t->q[(size_t) i * t->nx + k + 1]);
+            }
+            qb[2 * i] = qb[2 * i + 1] = sum;
+        }
+        /* with a phase that is not isotropic, three more weightings
+         * whose spread from the first is the estimate */
+        const int nv = t->phase != EF_PHASE_ISO && t->g != 0 ? SPOT_NV : 1;
+        const double lr = log(t->rmax / SPOT_RMIN);
+        for (int ir = 0; ir < SPOT_NR; ++ir) {
+            const double r = SPOT_RMIN * exp(lr * ir / (SPOT_NR - 1));
+            double nk[SPOT_NV];
+            for (int v = 0; v < nv; ++v) {
+                spot_kernel(t, qb, r, v, gx, gw, K + v * SPOT_NT);
+                nk[v] = 0;
+                for (int j = 0; j < SPOT_NT; ++j)
+                    nk[v] += K[v * SPOT_NT + j];
+            }
+            for (int i = 0; i < SPOT_NA; ++i) {
+                const double *a = A + (size_t) i * SPOT_NT;
+                double f[SPOT_NV] = { 0 }, dev = 0;
+                for (int v = 0; v < nv; ++v) {
+                    for (int j = 0; j < SPOT_NT; ++j)
+                        f[v] += K[v * SPOT_NT + j] * a[j];
+                    f[v] = nk[v] > 0 ? f[v] / nk[v] : 0;
+                    dev = fmax(dev, fabs(f[v] - f[0]));
+                }
+                t->fb[(size_t) ir * SPOT_NA + i] = f[0];
+                t->fbe[(size_t) ir * SPOT_NA + i] = dev;
+            }
+        }
+    }
+    free(A);
+    free(K);
+    return rc;
+}
+
+/* The spot's averaged share at optical distance r and cosine ca from the
+ * axis, bilinear in log r and the angle; its estimate into *e. */
+static double spot_share_at(const lms_tab *t, double r, double ca, double *e)
+{
+    double u = log(fmax(r, SPOT_RMIN) / SPOT_RMIN) / log(t->rmax / SPOT_RMIN) * (SPOT_NR - 1);
+    if (!(u < SPOT_NR - 1))
+        u = SPOT_NR - 1;
+    const double al = acos(fmax(-1, fmin(1, ca))) / PI * (SPOT_NA - 1);
+    const int i0 = u >= SPOT_NR - 2 ? SPOT_NR - 2 : (int) u;
+    const int j0 = al >= SPOT_NA - 2 ? SPOT_NA - 2 : (int) al;
+    const double fu = u - i0, fa = al - j0;
+    const size_t a = (size_t) i0 * SPOT_NA + j0, b = a + SPOT_NA;
+    const double v = (1 - fu) * ((1 - fa) * t->fb[a] + fa * t->fb[a + 1]) +
+                     fu * ((1 - fa) * t->fb[b] + fa * t->fb[b + 1]);
+    *e = (1 - fu) * ((1 - fa) * t->fbe[a] + fa * t->fbe[a + 1]) +
+         fu * ((1 - fa) * t->fbe[b] + fa * t->fbe[b + 1]);
+    return v;
+}
+
 /* ------------------------------------------- fog that is not uniform */
 
 int ef_lms_is_local(const ef_lms *m)
 {
     return m && m->local;
+}
+
+int ef_lms_is_spot(const ef_lms *m)
+{
+    return m && m->spot;
+}
+
+int ef_lms_is_scaled(const ef_lms *m)
+{
+    return m && m->scaled;
 }
 
 int ef_lms_same_table(const ef_lms *m, int j, int k)
@@ -1268,7 +1489,7 @@ int ef_lms_same_table(const ef_lms *m, int j, int k)
 }
 
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double *est)
+                         double ca, double *est)
 {
     *est = 0;
     const int t = m->tab_of[k];
@@ -1287,5 +1508,17 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
     const double v = sg * tl * tab_row(tb->q, tb->nr, tb->nx, tb->lg, tl, col, fx, &ev, tb->e);
     const double w = sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
     *est = fabs(v - w) + sg * tl * ev;
+    if (m->spot) {   /* the cone's share where the light first scattered */
+        double fe;
+        const double f = spot_share_at(tb, tl, ca, &fe);
+        *est = *est * f + fabs(v) * fe;
+        /* the view's dependence is the point lamp's, whose light at the
+         * node travels out from the lamp; a spot's may come from its
+         * beam, across: what the view would take from light of no
+         * preferred direction, the table's mean, bounds the spread */
+        if (tb->phase != EF_PHASE_ISO && tb->g != 0)
+            *est += f * fabs(v - sg * tl * tab_row(tb->qb, tb->nr, 2, tb->lg, tl, 0, 0, NULL, NULL));
+        return v * f;
+    }
     return v;
 }

@@ -257,7 +257,7 @@ typedef struct lit_q {
  * rounded to double, whose rounding (an ulp of the ray's length) would be
  * a large share of d where the lamp is near the ray. */
 static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double *dlp,
-                     double *cthp)
+                     double *cthp, double *shp, double *cap)
 {
     const ef_light *l = q->l;
     const ef_ray *r = q->r;
@@ -281,7 +281,7 @@ static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double 
     }
     if (!(t >= 0))
         t = 0;
-    double dl = INFINITY, cth;
+    double dl = INFINITY, cth, sh = 1, ca = 1;
     if (!ef_light_at_position(l)) {
         cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
     } else {
@@ -290,11 +290,15 @@ static int node_geom(const lit_q *q, double u, double *tp, double *wgtp, double 
             return 0;
         cth = -ur / dl;
         if (ef_light_coned(l)) {
-            wgt *= ef_spot_share(l, -(q->wa - t * q->va) / dl);
-            if (wgt == 0)
+            ca = -(q->wa - t * q->va) / dl;
+            sh = ef_spot_share(l, ca);
+            /* (a spot's multiple scattering reaches outside its cone) */
+            if (sh == 0 && !q->lms)
                 return 0;
         }
     }
+    *shp = sh;
+    *cap = ca;
     *tp = t;
     *wgtp = wgt;
     *dlp = dl;
@@ -544,7 +548,7 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
  * both attenuated to the camera; a channel like the one before it (grey
  * fog) copies it. */
 static void lms_node(const lit_q *q, const double tv[3], const double tl[3], const double sg[3],
-                     double d, double nu, double wgt, double v[3], double e[3])
+                     double d, double nu, double ca, double wgt, double v[3], double e[3])
 {
     const ef_light *l = q->l;
     for (int k = 0; k < 3; ++k) {
@@ -558,7 +562,7 @@ static void lms_node(const lit_q *q, const double tv[3], const double tl[3], con
         if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
             continue;
         double est;
-        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, &est);
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, &est);
         const double w = exp(-tv[k]) * wgt * l->e[k];
         v[k] = f * w;
         e[k] = est * w;
@@ -609,11 +613,15 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
         v_sqrt(&d2, &dl);
         dd |= ~(dl > 0.0);
         const v4d cth = -ur / dl;
+        /* a spot's share (sh) and cosine from its aim (ca); its multiple
+         * scattering reaches outside the cone */
+        v4d sh = { 1, 1, 1, 1 }, ca = sh;
         if (coned)
             for (int i = 0; i < 4; ++i)
                 if (!dd[i]) {
-                    wgt[i] *= ef_spot_share(l, -(q->wa - t[i] * q->va) / dl[i]);
-                    dd[i] = wgt[i] == 0 ? -1 : 0;
+                    ca[i] = -(q->wa - t[i] * q->va) / dl[i];
+                    sh[i] = ef_spot_share(l, ca[i]);
+                    dd[i] = sh[i] == 0 && !q->lms ? -1 : 0;
                 }
         for (int i = 0; q->aux && i < 4 && 4 * g + i < n; ++i)
             for (int k = 0; k < 3; ++k)
@@ -705,7 +713,7 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 v_sel(&mt, &gone, &m708, &mt);
                 v_exp(&mt, &et);
             }
-            const v4d o = acc[ch] * et * wgt * l->e[ch];
+            const v4d o = acc[ch] * et * wgt * sh * l->e[ch];
             for (int i = 0; i < 4 && 4 * g + i < n; ++i)
                 out[4 * g + i][ch] = dd[i] || gone[i] || acc[ch][i] == 0 ? 0 : o[i];
         }
@@ -718,7 +726,7 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 tl[ch] = tlv[ch][i];
                 sg[ch] = sgv[ch][i];
             }
-            lms_node(q, tv, tl, sg, dl[i], cth[i], wgt[i], mv, me);
+            lms_node(q, tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me);
             for (int ch = 0; ch < 3; ++ch) {
                 out[4 * g + i][ch] += mv[ch];
                 q->aux[4 * g + i][ch] = me[ch];
@@ -742,16 +750,16 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
     const ef_fog_scene *s = q->s;
     if (q->vc && lamp_v(q, q->vc, u, n, out))
         return;   /* a lamp in height, uniform and convex fog, most lit fog */
-    double tn[15], wgt[15], dl[15], cth[15];
+    double tn[15], wgt[15], dl[15], cth[15], sh[15], ca[15];
     int live[15], m = 0;
     for (int j = 0; j < n; ++j) {
         out[j][0] = out[j][1] = out[j][2] = 0;
         if (q->aux)
             for (int k = 0; k < 3; ++k)
                 q->aux[j][k] = q->aux[15 + j][k] = 0;
-        if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m]))
+        if (!node_geom(q, u[j], &tn[m], &wgt[m], &dl[m], &cth[m], &sh[m], &ca[m]))
             continue;
-        if (q->uniform) {
+        if (q->uniform && !q->lms) {
             /* T(0,t) T_l = e^-(sig (t + d)); one phase per component, one
              * exponential per distinct density */
             const double t = tn[m], d = dl[m];
@@ -773,7 +781,8 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
              * times a near lamp's weight may overflow, and inf * 0 is no
              * answer */
             for (int k = 0; k < 3; ++k)
-                out[j][k] = q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt[m] * l->e[k];
+                out[j][k] =
+                    q->sig[k] == 0 || e[k] == 0 ? 0 : a[k] * e[k] * wgt[m] * sh[m] * l->e[k];
             continue;
         }
         live[m++] = j;
@@ -844,10 +853,10 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
         e[2] = tau[2] == tau[0] ? e[0] : exp(-tau[2]);
         for (int k = 0; k < 3; ++k)
             out[live[j]][k] =
-                acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * l->e[k];
+                acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * sh[j] * l->e[k];
         if (q->lms) {
             double mv[3], me[3];
-            lms_node(q, tv[j], tl[j], sgt[j], dl[j], cth[j], wgt[j], mv, me);
+            lms_node(q, tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me);
             for (int k = 0; k < 3; ++k) {
                 out[live[j]][k] += mv[k];
                 q->aux[live[j]][k] = me[k];

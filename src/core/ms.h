@@ -223,12 +223,25 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * d^2 and the lamp's intensity), and into *est the spread from the same
  * field scaled by the node's own extinction (sg^3 Q1(sg d, nu)) plus the
  * table's estimate: an estimate, calibrated against nested quadrature of
- * the second order and against Cycles (bench/ms_lamp.md). */
+ * the second order and against Cycles (bench/ms_lamp.md). ca: the
+ * cosine of the node's direction from the lamp against a spot's aim
+ * (ef_lms_spot; else unused). */
 int ef_lms_is_local(const ef_lms *m);
+/* Whether m is a spot's (ef_lms_spot), and whether its fog is not
+ * uniform (the field scaled as above); either makes it local. */
+int ef_lms_is_spot(const ef_lms *m);
+int ef_lms_is_scaled(const ef_lms *m);
 /* Whether channels j and k read the same table (one albedo). */
 int ef_lms_same_table(const ef_lms *m, int j, int k);
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double *est);
+                         double ca, double *est);
+/* Makes m a spot's (l's cone and aim; local mode from then on): at a node
+ * whose direction from the lamp has cosine ca from the aim, the table's
+ * value is taken times the cone's share averaged over where the light
+ * reaching the node first scattered (exact with isotropic phase; with
+ * another, the spread of two weightings of the multiple part joins the
+ * estimate; lit_lamp_ms.c). Returns 0, or -1 out of memory. */
+int ef_lms_spot(ef_lms *m, const struct ef_light *l);
 double ef_lms_rho(int nr, double lg, int i);
 
 #endif

@@ -123,11 +123,17 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
                          "by GMRES in %d iterations (residual %.1e); discretisation estimated "
                          "at %.1e of the largest source; %.3f s\n",
                     in.nodes, in.kept, in.nh, in.iterated, in.tail_rel, in.disc_rel, in.seconds);
-            if (ef_lms_is_local(l->lms))
+            if (ef_lms_is_scaled(l->lms))
                 fprintf(out, "  multiple scattering in this fog, which is not uniform: the "
                              "uniform fog's field read at each node of the lamp's quadrature, "
                              "scaled by the optical distance from the lamp (an approximation; "
                              "its estimate joins --aov error)\n");
+            if (ef_lms_is_spot(l->lms))
+                fprintf(out, "  a spot's multiple scattering: the point lamp's field at each "
+                             "node of its quadrature (in and outside the cone) times the cone's "
+                             "share averaged over where the light reaching the node first "
+                             "scattered (exact with isotropic phase; with another phase, an "
+                             "approximation whose estimate joins --aov error)\n");
         } else if (l->multiple) {
             ef_ms_info in;
             ef_ms_get_info(l->ms, &in);
@@ -340,9 +346,10 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
                 ef_lms_get_info(l->lms, &in);
                 fprintf(out, ", \"multiple\": {\"radial_nodes\": %d, \"directions\": %d, "
                              "\"legendre_terms\": %d, \"gmres_iterations\": %d, \"local\": %s, "
-                             "\"residual\": ",
+                             "\"cone_averaged\": %s, \"residual\": ",
                         in.nodes, in.kept, in.nh, in.iterated,
-                        ef_lms_is_local(l->lms) ? "true" : "false");
+                        ef_lms_is_local(l->lms) ? "true" : "false",
+                        ef_lms_is_spot(l->lms) ? "true" : "false");
             } else {
                 ef_ms_get_info(l->ms, &in);
                 fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "

@@ -623,7 +623,6 @@ static void test_refusals(void **state)
         ef_scene_free(&s);
     }
     static const char *const lights[] = {
-        "spot:position=0,1,0:aim=0,0,1:scattering=multiple",
         "sun:towards=0,1,0:ground=0",
         "sun:towards=0,1,0:scattering=some",
         "sun:towards=0,1,0:scattering=multiple:planet=earth",
