@@ -38,13 +38,16 @@ lamp = next((float(a[5:]) for a in sys.argv[14:] if a.startswith("lamp=")), None
 wall = next((a for a in sys.argv[14:] if a.startswith("wall=")), None)
 behind = "behind" in sys.argv[14:]
 falloff = next((a for a in sys.argv[14:] if a.startswith("falloff=")), None)
+# spot=CONE: the lamp is a spot of that cone (degrees, blend 0.2) aimed straight down (-z)
+spot = next((a for a in sys.argv[14:] if a.startswith("spot=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
        ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else ""))
 if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
-           + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else ""))
+           + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else "")
+           + ("_" + spot.replace("=", "") if spot else ""))
 
 
 def render(bounces):
@@ -52,7 +55,7 @@ def render(bounces):
     t0 = time.time()
     if lamp is not None:
         script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
-                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else [])
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else [])
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
@@ -95,6 +98,9 @@ if lamp is not None:
         fogs = ["--fog", "height:density=%r:%s:albedo=%r:phase=hg:g=%r" % (dens, falloff, albedo, g)]
     common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
     sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
+    if spot:   # cosine=1: Cycles 3.x's spots fall as cos alpha inside the cone too
+        sun = "spot:position=%r,%r,%r:aim=0,0,-1:cone=%s:blend=0.2:cosine=1:intensity=%r" % (
+            tuple(cam["lamp"]) + (spot[5:], cam["intensity"]))
 else:
     sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
 if sky:
@@ -147,6 +153,7 @@ rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
     "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
+    "spot": float(spot[5:]) if spot else None,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

@@ -15,7 +15,8 @@ default; BOUNCES -1: no fog (the depth alone). With falloff=K, exponential heigh
 instead: density DENSITY exp(-K z) over world z (up; the camera at z = 0), in a box 600 units
 wide from z = -4 / K to 15 / K (e^-15 of the density at the top; below the bottom the fog is
 already e^4 times denser, which takes what light reaches it), marched by Cycles in steps of
-about a fiftieth of the scale height 1 / K. Writes OUT (RGBA + Z, 32-bit) and OUT.json
+about a fiftieth of the scale height 1 / K. With spot=CONE the lamp is a spot of that cone
+(degrees, blend 0.2) aimed straight down, of the same 100 W. Writes OUT (RGBA + Z, 32-bit) and OUT.json
 (camera, lamp position and intensity)."""
 import json
 import math
@@ -36,6 +37,7 @@ width, height = int(args[7]), int(args[8])
 wall = float(next((a[5:] for a in args[9:] if a.startswith("wall=")), "0"))
 behind = "behind" in args[9:]
 falloff = float(next((a[8:] for a in args[9:] if a.startswith("falloff=")), "0"))
+spot = float(next((a[5:] for a in args[9:] if a.startswith("spot=")), "0"))
 sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
@@ -60,7 +62,9 @@ if plain:
     cube.hide_render = True
 cube.data.materials.append(m)
 pos = (0.15 * dist, -dist if behind else dist, 0.1 * dist)
-pl = bpy.data.lights.new("lamp", 'POINT'); pl.energy = 100.0; pl.shadow_soft_size = 0.0
+pl = bpy.data.lights.new("lamp", 'SPOT' if spot > 0 else 'POINT'); pl.energy = 100.0; pl.shadow_soft_size = 0.0
+if spot > 0:   # a spot of that cone, blend 0.2, aimed down (-z: a light's default)
+    pl.spot_size = math.radians(spot); pl.spot_blend = 0.2
 po = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(po)
 po.location = pos
 cam = ms_scene.camera(sc, (0, 0, 0), (90, 0, 0))

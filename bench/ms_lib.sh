@@ -36,16 +36,18 @@ ms_header() {
 # oiiotool copy, wall times appended to $tmp/cost as "KEY/RUN SECONDS"; the
 # multiple scattering's solve time (--explain) to $tmp/solves as
 # "KEY/solve SECONDS s". KEY is the fog, after "lc_tag: " when lc_tag is
-# set. Needs the globals build, tmp, die.
+# set. lc_light replaces the lamp's spec (scattering= is added). Needs the
+# globals build, tmp, die.
 lamp_cost() {
     local view="${lc_view:-2,-3,60}" lamp="${lc_lamp:-2,3,25}" fog key r m
+    local light="${lc_light:-point:position=$lamp:intensity=40}"
     "$build/make_sample" "$tmp/f.exr" --size 1920x1080 --view "$view" >/dev/null || die "make_sample"
     for fog in "$@"; do
         key="${lc_tag:+$lc_tag: }$fog"
         for r in 1 2 3 4 5; do
             for m in single multiple; do
                 /usr/bin/time -f "%e" -o "$tmp/t" "$build/exrfog" "$tmp/f.exr" -o "$tmp/o.exr" --fog "$fog" \
-                    --light "point:position=$lamp:intensity=40:scattering=$m" --threads 2 ||
+                    --light "$light:scattering=$m" --threads 2 ||
                     die "exrfog $m"
                 echo "$key/$m $(cat "$tmp/t")" >>"$tmp/cost"
             done
@@ -53,7 +55,7 @@ lamp_cost() {
             echo "$key/copy $(cat "$tmp/t")" >>"$tmp/cost"
         done
         "$build/exrfog" "$tmp/f.exr" --fog "$fog" --explain \
-            --light "point:position=$lamp:intensity=40:scattering=multiple" >"$tmp/explain.txt" 2>&1
+            --light "$light:scattering=multiple" >"$tmp/explain.txt" 2>&1
         grep 'multiple scattering: solved' "$tmp/explain.txt" | grep -o '[0-9.]* s$' | head -1 |
             sed "s/^/$key\/solve /" >>"$tmp/solves"
     done
