@@ -1296,9 +1296,10 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
  * (optical units; p(y) the phase at y towards x, the bracket what a point
  * lamp at y sends to x: its once-scattered light and Q). With isotropic
  * phase that is exact: the light leaving y is a point lamp's. With a
- * phase that is not, its multiple part takes p(y) too (light leaving
- * towards x), and the spread from taking 1 / (4 pi) there instead is the
- * estimate. Tabulated against |x| and the angle of x from the axis: y's
+ * phase that is not, the light that leaves y and scatters again before x
+ * may leave towards x (p(y)) or any way (1 / (4 pi)): the mean of the
+ * cone's share under the two is taken, and the spread of those and of
+ * other weightings (spot_kernel's var) is the estimate. Tabulated against |x| and the angle of x from the axis: y's
  * angle theta from x's direction has the marginal
  *
  *   K(theta) = (2 pi / r) int e^-s p(y) [omega p_x e^-d + d^2 Q(d)] dpsi
@@ -1435,9 +1436,14 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
                     for (int j = 0; j < SPOT_NT; ++j)
                         f[v] += K[v * SPOT_NT + j] * a[j];
                     f[v] = nk[v] > 0 ? f[v] / nk[v] : 0;
-                    dev = fmax(dev, fabs(f[v] - f[0]));
                 }
-                t->fb[(size_t) ir * SPOT_NA + i] = f[0];
+                /* the light that leaves y and is scattered again on its
+                 * way to x leaves towards x (p(y)) or in any direction
+                 * (1 / (4 pi)): the truth between, the midpoint taken */
+                const double mid = nv > 1 ? 0.5 * (f[0] + f[1]) : f[0];
+                for (int v = 0; v < nv; ++v)
+                    dev = fmax(dev, fabs(f[v] - mid));
+                t->fb[(size_t) ir * SPOT_NA + i] = mid;
                 t->fbe[(size_t) ir * SPOT_NA + i] = dev;
             }
         }
