@@ -479,6 +479,23 @@ static void test_spot_second_order(void **state)
            worst_iso);
 }
 
+/* Rays from the origin through, beside, before and behind a lamp at
+ * (1, 0.5, 10), and along and across the y axis: direction and length. */
+static const double lamp_rays[][4] = { { 0.11, 0.05, 1, INFINITY }, { 0, 0, 1, 6 },
+                                       { -0.5, 0.1, 1, 30 }, { 1, -0.2, 0.3, INFINITY },
+                                       { 0, 0, -1, INFINITY }, { 0, 1, 0.2, INFINITY } };
+#define LAMP_RAYS ((unsigned) (sizeof lamp_rays / sizeof *lamp_rays))
+
+/* Light 0 of each of the n scenes sc along lamp ray i: into S[j], its
+ * estimate into E[j]. */
+static void along_ray(ef_fog_scene *const *sc, int n, unsigned i, double (*S)[3], double (*E)[3])
+{
+    static const double cam[3] = { 0, 0, 0 };
+    const ef_ray r = ray(cam, lamp_rays[i][0], lamp_rays[i][1], lamp_rays[i][2], lamp_rays[i][3]);
+    for (int j = 0; j < n; ++j)
+        ef_light_inscatter(sc[j], &sc[j]->light[0], &r, S[j], E[j]);
+}
+
 /* Fog that is not uniform in the limit of none (height fog of falloff
  * 1e-9, on the vector path; a half-space whose plane is 1000 units away,
  * on the scalar one): the local mode, read at the lit quadrature's nodes,
@@ -495,17 +512,11 @@ static void test_local_uniform_limit(void **state)
     assert_true(ef_lms_is_local(sh.light[0].lms));
     assert_true(ef_lms_is_local(sp.light[0].lms));
     assert_false(ef_lms_is_local(su.light[0].lms));
-    const double cam[3] = { 0, 0, 0 };
-    static const double dirs[][4] = { { 0.11, 0.05, 1, INFINITY }, { 0, 0, 1, 6 },
-                                      { -0.5, 0.1, 1, 30 }, { 1, -0.2, 0.3, INFINITY },
-                                      { 0, 0, -1, INFINITY } };
     double worst = 0;
-    for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
-        ef_ray r = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], dirs[i][3]);
-        double Su[3], Eu[3], Sh[3], Eh[3], Sp[3], Ep[3];
-        ef_light_inscatter(&su, &su.light[0], &r, Su, Eu);
-        ef_light_inscatter(&sh, &sh.light[0], &r, Sh, Eh);
-        ef_light_inscatter(&sp, &sp.light[0], &r, Sp, Ep);
+    for (unsigned i = 0; i + 1 < LAMP_RAYS; ++i) {
+        double S3[3][3], E3[3][3];
+        along_ray((ef_fog_scene *const[]) { &su, &sh, &sp }, 3, i, S3, E3);
+        const double *Su = S3[0], *Eu = E3[0], *Sh = S3[1], *Eh = E3[1], *Sp = S3[2], *Ep = E3[2];
         const double d = fabs(Sh[0] - Su[0]), dp = fabs(Sp[0] - Su[0]);
         worst = fmax(worst, fmax(d, dp) / Su[0]);
         if (!(d <= 1e-4 * Su[0]) || !(d <= Eu[0] + Eh[0]))
@@ -541,17 +552,11 @@ static void test_spots_make_a_lamp(void **state)
     assert_true(ef_lms_is_local(s1.light[0].lms));
     assert_true(ef_lms_is_spot(s1.light[0].lms));
     assert_false(ef_lms_is_scaled(s1.light[0].lms));
-    const double cam[3] = { 0, 0, 0 };
-    static const double dirs[][4] = { { 0.11, 0.05, 1, INFINITY }, { 0, 0, 1, 6 },
-                                      { -0.5, 0.1, 1, 30 }, { 1, -0.2, 0.3, INFINITY },
-                                      { 0, 1, 0.2, INFINITY } };
     double worst = 0;
-    for (unsigned i = 0; i < sizeof dirs / sizeof *dirs; ++i) {
-        ef_ray r = ray(cam, dirs[i][0], dirs[i][1], dirs[i][2], dirs[i][3]);
-        double Sp[3], Ep[3], S1[3], E1[3], S2[3], E2[3];
-        ef_light_inscatter(&sp, &sp.light[0], &r, Sp, Ep);
-        ef_light_inscatter(&s1, &s1.light[0], &r, S1, E1);
-        ef_light_inscatter(&s2, &s2.light[0], &r, S2, E2);
+    for (unsigned i = 0; i < LAMP_RAYS; ++i) {
+        double S3[3][3], E3[3][3];
+        along_ray((ef_fog_scene *const[]) { &sp, &s1, &s2 }, 3, i, S3, E3);
+        const double *Sp = S3[0], *S1 = S3[1], *S2 = S3[2];
         const double d = fabs(S1[0] + S2[0] - Sp[0]);
         worst = fmax(worst, d / Sp[0]);
         printf("ray %u: two spots %.9g (%.3g + %.3g), a point lamp %.9g (%+.1e)\n", i,
