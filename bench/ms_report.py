@@ -1,0 +1,29 @@
+"""What the reports of bench/ms_lamp_height.sh and bench/ms_spot.sh share: the grid's rows from
+ms_compare.py, the summary of their median errors, and the cost runs' medians with the solve's
+own times (ms_lib.sh's lamp_cost writes both files)."""
+import json
+import statistics as st
+
+
+def grid(path):
+    """The rows of a grid file (one JSON object a line)."""
+    return [json.loads(l) for l in open(path) if l.strip()]
+
+
+def summary(rows):
+    """Prints the median of the per-case median errors, the worst, and Cycles' noise."""
+    med = [r["rel_median"] for r in rows]
+    print("- %d cases: median of the per-case median errors %.2f %% (worst %.2f %%); Cycles' noise per block median %.2f %%" % (
+        len(rows), 100 * st.median(med), 100 * max(med), 100 * st.median(r["noise_rel_median"] for r in rows)))
+
+
+def costs(cost_path, solve_path):
+    """Median wall time per KEY/RUN, the solve's seconds per KEY, and the KEYs in order."""
+    cost = {}
+    for l in open(cost_path):
+        k, v = l.rsplit(" ", 1)
+        cost.setdefault(k, []).append(float(v))
+    m = {k: st.median(v) for k, v in cost.items()}
+    solve = {k: float(v.split()[0]) for k, v in
+             (l.strip().split("/solve ") for l in open(solve_path) if "/solve " in l)}
+    return m, solve, sorted({k.rsplit("/", 1)[0] for k in m})
