@@ -1297,9 +1297,10 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
  * lamp at y sends to x: its once-scattered light and Q). With isotropic
  * phase that is exact: the light leaving y is a point lamp's. With a
  * phase that is not, the light that leaves y and scatters again before x
- * may leave towards x (p(y)) or any way (1 / (4 pi)): the mean of the
- * cone's share under the two is taken, and the spread of those and of
- * other weightings (spot_kernel's var) is the estimate. Tabulated against |x| and the angle of x from the axis: y's
+ * left towards x (p(y)) if x is near, any way (1 / (4 pi)) if x is many
+ * transport mean free paths away (1 / (1 - g) each, over which the
+ * direction is lost): p(y) fading as e^-(1 - g) d is taken, and the
+ * spread of other weightings (spot_kernel's var) is the estimate. Tabulated against |x| and the angle of x from the axis: y's
  * angle theta from x's direction has the marginal
  *
  *   K(theta) = (2 pi / r) int e^-s p(y) [omega p_x e^-d + d^2 Q(d)] dpsi
@@ -1315,11 +1316,12 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
 #define SPOT_NT 512      /* kernel angles (midpoints) */
 #define SPOT_NPHI 128    /* azimuths of A (midpoints over [0, pi]) */
 #define SPOT_NPSI 24     /* Gauss nodes on each of psi's pieces */
-#define SPOT_NV 7        /* the weightings (spot_kernel's var) */
+#define SPOT_NV 8        /* the weightings (spot_kernel's var) */
 
 /* K(theta_j) of table t at r for SPOT_NT midpoints into K (the constant
- * 2 pi / r dropped). var 0: as above; 1: the multiple part with 1 / (4
- * pi) for p(y); 2 and 3: p_x of the light travelling outwards along the
+ * 2 pi / r dropped). var 0: as above, the multiple part's p(y) fading to
+ * 1 / (4 pi) over a transport mean free path from y; 1: 1 / (4 pi) there,
+ * 7: p(y) there; 2 and 3: p_x of the light travelling outwards along the
  * radial, or back (a view along the lamp's line, against the mean over
  * views); 4: isotropic phase throughout (how much the phase moves it at
  * all); 5 and 6: p_x of a view across the radial, the light's sideways
@@ -1356,7 +1358,10 @@ static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, c
                 double v = t->omega * px * exp(-(s + d));
                 if (t->max_order != 2) {
                     const double rq = tab_row(qb, t->nr, 2, t->lg, d, 0, 0, NULL, NULL);
-                    v += exp(-s) * d * rq * (iso ? pm / py : 1);
+                    /* (var 0: the direction y sends it in is kept over
+                     * a transport mean free path, 1 / (1 - g), then lost) */
+                    const double mem = exp(-(1 - t->g) * d);
+                    v += exp(-s) * d * rq * (iso ? pm / py : var == 7 ? 1 : mem + (1 - mem) * pm / py);
                 }
                 sum += (b - a) * gw[i] * py * v;
             }
@@ -1437,10 +1442,7 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
                         f[v] += K[v * SPOT_NT + j] * a[j];
                     f[v] = nk[v] > 0 ? f[v] / nk[v] : 0;
                 }
-                /* the light that leaves y and is scattered again on its
-                 * way to x leaves towards x (p(y)) or in any direction
-                 * (1 / (4 pi)): the truth between, the midpoint taken */
-                const double mid = nv > 1 ? 0.5 * (f[0] + f[1]) : f[0];
+                const double mid = f[0];
                 for (int v = 0; v < nv; ++v)
                     dev = fmax(dev, fabs(f[v] - mid));
                 t->fb[(size_t) ir * SPOT_NA + i] = mid;
