@@ -38,9 +38,11 @@ echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycl
 echo "- exrfog: exp fog of the same density, albedo and HG g, --up-axis z, spot:position=1.5,10,1:aim=0,0,-1:cone=CONE:blend=0.2:cosine=1:intensity=100/(4 pi) with scattering=single and =multiple"
 echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
 echo
-"$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" <<'PYEOF'
-import json, sys, statistics as st
-rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+"$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" "$here" <<'PYEOF'
+import sys
+sys.path.insert(0, sys.argv[4])
+import ms_report
+rows = ms_report.grid(sys.argv[1])
 print("| density (lamp tau) | cone | albedo | g | single vs Cycles' bounces 0 (frame means) | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
 print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
@@ -51,23 +53,16 @@ for r in rows:
         100 * (r["exrfog_single_mean"] / r["cycles_single_mean"] - 1), 100 * r["rel_median"],
         100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
         r["err_rel_median"], 100 * r["covered"], ms_e / ms_c if ms_c > 0 else float("nan")))
-med = [r["rel_median"] for r in rows]
 print()
-print("- %d cases: median of the per-case median errors %.2f %% (worst %.2f %%); Cycles' noise per block median %.2f %%" % (
-    len(rows), 100 * st.median(med), 100 * max(med), 100 * st.median(r["noise_rel_median"] for r in rows)))
-cost = {}
-for l in open(sys.argv[2]):
-    k, v = l.rsplit(" ", 1)
-    cost.setdefault(k, []).append(float(v))
-m = {k: st.median(v) for k, v in cost.items()}
-solve = dict(l.strip().split("/solve ") for l in open(sys.argv[3]) if "/solve " in l)
+ms_report.summary(rows)
+m, solve, fogs = ms_report.costs(sys.argv[2], sys.argv[3])
 print()
 print("### Cost at 1080p (a spot, 2 threads, medians of 5 runs)")
 print()
 print("| shot and fog | oiiotool copy s | single s | multiple s | / single | the solve and the cone's table (once per scene) |")
 print("|---|---:|---:|---:|---:|---:|")
-for fog in sorted({k.rsplit("/", 1)[0] for k in m}):
+for fog in fogs:
     s1, sm = m[fog + "/single"], m[fog + "/multiple"]
-    sv = float(solve.get(fog, "0 s").split()[0])
+    sv = solve.get(fog, 0.0)
     print("| `%s` | %.2f | %.2f | %.2f | %.2fx | %.2f s |" % (fog, m[fog + "/copy"], s1, sm, sm / s1, sv))
 PYEOF
