@@ -43,8 +43,7 @@ lc_tag="camera 60 up, 20 degrees down" lc_view=60,-20,60 lamp_cost "height:densi
 ms_header "A point lamp's multiple scattering in height fog against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, 64x36, volume bounces 0 and 128; bench/ms_lamp_blender.py with falloff=K: height fog DENSITY exp(-K z) in a box 600 wide from z = -4/K to 15/K, a black world, the camera at the origin looking along +y (60 degrees), a point lamp of 100 W (radius 0) at (1.5, 10, 1)"
 echo "- exrfog: height:density=DENSITY:falloff=K with the same albedo and HG g, --up-axis z, point:position=1.5,10,1:intensity=100/(4 pi) with scattering=single and =multiple"
-echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
-echo
+ms_errors_note 4
 "$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" "$here" <<'PYEOF'
 import sys
 sys.path.insert(0, sys.argv[4])
@@ -53,14 +52,12 @@ rows = ms_report.grid(sys.argv[1])
 print("| density | falloff | density x 10 (the lamp's distance) | lamp | albedo | g | samples | single / Cycles (median) | single vs Cycles' bounces 0 | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
 print("|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
-    ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
-    ms_c = r["cycles_mean"] - r["cycles_single_mean"]
     print("| %g | %g | %.2f | %s | %g | %g | %d | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
         r["density"], r["falloff"], r["lamp_tau"], "behind the camera" if r.get("behind") else "ahead",
         r["albedo"], r["g"], r["spp"],
         r["single_share_median"], 100 * r["single_check_median"], 100 * r["rel_median"],
         100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
-        r["err_rel_median"], 100 * r["covered"], ms_e / ms_c if ms_c > 0 else float("nan")))
+        r["err_rel_median"], 100 * r["covered"], ms_report.ms_ratio(r)))
 print()
 ms_report.summary(rows)
 m, solve, fogs = ms_report.costs(sys.argv[2], sys.argv[3])

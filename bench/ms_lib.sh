@@ -60,3 +60,9 @@ lamp_cost() {
             sed "s/^/$key\/solve /" >>"$tmp/solves"
     done
 }
+
+# ms_errors_note BLOCK: the report's line on how errors are counted, and a blank line.
+ms_errors_note() {
+    echo "- errors per $1x$1 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
+    echo
+}

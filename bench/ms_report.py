@@ -27,3 +27,11 @@ def costs(cost_path, solve_path):
     solve = {k: float(v.split()[0]) for k, v in
              (l.strip().split("/solve ") for l in open(solve_path) if "/solve " in l)}
     return m, solve, sorted({k.rsplit("/", 1)[0] for k in m})
+
+
+def ms_ratio(r):
+    """The multiple scattering alone over the frame, exrfog's over Cycles' (multiple less single
+    against 128 bounces less 0)."""
+    ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
+    ms_c = r["cycles_mean"] - r["cycles_single_mean"]
+    return ms_e / ms_c if ms_c > 0 else float("nan")

@@ -36,8 +36,7 @@ lc_tag="a spot 25 ahead aimed down" lc_light="spot:position=2,3,25:aim=0,-1,0.2:
 ms_header "A spot's multiple scattering against Cycles (issue 44)"
 echo "- Blender $(blender --version 2>/dev/null | head -1 | cut -d' ' -f2), Cycles CPU, $spp samples, 64x36, volume bounces 0 and 128; bench/ms_lamp_blender.py with spot=CONE: homogeneous fog in a cube 4 km wide about the camera, a black world, the camera at the origin looking along +y (60 degrees), a spot of 100 W (radius 0, blend 0.2) at (1.5, 10, 1) aimed straight down"
 echo "- exrfog: exp fog of the same density, albedo and HG g, --up-axis z, spot:position=1.5,10,1:aim=0,0,-1:cone=CONE:blend=0.2:cosine=1:intensity=100/(4 pi) with scattering=single and =multiple"
-echo "- errors per 4x4 block, relative to Cycles' radiance with every bounce; 'covered': |exrfog - Cycles| within exrfog's error output plus twice Cycles' noise"
-echo
+ms_errors_note 4
 "$py" - "$tmp/grid.jsonl" "$tmp/cost" "$tmp/solves" "$here" <<'PYEOF'
 import sys
 sys.path.insert(0, sys.argv[4])
@@ -46,13 +45,11 @@ rows = ms_report.grid(sys.argv[1])
 print("| density (lamp tau) | cone | albedo | g | single vs Cycles' bounces 0 (frame means) | median \\|err\\| | 99th \\|err\\| | signed median | Cycles noise | error output (median) | covered | multiple alone, exrfog / Cycles (frame means) |")
 print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for r in rows:
-    ms_e = r["exrfog_multiple_mean"] - r["exrfog_single_mean"]
-    ms_c = r["cycles_mean"] - r["cycles_single_mean"]
     print("| %g (%.1f) | %g | %g | %g | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
         r["density"], r["lamp_tau"], r["spot"], r["albedo"], r["g"],
         100 * (r["exrfog_single_mean"] / r["cycles_single_mean"] - 1), 100 * r["rel_median"],
         100 * r["rel_p99"], 100 * r["rel_signed_median"], 100 * r["noise_rel_median"],
-        r["err_rel_median"], 100 * r["covered"], ms_e / ms_c if ms_c > 0 else float("nan")))
+        r["err_rel_median"], 100 * r["covered"], ms_report.ms_ratio(r)))
 print()
 ms_report.summary(rows)
 m, solve, fogs = ms_report.costs(sys.argv[2], sys.argv[3])
