@@ -250,8 +250,10 @@ typedef struct lit_q {
     double (*aux)[3];
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
- * lamp's distance dl (INFINITY for the sun) and the phase's cosine; 0
- * where the node carries no light. For a lamp,
+ * lamp's distance dl (INFINITY for the sun), the phase's cosine, and a
+ * spot's share (1 for other lights; the single scattering's factor, not
+ * in the weight) with the cosine from its aim; 0 where the node carries
+ * no light (outside a spot's cone unless it scatters multiply). For a lamp,
  * its distance and the phase's angle come from u - ts and the line's
  * distance h (both exact at the closest approach), not from a world point
  * rounded to double, whose rounding (an ulp of the ray's length) would be
