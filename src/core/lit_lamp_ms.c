@@ -864,15 +864,14 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
                            "scattered light serves them all); give them the same albedo=, "
                            "phase= and g=, or use scattering=single", l->spec);
     }
-    if (local && l->shadow && ef_light_coned(l))
-        return ef_fail(err, "--light '%s': a spot's multiple scattering is read along the "
-                       "quadrature a shadow map cuts (it would be shadowed with the single "
-                       "scattering); drop shadow= or use scattering=single", l->spec);
+    const int coned = ef_light_coned(l);
     if (local && l->shadow)
-        return ef_fail(err, "--light '%s': a lamp's multiple scattering in fog that is not "
-                       "uniform is read along the quadrature a shadow map cuts (it would be "
-                       "shadowed with the single scattering); drop shadow= or use uniform "
-                       "(exp) fog", l->spec);
+        return ef_fail(err, "--light '%s': %s is read along the quadrature a shadow map cuts "
+                       "(it would be shadowed with the single scattering); drop shadow= or use "
+                       "%s", l->spec,
+                       coned ? "a spot's multiple scattering"
+                             : "a lamp's multiple scattering in fog that is not uniform",
+                       coned ? "scattering=single" : "uniform (exp) fog");
     return 0;
 }
 
@@ -886,7 +885,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         return ef_fail(err, "--light '%s': scattering=multiple needs fog (--fog)", l->spec);
     /* a spot's cone breaks the symmetry the gather needs: read at the
      * lit quadrature's nodes as fog that is not uniform is */
-    const int local = !all_uniform(s, sig) || ef_light_coned(l);
+    const int uniform = all_uniform(s, sig), local = !uniform || ef_light_coned(l);
     if ((local || s->ncomp > 1) && lms_refuse(s, l, local, err))
         return -1;
     const ef_fog_component *c = &s->comp[0];
@@ -907,8 +906,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         return ef_fail(err, "out of memory for a lamp's multiple scattering");
     atomic_init(&m->refs, 1);
     m->local = local;
-    double sig_u[3];
-    m->scaled = !all_uniform(s, sig_u);
+    m->scaled = !uniform;
     memcpy(m->pos, l->pos, sizeof m->pos);
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
@@ -1300,8 +1298,9 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
  * left towards x (p(y)) if x is near, any way (1 / (4 pi)) if x is many
  * transport mean free paths away (1 / (1 - g) each, over which the
  * direction is lost): p(y) fading as e^-(1 - g) d is taken, and the
- * spread of other weightings (spot_kernel's var) is the estimate. Tabulated against |x| and the angle of x from the axis: y's
- * angle theta from x's direction has the marginal
+ * spread of other weightings (spot_kernel's var) is the estimate.
+ * Tabulated against |x| and the angle of x from the axis: y's angle theta
+ * from x's direction has the marginal
  *
  *   K(theta) = (2 pi / r) int e^-s p(y) [omega p_x e^-d + d^2 Q(d)] dpsi
  *
@@ -1325,8 +1324,8 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
  * radial, or back (a view along the lamp's line, against the mean over
  * views); 4: isotropic phase throughout (how much the phase moves it at
  * all); 5 and 6: p_x of a view across the radial, the light's sideways
- * part towards it or away (a halo beside the cone is seen so). qb: the table's r Q averaged over directions ([nr][2], both
- * alike). */
+ * part towards it or away (a halo beside the cone is seen so). qb: the
+ * table's r Q averaged over directions ([nr][2], both alike). */
 static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, const double *gx,
                         const double *gw, double *K)
 {
@@ -1361,7 +1360,8 @@ static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, c
                     /* (var 0: the direction y sends it in is kept over
                      * a transport mean free path, 1 / (1 - g), then lost) */
                     const double mem = exp(-(1 - t->g) * d);
-                    v += exp(-s) * d * rq * (iso ? pm / py : var == 7 ? 1 : mem + (1 - mem) * pm / py);
+                    const double keep = iso ? pm / py : var == 7 ? 1 : mem + (1 - mem) * pm / py;
+                    v += exp(-s) * d * rq * keep;
                 }
                 sum += (b - a) * gw[i] * py * v;
             }
@@ -1421,7 +1421,7 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
             }
             qb[2 * i] = qb[2 * i + 1] = sum;
         }
-        /* with a phase that is not isotropic, three more weightings
+        /* with a phase that is not isotropic, seven more weightings
          * whose spread from the first is the estimate */
         const int nv = t->phase != EF_PHASE_ISO && t->g != 0 ? SPOT_NV : 1;
         const double lr = log(t->rmax / SPOT_RMIN);
@@ -1442,10 +1442,9 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
                         f[v] += K[v * SPOT_NT + j] * a[j];
                     f[v] = nk[v] > 0 ? f[v] / nk[v] : 0;
                 }
-                const double mid = f[0];
-                for (int v = 0; v < nv; ++v)
-                    dev = fmax(dev, fabs(f[v] - mid));
-                t->fb[(size_t) ir * SPOT_NA + i] = mid;
+                for (int v = 1; v < nv; ++v)
+                    dev = fmax(dev, fabs(f[v] - f[0]));
+                t->fb[(size_t) ir * SPOT_NA + i] = f[0];
                 t->fbe[(size_t) ir * SPOT_NA + i] = dev;
             }
         }
@@ -1525,7 +1524,8 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
          * beam, across: what the view would take from light of no
          * preferred direction, the table's mean, bounds the spread */
         if (tb->phase != EF_PHASE_ISO && tb->g != 0)
-            *est += f * fabs(v - sg * tl * tab_row(tb->qb, tb->nr, 2, tb->lg, tl, 0, 0, NULL, NULL));
+            *est += f * fabs(v - sg * tl * tab_row(tb->qb, tb->nr, 2, tb->lg, tl, 0, 0, NULL,
+                                                   NULL));
         return v * f;
     }
     return v;

@@ -239,8 +239,8 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
  * whose direction from the lamp has cosine ca from the aim, the table's
  * value is taken times the cone's share averaged over where the light
  * reaching the node first scattered (exact with isotropic phase; with
- * another, the spread of two weightings of the multiple part joins the
- * estimate; lit_lamp_ms.c). Returns 0, or -1 out of memory. */
+ * another, the spread of eight weightings and the view's dependence join
+ * the estimate; lit_lamp_ms.c). Returns 0, or -1 out of memory. */
 int ef_lms_spot(ef_lms *m, const struct ef_light *l);
 double ef_lms_rho(int nr, double lg, int i);
 

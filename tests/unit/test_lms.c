@@ -427,7 +427,8 @@ static double ref_Q2_spot(double om, double g, double r, double nu, const double
  * mean free paths). With isotropic phase the spot's averaged share is
  * exact, so the table's own accuracy holds (its second order is within
  * 2e-3 of nested quadrature, test_second_order); with HG phase the
- * estimate must cover the difference. Points inside the cone, in its
+ * estimate must cover the difference and the value be within a quarter
+ * of the reference (measured 4.6 and 18 %). Points inside the cone, in its
  * blend, just outside it (lit by scattered light alone) and behind the
  * spot, near and far. */
 static void test_spot_second_order(void **state)
@@ -470,7 +471,10 @@ static void test_spot_second_order(void **state)
             worst_iso = fmax(worst_iso, fabs(got - want) / want);
             if (!(fabs(got - want) <= 5e-3 * want))
                 fail_msg("case %u: Q_2 %.9g against %.9g", i, got, want);
-        } else if (!(fabs(got - want) <= est + 2e-3 * want)) {
+        } else if (!(fabs(got - want) <= est + 2e-3 * want) ||
+                   !(fabs(got - want) <= 0.25 * want)) {
+            /* the estimate is loose in HG fog (about the value itself): the
+             * approximation is held to a quarter of the reference as well */
             fail_msg("case %u: Q_2 %.9g against %.9g, estimate %.3g", i, got, want, est);
         }
         ef_lms_unref(m);
