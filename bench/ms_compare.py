@@ -40,6 +40,7 @@ behind = "behind" in sys.argv[14:]
 falloff = next((a for a in sys.argv[14:] if a.startswith("falloff=")), None)
 # spot=CONE: the lamp is a spot of that cone (degrees, blend 0.2) aimed straight down (-z)
 spot = next((a for a in sys.argv[14:] if a.startswith("spot=")), None)
+across = spot is not None and "across" in sys.argv[14:]   # the spot aimed along -x instead
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
@@ -47,7 +48,7 @@ tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "
 if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
            + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else "")
-           + ("_" + spot.replace("=", "") if spot else ""))
+           + ("_" + spot.replace("=", "") if spot else "") + ("_across" if across else ""))
 
 
 def render(bounces):
@@ -55,7 +56,7 @@ def render(bounces):
     t0 = time.time()
     if lamp is not None:
         script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
-                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else [])
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else []) + (["across"] if across else [])
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
@@ -99,8 +100,8 @@ if lamp is not None:
     common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
     sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
     if spot:   # cosine=1: Cycles 3.x's spots fall as cos alpha inside the cone too
-        sun = "spot:position=%r,%r,%r:aim=0,0,-1:cone=%s:blend=0.2:cosine=1:intensity=%r" % (
-            tuple(cam["lamp"]) + (spot[5:], cam["intensity"]))
+        sun = "spot:position=%r,%r,%r:aim=%s:cone=%s:blend=0.2:cosine=1:intensity=%r" % (
+            tuple(cam["lamp"]) + ("-1,0,0" if across else "0,0,-1", spot[5:], cam["intensity"]))
 else:
     sun = "sun:towards=%r,%r,%r:intensity=1" % tuple(cam["towards"])
 if sky:
@@ -153,7 +154,7 @@ rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
     "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
-    "spot": float(spot[5:]) if spot else None,
+    "spot": float(spot[5:]) if spot else None, "across": across,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

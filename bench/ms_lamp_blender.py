@@ -16,7 +16,8 @@ instead: density DENSITY exp(-K z) over world z (up; the camera at z = 0), in a 
 wide from z = -4 / K to 15 / K (e^-15 of the density at the top; below the bottom the fog is
 already e^4 times denser, which takes what light reaches it), marched by Cycles in steps of
 about a fiftieth of the scale height 1 / K. With spot=CONE the lamp is a spot of that cone
-(degrees, blend 0.2) aimed straight down, of the same 100 W. Writes OUT (RGBA + Z, 32-bit) and OUT.json
+(degrees, blend 0.2) aimed straight down (with across, along -x: across the view), of the
+same 100 W. Writes OUT (RGBA + Z, 32-bit) and OUT.json
 (camera, lamp position and intensity)."""
 import json
 import math
@@ -67,6 +68,8 @@ if spot > 0:   # a spot of that cone, blend 0.2, aimed down (-z: a light's defau
     pl.spot_size = math.radians(spot); pl.spot_blend = 0.2
 po = bpy.data.objects.new("lamp", pl); sc.collection.objects.link(po)
 po.location = pos
+if spot > 0 and "across" in args[9:]:   # aimed along -x, across the view: -z turned 90 degrees about y
+    po.rotation_euler = (0, math.radians(90), 0)
 cam = ms_scene.camera(sc, (0, 0, 0), (90, 0, 0))
 sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
