@@ -547,6 +547,7 @@ typedef struct px_lit {
     unsigned dmask;
     double dend;
     ef_lit_dense *dense;       /* the thread's (ef_deep_buf.dense): its memo changes */
+    double rel;                /* the lights' quadratures' accuracy (dense_rel) */
 } px_lit;
 
 static void seg_tau(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1, double a, double b,
@@ -653,12 +654,13 @@ typedef struct piece {
 /* Light j's in-scatter over [a, b) seen from a from its dense output:
  * (J(b) - J(a)) / T(0, a), Ta = T(0, a), with the leaves' estimates from
  * a's to b's as its error. 0 (the caller integrates the segment itself)
- * where that error passes 1e-6 of the segment's light plus 1e-9 of the
- * whole ray's (a segment beyond which T has underflowed, or one whose
- * difference the whole ray's rounding would swamp): what a composite sees
- * of a sample is T(0, a) times its light, so the second term bounds the
- * composite's error at 1e-9 of the pixel's light, far inside --deep-tol
- * (test_light's test_dense measures 4e-12). */
+ * where that error passes 1e-6 of the segment's light plus ten times the
+ * build's relative accuracy of the whole ray's (dense_rel: 1e-6 at the
+ * default --deep-tol; a segment beyond which T has underflowed, or one
+ * whose difference the whole ray's rounding would swamp): what a
+ * composite sees of a sample is T(0, a) times its light, so the second
+ * term bounds the composite's error at 1e-3 of --deep-tol (1e-9 at least)
+ * relative to the pixel's light. */
 static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], double v[3],
                        double e[3])
 {
@@ -670,12 +672,23 @@ static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], 
         const double dj = Jb[k] - Ja[k];
         /* the leaves from a's to b's, and the rounding of J's sums */
         const double de = (Eb[k] - La[k]) + 1e-15 * fabs(Jb[k]);
-        if (!(Ta[k] > 1e-300) || !(de <= 1e-6 * fabs(dj) + 1e-9 * fabs(Jt[k])))
+        if (!(Ta[k] > 1e-300) || !(de <= 1e-6 * fabs(dj) + 10 * d->rel * fabs(Jt[k])))
             return 0;
         v[k] = dj > 0 ? dj / Ta[k] : 0;
         e[k] = de / Ta[k];
     }
     return 1;
+}
+
+/* The relative accuracy a pixel's dense output is built to for
+ * --deep-tol tol: 1e-4 of it, between 1e-10 (the flat path's) and 1e-7.
+ * The output's samples need their light to a small share of what a split
+ * may change, not to the flat path's 1e-10 or 1e-13, and a Kronrod rule's
+ * pieces grow as the accuracy loosens (Balls, a lamp in height fog: the
+ * --deep fog run 10.1 -> 8.5 s). */
+static double dense_rel(double tol)
+{
+    return fmin(1e-7, fmax(1e-10, 1e-4 * tol));
 }
 
 /* T(0, a) along r1 per channel into Ta, unless Ta[0] >= 0 says it is there. */
@@ -746,9 +759,9 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
             /* the single scattering here, the multiple below */
             ef_light single = *l;
             single.lms = NULL;
-            ef_light_inscatter(s, &single, &seg, v, e);
+            ef_light_inscatter_rel(s, &single, &seg, lt ? lt->rel : 0, v, e);
         } else if (!done) {
-            ef_light_inscatter(s, l, &seg, v, e);
+            ef_light_inscatter_rel(s, l, &seg, lt ? lt->rel : 0, v, e);
         }
         if (gather) {
             /* the dense output or the segment's inscatter is the single
@@ -903,11 +916,11 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
                      const ef_ray *r1, double a, double b, double *Tf, ef_deep_buf *fog,
                      ef_deep_stats *st)
 {
-    enum { DEPTH = 48 };
-    piece stack[DEPTH + 2];
+    enum { DEPTH = 48, PARTS = 8, STACK = DEPTH + 2 + 2 * PARTS };
+    piece stack[STACK];
     /* with F->per_light, stack entry i's light per light, kept beside the
      * stack (not in each piece, which is copied as it moves) */
-    double sl[DEPTH + 2][EF_MAX_LIGHTS + 1][3];
+    double sl[STACK][EF_MAX_LIGHTS + 1][3];
 #define PER(i) (F->per_light ? sl[(i)] : NULL)
     int linear;
     const ef_fog_scene *sc = F->scene;
@@ -948,6 +961,36 @@ static int fog_piece(const ef_deep_layout *L, const ef_deep_fog *F, const px_lit
             const double ec = color_est(&p, &front, *Tf, lt->scale);
             est = fmax(est, ec);
             split = ec > F->tol;
+        }
+        /* how many equal parts: the estimate falls with the square of a
+         * piece's length, so sqrt(est / tol) parts would each pass; a
+         * part that does not splits again, so this only saves the tests
+         * of the levels a bisection would pass through */
+        int parts = 2;
+        if (split) {
+            const double want = fmax(max3(p.tau) / F->tau_cap, sqrt(est / F->tol));
+            parts = want < PARTS ? (int) ceil(want) : PARTS;
+            /* room for the top part's bisections down to DEPTH */
+            if (parts < 2 || sp + parts + DEPTH - p.depth - 1 > STACK)
+                parts = 2;
+        }
+        if (split && parts > 2) {
+            /* front to back, so that each part's T(0, a) follows from
+             * the one before; the first on top of the stack */
+            const double h = (sb - sa) / parts;
+            double Ta[3];
+            memcpy(Ta, p.Ta, sizeof Ta);
+            for (int i = 0; i < parts; ++i) {
+                const double x0 = i ? sa + i * h : sa, x1 = i + 1 < parts ? sa + (i + 1) * h : sb;
+                const int slot = sp + parts - 1 - i;
+                stack[slot] = make_piece(F, lt, r1, x0, x1, p.depth + 1, NULL, PER(slot),
+                                         Ta[0] >= 0 ? Ta : NULL);
+                for (int k = 0; k < 3; ++k)
+                    Ta[k] = stack[slot].Ta[k] >= 0 ? stack[slot].Ta[k] * exp(-stack[slot].tau[k])
+                                                   : -1;
+            }
+            sp += parts;
+            continue;
         }
         if (split) {
             /* the back half after: in p's slot, the front above it */
@@ -1123,7 +1166,8 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
     /* a sky carried through the fog (scattering=multiple) is lit like a
      * light, per sample; else its unattenuated light joins the colours */
     px_lit lt = { .lights = s->nlight > 0 || (s->sky_light && s->sky_multiple),
-                  .sky = s->sky_light != NULL && !s->sky_multiple };
+                  .sky = s->sky_light != NULL && !s->sky_multiple,
+                  .rel = dense_rel(F->tol) };
     for (int i = 0; lt.sky && i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         ef_sky_light_eval(s->sky_light, c->phase, c->g, s->ctx.up, r1.dir, lt.sky_c[i]);
@@ -1152,6 +1196,7 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
             }
             const ef_ray whole = seg_ray(&r1, 0, end);
             for (int j = 0; j < s->nlight; ++j) {
+                fog->dense[j].rel = lt.rel;
                 const int rc = ef_lit_dense_build(s, &s->light[j], &whole, &fog->dense[j]);
                 if (rc < 0)
                     return -1;

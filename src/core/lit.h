@@ -26,6 +26,11 @@ int ef_light_dark(const ef_fog_scene *s, const ef_light *l);
  * segment itself. */
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
+/* ef_light_inscatter with its quadrature aiming at relative accuracy rel
+ * (0: its own, 1e-10 or 1e-13): deep samples, whose light a composite
+ * needs to a share of --deep-tol, not to the flat path's digits. */
+void ef_light_inscatter_rel(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double rel,
+                            double S[3], double err[3]);
 
 /* ef_light_inscatter for each of the n rays r[j]: S[k][j] and, where E is
  * not NULL, the estimate E[k][j], the same bits. A point lamp in uniform
@@ -85,6 +90,9 @@ typedef struct ef_lit_dense {
      * t, then J, E and Elo */
     double memo[4][10];
     int nmemo, next;
+    /* the relative accuracy the build aims at, set by the caller (0: the
+     * flat path's own, REL_UNIFORM or REL_GENERAL of lit_quad.c) */
+    double rel;
 } ef_lit_dense;
 
 /* Builds d for light l of s along the whole of r (org the camera, r->dist

@@ -104,9 +104,10 @@ static const double lg_I[EF_LIT_DENSE_NC] = {
  * a shadow map's visibility), without the closed forms. */
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                              double D, double w, ef_lit_dense *d);
-/* The general quadrature of l's light over [a, D] of r, added to S and E. */
+/* The general quadrature of l's light over [a, D] of r, added to S and E,
+ * to relative accuracy rel (0: its own). */
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                       double D, double S[3], double E[3]);
+                       double D, double rel, double S[3], double E[3]);
 
 /* ---- lit.c: a lamp's geometry, the uniform medium ---- */
 

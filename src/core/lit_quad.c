@@ -1107,7 +1107,8 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
  * in t or in the lamp's angle, with a point lamp in uniform isotropic fog
  * by its closed form first. */
 static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                       double D, double S[3], double E[3], ef_lit_dense *dense, double vis)
+                       double D, double S[3], double E[3], ef_lit_dense *dense, double vis,
+                       double rel_in)
 {
     lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 }, NULL, NULL,
                 NULL };
@@ -1208,7 +1209,8 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     }
     if (isfinite(D))
         cut[n++] = D;
-    const double rel = q.uniform ? REL_UNIFORM : REL_GENERAL;
+    const double rel = rel_in > 0 ? rel_in : q.uniform ? REL_UNIFORM : REL_GENERAL;
+    const double rel_general = rel_in > 0 ? rel_in : REL_GENERAL;
     if (q.equi) {
         /* pieces within W of the lamp in xi = atan((t - ts) / hq), the
          * others in u = t - ts; an infinite ray's last piece in v, u =
@@ -1245,7 +1247,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
          * is at most max(albedo p) E T(0,t) (1 - T(t,inf)) per channel,
          * which joins the error estimate. */
         qsort(cut, (size_t) n, sizeof cut[0], cmp_double);
-        gk_adapt_rec(lit_integrand, &q, cut, n, REL_GENERAL, S, E, rec, q.aux, X);
+        gk_adapt_rec(lit_integrand, &q, cut, n, rel_general, S, E, rec, q.aux, X);
         const double cth = l->dir[0] * r->dir[0] + l->dir[1] * r->dir[1] + l->dir[2] * r->dir[2];
         double pmax = 0;
         for (int i = 0; i < s->ncomp; ++i)
@@ -1260,7 +1262,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
             int done = 1;
             for (int k = 0; k < 3; ++k) {
                 tail[k] = pmax * l->e[k] * exp(-tv[k]) * -expm1(-tr[k]);
-                done &= !(tail[k] > REL_GENERAL * fabs(S[k])) || tail[k] < 1e-300;
+                done &= !(tail[k] > rel_general * fabs(S[k])) || tail[k] < 1e-300;
             }
             if (done || !(ta + len < 1e300)) {
                 for (int k = 0; k < 3; ++k)
@@ -1268,7 +1270,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
                 break;
             }
             const double piece[2] = { ta, ta + len };
-            gk_adapt_rec(lit_integrand, &q, piece, 2, REL_GENERAL, S, E, rec, q.aux, X);
+            gk_adapt_rec(lit_integrand, &q, piece, 2, rel_general, S, E, rec, q.aux, X);
             ta += len;
             len *= 2;
         }
@@ -1283,16 +1285,16 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 }
 
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                       double D, double S[3], double E[3])
+                       double D, double rel, double S[3], double E[3])
 {
-    quad_range(s, l, r, a, D, S, E, NULL, 1);
+    quad_range(s, l, r, a, D, S, E, NULL, 1, rel);
 }
 
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                              double D, double w, ef_lit_dense *d)
 {
     double S[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
-    quad_range(s, l, r, a, D, S, E, d, w);
+    quad_range(s, l, r, a, D, S, E, d, w, d->rel);
     /* a lamp on the segment itself (inf) has no leaves to hold it */
     for (int k = 0; k < 3; ++k)
         if (!isfinite(S[k]) && !d->failed)

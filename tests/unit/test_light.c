@@ -568,6 +568,11 @@ static void test_dense(void **state)
         { { "height:density=0.05,0.03,0.02:falloff=0.3:base=0:albedo=0.9,1,0.6", NULL },
           "point:position=1,3,-20:intensity=100:color=1,0.5,0.2", { 0.05, -0.02, -1 }, 100 },
     };
+    /* pass 0 at the flat path's accuracy; pass 1 at what deep output
+     * builds for the default --deep-tol (1e-7, deep.c's dense_rel), whose
+     * promise is a composite error within 1e-6 of the pixel's light */
+    for (int pass = 0; pass < 2; ++pass) {
+    const double rel = pass ? 1e-7 : 0;
     uint64_t seed = 12345;
     double worst_piece = 0, worst_total = 0;
     int n = 0;
@@ -582,13 +587,14 @@ static void test_dense(void **state)
         const double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
         ef_ray r = { { d[0] / dn, d[1] / dn, d[2] / dn }, cs[c].D, cs[c].D, { 0, 1.7, 0 } };
         ef_lit_dense dense = { 0 };
+        dense.rel = rel;
         assert_int_equal(ef_lit_dense_build(&s, &s.light[0], &r, &dense), 0);
         double Jt[3], Et[3], Lt[3];
         ef_lit_dense_at(&dense, INFINITY, Jt, Et, Lt);
         double whole[3], we[3];
         ef_light_inscatter(&s, &s.light[0], &r, whole, we);
         for (int k = 0; k < 3; ++k)
-            assert_true(fabs(Jt[k] - whole[k]) <= 1e-9 * whole[k] + 1e-300);
+            assert_true(fabs(Jt[k] - whole[k]) <= (pass ? 1e-6 : 1e-9) * whole[k] + 1e-300);
         const double span = isfinite(cs[c].D) ? cs[c].D : 200;
         for (int i = 0; i < 300; ++i) {
             seed = seed * 6364136223846793005ull + 1442695040888963407ull;
@@ -624,17 +630,19 @@ static void test_dense(void **state)
                 const double got = (Jb[k] - Ja[k]) / Ta, diff = fabs(got - want[k]);
                 worst_piece = fmax(worst_piece, want[k] > 0 ? diff / want[k] : diff);
                 worst_total = fmax(worst_total, diff * Ta / Jt[k]);
-                if (!(diff <= 1e-7 * want[k] + 1e-10 * Jt[k] / Ta))
-                    fail_msg("case %zu [%g, %g) channel %d: dense %.17g, per segment %.17g",
-                             c, a, b, k, got, want[k]);
+                if (!(pass ? diff * Ta <= 1e-6 * Jt[k]
+                           : diff <= 1e-7 * want[k] + 1e-10 * Jt[k] / Ta))
+                    fail_msg("pass %d case %zu [%g, %g) channel %d: dense %.17g, per segment "
+                             "%.17g", pass, c, a, b, k, got, want[k]);
                 ++n;
             }
         }
         ef_lit_dense_free(&dense);
         ef_scene_free(&s);
     }
-    printf("dense in-scatter: %d segments; worst relative to the segment %.2e, to the ray's "
-           "light %.2e\n", n, worst_piece, worst_total);
+    printf("dense in-scatter at rel %g: %d segments; worst relative to the segment %.2e, to "
+           "the ray's light %.2e\n", rel, n, worst_piece, worst_total);
+    }
 }
 
 /* Limits worked by hand. A horizontal view ray at height y in height fog
