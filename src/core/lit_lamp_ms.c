@@ -297,20 +297,21 @@ static void tab_col(int nx, double nu, int *k, double *fx)
     *fx = x - *k;
 }
 
-/* Table value r Q at radius r in column (k, fx), cubic in the radial
- * position; with ev, te's the same way (its absolute value); 0 past
- * rmax. */
-static double tab_row(const double *tq, int nr, int nx, double lg, double r, int k, double fx,
-                      double *ev, const double *te)
+/* The rows about optical distance r and their cubic weights (rows4);
+ * 0 past rmax (the table's value is 0 there). */
+static int tab_rows(int nr, double lg, double r, int *r0, double w[4])
 {
-    if (ev)
-        *ev = 0;
     const double u = log1p(r / LMS_RS) / lg * (nr - 1);
     if (!(u <= nr - 1))
         return 0;
-    double w[4];
-    int r0;
-    rows4(u, nr, &r0, w);
+    rows4(u, nr, r0, w);
+    return 1;
+}
+
+/* tab_row's sum over rows r0 to r0 + 3 with weights w. */
+static double tab_sum(const double *tq, int nx, int r0, const double w[4], int k, double fx,
+                      double *ev, const double *te)
+{
     double v = 0, e = 0;
     for (int j = 0; j < 4; ++j) {
         const size_t a = (size_t) (r0 + j) * nx + k;
@@ -321,6 +322,21 @@ static double tab_row(const double *tq, int nr, int nx, double lg, double r, int
     if (ev)
         *ev = fabs(e);
     return v;
+}
+
+/* Table value r Q at radius r in column (k, fx), cubic in the radial
+ * position; with ev, te's the same way (its absolute value); 0 past
+ * rmax. */
+static double tab_row(const double *tq, int nr, int nx, double lg, double r, int k, double fx,
+                      double *ev, const double *te)
+{
+    if (ev)
+        *ev = 0;
+    double w[4];
+    int r0;
+    if (!tab_rows(nr, lg, r, &r0, w))
+        return 0;
+    return tab_sum(tq, nx, r0, w, k, fx, ev, te);
 }
 
 /* Table value r Q at (r, nu), cubic in the radial position and linear in
@@ -1512,8 +1528,16 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
     int col;
     double fx;
     tab_col(tb->nx, nu, &col, &fx);
-    const double v = sg * tl * tab_row(tb->q, tb->nr, tb->nx, tb->lg, tl, col, fx, &ev, tb->e);
-    const double w = sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
+    /* tl's rows serve the value and the view's mean; sd's are tl's in
+     * uniform fog, where the two distances agree to rounding */
+    double wt[4];
+    int r0;
+    const int in = tab_rows(tb->nr, tb->lg, tl, &r0, wt);
+    ev = 0;
+    const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, &ev, tb->e) : 0;
+    const double w = fabs(sd - tl) <= 1e-12 * tl
+                         ? v
+                         : sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
     *est = fabs(v - w) + sg * tl * ev;
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;
@@ -1524,8 +1548,7 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
          * beam, across: what the view would take from light of no
          * preferred direction, the table's mean, bounds the spread */
         if (tb->phase != EF_PHASE_ISO && tb->g != 0)
-            *est += f * fabs(v - sg * tl * tab_row(tb->qb, tb->nr, 2, tb->lg, tl, 0, 0, NULL,
-                                                   NULL));
+            *est += f * fabs(v - (in ? sg * tl * tab_sum(tb->qb, 2, r0, wt, 0, 0, NULL, NULL) : 0));
         return v * f;
     }
     return v;
