@@ -731,7 +731,9 @@ for spec_text, model, step in (
 # scattering=multiple over a half-space layer, a sky light of a constant
 # map carried through it, a point lamp in exp fog (its multiple
 # scattering beside the dense output of its single scattering) and one in
-# height fog (ms.h's local mode: inside the dense output's integrand). Each deep sample gathers its own share of the
+# height fog (ms.h's local mode: inside the dense output's integrand), and
+# a spot in exp fog (its cone's share read at every node, inside the cone
+# and out). Each deep sample gathers its own share of the
 # solve, so the three ways to a flat image (--deep flatten, --deep samples
 # flattened by OIIO, the fog element deep-merged by OIIO) must agree within
 # half precision; and the multiple scattering must take effect: the sun's
@@ -748,9 +750,11 @@ height_fog = ["--fog", "height:density=0.1:falloff=0.3:base=-1:albedo=0.95:phase
 lamp_ms = ["--light", "point:position=0.5,1,3:intensity=5:scattering=multiple"]
 for what, light in (("sun", ["--light", "sun:towards=0.3,1,0.5:intensity=2:scattering=multiple"]),
                     ("sky", ["--sky-light", env1 + ":scattering=multiple"]),
-                    ("lamp", lamp_ms), ("lamp in height fog", lamp_ms)):
-    ms_fog = (lamp_fog if what == "lamp" else height_fog if what == "lamp in height fog"
-              else ms_fog_layer)
+                    ("lamp", lamp_ms), ("lamp in height fog", lamp_ms),
+                    ("spot", ["--light", "spot:position=0.5,1,3:aim=0,-1,1:cone=120:blend=0.2:"
+                              "intensity=5:scattering=multiple"])):
+    ms_fog = (lamp_fog if what in ("lamp", "spot") else
+              height_fog if what == "lamp in height fog" else ms_fog_layer)
     mo = {}
     for mode in ("samples", "fog", "flatten"):
         mo[mode] = os.path.join(tmp, "deep_ms_%s_%s.exr" % (what.replace(" ", "_"), mode))
@@ -941,6 +945,18 @@ if os.path.exists(sample_exr) and os.path.exists(make_sample):
     gb = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
     gb.set_pixels(oiio.ROI(0, 64, 0, 32, 0, 1, 0, 3), gimg)
     check(gb.write(genv), "gradient environment written")
+    # a spot's multiple scattering is read along the quadrature a shadow map
+    # cuts, which would shadow it with the single scattering: refused, with
+    # the way out, and nothing written
+    refused = os.path.join(tmp, "lit_spot_ms_shadow.exr")
+    r = subprocess.run([exrfog, cflat, "-o", refused, "--fog", "exp:density=0.05:albedo=0.9",
+                        "--light", spot_light + ":scattering=multiple"],
+                       capture_output=True, text=True)
+    check(r.returncode == 2 and "a spot's multiple scattering is read along the quadrature a "
+          "shadow map cuts" in r.stderr and "scattering=single" in r.stderr and
+          not os.path.exists(refused),
+          "a spot's multiple scattering with a shadow map is refused (%d: %s)"
+          % (r.returncode, r.stderr.strip()))
     for what, lit in (("sun with a shadow map", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:shadow=" + smap]),
                       ("sun with penumbrae", ["--light", "sun:towards=0.2,0.3,-1:intensity=3:angle=6:"
                                               "penumbra=8:shadow=" + smap]),
