@@ -651,18 +651,18 @@ typedef struct piece {
     int depth;
 } piece;
 
-/* Light j's in-scatter over [a, b) seen from a from its dense output:
- * (J(b) - J(a)) / T(0, a), Ta = T(0, a), with the leaves' estimates from
- * a's to b's as its error. 0 (the caller integrates the segment itself)
- * where that error passes 1e-6 of the segment's light plus ten times the
- * build's relative accuracy of the whole ray's (dense_rel: 1e-6 at the
- * default --deep-tol; a segment beyond which T has underflowed, or one
+/* Light j's in-scatter over [a, b) seen from a from its dense output d,
+ * built to relative accuracy rel: (J(b) - J(a)) / T(0, a), Ta = T(0, a),
+ * with the leaves' estimates from a's to b's as its error. 0 (the caller
+ * integrates the segment itself) where that error passes 1e-6 of the
+ * segment's light plus 10 rel of the whole ray's (1e-6 at the default
+ * --deep-tol, dense_rel; a segment beyond which T has underflowed, or one
  * whose difference the whole ray's rounding would swamp): what a
  * composite sees of a sample is T(0, a) times its light, so the second
  * term bounds the composite's error at 1e-3 of --deep-tol (1e-9 at least)
  * relative to the pixel's light. */
-static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], double v[3],
-                       double e[3])
+static int dense_light(ef_lit_dense *d, double a, double b, double rel, const double Ta[3],
+                       double v[3], double e[3])
 {
     double Ja[3], Ea[3], La[3], Jb[3], Eb[3], Lb[3];
     const double *Jt = d->total;
@@ -672,7 +672,7 @@ static int dense_light(ef_lit_dense *d, double a, double b, const double Ta[3], 
         const double dj = Jb[k] - Ja[k];
         /* the leaves from a's to b's, and the rounding of J's sums */
         const double de = (Eb[k] - La[k]) + 1e-15 * fabs(Jb[k]);
-        if (!(Ta[k] > 1e-300) || !(de <= 1e-6 * fabs(dj) + 10 * d->rel * fabs(Jt[k])))
+        if (!(Ta[k] > 1e-300) || !(de <= 1e-6 * fabs(dj) + 10 * rel * fabs(Jt[k])))
             return 0;
         v[k] = dj > 0 ? dj / Ta[k] : 0;
         e[k] = de / Ta[k];
@@ -753,7 +753,7 @@ static void seg_light(const ef_fog_scene *s, const px_lit *lt, const ef_ray *r1,
         const int gather = l->lms && !ef_lms_is_local(l->lms);
         if (lt && (lt->dmask >> j & 1) && b <= lt->dend) {
             seg_ta(s, r1, a, Ta);
-            done = dense_light(&lt->dense[j], a, b, Ta, v, e);
+            done = dense_light(&lt->dense[j], a, b, lt->rel, Ta, v, e);
         }
         if (!done && gather) {
             /* the single scattering here, the multiple below */
@@ -1196,8 +1196,8 @@ int ef_deep_fog_samples(const ef_deep_layout *L, const ef_deep_fog *F, const ef_
             }
             const ef_ray whole = seg_ray(&r1, 0, end);
             for (int j = 0; j < s->nlight; ++j) {
-                fog->dense[j].rel = lt.rel;
-                const int rc = ef_lit_dense_build(s, &s->light[j], &whole, &fog->dense[j]);
+                const int rc =
+                    ef_lit_dense_build(s, &s->light[j], &whole, lt.rel, &fog->dense[j]);
                 if (rc < 0)
                     return -1;
                 if (rc == 0)

@@ -434,7 +434,7 @@ void ef_light_inscatter_rel(const ef_fog_scene *s, const ef_light *l, const ef_r
 
 /* ------------------------------------------------- the dense output */
 
-int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double rel,
                        ef_lit_dense *d)
 {
     d->n = 0;
@@ -451,14 +451,14 @@ int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     if (!(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return 0;
     if (!l->shadow) {
-        ef_lit_quad_range_dense(s, l, r, 0, D, 1, d);
+        ef_lit_quad_range_dense(s, l, r, 0, D, 1, rel, d);
     } else {
         double stack[LIT_STACK][3];
         const int n = ef_shadow_pieces(l->shadow, r->org, r->dir, 0, D, stack, LIT_STACK);
         if (n < 0)
             return 1;   /* more lit pieces than the stack: per segment */
         for (int i = 0; i < n && !d->failed; ++i)
-            ef_lit_quad_range_dense(s, l, r, stack[i][0], stack[i][1], stack[i][2], d);
+            ef_lit_quad_range_dense(s, l, r, stack[i][0], stack[i][1], stack[i][2], rel, d);
     }
     if (d->failed)
         return d->failed == 2 ? -1 : 1;

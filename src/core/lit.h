@@ -90,16 +90,15 @@ typedef struct ef_lit_dense {
      * t, then J, E and Elo */
     double memo[4][10];
     int nmemo, next;
-    /* the relative accuracy the build aims at, set by the caller (0: the
-     * flat path's own, REL_UNIFORM or REL_GENERAL of lit_quad.c) */
-    double rel;
 } ef_lit_dense;
 
 /* Builds d for light l of s along the whole of r (org the camera, r->dist
- * possibly INFINITY): 0, or 1 where the per-segment methods serve l better
- * or alone can (a sun, whose closed forms are cheap per segment; noise
- * fog, which has its own integrator), or -1 (out of memory). */
-int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r,
+ * possibly INFINITY), its quadrature aiming at relative accuracy rel (0:
+ * the flat path's own, 1e-10 or 1e-13): 0, or 1 where the per-segment
+ * methods serve l better or alone can (a sun, whose closed forms are cheap
+ * per segment; noise fog, which has its own integrator), or -1 (out of
+ * memory). */
+int ef_lit_dense_build(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double rel,
                        ef_lit_dense *d);
 /* J(t) per channel, the summed error estimates of the leaves up to t's
  * leaf included (E) and excluded (Elo), so that J(b) - J(a) is within

@@ -101,9 +101,10 @@ static const double lg_I[EF_LIT_DENSE_NC] = {
 };
 
 /* ef_lit_quad_range recording its final intervals into d (weighted by w,
- * a shadow map's visibility), without the closed forms. */
+ * a shadow map's visibility) to relative accuracy rel (0: its own),
+ * without the closed forms. */
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                             double D, double w, ef_lit_dense *d);
+                             double D, double w, double rel, ef_lit_dense *d);
 /* The general quadrature of l's light over [a, D] of r, added to S and E,
  * to relative accuracy rel (0: its own). */
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,

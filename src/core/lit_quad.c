@@ -1291,10 +1291,10 @@ void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 }
 
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                             double D, double w, ef_lit_dense *d)
+                             double D, double w, double rel, ef_lit_dense *d)
 {
     double S[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
-    quad_range(s, l, r, a, D, S, E, d, w, d->rel);
+    quad_range(s, l, r, a, D, S, E, d, w, rel);
     /* a lamp on the segment itself (inf) has no leaves to hold it */
     for (int k = 0; k < 3; ++k)
         if (!isfinite(S[k]) && !d->failed)

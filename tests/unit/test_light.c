@@ -587,8 +587,7 @@ static void test_dense(void **state)
         const double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
         ef_ray r = { { d[0] / dn, d[1] / dn, d[2] / dn }, cs[c].D, cs[c].D, { 0, 1.7, 0 } };
         ef_lit_dense dense = { 0 };
-        dense.rel = rel;
-        assert_int_equal(ef_lit_dense_build(&s, &s.light[0], &r, &dense), 0);
+        assert_int_equal(ef_lit_dense_build(&s, &s.light[0], &r, rel, &dense), 0);
         double Jt[3], Et[3], Lt[3];
         ef_lit_dense_at(&dense, INFINITY, Jt, Et, Lt);
         double whole[3], we[3];
