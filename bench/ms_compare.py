@@ -41,6 +41,10 @@ falloff = next((a for a in sys.argv[14:] if a.startswith("falloff=")), None)
 # spot=CONE: the lamp is a spot of that cone (degrees, blend 0.2) aimed straight down (-z)
 spot = next((a for a in sys.argv[14:] if a.startswith("spot=")), None)
 across = spot is not None and "across" in sys.argv[14:]   # the spot aimed along -x instead
+# box=X0,Y0,Z0,X1,Y1,Z1 (with lamp=): the fog fills that box alone (exrfog: box:min=:max=)
+box = next((a for a in sys.argv[14:] if a.startswith("box=")), None)
+# hs=Z (with lamp=): the fog fills everything below z = Z (exrfog: halfspace:plane=0,0,1,-Z)
+hs = next((a for a in sys.argv[14:] if a.startswith("hs=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
@@ -48,7 +52,8 @@ tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "
 if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
            + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else "")
-           + ("_" + spot.replace("=", "") if spot else "") + ("_across" if across else ""))
+           + ("_" + spot.replace("=", "") if spot else "") + ("_across" if across else "")
+           + ("_box" + box[4:].replace(",", "_") if box else "") + ("_hs" + hs[3:] if hs else ""))
 
 
 def render(bounces):
@@ -56,11 +61,13 @@ def render(bounces):
     t0 = time.time()
     if lamp is not None:
         script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
-                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else []) + (["across"] if across else [])
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else []) + (["across"] if across else []) + ([box] if box else []) + ([hs] if hs else [])
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
                   + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else []))
+    if os.environ.get("MS_REUSE") and os.path.exists(out) and os.path.exists(out + ".json"):
+        return out, 0.0   # MS_REUSE=1: an earlier run's render of the same case
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
                        + script, capture_output=True, text=True)
     if "blender: rendered" not in r.stdout:
@@ -97,6 +104,13 @@ if lamp is not None:
     fogs = ["--fog", "exp:density=%r:albedo=%r:phase=hg:g=%r" % (dens, albedo, g)]
     if falloff:
         fogs = ["--fog", "height:density=%r:%s:albedo=%r:phase=hg:g=%r" % (dens, falloff, albedo, g)]
+    if box:
+        bx = [float(v) for v in box[4:].split(",")]
+        fogs = ["--fog", "box:min=%r,%r,%r:max=%r,%r,%r:density=%r:albedo=%r:phase=hg:g=%r" % (
+            tuple(bx) + (dens, albedo, g))]
+    if hs:
+        fogs = ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (
+            -float(hs[3:]), dens, albedo, g)]
     common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
     sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
     if spot:   # cosine=1: Cycles 3.x's spots fall as cos alpha inside the cone too
@@ -154,7 +168,7 @@ rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
     "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
-    "spot": float(spot[5:]) if spot else None, "across": across,
+    "spot": float(spot[5:]) if spot else None, "across": across, "box": box[4:] if box else None, "hs": float(hs[3:]) if hs else None,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

@@ -17,7 +17,7 @@ wide from z = -4 / K to 15 / K (e^-15 of the density at the top; below the botto
 already e^4 times denser, which takes what light reaches it), marched by Cycles in steps of
 about a fiftieth of the scale height 1 / K. With spot=CONE the lamp is a spot of that cone
 (degrees, blend 0.2) aimed straight down (with across, along -x: across the view), of the
-same 100 W. Writes OUT (RGBA + Z, 32-bit) and OUT.json
+same 100 W. With box=X0,Y0,Z0,X1,Y1,Z1 the homogeneous fog fills that box alone; with hs=Z, everything below z = Z. Writes OUT (RGBA + Z, 32-bit) and OUT.json
 (camera, lamp position and intensity)."""
 import json
 import math
@@ -39,6 +39,12 @@ wall = float(next((a[5:] for a in args[9:] if a.startswith("wall=")), "0"))
 behind = "behind" in args[9:]
 falloff = float(next((a[8:] for a in args[9:] if a.startswith("falloff=")), "0"))
 spot = float(next((a[5:] for a in args[9:] if a.startswith("spot=")), "0"))
+# box=X0,Y0,Z0,X1,Y1,Z1: the homogeneous fog fills that box only (not 4 km)
+box = next(([float(v) for v in a[4:].split(",")] for a in args[9:] if a.startswith("box=")), None)
+# hs=Z: the homogeneous fog fills everything below z = Z (a half-space: a box 4 km wide)
+hs = next((float(a[3:]) for a in args[9:] if a.startswith("hs=")), None)
+if hs is not None:
+    box = [-2000, -2000, -2000, 2000, 2000, hs]
 sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
@@ -55,6 +61,11 @@ if falloff > 0:
     step = 0.1 * (600 + 600 + zhi - zlo) / 3
     m = ms_scene.height_fog("fog", dens, albedo, g, falloff, (0.02 / falloff) / step)
     sc.cycles.volume_max_steps = 100000
+elif box:
+    bpy.ops.mesh.primitive_cube_add(size=1, location=tuple(0.5 * (box[i] + box[i + 3]) for i in range(3)))
+    cube = bpy.context.object
+    cube.scale = tuple(box[i + 3] - box[i] for i in range(3))
+    m = ms_scene.fog("fog", dens, albedo, g)
 else:
     bpy.ops.mesh.primitive_cube_add(size=4000, location=(0, 0, 0))
     cube = bpy.context.object

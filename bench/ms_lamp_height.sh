@@ -32,11 +32,11 @@ else
     done
     cp "$tmp/grid.jsonl" "$here/ms_lamp_height_grid.jsonl"
 fi
-lc_tag="camera 2 up, lamp ahead" lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
+lc_tag="camera 2 up, lamp behind" lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
     "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5" \
     "height:density=0.1:falloff=0.3:albedo=0.99:phase=hg:g=0.85"
-# a lamp behind the camera, and a camera 60 up looking 20 degrees down on a lamp below it
-lc_tag="camera 2 up, lamp behind" lc_lamp=2,3,-15 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
+# a lamp ahead of the camera (it looks along -z), and a camera 60 up looking 20 degrees down on a lamp below it
+lc_tag="camera 2 up, lamp ahead" lc_lamp=2,3,-15 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
     "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5"
 lc_tag="camera 60 up, 20 degrees down" lc_view=60,-20,60 lamp_cost "height:density=0.1:falloff=0.1:albedo=0.9" \
     "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5"

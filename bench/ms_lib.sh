@@ -31,8 +31,8 @@ ms_header() {
 
 # lamp_cost FOG...: per fog, 5 rounds on a 1080p frame made here from the
 # view lc_view (make_sample's --view; default 2,-3,60, a camera 2 up
-# looking 3 degrees down): exrfog with a point lamp at lc_lamp (default
-# 2,3,25, ahead) scattering=single and =multiple on 2 threads and the
+# looking 3 degrees down, along -z): exrfog with a point lamp at lc_lamp (default
+# 2,3,25: behind the camera) scattering=single and =multiple on 2 threads and the
 # oiiotool copy, wall times appended to $tmp/cost as "KEY/RUN SECONDS"; the
 # multiple scattering's solve time (--explain) to $tmp/solves as
 # "KEY/solve SECONDS s". KEY is the fog, after "lc_tag: " when lc_tag is

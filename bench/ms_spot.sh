@@ -32,7 +32,7 @@ else
     done
     cp "$tmp/grid.jsonl" "$here/ms_spot_grid.jsonl"
 fi
-lc_tag="a spot 25 ahead aimed down" lc_light="spot:position=2,3,25:aim=0,-1,0.2:cone=40:blend=0.2:intensity=40" \
+lc_tag="a spot 25 behind aimed down" lc_light="spot:position=2,3,25:aim=0,-1,0.2:cone=40:blend=0.2:intensity=40" \
     lamp_cost "exp:density=0.05:albedo=0.9" "exp:density=0.05:albedo=0.9:phase=hg:g=0.5" \
     "height:density=0.1:falloff=0.1:albedo=0.9:phase=hg:g=0.5"
 ms_header "A spot's multiple scattering against Cycles (issue 44)"

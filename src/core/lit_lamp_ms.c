@@ -48,6 +48,16 @@
 /* GMRES: restart length, and the residual it stops at (relative to the
  * right-hand side). */
 #define LMS_KRYLOV 60
+/* The planes where the fog drops that the leak estimate reads, at most
+ * (ef_lms_local_node); and its weight at albedo 0.9, calibrated against
+ * Cycles on bench/ms_lamp_box.sh's three calib scenes (two boxes and a
+ * half-space: every block covered on each; 0.9 leaves 1 % of one). */
+#define LEAK_MAX 64
+/* E_2 tabulated over [0, LEAK_E2_X) for the leak estimate (within 3e-3:
+ * its second derivative e^-x / x at one step from 0) */
+#define LEAK_E2_N 2048
+#define LEAK_E2_X 40.0
+#define LEAK_C 1.0
 #define LMS_GMRES_TOL 1e-9
 
 /* One resolution of the solve. */
@@ -92,6 +102,18 @@ struct ef_lms {
     /* a spot (ef_lms_spot): its aim and cone, for the share (light.h) */
     int spot, scaled;   /* scaled: the fog is not uniform */
     ef_light cone;
+    /* where a component's density drops at a plane (ef_lms_local_node's
+     * leak): the plane n.x + d = 0 (n unit), the component's density on
+     * its negative and positive sides near it, and the component (a
+     * convex volume's planes: a node outside any of them is not in it);
+     * nleak < 0: more than LEAK_MAX, every node fully exposed */
+    int nleak;
+    double leak[LEAK_MAX][4], dneg[LEAK_MAX][3], dpos[LEAK_MAX][3];
+    /* per plane: where its component's planes end (a component's are
+     * consecutive), and whether it is a convex volume's */
+    int leak_end[LEAK_MAX], leak_convex[LEAK_MAX];
+    double lamp_leak[3];   /* the lamp's own exposure per channel */
+    float e2[LEAK_E2_N + 1];   /* E_2 at LEAK_E2_X j / LEAK_E2_N (linear between) */
 };
 
 /* ------------------------------------------------------------ the grids */
@@ -891,6 +913,116 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
     return 0;
 }
 
+/* The planes where a component's density drops (its features of scale
+ * 0 with different densities either side: a box's or convex volume's
+ * faces, a half-space's plane) into m->leak, with those densities: the
+ * leak estimate's (ef_lms_local_node). A component of several
+ * functionals other than a convex volume is passed over. */
+static void leak_planes(const ef_fog_scene *s, ef_lms *m)
+{
+    m->nleak = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        const ef_fog_component *c = &s->comp[i];
+        if (!c->model->functionals || !c->model->features || !c->model->density)
+            continue;
+        ef_fog_functional fn[LEAK_MAX];
+        ef_fog_feature ft[LEAK_MAX];
+        const int nf = c->model->functionals(c, fn, LEAK_MAX);
+        const int nt = c->model->features(c, ft, LEAK_MAX);
+        if (nf > LEAK_MAX || nt > LEAK_MAX) {
+            m->nleak = -1;
+            return;
+        }
+        const int convex = c->model->convex != NULL, first = m->nleak;
+        if (nf != 1 && !convex)
+            continue;
+        for (int j = 0; j < nt; ++j) {
+            if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf)
+                continue;
+            const ef_fog_functional *f = &fn[ft[j].f];
+            const double nn = sqrt(f->n[0] * f->n[0] + f->n[1] * f->n[1] + f->n[2] * f->n[2]);
+            if (!(nn > 0))
+                continue;
+            /* the density just either side of the plane (inside a convex
+             * volume's other faces) */
+            long double v[LEAK_MAX], lo[3], hi[3];
+            for (int a = 0; a < nf; ++a)
+                v[a] = -INFINITY;
+            const double dl = 1e-9 * (1 + fabs(ft[j].value));
+            v[ft[j].f] = ft[j].value - dl;
+            c->model->density(c, v, lo);
+            v[ft[j].f] = ft[j].value + dl;
+            c->model->density(c, v, hi);
+            if (lo[0] == hi[0] && lo[1] == hi[1] && lo[2] == hi[2])
+                continue;   /* a kink, not a drop */
+            if (m->nleak == LEAK_MAX) {
+                m->nleak = -1;
+                return;
+            }
+            const int k = m->nleak++;
+            for (int q = 0; q < 3; ++q) {
+                m->leak[k][q] = f->n[q] / nn;
+                m->dneg[k][q] = (double) lo[q];
+                m->dpos[k][q] = (double) hi[q];
+            }
+            m->leak[k][3] = (f->d - ft[j].value) / nn;
+            m->leak_convex[k] = convex;
+        }
+        for (int j = first; j < m->nleak; ++j)
+            m->leak_end[j] = m->nleak;
+    }
+}
+
+/* E_2(x) = e^-x - x E_1(x), x >= 0, E_1 by Abramowitz and Stegun 5.1.53
+ * (x <= 1, within 2e-7) and 5.1.56 (beyond, within 5e-5 relative). */
+static double expint2(double x)
+{
+    if (!(x > 0))
+        return 1;
+    if (x > 700)
+        return 0;
+    double e1;
+    if (x <= 1)
+        e1 = -log(x) - 0.57721566 +
+             x * (0.99999193 + x * (-0.24991055 + x * (0.05519968 + x * (-0.00976004 + x * 0.00107857))));
+    else
+        e1 = exp(-x) / x * (x * x + 2.334733 * x + 0.250621) / (x * x + 3.330657 * x + 1.681534);
+    return fmax(0, exp(-x) - x * e1);
+}
+
+/* The node at x's exposure in channel k to the planes where the density
+ * drops, at extinction sg: over the planes of the components whose fog
+ * holds x, the share of sg that drops there times E_2(sg dist) / 2 (the
+ * mean over directions of the transmittance to the plane), at most 1. */
+static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg)
+{
+    if (m->nleak < 0)
+        return 1;
+    if (!(sg > 0))
+        return 0;
+    double e = 0, sd[LEAK_MAX];
+    for (int i = 0; i < m->nleak; ++i)
+        sd[i] = m->leak[i][0] * x[0] + m->leak[i][1] * x[1] + m->leak[i][2] * x[2] + m->leak[i][3];
+    for (int i = 0; i < m->nleak;) {
+        const int end = m->leak_end[i];
+        int in = 1;   /* a volume's faces: x inside every one of them */
+        for (int j = i; m->leak_convex[i] && j < end && in; ++j)
+            in = sd[j] < 0;
+        for (; in && i < end; ++i) {
+            const double here = sd[i] < 0 ? m->dneg[i][k] : m->dpos[i][k];
+            const double beyond = sd[i] < 0 ? m->dpos[i][k] : m->dneg[i][k];
+            const double u = sg * fabs(sd[i]) * (LEAK_E2_N / LEAK_E2_X);
+            if (here > beyond && u < LEAK_E2_N) {   /* E_2(40) < 1e-19 */
+                const int j = (int) u;
+                const double e2 = m->e2[j] + (u - j) * (m->e2[j + 1] - m->e2[j]);
+                e += fmin(1, (here - beyond) / sg) * 0.5 * e2;
+            }
+        }
+        i = end;
+    }
+    return fmin(e, 1);
+}
+
 int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err *err)
 {
     struct timespec t0;
@@ -924,6 +1056,18 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     m->local = local;
     m->scaled = !uniform;
     memcpy(m->pos, l->pos, sizeof m->pos);
+    if (local) {
+        for (int j = 0; j <= LEAK_E2_N; ++j)
+            m->e2[j] = (float) expint2(LEAK_E2_X * j / LEAK_E2_N);
+        leak_planes(s, m);
+        /* the lamp's own exposure, at the extinction where it stands */
+        double sl[3];
+        const double up[3] = { 0, 0, 1 }, h = 1e-6 * (1 + fabs(l->pos[0]) + fabs(l->pos[1]) + fabs(l->pos[2]));
+        const double p0[3] = { l->pos[0], l->pos[1], l->pos[2] - 0.5 * h };
+        ef_lit_tau_from(s, p0, up, h, sl);
+        for (int k = 0; k < 3; ++k)
+            m->lamp_leak[k] = leak_exposure(m, l->pos, k, sl[k] / h);
+    }
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
     for (int k = 0; k < 3; ++k) {
@@ -1512,7 +1656,7 @@ int ef_lms_same_table(const ef_lms *m, int j, int k)
 }
 
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, double *est)
+                         double ca, const double x[3], double *est)
 {
     *est = 0;
     const int t = m->tab_of[k];
@@ -1539,6 +1683,13 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
                          ? v
                          : sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
     *est = fabs(v - w) + sg * tl * ev;
+    /* light the unbounded fog's field scatters back from beyond a plane
+     * where this fog drops, seen from the node and from the lamp: the more,
+     * the further the light wanders (the diffusion length grows as
+     * (1 - albedo)^-1/2) */
+    if (m->nleak)
+        *est += LEAK_C * sqrt(0.1 / fmax(1 - tb->omega, 1e-3)) * fabs(v) *
+                fmin(1, leak_exposure(m, x, k, sg) + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;
         const double f = spot_share_at(tb, tl, ca, &fe);

@@ -549,8 +549,9 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
  * (1 / d^2 and the Jacobian). Its value into v and its estimate into e,
  * both attenuated to the camera; a channel like the one before it (grey
  * fog) copies it. */
-static void lms_node(const lit_q *q, const double tv[3], const double tl[3], const double sg[3],
-                     double d, double nu, double ca, double wgt, double v[3], double e[3])
+static void lms_node(const lit_q *q, const double x[3], const double tv[3], const double tl[3],
+                     const double sg[3], double d, double nu, double ca, double wgt, double v[3],
+                     double e[3])
 {
     const ef_light *l = q->l;
     for (int k = 0; k < 3; ++k) {
@@ -564,7 +565,7 @@ static void lms_node(const lit_q *q, const double tv[3], const double tl[3], con
         if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
             continue;
         double est;
-        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, &est);
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, x, &est);
         const double w = exp(-tv[k]) * wgt * l->e[k];
         v[k] = f * w;
         e[k] = est * w;
@@ -728,7 +729,10 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 tl[ch] = tlv[ch][i];
                 sg[ch] = sgv[ch][i];
             }
-            lms_node(q, tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me);
+            const double xi[3] = { q->r->org[0] + t[i] * q->r->dir[0],
+                                   q->r->org[1] + t[i] * q->r->dir[1],
+                                   q->r->org[2] + t[i] * q->r->dir[2] };
+            lms_node(q, xi, tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me);
             for (int ch = 0; ch < 3; ++ch) {
                 out[4 * g + i][ch] += mv[ch];
                 q->aux[4 * g + i][ch] = me[ch];
@@ -858,7 +862,7 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
                 acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * sh[j] * l->e[k];
         if (q->lms) {
             double mv[3], me[3];
-            lms_node(q, tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me);
+            lms_node(q, x[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me);
             for (int k = 0; k < 3; ++k) {
                 out[live[j]][k] += mv[k];
                 q->aux[live[j]][k] = me[k];

@@ -222,10 +222,15 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * in uniform fog). Returns d^2 Q (the quadrature's weights carry 1 /
  * d^2 and the lamp's intensity), and into *est the spread from the same
  * field scaled by the node's own extinction (sg^3 Q1(sg d, nu)) plus the
- * table's estimate: an estimate, calibrated against nested quadrature of
- * the second order and against Cycles (bench/ms_lamp.md). ca: the
- * cosine of the node's direction from the lamp against a spot's aim
- * (ef_lms_spot; else unused). */
+ * table's estimate, plus the light that leaks out where the fog ends at
+ * a plane (a box's or convex volume's faces, a half-space's plane, a
+ * layer's knot: the field is the unbounded fog's, which scatters back from
+ * beyond): the value times LEAK_C times the node's exposure to the planes
+ * near it, sum of e^(-sg dist) / 2 (at most 1). An estimate, calibrated
+ * against nested quadrature of the second order and against Cycles
+ * (bench/ms_lamp.md, bench/ms_lamp_box.md). ca: the cosine of the node's
+ * direction from the lamp against a spot's aim (ef_lms_spot; else
+ * unused); x: the node. */
 int ef_lms_is_local(const ef_lms *m);
 /* Whether m is a spot's (ef_lms_spot), and whether its fog is not
  * uniform (the field scaled as above); either makes it local. */
@@ -234,7 +239,7 @@ int ef_lms_is_scaled(const ef_lms *m);
 /* Whether channels j and k read the same table (one albedo). */
 int ef_lms_same_table(const ef_lms *m, int j, int k);
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, double *est);
+                         double ca, const double x[3], double *est);
 /* Makes m a spot's (l's cone and aim; local mode from then on): at a node
  * whose direction from the lamp has cosine ca from the aim, the table's
  * value is taken times the cone's share averaged over where the light
