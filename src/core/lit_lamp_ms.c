@@ -113,6 +113,12 @@ struct ef_lms {
      * consecutive), and whether it is a convex volume's */
     int leak_end[LEAK_MAX], leak_convex[LEAK_MAX];
     double lamp_leak[3];   /* the lamp's own exposure per channel */
+    double leak_w[3];      /* the leak term's weight per channel (LEAK_C and the albedo's) */
+    /* exponential strata (height fog): where the fog thins, e-fold by
+     * e-fold, along up (its density rho e^-(k (up.x - base))) */
+    int nstrata, strata_only;   /* strata_only: they are the fog's one component */
+    double st_up[EF_FOG_MAX_COMPONENTS][3], st_rho[EF_FOG_MAX_COMPONENTS][3];
+    double st_k[EF_FOG_MAX_COMPONENTS], st_base[EF_FOG_MAX_COMPONENTS];
     float e2[LEAK_E2_N + 1];   /* E_2 at LEAK_E2_X j / LEAK_E2_N (linear between) */
 };
 
@@ -921,8 +927,19 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
 static void leak_planes(const ef_fog_scene *s, ef_lms *m)
 {
     m->nleak = 0;
+    m->nstrata = 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
+        double rho[3], kk, base;
+        if (c->model->strata && c->model->strata(c, rho, &kk, &base) && kk > 0) {
+            const int j = m->nstrata++;
+            memcpy(m->st_up[j], c->up, sizeof m->st_up[j]);
+            memcpy(m->st_rho[j], rho, sizeof rho);
+            m->st_k[j] = kk;
+            m->st_base[j] = base;
+            m->strata_only = s->ncomp == 1;
+            continue;
+        }
         if (!c->model->functionals || !c->model->features || !c->model->density)
             continue;
         ef_fog_functional fn[LEAK_MAX];
@@ -1020,6 +1037,20 @@ static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg
         }
         i = end;
     }
+    /* height fog thins upwards: its share of sg, at an optical depth sg / k
+     * (one e-fold) */
+    for (int j = 0; j < m->nstrata; ++j) {
+        const double *up = m->st_up[j];
+        const double sc = m->strata_only ? sg
+                          : m->st_rho[j][k] * exp(-m->st_k[j] * (up[0] * x[0] + up[1] * x[1] +
+                                                                 up[2] * x[2] - m->st_base[j]));
+        const double u = sg / m->st_k[j] * (LEAK_E2_N / LEAK_E2_X);
+        if (sc > 0 && u < LEAK_E2_N) {
+            const int q = (int) u;
+            const double e2 = m->e2[q] + (u - q) * (m->e2[q + 1] - m->e2[q]);
+            e += fmin(1, sc / sg) * 0.5 * e2;
+        }
+    }
     return fmin(e, 1);
 }
 
@@ -1065,8 +1096,10 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         const double up[3] = { 0, 0, 1 }, h = 1e-6 * (1 + fabs(l->pos[0]) + fabs(l->pos[1]) + fabs(l->pos[2]));
         const double p0[3] = { l->pos[0], l->pos[1], l->pos[2] - 0.5 * h };
         ef_lit_tau_from(s, p0, up, h, sl);
-        for (int k = 0; k < 3; ++k)
+        for (int k = 0; k < 3; ++k) {
             m->lamp_leak[k] = leak_exposure(m, l->pos, k, sl[k] / h);
+            m->leak_w[k] = LEAK_C * sqrt(0.1 / fmax(1 - albedo(c, k), 1e-3));
+        }
     }
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
@@ -1687,8 +1720,8 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
      * where this fog drops, seen from the node and from the lamp: the more,
      * the further the light wanders (the diffusion length grows as
      * (1 - albedo)^-1/2) */
-    if (m->nleak)
-        *est += LEAK_C * sqrt(0.1 / fmax(1 - tb->omega, 1e-3)) * fabs(v) *
+    if (m->nleak || m->nstrata)
+        *est += m->leak_w[k] * fabs(v) *
                 fmin(1, leak_exposure(m, x, k, sg) + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;

@@ -222,15 +222,17 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * in uniform fog). Returns d^2 Q (the quadrature's weights carry 1 /
  * d^2 and the lamp's intensity), and into *est the spread from the same
  * field scaled by the node's own extinction (sg^3 Q1(sg d, nu)) plus the
- * table's estimate, plus the light that leaks out where the fog ends at
- * a plane (a box's or convex volume's faces, a half-space's plane, a
- * layer's knot: the field is the unbounded fog's, which scatters back from
- * beyond): the value times LEAK_C times the node's exposure to the planes
- * near it, sum of e^(-sg dist) / 2 (at most 1). An estimate, calibrated
- * against nested quadrature of the second order and against Cycles
- * (bench/ms_lamp.md, bench/ms_lamp_box.md). ca: the cosine of the node's
- * direction from the lamp against a spot's aim (ef_lms_spot; else
- * unused); x: the node. */
+ * table's estimate, plus the light the unbounded fog's field counts that
+ * would scatter back from where this fog drops or thins (a box's or convex
+ * volume's faces, a half-space's plane; height fog one e-fold up): the
+ * value times LEAK_C sqrt(0.1 / (1 - albedo)) times the exposure of the
+ * node and of the lamp to them (the share of the extinction that drops
+ * times E_2 of the optical depth to the drop, over 2; at most 1). An
+ * estimate, calibrated against nested quadrature of the second order and
+ * against Cycles (bench/ms_lamp.md, bench/ms_lamp_box.md,
+ * bench/ms_lamp_height.md). ca: the cosine of the node's direction from
+ * the lamp against a spot's aim (ef_lms_spot; else unused); x: the
+ * node. */
 int ef_lms_is_local(const ef_lms *m);
 /* Whether m is a spot's (ef_lms_spot), and whether its fog is not
  * uniform (the field scaled as above); either makes it local. */
