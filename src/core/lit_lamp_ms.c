@@ -53,11 +53,11 @@
  * Cycles on bench/ms_lamp_box.sh's three calib scenes (two boxes and a
  * half-space: every block covered on each; 0.9 leaves 1 % of one). */
 #define LEAK_MAX 64
+#define LEAK_C 1.0
 /* E_2 tabulated over [0, LEAK_E2_X) for the leak estimate (within 3e-3:
  * its second derivative e^-x / x at one step from 0) */
 #define LEAK_E2_N 2048
 #define LEAK_E2_X 40.0
-#define LEAK_C 1.0
 #define LMS_GMRES_TOL 1e-9
 
 /* One resolution of the solve. */
@@ -919,11 +919,13 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
     return 0;
 }
 
-/* The planes where a component's density drops (its features of scale
- * 0 with different densities either side: a box's or convex volume's
- * faces, a half-space's plane) into m->leak, with those densities: the
- * leak estimate's (ef_lms_local_node). A component of several
- * functionals other than a convex volume is passed over. */
+/* Where the fog drops or thins, for the leak estimate
+ * (ef_lms_local_node): the planes where a component's density drops (its
+ * features of scale 0 with different densities either side: a box's or
+ * convex volume's faces, a half-space's plane) into m->leak with those
+ * densities, and the exponential strata (height fog) into m->st_*. A
+ * component of several functionals other than a convex volume is passed
+ * over (layers: their knots are kinks, not drops). */
 static void leak_planes(const ef_fog_scene *s, ef_lms *m)
 {
     m->nleak = 0;
@@ -1007,10 +1009,12 @@ static double expint2(double x)
     return fmax(0, exp(-x) - x * e1);
 }
 
-/* The node at x's exposure in channel k to the planes where the density
- * drops, at extinction sg: over the planes of the components whose fog
- * holds x, the share of sg that drops there times E_2(sg dist) / 2 (the
- * mean over directions of the transmittance to the plane), at most 1. */
+/* The exposure in channel k of a point x of extinction sg to where the
+ * fog drops or thins: over the planes of the components whose fog holds
+ * x, the share of sg that drops there times E_2(sg dist) / 2 (the mean
+ * over directions of the transmittance to the plane); over height fogs,
+ * their share of sg times E_2(sg / falloff) / 2 (one e-fold up); at most
+ * 1. */
 static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg)
 {
     if (m->nleak < 0)
@@ -1091,7 +1095,8 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
         for (int j = 0; j <= LEAK_E2_N; ++j)
             m->e2[j] = (float) expint2(LEAK_E2_X * j / LEAK_E2_N);
         leak_planes(s, m);
-        /* the lamp's own exposure, at the extinction where it stands */
+        /* the lamp's own exposure, at the extinction where it stands (0
+         * outside the fog), and the term's weight per channel */
         double sl[3];
         const double up[3] = { 0, 0, 1 }, h = 1e-6 * (1 + fabs(l->pos[0]) + fabs(l->pos[1]) + fabs(l->pos[2]));
         const double p0[3] = { l->pos[0], l->pos[1], l->pos[2] - 0.5 * h };
