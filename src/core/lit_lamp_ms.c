@@ -945,16 +945,21 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
         if (!c->model->functionals || !c->model->features || !c->model->density)
             continue;
         ef_fog_functional fn[LEAK_MAX];
-        ef_fog_feature ft[LEAK_MAX];
         const int nf = c->model->functionals(c, fn, LEAK_MAX);
-        const int nt = c->model->features(c, ft, LEAK_MAX);
-        if (nf > LEAK_MAX || nt > LEAK_MAX) {
-            m->nleak = -1;
-            return;
-        }
         const int convex = c->model->convex != NULL, first = m->nleak;
         if (nf != 1 && !convex)
             continue;
+        /* every feature (a profile's thousands of knots, which are kinks,
+         * need not fit LEAK_MAX; the drops do) */
+        const int nt = c->model->features(c, NULL, 0);
+        ef_fog_feature *ft = nt > 0 ? malloc(sizeof *ft * (size_t) nt) : NULL;
+        if (nf > LEAK_MAX || (nt > 0 && !ft)) {
+            free(ft);
+            m->nleak = -1;   /* every node fully exposed: the estimate errs wide */
+            return;
+        }
+        if (nt > 0)
+            c->model->features(c, ft, nt);
         for (int j = 0; j < nt; ++j) {
             if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf)
                 continue;
@@ -975,6 +980,7 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             if (lo[0] == hi[0] && lo[1] == hi[1] && lo[2] == hi[2])
                 continue;   /* a kink, not a drop */
             if (m->nleak == LEAK_MAX) {
+                free(ft);
                 m->nleak = -1;
                 return;
             }
@@ -987,6 +993,7 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             m->leak[k][3] = (f->d - ft[j].value) / nn;
             m->leak_convex[k] = convex;
         }
+        free(ft);
         for (int j = first; j < m->nleak; ++j)
             m->leak_end[j] = m->nleak;
     }
