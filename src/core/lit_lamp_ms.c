@@ -1700,8 +1700,13 @@ int ef_lms_same_table(const ef_lms *m, int j, int k)
     return m->tab_of[j] == m->tab_of[k];
 }
 
+double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg)
+{
+    return m->nleak || m->nstrata ? leak_exposure(m, x, k, sg) : 0;
+}
+
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, const double x[3], double *est)
+                         double ca, double expo, double *est)
 {
     *est = 0;
     const int t = m->tab_of[k];
@@ -1733,8 +1738,7 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
      * the further the light wanders (the diffusion length grows as
      * (1 - albedo)^-1/2) */
     if (m->nleak || m->nstrata)
-        *est += m->leak_w[k] * fabs(v) *
-                fmin(1, leak_exposure(m, x, k, sg) + m->lamp_leak[k]);
+        *est += m->leak_w[k] * fabs(v) * fmin(1, expo + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;
         const double f = spot_share_at(tb, tl, ca, &fe);

@@ -546,13 +546,25 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
  * the node, the lamp's tl from it, the extinction there sg, the lamp's
  * distance d and the cosine nu (the phase's: the light leaving towards
  * the camera against the outward radial), wgt the substitution's weight
- * (1 / d^2 and the Jacobian). Its value into v and its estimate into e,
- * both attenuated to the camera; a channel like the one before it (grey
- * fog) copies it. */
-static void lms_node(const lit_q *q, const double x[3], const double tv[3], const double tl[3],
+ * (1 / d^2 and the Jacobian), t the node's place along the view. Its
+ * value into v and its estimate into e, both attenuated to the camera; a
+ * channel like the one before it (grey fog) copies it. ex: the leak
+ * term's exposure per channel, read here where ex[3] is 0 (the caller
+ * clears it every four nodes). */
+static void lms_node(const lit_q *q, double t, const double tv[3], const double tl[3],
                      const double sg[3], double d, double nu, double ca, double wgt, double v[3],
-                     double e[3])
+                     double e[3], double ex[4])
 {
+    /* the leak term's exposure, once per four nodes (at the first of them:
+     * it is smooth over a rule's span); ex[3] 0 asks for it */
+    if (!ex[3]) {
+        const ef_ray *r = q->r;
+        const double x[3] = { r->org[0] + t * r->dir[0], r->org[1] + t * r->dir[1],
+                              r->org[2] + t * r->dir[2] };
+        for (int k = 0; k < 3; ++k)
+            ex[k] = k > 0 && sg[k] == sg[k - 1] ? ex[k - 1] : ef_lms_leak_exposure(q->lms, x, k, sg[k]);
+        ex[3] = 1;
+    }
     const ef_light *l = q->l;
     for (int k = 0; k < 3; ++k) {
         if (k > 0 && tv[k] == tv[k - 1] && tl[k] == tl[k - 1] && sg[k] == sg[k - 1] &&
@@ -565,7 +577,7 @@ static void lms_node(const lit_q *q, const double x[3], const double tv[3], cons
         if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
             continue;
         double est;
-        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, x, &est);
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, ex[k], &est);
         const double w = exp(-tv[k]) * wgt * l->e[k];
         v[k] = f * w;
         e[k] = est * w;
@@ -587,7 +599,9 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
     const ef_light *l = q->l;
     const int coned = ef_light_coned(l);
     const v4d m708 = { -708, -708, -708, -708 }, zero = { 0, 0, 0, 0 };
+    double ex[4];   /* lms_node's exposure, once per four nodes */
     for (int g = 0; g * 4 < n; ++g) {
+        ex[3] = 0;
         v4d U;
         for (int i = 0; i < 4; ++i)
             U[i] = u[4 * g + i < n ? 4 * g + i : 4 * g];
@@ -729,10 +743,7 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 tl[ch] = tlv[ch][i];
                 sg[ch] = sgv[ch][i];
             }
-            const double xi[3] = { q->r->org[0] + t[i] * q->r->dir[0],
-                                   q->r->org[1] + t[i] * q->r->dir[1],
-                                   q->r->org[2] + t[i] * q->r->dir[2] };
-            lms_node(q, xi, tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me);
+            lms_node(q, t[i], tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me, ex);
             for (int ch = 0; ch < 3; ++ch) {
                 out[4 * g + i][ch] += mv[ch];
                 q->aux[4 * g + i][ch] = me[ch];
@@ -799,6 +810,7 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
      * depths, component by component */
     const int planet = !ef_light_at_position(l) && l->planet > 0;
     double acc[15][3], tv[15][3], tl[15][3], x[15][3], sgt[15][3];
+    double ex[4] = { 0, 0, 0, 0 };   /* lms_node's exposure, once per four nodes */
     memset(acc, 0, sizeof acc[0] * (size_t) m);
     memset(sgt, 0, sizeof sgt[0] * (size_t) m);
     memset(tv, 0, sizeof tv[0] * (size_t) m);
@@ -862,7 +874,9 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
                 acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * sh[j] * l->e[k];
         if (q->lms) {
             double mv[3], me[3];
-            lms_node(q, x[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me);
+            if (j % 4 == 0)
+                ex[3] = 0;
+            lms_node(q, tn[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me, ex);
             for (int k = 0; k < 3; ++k) {
                 out[live[j]][k] += mv[k];
                 q->aux[live[j]][k] = me[k];

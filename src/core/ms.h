@@ -231,8 +231,9 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * estimate, calibrated against nested quadrature of the second order and
  * against Cycles (bench/ms_lamp.md, bench/ms_lamp_box.md,
  * bench/ms_lamp_height.md). ca: the cosine of the node's direction from
- * the lamp against a spot's aim (ef_lms_spot; else unused); x: the
- * node. */
+ * the lamp against a spot's aim (ef_lms_spot; else unused); expo: the
+ * node's exposure, ef_lms_leak_exposure (a point near it serves: it is
+ * smooth, and read once per four nodes of a quadrature rule). */
 int ef_lms_is_local(const ef_lms *m);
 /* Whether m is a spot's (ef_lms_spot), and whether its fog is not
  * uniform (the field scaled as above); either makes it local. */
@@ -241,7 +242,10 @@ int ef_lms_is_scaled(const ef_lms *m);
 /* Whether channels j and k read the same table (one albedo). */
 int ef_lms_same_table(const ef_lms *m, int j, int k);
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, const double x[3], double *est);
+                         double ca, double expo, double *est);
+/* The exposure in channel k of a point x of extinction sg to where the fog
+ * drops or thins (the leak term's; 0 in fog that does neither). */
+double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg);
 /* Makes m a spot's (l's cone and aim; local mode from then on): at a node
  * whose direction from the lamp has cosine ca from the aim, the table's
  * value is taken times the cone's share averaged over where the light
