@@ -109,6 +109,8 @@ void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_
  * to relative accuracy rel (0: its own). */
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double rel, double S[3], double E[3]);
+/* The scene's extinction per channel at x (its components' densities). */
+void ef_lit_sigma_at(const ef_fog_scene *s, const double x[3], double out[3]);
 
 /* ---- lit.c: a lamp's geometry, the uniform medium ---- */
 
@@ -121,6 +123,10 @@ void ef_lit_lamp_medium(const ef_fog_scene *s, double sig[3], double scat[3]);
 
 /* ---- lit_lamp.c ---- */
 
+/* E_2(x) = int_1^inf e^-(x t) / t^2 dt for x >= 0, from the closed form's
+ * exponential integral (to about 1e-15; e^-x, its bound, where that does
+ * not converge). */
+double ef_lit_e2(double x);
 /* A point lamp's closed form over [a, D], added to S and E; -1 when it does not hold. */
 int ef_lit_lamp_closed(const double sig[3], const double scat[3], const double e[3], double ts,
                        double h, double a, double D, double S[3], double E[3]);

@@ -145,6 +145,19 @@ static int g_e1(double complex z, double complex *out)
     return 0;
 }
 
+double ef_lit_e2(double x)
+{
+    if (!(x > 0))
+        return 1;
+    if (x > 700)
+        return 0;
+    /* E_2 = e^-x - x E_1 = e^-x (1 - x G), G = e^x E_1 */
+    double complex G;
+    if (g_e1(x, &G))
+        return exp(-x);
+    return fmax(0, exp(-x) * (1 - x * creal(G)));
+}
+
 /* Sun, Ramamoorthi, Narasimhan and Nayar's closed form for a point lamp
  * of radius 0 in uniform fog with the isotropic phase, over [a, D]:
  *   int e^-(sigma (t + d)) / d^2 dt = (2 / h) Im[F(w_a) - F(w_D)],

@@ -54,8 +54,9 @@
  * half-space: every block covered on each; 0.9 leaves 1 % of one). */
 #define LEAK_MAX 64
 #define LEAK_C 1.0
-/* E_2 tabulated over [0, LEAK_E2_X) for the leak estimate (within 3e-3:
- * its second derivative e^-x / x at one step from 0) */
+/* E_2 tabulated over [0, LEAK_E2_X] for the leak estimate (linear between
+ * points: within 3e-3 at one step from 0, where its second derivative
+ * e^-x / x is largest) */
 #define LEAK_E2_N 2048
 #define LEAK_E2_X 40.0
 #define LMS_GMRES_TOL 1e-9
@@ -968,8 +969,9 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             if (!(nn > 0))
                 continue;
             /* the density just either side of the plane (inside a convex
-             * volume's other faces) */
-            long double v[LEAK_MAX], lo[3], hi[3];
+             * volume's other faces), at two offsets: a drop differs as much
+             * at both, a kink a thousand times more at the wider */
+            long double v[LEAK_MAX], lo[3], hi[3], lo2[3], hi2[3];
             for (int a = 0; a < nf; ++a)
                 v[a] = -INFINITY;
             const double dl = 1e-9 * (1 + fabs(ft[j].value));
@@ -977,7 +979,14 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             c->model->density(c, v, lo);
             v[ft[j].f] = ft[j].value + dl;
             c->model->density(c, v, hi);
-            if (lo[0] == hi[0] && lo[1] == hi[1] && lo[2] == hi[2])
+            v[ft[j].f] = ft[j].value - 1000 * dl;
+            c->model->density(c, v, lo2);
+            v[ft[j].f] = ft[j].value + 1000 * dl;
+            c->model->density(c, v, hi2);
+            int drop = 0;
+            for (int q = 0; q < 3; ++q)
+                drop |= fabsl(hi[q] - lo[q]) > 0.5L * fabsl(hi2[q] - lo2[q]) && hi[q] != lo[q];
+            if (!drop)
                 continue;   /* a kink, not a drop */
             if (m->nleak == LEAK_MAX) {
                 free(ft);
@@ -999,21 +1008,15 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
     }
 }
 
-/* E_2(x) = e^-x - x E_1(x), x >= 0, E_1 by Abramowitz and Stegun 5.1.53
- * (x <= 1, within 2e-7) and 5.1.56 (beyond, within 5e-5 relative). */
-static double expint2(double x)
+/* E_2(x) / 2 from m's table (linear between its points), 0 past it
+ * (E_2(40) < 1e-19). */
+static double half_e2(const ef_lms *m, double x)
 {
-    if (!(x > 0))
-        return 1;
-    if (x > 700)
+    const double u = x * (LEAK_E2_N / LEAK_E2_X);
+    if (!(u < LEAK_E2_N))
         return 0;
-    double e1;
-    if (x <= 1)
-        e1 = -log(x) - 0.57721566 +
-             x * (0.99999193 + x * (-0.24991055 + x * (0.05519968 + x * (-0.00976004 + x * 0.00107857))));
-    else
-        e1 = exp(-x) / x * (x * x + 2.334733 * x + 0.250621) / (x * x + 3.330657 * x + 1.681534);
-    return fmax(0, exp(-x) - x * e1);
+    const int j = (int) u;
+    return 0.5 * (m->e2[j] + (u - j) * (m->e2[j + 1] - m->e2[j]));
 }
 
 /* The exposure in channel k of a point x of extinction sg to where the
@@ -1039,12 +1042,8 @@ static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg
         for (; in && i < end; ++i) {
             const double here = sd[i] < 0 ? m->dneg[i][k] : m->dpos[i][k];
             const double beyond = sd[i] < 0 ? m->dpos[i][k] : m->dneg[i][k];
-            const double u = sg * fabs(sd[i]) * (LEAK_E2_N / LEAK_E2_X);
-            if (here > beyond && u < LEAK_E2_N) {   /* E_2(40) < 1e-19 */
-                const int j = (int) u;
-                const double e2 = m->e2[j] + (u - j) * (m->e2[j + 1] - m->e2[j]);
-                e += fmin(1, (here - beyond) / sg) * 0.5 * e2;
-            }
+            if (here > beyond)
+                e += fmin(1, (here - beyond) / sg) * half_e2(m, sg * fabs(sd[i]));
         }
         i = end;
     }
@@ -1055,12 +1054,8 @@ static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg
         const double sc = m->strata_only ? sg
                           : m->st_rho[j][k] * exp(-m->st_k[j] * (up[0] * x[0] + up[1] * x[1] +
                                                                  up[2] * x[2] - m->st_base[j]));
-        const double u = sg / m->st_k[j] * (LEAK_E2_N / LEAK_E2_X);
-        if (sc > 0 && u < LEAK_E2_N) {
-            const int q = (int) u;
-            const double e2 = m->e2[q] + (u - q) * (m->e2[q + 1] - m->e2[q]);
-            e += fmin(1, sc / sg) * 0.5 * e2;
-        }
+        if (sc > 0)
+            e += fmin(1, sc / sg) * half_e2(m, sg / m->st_k[j]);
     }
     return fmin(e, 1);
 }
@@ -1100,16 +1095,14 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     memcpy(m->pos, l->pos, sizeof m->pos);
     if (local) {
         for (int j = 0; j <= LEAK_E2_N; ++j)
-            m->e2[j] = (float) expint2(LEAK_E2_X * j / LEAK_E2_N);
+            m->e2[j] = (float) ef_lit_e2(LEAK_E2_X * j / LEAK_E2_N);
         leak_planes(s, m);
         /* the lamp's own exposure, at the extinction where it stands (0
          * outside the fog), and the term's weight per channel */
         double sl[3];
-        const double up[3] = { 0, 0, 1 }, h = 1e-6 * (1 + fabs(l->pos[0]) + fabs(l->pos[1]) + fabs(l->pos[2]));
-        const double p0[3] = { l->pos[0], l->pos[1], l->pos[2] - 0.5 * h };
-        ef_lit_tau_from(s, p0, up, h, sl);
+        ef_lit_sigma_at(s, l->pos, sl);
         for (int k = 0; k < 3; ++k) {
-            m->lamp_leak[k] = leak_exposure(m, l->pos, k, sl[k] / h);
+            m->lamp_leak[k] = leak_exposure(m, l->pos, k, sl[k]);
             m->leak_w[k] = LEAK_C * sqrt(0.1 / fmax(1 - albedo(c, k), 1e-3));
         }
     }

@@ -48,6 +48,17 @@ static void sigma_at(const ef_fog_component *c, const double x[3], double out[3]
     }
 }
 
+void ef_lit_sigma_at(const ef_fog_scene *s, const double x[3], double out[3])
+{
+    out[0] = out[1] = out[2] = 0;
+    for (int i = 0; i < s->ncomp; ++i) {
+        double sg[3];
+        sigma_at(&s->comp[i], x, sg);
+        for (int k = 0; k < 3; ++k)
+            out[k] += sg[k];
+    }
+}
+
 /* ----------------------------------------------------- the quadrature */
 
 /* An integrand at n nodes u into out[j] per channel. */
