@@ -17,12 +17,13 @@ here="$(cd "$(dirname "$0")" && pwd)"
 # shellcheck source=bench/ms_lib.sh
 . "$here/ms_lib.sh"
 ms_setup ms_lamp_box.sh MS_LAMP_BOX_SPP 1024 "${1:-build}"
-# role density albedo g geometry
+# role density albedo g geometry [behind: the lamp 10 behind the camera | spot=CONE: a spot aimed down]
 cases=("calib 0.3 0.9 0.3 box=-10,5,-6,10,20,8" "calib 0.15 0.99 0 box=-12,2,-4,14,22,10"
        "calib 0.25 0.92 0.2 hs=2"
        "test 0.2 0.95 0.5 box=-6,4,-5,9,16,7" "test 0.5 0.95 0.5 box=-6,4,-5,9,16,7"
        "test 0.1 0.95 0.5 box=-20,-10,-8,20,30,12" "test 0.3 0.95 0.5 box=-8,14,-6,8,26,6"
-       "test 0.2 0.95 0.5 hs=3" "test 0.3 0.9 0 hs=1.5" "test 0.1 0.99 0.3 hs=4")
+       "test 0.2 0.95 0.5 hs=3" "test 0.3 0.9 0 hs=1.5" "test 0.1 0.99 0.3 hs=4"
+       "test 0.1 0.95 0.5 box=-20,-30,-8,20,30,12 behind" "test 0.2 0.95 0 box=-6,4,-5,9,16,7 spot=60")
 if [[ -n "${MS_LAMP_BOX_GRID:-}" ]]; then
     cp "$MS_LAMP_BOX_GRID" "$tmp/grid.jsonl" || die "MS_LAMP_BOX_GRID=$MS_LAMP_BOX_GRID unreadable"
     for c in "${cases[@]}"; do echo "${c%% *}"; done >"$tmp/roles"
@@ -32,7 +33,7 @@ else
         set -- $c
         echo "$1" >>"$tmp/roles"
         "$py" "$here/ms_compare.py" "$build/exrfog" blender "$tmp" "$spp" 0 "$2" "$3" "$4" 0 64 36 4 \
-            - lamp=10 "$5" >>"$tmp/grid.jsonl" || die "case $c failed"
+            - lamp=10 "${@:5}" >>"$tmp/grid.jsonl" || die "case $c failed"
     done
 fi
 lc_tag="a lamp in a box of fog" lc_lamp=2,3,-25 lamp_cost \
@@ -52,6 +53,10 @@ print("| role | fog | density | albedo | g | single / Cycles (median) | single v
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for role, r in zip(roles, rows):
     geo = ("box " + r["box"]) if r.get("box") else "below z = %g" % r["hs"]
+    if r.get("behind"):
+        geo += ", the lamp behind the camera"
+    if r.get("spot"):
+        geo += ", a spot of cone %g aimed down" % r["spot"]
     print("| %s | %s | %g | %g | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
         role, geo, r["density"], r["albedo"], r["g"], r["single_share_median"],
         100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
