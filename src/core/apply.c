@@ -85,10 +85,12 @@ typedef struct light_cache {
 } light_cache;
 
 /* Fills lc[l] for every light over r[0..n) (need_inf[j]: pixel j's far
- * part shows; skip[j]: a kept pixel, not evaluated). */
+ * part shows; skip[j]: a kept pixel, not evaluated); the estimates E and
+ * Ef only with want_err (else 0: the error output is not asked for, and a
+ * lamp's multiple scattering skips its estimate's reads). */
 static void light_cache_fill(const ef_fog_scene *s, const ef_ray *r, int n,
                              const unsigned char *need_inf, const unsigned char *skip,
-                             light_cache *lc)
+                             int want_err, light_cache *lc)
 {
     ef_ray far[EF_RECON_SPAN];
     int fj[EF_RECON_SPAN], nf = 0;
@@ -98,7 +100,10 @@ static void light_cache_fill(const ef_fog_scene *s, const ef_ray *r, int n,
     for (int l = 0; l < s->nlight; ++l) {
         light_cache *c = &lc[l];
         double *const S[3] = { c->S[0], c->S[1], c->S[2] }, *const E[3] = { c->E[0], c->E[1], c->E[2] };
-        ef_light_rays(s, &s->light[l], r, n, S, E);
+        if (!want_err)
+            for (int k = 0; k < 3; ++k)
+                memset(c->E[k], 0, (size_t) n * sizeof c->E[k][0]);
+        ef_light_rays(s, &s->light[l], r, n, S, want_err ? E : NULL);
         for (int k = 0; k < 3; ++k) {
             memcpy(c->Sf[k], c->S[k], (size_t) n * sizeof c->S[k][0]);
             memcpy(c->Ef[k], c->E[k], (size_t) n * sizeof c->E[k][0]);
@@ -106,11 +111,11 @@ static void light_cache_fill(const ef_fog_scene *s, const ef_ray *r, int n,
         if (nf) {
             double Sq[3][EF_RECON_SPAN], Eq[3][EF_RECON_SPAN];
             double *const Sqk[3] = { Sq[0], Sq[1], Sq[2] }, *const Eqk[3] = { Eq[0], Eq[1], Eq[2] };
-            ef_light_rays(s, &s->light[l], far, nf, Sqk, Eqk);
+            ef_light_rays(s, &s->light[l], far, nf, Sqk, want_err ? Eqk : NULL);
             for (int m = 0; m < nf; ++m)
                 for (int k = 0; k < 3; ++k) {
                     c->Sf[k][fj[m]] = Sq[k][m];
-                    c->Ef[k][fj[m]] = Eq[k][m];
+                    c->Ef[k][fj[m]] = want_err ? Eq[k][m] : 0;
                 }
         }
     }
@@ -739,7 +744,7 @@ void ef_fog_block_aov(const ef_fog_pass *pass, int x0, int y0, int w, int h, flo
                 unsigned char skip[EF_RECON_SPAN];
                 for (int j = 0; j < n; ++j)
                     skip[j] = sp->sky[j] && s->sky == EF_SKY_KEEP;
-                light_cache_fill(s, sp->r, n, sp->need_inf, skip, lc);
+                light_cache_fill(s, sp->r, n, sp->need_inf, skip, (mask & EF_AOV_ERROR) != 0, lc);
             }
             const double cpu0 = cpu ? cpu() : 0;
             for (int j = 0; j < n; ++j)

@@ -245,7 +245,7 @@ static int closed_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *
  * to E: the method that serves the segment (lit noise fog, a sun's closed
  * form, else the quadrature with its point-lamp closed form). */
 static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
-                            double D, double rel, double S[3], double E[3])
+                            double D, double rel, double S[3], double E[3], int est)
 {
     for (int i = 0; i < s->ncomp; ++i)
         if (s->comp[i].model->tau_info) {
@@ -267,7 +267,7 @@ static void inscatter_range(const ef_fog_scene *s, const ef_light *l, const ef_r
             return;
         }
     }
-    ef_lit_quad_range(s, l, r, a, D, rel, S, E);
+    ef_lit_quad_range(s, l, r, a, D, rel, S, est ? E : NULL);
 }
 
 int ef_light_cuts(const ef_light *l, const ef_ray *r, double a, double b, double *cut, int cap)
@@ -332,7 +332,7 @@ static void one_ray(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, i
                     double *const S[3], double *const E[3])
 {
     double v[3], ve[3];
-    ef_light_inscatter(s, l, &r[j], v, ve);
+    ef_light_inscatter(s, l, &r[j], v, E ? ve : NULL);
     for (int k = 0; k < 3; ++k) {
         S[k][j] = v[k];
         if (E)
@@ -387,6 +387,7 @@ void ef_light_inscatter_rel(const ef_fog_scene *s, const ef_light *l, const ef_r
                             double S[3], double err[3])
 {
     double E[3] = { 0, 0, 0 };
+    const int est = err != NULL;   /* without err, the estimates are not computed */
     S[0] = S[1] = S[2] = 0;
     if (err)
         err[0] = err[1] = err[2] = 0;
@@ -394,7 +395,7 @@ void ef_light_inscatter_rel(const ef_fog_scene *s, const ef_light *l, const ef_r
     if (s->ncomp == 0 || !(D > 0) || (l->e[0] == 0 && l->e[1] == 0 && l->e[2] == 0))
         return;
     if (!l->shadow) {
-        inscatter_range(s, l, r, 0, D, rel, S, E);
+        inscatter_range(s, l, r, 0, D, rel, S, E, est);
     } else {
         /* each lit piece at its visibility (1: hard shadows) */
         double stack[LIT_STACK][3], (*iv)[3] = stack;
@@ -413,11 +414,11 @@ void ef_light_inscatter_rel(const ef_fog_scene *s, const ef_light *l, const ef_r
             n = -1 - n;
         for (int i = 0; i < n; ++i) {
             if (iv[i][2] == 1) {
-                inscatter_range(s, l, r, iv[i][0], iv[i][1], rel, S, E);
+                inscatter_range(s, l, r, iv[i][0], iv[i][1], rel, S, E, est);
                 continue;
             }
             double Sp[3] = { 0, 0, 0 }, Ep[3] = { 0, 0, 0 };
-            inscatter_range(s, l, r, iv[i][0], iv[i][1], rel, Sp, Ep);
+            inscatter_range(s, l, r, iv[i][0], iv[i][1], rel, Sp, Ep, est);
             for (int k = 0; k < 3; ++k) {
                 S[k] += iv[i][2] * Sp[k];
                 E[k] += iv[i][2] * Ep[k];

@@ -23,7 +23,8 @@ int ef_light_dark(const ef_fog_scene *s, const ef_light *l);
  * absolute error per channel (the quadrature's Kronrod-Gauss differences,
  * with noise fog the steps' Richardson differences and the noise calls'
  * estimates; 0 for closed forms). +inf where a lamp of radius 0 lies on the
- * segment itself. */
+ * segment itself. err NULL skips what serves the estimate alone (a lamp's
+ * multiple scattering's second reads); S is the same bits. */
 void ef_light_inscatter(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double S[3],
                         double err[3]);
 /* ef_light_inscatter with its quadrature aiming at relative accuracy rel

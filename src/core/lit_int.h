@@ -106,7 +106,9 @@ static const double lg_I[EF_LIT_DENSE_NC] = {
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                              double D, double w, double rel, ef_lit_dense *d);
 /* The general quadrature of l's light over [a, D] of r, added to S and E,
- * to relative accuracy rel (0: its own). */
+ * to relative accuracy rel (0: its own). E NULL: no estimate wanted (a
+ * lamp's multiple scattering then skips its estimate's reads; S is the
+ * same bits). */
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double rel, double S[3], double E[3]);
 /* The scene's extinction per channel at x (its components' densities). */

@@ -1701,7 +1701,8 @@ double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
                          double ca, double expo, double *est)
 {
-    *est = 0;
+    if (est)
+        *est = 0;
     const int t = m->tab_of[k];
     if (t < 0 || !(sg > 0) || !(tl > 0) || !(d > 0))
         return 0;
@@ -1721,6 +1722,10 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
     int r0;
     const int in = tab_rows(tb->nr, tb->lg, tl, &r0, wt);
     ev = 0;
+    if (!est) {   /* the value alone: no estimate's reads */
+        const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL) : 0;
+        return m->spot ? v * spot_share_at(tb, tl, ca, &ev) : v;
+    }
     const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, &ev, tb->e) : 0;
     const double w = fabs(sd - tl) <= 1e-12 * tl
                          ? v

@@ -258,6 +258,7 @@ typedef struct lit_q {
      * local mode: its table read at every node), else NULL; its estimate
      * and its part of the value per node into aux (gk15_fv's 30 rows) */
     const ef_lms *lms;
+    int est;                  /* 0: the caller wants no estimate (lms_node skips its reads) */
     double (*aux)[3];
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
@@ -568,7 +569,7 @@ static void lms_node(const lit_q *q, double t, const double tv[3], const double 
 {
     /* the leak term's exposure, once per four nodes (at the first of them:
      * it is smooth over a rule's span); ex[3] 0 asks for it */
-    if (!ex[3]) {
+    if (!ex[3] && q->est) {
         const ef_ray *r = q->r;
         const double x[3] = { r->org[0] + t * r->dir[0], r->org[1] + t * r->dir[1],
                               r->org[2] + t * r->dir[2] };
@@ -587,8 +588,9 @@ static void lms_node(const lit_q *q, double t, const double tv[3], const double 
         v[k] = e[k] = 0;
         if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
             continue;
-        double est;
-        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, ex[k], &est);
+        double est = 0;
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, ex[k],
+                                           q->est ? &est : NULL);
         const double w = exp(-tv[k]) * wgt * l->e[k];
         v[k] = f * w;
         e[k] = est * w;
@@ -1137,10 +1139,9 @@ int ef_lit_cone_cuts(const ef_light *l, const ef_ray *r, double a, double D, dou
  * by its closed form first. */
 static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double S[3], double E[3], ef_lit_dense *dense, double vis,
-                       double rel_in)
+                       double rel_in, int est)
 {
-    lit_q q = { s, l, r, 0, 0, 0, 0, { 0, 0, 0 }, 0, 0, 0, 0, 0, 1, { 0, 0, 0 }, NULL, NULL,
-                NULL };
+    lit_q q = { .s = s, .l = l, .r = r, .uniform = 1, .est = est };
     vcomp vc[EF_FOG_MAX_COMPONENTS];
     double aux[30][3], X[3] = { 0, 0, 0 };
     if (ef_lms_is_local(l->lms) && ef_light_at_position(l)) {
@@ -1316,14 +1317,16 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
 void ef_lit_quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                        double D, double rel, double S[3], double E[3])
 {
-    quad_range(s, l, r, a, D, S, E, NULL, 1, rel);
+    /* without E, the estimates' sums go to a scratch the caller never sees */
+    double Es[3] = { 0, 0, 0 };
+    quad_range(s, l, r, a, D, S, E ? E : Es, NULL, 1, rel, E != NULL);
 }
 
 void ef_lit_quad_range_dense(const ef_fog_scene *s, const ef_light *l, const ef_ray *r, double a,
                              double D, double w, double rel, ef_lit_dense *d)
 {
     double S[3] = { 0, 0, 0 }, E[3] = { 0, 0, 0 };
-    quad_range(s, l, r, a, D, S, E, d, w, rel);
+    quad_range(s, l, r, a, D, S, E, d, w, rel, 1);
     /* a lamp on the segment itself (inf) has no leaves to hold it */
     for (int k = 0; k < 3; ++k)
         if (!isfinite(S[k]) && !d->failed)

@@ -233,7 +233,9 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * bench/ms_lamp_height.md). ca: the cosine of the node's direction from
  * the lamp against a spot's aim (ef_lms_spot; else unused); expo: the
  * node's exposure, ef_lms_leak_exposure (a point near it serves: it is
- * smooth, and read once per four nodes of a quadrature rule). */
+ * smooth, and read once per four nodes of a quadrature rule). est NULL:
+ * the value alone, the same bits, without the estimate's reads (expo
+ * unused). */
 int ef_lms_is_local(const ef_lms *m);
 /* Whether m is a spot's (ef_lms_spot), and whether its fog is not
  * uniform (the field scaled as above); either makes it local. */
