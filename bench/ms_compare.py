@@ -45,6 +45,9 @@ across = spot is not None and "across" in sys.argv[14:]   # the spot aimed along
 box = next((a for a in sys.argv[14:] if a.startswith("box=")), None)
 # hs=Z (with lamp=): the fog fills everything below z = Z (exrfog: halfspace:plane=0,0,1,-Z)
 hs = next((a for a in sys.argv[14:] if a.startswith("hs=")), None)
+# lay=H0/F0,H1/F1,... (with lamp=): layered fog, DENSITY times factors linear between the knots
+# (exrfog: layered:heights=H0,H1,...:densities=DENSITY F0,...)
+lay = next((a for a in sys.argv[14:] if a.startswith("lay=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
@@ -53,7 +56,8 @@ if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
            + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else "")
            + ("_" + spot.replace("=", "") if spot else "") + ("_across" if across else "")
-           + ("_box" + box[4:].replace(",", "_") if box else "") + ("_hs" + hs[3:] if hs else ""))
+           + ("_box" + box[4:].replace(",", "_") if box else "") + ("_hs" + hs[3:] if hs else "")
+           + ("_lay" + lay[4:].replace(",", "_").replace("/", "x") if lay else ""))
 
 
 def render(bounces):
@@ -61,7 +65,7 @@ def render(bounces):
     t0 = time.time()
     if lamp is not None:
         script = [here + "/ms_lamp_blender.py", "--", out, spp, str(bounces), str(dens), str(albedo),
-                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else []) + (["across"] if across else []) + ([box] if box else []) + ([hs] if hs else [])
+                  str(g), str(lamp), str(W), str(H)] + ([wall] if wall else []) + (["behind"] if behind else []) + ([falloff] if falloff else []) + ([spot] if spot else []) + (["across"] if across else []) + ([box] if box else []) + ([hs] if hs else []) + ([lay] if lay else [])
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
@@ -111,6 +115,10 @@ if lamp is not None:
     if hs:
         fogs = ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (
             -float(hs[3:]), dens, albedo, g)]
+    if lay:
+        kn = [tuple(float(x) for x in k.split("/")) for k in lay[4:].split(",")]
+        fogs = ["--fog", "layered:heights=%s:densities=%s:albedo=%r:phase=hg:g=%r" % (
+            ",".join(repr(h) for h, _ in kn), ",".join(repr(dens * f) for _, f in kn), albedo, g)]
     common[common.index("--fog-color") + 2:common.index("--fog-color") + 2] = fogs
     sun = "point:position=%r,%r,%r:intensity=%r" % (tuple(cam["lamp"]) + (cam["intensity"],))
     if spot:   # cosine=1: Cycles 3.x's spots fall as cos alpha inside the cone too
@@ -168,7 +176,7 @@ rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
     "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
-    "spot": float(spot[5:]) if spot else None, "across": across, "box": box[4:] if box else None, "hs": float(hs[3:]) if hs else None,
+    "spot": float(spot[5:]) if spot else None, "across": across, "box": box[4:] if box else None, "hs": float(hs[3:]) if hs else None, "lay": lay[4:] if lay else None,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

@@ -17,7 +17,11 @@ wide from z = -4 / K to 15 / K (e^-15 of the density at the top; below the botto
 already e^4 times denser, which takes what light reaches it), marched by Cycles in steps of
 about a fiftieth of the scale height 1 / K. With spot=CONE the lamp is a spot of that cone
 (degrees, blend 0.2) aimed straight down (with across, along -x: across the view), of the
-same 100 W. With box=X0,Y0,Z0,X1,Y1,Z1 the homogeneous fog fills that box alone; with hs=Z, everything below z = Z. Writes OUT (RGBA + Z, 32-bit) and OUT.json
+same 100 W. With box=X0,Y0,Z0,X1,Y1,Z1 the homogeneous fog fills that box alone; with hs=Z, everything below z = Z.
+With lay=H0/F0,H1/F1,...: layered fog, DENSITY times a factor linear between the knots (heights
+increasing) and constant beyond: homogeneous below H0 (a box 4 km wide) and marched between H0
+and the last knot (steps of a hundredth of the closest knots' gap), homogeneous above it
+unless its factor is 0. Writes OUT (RGBA + Z, 32-bit) and OUT.json
 (camera, lamp position and intensity)."""
 import json
 import math
@@ -45,6 +49,9 @@ box = next(([float(v) for v in a[4:].split(",")] for a in args[9:] if a.startswi
 hs = next((float(a[3:]) for a in args[9:] if a.startswith("hs=")), None)
 if hs is not None:
     box = [-2000, -2000, -2000, 2000, 2000, hs]
+# lay=H0/F0,H1/F1,...: layered fog (the knots' heights and density factors)
+lay = next(([tuple(float(x) for x in k.split("/")) for k in a[4:].split(",")]
+            for a in args[9:] if a.startswith("lay=")), None)
 sc = ms_scene.setup(spp, bounces, width, height, 7)
 if wall > 0:
     # a black wall covering the left half of the frame: x from -4000 to 0 at y = wall
@@ -60,6 +67,22 @@ if falloff > 0:
     # Cycles' automatic step for a procedural volume is a tenth of the bounds' mean size
     step = 0.1 * (600 + 600 + zhi - zlo) / 3
     m = ms_scene.height_fog("fog", dens, albedo, g, falloff, (0.02 / falloff) / step)
+    sc.cycles.volume_max_steps = 100000
+elif lay:
+    def slab(z0, z1):
+        bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5 * (z0 + z1)))
+        c = bpy.context.object
+        c.scale = (4000, 4000, z1 - z0)
+        return c
+    h0, hn = lay[0][0], lay[-1][0]
+    if lay[0][1] > 0:
+        slab(-2000, h0).data.materials.append(ms_scene.fog("fog_below", dens * lay[0][1], albedo, g))
+    if lay[-1][1] > 0:
+        slab(hn, 2000).data.materials.append(ms_scene.fog("fog_above", dens * lay[-1][1], albedo, g))
+    cube = slab(h0, hn)
+    gap = min(b[0] - a[0] for a, b in zip(lay, lay[1:]))
+    step = 0.1 * (4000 + 4000 + hn - h0) / 3
+    m = ms_scene.layered_fog("fog", dens, albedo, g, lay, (gap / 100) / step)
     sc.cycles.volume_max_steps = 100000
 elif box:
     bpy.ops.mesh.primitive_cube_add(size=1, location=tuple(0.5 * (box[i] + box[i + 3]) for i in range(3)))

@@ -61,6 +61,45 @@ def fog(name, dens, albedo, g):
     return m
 
 
+def layered_fog(name, dens, albedo, g, knots, step_rate):
+    """Layered fog over world z: density DENS times a factor piecewise linear between KNOTS
+    ((height, factor) pairs, heights increasing) and constant beyond the ends (exrfog's layered
+    model), as a sum of clamped Map Range ramps; split as fog() splits it, marched at STEP_RATE
+    times Cycles' automatic step."""
+    m = bpy.data.materials.new(name); m.use_nodes = True
+    nt = m.node_tree; nt.nodes.clear()
+    geo = nt.nodes.new('ShaderNodeNewGeometry')
+    sep = nt.nodes.new('ShaderNodeSeparateXYZ')
+    nt.links.new(geo.outputs['Position'], sep.inputs[0])
+    acc = None
+    for (h0, f0), (h1, f1) in zip(knots, knots[1:]):
+        mr = nt.nodes.new('ShaderNodeMapRange'); mr.clamp = True
+        mr.inputs['From Min'].default_value = h0; mr.inputs['From Max'].default_value = h1
+        mr.inputs['To Min'].default_value = 0.0; mr.inputs['To Max'].default_value = f1 - f0
+        nt.links.new(sep.outputs['Z'], mr.inputs['Value'])
+        if acc is None:
+            add = nt.nodes.new('ShaderNodeMath'); add.operation = 'ADD'
+            add.inputs[1].default_value = knots[0][1]
+            nt.links.new(mr.outputs['Result'], add.inputs[0])
+        else:
+            add = nt.nodes.new('ShaderNodeMath'); add.operation = 'ADD'
+            nt.links.new(acc.outputs[0], add.inputs[0]); nt.links.new(mr.outputs['Result'], add.inputs[1])
+        acc = add
+    ds = nt.nodes.new('ShaderNodeMath'); ds.operation = 'MULTIPLY'
+    ds.inputs[1].default_value = dens * albedo
+    nt.links.new(acc.outputs[0], ds.inputs[0])
+    da = nt.nodes.new('ShaderNodeMath'); da.operation = 'MULTIPLY'
+    da.inputs[1].default_value = dens * (1 - albedo)
+    nt.links.new(acc.outputs[0], da.inputs[0])
+    s, a = _scatter_absorb(nt, g)
+    nt.links.new(ds.outputs[0], s.inputs['Density'])
+    nt.links.new(da.outputs[0], a.inputs['Density'])
+    m.cycles.homogeneous_volume = False
+    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
+    m.cycles.volume_step_rate = step_rate
+    return m
+
+
 def _scatter_absorb(nt, g):
     """Volume Scatter (white, HG anisotropy G) plus black Volume Absorption into the material
     output of node tree NT; returns the two nodes, their densities for the caller."""

@@ -58,6 +58,8 @@
  * points: within 3e-3 at one step from 0, where its second derivative
  * e^-x / x is largest) */
 #define LEAK_E2_N 2048
+/* Gauss-Legendre nodes of the mean over a piece of layered profile */
+#define PROF_NG 8
 #define LEAK_E2_X 40.0
 #define LMS_GMRES_TOL 1e-9
 
@@ -86,6 +88,18 @@ typedef struct lms_tab {
     double *fb, *fbe;
     double *qb;      /* [nr][2]: r Q's mean over directions (both columns) */
 } lms_tab;
+
+/* A layered profile along h = n.x + d: its knots, the density per
+ * channel at each (linear between, constant beyond the ends), and per
+ * knot i the knot of the least density over i and above (up) and over i
+ * and below (dn). */
+typedef struct lms_prof {
+    double n[3], d;
+    int nk;
+    double *h, *den[3];
+    int *up[3], *dn[3];
+    void *mem;   /* one block holding the arrays */
+} lms_prof;
 
 struct ef_lms {
     _Atomic int refs;
@@ -118,9 +132,14 @@ struct ef_lms {
     /* exponential strata (height fog): where the fog thins, e-fold by
      * e-fold, along up (its density rho e^-(k (up.x - base))) */
     int nstrata, strata_only;   /* strata_only: they are the fog's one component */
+    /* layered profiles (a component of one functional whose features are
+     * kinks: layered fog), where the fog thins along them up or down */
+    int nprof;
+    struct lms_prof *prof;
     double st_up[EF_FOG_MAX_COMPONENTS][3], st_rho[EF_FOG_MAX_COMPONENTS][3];
     double st_k[EF_FOG_MAX_COMPONENTS], st_base[EF_FOG_MAX_COMPONENTS];
     float e2[LEAK_E2_N + 1];   /* E_2 at LEAK_E2_X j / LEAK_E2_N (linear between) */
+    double glx[PROF_NG], glw[PROF_NG];   /* prof_walk's nodes on [0, 1] (weights sum to 1) */
 };
 
 /* ------------------------------------------------------------ the grids */
@@ -741,6 +760,9 @@ void ef_lms_unref(ef_lms *m)
         free(m->tab[t].fbe);
         free(m->tab[t].qb);
     }
+    for (int j = 0; j < m->nprof; ++j)
+        free(m->prof[j].mem);
+    free(m->prof);
     free(m);
 }
 
@@ -920,17 +942,86 @@ static int lms_refuse(const ef_fog_scene *s, const ef_light *l, int local, ef_er
     return 0;
 }
 
+
+/* Fills p's tables from its knots h and densities den (already set). */
+static void prof_tables(lms_prof *p)
+{
+    const int n = p->nk;
+    for (int k = 0; k < 3; ++k) {
+        const double *D = p->den[k];
+        p->up[k][n - 1] = n - 1;
+        for (int i = n - 2; i >= 0; --i)
+            p->up[k][i] = D[i] <= D[p->up[k][i + 1]] ? i : p->up[k][i + 1];
+        p->dn[k][0] = 0;
+        for (int i = 1; i < n; ++i)
+            p->dn[k][i] = D[i] <= D[p->dn[k][i - 1]] ? i : p->dn[k][i - 1];
+    }
+}
+
+/* Adds profile c's knots (its features; a layered fog's) to m->prof as a
+ * profile along functional f; on no memory, every node fully exposed. */
+static void leak_profile(ef_lms *m, const ef_fog_component *c, const ef_fog_functional *f,
+                         const ef_fog_feature *ft, int nt)
+{
+    lms_prof *np = realloc(m->prof, (size_t) (m->nprof + 1) * sizeof *np);
+    if (!np) {
+        m->nleak = -1;
+        return;
+    }
+    m->prof = np;
+    lms_prof *p = &np[m->nprof];
+    memset(p, 0, sizeof *p);
+    const size_t n = (size_t) nt;
+    p->mem = malloc(n * (4 * sizeof(double) + 6 * sizeof(int)));
+    if (!p->mem) {
+        m->nleak = -1;
+        return;
+    }
+    double *a = p->mem;
+    p->h = a;
+    for (int k = 0; k < 3; ++k)
+        p->den[k] = a + (1 + k) * n;
+    int *ia = (int *) (a + 4 * n);
+    for (int k = 0; k < 3; ++k) {
+        p->up[k] = ia + k * n;
+        p->dn[k] = ia + (3 + k) * n;
+    }
+    /* the knots in order (features come sorted; duplicates dropped) */
+    int m_ = 0;
+    for (int j = 0; j < nt; ++j) {
+        if (m_ > 0 && !(ft[j].value > p->h[m_ - 1]))
+            continue;
+        long double v = ft[j].value, dv[3];
+        c->model->density(c, &v, dv);
+        p->h[m_] = ft[j].value;
+        for (int k = 0; k < 3; ++k)
+            p->den[k][m_] = (double) dv[k];
+        ++m_;
+    }
+    if (m_ < 2) {
+        free(p->mem);
+        return;
+    }
+    p->nk = m_;
+    memcpy(p->n, f->n, sizeof p->n);
+    p->d = f->d;
+    prof_tables(p);
+    ++m->nprof;
+}
+
 /* Where the fog drops or thins, for the leak estimate
  * (ef_lms_local_node): the planes where a component's density drops (its
  * features of scale 0 with different densities either side: a box's or
  * convex volume's faces, a half-space's plane) into m->leak with those
- * densities, and the exponential strata (height fog) into m->st_*. A
- * component of several functionals other than a convex volume is passed
- * over (layers: their knots are kinks, not drops). */
+ * densities, the exponential strata (height fog) into m->st_*, and a
+ * component of one functional whose features are kinks (layered fog) as
+ * a profile (leak_profile). A component of several functionals other
+ * than a convex volume is passed over. */
 static void leak_planes(const ef_fog_scene *s, ef_lms *m)
 {
     m->nleak = 0;
     m->nstrata = 0;
+    m->nprof = 0;
     for (int i = 0; i < s->ncomp; ++i) {
         const ef_fog_component *c = &s->comp[i];
         double rho[3], kk, base;
@@ -961,7 +1052,9 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
         }
         if (nt > 0)
             c->model->features(c, ft, nt);
+        int kinks = 0, smooth = 0;
         for (int j = 0; j < nt; ++j) {
+            smooth |= ft[j].scale != 0;
             if (ft[j].scale != 0 || ft[j].f < 0 || ft[j].f >= nf)
                 continue;
             const ef_fog_functional *f = &fn[ft[j].f];
@@ -986,8 +1079,10 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             int drop = 0;
             for (int q = 0; q < 3; ++q)
                 drop |= fabsl(hi[q] - lo[q]) > 0.5L * fabsl(hi2[q] - lo2[q]) && hi[q] != lo[q];
-            if (!drop)
+            if (!drop) {
+                ++kinks;
                 continue;   /* a kink, not a drop */
+            }
             if (m->nleak == LEAK_MAX) {
                 free(ft);
                 m->nleak = -1;
@@ -1002,7 +1097,12 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
             m->leak[k][3] = (f->d - ft[j].value) / nn;
             m->leak_convex[k] = convex;
         }
+        /* a profile of kinks alone, linear between them (layered fog) */
+        if (nf == 1 && !convex && kinks >= 2 && m->nleak == first && !smooth)
+            leak_profile(m, c, &fn[0], ft, nt);
         free(ft);
+        if (m->nleak < 0)
+            return;
         for (int j = first; j < m->nleak; ++j)
             m->leak_end[j] = m->nleak;
     }
@@ -1017,6 +1117,80 @@ static double half_e2(const ef_lms *m, double x)
         return 0;
     const int j = (int) u;
     return 0.5 * (m->e2[j] + (u - j) * (m->e2[j + 1] - m->e2[j]));
+}
+
+/* The pieces of a profile prof_walk takes one by one before the rest is
+ * taken at the walk's end. */
+#define PROF_WALK 64
+
+/* One direction of prof_exposure: from x (density dv, height v) through
+ * the profile's points hs[0..n) (densities ds, going away from x), every
+ * fall of the density counted as planes are (its share of sg times E_2 of
+ * the optical depth to it, over 2), the mean over a linear piece by
+ * Gauss-Legendre (the depth quadratic along it); past PROF_WALK pieces or
+ * LEAK_E2_X of depth, the fall still to come (to the least, rest_min) at
+ * the depth reached. */
+static double prof_walk(const ef_lms *m, double v, double dv, const double *hs, const double *ds,
+                        int step, int n, double rest_min, double sg, double rest)
+{
+    double e = 0, tau = 0, ha = v, da = dv;
+    for (int i = 0; i < n; ++i) {
+        const double hb = hs[i * step], db = ds[i * step], L = fabs(hb - ha);
+        if (i >= PROF_WALK || !(tau < LEAK_E2_X)) {
+            if (da > rest_min)
+                e += (da - rest_min) / sg * half_e2(m, tau);
+            return e;
+        }
+        if (db < da && L > 0) {
+            double mean = 0;
+            for (int g = 0; g < PROF_NG; ++g) {
+                const double u = m->glx[g] * L;
+                mean += m->glw[g] * half_e2(m, tau + (da + rest) * u + (db - da) * u * u / (2 * L));
+            }
+            e += (da - db) / sg * mean;
+        }
+        tau += (0.5 * (da + db) + rest) * L;
+        ha = hb;
+        da = db;
+    }
+    return e;
+}
+
+/* Profile p's part of leak_exposure at x (channel k, extinction sg):
+ * where the density falls going up or down from x, each fall as planes'
+ * drops are counted (prof_walk), the rest of sg (the other components)
+ * taken as at x. */
+static double prof_exposure(const lms_prof *p, const ef_lms *m, const double x[3], int k,
+                            double sg)
+{
+    const double v = p->n[0] * x[0] + p->n[1] * x[1] + p->n[2] * x[2] + p->d;
+    const double *H = p->h, *D = p->den[k];
+    const int n = p->nk;
+    /* j: the last knot at or below v (-1 below them all) */
+    int lo = -1, hi = n;
+    while (hi - lo > 1) {
+        const int mid = (lo + hi) / 2;
+        if (H[mid] <= v)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    const int j = lo;
+    double dv;
+    if (j < 0)
+        dv = D[0];
+    else if (j == n - 1)
+        dv = D[n - 1];
+    else
+        dv = D[j] + (v - H[j]) / (H[j + 1] - H[j]) * (D[j + 1] - D[j]);
+    const double rest = fmax(0, sg - dv);
+    double e = 0;
+    if (j + 1 < n)   /* up: knots j + 1 and above */
+        e += fmin(1, prof_walk(m, v, dv, H + j + 1, D + j + 1, 1, n - j - 1,
+                               D[p->up[k][j + 1]], sg, rest));
+    if (j >= 0)   /* down: knots j and below */
+        e += fmin(1, prof_walk(m, v, dv, H + j, D + j, -1, j + 1, D[p->dn[k][j]], sg, rest));
+    return e;
 }
 
 /* The exposure in channel k of a point x of extinction sg to where the
@@ -1047,6 +1221,11 @@ static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg
         }
         i = end;
     }
+    /* layered fog thins where its profile falls to its least above or
+     * below x: that fall's share of sg, at the optical depth to where it
+     * is reached (the profile's column, the other components' sg as at x) */
+    for (int j = 0; j < m->nprof; ++j)
+        e += prof_exposure(&m->prof[j], m, x, k, sg);
     /* height fog thins upwards: its share of sg, at an optical depth sg / k
      * (one e-fold) */
     for (int j = 0; j < m->nstrata; ++j) {
@@ -1096,6 +1275,7 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
     if (local) {
         for (int j = 0; j <= LEAK_E2_N; ++j)
             m->e2[j] = (float) ef_lit_e2(LEAK_E2_X * j / LEAK_E2_N);
+        ef_ms_directions(PROF_NG, m->glx, m->glw);
         leak_planes(s, m);
         /* the lamp's own exposure, at the extinction where it stands (0
          * outside the fog), and the term's weight per channel */
@@ -1695,7 +1875,7 @@ int ef_lms_same_table(const ef_lms *m, int j, int k)
 
 double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg)
 {
-    return m->nleak || m->nstrata ? leak_exposure(m, x, k, sg) : 0;
+    return m->nleak || m->nstrata || m->nprof ? leak_exposure(m, x, k, sg) : 0;
 }
 
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
@@ -1735,7 +1915,7 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
      * where this fog drops, seen from the node and from the lamp: the more,
      * the further the light wanders (the diffusion length grows as
      * (1 - albedo)^-1/2) */
-    if (m->nleak || m->nstrata)
+    if (m->nleak || m->nstrata || m->nprof)
         *est += m->leak_w[k] * fabs(v) * fmin(1, expo + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;

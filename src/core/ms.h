@@ -224,14 +224,16 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * field scaled by the node's own extinction (sg^3 Q1(sg d, nu)) plus the
  * table's estimate, plus the light the unbounded fog's field counts that
  * would scatter back from where this fog drops or thins (a box's or convex
- * volume's faces, a half-space's plane; height fog one e-fold up): the
+ * volume's faces, a half-space's plane; height fog one e-fold up; layered
+ * fog wherever its profile falls, each fall as a plane's drop): the
  * value times LEAK_C sqrt(0.1 / (1 - albedo)) times the exposure of the
  * node and of the lamp to them (the share of the extinction that drops
  * times E_2 of the optical depth to the drop, over 2; at most 1). An
  * estimate, calibrated against nested quadrature of the second order and
  * against Cycles (bench/ms_lamp.md, bench/ms_lamp_box.md,
- * bench/ms_lamp_height.md). ca: the cosine of the node's direction from
- * the lamp against a spot's aim (ef_lms_spot; else unused); expo: the
+ * bench/ms_lamp_height.md, bench/ms_lamp_layered.md). ca: the cosine of
+ * the node's direction from the lamp against a spot's aim (ef_lms_spot;
+ * else unused); expo: the
  * node's exposure, ef_lms_leak_exposure (a point near it serves: it is
  * smooth, and read once per four nodes of a quadrature rule). est NULL:
  * the value alone, the same bits, without the estimate's reads (expo
