@@ -87,6 +87,9 @@ typedef struct lms_tab {
      * the optical distance and the angle from the axis ([SPOT_NR][SPOT_NA]) */
     double *fb, *fbe;
     double *qb;      /* [nr][2]: r Q's mean over directions (both columns) */
+    /* the lamp's images (lamp_images): r Q's mean over directions at
+     * optical distance rmax (i / (IMG_N - 1))^2, linear between */
+    double *im;
 } lms_tab;
 
 /* A layered profile along h = n.x + d: its knots, the density per
@@ -128,6 +131,10 @@ struct ef_lms {
      * consecutive), and whether it is a convex volume's */
     int leak_end[LEAK_MAX], leak_convex[LEAK_MAX];
     double lamp_leak[3];   /* the lamp's own exposure per channel */
+    /* the lamp's images across those planes (lamp_images): per channel its
+     * place beyond the extrapolated boundary and the drop's share */
+    int nimg;
+    double img[LEAK_MAX][3][3], img_share[LEAK_MAX][3];
     double leak_w[3];      /* the leak term's weight per channel (LEAK_C and the albedo's) */
     /* exponential strata (height fog): where the fog thins, e-fold by
      * e-fold, along up (its density rho e^-(k (up.x - base))) */
@@ -326,11 +333,13 @@ static void rows4(double u, int nr, int *row0, double w[4])
         r0 = 0;
     if (r0 > nr - 4)
         r0 = nr - 4;
-    const double t = u - r0;
-    w[0] = -(t - 1) * (t - 2) * (t - 3) / 6;
-    w[1] = t * (t - 2) * (t - 3) / 2;
-    w[2] = -t * (t - 1) * (t - 3) / 2;
-    w[3] = t * (t - 1) * (t - 2) / 6;
+    /* (products by 1/6 and 1/2, not quotients: every node of a lamp's
+     * quadrature comes here, and a division's latency was most of it) */
+    const double t = u - r0, a = t - 1, b = t - 2, c = t - 3;
+    w[0] = -(a * b * c) * (1.0 / 6);
+    w[1] = t * b * c * 0.5;
+    w[2] = -(t * a * c) * 0.5;
+    w[3] = t * a * b * (1.0 / 6);
     *row0 = r0;
 }
 
@@ -349,7 +358,7 @@ static void tab_col(int nx, double nu, int *k, double *fx)
  * 0 past rmax (the table's value is 0 there). */
 static int tab_rows(int nr, double lg, double r, int *r0, double w[4])
 {
-    const double u = log1p(r / LMS_RS) / lg * (nr - 1);
+    const double u = log1p(r * (1 / LMS_RS)) * ((nr - 1) / lg);
     if (!(u <= nr - 1))
         return 0;
     rows4(u, nr, r0, w);
@@ -759,6 +768,7 @@ void ef_lms_unref(ef_lms *m)
         free(m->tab[t].fb);
         free(m->tab[t].fbe);
         free(m->tab[t].qb);
+        free(m->tab[t].im);
     }
     for (int j = 0; j < m->nprof; ++j)
         free(m->prof[j].mem);
@@ -1108,6 +1118,130 @@ static void leak_planes(const ef_fog_scene *s, ef_lms *m)
     }
 }
 
+/* r Q's mean over directions in row i of t: columns at x = sin(beta / 2)
+ * uniform, nu = 1 - 2 x^2, the mean (1/2) int dnu = int 2 x dx
+ * (trapezoid). */
+static double row_mean(const lms_tab *t, int i)
+{
+    double sum = 0;
+    for (int k = 0; k + 1 < t->nx; ++k) {
+        const double x0 = (double) k / (t->nx - 1), x1 = (double) (k + 1) / (t->nx - 1);
+        sum += (x1 - x0) * (x0 * t->q[(size_t) i * t->nx + k] + x1 * t->q[(size_t) i * t->nx + k + 1]);
+    }
+    return sum;
+}
+
+/* Points of the images' table (lms_tab's im) */
+#define IMG_N 4096
+
+/* Fills t->im (IMG_N points) from t's rows' means; -1 without memory. */
+static int image_table(lms_tab *t)
+{
+    double *qm = malloc((size_t) t->nr * 2 * sizeof *qm);
+    t->im = malloc(IMG_N * sizeof *t->im);
+    if (!qm || !t->im) {
+        free(qm);
+        return -1;
+    }
+    for (int i = 0; i < t->nr; ++i)
+        qm[2 * i] = qm[2 * i + 1] = row_mean(t, i);
+    for (int i = 0; i < IMG_N; ++i) {
+        const double u = (double) i / (IMG_N - 1);
+        t->im[i] = tab_row(qm, t->nr, 2, t->lg, t->rmax * u * u, 0, 0, NULL, NULL);
+    }
+    free(qm);
+    return 0;
+}
+
+/* Diffusion's extrapolated boundary beyond a free surface, in transport
+ * mean free paths (Milne's problem: 0.7104) */
+#define IMG_ZB 0.7104
+
+/* The lamp's images (m->img): across each plane where the fog holding the
+ * lamp drops (a half-space's plane, the faces of a box or convex volume
+ * the lamp is in), the lamp mirrored beyond the extrapolated boundary
+ * IMG_ZB / (sigma (1 - albedo g1)) past it (sigma the extinction at the
+ * lamp, g1 the phase's mean cosine), weighted by the drop's share of
+ * sigma: the field of a source near a free surface less its image's, as
+ * diffusion theory takes it (first images only; none for strata and
+ * layers, whose fog thins without a plane). */
+static void lamp_images(ef_lms *m, const double sl[3], const double om[3], double g1)
+{
+    m->nimg = 0;
+    if (m->nleak <= 0)
+        return;
+    const double *s = m->pos;
+    /* the planes of the fog holding the lamp, outward (u . x + c = 0, the
+     * lamp's side negative), the drop's share and the boundary per channel */
+    double u[LEAK_MAX][4], sh[LEAK_MAX][3], zb[LEAK_MAX][3];
+    int np = 0;
+    for (int i = 0; i < m->nleak;) {
+        const int end = m->leak_end[i];
+        double sd[LEAK_MAX];
+        int in = 1;
+        for (int j = i; j < end; ++j) {
+            sd[j] = m->leak[j][0] * s[0] + m->leak[j][1] * s[1] + m->leak[j][2] * s[2] + m->leak[j][3];
+            in &= !m->leak_convex[i] || sd[j] < 0;
+        }
+        for (; in && i < end; ++i) {
+            const double o = sd[i] < 0 ? 1 : -1;
+            int any = 0;
+            for (int k = 0; k < 3; ++k) {
+                const double here = sd[i] < 0 ? m->dneg[i][k] : m->dpos[i][k];
+                const double beyond = sd[i] < 0 ? m->dpos[i][k] : m->dneg[i][k];
+                sh[np][k] = here > beyond && sl[k] > 0 ? fmin(1, (here - beyond) / sl[k]) : 0;
+                zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
+                any |= sh[np][k] > 0;
+            }
+            for (int a = 0; a < 4; ++a)
+                u[np][a] = o * m->leak[i][a];
+            np += any;
+        }
+        i = end;
+    }
+    /* first images only: a box's images of images (its corners, opposite
+     * faces) were tried and, summed to that order, undid the first in
+     * every box of bench/ms_lamp_box.md (its series alternates slowly) */
+    for (int i = 0; i < np; ++i) {
+        for (int k = 0; k < 3; ++k) {
+            const double *n = u[i];
+            const double h = n[0] * s[0] + n[1] * s[1] + n[2] * s[2] + n[3];
+            for (int a = 0; a < 3; ++a)
+                m->img[m->nimg][k][a] = s[a] + 2 * (zb[i][k] - h) * n[a];
+            m->img_share[m->nimg][k] = sh[i][k];
+        }
+        ++m->nimg;
+    }
+}
+
+/* The images' part of a node's value (ef_lms_local_node's units: sigma
+ * tau (rQ)(tau) for the lamp itself) at x, each at the lamp's mean
+ * extinction tl / d over its own distance, from the table's mean over
+ * directions (a first form read each image's direction from the full
+ * table: twice the cost, the same errors against Cycles but one). */
+static double image_part(const ef_lms *m, const lms_tab *tb, int k, double tl, double sg,
+                         double d, const double x[3])
+{
+    double v = 0;
+    for (int j = 0; j < m->nimg; ++j) {
+        const double sh = m->img_share[j][k];
+        if (!(sh > 0))
+            continue;
+        const double *p = m->img[j][k];
+        const double y[3] = { x[0] - p[0], x[1] - p[1], x[2] - p[2] };
+        const double dp = sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]);
+        if (!(dp > 0))
+            continue;
+        const double taup = tl / d * dp, u = sqrt(taup / tb->rmax) * (IMG_N - 1);
+        if (!(u < IMG_N - 1))
+            continue;
+        const int i = (int) u;
+        const double f = u - i, rq = tb->im[i] + f * (tb->im[i + 1] - tb->im[i]);
+        v += sh * sg * tl * (tl / taup) * rq;
+    }
+    return v;
+}
+
 /* E_2(x) / 2 from m's table (linear between its points), 0 past it
  * (E_2(40) < 1e-19). */
 static double half_e2(const ef_lms *m, double x)
@@ -1281,10 +1415,14 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
          * outside the fog), and the term's weight per channel */
         double sl[3];
         ef_lit_sigma_at(s, l->pos, sl);
+        double om[3], b1[LMS_L_MAX];
         for (int k = 0; k < 3; ++k) {
             m->lamp_leak[k] = leak_exposure(m, l->pos, k, sl[k]);
             m->leak_w[k] = LEAK_C * sqrt(0.1 / fmax(1 - albedo(c, k), 1e-3));
+            om[k] = albedo(c, k);
         }
+        phase_terms(c->phase, c->g, b1);
+        lamp_images(m, sl, om, b1[1]);
     }
     double b[LMS_L_MAX];
     const int L = m->L = phase_terms(c->phase, c->g, b);
@@ -1305,6 +1443,10 @@ int ef_lms_build(const ef_fog_scene *s, const ef_light *l, ef_lms **out, ef_err 
                 return ef_fail(err, "out of memory for a lamp's multiple scattering");
             }
             ++m->ntab;
+            if (m->nimg && image_table(&m->tab[t])) {
+                ef_lms_unref(m);
+                return ef_fail(err, "out of memory for a lamp's multiple scattering");
+            }
         }
         m->tab_of[k] = t;
     }
@@ -1788,17 +1930,8 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
             rc = -1;
             break;
         }
-        /* r Q's mean over directions: columns at x = sin(beta / 2) uniform,
-         * nu = 1 - 2 x^2, the mean (1/2) int dnu = int 2 x dx (trapezoid) */
-        for (int i = 0; i < t->nr; ++i) {
-            double sum = 0;
-            for (int k = 0; k + 1 < t->nx; ++k) {
-                const double x0 = (double) k / (t->nx - 1), x1 = (double) (k + 1) / (t->nx - 1);
-                sum += (x1 - x0) * (x0 * t->q[(size_t) i * t->nx + k] +
-                                    x1 * t->q[(size_t) i * t->nx + k + 1]);
-            }
-            qb[2 * i] = qb[2 * i + 1] = sum;
-        }
+        for (int i = 0; i < t->nr; ++i)
+            qb[2 * i] = qb[2 * i + 1] = row_mean(t, i);
         /* with a phase that is not isotropic, seven more weightings
          * whose spread from the first is the estimate */
         const int nv = t->phase != EF_PHASE_ISO && t->g != 0 ? SPOT_NV : 1;
@@ -1879,7 +2012,7 @@ double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg
 }
 
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, double expo, double *est)
+                         double ca, const double x[3], double expo, double *est)
 {
     if (est)
         *est = 0;
@@ -1902,21 +2035,26 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
     int r0;
     const int in = tab_rows(tb->nr, tb->lg, tl, &r0, wt);
     ev = 0;
+    /* less the images' field where the fog ends at planes (lamp_images) */
+    const double vi = x && m->nimg ? image_part(m, tb, k, tl, sg, d, x) : 0;
     if (!est) {   /* the value alone: no estimate's reads */
-        const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL) : 0;
+        double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL) : 0;
+        v = vi > 0 ? fmax(0, v - vi) : v;
         return m->spot ? v * spot_share_at(tb, tl, ca, &ev) : v;
     }
-    const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, &ev, tb->e) : 0;
-    const double w = fabs(sd - tl) <= 1e-12 * tl
-                         ? v
-                         : sg * sd * tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
-    *est = fabs(v - w) + sg * tl * ev;
+    const double v0 = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, &ev, tb->e) : 0;
+    const double v = vi > 0 ? fmax(0, v0 - vi) : v0, fac = v0 > 0 ? v / v0 : 1;
+    const double wl = fabs(sd - tl) <= 1e-12 * tl
+                          ? v
+                          : fac * sg * sd *
+                                tab_row(tb->q, tb->nr, tb->nx, tb->lg, sd, col, fx, NULL, NULL);
+    *est = fabs(v - wl) + sg * tl * ev * fac;
     /* light the unbounded fog's field scatters back from beyond a plane
      * where this fog drops, seen from the node and from the lamp: the more,
      * the further the light wanders (the diffusion length grows as
      * (1 - albedo)^-1/2) */
-    if (m->nleak || m->nstrata || m->nprof)
-        *est += m->leak_w[k] * fabs(v) * fmin(1, expo + m->lamp_leak[k]);
+    if (m->nleak || m->nstrata || m->nprof)   /* (on the field before its images) */
+        *est += m->leak_w[k] * fabs(v0) * fmin(1, expo + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;
         const double f = spot_share_at(tb, tl, ca, &fe);
@@ -1926,7 +2064,8 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
          * beam, across: what the view would take from light of no
          * preferred direction, the table's mean, bounds the spread */
         if (tb->phase != EF_PHASE_ISO && tb->g != 0)
-            *est += f * fabs(v - (in ? sg * tl * tab_sum(tb->qb, 2, r0, wt, 0, 0, NULL, NULL) : 0));
+            *est += f * fabs(v - fac * (in ? sg * tl * tab_sum(tb->qb, 2, r0, wt, 0, 0, NULL, NULL)
+                                           : 0));
         return v * f;
     }
     return v;

@@ -569,10 +569,10 @@ static void lms_node(const lit_q *q, double t, const double tv[3], const double 
 {
     /* the leak term's exposure, once per four nodes (at the first of them:
      * it is smooth over a rule's span); ex[3] 0 asks for it */
+    const ef_ray *r = q->r;
+    const double x[3] = { r->org[0] + t * r->dir[0], r->org[1] + t * r->dir[1],
+                          r->org[2] + t * r->dir[2] };
     if (!ex[3] && q->est) {
-        const ef_ray *r = q->r;
-        const double x[3] = { r->org[0] + t * r->dir[0], r->org[1] + t * r->dir[1],
-                              r->org[2] + t * r->dir[2] };
         for (int k = 0; k < 3; ++k)
             ex[k] = k > 0 && sg[k] == sg[k - 1] ? ex[k - 1] : ef_lms_leak_exposure(q->lms, x, k, sg[k]);
         ex[3] = 1;
@@ -589,7 +589,7 @@ static void lms_node(const lit_q *q, double t, const double tv[3], const double 
         if (!(sg[k] > 0) || !(tv[k] < 708) || l->e[k] == 0)
             continue;
         double est = 0;
-        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, ex[k],
+        const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, x, ex[k],
                                            q->est ? &est : NULL);
         const double w = exp(-tv[k]) * wgt * l->e[k];
         v[k] = f * w;

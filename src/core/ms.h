@@ -235,9 +235,11 @@ double ef_lms_eval(const ef_lms *m, double r, double nu, double *err);
  * the node's direction from the lamp against a spot's aim (ef_lms_spot;
  * else unused); expo: the
  * node's exposure, ef_lms_leak_exposure (a point near it serves: it is
- * smooth, and read once per four nodes of a quadrature rule). est NULL:
- * the value alone, the same bits, without the estimate's reads (expo
- * unused). */
+ * smooth, and read once per four nodes of a quadrature rule). x: the
+ * node; where the fog holding the lamp ends at planes the value is less the field of the
+ * lamp's images across them (lit_lamp_ms.c's lamp_images; x NULL: none).
+ * est NULL: the value alone, the same bits, without the estimate's reads
+ * (expo unused). */
 int ef_lms_is_local(const ef_lms *m);
 /* Whether m is a spot's (ef_lms_spot), and whether its fog is not
  * uniform (the field scaled as above); either makes it local. */
@@ -246,7 +248,7 @@ int ef_lms_is_scaled(const ef_lms *m);
 /* Whether channels j and k read the same table (one albedo). */
 int ef_lms_same_table(const ef_lms *m, int j, int k);
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
-                         double ca, double expo, double *est);
+                         double ca, const double x[3], double expo, double *est);
 /* The exposure in channel k of a point x of extinction sg to where the fog
  * drops or thins (the leak term's; 0 in fog that does neither). */
 double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg);

@@ -247,10 +247,10 @@ static void test_local_second_order(void **state)
         assert_int_equal(ef_lms_build_albedo(om, EF_PHASE_HG, g, 2, &m, NULL, NULL, NULL, NULL), 0);
         static const double o[3] = { 0, 0, 0 };
         double est;
-        const double got = ef_lms_local_node(m, 0, tau_h(k, o, x), exp(-k * x[2]), r, nu, 1, 0, &est) /
+        const double got = ef_lms_local_node(m, 0, tau_h(k, o, x), exp(-k * x[2]), r, nu, 1, NULL, 0, &est) /
                            (r * r);
         est /= r * r;
-        assert_true(ef_lms_local_node(m, 0, tau_h(k, o, x), exp(-k * x[2]), r, nu, 1, 0, NULL) /
+        assert_true(ef_lms_local_node(m, 0, tau_h(k, o, x), exp(-k * x[2]), r, nu, 1, NULL, 0, NULL) /
                         (r * r) == got);   /* the value alone: the same bits */
         const clock_t c0 = clock();
         const double want = ref_Q2_at(om, g, k, r, nu, xh);
@@ -461,9 +461,9 @@ static void test_spot_second_order(void **state)
         assert_int_equal(ef_lms_build_albedo(om, EF_PHASE_HG, g, 2, &m, NULL, NULL, NULL, NULL), 0);
         assert_int_equal(ef_lms_spot(m, &sp), 0);
         double est;
-        const double got = ef_lms_local_node(m, 0, r, 1, r, nu, cos(an), 0, &est) / (r * r);
+        const double got = ef_lms_local_node(m, 0, r, 1, r, nu, cos(an), NULL, 0, &est) / (r * r);
         est /= r * r;
-        assert_true(ef_lms_local_node(m, 0, r, 1, r, nu, cos(an), 0, NULL) / (r * r) ==
+        assert_true(ef_lms_local_node(m, 0, r, 1, r, nu, cos(an), NULL, 0, NULL) / (r * r) ==
                     got);   /* the value alone: the same bits */
         const clock_t c0 = clock();
         const double want = ref_Q2_spot(om, g, r, nu, xh, &sp);
