@@ -1153,6 +1153,36 @@ static int image_table(lms_tab *t)
     return 0;
 }
 
+/* The density's falls in channel k of profile p going from height v up
+ * (dir 1) or down (-1), summed into *fall, and their mean height (each
+ * piece's fall at its middle) into *hm; 0 and v where there is none. */
+static void prof_fall(const lms_prof *p, int k, double v, int dir, double *fall, double *hm)
+{
+    const double *H = p->h, *D = p->den[k];
+    const int n = p->nk;
+    int j = -1;
+    while (j + 1 < n && H[j + 1] <= v)
+        ++j;
+    double dv;
+    if (j < 0)
+        dv = D[0];
+    else if (j == n - 1)
+        dv = D[n - 1];
+    else
+        dv = D[j] + (v - H[j]) / (H[j + 1] - H[j]) * (D[j + 1] - D[j]);
+    double f = 0, m = 0, ha = v, da = dv;
+    for (int i = dir > 0 ? j + 1 : j; i >= 0 && i < n; i += dir) {
+        if (da > D[i]) {
+            f += da - D[i];
+            m += (da - D[i]) * 0.5 * (ha + H[i]);
+        }
+        ha = H[i];
+        da = D[i];
+    }
+    *fall = f;
+    *hm = f > 0 ? m / f : v;
+}
+
 /* Diffusion's extrapolated boundary beyond a free surface, in transport
  * mean free paths (Milne's problem: 0.7104) */
 #define IMG_ZB 0.7104
@@ -1163,12 +1193,13 @@ static int image_table(lms_tab *t)
  * IMG_ZB / (sigma (1 - albedo g1)) past it (sigma the extinction at the
  * lamp, g1 the phase's mean cosine), weighted by the drop's share of
  * sigma: the field of a source near a free surface less its image's, as
- * diffusion theory takes it (first images only; none for strata and
- * layers, whose fog thins without a plane). */
+ * diffusion theory takes it (first images only); a layered profile's
+ * falls up and down from the lamp as a plane each (prof_fall); none for
+ * height fog. */
 static void lamp_images(ef_lms *m, const double sl[3], const double om[3], double g1)
 {
     m->nimg = 0;
-    if (m->nleak <= 0)
+    if (m->nleak < 0)
         return;
     const double *s = m->pos;
     /* the planes of the fog holding the lamp, outward (u . x + c = 0, the
@@ -1198,6 +1229,33 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
             np += any;
         }
         i = end;
+    }
+    /* a layered profile's falls up and down from the lamp, as one plane
+     * each at their mean height (weighted by the fall), their share summed
+     * (at most 1) */
+    for (int j = 0; j < m->nprof && np + 2 <= LEAK_MAX; ++j) {
+        const lms_prof *p = &m->prof[j];
+        const double v = p->n[0] * s[0] + p->n[1] * s[1] + p->n[2] * s[2] + p->d;
+        for (int dir = 1; dir >= -1; dir -= 2) {
+            double fall[3] = { 0, 0, 0 }, hm[3] = { 0, 0, 0 };
+            for (int k = 0; k < 3; ++k)
+                prof_fall(p, k, v, dir, &fall[k], &hm[k]);
+            int any = 0;
+            for (int k = 0; k < 3; ++k) {
+                sh[np][k] = sl[k] > 0 && fall[k] > 0 ? fmin(1, fall[k] / sl[k]) : 0;
+                zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
+                any |= sh[np][k] > 0;
+            }
+            if (!any)
+                continue;
+            /* one plane for every channel: at the falls' mean height in the
+             * channel of the largest */
+            const int kk = fall[1] > fall[0] ? (fall[2] > fall[1] ? 2 : 1) : (fall[2] > fall[0] ? 2 : 0);
+            for (int a = 0; a < 3; ++a)
+                u[np][a] = dir * p->n[a];
+            u[np][3] = dir * (p->d - hm[kk]);
+            ++np;
+        }
     }
     /* first images only: a box's images of images (its corners, opposite
      * faces) were tried and, summed to that order, undid the first in
