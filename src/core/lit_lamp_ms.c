@@ -134,7 +134,7 @@ struct ef_lms {
     /* the lamp's images across those planes (lamp_images): per channel its
      * place beyond the extrapolated boundary and the drop's share */
     int nimg;
-    double img[LEAK_MAX][3][3], img_share[LEAK_MAX][3];
+    double imx[3][LEAK_MAX], imy[3][LEAK_MAX], imz[3][LEAK_MAX], ims[3][LEAK_MAX];
     double leak_w[3];      /* the leak term's weight per channel (LEAK_C and the albedo's) */
     /* exponential strata (height fog): where the fog thins, e-fold by
      * e-fold, along up (its density rho e^-(k (up.x - base))) */
@@ -1193,9 +1193,12 @@ static void prof_fall(const lms_prof *p, int k, double v, int dir, double *fall,
  * IMG_ZB / (sigma (1 - albedo g1)) past it (sigma the extinction at the
  * lamp, g1 the phase's mean cosine), weighted by the drop's share of
  * sigma: the field of a source near a free surface less its image's, as
- * diffusion theory takes it (first images only); a layered profile's
- * falls up and down from the lamp as a plane each (prof_fall); none for
- * height fog. */
+ * diffusion theory takes it; a layered profile's falls up and down from
+ * the lamp as a plane each (prof_fall); none for height fog. Then the
+ * images of images across planes square to each other or facing (a
+ * box's corners and opposite faces), of the opposite sign and at half
+ * their weight: a box's series alternates, and the mean of its first two
+ * partial sums came nearest Cycles (bench/ms_lamp_box.md). */
 static void lamp_images(ef_lms *m, const double sl[3], const double om[3], double g1)
 {
     m->nimg = 0;
@@ -1257,19 +1260,40 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
             ++np;
         }
     }
-    /* first images only: a box's images of images (its corners, opposite
-     * faces) were tried and, summed to that order, undid the first in
-     * every box of bench/ms_lamp_box.md (its series alternates slowly) */
-    for (int i = 0; i < np; ++i) {
-        for (int k = 0; k < 3; ++k) {
-            const double *n = u[i];
-            const double h = n[0] * s[0] + n[1] * s[1] + n[2] * s[2] + n[3];
-            for (int a = 0; a < 3; ++a)
-                m->img[m->nimg][k][a] = s[a] + 2 * (zb[i][k] - h) * n[a];
-            m->img_share[m->nimg][k] = sh[i][k];
+    /* first images, then the second across planes square to each other
+     * (a box's 12 corners, once each) or facing (a slab's or box's
+     * opposite faces, both orders), of the opposite sign, where they fit */
+    int pairs = 0;
+    for (int i = 0; i < np; ++i)
+        for (int j = 0; j < np; ++j) {
+            const double c = u[i][0] * u[j][0] + u[i][1] * u[j][1] + u[i][2] * u[j][2];
+            pairs += i != j && ((fabs(c) < 1e-9 && i < j) || c < -1 + 1e-9);
         }
-        ++m->nimg;
-    }
+    const int second = np + pairs <= LEAK_MAX;
+    for (int i = 0; i < np; ++i)
+        for (int j = -1; j < (second ? np : 0); ++j) {
+            if (j >= 0) {
+                const double c = u[i][0] * u[j][0] + u[i][1] * u[j][1] + u[i][2] * u[j][2];
+                if (i == j || !((fabs(c) < 1e-9 && i < j) || c < -1 + 1e-9))
+                    continue;
+            }
+            for (int k = 0; k < 3; ++k) {
+                double p[3];
+                memcpy(p, s, sizeof p);
+                const int pl[2] = { i, j };
+                for (int q = 0; q < (j < 0 ? 1 : 2); ++q) {
+                    const double *n = u[pl[q]];
+                    const double h = n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + n[3];
+                    for (int a = 0; a < 3; ++a)
+                        p[a] += 2 * (zb[pl[q]][k] - h) * n[a];
+                }
+                m->imx[k][m->nimg] = p[0];
+                m->imy[k][m->nimg] = p[1];
+                m->imz[k][m->nimg] = p[2];
+                m->ims[k][m->nimg] = j < 0 ? sh[i][k] : -0.5 * sh[i][k] * sh[j][k];
+            }
+            ++m->nimg;
+        }
 }
 
 /* The images' part of a node's value (ef_lms_local_node's units: sigma
@@ -1280,24 +1304,27 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
 static double image_part(const ef_lms *m, const lms_tab *tb, int k, double tl, double sg,
                          double d, const double x[3])
 {
-    double v = 0;
-    for (int j = 0; j < m->nimg; ++j) {
-        const double sh = m->img_share[j][k];
-        if (!(sh > 0))
-            continue;
-        const double *p = m->img[j][k];
-        const double y[3] = { x[0] - p[0], x[1] - p[1], x[2] - p[2] };
-        const double dp = sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]);
-        if (!(dp > 0))
-            continue;
-        const double taup = tl / d * dp, u = sqrt(taup / tb->rmax) * (IMG_N - 1);
-        if (!(u < IMG_N - 1))
-            continue;
-        const int i = (int) u;
-        const double f = u - i, rq = tb->im[i] + f * (tb->im[i + 1] - tb->im[i]);
-        v += sh * sg * tl * (tl / taup) * rq;
+    /* the distances and the table's places first, a loop the compiler
+     * puts on vectors; the reads after (tl / taup = d / dp) */
+    const int n = m->nimg;
+    const double *px = m->imx[k], *py = m->imy[k], *pz = m->imz[k], *ps = m->ims[k];
+    double u[LEAK_MAX], rd[LEAK_MAX];
+    const double c = tl / (d * tb->rmax);
+    for (int j = 0; j < n; ++j) {
+        const double a = x[0] - px[j], b = x[1] - py[j], e = x[2] - pz[j];
+        const double dp = sqrt(a * a + b * b + e * e);
+        u[j] = sqrt(c * dp) * (IMG_N - 1);
+        rd[j] = 1 / dp;
     }
-    return v;
+    double v = 0;
+    for (int j = 0; j < n; ++j) {
+        if (!(u[j] < IMG_N - 1) || !(rd[j] < INFINITY) || ps[j] == 0)
+            continue;
+        const int i = (int) u[j];
+        const double f = u[j] - i;
+        v += ps[j] * rd[j] * (tb->im[i] + f * (tb->im[i + 1] - tb->im[i]));
+    }
+    return v * sg * tl * d;
 }
 
 /* E_2(x) / 2 from m's table (linear between its points), 0 past it

@@ -19,7 +19,7 @@ each block's error beyond twice its own noise (measured at 16384 samples per
 a box of fog (density 0.2, albedo 0.95, g 0.5, 15 x 12 x 12 units about it,
 the camera outside; bench/ms_lamp_box.md's first test case) at 1024 samples:
 the uniform field less the lamp's images across the faces reads the multiple
-part about 13 % low there (13 % high without the images), so only the single
+part about 2 % low there (13 % high without the images), so only the single
 scattering and the error output's coverage are held (95 % of 8x8 blocks;
 measured 100 %, and every 4x4 block in bench/ms_lamp_box.md). Then a lamp
 0.15 mean free paths below a half-space's plane (density 0.3, albedo 0.9,
