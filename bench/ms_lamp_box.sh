@@ -57,20 +57,10 @@ for role, r in zip(roles, rows):
         geo += ", the lamp behind the camera"
     if r.get("spot"):
         geo += ", a spot of cone %g aimed down" % r["spot"]
-    print("| %s | %s | %g | %g | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
-        role, geo, r["density"], r["albedo"], r["g"], r["single_share_median"],
-        100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
-        100 * r["rel_signed_median"], 100 * r["noise_rel_median"], r["err_rel_median"],
-        100 * r["covered"], ms_report.ms_ratio(r)))
+    print("| %s | %s | %s" % (role, geo, ms_report.case_cells(r)))
 print()
 ms_report.summary(rows)
 print()
-print("### Cost at 1080p (a point lamp at 2,3,-25 in a box of fog ahead of the camera, 2 threads, medians of 5 runs)")
-print()
-m, solve, fogs = ms_report.costs(sys.argv[3], sys.argv[4])
-print("| fog | single s | multiple s | / single | the solve (once per scene) |")
-print("|---|---:|---:|---:|---:|")
-for fog in fogs:
-    s1, sm = m[fog + "/single"], m[fog + "/multiple"]
-    print("| `%s` | %.2f | %.2f | %.2fx | %.2f s |" % (fog, s1, sm, sm / s1, solve.get(fog, 0.0)))
+ms_report.cost_table("Cost at 1080p (a point lamp at 2,3,-25 in a box of fog ahead of the camera, 2 threads, medians of 5 runs)",
+                     sys.argv[3], sys.argv[4])
 PYEOF

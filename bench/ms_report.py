@@ -29,6 +29,30 @@ def costs(cost_path, solve_path):
     return m, solve, sorted({k.rsplit("/", 1)[0] for k in m})
 
 
+def case_cells(r):
+    """A lamp case's cells after its description (bench/ms_lamp_box.sh, ms_lamp_layered.sh):
+    density, albedo, g, the single share, its check, the errors, noise, error output, coverage
+    and the multiple part's ratio."""
+    return "%g | %g | %g | %.3f | %+.2f %% | %.2f %% | %.2f %% | %+.2f %% | %.2f %% | %.2e | %.0f %% | %.3f |" % (
+        r["density"], r["albedo"], r["g"], r["single_share_median"],
+        100 * r["single_check_median"], 100 * r["rel_median"], 100 * r["rel_p99"],
+        100 * r["rel_signed_median"], 100 * r["noise_rel_median"], r["err_rel_median"],
+        100 * r["covered"], ms_ratio(r))
+
+
+def cost_table(title, cost_path, solve_path):
+    """Prints lamp_cost's medians (bench/ms_lib.sh) under TITLE: single against multiple per
+    fog, and the solve."""
+    print("### " + title)
+    print()
+    m, solve, fogs = costs(cost_path, solve_path)
+    print("| fog | single s | multiple s | / single | the solve (once per scene) |")
+    print("|---|---:|---:|---:|---:|")
+    for fog in fogs:
+        s1, sm = m[fog + "/single"], m[fog + "/multiple"]
+        print("| `%s` | %.2f | %.2f | %.2fx | %.2f s |" % (fog, s1, sm, sm / s1, solve.get(fog, 0.0)))
+
+
 def ms_ratio(r):
     """The multiple scattering alone over the frame, exrfog's over Cycles' (multiple less single
     against 128 bounces less 0)."""

@@ -85,12 +85,20 @@ def layered_fog(name, dens, albedo, g, knots, step_rate):
             add = nt.nodes.new('ShaderNodeMath'); add.operation = 'ADD'
             nt.links.new(acc.outputs[0], add.inputs[0]); nt.links.new(mr.outputs['Result'], add.inputs[1])
         acc = add
+    return _factor_fog(m, acc.outputs[0], dens, albedo, g, step_rate)
+
+
+def _factor_fog(m, factor, dens, albedo, g, step_rate):
+    """Material M's fog from the node socket FACTOR (the density over DENS): scattering DENS *
+    ALBEDO and absorption the rest times it, HG G, marched at STEP_RATE times Cycles' automatic
+    step; returns M."""
+    nt = m.node_tree
     ds = nt.nodes.new('ShaderNodeMath'); ds.operation = 'MULTIPLY'
     ds.inputs[1].default_value = dens * albedo
-    nt.links.new(acc.outputs[0], ds.inputs[0])
+    nt.links.new(factor, ds.inputs[0])
     da = nt.nodes.new('ShaderNodeMath'); da.operation = 'MULTIPLY'
     da.inputs[1].default_value = dens * (1 - albedo)
-    nt.links.new(acc.outputs[0], da.inputs[0])
+    nt.links.new(factor, da.inputs[0])
     s, a = _scatter_absorb(nt, g)
     nt.links.new(ds.outputs[0], s.inputs['Density'])
     nt.links.new(da.outputs[0], a.inputs['Density'])
@@ -142,16 +150,4 @@ def height_fog(name, dens, albedo, g, falloff, step_rate):
     nt.links.new(sep.outputs['Z'], mul.inputs[0])
     ex = nt.nodes.new('ShaderNodeMath'); ex.operation = 'EXPONENT'
     nt.links.new(mul.outputs[0], ex.inputs[0])
-    ds = nt.nodes.new('ShaderNodeMath'); ds.operation = 'MULTIPLY'
-    ds.inputs[1].default_value = dens * albedo
-    nt.links.new(ex.outputs[0], ds.inputs[0])
-    da = nt.nodes.new('ShaderNodeMath'); da.operation = 'MULTIPLY'
-    da.inputs[1].default_value = dens * (1 - albedo)
-    nt.links.new(ex.outputs[0], da.inputs[0])
-    s, a = _scatter_absorb(nt, g)
-    nt.links.new(ds.outputs[0], s.inputs['Density'])
-    nt.links.new(da.outputs[0], a.inputs['Density'])
-    m.cycles.homogeneous_volume = False
-    m.cycles.volume_sampling = 'MULTIPLE_IMPORTANCE'
-    m.cycles.volume_step_rate = step_rate
-    return m
+    return _factor_fog(m, ex.outputs[0], dens, albedo, g, step_rate)

@@ -1153,6 +1153,28 @@ static int image_table(lms_tab *t)
     return 0;
 }
 
+/* Profile p's density in channel k at height v, and into *jp the last
+ * knot at or below v (-1 below them all). */
+static double prof_at(const lms_prof *p, int k, double v, int *jp)
+{
+    const double *H = p->h, *D = p->den[k];
+    const int n = p->nk;
+    int lo = -1, hi = n;
+    while (hi - lo > 1) {
+        const int mid = (lo + hi) / 2;
+        if (H[mid] <= v)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    *jp = lo;
+    if (lo < 0)
+        return D[0];
+    if (lo == n - 1)
+        return D[n - 1];
+    return D[lo] + (v - H[lo]) / (H[lo + 1] - H[lo]) * (D[lo + 1] - D[lo]);
+}
+
 /* The density's falls in channel k of profile p going from height v up
  * (dir 1) or down (-1), summed into *fall, and their mean height (each
  * piece's fall at its middle) into *hm; 0 and v where there is none. */
@@ -1160,16 +1182,8 @@ static void prof_fall(const lms_prof *p, int k, double v, int dir, double *fall,
 {
     const double *H = p->h, *D = p->den[k];
     const int n = p->nk;
-    int j = -1;
-    while (j + 1 < n && H[j + 1] <= v)
-        ++j;
-    double dv;
-    if (j < 0)
-        dv = D[0];
-    else if (j == n - 1)
-        dv = D[n - 1];
-    else
-        dv = D[j] + (v - H[j]) / (H[j + 1] - H[j]) * (D[j + 1] - D[j]);
+    int j;
+    const double dv = prof_at(p, k, v, &j);
     double f = 0, m = 0, ha = v, da = dv;
     for (int i = dir > 0 ? j + 1 : j; i >= 0 && i < n; i += dir) {
         if (da > D[i]) {
@@ -1385,23 +1399,8 @@ static double prof_exposure(const lms_prof *p, const ef_lms *m, const double x[3
     const double v = p->n[0] * x[0] + p->n[1] * x[1] + p->n[2] * x[2] + p->d;
     const double *H = p->h, *D = p->den[k];
     const int n = p->nk;
-    /* j: the last knot at or below v (-1 below them all) */
-    int lo = -1, hi = n;
-    while (hi - lo > 1) {
-        const int mid = (lo + hi) / 2;
-        if (H[mid] <= v)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    const int j = lo;
-    double dv;
-    if (j < 0)
-        dv = D[0];
-    else if (j == n - 1)
-        dv = D[n - 1];
-    else
-        dv = D[j] + (v - H[j]) / (H[j + 1] - H[j]) * (D[j + 1] - D[j]);
+    int j;   /* the last knot at or below v (-1 below them all) */
+    const double dv = prof_at(p, k, v, &j);
     const double rest = fmax(0, sg - dv);
     double e = 0;
     if (j + 1 < n)   /* up: knots j + 1 and above */
