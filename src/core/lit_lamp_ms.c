@@ -85,7 +85,7 @@ typedef struct lms_tab {
     /* a spot's (ef_lms_spot): the cone's share averaged over where the
      * light reaching a point first scattered, and its estimate, against
      * the optical distance and the angle from the axis ([SPOT_NR][SPOT_NA]) */
-    double *fb, *fbe;
+    double *fb, *fbe, spot_u;
     double *qb;      /* [nr][2]: r Q's mean over directions (both columns) */
     /* the lamp's images (lamp_images): r Q's mean over directions at
      * optical distance rmax (i / (IMG_N - 1))^2, linear between */
@@ -2020,6 +2020,7 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
          * whose spread from the first is the estimate */
         const int nv = t->phase != EF_PHASE_ISO && t->g != 0 ? SPOT_NV : 1;
         const double lr = log(t->rmax / SPOT_RMIN);
+        t->spot_u = (SPOT_NR - 1) / lr;   /* spot_share_at's rows per unit of log r */
         for (int ir = 0; ir < SPOT_NR; ++ir) {
             const double r = SPOT_RMIN * exp(lr * ir / (SPOT_NR - 1));
             double nk[SPOT_NV];
@@ -2053,7 +2054,7 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
  * axis, bilinear in log r and the angle; its estimate into *e. */
 static double spot_share_at(const lms_tab *t, double r, double ca, double *e)
 {
-    double u = log(fmax(r, SPOT_RMIN) / SPOT_RMIN) / log(t->rmax / SPOT_RMIN) * (SPOT_NR - 1);
+    double u = log(fmax(r, SPOT_RMIN) * (1 / SPOT_RMIN)) * t->spot_u;
     if (!(u < SPOT_NR - 1))
         u = SPOT_NR - 1;
     const double al = acos(fmax(-1, fmin(1, ca))) / PI * (SPOT_NA - 1);
