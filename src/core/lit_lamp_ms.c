@@ -1208,7 +1208,8 @@ static void prof_fall(const lms_prof *p, int k, double v, int dir, double *fall,
  * lamp, g1 the phase's mean cosine), weighted by the drop's share of
  * sigma: the field of a source near a free surface less its image's, as
  * diffusion theory takes it; a layered profile's falls up and down from
- * the lamp as a plane each (prof_fall); none for height fog. Then the
+ * the lamp as a plane each (prof_fall), height fog's one e-fold from it.
+ * Then the
  * images of images across planes square to each other or facing (a
  * box's corners and opposite faces), of the opposite sign and at half
  * their weight: a box's series alternates, and the mean of its first two
@@ -1273,6 +1274,26 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
             u[np][3] = dir * (p->d - hm[kk]);
             ++np;
         }
+    }
+    /* height fog's fall, above the lamp (below where it thickens upwards),
+     * as one plane at its mean height, one e-fold away */
+    for (int j = 0; j < m->nstrata && np < LEAK_MAX; ++j) {
+        const double *up = m->st_up[j], kk = m->st_k[j];
+        const double hs = up[0] * s[0] + up[1] * s[1] + up[2] * s[2];
+        int any = 0;
+        for (int k = 0; k < 3; ++k) {
+            const double sc = m->st_rho[j][k] * exp(-kk * (hs - m->st_base[j]));
+            sh[np][k] = sl[k] > 0 && sc > 0 ? fmin(1, sc / sl[k]) : 0;
+            zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
+            any |= sh[np][k] > 0;
+        }
+        if (!any || !(kk != 0))
+            continue;
+        const double o = kk > 0 ? 1 : -1;
+        for (int a = 0; a < 3; ++a)
+            u[np][a] = o * up[a];
+        u[np][3] = -o * (hs + 1 / kk);
+        ++np;
     }
     /* first images, then the second across planes square to each other
      * (a box's 12 corners, once each) or facing (a slab's or box's
