@@ -58,9 +58,9 @@
  * points: within 3e-3 at one step from 0, where its second derivative
  * e^-x / x is largest) */
 #define LEAK_E2_N 2048
+#define LEAK_E2_X 40.0
 /* Gauss-Legendre nodes of the mean over a piece of layered profile */
 #define PROF_NG 8
-#define LEAK_E2_X 40.0
 #define LMS_GMRES_TOL 1e-9
 
 /* One resolution of the solve. */
@@ -1209,11 +1209,19 @@ static void prof_fall(const lms_prof *p, int k, double v, int dir, double *fall,
  * sigma: the field of a source near a free surface less its image's, as
  * diffusion theory takes it; a layered profile's falls up and down from
  * the lamp as a plane each (prof_fall), height fog's one e-fold from it.
- * Then the
- * images of images across planes square to each other or facing (a
- * box's corners and opposite faces), of the opposite sign and at half
+ * Then the images of images across planes square to each other or facing
+ * (a box's corners and opposite faces), of the opposite sign and at half
  * their weight: a box's series alternates, and the mean of its first two
  * partial sums came nearest Cycles (bench/ms_lamp_box.md). */
+/* Whether outward planes u_i and u_j (lamp_images') give an image of
+ * images: square to each other (once, i < j: a box's corner) or facing (a
+ * slab's or box's opposite faces, both orders). */
+static int image_pair(const double (*u)[4], int i, int j)
+{
+    const double c = u[i][0] * u[j][0] + u[i][1] * u[j][1] + u[i][2] * u[j][2];
+    return i != j && ((fabs(c) < 1e-9 && i < j) || c < -1 + 1e-9);
+}
+
 static void lamp_images(ef_lms *m, const double sl[3], const double om[3], double g1)
 {
     m->nimg = 0;
@@ -1221,8 +1229,11 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
         return;
     const double *s = m->pos;
     /* the planes of the fog holding the lamp, outward (u . x + c = 0, the
-     * lamp's side negative), the drop's share and the boundary per channel */
-    double u[LEAK_MAX][4], sh[LEAK_MAX][3], zb[LEAK_MAX][3];
+     * lamp's side negative) and the drop's share per channel; the
+     * extrapolated boundary per channel */
+    double u[LEAK_MAX][4], sh[LEAK_MAX][3], zb[3];
+    for (int k = 0; k < 3; ++k)
+        zb[k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
     int np = 0;
     for (int i = 0; i < m->nleak;) {
         const int end = m->leak_end[i];
@@ -1239,7 +1250,6 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
                 const double here = sd[i] < 0 ? m->dneg[i][k] : m->dpos[i][k];
                 const double beyond = sd[i] < 0 ? m->dpos[i][k] : m->dneg[i][k];
                 sh[np][k] = here > beyond && sl[k] > 0 ? fmin(1, (here - beyond) / sl[k]) : 0;
-                zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
                 any |= sh[np][k] > 0;
             }
             for (int a = 0; a < 4; ++a)
@@ -1261,7 +1271,6 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
             int any = 0;
             for (int k = 0; k < 3; ++k) {
                 sh[np][k] = sl[k] > 0 && fall[k] > 0 ? fmin(1, fall[k] / sl[k]) : 0;
-                zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
                 any |= sh[np][k] > 0;
             }
             if (!any)
@@ -1284,7 +1293,6 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
         for (int k = 0; k < 3; ++k) {
             const double sc = m->st_rho[j][k] * exp(-kk * (hs - m->st_base[j]));
             sh[np][k] = sl[k] > 0 && sc > 0 ? fmin(1, sc / sl[k]) : 0;
-            zb[np][k] = sl[k] > 0 ? IMG_ZB / (sl[k] * fmax(1 - om[k] * g1, 1e-3)) : 0;
             any |= sh[np][k] > 0;
         }
         if (!any || !(kk != 0))
@@ -1300,18 +1308,13 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
      * opposite faces, both orders), of the opposite sign, where they fit */
     int pairs = 0;
     for (int i = 0; i < np; ++i)
-        for (int j = 0; j < np; ++j) {
-            const double c = u[i][0] * u[j][0] + u[i][1] * u[j][1] + u[i][2] * u[j][2];
-            pairs += i != j && ((fabs(c) < 1e-9 && i < j) || c < -1 + 1e-9);
-        }
+        for (int j = 0; j < np; ++j)
+            pairs += image_pair((const double (*)[4]) u, i, j);
     const int second = np + pairs <= LEAK_MAX;
     for (int i = 0; i < np; ++i)
         for (int j = -1; j < (second ? np : 0); ++j) {
-            if (j >= 0) {
-                const double c = u[i][0] * u[j][0] + u[i][1] * u[j][1] + u[i][2] * u[j][2];
-                if (i == j || !((fabs(c) < 1e-9 && i < j) || c < -1 + 1e-9))
-                    continue;
-            }
+            if (j >= 0 && !image_pair((const double (*)[4]) u, i, j))
+                continue;
             for (int k = 0; k < 3; ++k) {
                 double p[3];
                 memcpy(p, s, sizeof p);
@@ -1320,7 +1323,7 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
                     const double *n = u[pl[q]];
                     const double h = n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + n[3];
                     for (int a = 0; a < 3; ++a)
-                        p[a] += 2 * (zb[pl[q]][k] - h) * n[a];
+                        p[a] += 2 * (zb[k] - h) * n[a];
                 }
                 m->imx[k][m->nimg] = p[0];
                 m->imy[k][m->nimg] = p[1];
@@ -1460,9 +1463,8 @@ static double leak_exposure(const ef_lms *m, const double x[3], int k, double sg
         }
         i = end;
     }
-    /* layered fog thins where its profile falls to its least above or
-     * below x: that fall's share of sg, at the optical depth to where it
-     * is reached (the profile's column, the other components' sg as at x) */
+    /* layered fog thins wherever its profile falls, above or below x:
+     * each fall's share of sg at the optical depth to it (prof_exposure) */
     for (int j = 0; j < m->nprof; ++j)
         e += prof_exposure(&m->prof[j], m, x, k, sg);
     /* height fog thins upwards: its share of sg, at an optical depth sg / k

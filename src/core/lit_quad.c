@@ -558,20 +558,16 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
  * the node, the lamp's tl from it, the extinction there sg, the lamp's
  * distance d and the cosine nu (the phase's: the light leaving towards
  * the camera against the outward radial), wgt the substitution's weight
- * (1 / d^2 and the Jacobian), t the node's place along the view. Its
- * value into v and its estimate into e, both attenuated to the camera; a
+ * (1 / d^2 and the Jacobian), x the node. Its value into v and its estimate into e, both attenuated to the camera; a
  * channel like the one before it (grey fog) copies it. ex: the leak
  * term's exposure per channel, read here where ex[3] is 0 (the caller
  * clears it every four nodes). */
-static void lms_node(const lit_q *q, double t, const double tv[3], const double tl[3],
+static void lms_node(const lit_q *q, const double x[3], const double tv[3], const double tl[3],
                      const double sg[3], double d, double nu, double ca, double wgt, double v[3],
                      double e[3], double ex[4])
 {
     /* the leak term's exposure, once per four nodes (at the first of them:
      * it is smooth over a rule's span); ex[3] 0 asks for it */
-    const ef_ray *r = q->r;
-    const double x[3] = { r->org[0] + t * r->dir[0], r->org[1] + t * r->dir[1],
-                          r->org[2] + t * r->dir[2] };
     if (!ex[3] && q->est) {
         for (int k = 0; k < 3; ++k)
             ex[k] = k > 0 && sg[k] == sg[k - 1] ? ex[k - 1] : ef_lms_leak_exposure(q->lms, x, k, sg[k]);
@@ -756,7 +752,10 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
                 tl[ch] = tlv[ch][i];
                 sg[ch] = sgv[ch][i];
             }
-            lms_node(q, t[i], tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me, ex);
+            const double xi[3] = { q->r->org[0] + t[i] * q->r->dir[0],
+                                   q->r->org[1] + t[i] * q->r->dir[1],
+                                   q->r->org[2] + t[i] * q->r->dir[2] };
+            lms_node(q, xi, tv, tl, sg, dl[i], cth[i], ca[i], wgt[i], mv, me, ex);
             for (int ch = 0; ch < 3; ++ch) {
                 out[4 * g + i][ch] += mv[ch];
                 q->aux[4 * g + i][ch] = me[ch];
@@ -889,7 +888,7 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
             double mv[3], me[3];
             if (j % 4 == 0)
                 ex[3] = 0;
-            lms_node(q, tn[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me, ex);
+            lms_node(q, x[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me, ex);
             for (int k = 0; k < 3; ++k) {
                 out[live[j]][k] += mv[k];
                 q->aux[live[j]][k] = me[k];
