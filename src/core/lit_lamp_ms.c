@@ -1944,26 +1944,29 @@ void ef_lms_gather_view(const ef_lms *m, const ef_lms_view *v, const ef_ray *r, 
 #define SPOT_NPSI 24     /* Gauss nodes on each of psi's pieces */
 #define SPOT_NV 8        /* the weightings (spot_kernel's var) */
 
-/* K(theta_j) of table t at r for SPOT_NT midpoints into K (the constant
- * 2 pi / r dropped). var 0: as above, the multiple part's p(y) fading to
- * 1 / (4 pi) over a transport mean free path from y; 1: 1 / (4 pi) there,
- * 7: p(y) there; 2 and 3: p_x of the light travelling outwards along the
- * radial, or back (a view along the lamp's line, against the mean over
- * views); 4: isotropic phase throughout (how much the phase moves it at
- * all); 5 and 6: p_x of a view across the radial, the light's sideways
- * part towards it or away (a halo beside the cone is seen so). qb: the
- * table's r Q averaged over directions ([nr][2], both alike). */
-static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, const double *gx,
+/* K(theta_j) of table t at r for SPOT_NT midpoints, for the weightings
+ * var 0 .. nv - 1 into K + var SPOT_NT (the constant 2 pi / r dropped).
+ * var 0: as above, the multiple part's p(y) fading to 1 / (4 pi) over a
+ * transport mean free path from y; 1: 1 / (4 pi) there, 7: p(y) there;
+ * 2 and 3: p_x of the light travelling outwards along the radial, or back
+ * (a view along the lamp's line, against the mean over views); 4:
+ * isotropic phase throughout (how much the phase moves it at all); 5 and
+ * 6: p_x of a view across the radial, the light's sideways part towards it
+ * or away (a halo beside the cone is seen so). qb: the table's r Q
+ * averaged over directions ([nr][2], both alike). One pass serves every
+ * weighting: the node's geometry, attenuation and table read are theirs
+ * in common (each weighting's sum is the same operations in the same
+ * order as on its own, so the same bits). */
+static void spot_kernel(const lms_tab *t, const double *qb, double r, int nv, const double *gx,
                         const double *gw, double *K)
 {
     const double pm = 1 / (4 * PI);
-    const int iso = var == 1;
     for (int j = 0; j < SPOT_NT; ++j) {
         const double th = (j + 0.5) * PI / SPOT_NT, c = cos(th), h = r * sin(th);
         const double p0 = atan2(-r * c, h);
         /* psi's pieces: from the lamp (s = 0) to x's foot, and on to pi/2 */
         const double piece[3] = { p0, fmax(p0, 0), PI / 2 };
-        double sum = 0;
+        double sum[SPOT_NV] = { 0 };
         for (int pc = 0; pc < 2; ++pc) {
             const double a = piece[pc], b = piece[pc + 1];
             for (int i = 0; b > a && i < SPOT_NPSI; ++i) {
@@ -1971,29 +1974,40 @@ static void spot_kernel(const lms_tab *t, const double *qb, double r, int var, c
                 if (!(cp > 0))
                     continue;
                 const double s = fmax(0, r * c + h * tan(ps)), d = h / cp;
-                const double py = var == 4 ? pm : ef_phase_eval(t->phase, t->g, -sin(ps));
+                const double pyp = ef_phase_eval(t->phase, t->g, -sin(ps));
                 /* the once-scattered light's direction at x against the
                  * outward radial: (r - s cos theta) / d */
                 const double ux = (r - s * c) / d;
                 /* (5 and 6: a view across the radial, the light's
                  * sideways part towards it or away) */
                 const double uy = sqrt(fmax(0, 1 - ux * ux));
-                const double px = var < 2 || var == 4 ? pm
-                                  : var < 4 ? ef_phase_eval(t->phase, t->g, var == 2 ? ux : -ux)
-                                            : ef_phase_eval(t->phase, t->g, var == 5 ? uy : -uy);
-                double v = t->omega * px * exp(-(s + d));
+                const double ea = exp(-(s + d));
+                double base = 0, mem = 0;
                 if (t->max_order != 2) {
                     const double rq = tab_row(qb, t->nr, 2, t->lg, d, 0, 0, NULL, NULL);
                     /* (var 0: the direction y sends it in is kept over
                      * a transport mean free path, 1 / (1 - g), then lost) */
-                    const double mem = exp(-(1 - t->g) * d);
-                    const double keep = iso ? pm / py : var == 7 ? 1 : mem + (1 - mem) * pm / py;
-                    v += exp(-s) * d * rq * keep;
+                    mem = exp(-(1 - t->g) * d);
+                    base = exp(-s) * d * rq;
                 }
-                sum += (b - a) * gw[i] * py * v;
+                for (int var = 0; var < nv; ++var) {
+                    const double py = var == 4 ? pm : pyp;
+                    const double px = var < 2 || var == 4 ? pm
+                                      : var < 4 ? ef_phase_eval(t->phase, t->g, var == 2 ? ux : -ux)
+                                                : ef_phase_eval(t->phase, t->g, var == 5 ? uy : -uy);
+                    double v = t->omega * px * ea;
+                    if (t->max_order != 2) {
+                        const double keep = var == 1   ? pm / py
+                                            : var == 7 ? 1
+                                                       : mem + (1 - mem) * pm / py;
+                        v += base * keep;
+                    }
+                    sum[var] += (b - a) * gw[i] * py * v;
+                }
             }
         }
-        K[j] = sum > 0 ? sum : 0;
+        for (int var = 0; var < nv; ++var)
+            K[var * SPOT_NT + j] = sum[var] > 0 ? sum[var] : 0;
     }
 }
 
@@ -2047,8 +2061,8 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
         for (int ir = 0; ir < SPOT_NR; ++ir) {
             const double r = SPOT_RMIN * exp(lr * ir / (SPOT_NR - 1));
             double nk[SPOT_NV];
+            spot_kernel(t, qb, r, nv, gx, gw, K);
             for (int v = 0; v < nv; ++v) {
-                spot_kernel(t, qb, r, v, gx, gw, K + v * SPOT_NT);
                 nk[v] = 0;
                 for (int j = 0; j < SPOT_NT; ++j)
                     nk[v] += K[v * SPOT_NT + j];
