@@ -31,6 +31,7 @@
 
 #include "gk15.h"
 #include "lit_int.h"
+#include "vmath.h"
 
 /* |g| above this: the phase's Legendre series needs more than LMS_L_MAX
  * terms (0.9^128 = 1.4e-6). */
@@ -326,7 +327,7 @@ static void sys_free(lms_sys *S)
  * in [0, nr - 1]: Lagrange's cubic through four rows about u (r Q is smooth
  * in u; the linear interpolation's error on the log grid was 3 % of the
  * scattered energy at 72 rows). */
-static void rows4(double u, int nr, int *row0, double w[4])
+EF_INLINE void rows4(double u, int nr, int *row0, double w[4])
 {
     int r0 = (int) u - 1;
     if (r0 < 0)
@@ -345,13 +346,10 @@ static void rows4(double u, int nr, int *row0, double w[4])
 
 /* The table's direction column k and the fraction fx towards k + 1 for
  * cosine nu (x = sin(beta / 2) uniform over nx columns). */
+EF_INLINE void tab_col_at(int nx, double x, int *k, double *fx);
 static void tab_col(int nx, double nu, int *k, double *fx)
 {
-    const double x = sqrt(fmax(0, fmin(1, 0.5 * (1 - nu)))) * (nx - 1);
-    *k = (int) x;
-    if (*k > nx - 2)
-        *k = nx - 2;
-    *fx = x - *k;
+    tab_col_at(nx, sqrt(fmax(0, fmin(1, 0.5 * (1 - nu)))) * (nx - 1), k, fx);
 }
 
 /* The rows about optical distance r and their cubic weights (rows4);
@@ -365,8 +363,18 @@ static int tab_rows(int nr, double lg, double r, int *r0, double w[4])
     return 1;
 }
 
+/* tab_col's column and fraction from its grid position x = sqrt(...)
+ * (nx - 1). */
+EF_INLINE void tab_col_at(int nx, double x, int *k, double *fx)
+{
+    *k = (int) x;
+    if (*k > nx - 2)
+        *k = nx - 2;
+    *fx = x - *k;
+}
+
 /* tab_row's sum over rows r0 to r0 + 3 with weights w. */
-static double tab_sum(const double *tq, int nx, int r0, const double w[4], int k, double fx,
+EF_INLINE double tab_sum(const double *tq, int nx, int r0, const double w[4], int k, double fx,
                       double *ev, const double *te)
 {
     double v = 0, e = 0;
@@ -2057,7 +2065,7 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
          * whose spread from the first is the estimate */
         const int nv = t->phase != EF_PHASE_ISO && t->g != 0 ? SPOT_NV : 1;
         const double lr = log(t->rmax / SPOT_RMIN);
-        t->spot_u = (SPOT_NR - 1) / lr;   /* spot_share_at's rows per unit of log r */
+        t->spot_u = (SPOT_NR - 1) / lr;   /* spot_share_uv's rows per unit of log r */
         for (int ir = 0; ir < SPOT_NR; ++ir) {
             const double r = SPOT_RMIN * exp(lr * ir / (SPOT_NR - 1));
             double nk[SPOT_NV];
@@ -2087,22 +2095,23 @@ int ef_lms_spot(ef_lms *m, const ef_light *l)
     return rc;
 }
 
-/* The spot's averaged share at optical distance r and cosine ca from the
- * axis, bilinear in log r and the angle; its estimate into *e. */
-static double spot_share_at(const lms_tab *t, double r, double ca, double *e)
+/* The spot's averaged share at optical distance r and angle al from the
+ * axis, bilinear in log r and the angle, at the table's positions: u =
+ * log(r / SPOT_RMIN) in rows, al in columns (node_places); *e its estimate
+ * (e NULL: not read). */
+EF_INLINE double spot_share_uv(const lms_tab *t, double u, double al, double *e)
 {
-    double u = log(fmax(r, SPOT_RMIN) * (1 / SPOT_RMIN)) * t->spot_u;
     if (!(u < SPOT_NR - 1))
         u = SPOT_NR - 1;
-    const double al = acos(fmax(-1, fmin(1, ca))) / PI * (SPOT_NA - 1);
     const int i0 = u >= SPOT_NR - 2 ? SPOT_NR - 2 : (int) u;
     const int j0 = al >= SPOT_NA - 2 ? SPOT_NA - 2 : (int) al;
     const double fu = u - i0, fa = al - j0;
     const size_t a = (size_t) i0 * SPOT_NA + j0, b = a + SPOT_NA;
     const double v = (1 - fu) * ((1 - fa) * t->fb[a] + fa * t->fb[a + 1]) +
                      fu * ((1 - fa) * t->fb[b] + fa * t->fb[b + 1]);
-    *e = (1 - fu) * ((1 - fa) * t->fbe[a] + fa * t->fbe[a + 1]) +
-         fu * ((1 - fa) * t->fbe[b] + fa * t->fbe[b + 1]);
+    if (e)
+        *e = (1 - fu) * ((1 - fa) * t->fbe[a] + fa * t->fbe[a + 1]) +
+             fu * ((1 - fa) * t->fbe[b] + fa * t->fbe[b + 1]);
     return v;
 }
 
@@ -2133,6 +2142,59 @@ double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg
     return m->nleak || m->nstrata || m->nprof ? leak_exposure(m, x, k, sg) : 0;
 }
 
+/* A node's value from the field's v0 and its images' vi (image_part):
+ * less them, never below 0, times a spot's share at its places sp
+ * (node_places). */
+EF_INLINE double node_less_images(const ef_lms *m, const lms_tab *tb, double v0, double vi,
+                                  const double sp[2])
+{
+    const double v = vi > 0 ? fmax(0, v0 - vi) : v0;
+    if (!m->spot)
+        return v;
+    return v * spot_share_uv(tb, sp[0], sp[1], NULL);
+}
+
+/* The table's places of four nodes (a lane not live reads 1 and 0, inside
+ * every function's domain): U the rows' (tab_rows' u), X the column's
+ * (tab_col's x), and a spot's (spot_share_uv's u and al) into sp, by
+ * vmath.h's log1p, sqrt, log and atan2 (acos as atan2 of sin and cos, 1 -
+ * c^2 as (1 - c)(1 + c), which keeps the digits near the axis). A lane's
+ * places are the same bits whatever its neighbours and whichever clone
+ * runs (vmath.h), so a node read alone (ef_lms_local_node) and four at a
+ * time (ef_lms_local_node4) agree bit for bit. */
+EF_INLINE void node_places(const ef_lms *m, const lms_tab *tb, const double tl[4],
+                           const double nu[4], const double ca[4], const int live[4], double U[4],
+                           double X[4], double sp[4][2])
+{
+    v4d L, Z, S, C;
+    for (int i = 0; i < 4; ++i) {
+        L[i] = live[i] && tl[i] < 1e300 ? tl[i] * (1 / LMS_RS) : 1;
+        Z[i] = live[i] ? fmax(0, fmin(1, 0.5 * (1 - nu[i]))) : 0;
+        S[i] = live[i] ? fmax(tl[i], SPOT_RMIN) * (1 / SPOT_RMIN) : 1;
+        C[i] = (live[i] ? fmax(-1, fmin(1, ca[i])) : 1) + 0.0;   /* (-0 to +0) */
+    }
+    v4d u, x, us = { 0, 0, 0, 0 }, al = us;
+    v_log1p(&L, &u);
+    u = u * ((tb->nr - 1) / tb->lg);
+    v_sqrt(&Z, &x);
+    x = x * (tb->nx - 1);
+    if (m->spot) {
+        v_log(&S, &us);
+        us = us * tb->spot_u;
+        const v4d s2 = (1.0 - C) * (1.0 + C);
+        v4d sn;
+        v_sqrt(&s2, &sn);
+        v_atan2(&sn, &C, &al);
+        al = al / PI * (SPOT_NA - 1);
+    }
+    for (int i = 0; i < 4; ++i) {
+        U[i] = u[i];
+        X[i] = x[i];
+        sp[i][0] = us[i];
+        sp[i][1] = al[i];
+    }
+}
+
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
                          double ca, const double x[3], double expo, double *est)
 {
@@ -2148,21 +2210,27 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
      * medium's own scale instead: the spread of the two is the estimate of
      * what a field that is not symmetric about the lamp does */
     const double sd = sg * d;
+    /* the places as ef_lms_local_node4 takes them, lane 0 of four */
+    const double tl4[4] = { tl }, nu4[4] = { nu }, ca4[4] = { ca };
+    const int live[4] = { 1 };
+    double U[4], X[4], sp[4][2];
+    node_places(m, tb, tl4, nu4, ca4, live, U, X, sp);
     int col;
     double fx;
-    tab_col(tb->nx, nu, &col, &fx);
+    tab_col_at(tb->nx, X[0], &col, &fx);
     /* tl's rows serve the value and the view's mean; sd's are tl's in
      * uniform fog, where the two distances agree to rounding */
     double wt[4];
-    int r0;
-    const int in = tab_rows(tb->nr, tb->lg, tl, &r0, wt);
+    int r0 = 0;
+    const int in = tl < 1e300 && U[0] <= tb->nr - 1;
+    if (in)
+        rows4(U[0], tb->nr, &r0, wt);
     ev = 0;
     /* less the images' field where the fog ends at planes (lamp_images) */
     const double vi = x && m->nimg ? image_part(m, tb, k, tl, sg, d, x) : 0;
     if (!est) {   /* the value alone: no estimate's reads */
-        double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL) : 0;
-        v = vi > 0 ? fmax(0, v - vi) : v;
-        return m->spot ? v * spot_share_at(tb, tl, ca, &ev) : v;
+        const double v = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL) : 0;
+        return node_less_images(m, tb, v, vi, sp[0]);
     }
     const double v0 = in ? sg * tl * tab_sum(tb->q, tb->nx, r0, wt, col, fx, &ev, tb->e) : 0;
     const double v = vi > 0 ? fmax(0, v0 - vi) : v0, fac = v0 > 0 ? v / v0 : 1;
@@ -2179,7 +2247,7 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
         *est += m->leak_w[k] * fabs(v0) * fmin(1, expo + m->lamp_leak[k]);
     if (m->spot) {   /* the cone's share where the light first scattered */
         double fe;
-        const double f = spot_share_at(tb, tl, ca, &fe);
+        const double f = spot_share_uv(tb, sp[0][0], sp[0][1], &fe);
         *est = *est * f + fabs(v) * fe;
         /* the view's dependence is the point lamp's, whose light at the
          * node travels out from the lamp; a spot's may come from its
@@ -2191,4 +2259,36 @@ double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d,
         return v * f;
     }
     return v;
+}
+
+EF_MULTIVERSION void ef_lms_local_node4(const ef_lms *m, int k, const double tl[4],
+                                        const double sg[4], const double d[4],
+                                        const double nu[4], const double ca[4],
+                                        const double (*x)[3], double f[4])
+{
+    const int t = m->tab_of[k];
+    int live[4], any = 0;
+    for (int i = 0; i < 4; ++i) {
+        f[i] = 0;
+        live[i] = t >= 0 && sg[i] > 0 && tl[i] > 0 && d[i] > 0;
+        any |= live[i];
+    }
+    if (!any)
+        return;
+    const lms_tab *tb = &m->tab[t];
+    double U[4], X[4], sp[4][2];
+    node_places(m, tb, tl, nu, ca, live, U, X, sp);
+    for (int i = 0; i < 4; ++i) {
+        if (!live[i])
+            continue;
+        double v0 = 0, wt[4], fx;
+        int r0, col;
+        if (tl[i] < 1e300 && U[i] <= tb->nr - 1) {
+            rows4(U[i], tb->nr, &r0, wt);
+            tab_col_at(tb->nx, X[i], &col, &fx);
+            v0 = sg[i] * tl[i] * tab_sum(tb->q, tb->nx, r0, wt, col, fx, NULL, NULL);
+        }
+        const double vi = x && m->nimg ? image_part(m, tb, k, tl[i], sg[i], d[i], x[i]) : 0;
+        f[i] = node_less_images(m, tb, v0, vi, sp[i]);
+    }
 }

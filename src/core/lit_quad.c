@@ -92,7 +92,19 @@ static void kg_sums(const double (*v)[3], double rk[3], double rg[3])
  * estimate's Kronrod integral plus that part's |K - G|: the table it
  * reads is linear in direction between columns, and a rule held to the
  * single scattering's 1e-10 would chase every column's kink. */
-static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo, const double (*aux)[3])
+/* The five-node rule on the Gauss nodes 0, +-xgk[3] and +-xgk[1], exact
+ * to degree 5 (w0 + 2 w3 + 2 w1 = 2, 2 w3 x3^2 + 2 w1 x1^2 = 2/3, the
+ * same with x^4 = 2/5): against the Gauss rule, the side part's estimate
+ * where only the Gauss nodes carry it. */
+static const double r5_w[3] = { 0.8550618162163684751, 0.5196089047921329057,
+                                0.05286018709968285677 };   /* w0, w3, w1 */
+
+/* With side_gauss (and aux), the side part (aux's rows 15-29) is read at
+ * the seven Gauss nodes alone (odd j; the integrand leaves it 0 at the
+ * others): its integral is the Gauss rule's, its estimate the Gauss
+ * estimate's integral plus |Gauss - r5_w's rule|. */
+static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo, const double (*aux)[3],
+                    int side_gauss)
 {
     const double c = 0.5 * (iv->a + iv->b), h = 0.5 * (iv->b - iv->a);
     double fv[15][3], u[15], rk[3], rg[3], dv[15][3], dk[3], dg[3];
@@ -135,6 +147,21 @@ static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo, const doubl
     }
     if (fvo)
         memcpy(fvo, fv, sizeof fv);
+    if (aux && side_gauss) {
+        for (int k = 0; k < 3; ++k) {
+            const double (*sv)[3] = aux + 15;
+            double g7 = (double) ef_gk15_wg[3] * sv[7][k], x = (double) ef_gk15_wg[3] * aux[7][k];
+            for (int j = 1; j < 7; j += 2) {
+                g7 += (double) ef_gk15_wg[j / 2] * (sv[j][k] + sv[14 - j][k]);
+                x += (double) ef_gk15_wg[j / 2] * (aux[j][k] + aux[14 - j][k]);
+            }
+            const double r5 = r5_w[0] * sv[7][k] + r5_w[1] * (sv[3][k] + sv[11][k]) +
+                              r5_w[2] * (sv[1][k] + sv[13][k]);
+            iv->r[k] = (dk[k] + g7) * h;
+            iv->x[k] = (x + fabs(g7 - r5)) * fabs(h);
+        }
+        return;
+    }
     for (int k = 0; k < 3; ++k) {
         double x = 0;
         for (int j = 0; aux && j < 15; ++j)
@@ -147,7 +174,7 @@ static void gk15_fv(lit_fn f, const void *q, gk_iv *iv, double *fvo, const doubl
 
 static void gk15(lit_fn f, const void *q, gk_iv *iv, const double (*aux)[3])
 {
-    gk15_fv(f, q, iv, NULL, aux);
+    gk15_fv(f, q, iv, NULL, aux, 0);
 }
 
 #define GK_MAX 512
@@ -175,7 +202,7 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
             continue;
         iv[n].a = cut[i];
         iv[n].b = cut[i + 1];
-        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux);
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux, aux && !rec);
         ++n;
     }
     for (;;) {
@@ -219,10 +246,10 @@ static void gk_adapt_rec(lit_fn f, const void *q, const double *cut, int ncut, d
         }
         const double a = iv[worst].a, b = iv[worst].b, m = 0.5 * (a + b);
         iv[worst].b = m;
-        gk15_fv(f, q, &iv[worst], rec_fv(rec, worst), aux);
+        gk15_fv(f, q, &iv[worst], rec_fv(rec, worst), aux, aux && !rec);
         iv[n].a = m;
         iv[n].b = b;
-        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux);
+        gk15_fv(f, q, &iv[n], rec_fv(rec, n), aux, aux && !rec);
         ++n;
     }
 }
@@ -259,6 +286,7 @@ typedef struct lit_q {
      * and its part of the value per node into aux (gk15_fv's 30 rows) */
     const ef_lms *lms;
     int est;                  /* 0: the caller wants no estimate (lms_node skips its reads) */
+    int ms_gauss;             /* 1: the side part at a rule's Gauss nodes alone (gk15_fv) */
     double (*aux)[3];
 } lit_q;
 /* One node's geometry: t along the ray, the substitution's weight, the
@@ -587,9 +615,78 @@ static void lms_node(const lit_q *q, const double x[3], const double tv[3], cons
         double est = 0;
         const double f = ef_lms_local_node(q->lms, k, tl[k], sg[k], d, nu, ca, x, ex[k],
                                            q->est ? &est : NULL);
-        const double w = exp(-tv[k]) * wgt * l->e[k];
+        /* (e^-tv as lms_pack takes it, so a value read here is the same
+         * bits as one read four at a time) */
+        const v4d mt = { -tv[k], 0, 0, 0 };
+        v4d et;
+        v_exp(&mt, &et);
+        const double w = et[0] * wgt * l->e[k];
         v[k] = f * w;
         e[k] = est * w;
+    }
+}
+
+/* The nodes of one lamp_v call that take a lamp's multiple scattering
+ * (the value alone), gathered over its groups of four so that the table's
+ * places go four at a time: each node's index j, t, the lamp's distance,
+ * the phase's cosine, a spot's ca, the weight, and per channel the optical
+ * depth (view and lamp), the lamp's leg and the extinction. */
+typedef struct lms_pk {
+    int n, j[16];
+    double t[16], dl[16], cth[16], ca[16], wgt[16], tau[3][16], tl[3][16], sg[3][16];
+} lms_pk;
+
+/* lms_node's values (no estimate) at pk's nodes, four at a time: each
+ * added to out and kept in aux's rows 15-29 (the part that does not steer
+ * the refinement; its estimate rows stay 0). */
+EF_INLINE void lms_pack(const lit_q *q, const lms_pk *pk, double (*out)[3])
+{
+    const ef_light *l = q->l;
+    for (int p = 0; p < pk->n; p += 4) {
+        double x[4][3], D[4], N[4], A[4], mv[3][4];
+        int live[4];
+        for (int i = 0; i < 4; ++i) {
+            const int a = p + i < pk->n ? p + i : p;
+            live[i] = p + i < pk->n;
+            for (int k = 0; k < 3; ++k)
+                x[i][k] = q->r->org[k] + pk->t[a] * q->r->dir[k];
+            D[i] = pk->dl[a];
+            N[i] = pk->cth[a];
+            A[i] = pk->ca[a];
+        }
+        for (int k = 0; k < 3; ++k) {
+            /* a channel like the one before it (grey fog) copies it */
+            int same = k > 0 && l->e[k] == l->e[k - 1] && ef_lms_same_table(q->lms, k, k - 1);
+            for (int i = 0; same && i < 4 && p + i < pk->n; ++i)
+                same = pk->tau[k][p + i] == pk->tau[k - 1][p + i] &&
+                       pk->tl[k][p + i] == pk->tl[k - 1][p + i] &&
+                       pk->sg[k][p + i] == pk->sg[k - 1][p + i];
+            if (same) {
+                memcpy(mv[k], mv[k - 1], sizeof mv[k]);
+                continue;
+            }
+            double TL[4], SG[4], F[4];
+            v4d mt;
+            for (int i = 0; i < 4; ++i) {
+                const int a = p + i < pk->n ? p + i : p;
+                const double tv = pk->tau[k][a] - pk->tl[k][a];
+                const int on = live[i] && pk->sg[k][a] > 0 && tv < 708 && l->e[k] != 0;
+                TL[i] = pk->tl[k][a];
+                SG[i] = on ? pk->sg[k][a] : 0;
+                mt[i] = on ? -tv : 0;
+            }
+            ef_lms_local_node4(q->lms, k, TL, SG, D, N, A, (const double (*)[3]) x, F);
+            v4d et;
+            v_exp(&mt, &et);
+            for (int i = 0; i < 4; ++i)
+                mv[k][i] = SG[i] > 0 ? F[i] * (et[i] * pk->wgt[p + i < pk->n ? p + i : p] * l->e[k])
+                                     : 0;
+        }
+        for (int i = 0; i < 4 && p + i < pk->n; ++i)
+            for (int k = 0; k < 3; ++k) {
+                out[pk->j[p + i]][k] += mv[k][i];
+                q->aux[15 + pk->j[p + i]][k] = mv[k][i];
+            }
     }
 }
 
@@ -609,6 +706,8 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
     const int coned = ef_light_coned(l);
     const v4d m708 = { -708, -708, -708, -708 }, zero = { 0, 0, 0, 0 };
     double ex[4];   /* lms_node's exposure, once per four nodes */
+    lms_pk pk;
+    pk.n = 0;
     for (int g = 0; g * 4 < n; ++g) {
         ex[3] = 0;
         v4d U;
@@ -743,8 +842,26 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
             for (int i = 0; i < 4 && 4 * g + i < n; ++i)
                 out[4 * g + i][ch] = dd[i] || gone[i] || acc[ch][i] == 0 ? 0 : o[i];
         }
-        for (int i = 0; q->lms && i < 4 && 4 * g + i < n; ++i) {
-            if (dd[i])
+        for (int i = 0; q->lms && !q->est && i < 4 && 4 * g + i < n; ++i) {
+            /* (the value alone: gathered for lms_pack below) */
+            const int j = 4 * g + i;
+            if (dd[i] || (q->ms_gauss && !(j & 1)))
+                continue;
+            const int a = pk.n++;
+            pk.j[a] = j;
+            pk.t[a] = t[i];
+            pk.dl[a] = dl[i];
+            pk.cth[a] = cth[i];
+            pk.ca[a] = ca[i];
+            pk.wgt[a] = wgt[i];
+            for (int ch = 0; ch < 3; ++ch) {
+                pk.tau[ch][a] = tau[ch][i];
+                pk.tl[ch][a] = tlv[ch][i];
+                pk.sg[ch][a] = sgv[ch][i];
+            }
+        }
+        for (int i = 0; q->lms && q->est && i < 4 && 4 * g + i < n; ++i) {
+            if (dd[i] || (q->ms_gauss && !((4 * g + i) & 1)))
                 continue;
             double tv[3], tl[3], sg[3], mv[3], me[3];
             for (int ch = 0; ch < 3; ++ch) {
@@ -763,6 +880,8 @@ EF_MULTIVERSION static int lamp_v(const lit_q *q, const vcomp *vc, const double 
             }
         }
     }
+    if (pk.n)
+        lms_pack(q, &pk, out);
     return 1;
 }
 
@@ -884,10 +1003,10 @@ static void lit_integrand(const void *qv, const double *u, int n, double (*out)[
         for (int k = 0; k < 3; ++k)
             out[live[j]][k] =
                 acc[j][k] == 0 || e[k] == 0 ? 0 : acc[j][k] * e[k] * wgt[j] * sh[j] * l->e[k];
-        if (q->lms) {
+        if (q->lms && j % 4 == 0)
+            ex[3] = 0;
+        if (q->lms && !(q->ms_gauss && !(live[j] & 1))) {
             double mv[3], me[3];
-            if (j % 4 == 0)
-                ex[3] = 0;
             lms_node(q, x[j], tv[j], tl[j], sgt[j], dl[j], cth[j], ca[j], wgt[j], mv, me, ex);
             for (int k = 0; k < 3; ++k) {
                 out[live[j]][k] += mv[k];
@@ -1146,6 +1265,8 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
     if (ef_lms_is_local(l->lms) && ef_light_at_position(l)) {
         q.lms = l->lms;
         q.aux = aux;
+        /* (a dense output keeps every node's value: gk_adapt_rec) */
+        q.ms_gauss = !dense;
     }
     dense_rec rec_ = { dense, &q, vis }, *rec = dense ? &rec_ : NULL;
     for (int i = 0; i < s->ncomp; ++i) {
@@ -1194,7 +1315,7 @@ static void quad_range(const ef_fog_scene *s, const ef_light *l, const ef_ray *r
         int iso = 1;
         for (int i = 0; i < s->ncomp; ++i)
             iso &= s->comp[i].phase == EF_PHASE_ISO;
-        if (!rec && (ef_light_at_position(l) && !ef_light_coned(l)) && q.uniform && iso &&
+        if (!rec && !q.lms && (ef_light_at_position(l) && !ef_light_coned(l)) && q.uniform && iso &&
             l->radius == 0 && q.h > 0) {
             double sig[3], scat[3];
             ef_lit_lamp_medium(s, sig, scat);

@@ -245,6 +245,13 @@ int ef_lms_is_local(const ef_lms *m);
  * uniform (the field scaled as above); either makes it local. */
 int ef_lms_is_spot(const ef_lms *m);
 int ef_lms_is_scaled(const ef_lms *m);
+/* ef_lms_local_node's value (est NULL) at four nodes at once, into f:
+ * the table's places on vectors (vmath.h's log1p, log, atan2 and sqrt, a
+ * few ulp from libm's), the reads per node. x: the four nodes (NULL as
+ * there). A node with sg, tl or d not above 0 gets 0. */
+void ef_lms_local_node4(const ef_lms *m, int k, const double tl[4], const double sg[4],
+                        const double d[4], const double nu[4], const double ca[4],
+                        const double (*x)[3], double f[4]);
 /* Whether channels j and k read the same table (one albedo). */
 int ef_lms_same_table(const ef_lms *m, int j, int k);
 double ef_lms_local_node(const ef_lms *m, int k, double tl, double sg, double d, double nu,
