@@ -1347,8 +1347,8 @@ static void lamp_images(ef_lms *m, const double sl[3], const double om[3], doubl
  * extinction tl / d over its own distance, from the table's mean over
  * directions (a first form read each image's direction from the full
  * table: twice the cost, the same errors against Cycles but one). */
-static double image_part(const ef_lms *m, const lms_tab *tb, int k, double tl, double sg,
-                         double d, const double x[3])
+EF_INLINE double image_part(const ef_lms *m, const lms_tab *tb, int k, double tl, double sg,
+                            double d, const double x[3])
 {
     /* the distances and the table's places first, a loop the compiler
      * puts on vectors; the reads after (tl / taup = d / dp) */
@@ -2148,7 +2148,7 @@ double ef_lms_leak_exposure(const ef_lms *m, const double x[3], int k, double sg
 EF_INLINE double node_less_images(const ef_lms *m, const lms_tab *tb, double v0, double vi,
                                   const double sp[2])
 {
-    const double v = vi > 0 ? fmax(0, v0 - vi) : v0;
+    const double v = vi > 0 ? (v0 - vi > 0 ? v0 - vi : 0) : v0;
     if (!m->spot)
         return v;
     return v * spot_share_uv(tb, sp[0], sp[1], NULL);
@@ -2167,11 +2167,14 @@ EF_INLINE void node_places(const ef_lms *m, const lms_tab *tb, const double tl[4
                            double X[4], double sp[4][2])
 {
     v4d L, Z, S, C;
+    /* (clamps by comparison, as fmin and fmax give them, NaN included:
+     * libm's calls from the x86-64-v3 clone cost a transition each) */
     for (int i = 0; i < 4; ++i) {
+        const double z = 0.5 * (1 - nu[i]), zc = z < 1 ? z : 1, c = ca[i] < 1 ? ca[i] : 1;
         L[i] = live[i] && tl[i] < 1e300 ? tl[i] * (1 / LMS_RS) : 1;
-        Z[i] = live[i] ? fmax(0, fmin(1, 0.5 * (1 - nu[i]))) : 0;
-        S[i] = live[i] ? fmax(tl[i], SPOT_RMIN) * (1 / SPOT_RMIN) : 1;
-        C[i] = (live[i] ? fmax(-1, fmin(1, ca[i])) : 1) + 0.0;   /* (-0 to +0) */
+        Z[i] = live[i] && zc > 0 ? zc : 0;
+        S[i] = live[i] ? (tl[i] > SPOT_RMIN ? tl[i] : SPOT_RMIN) * (1 / SPOT_RMIN) : 1;
+        C[i] = (live[i] ? (c > -1 ? c : -1) : 1) + 0.0;   /* (-0 to +0) */
     }
     v4d u, x, us = { 0, 0, 0, 0 }, al = us;
     v_log1p(&L, &u);
