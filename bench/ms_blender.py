@@ -7,7 +7,8 @@ Volume Absorption of the rest) from the ground z = 0 to z = TOP (its box reaches
 the same along the ground for what the camera sees), a black ground that only absorbs (no
 emission, no BSDF: exrfog's black ground=0), a black world, a sun of strength 1 at ELEV
 degrees above the horizon, the camera 2 units up looking 8 degrees down (camz=Z: Z up, and
-20 degrees down when above the fog's top). BOUNCES volume
+20 degrees down when above the fog's top); sbox=X0,Y0,X1,Y1 cuts the slab to that footprint (a
+box lit through its top and sides). BOUNCES volume
 bounces (0: single scattering; 128: every order the issue asks for; -1: no fog, for the depth), max bounces as many,
 transparent bounces left at their default. Writes OUT (RGBA + Z, 32-bit) and OUT.json (the
 camera and the direction towards the sun)."""
@@ -35,15 +36,22 @@ layers = ([tuple(float(v) for v in l.split(":")) for l in args[10].split(",")]
 sky = "sky" in args[11:]
 # "camz=Z": the camera Z units up (default 2; above TOP it looks down into the fog from above)
 camz = float(next((a[5:] for a in args[11:] if a.startswith("camz=")), "2"))
+# "sbox=X0,Y0,X1,Y1": the fog's box over that footprint alone (exrfog: box:min=X0,Y0,-1:max=X1,Y1,TOP)
+sbox = next(([float(v) for v in a[5:].split(",")] for a in args[11:] if a.startswith("sbox=")), None)
 sc = ms_scene.setup(spp, bounces, width, height, 11, 1.0 if sky else 0.0)
 # the ground: black, absorbing every ray (a material with no output)
 bpy.ops.mesh.primitive_plane_add(size=4000, location=(0, 0, 0))
 bpy.context.object.data.materials.append(ms_scene.black())
 # the fog's boxes reach below the ground (a face on the ground's plane would hide it)
 for li, (ltop, ldens, lalb, lg) in enumerate(layers):
-    bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (ltop - 1) / 2))
+    if sbox:
+        bpy.ops.mesh.primitive_cube_add(size=1, location=((sbox[0] + sbox[2]) / 2,
+                                                          (sbox[1] + sbox[3]) / 2, (ltop - 1) / 2))
+    else:
+        bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, (ltop - 1) / 2))
     cube = bpy.context.object
-    cube.scale = (4000 - li, 4000 - li, ltop + 1)
+    cube.scale = ((sbox[2] - sbox[0], sbox[3] - sbox[1], ltop + 1) if sbox
+                  else (4000 - li, 4000 - li, ltop + 1))
     if plain:
         cube.hide_render = True
     m = ms_scene.fog("fog%d" % li, ldens, lalb, lg)

@@ -43,6 +43,8 @@ spot = next((a for a in sys.argv[14:] if a.startswith("spot=")), None)
 across = spot is not None and "across" in sys.argv[14:]   # the spot aimed along -x instead
 # box=X0,Y0,Z0,X1,Y1,Z1 (with lamp=): the fog fills that box alone (exrfog: box:min=:max=)
 box = next((a for a in sys.argv[14:] if a.startswith("box=")), None)
+# sbox=X0,Y0,X1,Y1 (with the sun): the slab cut to that footprint (exrfog: box:min=X0,Y0,-1:max=X1,Y1,TOP)
+sbox = next((a for a in sys.argv[14:] if a.startswith("sbox=")), None)
 # hs=Z (with lamp=): the fog fills everything below z = Z (exrfog: halfspace:plane=0,0,1,-Z)
 hs = next((a for a in sys.argv[14:] if a.startswith("hs=")), None)
 # lay=H0/F0,H1/F1,... (with lamp=): layered fog, DENSITY times factors linear between the knots
@@ -51,7 +53,8 @@ lay = next((a for a in sys.argv[14:] if a.startswith("lay=")), None)
 here = os.path.dirname(os.path.abspath(__file__))
 os.makedirs(d, exist_ok=True)
 tag = ("e%g_d%g_a%g_g%g" % (elev, dens, albedo, g) + ("_layers" if layers else "") +
-       ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else ""))
+       ("_sky" if sky else "") + ("_" + camz.replace("=", "") if camz else "") +
+       ("_sbox" + sbox[5:].replace(",", "_") if sbox else ""))
 if lamp is not None:
     tag = ("lamp%g_d%g_a%g_g%g" % (lamp, dens, albedo, g) + ("_" + wall.replace("=", "") if wall else "")
            + ("_behind" if behind else "") + ("_" + falloff.replace("=", "") if falloff else "")
@@ -69,7 +72,8 @@ def render(bounces):
     else:
         script = ([here + "/ms_blender.py", "--", out, spp, str(bounces), str(elev),
                    str(dens), str(albedo), str(g), str(top), str(W), str(H)]
-                  + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else []))
+                  + [layers or "-"] + (["sky"] if sky else []) + ([camz] if camz else [])
+                  + ([sbox] if sbox else []))
     if os.environ.get("MS_REUSE") and os.path.exists(out) and os.path.exists(out + ".json"):
         return out, 0.0   # MS_REUSE=1: an earlier run's render of the same case
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python"]
@@ -99,7 +103,12 @@ ib.write("%s/%s_in.exr" % (d, tag))
 fogs = []
 for l in ([] if lamp is not None else layers.split(",") if layers else ["%r:%r:%r:%r" % (top, dens, albedo, g)]):
     lt, ld, la, lg = (float(v) for v in l.split(":"))
-    fogs += ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-lt, ld, la, lg)]
+    if sbox:
+        x0, y0, x1, y1 = (float(v) for v in sbox[5:].split(","))
+        fogs += ["--fog", "box:min=%r,%r,-1:max=%r,%r,%r:density=%r:albedo=%r:phase=hg:g=%r" % (
+            x0, y0, x1, y1, lt, ld, la, lg)]
+    else:
+        fogs += ["--fog", "halfspace:plane=0,0,1,%r:density=%r:albedo=%r:phase=hg:g=%r" % (-lt, ld, la, lg)]
 common = ["--up-axis", "z", "--camera-convention", "blender", "--camera-to-world",
           ",".join(repr(v) for v in cam["c2w"]), "--fov", repr(cam["fov"]), "--near",
           repr(cam["near"]), "--far", repr(cam["far"]), "--fog-color", "0,0,0"] + fogs + [
@@ -176,7 +185,7 @@ rel = (EM - C)[ok] / C[ok]
 res = {
     "case": tag, "layers": layers, "sky": sky, "lamp": lamp, "wall": float(wall[5:]) if wall else None,
     "behind": behind, "falloff": float(falloff[8:]) if falloff else 0.0,
-    "spot": float(spot[5:]) if spot else None, "across": across, "box": box[4:] if box else None, "hs": float(hs[3:]) if hs else None, "lay": lay[4:] if lay else None,
+    "spot": float(spot[5:]) if spot else None, "across": across, "box": box[4:] if box else None, "sbox": sbox[5:] if sbox else None, "hs": float(hs[3:]) if hs else None, "lay": lay[4:] if lay else None,
     "lamp_tau": dens * lamp if lamp is not None else None, "camz": float(camz[5:]) if camz else 2.0,
     "elev": elev, "density": dens, "albedo": albedo, "g": g, "top": top,
     "vertical_tau": dens * top, "spp": int(spp), "size": [W, H], "block": block,

@@ -490,6 +490,7 @@ struct ef_ms {
     int ntab;
     ms_tab tab[3];
     ef_ms_info info;
+    ef_vms *vol;                  /* a box or convex volume's solve instead (lit_vms.c) */
 };
 
 void ef_ms_ref(ef_ms *m)
@@ -507,6 +508,7 @@ void ef_ms_unref(ef_ms *m)
         free(m->tab[t].tau);
         free(m->tab[t].v);
     }
+    ef_vms_free(m->vol);
     free(m);
 }
 
@@ -1014,6 +1016,24 @@ int ef_ms_build(const ef_fog_scene *s, const ef_light *l, ef_ms **out, ef_err *e
     if (l->planet > 0)
         return ef_fail(err, "light '%s': scattering=multiple is solved over flat ground (no "
                        "planet=)", l->name);
+    if (s->ncomp == 1 && s->comp[0].model->convex) {
+        /* one box or convex volume: the solve in three dimensions */
+        ef_vms *v;
+        if (ef_vms_build(s, l, &v, err))
+            return -1;
+        if (!v)
+            return 0;
+        ef_ms *m = calloc(1, sizeof *m);
+        if (!m) {
+            ef_vms_free(v);
+            return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
+        }
+        atomic_init(&m->refs, 1);
+        m->vol = v;
+        ef_vms_get_info(v, &m->info);
+        *out = m;
+        return 0;
+    }
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     char what[96];
@@ -1461,19 +1481,35 @@ EF_INLINE void walk(const ms_tab *tab, const dir_w *dw, double tauc, double q, d
     cell1(es, fmax(0, (tend - tab->tau[kl]) * iq), Jl, Jend, el, eend, out);
 }
 
+void ef_ms_view_clear(ef_ms_view *v)
+{
+    ef_vms_cam_unref(v->cam);
+    memset(v, 0, sizeof *v);
+}
+
 void ef_ms_bind(const ef_ms *m, const ef_fog_scene *s, const double org[3], ef_ms_view *v)
 {
-    memset(v, 0, sizeof *v);
+    ef_ms_view_clear(v);
     if (!m)
         return;
     v->bound = 1;
     memcpy(v->org, org, sizeof v->org);
+    if (m->vol) {
+        v->cam = ef_vms_bind(m->vol, org);
+        return;
+    }
     ef_lit_tau_from(s, org, m->up, INFINITY, v->tauc);
 }
 
 void ef_ms_gather_view(const ef_ms *m, const ef_ms_view *v, const ef_fog_scene *s,
                        const ef_ray *r, const double *tv, double S[3], double E[3])
 {
+    if (m && m->vol) {
+        const int at = v->bound && r->org[0] == v->org[0] && r->org[1] == v->org[1] &&
+                       r->org[2] == v->org[2];
+        ef_vms_gather(m->vol, at ? v->cam : NULL, r, S, E);
+        return;
+    }
     const int cam = v->bound && r->org[0] == v->org[0] && r->org[1] == v->org[1] &&
                     r->org[2] == v->org[2];
     ef_ms_gather(m, s, r, tv, cam ? v->tauc : NULL, S, E);

@@ -123,9 +123,13 @@ void ef_ms_gather(const ef_ms *m, const struct ef_fog_scene *s, const struct ef_
                   const double *tv, const double *tauc, double S[3], double E[3]);
 /* A solve bound to a camera: the camera's vertical optical depth per
  * channel, which every ray from it would otherwise compute again. */
+typedef struct ef_vms_cam ef_vms_cam;
 typedef struct ef_ms_view {
     int bound;
     double org[3], tauc[3];
+    /* a volume's solve (lit_vms.c): its source towards the camera at each
+     * voxel, shared by copies of the scene (ef_vms_cam_ref), or NULL */
+    ef_vms_cam *cam;
 } ef_ms_view;
 
 /* Binds m (may be NULL: nothing bound) to the camera at org of scene s. */
@@ -144,12 +148,39 @@ void ef_ms_gather_view(const ef_ms *m, const ef_ms_view *v, const struct ef_fog_
 typedef struct ef_ms_info {
     int nodes, kept, nh, direct, iterated;
     double tail_rel, disc_rel, seconds;
+    /* a box or convex volume's solve (lit_vms.c): 1, its photons, and
+     * nodes the voxels, kept the voxels along each side */
+    int volume, photons;
 } ef_ms_info;
 void ef_ms_get_info(const ef_ms *m, ef_ms_info *info);
 
 /* Shared, immutable once built: copies of a scene take references. */
 void ef_ms_ref(ef_ms *m);
 void ef_ms_unref(ef_ms *m);
+
+/* A sun's multiple scattering in one uniform box or convex volume
+ * (lit_vms.c: a Monte Carlo solve on a grid over the volume, once per
+ * scene and sun). ef_ms_build makes one where the scene is such a volume
+ * alone; its gather then takes the view's segment through it. */
+typedef struct ef_vms ef_vms;
+int ef_vms_build(const struct ef_fog_scene *s, const struct ef_light *l, ef_vms **out,
+                 ef_err *err);
+void ef_vms_free(ef_vms *v);
+void ef_vms_gather(const ef_vms *v, const ef_vms_cam *c, const struct ef_ray *r, double S[3],
+                   double E[3]);
+/* v's source towards a camera at org at every voxel (the harmonics summed
+ * for the direction from the voxel's centre to it), which ef_vms_gather
+ * reads beyond eight voxels from c's camera for rays that start there;
+ * NULL out of memory (the gather then sums the harmonics itself). */
+ef_vms_cam *ef_vms_bind(const ef_vms *v, const double org[3]);
+void ef_vms_cam_ref(ef_vms_cam *c);
+void ef_vms_cam_unref(ef_vms_cam *c);
+/* Releases what ef_ms_bind holds in v and clears it. */
+void ef_ms_view_clear(ef_ms_view *v);
+void ef_vms_get_info(const ef_vms *v, ef_ms_info *info);
+/* The real spherical harmonics Y_lm of unit d to degree 3, in the order
+ * (0,0), (1,-1), (1,0), (1,1), (2,-2) .. (3,3). */
+void ef_vms_harmonics(const double d[3], double Y[16]);
 
 /* Legendre polynomials P_0..P_{L-1} at x into P. */
 void ef_ms_legendre(int L, double x, double *P);

@@ -142,6 +142,7 @@ int ef_scene_copy(ef_fog_scene *dst, const ef_fog_scene *src, int with_spec)
         ef_ms_ref(dst->light[j].ms);
         ef_lms_ref(dst->light[j].lms);
         ef_lms_view_ref(dst->light[j].lms_view);
+        ef_vms_cam_ref(dst->light[j].ms_view.cam);
     }
     dst->sky_light = src->sky_light;
     ef_sky_light_ref(dst->sky_light);
@@ -200,6 +201,7 @@ void ef_scene_free(ef_fog_scene *s)
         s->light[j].lms = NULL;
         ef_lms_view_unref(s->light[j].lms_view);
         s->light[j].lms_view = NULL;
+        ef_ms_view_clear(&s->light[j].ms_view);
     }
     ef_sky_light_unref(s->sky_light);
     s->sky_light = NULL;
@@ -453,6 +455,7 @@ int ef_scene_prepare_lights(ef_fog_scene *s, ef_err *err)
         l->lms = NULL;
         ef_lms_view_unref(l->lms_view);
         l->lms_view = NULL;
+        ef_ms_view_clear(&l->ms_view);
         if (l->multiple && (ef_light_at_position(l) ? ef_lms_build(s, l, &l->lms, err)
                                                      : ef_ms_build(s, l, &l->ms, err)))
             return -1;

@@ -140,6 +140,12 @@ static void explain_scene(ef_job *J, FILE *out, const ef_channel_plan *plan)
             if (!l->ms)
                 fprintf(out, "  multiple scattering: nothing to add (the sun at or below the "
                              "horizon, or no fog its light reaches)\n");
+            else if (in.volume)
+                fprintf(out, "  multiple scattering: solved by Monte Carlo in the volume, %d photons "
+                             "of the beam on a grid of %d voxels a side, harmonics to degree 3 "
+                             "(its noise, grid and harmonics estimated into --aov error); "
+                             "%.3f s\n",
+                        in.photons, in.kept, in.seconds);
             else
                 fprintf(out, "  multiple scattering: plane-parallel solve over %d depth nodes (%d kept "
                              "in its table) to %s, "
@@ -353,8 +359,10 @@ void ef_explain_json(ef_job *J, FILE *out, const ef_exr_file *in, const ef_chann
             } else {
                 ef_ms_get_info(l->ms, &in);
                 fprintf(out, ", \"multiple\": {\"nodes\": %d, \"kept\": %d, \"directions\": %d, "
-                             "\"direct_modes\": %d, \"iterated_modes\": %d, \"tail_rel\": ",
-                        in.nodes, in.kept, in.nh, in.direct, in.iterated);
+                             "\"direct_modes\": %d, \"iterated_modes\": %d, \"volume\": %s, "
+                             "\"photons\": %d, \"tail_rel\": ",
+                        in.nodes, in.kept, in.nh, in.direct, in.iterated,
+                        in.volume ? "true" : "false", in.photons);
             }
             json_num(out, in.tail_rel);
             fputs(", \"discretisation_rel\": ", out);
