@@ -274,7 +274,7 @@ static void deposit(ef_vms *v, int nch, const double x[3], const double d[3], do
 
 /* The volume's corners: every triple of planes that meets at a point
  * inside all of them. Returns their count into lo and hi (the box they
- * span), 0 when the planes bound nothing or leave it open. */
+ * span): 0 when the planes hold nothing, -1 when they leave it open. */
 static int corners(const double *pl, int np, double lo[3], double hi[3])
 {
     /* open: some direction d with n.d <= 0 for every plane (a polyhedral
@@ -300,7 +300,7 @@ static int corners(const double *pl, int np, double lo[3], double hi[3])
                 for (int k = 0; k < np && open; ++k)
                     open = dot3(pl + 4 * k, d) <= 1e-12 * dn;
                 if (open)
-                    return 0;
+                    return -1;
             }
     int nc = 0;
     for (int q = 0; q < 3; ++q)
@@ -387,7 +387,14 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
         p[3] = l->ground;
     }
     double lo[3], hi[3];
-    if (!(rho[0] > 0) || !corners(v->pl, v->np, lo, hi)) {
+    const int nc = corners(v->pl, v->np, lo, hi);
+    if (nc < 0) {
+        ef_vms_free(v);
+        return ef_fail(err, "light '%s': multiple scattering in a convex volume is solved where "
+                       "its planes close it (these leave it open; a half-space is "
+                       "halfspace:, solved along the ground, or give ground=)", l->name);
+    }
+    if (!(rho[0] > 0) || nc == 0) {
         ef_vms_free(v);
         return 0;   /* no fog, or none above the ground: nothing scatters */
     }

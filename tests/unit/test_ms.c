@@ -759,6 +759,7 @@ static void test_vms_refusals(void **state)
     static const char *const fogs[][2] = {
         { "box:min=-1,-1,-1:max=1,1,1:density=0.1,0.1,0.2", "density" },
         { "box:min=-1,-1,-1:max=1,1,1:density=0.1:phase=hg:g=0.7", "up to 0.6" },
+        { "convex:planes=0,1,0,-2,1,0,0,-1,-1,0,0,-1:density=0.1", "open" },
     };
     for (unsigned i = 0; i < sizeof fogs / sizeof *fogs; ++i) {
         ef_fog_scene s;
@@ -770,6 +771,30 @@ static void test_vms_refusals(void **state)
         if (!strstr(err.msg, fogs[i][1]))
             fail_msg("'%s': %s", fogs[i][0], err.msg);
         ef_scene_free(&s);
+    }
+    /* a convex volume of a box's six planes is that box: the same solve,
+     * bit for bit; a pyramid's is light of its own */
+    {
+        ef_fog_scene sb, sc, sp;
+        const char *light = "sun:towards=0.3,1,0.2:scattering=multiple";
+        scene_with(&sb, "box:min=-2,0,-3:max=2,1,3:density=0.4:albedo=0.9", light);
+        scene_with(&sc, "convex:planes=1,0,0,-2,-1,0,0,-2,0,1,0,-1,0,-1,0,0,0,0,1,-3,0,0,-1,-3:"
+                        "density=0.4:albedo=0.9", light);
+        scene_with(&sp, "convex:planes=0,-1,0,0,1,1,0,-2,-1,1,0,-2,0,1,1,-2,0,1,-1,-2:"
+                        "density=0.4:albedo=0.9", light);
+        const double cam[3] = { 0, 0.5, 8 };
+        ef_ray r = ray(cam, 0.02, -0.01, -1, 20);
+        const ef_ms_view nv = { 0 };
+        double Sb[3], Sc[3], Sp[3], Ep[3];
+        ef_ms_gather_view(sb.light[0].ms, &nv, &sb, &r, NULL, Sb, NULL);
+        ef_ms_gather_view(sc.light[0].ms, &nv, &sc, &r, NULL, Sc, NULL);
+        ef_ms_gather_view(sp.light[0].ms, &nv, &sp, &r, NULL, Sp, Ep);
+        assert_true(Sb[0] > 0);
+        assert_memory_equal(Sb, Sc, sizeof Sb);
+        assert_true(Sp[0] > 0 && isfinite(Sp[0]) && Ep[0] > 0 && Ep[0] < Sp[0]);
+        ef_scene_free(&sb);
+        ef_scene_free(&sc);
+        ef_scene_free(&sp);
     }
     /* a box below the ground: nothing to solve */
     ef_fog_scene s;
