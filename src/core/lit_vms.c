@@ -135,19 +135,28 @@ void ef_vms_harmonics(const double d[3], double Y[16])
     Y[15] = 0.5900435899266435 * x * (x * x - 3 * y * y);
 }
 
-/* A unit vector at cosine mu from unit d, azimuth 2 pi v about it. */
-static void turn(const double d[3], double mu, double v, double out[3])
+/* Two unit vectors e1, e2 across unit d, (e1, e2, d) right-handed. */
+static void across(const double d[3], double e1[3], double e2[3])
 {
     double a[3] = { 1, 0, 0 };
     if (fabs(d[0]) > 0.9)
         a[0] = 0, a[1] = 1;
-    double e1[3] = { d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2],
-                     d[0] * a[1] - d[1] * a[0] };
+    e1[0] = d[1] * a[2] - d[2] * a[1];
+    e1[1] = d[2] * a[0] - d[0] * a[2];
+    e1[2] = d[0] * a[1] - d[1] * a[0];
     const double n1 = sqrt(dot3(e1, e1));
     for (int q = 0; q < 3; ++q)
         e1[q] /= n1;
-    const double e2[3] = { d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
-                           d[0] * e1[1] - d[1] * e1[0] };
+    e2[0] = d[1] * e1[2] - d[2] * e1[1];
+    e2[1] = d[2] * e1[0] - d[0] * e1[2];
+    e2[2] = d[0] * e1[1] - d[1] * e1[0];
+}
+
+/* A unit vector at cosine mu from unit d, azimuth 2 pi v about it. */
+static void turn(const double d[3], double mu, double v, double out[3])
+{
+    double e1[3], e2[3];
+    across(d, e1, e2);
     const double st = sqrt(fmax(0, 1 - mu * mu)), ph = 2 * PI * v, c = cos(ph), s = sin(ph);
     for (int q = 0; q < 3; ++q)
         out[q] = mu * d[q] + st * (c * e1[q] + s * e2[q]);
@@ -458,20 +467,7 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
     R = sqrt(R) * 1.001;
     const double back[3] = { -sd[0], -sd[1], -sd[2] };
     double e1[3], e2[3];
-    {
-        double a[3] = { 1, 0, 0 };
-        if (fabs(sd[0]) > 0.9)
-            a[0] = 0, a[1] = 1;
-        e1[0] = sd[1] * a[2] - sd[2] * a[1];
-        e1[1] = sd[2] * a[0] - sd[0] * a[2];
-        e1[2] = sd[0] * a[1] - sd[1] * a[0];
-        const double n1 = sqrt(dot3(e1, e1));
-        for (int q = 0; q < 3; ++q)
-            e1[q] /= n1;
-        e2[0] = sd[1] * e1[2] - sd[2] * e1[1];
-        e2[1] = sd[2] * e1[0] - sd[0] * e1[2];
-        e2[2] = sd[0] * e1[1] - sd[1] * e1[0];
-    }
+    across(sd, e1, e2);
     const int per = VMS_PHOTONS / VMS_BATCHES;
     double wmax = 1;
     for (int k = 0; k < 3; ++k)
