@@ -50,11 +50,15 @@
 #define VMS_BATCHES 16                 /* batches for the noise's estimate */
 #define VMS_WMIN 0.01                  /* Russian roulette below this weight */
 #define VMS_MAXP 70                    /* planes: a convex volume's 64 and the ground */
-/* The largest |g| taken: against Cycles (bench/ms_sun_box.md) the multiple
- * part is within 1.2 % at g 0.6 and the error output covers every block;
- * at 0.7 4.8 % high, 95 % covered; at 0.85 31 % high, 82 % covered (the
- * forward peak needs harmonics far beyond degree 3). */
-#define VMS_GMAX 0.6
+/* The largest |g| the harmonics serve alone: against Cycles
+ * (bench/ms_sun_box.md) the multiple part is within 1.2 % at g 0.6 and the
+ * error output covers every block; at 0.7 4.8 % high, 95 % covered; at
+ * 0.85 31 % high, 82 % covered (the forward peak needs harmonics far
+ * beyond degree 3). Beyond it each camera bind traces the photons again,
+ * scoring the phase itself towards the camera (ef_vms_bind); up to
+ * VMS_GMAX. */
+#define VMS_GMAX_SH 0.6
+#define VMS_GMAX 0.9
 
 struct ef_vms {
     int n[3];                   /* voxels per axis */
@@ -69,6 +73,11 @@ struct ef_vms {
     double *phi;                /* [voxel][channel][VMS_NC] */
     double *est;                /* [voxel][channel]: noise and grid, as a share of Phi_00 */
     unsigned char *in;          /* [voxel]: 1 where the voxel holds some of the volume */
+    double *frac;               /* [voxel]: its share inside the volume */
+    int phase;                  /* the phase function and its g */
+    double g;
+    int exact;                  /* |g| beyond VMS_GMAX_SH: each camera bind scores the phase */
+    double sd[3];               /* towards the sun */
     ef_ms_info info;
 };
 
@@ -230,12 +239,25 @@ static size_t vidx(const ef_vms *v, int i, int j, int k)
     return ((size_t) k * (size_t) v->n[1] + (size_t) j) * (size_t) v->n[0] + (size_t) i;
 }
 
-/* Adds w[ch] len Y to the voxels the flight x + t d, t in [0, len],
- * crosses (Amanatides and Woo's walk), and w[0] len into bat (the
- * batch's Phi_00 of channel 0, for the noise's estimate). */
-static void deposit(ef_vms *v, int nch, const double x[3], const double d[3], double len,
-                    const double *w, const double Y[VMS_NC], double *bat)
+/* Where a solve's flights go: the harmonics' moments phi ([voxel][nch]
+ * [VMS_NC]), or, bound to a camera, jc ([voxel][nch]): each flight's
+ * length times the phase towards the camera from the voxel's centre
+ * (ucam, [voxel][3]); bat the batch's channel 0 (for the noise), bs and
+ * bq the batches' sums and squares. */
+typedef struct tally {
+    int nch;
+    double *phi, *jc;
+    const double *ucam;
+    double *bat, *bs, *bq;
+} tally;
+
+/* Adds the flight x + t d, t in [0, len], of weights w to the voxels it
+ * crosses (Amanatides and Woo's walk): w[ch] len Y into phi, or w[ch]
+ * len p(d . ucam) into jc. */
+static void deposit(const ef_vms *v, tally *ty, const double x[3], const double d[3],
+                    double len, const double *w, const double Y[VMS_NC])
 {
+    const int nch = ty->nch;
     int c[3], st[3];
     double tm[3], td[3];
     for (int q = 0; q < 3; ++q) {
@@ -261,13 +283,20 @@ static void deposit(ef_vms *v, int nch, const double x[3], const double d[3], do
         const double tn = fmin(tm[q], len), l = tn - t;
         if (l > 0) {
             const size_t a = vidx(v, c[0], c[1], c[2]);
-            double *ph = v->phi + a * (size_t) nch * VMS_NC;
-            for (int ch = 0; ch < nch; ++ch) {
-                const double wl = w[ch] * l;
-                for (int m = 0; m < VMS_NC; ++m)
-                    ph[ch * VMS_NC + m] += wl * Y[m];
+            if (ty->jc) {
+                const double p = l * ef_phase_eval(v->phase, v->g, dot3(d, ty->ucam + 3 * a));
+                for (int ch = 0; ch < nch; ++ch)
+                    ty->jc[a * (size_t) nch + ch] += w[ch] * p;
+                ty->bat[a] += w[0] * p;
+            } else {
+                double *ph = ty->phi + a * (size_t) nch * VMS_NC;
+                for (int ch = 0; ch < nch; ++ch) {
+                    const double wl = w[ch] * l;
+                    for (int m = 0; m < VMS_NC; ++m)
+                        ph[ch * VMS_NC + m] += wl * Y[m];
+                }
+                ty->bat[a] += w[0] * l;
             }
-            bat[a] += w[0] * l;
         }
         t = tn;
         if (t >= len)
@@ -277,6 +306,121 @@ static void deposit(ef_vms *v, int nch, const double x[3], const double d[3], do
             break;   /* (rounding at the volume's face) */
         tm[q] += td[q];
     }
+}
+
+/* The beam's disc: its centre (the grid's) and radius R (the grid's half
+ * diagonal), which covers the volume. */
+static void beam_disc(const ef_vms *v, double ctr[3], double *R)
+{
+    double r2 = 0;
+    for (int q = 0; q < 3; ++q) {
+        ctr[q] = v->lo[q] + 0.5 * v->n[q] * v->h[q];
+        r2 += 0.25 * (v->n[q] * v->h[q]) * (v->n[q] * v->h[q]);
+    }
+    *R = sqrt(r2) * 1.001;
+}
+
+/* The photons of the sun's beam through v into ty (module comment), in
+ * VMS_BATCHES batches of fixed seeds. */
+static void trace(const ef_vms *v, tally *ty)
+{
+    const size_t nv = (size_t) v->n[0] * v->n[1] * v->n[2];
+    const double *sd = v->sd;
+    double ctr[3], R;
+    beam_disc(v, ctr, &R);
+    const double back[3] = { -sd[0], -sd[1], -sd[2] };
+    double e1[3], e2[3];
+    across(sd, e1, e2);
+    const int per = VMS_PHOTONS / VMS_BATCHES;
+    double wmax = 1;
+    for (int k = 0; k < 3; ++k)
+        wmax = fmax(wmax, v->alb[k]);
+    for (int bt = 0; bt < VMS_BATCHES; ++bt) {
+        vrng rg;
+        rng_seed(&rg, 0x65786672666f67ULL + (uint64_t) bt);
+        for (int p = 0; p < per; ++p) {
+            const double rr = R * sqrt(rng_u(&rg)), ph = 2 * PI * rng_u(&rg);
+            double x[3], d[3] = { back[0], back[1], back[2] };
+            for (int q = 0; q < 3; ++q)
+                x[q] = ctr[q] + 2 * R * sd[q] + rr * (cos(ph) * e1[q] + sin(ph) * e2[q]);
+            double ta, tb;
+            clip(v, x, d, &ta, &tb);
+            if (!(tb > ta) || !(tb > 0))
+                continue;
+            ta = fmax(ta, 0);
+            /* the first scattering, forced inside */
+            const double pc = -expm1(-v->sig * (tb - ta));
+            const double t1 = ta - log1p(-rng_u(&rg) * pc) / v->sig;
+            for (int q = 0; q < 3; ++q)
+                x[q] += fmin(t1, tb) * d[q];
+            double w[3];
+            for (int k = 0; k < 3; ++k)
+                w[k] = pc * v->alb[k];
+            for (int it = 0; it < 100000; ++it) {
+                double nd[3];
+                turn(d, phase_mu(v->phase, v->g, &rg), rng_u(&rg), nd);
+                memcpy(d, nd, sizeof d);
+                const double te = exit_t(v, x, d), f = -log(rng_u(&rg)) / v->sig;
+                const double len = fmin(f, te);
+                double Y[VMS_NC];
+                if (!ty->jc)
+                    ef_vms_harmonics(d, Y);
+                deposit(v, ty, x, d, len, w, Y);
+                if (!(f < te))
+                    break;
+                for (int q = 0; q < 3; ++q)
+                    x[q] += f * d[q];
+                double wm = 0;
+                for (int k = 0; k < 3; ++k) {
+                    w[k] *= v->alb[k];
+                    wm = fmax(wm, w[k]);
+                }
+                if (wm < VMS_WMIN * wmax) {
+                    if (rng_u(&rg) < 0.5)
+                        break;
+                    for (int k = 0; k < 3; ++k)
+                        w[k] *= 2;
+                }
+            }
+        }
+        for (size_t a = 0; a < nv; ++a) {
+            ty->bs[a] += ty->bat[a];
+            ty->bq[a] += ty->bat[a] * ty->bat[a];
+            ty->bat[a] = 0;
+        }
+    }
+}
+
+/* Three standard errors of the batches' mean as a share of it, per voxel. */
+static double noise_share(const tally *ty, size_t a)
+{
+    if (!(ty->bs[a] > 0))
+        return 0;
+    const double mb = ty->bs[a] / VMS_BATCHES;
+    const double var = fmax(0, ty->bq[a] / VMS_BATCHES - mb * mb) / (VMS_BATCHES - 1);
+    return 3 * sqrt(var) / mb;
+}
+
+/* The grid's estimate at voxel (i, j, k) of a field f (stride st between
+ * voxels, channel's offset applied by the caller): its second differences
+ * along the axes over 8, where both neighbours hold volume. */
+static double curvature(const ef_vms *v, const double *f, size_t st, int i, int j, int k)
+{
+    const int ix[3] = { i, j, k };
+    const double f0 = f[vidx(v, i, j, k) * st];
+    double curv = 0;
+    for (int q = 0; q < 3; ++q) {
+        if (ix[q] == 0 || ix[q] == v->n[q] - 1)
+            continue;
+        int lo3[3] = { i, j, k }, hi3[3] = { i, j, k };
+        lo3[q]--, hi3[q]++;
+        const size_t al = vidx(v, lo3[0], lo3[1], lo3[2]);
+        const size_t ah = vidx(v, hi3[0], hi3[1], hi3[2]);
+        if (!v->in[al] || !v->in[ah])
+            continue;
+        curv += fabs(f[al * st] - 2 * f0 + f[ah * st]) / 8;
+    }
+    return curv;
 }
 
 /* ---------------------------------------------------------------- build */
@@ -354,6 +498,7 @@ void ef_vms_free(ef_vms *v)
     free(v->phi);
     free(v->est);
     free(v->in);
+    free(v->frac);
     free(v);
 }
 
@@ -378,10 +523,10 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
         return ef_fail(err, "light '%s': scattering=multiple is solved over flat ground (no "
                        "planet=)", l->name);
     if ((c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS) && fabs(c->g) > VMS_GMAX)
-        return ef_fail(err, "light '%s': multiple scattering in a box or convex volume keeps "
-                       "harmonics to degree 3, which hold |g| up to %g (against Cycles the "
-                       "multiple part is 1.05 of its own at g 0.7 and 1.31 at g 0.85, beyond "
-                       "what the error output covers); this fog has g %g", l->name, VMS_GMAX, c->g);
+        return ef_fail(err, "light '%s': multiple scattering in a box or convex volume is "
+                       "solved for |g| up to %g (the phase's peak beyond it leaves the Monte "
+                       "Carlo solve's noise unbounded); this fog has g %g", l->name, VMS_GMAX,
+                       c->g);
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     ef_vms *v = calloc(1, sizeof *v);
@@ -412,6 +557,9 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
     for (int k = 0; k < 3; ++k)
         v->alb[k] = c->has_albedo ? c->albedo[k] : 1;
     ef_ms_phase_legendre(c->phase, c->g, VMS_L, v->b);
+    v->phase = c->phase;
+    v->g = c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS ? c->g : 0;
+    v->exact = fabs(v->g) > VMS_GMAX_SH;
     v->trunc = c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS ? fabs(c->g) / (1 - fabs(c->g))
                : c->phase == EF_PHASE_RAYLEIGH ? 0 : 0;
     /* the grid: VMS_NMAX voxels along every side (a thin slab's depth
@@ -456,78 +604,14 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
                 frac[a] = cnt / 64.0;
                 v->in[a] = cnt > 0;
             }
-    /* the beam: photons along -dir through a disc about the grid's
-     * centre that covers it, each of power E pi R^2 / N */
-    const double *sd = l->dir;
-    double ctr[3], R = 0;
-    for (int q = 0; q < 3; ++q) {
-        ctr[q] = v->lo[q] + 0.5 * v->n[q] * v->h[q];
-        R += 0.25 * (v->n[q] * v->h[q]) * (v->n[q] * v->h[q]);
-    }
-    R = sqrt(R) * 1.001;
-    const double back[3] = { -sd[0], -sd[1], -sd[2] };
-    double e1[3], e2[3];
-    across(sd, e1, e2);
-    const int per = VMS_PHOTONS / VMS_BATCHES;
-    double wmax = 1;
-    for (int k = 0; k < 3; ++k)
-        wmax = fmax(wmax, v->alb[k]);
-    for (int bt = 0; bt < VMS_BATCHES; ++bt) {
-        vrng rg;
-        rng_seed(&rg, 0x65786672666f67ULL + (uint64_t) bt);
-        for (int p = 0; p < per; ++p) {
-            const double rr = R * sqrt(rng_u(&rg)), ph = 2 * PI * rng_u(&rg);
-            double x[3], d[3] = { back[0], back[1], back[2] };
-            for (int q = 0; q < 3; ++q)
-                x[q] = ctr[q] + 2 * R * sd[q] + rr * (cos(ph) * e1[q] + sin(ph) * e2[q]);
-            double ta, tb;
-            clip(v, x, d, &ta, &tb);
-            if (!(tb > ta) || !(tb > 0))
-                continue;
-            ta = fmax(ta, 0);
-            /* the first scattering, forced inside */
-            const double pc = -expm1(-v->sig * (tb - ta));
-            const double t1 = ta - log1p(-rng_u(&rg) * pc) / v->sig;
-            for (int q = 0; q < 3; ++q)
-                x[q] += fmin(t1, tb) * d[q];
-            double w[3];
-            for (int k = 0; k < 3; ++k)
-                w[k] = pc * v->alb[k];
-            for (int it = 0; it < 100000; ++it) {
-                double nd[3];
-                turn(d, phase_mu(c->phase, c->g, &rg), rng_u(&rg), nd);
-                memcpy(d, nd, sizeof d);
-                const double te = exit_t(v, x, d), f = -log(rng_u(&rg)) / v->sig;
-                const double len = fmin(f, te);
-                double Y[VMS_NC];
-                ef_vms_harmonics(d, Y);
-                deposit(v, nch, x, d, len, w, Y, bat);
-                if (!(f < te))
-                    break;
-                for (int q = 0; q < 3; ++q)
-                    x[q] += f * d[q];
-                double wm = 0;
-                for (int k = 0; k < 3; ++k) {
-                    w[k] *= v->alb[k];
-                    wm = fmax(wm, w[k]);
-                }
-                if (wm < VMS_WMIN * wmax) {
-                    if (rng_u(&rg) < 0.5)
-                        break;
-                    for (int k = 0; k < 3; ++k)
-                        w[k] *= 2;
-                }
-            }
-        }
-        for (size_t a = 0; a < nv; ++a) {
-            bs[a] += bat[a];
-            bq[a] += bat[a] * bat[a];
-            bat[a] = 0;
-        }
-    }
+    memcpy(v->sd, l->dir, sizeof v->sd);
+    tally ty = { .nch = nch, .phi = v->phi, .bat = bat, .bs = bs, .bq = bq };
+    trace(v, &ty);
     /* to Phi: power per photon over the voxel's volume inside; a grey
      * solve's one channel spread to three (from the last voxel down, so
      * none is overwritten before it is read) */
+    double ctr[3], R;
+    beam_disc(v, ctr, &R);
     const double vol = v->h[0] * v->h[1] * v->h[2];
     for (size_t a = nv; a-- > 0;) {
         const double sc = frac[a] > 0 ? PI * R * R / (VMS_PHOTONS * vol * frac[a]) : 0;
@@ -542,37 +626,21 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
                 v->phi[(a * 3 + ch) * VMS_NC + m] = val;
         }
     }
-    /* the noise: three standard errors of the batches' mean, as a share of
-     * the mean; the grid: second differences of Phi_00 over 8 */
+    /* the noise and the grid, as a share of Phi_00 */
     for (int k = 0; k < v->n[2]; ++k)
         for (int j = 0; j < v->n[1]; ++j)
             for (int i = 0; i < v->n[0]; ++i) {
                 const size_t a = vidx(v, i, j, k);
-                double share = 0;
-                if (bs[a] > 0) {
-                    const double mb = bs[a] / VMS_BATCHES;
-                    const double var = fmax(0, bq[a] / VMS_BATCHES - mb * mb) / (VMS_BATCHES - 1);
-                    share = 3 * sqrt(var) / mb;
-                }
+                const double share = noise_share(&ty, a);
                 for (int ch = 0; ch < 3; ++ch) {
                     const double f0 = v->phi[(a * 3 + ch) * VMS_NC];
-                    double curv = 0;
-                    const int ix[3] = { i, j, k };
-                    for (int q = 0; q < 3; ++q) {
-                        if (ix[q] == 0 || ix[q] == v->n[q] - 1)
-                            continue;
-                        int lo3[3] = { i, j, k }, hi3[3] = { i, j, k };
-                        lo3[q]--, hi3[q]++;
-                        const size_t al = vidx(v, lo3[0], lo3[1], lo3[2]);
-                        const size_t ah = vidx(v, hi3[0], hi3[1], hi3[2]);
-                        if (!v->in[al] || !v->in[ah])
-                            continue;
-                        curv += fabs(v->phi[(al * 3 + ch) * VMS_NC] - 2 * f0 +
-                                     v->phi[(ah * 3 + ch) * VMS_NC]) / 8;
-                    }
+                    const double curv = curvature(v, v->phi + (size_t) ch * VMS_NC,
+                                                  3 * VMS_NC, i, j, k);
                     v->est[a * 3 + ch] = share + (f0 > 0 ? curv / f0 : 0);
                 }
             }
+    v->frac = frac;
+    frac = NULL;
     free(bat), free(bs), free(bq), free(frac);
     struct timespec t1;
     clock_gettime(CLOCK_MONOTONIC, &t1);
@@ -591,6 +659,7 @@ struct ef_vms_cam {
     _Atomic int refs;
     double org[3];
     double *j;                  /* [voxel][channel]: J towards org from the voxel's centre */
+    double *e;                  /* exact: [voxel][channel] its estimate's share; else NULL */
 };
 
 void ef_vms_cam_ref(ef_vms_cam *c)
@@ -604,6 +673,7 @@ void ef_vms_cam_unref(ef_vms_cam *c)
     if (!c || atomic_fetch_sub(&c->refs, 1) != 1)
         return;
     free(c->j);
+    free(c->e);
     free(c);
 }
 
@@ -617,6 +687,63 @@ static void weights(const ef_vms *v, const double u[3], double cw[VMS_NC])
             cw[m] = v->b[l] * Y[m];
 }
 
+/* The unit vector from voxel (i, j, k)'s centre towards org into u. */
+static void towards(const ef_vms *v, const double org[3], int i, int j, int k, double u[3])
+{
+    u[0] = org[0] - (v->lo[0] + (i + 0.5) * v->h[0]);
+    u[1] = org[1] - (v->lo[1] + (j + 0.5) * v->h[1]);
+    u[2] = org[2] - (v->lo[2] + (k + 0.5) * v->h[2]);
+    const double un = sqrt(dot3(u, u));
+    for (int q = 0; q < 3; ++q)
+        u[q] = un > 0 ? u[q] / un : q == 2;
+}
+
+/* ef_vms_bind where the phase is too peaked for the harmonics: the
+ * photons again, each flight scoring the phase towards org from the
+ * voxel's centre, and the estimate's share per voxel (the noise over the
+ * batches, the grid's second differences). Returns 0, or -1 out of
+ * memory. */
+static int bind_exact(const ef_vms *v, const double org[3], ef_vms_cam *c)
+{
+    const size_t nv = (size_t) v->n[0] * v->n[1] * v->n[2];
+    const int nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
+    double *u = malloc(nv * 3 * sizeof *u), *jc = calloc(nv * 3, sizeof *jc);
+    double *bat = calloc(nv, sizeof *bat), *bs = calloc(nv, sizeof *bs),
+           *bq = calloc(nv, sizeof *bq);
+    c->e = malloc(nv * 3 * sizeof *c->e);
+    if (!u || !jc || !bat || !bs || !bq || !c->e) {
+        free(u), free(jc), free(bat), free(bs), free(bq);
+        return -1;
+    }
+    for (int k = 0; k < v->n[2]; ++k)
+        for (int j = 0; j < v->n[1]; ++j)
+            for (int i = 0; i < v->n[0]; ++i)
+                towards(v, org, i, j, k, u + 3 * vidx(v, i, j, k));
+    tally ty = { .nch = nch, .jc = jc, .ucam = u, .bat = bat, .bs = bs, .bq = bq };
+    trace(v, &ty);
+    double ctr[3], R;
+    beam_disc(v, ctr, &R);
+    const double vol = v->h[0] * v->h[1] * v->h[2];
+    for (size_t a = 0; a < nv; ++a) {
+        const double sc = v->frac[a] > 0 ? PI * R * R / (VMS_PHOTONS * vol * v->frac[a]) : 0;
+        for (int ch = 0; ch < 3; ++ch)
+            c->j[a * 3 + ch] = v->sig * v->alb[ch] * sc * jc[a * (size_t) nch + (nch == 3 ? ch : 0)];
+    }
+    for (int k = 0; k < v->n[2]; ++k)
+        for (int j = 0; j < v->n[1]; ++j)
+            for (int i = 0; i < v->n[0]; ++i) {
+                const size_t a = vidx(v, i, j, k);
+                const double share = noise_share(&ty, a);
+                for (int ch = 0; ch < 3; ++ch) {
+                    const double f0 = c->j[a * 3 + ch];
+                    const double curv = curvature(v, c->j + ch, 3, i, j, k);
+                    c->e[a * 3 + ch] = share + (f0 > 0 ? curv / f0 : 0);
+                }
+            }
+    free(u), free(jc), free(bat), free(bs), free(bq);
+    return 0;
+}
+
 ef_vms_cam *ef_vms_bind(const ef_vms *v, const double org[3])
 {
     ef_vms_cam *c = calloc(1, sizeof *c);
@@ -627,16 +754,19 @@ ef_vms_cam *ef_vms_bind(const ef_vms *v, const double org[3])
     }
     atomic_init(&c->refs, 1);
     memcpy(c->org, org, sizeof c->org);
+    if (v->exact) {
+        if (bind_exact(v, org, c)) {
+            ef_vms_cam_unref(c);
+            return NULL;
+        }
+        return c;
+    }
     for (int k = 0; k < v->n[2]; ++k)
         for (int jj = 0; jj < v->n[1]; ++jj)
             for (int i = 0; i < v->n[0]; ++i) {
                 const size_t a = vidx(v, i, jj, k);
-                double u[3] = { org[0] - (v->lo[0] + (i + 0.5) * v->h[0]),
-                                org[1] - (v->lo[1] + (jj + 0.5) * v->h[1]),
-                                org[2] - (v->lo[2] + (k + 0.5) * v->h[2]) };
-                const double un = sqrt(dot3(u, u));
-                for (int q = 0; q < 3; ++q)
-                    u[q] = un > 0 ? u[q] / un : q == 2;
+                double u[3];
+                towards(v, org, i, jj, k, u);
                 double cw[VMS_NC];
                 weights(v, u, cw);
                 for (int ch = 0; ch < 3; ++ch) {
@@ -712,8 +842,12 @@ void ef_vms_gather(const ef_vms *v, const ef_vms_cam *c, const ef_ray *r, double
     int n = (int) ceil(cross) + 1;
     n = n > 2048 ? 2048 : n;
     /* where the camera's table serves: beyond eight voxels from it (the
-     * direction from a voxel's centre then within 7 degrees of the node's) */
-    const double tcam = c ? 8 * hmax : INFINITY;
+     * direction from a voxel's centre then within 7 degrees of the node's);
+     * a table that scores the phase itself (c->e), whose harmonics would
+     * be worse, beyond two voxel diagonals (within about 15 degrees; its
+     * stencil's spread joins the estimate) */
+    const double diag = sqrt(v->h[0] * v->h[0] + v->h[1] * v->h[1] + v->h[2] * v->h[2]);
+    const double tcam = !c ? INFINITY : c->e ? 2 * diag : 8 * hmax;
     const double dl = (tb - ta) / n, ratio = exp(-v->sig * dl);
     const int nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
     double acc[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
@@ -730,6 +864,18 @@ void ef_vms_gather(const ef_vms *v, const ef_vms_cam *c, const ef_ray *r, double
             if (t > tcam) {
                 for (int k = 0; k < ns; ++k)
                     jj += w[k] * c->j[id[k] * 3 + (size_t) ch];
+                if (c->e) {
+                    /* the exact table's estimate: its noise and grid, and
+                     * the stencil's spread (the direction to the camera
+                     * turns across it) */
+                    for (int k = 0; E && k < ns; ++k) {
+                        const double jk = c->j[id[k] * 3 + (size_t) ch];
+                        err[ch] += T * w[k] *
+                                   (fabs(jk) * c->e[id[k] * 3 + (size_t) ch] + fabs(jk - jj));
+                    }
+                    acc[ch] += T * (jj > 0 ? jj : 0);
+                    continue;
+                }
             } else {
                 for (int k = 0; k < ns; ++k) {
                     const double *p = v->phi + (id[k] * 3 + (size_t) ch) * VMS_NC;
