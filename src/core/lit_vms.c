@@ -401,6 +401,27 @@ static double noise_share(const tally *ty, size_t a)
     return 3 * sqrt(var) / mb;
 }
 
+static double curvature(const ef_vms *v, const double *f, size_t st, int i, int j, int k);
+
+/* The estimate's share per voxel and channel into out ([voxel][3]): the
+ * batches' noise (ty) plus the grid's second differences of a field whose
+ * channel ch at voxel a is f[ch * cst + a * vst], over its value. */
+static void shares(const ef_vms *v, const tally *ty, const double *f, size_t cst, size_t vst,
+                   double *out)
+{
+    for (int k = 0; k < v->n[2]; ++k)
+        for (int j = 0; j < v->n[1]; ++j)
+            for (int i = 0; i < v->n[0]; ++i) {
+                const size_t a = vidx(v, i, j, k);
+                const double share = noise_share(ty, a);
+                for (int ch = 0; ch < 3; ++ch) {
+                    const double f0 = f[ch * cst + a * vst];
+                    const double curv = curvature(v, f + ch * cst, vst, i, j, k);
+                    out[a * 3 + ch] = share + (f0 > 0 ? curv / f0 : 0);
+                }
+            }
+}
+
 /* The grid's estimate at voxel (i, j, k) of a field f (stride st between
  * voxels, channel's offset applied by the caller): its second differences
  * along the axes over 8, where both neighbours hold volume. */
@@ -627,18 +648,7 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
         }
     }
     /* the noise and the grid, as a share of Phi_00 */
-    for (int k = 0; k < v->n[2]; ++k)
-        for (int j = 0; j < v->n[1]; ++j)
-            for (int i = 0; i < v->n[0]; ++i) {
-                const size_t a = vidx(v, i, j, k);
-                const double share = noise_share(&ty, a);
-                for (int ch = 0; ch < 3; ++ch) {
-                    const double f0 = v->phi[(a * 3 + ch) * VMS_NC];
-                    const double curv = curvature(v, v->phi + (size_t) ch * VMS_NC,
-                                                  3 * VMS_NC, i, j, k);
-                    v->est[a * 3 + ch] = share + (f0 > 0 ? curv / f0 : 0);
-                }
-            }
+    shares(v, &ty, v->phi, VMS_NC, 3 * VMS_NC, v->est);
     v->frac = frac;
     frac = NULL;
     free(bat), free(bs), free(bq), free(frac);
@@ -729,17 +739,7 @@ static int bind_exact(const ef_vms *v, const double org[3], ef_vms_cam *c)
         for (int ch = 0; ch < 3; ++ch)
             c->j[a * 3 + ch] = v->sig * v->alb[ch] * sc * jc[a * (size_t) nch + (nch == 3 ? ch : 0)];
     }
-    for (int k = 0; k < v->n[2]; ++k)
-        for (int j = 0; j < v->n[1]; ++j)
-            for (int i = 0; i < v->n[0]; ++i) {
-                const size_t a = vidx(v, i, j, k);
-                const double share = noise_share(&ty, a);
-                for (int ch = 0; ch < 3; ++ch) {
-                    const double f0 = c->j[a * 3 + ch];
-                    const double curv = curvature(v, c->j + ch, 3, i, j, k);
-                    c->e[a * 3 + ch] = share + (f0 > 0 ? curv / f0 : 0);
-                }
-            }
+    shares(v, &ty, c->j, 1, 3, c->e);
     free(u), free(jc), free(bat), free(bs), free(bq);
     return 0;
 }
