@@ -344,9 +344,18 @@ EF_INLINE void rows4(double u, int nr, int *row0, double w[4])
     *row0 = r0;
 }
 
+/* tab_col's column and fraction from its grid position x = sqrt(...)
+ * (nx - 1). */
+EF_INLINE void tab_col_at(int nx, double x, int *k, double *fx)
+{
+    *k = (int) x;
+    if (*k > nx - 2)
+        *k = nx - 2;
+    *fx = x - *k;
+}
+
 /* The table's direction column k and the fraction fx towards k + 1 for
  * cosine nu (x = sin(beta / 2) uniform over nx columns). */
-EF_INLINE void tab_col_at(int nx, double x, int *k, double *fx);
 static void tab_col(int nx, double nu, int *k, double *fx)
 {
     tab_col_at(nx, sqrt(fmax(0, fmin(1, 0.5 * (1 - nu)))) * (nx - 1), k, fx);
@@ -361,16 +370,6 @@ static int tab_rows(int nr, double lg, double r, int *r0, double w[4])
         return 0;
     rows4(u, nr, r0, w);
     return 1;
-}
-
-/* tab_col's column and fraction from its grid position x = sqrt(...)
- * (nx - 1). */
-EF_INLINE void tab_col_at(int nx, double x, int *k, double *fx)
-{
-    *k = (int) x;
-    if (*k > nx - 2)
-        *k = nx - 2;
-    *fx = x - *k;
 }
 
 /* tab_row's sum over rows r0 to r0 + 3 with weights w. */

@@ -1489,6 +1489,11 @@ void ef_ms_view_clear(ef_ms_view *v)
 
 void ef_ms_bind(const ef_ms *m, const ef_fog_scene *s, const double org[3], ef_ms_view *v)
 {
+    /* a volume's table for this camera already (a sequence's next frame
+     * from the same place): kept, not traced again */
+    if (m && m->vol && v->bound && v->cam && v->org[0] == org[0] && v->org[1] == org[1] &&
+        v->org[2] == org[2])
+        return;
     ef_ms_view_clear(v);
     if (!m)
         return;

@@ -84,14 +84,6 @@ static void kg_sums(const double (*v)[3], double rk[3], double rg[3])
         }
 }
 
-/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel; the 15
- * values, in node order (fvo[3 i + k]), into fvo when not NULL. With aux
- * (30 rows f fills beside its values: a lamp's multiple scattering in fog
- * that is not uniform, its estimate at each node in rows 0-14 and its
- * part of the value in rows 15-29), e is the rest's alone and x takes the
- * estimate's Kronrod integral plus that part's |K - G|: the table it
- * reads is linear in direction between columns, and a rule held to the
- * single scattering's 1e-10 would chase every column's kink. */
 /* The five-node rule on the Gauss nodes 0, +-xgk[3] and +-xgk[1], exact
  * to degree 5 (w0 + 2 w3 + 2 w1 = 2, 2 w3 x3^2 + 2 w1 x1^2 = 2/3, the
  * same with x^4 = 2/5): against the Gauss rule, the side part's estimate
@@ -99,7 +91,15 @@ static void kg_sums(const double (*v)[3], double rk[3], double rg[3])
 static const double r5_w[3] = { 0.8550618162163684751, 0.5196089047921329057,
                                 0.05286018709968285677 };   /* w0, w3, w1 */
 
-/* With side_gauss (and aux), the side part (aux's rows 15-29) is read at
+/* One Kronrod rule over [a, b]; e: |Kronrod - Gauss| per channel; the 15
+ * values, in node order (fvo[3 i + k]), into fvo when not NULL. With aux
+ * (30 rows f fills beside its values: a lamp's multiple scattering in fog
+ * that is not uniform, its estimate at each node in rows 0-14 and its
+ * part of the value in rows 15-29), e is the rest's alone and x takes the
+ * estimate's Kronrod integral plus that part's |K - G|: the table it
+ * reads is linear in direction between columns, and a rule held to the
+ * single scattering's 1e-10 would chase every column's kink. With
+ * side_gauss (and aux), the side part (aux's rows 15-29) is read at
  * the seven Gauss nodes alone (odd j; the integrand leaves it 0 at the
  * others): its integral is the Gauss rule's, its estimate the Gauss
  * estimate's integral plus |Gauss - r5_w's rule|. */
@@ -586,8 +586,9 @@ EF_INLINE void convex_legs(const lit_q *q, const vcomp *v, const v4d *t, const v
  * the node, the lamp's tl from it, the extinction there sg, the lamp's
  * distance d and the cosine nu (the phase's: the light leaving towards
  * the camera against the outward radial), wgt the substitution's weight
- * (1 / d^2 and the Jacobian), x the node. Its value into v and its estimate into e, both attenuated to the camera; a
- * channel like the one before it (grey fog) copies it. ex: the leak
+ * (1 / d^2 and the Jacobian), x the node. Its value into v and its
+ * estimate into e, both attenuated to the camera; a channel like the one
+ * before it (grey fog) copies it. ex: the leak
  * term's exposure per channel, read here where ex[3] is 0 (the caller
  * clears it every four nodes). */
 static void lms_node(const lit_q *q, const double x[3], const double tv[3], const double tl[3],

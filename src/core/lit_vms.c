@@ -31,6 +31,9 @@
  *     8 (trilinear interpolation's error for a field with that curvature);
  *   - the harmonics left out: the last band's term times |g| / (1 - |g|)
  *     (the bands fall as b_l times the radiance's own, about g^l each).
+ * Beyond |g| VMS_GMAX_SH the harmonics do not hold the forward peak: each
+ * camera bind then traces the photons again, every flight scoring the
+ * exact phase towards the camera from its voxel's centre (ef_vms_bind).
  * Scattered light is not shadowed (as in lit_ms.c). */
 #include "ms.h"
 
@@ -72,11 +75,11 @@ struct ef_vms {
     double trunc;               /* |g| / (1 - |g|): the harmonics left out */
     double *phi;                /* [voxel][channel][VMS_NC] */
     double *est;                /* [voxel][channel]: noise and grid, as a share of Phi_00 */
-    unsigned char *in;          /* [voxel]: 1 where the voxel holds some of the volume */
-    double *frac;               /* [voxel]: its share inside the volume */
+    double *frac;               /* [voxel]: its share inside the volume (0: none of it) */
     int phase;                  /* the phase function and its g */
     double g;
     int exact;                  /* |g| beyond VMS_GMAX_SH: each camera bind scores the phase */
+    int nch;                    /* channels traced: 1 where the albedo is grey, else 3 */
     double sd[3];               /* towards the sun */
     ef_ms_info info;
 };
@@ -190,20 +193,6 @@ static double phase_mu(int phase, double g, vrng *r)
         if (rng_u(r) * pmax <= ef_phase_eval(phase, g, mu))
             return mu;
     }
-}
-
-/* Where the ray x + t d (x inside) leaves the volume: the least t > 0. */
-static double exit_t(const ef_vms *v, const double x[3], const double d[3])
-{
-    double te = INFINITY;
-    for (int i = 0; i < v->np; ++i) {
-        const double *p = v->pl + 4 * i, nd = dot3(p, d);
-        if (nd > 0) {
-            const double t = -(dot3(p, x) + p[3]) / nd;
-            te = fmin(te, t > 0 ? t : 0);
-        }
-    }
-    return te;
 }
 
 /* The stretch [t0, t1] of the line o + t d inside the volume (empty: t0 >
@@ -360,7 +349,10 @@ static void trace(const ef_vms *v, tally *ty)
                 double nd[3];
                 turn(d, phase_mu(v->phase, v->g, &rg), rng_u(&rg), nd);
                 memcpy(d, nd, sizeof d);
-                const double te = exit_t(v, x, d), f = -log(rng_u(&rg)) / v->sig;
+                double t0, te;   /* where the flight leaves the volume (x is inside) */
+                clip(v, x, d, &t0, &te);
+                te = fmax(te, 0);
+                const double f = -log(rng_u(&rg)) / v->sig;
                 const double len = fmin(f, te);
                 double Y[VMS_NC];
                 if (!ty->jc)
@@ -389,6 +381,16 @@ static void trace(const ef_vms *v, tally *ty)
             ty->bat[a] = 0;
         }
     }
+}
+
+/* A photon's track length in voxel a to its Phi: the beam's power per
+ * photon (unit irradiance over the disc) over the voxel's volume inside. */
+static double photon_scale(const ef_vms *v, size_t a)
+{
+    double ctr[3], R;
+    beam_disc(v, ctr, &R);
+    const double vol = v->h[0] * v->h[1] * v->h[2];
+    return v->frac[a] > 0 ? PI * R * R / (VMS_PHOTONS * vol * v->frac[a]) : 0;
 }
 
 /* Three standard errors of the batches' mean as a share of it, per voxel. */
@@ -437,7 +439,7 @@ static double curvature(const ef_vms *v, const double *f, size_t st, int i, int 
         lo3[q]--, hi3[q]++;
         const size_t al = vidx(v, lo3[0], lo3[1], lo3[2]);
         const size_t ah = vidx(v, hi3[0], hi3[1], hi3[2]);
-        if (!v->in[al] || !v->in[ah])
+        if (!(v->frac[al] > 0) || !(v->frac[ah] > 0))
             continue;
         curv += fabs(f[al * st] - 2 * f0 + f[ah * st]) / 8;
     }
@@ -518,7 +520,6 @@ void ef_vms_free(ef_vms *v)
         return;
     free(v->phi);
     free(v->est);
-    free(v->in);
     free(v->frac);
     free(v);
 }
@@ -581,8 +582,7 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
     v->phase = c->phase;
     v->g = c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS ? c->g : 0;
     v->exact = fabs(v->g) > VMS_GMAX_SH;
-    v->trunc = c->phase == EF_PHASE_HG || c->phase == EF_PHASE_CS ? fabs(c->g) / (1 - fabs(c->g))
-               : c->phase == EF_PHASE_RAYLEIGH ? 0 : 0;
+    v->trunc = fabs(v->g) / (1 - fabs(v->g));   /* (0 for iso and Rayleigh: degree 2 holds them) */
     /* the grid: VMS_NMAX voxels along every side (a thin slab's depth
      * needs its own resolution as much as its width) */
     double side = 0;
@@ -595,14 +595,14 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
         v->h[q] = w / v->n[q];
     }
     const size_t nv = (size_t) v->n[0] * v->n[1] * v->n[2];
-    const int nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
+    const int nch = v->nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
     v->phi = calloc(nv * 3 * VMS_NC, sizeof *v->phi);
     v->est = calloc(nv * 3, sizeof *v->est);
-    v->in = calloc(nv, 1);
+    v->frac = calloc(nv, sizeof *v->frac);
     double *bat = calloc(nv, sizeof *bat), *bs = calloc(nv, sizeof *bs),
-           *bq = calloc(nv, sizeof *bq), *frac = calloc(nv, sizeof *frac);
-    if (!v->phi || !v->est || !v->in || !bat || !bs || !bq || !frac) {
-        free(bat), free(bs), free(bq), free(frac);
+           *bq = calloc(nv, sizeof *bq);
+    if (!v->phi || !v->est || !v->frac || !bat || !bs || !bq) {
+        free(bat), free(bs), free(bq);
         ef_vms_free(v);
         return ef_fail(err, "out of memory for light '%s''s multiple scattering", l->name);
     }
@@ -621,9 +621,7 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
                         inside = dot3(v->pl + 4 * m, x) + v->pl[4 * m + 3] < 0;
                     cnt += inside;
                 }
-                const size_t a = vidx(v, i, j, k);
-                frac[a] = cnt / 64.0;
-                v->in[a] = cnt > 0;
+                v->frac[vidx(v, i, j, k)] = cnt / 64.0;
             }
     memcpy(v->sd, l->dir, sizeof v->sd);
     tally ty = { .nch = nch, .phi = v->phi, .bat = bat, .bs = bs, .bq = bq };
@@ -631,11 +629,8 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
     /* to Phi: power per photon over the voxel's volume inside; a grey
      * solve's one channel spread to three (from the last voxel down, so
      * none is overwritten before it is read) */
-    double ctr[3], R;
-    beam_disc(v, ctr, &R);
-    const double vol = v->h[0] * v->h[1] * v->h[2];
     for (size_t a = nv; a-- > 0;) {
-        const double sc = frac[a] > 0 ? PI * R * R / (VMS_PHOTONS * vol * frac[a]) : 0;
+        const double sc = photon_scale(v, a);
         for (int m = 0; m < VMS_NC; ++m) {
             if (nch == 3) {
                 for (int ch = 0; ch < 3; ++ch)
@@ -649,9 +644,7 @@ int ef_vms_build(const ef_fog_scene *s, const ef_light *l, ef_vms **out, ef_err 
     }
     /* the noise and the grid, as a share of Phi_00 */
     shares(v, &ty, v->phi, VMS_NC, 3 * VMS_NC, v->est);
-    v->frac = frac;
-    frac = NULL;
-    free(bat), free(bs), free(bq), free(frac);
+    free(bat), free(bs), free(bq);
     struct timespec t1;
     clock_gettime(CLOCK_MONOTONIC, &t1);
     v->info.seconds = (double) (t1.tv_sec - t0.tv_sec) + 1e-9 * (double) (t1.tv_nsec - t0.tv_nsec);
@@ -716,7 +709,7 @@ static void towards(const ef_vms *v, const double org[3], int i, int j, int k, d
 static int bind_exact(const ef_vms *v, const double org[3], ef_vms_cam *c)
 {
     const size_t nv = (size_t) v->n[0] * v->n[1] * v->n[2];
-    const int nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
+    const int nch = v->nch;
     double *u = malloc(nv * 3 * sizeof *u), *jc = calloc(nv * 3, sizeof *jc);
     double *bat = calloc(nv, sizeof *bat), *bs = calloc(nv, sizeof *bs),
            *bq = calloc(nv, sizeof *bq);
@@ -731,11 +724,8 @@ static int bind_exact(const ef_vms *v, const double org[3], ef_vms_cam *c)
                 towards(v, org, i, j, k, u + 3 * vidx(v, i, j, k));
     tally ty = { .nch = nch, .jc = jc, .ucam = u, .bat = bat, .bs = bs, .bq = bq };
     trace(v, &ty);
-    double ctr[3], R;
-    beam_disc(v, ctr, &R);
-    const double vol = v->h[0] * v->h[1] * v->h[2];
     for (size_t a = 0; a < nv; ++a) {
-        const double sc = v->frac[a] > 0 ? PI * R * R / (VMS_PHOTONS * vol * v->frac[a]) : 0;
+        const double sc = photon_scale(v, a);
         for (int ch = 0; ch < 3; ++ch)
             c->j[a * 3 + ch] = v->sig * v->alb[ch] * sc * jc[a * (size_t) nch + (nch == 3 ? ch : 0)];
     }
@@ -799,7 +789,7 @@ static int stencil(const ef_vms *v, const double x[3], size_t id[8], double w[8]
     for (int cn = 0; cn < 8; ++cn) {
         const int a = cn & 1, b = (cn >> 1) & 1, cc = cn >> 2;
         const size_t k = vidx(v, i0[0] + a, i0[1] + b, i0[2] + cc);
-        if (!v->in[k])
+        if (!(v->frac[k] > 0))
             continue;
         w[n] = (a ? f[0] : 1 - f[0]) * (b ? f[1] : 1 - f[1]) * (cc ? f[2] : 1 - f[2]);
         ws += w[n];
@@ -849,7 +839,7 @@ void ef_vms_gather(const ef_vms *v, const ef_vms_cam *c, const ef_ray *r, double
     const double diag = sqrt(v->h[0] * v->h[0] + v->h[1] * v->h[1] + v->h[2] * v->h[2]);
     const double tcam = !c ? INFINITY : c->e ? 2 * diag : 8 * hmax;
     const double dl = (tb - ta) / n, ratio = exp(-v->sig * dl);
-    const int nch = v->alb[0] == v->alb[1] && v->alb[0] == v->alb[2] ? 1 : 3;
+    const int nch = v->nch;
     double acc[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
     double T = -expm1(-v->sig * dl) / v->sig;
     for (int i = 0; i < n; ++i, T *= ratio) {
