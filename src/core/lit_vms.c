@@ -834,10 +834,12 @@ void ef_vms_gather(const ef_vms *v, const ef_vms_cam *c, const ef_ray *r, double
     /* where the camera's table serves: beyond eight voxels from it (the
      * direction from a voxel's centre then within 7 degrees of the node's);
      * a table that scores the phase itself (c->e), whose harmonics would
-     * be worse, beyond two voxel diagonals (within about 15 degrees; its
-     * stencil's spread joins the estimate) */
+     * be worse, beyond half a voxel diagonal (its stencil's spread joins
+     * the estimate; with the camera inside a box at g 0.85, against
+     * Cycles, two diagonals gave 31 % and 92 % of blocks covered, half a
+     * diagonal 11 % and 100 %, none at all missed test_ms's slab rays) */
     const double diag = sqrt(v->h[0] * v->h[0] + v->h[1] * v->h[1] + v->h[2] * v->h[2]);
-    const double tcam = !c ? INFINITY : c->e ? 2 * diag : 8 * hmax;
+    const double tcam = !c ? INFINITY : c->e ? 0.5 * diag : 8 * hmax;
     const double dl = (tb - ta) / n, ratio = exp(-v->sig * dl);
     const int nch = v->nch;
     double acc[3] = { 0, 0, 0 }, err[3] = { 0, 0, 0 };
